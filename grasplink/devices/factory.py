@@ -1,0 +1,36 @@
+"""Build a grasplink device node by kind: its EDS plus its application."""
+
+from __future__ import annotations
+
+from grasplink.devices.app import DeviceApp
+from grasplink.devices.belt import BeltApp
+from grasplink.devices.emg import EmgApp
+from grasplink.devices.hand import HandApp
+from grasplink.devices.node import DeviceNode
+from grasplink.devices.skin import SkinApp
+from grasplink.devices.sources import SampleSource
+from grasplink.errors import ConfigError
+from grasplink.profiles import DEVICE_KINDS, load_profile
+from grasplink.profiles import objects as obj
+
+
+def make_app(kind: str, source: SampleSource | None = None) -> DeviceApp:
+    if kind == "skin":
+        return SkinApp(source)
+    if kind == "emg":
+        return EmgApp(source)
+    if kind == "belt":
+        return BeltApp()
+    if kind == "hand":
+        return HandApp()
+    raise ConfigError(f"unknown node type {kind!r}; choose one of {', '.join(DEVICE_KINDS)}")
+
+
+def build_node(kind: str, node_id: int | None = None,
+               source: SampleSource | None = None) -> DeviceNode:
+    """A ready-to-start node of `kind` at `node_id` (default from objects.DEFAULT_NODE_IDS)."""
+    app = make_app(kind, source)
+    node_id = obj.DEFAULT_NODE_IDS[kind] if node_id is None else node_id
+    if not 1 <= node_id <= 127:
+        raise ConfigError(f"node-ID {node_id} is outside 1..127")
+    return DeviceNode(load_profile(kind, node_id), node_id, app)

@@ -1,0 +1,54 @@
+"""Hand (grip actuator) node: a CiA 402 drive whose target is grip force.
+
+The grip-force loop slews the actual force towards the target at the
+configured rate, never above the crush limit or the maximum force (a
+limited target sets statusword bit 11). When the master is lost the hand
+holds the grip it has: dropping an object is worse than keeping it.
+"""
+
+from __future__ import annotations
+
+from grasplink.devices.drive import DriveApp
+from grasplink.devices.nmt import NmtState
+from grasplink.profiles import objects as obj
+
+
+class HandApp(DriveApp):
+    supported_mode = obj.MODE_GRIP_FORCE
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.grip_mn = 0.0  # actual; a hand simulator may drive this instead
+        self.holding = False
+
+    def on_reset(self, t_us: int) -> None:
+        self.grip_mn = 0.0
+        self.holding = False
+        super().on_reset(t_us)
+        self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, 0)
+
+    def on_state(self, state: NmtState, t_us: int) -> None:
+        if state == NmtState.OPERATIONAL:
+            self.holding = False  # the master is back and restarted us
+        super().on_state(state, t_us)
+
+    def enter_safe_state(self, t_us: int, reason: str) -> None:
+        self.holding = True  # keep the drive enabled and the grip where it is
+        self._publish_status()
+
+    def demand_mn(self) -> float:
+        if self.holding or not self.enabled:
+            self.internal_limit = False
+            return self.grip_mn
+        target = int(self.store.get(obj.HAND_TARGET_GRIP_MN))
+        ceiling = min(int(self.store.get(obj.HAND_CRUSH_LIMIT_MN)),
+                      int(self.store.get(obj.HAND_MAX_GRIP_MN)))
+        self.internal_limit = target > ceiling
+        return float(min(target, ceiling))
+
+    def control(self, dt_s: float) -> None:
+        demand = self.demand_mn()
+        step = int(self.store.get(obj.HAND_GRIP_RATE_MN_S)) * dt_s
+        self.grip_mn += max(-step, min(step, demand - self.grip_mn))
+        self.target_reached = abs(demand - self.grip_mn) < 1.0
+        self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, round(self.grip_mn))

@@ -1,0 +1,236 @@
+"""A CANopen slave device: NMT, SDO, PDO, SYNC, EMCY and heartbeat around one store.
+
+`DeviceNode` is the firmware of every grasplink node; what differs between
+the skin, EMG, belt and hand is the object dictionary (EDS) and the
+`DeviceApp` plugged in. Everything is sans-IO (see `protocol.SansIoDevice`).
+"""
+
+from __future__ import annotations
+
+import canopen.objectdictionary as cod
+
+from grasplink.devices import emcy as em
+from grasplink.devices.app import DeviceApp
+from grasplink.devices.frames import HEARTBEAT_BASE, NMT_COB_ID, SDO_RX_BASE, SDO_TX_BASE, Frame
+from grasplink.devices.heartbeat import HeartbeatConsumer, HeartbeatProducer
+from grasplink.devices.nmt import (
+    EMCY_ALLOWED,
+    SDO_ALLOWED,
+    SYNC_ALLOWED,
+    NmtCommand,
+    NmtState,
+)
+from grasplink.devices.pdo import CAN_ID_MASK, PdoEngine, is_restricted_can_id
+from grasplink.devices.sdo_abort import AbortCode, SdoAbort
+from grasplink.devices.sdo_server import SdoServer
+from grasplink.devices.store import APPLICATION_AREA, COMMUNICATION_AREA, ObjectStore, Value
+from grasplink.errors import ConfigError
+from grasplink.profiles import objects as obj
+
+SYNC_GENERATE = 0x40000000
+COB_ID_INVALID = 0x80000000
+COB_ID_EXTENDED = 0x20000000
+
+# 1029h:01 communication-error behaviour
+ON_ERROR_PRE_OPERATIONAL = 0
+ON_ERROR_NO_CHANGE = 1
+ON_ERROR_STOPPED = 2
+
+
+def dummy_usage(od: cod.ObjectDictionary) -> frozenset[int]:
+    """Dummy objects the EDS says the device accepts in RPDO mappings."""
+    return frozenset(index for index in range(0x0002, 0x0008) if index in od)
+
+
+class DeviceNode:
+    """The behaviour every grasplink device shares; see module docstring."""
+
+    def __init__(self, od: cod.ObjectDictionary, node_id: int, app: DeviceApp | None = None,
+                 *, dummies: frozenset[int] | None = None):
+        if not 1 <= node_id <= 127:
+            raise ConfigError(f"node-ID {node_id} is outside 1..127")
+        self.node_id = node_id
+        self.store = ObjectStore(od)
+        self.emcy = em.EmcyProducer(self.store)
+        self.heartbeat = HeartbeatProducer(self.store)
+        self.consumer = HeartbeatConsumer(self.store)
+        self.pdo = PdoEngine(self.store, self.emcy,
+                             dummy_usage(od) if dummies is None else dummies,
+                             on_rpdo=self._on_rpdo)
+        self.sdo = SdoServer(self.store)
+        self.app = app or DeviceApp()
+        self.state = NmtState.INITIALISING
+        self.powered = False
+        self.store.add_validator(obj.COB_ID_SYNC, self._validate_sync_cob_id)
+        self.store.add_validator(obj.COB_ID_EMCY, self._validate_emcy_cob_id)
+        self.app.attach(self)
+
+    # -- SansIoDevice ------------------------------------------------------------
+    def start(self, t_us: int) -> list[Frame]:
+        """Power on: initialise the whole dictionary and boot."""
+        self.powered = True
+        return self._reset(t_us, application=True)
+
+    def power_off(self) -> None:
+        """Lose power: silent until `start` is called again (NVM survives)."""
+        self.powered = False
+        self.state = NmtState.INITIALISING
+        self.pdo.set_operational(False, 0)
+
+    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
+        if not self.powered or self.state == NmtState.INITIALISING:
+            return []
+        self._touch(t_us)
+        can_id = frame.can_id
+        if can_id == NMT_COB_ID:
+            return self._on_nmt(frame, t_us)
+        if HEARTBEAT_BASE < can_id <= HEARTBEAT_BASE + 127 and not frame.rtr and frame.data:
+            return self._on_heartbeat(can_id - HEARTBEAT_BASE, frame.data[0], t_us)
+        if self.state not in SDO_ALLOWED:
+            return []
+        if can_id == SDO_RX_BASE + self.node_id and not frame.rtr:
+            return self._sdo_frames(self.sdo.on_request(bytes(frame.data), t_us))
+        if can_id == self._sync_can_id() and len(frame.data) <= 1 and not frame.rtr:
+            counter = frame.data[0] if frame.data else None
+            return self.pdo.on_sync(counter, t_us) + self._emcy(t_us)
+        handled = self.pdo.on_frame(frame, t_us)
+        if handled is not None:
+            return handled + self._emcy(t_us)
+        return []
+
+    def advance(self, t_us: int) -> list[Frame]:
+        if not self.powered or self.state == NmtState.INITIALISING:
+            return []
+        self._touch(t_us)
+        frames: list[Frame] = []
+        for node_id in self.consumer.expired(t_us):
+            frames += self._on_heartbeat_lost(node_id, t_us)
+        if self.state in SDO_ALLOWED:
+            frames += self._sdo_frames(self.sdo.advance(t_us))
+        frames += self.app.advance(t_us)
+        frames += self.pdo.advance(t_us)
+        frames += self._emcy(t_us)
+        if self.heartbeat.due(t_us):
+            frames.append(Frame(HEARTBEAT_BASE + self.node_id, bytes([self.state])))
+        return frames
+
+    def next_deadline_us(self) -> int | None:
+        if not self.powered:
+            return None
+        candidates = [self.heartbeat.next_deadline_us(), self.consumer.next_deadline_us(),
+                      self.app.next_deadline_us()]
+        if self.state in SDO_ALLOWED:
+            candidates += [self.sdo.next_deadline_us(), self.emcy.next_deadline_us()]
+        candidates.append(self.pdo.next_deadline_us())
+        return min((c for c in candidates if c is not None), default=None)
+
+    # -- NMT -------------------------------------------------------------------------
+    def _on_nmt(self, frame: Frame, t_us: int) -> list[Frame]:
+        if len(frame.data) != 2 or frame.data[1] not in (0, self.node_id):
+            return []
+        try:
+            command = NmtCommand(frame.data[0])
+        except ValueError:
+            return []
+        if command == NmtCommand.RESET_NODE:
+            return self._reset(t_us, application=True)
+        if command == NmtCommand.RESET_COMMUNICATION:
+            return self._reset(t_us, application=False)
+        target = {NmtCommand.START: NmtState.OPERATIONAL, NmtCommand.STOP: NmtState.STOPPED,
+                  NmtCommand.ENTER_PRE_OPERATIONAL: NmtState.PRE_OPERATIONAL}[command]
+        return self._enter(target, t_us)
+
+    def _enter(self, state: NmtState, t_us: int) -> list[Frame]:
+        if state == self.state:
+            return []
+        self.state = state
+        if state != NmtState.PRE_OPERATIONAL and state != NmtState.OPERATIONAL:
+            self.sdo.reset()
+        self.pdo.set_operational(state == NmtState.OPERATIONAL, t_us)
+        self.app.on_state(state, t_us)
+        # Entering OPERATIONAL publishes the event-driven TPDOs at once.
+        return self.pdo.advance(t_us) if state == NmtState.OPERATIONAL else []
+
+    def _reset(self, t_us: int, *, application: bool) -> list[Frame]:
+        """Reset node (application=True) or reset communication, then boot again."""
+        self.state = NmtState.INITIALISING
+        self.pdo.set_operational(False, t_us)
+        self.sdo.reset()
+        if application:
+            self.store.load_defaults(APPLICATION_AREA)
+        self.store.load_defaults(COMMUNICATION_AREA)
+        self.emcy.reset()
+        self.pdo.reload()
+        self.consumer.reload()
+        if application:
+            self.app.on_reset(t_us)
+        self.heartbeat.restart(t_us)
+        self.state = NmtState.PRE_OPERATIONAL
+        self.app.on_state(self.state, t_us)
+        return [Frame(HEARTBEAT_BASE + self.node_id, bytes([NmtState.INITIALISING]))]
+
+    # -- heartbeat consumer --------------------------------------------------------------
+    def _on_heartbeat(self, node_id: int, state: int, t_us: int) -> list[Frame]:
+        if self.consumer.on_heartbeat(node_id, state, t_us):
+            if not self.consumer.any_timed_out():
+                self.emcy.clear_error(em.HEARTBEAT_TIMEOUT, t_us)
+            return self._emcy(t_us)
+        return []
+
+    def _on_heartbeat_lost(self, node_id: int, t_us: int) -> list[Frame]:
+        """CiA 301 heartbeat event: EMCY 8130h, 1029h behaviour, device safe state."""
+        self.emcy.raise_error(em.HEARTBEAT_TIMEOUT, em.REG_COMMUNICATION, t_us, bytes([node_id]))
+        self.app.enter_safe_state(t_us, f"heartbeat of node 0x{node_id:02X} lost")
+        frames = self._emcy(t_us)
+        behaviour = int(self.store.get(obj.ERROR_BEHAVIOUR, 1))
+        if behaviour == ON_ERROR_PRE_OPERATIONAL and self.state == NmtState.OPERATIONAL:
+            frames += self._enter(NmtState.PRE_OPERATIONAL, t_us)
+        elif behaviour == ON_ERROR_STOPPED:
+            frames += self._enter(NmtState.STOPPED, t_us)
+        return frames
+
+    # -- helpers ------------------------------------------------------------------------
+    def transmit_tpdo(self, number: int, t_us: int) -> list[Frame]:
+        """For applications: send TPDO `number` now (its inhibit time permitting)."""
+        return self.pdo.trigger(number, t_us)
+
+    def _on_rpdo(self, number: int, t_us: int) -> None:
+        self.app.on_rpdo(number, t_us)
+
+    def _emcy(self, t_us: int) -> list[Frame]:
+        return self.emcy.poll(t_us) if self.state in EMCY_ALLOWED else []
+
+    def _sdo_frames(self, payloads: list[bytes]) -> list[Frame]:
+        return [Frame(SDO_TX_BASE + self.node_id, p) for p in payloads]
+
+    def _sync_can_id(self) -> int | None:
+        if self.state not in SYNC_ALLOWED:
+            return None
+        return int(self.store.get(obj.COB_ID_SYNC)) & CAN_ID_MASK
+
+    def _touch(self, t_us: int) -> None:
+        self.heartbeat.now_us = t_us
+        self.pdo.now_us = t_us
+
+    def _validate_sync_cob_id(self, index: int, subindex: int, value: Value) -> None:
+        value = int(value)
+        if value & SYNC_GENERATE:
+            raise SdoAbort(AbortCode.INVALID_VALUE, "this device consumes SYNC; it cannot produce it")
+        self._check_service_cob_id(value)
+
+    def _validate_emcy_cob_id(self, index: int, subindex: int, value: Value) -> None:
+        value = int(value)
+        current = int(self.store.get(obj.COB_ID_EMCY))
+        if not (current & COB_ID_INVALID or value & COB_ID_INVALID) and (
+                (value ^ current) & CAN_ID_MASK):
+            raise SdoAbort(AbortCode.INVALID_VALUE, "set bit 31 before changing the EMCY CAN-ID")
+        if not value & COB_ID_INVALID:
+            self._check_service_cob_id(value)
+
+    @staticmethod
+    def _check_service_cob_id(value: int) -> None:
+        if value & COB_ID_EXTENDED:
+            raise SdoAbort(AbortCode.INVALID_VALUE, "29-bit CAN-IDs are not supported")
+        can_id = value & CAN_ID_MASK
+        if is_restricted_can_id(can_id):
+            raise SdoAbort(AbortCode.INVALID_VALUE, f"CAN-ID 0x{can_id:03X} is restricted")

@@ -1,0 +1,392 @@
+"""PDO engine: TPDO/RPDO communication and mapping, SYNC consumer (CiA 301 7.2.2, 7.5.2.35-38).
+
+TPDO transmission types: 0 (acyclic synchronous: on the SYNC after an
+event), 1-240 (every n-th SYNC, honouring the SYNC start value), 254/255
+(event-driven, limited by the inhibit time and repeated by the event
+timer; the event is an application trigger for 254 and any change of a
+mapped value for 255). RPDO types 0-240 apply
+their data at the next SYNC, 254/255 at once. Mapping and communication
+parameters are checked as they are written, with the abort codes CiA 301
+names; the mapping procedure (invalidate the PDO, sub-index 0 = 0, write
+entries, sub-index 0 = n, validate) is enforced.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from grasplink.devices import emcy as em
+from grasplink.devices.frames import Frame
+from grasplink.devices.sdo_abort import AbortCode, SdoAbort
+from grasplink.devices.store import ObjectStore, Value
+from grasplink.profiles import objects as obj
+
+COB_ID_INVALID = 0x80000000
+COB_ID_NO_RTR = 0x40000000
+COB_ID_EXTENDED = 0x20000000
+CAN_ID_MASK = 0x7FF
+MAX_PDO_BITS = 64
+MAX_PDOS = 512
+SYNC_TYPE_MAX = 240
+TYPE_EVENT_MANUFACTURER = 254
+TYPE_EVENT_PROFILE = 255
+# Dummy objects (CiA 301 7.4.7.1): index -> size in bits.
+DUMMY_BITS = {0x0002: 8, 0x0003: 16, 0x0004: 32, 0x0005: 8, 0x0006: 16, 0x0007: 32}
+
+# CAN-IDs no PDO, SYNC or EMCY may use (CiA 301 7.3.5, "restricted CAN-IDs").
+_RESTRICTED = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x5FF),
+               (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x77F), (0x780, 0x7FF))
+
+
+def is_restricted_can_id(can_id: int) -> bool:
+    return any(lo <= can_id <= hi for lo, hi in _RESTRICTED)
+
+
+@dataclass(frozen=True, slots=True)
+class MapEntry:
+    index: int
+    subindex: int
+    bits: int
+
+    @classmethod
+    def decode(cls, raw: int) -> MapEntry:
+        return cls((raw >> 16) & 0xFFFF, (raw >> 8) & 0xFF, raw & 0xFF)
+
+    @property
+    def is_dummy(self) -> bool:
+        return self.index in DUMMY_BITS
+
+
+@dataclass(slots=True)
+class _Pdo:
+    """Runtime state of one PDO; its parameters live in the store."""
+
+    number: int  # 1-based
+    transmit: bool
+    comm_index: int
+    map_index: int
+    pending: bool = False
+    last_tx_us: int | None = None
+    timer_origin_us: int = 0
+    sync_count: int = 0
+    sync_started: bool = False
+    buffered: bytes | None = None  # RPDO data waiting for SYNC
+    last_rx_us: int | None = None  # RPDO deadline monitoring
+    mapping: list[MapEntry] = field(default_factory=list)
+
+
+class PdoEngine:
+    def __init__(self, store: ObjectStore, emcy: em.EmcyProducer, dummy_usage: frozenset[int],
+                 on_rpdo: Callable[[int, int], None] | None = None):
+        self.store = store
+        self.emcy = emcy
+        self.dummy_usage = dummy_usage
+        self.on_rpdo = on_rpdo
+        self.operational = False
+        self.now_us = 0
+        self.tpdos = self._discover(obj.TPDO_COMM, obj.TPDO_MAP, transmit=True)
+        self.rpdos = self._discover(obj.RPDO_COMM, obj.RPDO_MAP, transmit=False)
+        self._by_comm = {p.comm_index: p for p in self.tpdos + self.rpdos}
+        self._by_map = {p.map_index: p for p in self.tpdos + self.rpdos}
+        self._watchers: dict[tuple[int, int], list[_Pdo]] = {}
+        for pdo in self._by_comm.values():
+            store.add_validator(pdo.comm_index, self._validate_comm)
+            store.add_validator(pdo.map_index, self._validate_map)
+        store.add_listener(self._on_change)
+        self.reload()
+
+    def _discover(self, comm_base: int, map_base: int, transmit: bool) -> list[_Pdo]:
+        return [_Pdo(n + 1, transmit, comm_base + n, map_base + n) for n in range(MAX_PDOS)
+                if self.store.has(comm_base + n, 1) and self.store.has(map_base + n, 0)]
+
+    # -- parameters ----------------------------------------------------------
+    def cob_id(self, pdo: _Pdo) -> int:
+        return int(self.store.get(pdo.comm_index, 1))
+
+    def is_valid(self, pdo: _Pdo) -> bool:
+        return not self.cob_id(pdo) & COB_ID_INVALID
+
+    def transmission_type(self, pdo: _Pdo) -> int:
+        return int(self.store.get(pdo.comm_index, 2))
+
+    def _param(self, pdo: _Pdo, sub: int) -> int:
+        return int(self.store.get(pdo.comm_index, sub)) if self.store.has(pdo.comm_index, sub) else 0
+
+    def inhibit_us(self, pdo: _Pdo) -> int:
+        return self._param(pdo, 3) * 100
+
+    def event_timer_us(self, pdo: _Pdo) -> int:
+        return self._param(pdo, 5) * 1000
+
+    def reload(self) -> None:
+        """Re-read every mapping (after a reset or a parameter change)."""
+        self._watchers.clear()
+        for pdo in self._by_comm.values():
+            count = int(self.store.get(pdo.map_index, 0))
+            pdo.mapping = [MapEntry.decode(int(self.store.get(pdo.map_index, s)))
+                           for s in range(1, count + 1)]
+            if pdo.transmit:
+                for entry in pdo.mapping:
+                    self._watchers.setdefault((entry.index, entry.subindex), []).append(pdo)
+
+    def mapped_bytes(self, pdo: _Pdo) -> int:
+        return sum(e.bits for e in pdo.mapping) // 8
+
+    # -- NMT -------------------------------------------------------------------
+    def set_operational(self, operational: bool, t_us: int) -> None:
+        self.operational = operational
+        for pdo in self._by_comm.values():
+            pdo.buffered = None
+            pdo.sync_count = 0
+            pdo.sync_started = False
+            pdo.last_rx_us = None
+            pdo.last_tx_us = None
+            pdo.timer_origin_us = t_us
+            # Entering OPERATIONAL publishes every event-driven TPDO once, so a
+            # master sees current values without waiting for a change.
+            pdo.pending = operational and pdo.transmit and self.is_valid(pdo) and (
+                self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER)
+
+    # -- device side -----------------------------------------------------------
+    def trigger(self, number: int, t_us: int) -> list[Frame]:
+        """The application asks TPDO `number` to go out now (event-driven types)."""
+        pdo = self.tpdos[number - 1]
+        pdo.pending = True
+        return self._flush(pdo, t_us) if self.operational else []
+
+    def advance(self, t_us: int) -> list[Frame]:
+        self.now_us = t_us
+        if not self.operational:
+            return []
+        frames: list[Frame] = []
+        for pdo in self.tpdos:
+            if not self.is_valid(pdo) or self.transmission_type(pdo) < TYPE_EVENT_MANUFACTURER:
+                continue
+            timer = self.event_timer_us(pdo)
+            if timer and t_us >= self._timer_deadline(pdo, timer):
+                pdo.pending = True
+            frames += self._flush(pdo, t_us)
+        for pdo in self.rpdos:
+            self._check_rpdo_deadline(pdo, t_us)
+        return frames
+
+    def next_deadline_us(self) -> int | None:
+        if not self.operational:
+            return None
+        deadlines = []
+        for pdo in self.tpdos:
+            if not self.is_valid(pdo) or self.transmission_type(pdo) < TYPE_EVENT_MANUFACTURER:
+                continue
+            if pdo.pending:
+                deadlines.append(self._inhibit_end(pdo))
+            timer = self.event_timer_us(pdo)
+            if timer:
+                deadlines.append(self._timer_deadline(pdo, timer))
+        for pdo in self.rpdos:
+            timer = self.event_timer_us(pdo)
+            if timer and pdo.last_rx_us is not None and self.is_valid(pdo):
+                deadlines.append(pdo.last_rx_us + timer + 1)
+        return min(deadlines, default=None)
+
+    # -- bus side --------------------------------------------------------------
+    def on_sync(self, counter: int | None, t_us: int) -> list[Frame]:
+        if not self.operational:
+            return []
+        for pdo in self.rpdos:
+            if pdo.buffered is not None and self.is_valid(pdo):
+                self._apply(pdo, pdo.buffered, t_us)
+                pdo.buffered = None
+        frames = []
+        for pdo in self.tpdos:
+            if not self.is_valid(pdo):
+                continue
+            kind = self.transmission_type(pdo)
+            if kind == 0:
+                if pdo.pending:
+                    frames.append(self._build(pdo, t_us))
+            elif kind <= SYNC_TYPE_MAX and self._sync_due(pdo, kind, counter):
+                frames.append(self._build(pdo, t_us))
+        return frames
+
+    def _sync_due(self, pdo: _Pdo, every: int, counter: int | None) -> bool:
+        start = self._param(pdo, 6)
+        if not pdo.sync_started:
+            if start and counter is not None and counter != start:
+                return False
+            pdo.sync_started = True
+            pdo.sync_count = 0
+            if start and counter is not None:
+                return True
+        pdo.sync_count += 1
+        if pdo.sync_count >= every:
+            pdo.sync_count = 0
+            return True
+        return False
+
+    def on_frame(self, frame: Frame, t_us: int) -> list[Frame] | None:
+        """Handle a frame addressed to one of our PDOs; None if it is not ours."""
+        for pdo in self.rpdos:
+            if self.is_valid(pdo) and frame.can_id == self.cob_id(pdo) & CAN_ID_MASK:
+                if not frame.rtr and self.operational:
+                    self._receive(pdo, frame.data, t_us)
+                return []
+        for pdo in self.tpdos:
+            cob = self.cob_id(pdo)
+            if frame.rtr and self.is_valid(pdo) and frame.can_id == cob & CAN_ID_MASK:
+                if self.operational and not cob & COB_ID_NO_RTR:
+                    return [self._build(pdo, t_us)]
+                return []
+        return None
+
+    def _receive(self, pdo: _Pdo, data: bytes, t_us: int) -> None:
+        needed = self.mapped_bytes(pdo)
+        if len(data) < needed:
+            self.emcy.raise_error(em.PDO_LENGTH_ERROR, em.REG_COMMUNICATION, t_us,
+                                  bytes([pdo.number, len(data)]))
+            return
+        if len(data) > needed:
+            self.emcy.raise_error(em.PDO_LENGTH_EXCEEDED, em.REG_COMMUNICATION, t_us,
+                                  bytes([pdo.number, len(data)]))
+        else:
+            self.emcy.clear_error(em.PDO_LENGTH_ERROR, t_us)
+            self.emcy.clear_error(em.PDO_LENGTH_EXCEEDED, t_us)
+        if pdo.last_rx_us is not None or self.event_timer_us(pdo):
+            self.emcy.clear_error(em.RPDO_TIMEOUT, t_us)
+        pdo.last_rx_us = t_us
+        if self.transmission_type(pdo) <= SYNC_TYPE_MAX:
+            pdo.buffered = bytes(data[:needed])
+        else:
+            self._apply(pdo, data, t_us)
+
+    def _apply(self, pdo: _Pdo, data: bytes, t_us: int) -> None:
+        offset = 0
+        for entry in pdo.mapping:
+            size = entry.bits // 8
+            if not entry.is_dummy:
+                var = self.store.entry(entry.index, entry.subindex).var
+                self.store.set(entry.index, entry.subindex, var.decode_raw(data[offset:offset + size]))
+            offset += size
+        if self.on_rpdo is not None:
+            self.on_rpdo(pdo.number, t_us)
+
+    def _check_rpdo_deadline(self, pdo: _Pdo, t_us: int) -> None:
+        timer = self.event_timer_us(pdo)
+        if timer and pdo.last_rx_us is not None and t_us > pdo.last_rx_us + timer:
+            self.emcy.raise_error(em.RPDO_TIMEOUT, em.REG_COMMUNICATION, t_us, bytes([pdo.number]))
+            pdo.last_rx_us = None
+
+    # -- transmission ------------------------------------------------------------
+    def _inhibit_end(self, pdo: _Pdo) -> int:
+        return 0 if pdo.last_tx_us is None else pdo.last_tx_us + self.inhibit_us(pdo)
+
+    def _timer_deadline(self, pdo: _Pdo, timer_us: int) -> int:
+        origin = pdo.timer_origin_us if pdo.last_tx_us is None else pdo.last_tx_us
+        return origin + timer_us
+
+    def _flush(self, pdo: _Pdo, t_us: int) -> list[Frame]:
+        if not pdo.pending or not self.is_valid(pdo) or t_us < self._inhibit_end(pdo):
+            return []
+        return [self._build(pdo, t_us)]
+
+    def _build(self, pdo: _Pdo, t_us: int) -> Frame:
+        data = b"".join(self.store.encode(e.index, e.subindex) for e in pdo.mapping)
+        pdo.pending = False
+        pdo.last_tx_us = t_us
+        return Frame(self.cob_id(pdo) & CAN_ID_MASK, data)
+
+    def _on_change(self, index: int, subindex: int, value: Value) -> None:
+        if index in self._by_comm or index in self._by_map:
+            self._on_parameter_change(index, subindex)
+            return
+        # Type 254 events are the application's to call (trigger); types 0 and 255
+        # treat any change of a mapped value as the event.
+        for pdo in self._watchers.get((index, subindex), ()):
+            if self.transmission_type(pdo) in (0, TYPE_EVENT_PROFILE):
+                pdo.pending = True
+
+    def _on_parameter_change(self, index: int, subindex: int) -> None:
+        pdo = self._by_comm.get(index) or self._by_map[index]
+        self.reload()
+        if index == pdo.comm_index:
+            pdo.pending = False
+            pdo.sync_count = 0
+            pdo.sync_started = False
+            pdo.last_tx_us = None
+            pdo.timer_origin_us = self.now_us
+
+    # -- SDO-side checks -----------------------------------------------------------
+    def _validate_comm(self, index: int, subindex: int, value: Value) -> None:
+        pdo = self._by_comm[index]
+        value = int(value)
+        valid = self.is_valid(pdo)
+        if subindex == 1:
+            self._check_cob_id(pdo, value)
+        elif subindex == 2:
+            allowed = value <= SYNC_TYPE_MAX or value >= TYPE_EVENT_MANUFACTURER
+            if not allowed:
+                raise SdoAbort(AbortCode.INVALID_VALUE,
+                               f"transmission type {value} not supported (0-240, 254, 255)")
+        elif subindex in (3, 6) and pdo.transmit and valid and value != self._param(pdo, subindex):
+            raise SdoAbort(AbortCode.INVALID_VALUE,
+                           f"{index:04X}h:{subindex:02X} can change only while the PDO is invalid")
+        if subindex == 6 and value > SYNC_TYPE_MAX:
+            raise SdoAbort(AbortCode.INVALID_VALUE, "SYNC start value must be 0-240")
+
+    def _check_cob_id(self, pdo: _Pdo, value: int) -> None:
+        if value & COB_ID_EXTENDED:
+            raise SdoAbort(AbortCode.INVALID_VALUE, "29-bit CAN-IDs are not supported")
+        new_valid = not value & COB_ID_INVALID
+        can_id = value & CAN_ID_MASK
+        if not new_valid:
+            return
+        if self.is_valid(pdo) and can_id != self.cob_id(pdo) & CAN_ID_MASK:
+            raise SdoAbort(AbortCode.INVALID_VALUE, "set bit 31 before changing a PDO's CAN-ID")
+        if is_restricted_can_id(can_id):
+            raise SdoAbort(AbortCode.INVALID_VALUE, f"CAN-ID 0x{can_id:03X} is restricted")
+        for other in self._by_comm.values():
+            if other is not pdo and self.is_valid(other) and (
+                    self.cob_id(other) & CAN_ID_MASK) == can_id:
+                raise SdoAbort(AbortCode.INVALID_VALUE, f"CAN-ID 0x{can_id:03X} already in use")
+
+    def _validate_map(self, index: int, subindex: int, value: Value) -> None:
+        pdo = self._by_map[index]
+        value = int(value)
+        if self.is_valid(pdo):
+            raise SdoAbort(AbortCode.UNSUPPORTED_ACCESS,
+                           "mapping can change only while the PDO is invalid (COB-ID bit 31)")
+        if subindex == 0:
+            entries = [MapEntry.decode(int(self.store.get(index, s))) for s in range(1, value + 1)]
+            for entry in entries:
+                self._check_entry(pdo, entry)
+            if sum(e.bits for e in entries) > MAX_PDO_BITS:
+                raise SdoAbort(AbortCode.PDO_TOO_LONG, f"mapping exceeds {MAX_PDO_BITS} bits")
+            return
+        if int(self.store.get(index, 0)) != 0:
+            raise SdoAbort(AbortCode.UNSUPPORTED_ACCESS,
+                           "set sub-index 0 to 0 before writing mapping entries")
+        if value:
+            self._check_entry(pdo, MapEntry.decode(value))
+
+    def _check_entry(self, pdo: _Pdo, entry: MapEntry) -> None:
+        if entry.is_dummy:
+            if pdo.transmit or entry.index not in self.dummy_usage:
+                raise SdoAbort(AbortCode.NOT_MAPPABLE, f"dummy 0x{entry.index:04X} not usable here")
+            if entry.bits != DUMMY_BITS[entry.index]:
+                raise SdoAbort(AbortCode.PARAMETER_INCOMPATIBLE, "dummy length mismatch")
+            return
+        var = self.store.entry(entry.index, entry.subindex).var  # raises NO_OBJECT / NO_SUBINDEX
+        if not var.pdo_mappable:
+            raise SdoAbort(AbortCode.NOT_MAPPABLE,
+                           f"0x{entry.index:04X}:{entry.subindex:02X} is not PDO-mappable")
+        access = var.access_type
+        direction_ok = access in ("ro", "rw", "rwr", "const") if pdo.transmit else (
+            access in ("wo", "rw", "rww"))
+        if not direction_ok:
+            raise SdoAbort(AbortCode.NOT_MAPPABLE,
+                           f"0x{entry.index:04X}:{entry.subindex:02X} ({access}) cannot go into a "
+                           f"{'T' if pdo.transmit else 'R'}PDO")
+        if entry.bits != len(var):
+            raise SdoAbort(AbortCode.PARAMETER_INCOMPATIBLE,
+                           f"0x{entry.index:04X}:{entry.subindex:02X} is {len(var)} bits, "
+                           f"mapping says {entry.bits}")

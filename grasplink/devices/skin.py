@@ -1,0 +1,183 @@
+"""Skin sensor node: samples the FSR under the ridged skin and streams it.
+
+TPDO1 carries `samples per PDO` (1-3) consecutive ADC samples plus a packet
+sequence number, so a receiver can tell a lost frame from a quiet signal.
+TPDO2 (event timer) carries the static force in mN and the total sample
+count, which lets a receiver re-anchor sample times after a loss.
+
+Bus load at defaults (400 Hz, 3 samples per PDO): 133.3 TPDO1 frames/s of
+7 data bytes and 50 TPDO2 frames/s of 8 bytes, about 2.4 % of 1 Mbit/s
+with worst-case stuffing (see docs/benchmarks/network.md for measured figures).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grasplink.devices import emcy as em
+from grasplink.devices.app import DeviceApp
+from grasplink.devices.frames import Frame
+from grasplink.devices.nmt import NmtState
+from grasplink.devices.sampling import SampleClock
+from grasplink.devices.sources import ConstantSource, SampleSource
+from grasplink.devices.store import Value
+from grasplink.devices.sdo_abort import AbortCode, SdoAbort
+from grasplink.profiles import objects as obj
+from grasplink.profiles.layouts import LAYOUTS_MM, PRESET_CODES
+
+STATIC_WINDOW_S = 0.05  # static force = mean of the last 50 ms of samples
+MN_PER_N = 1000.0
+UM_PER_MM = 1000
+MAX_PACKETS_PER_ADVANCE = 4096  # bound work after a stall; older packets are dropped
+TPDO_SAMPLES = 1
+CAL_BITS, CAL_FULL_SCALE_MN, CAL_ZERO = 1, 2, 3
+
+
+class SkinApp(DeviceApp):
+    def __init__(self, source: SampleSource | None = None):
+        self.source = source or ConstantSource(0.0)
+        self.clock: SampleClock | None = None
+        self._static = np.zeros(1)
+        self._static_fill = 0
+        self._ring_pos = 0
+        self._loading_preset = False
+        self.saturated_samples = 0
+        self.dropped_packets = 0
+
+    def attach(self, node) -> None:
+        super().attach(node)
+        self.store.add_validator(obj.SKIN_RIDGE_SPACING_UM, self._validate_spacing)
+        self.store.add_validator(obj.SKIN_FSR_CALIBRATION, self._validate_calibration)
+        self.store.add_listener(self._on_change)
+
+    # -- configuration ----------------------------------------------------------
+    @property
+    def rate_hz(self) -> int:
+        return int(self.store.get(obj.SKIN_SAMPLE_RATE_HZ))
+
+    @property
+    def samples_per_pdo(self) -> int:
+        return int(self.store.get(obj.SKIN_SAMPLES_PER_PDO))
+
+    def layout_mm(self) -> tuple[float, ...]:
+        count = int(self.store.get(obj.SKIN_RIDGE_SPACING_UM, 0))
+        return tuple(int(self.store.get(obj.SKIN_RIDGE_SPACING_UM, s)) / UM_PER_MM
+                     for s in range(1, count + 1))
+
+    def full_scale_counts(self) -> int:
+        return (1 << int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_BITS))) - 1
+
+    def _validate_spacing(self, index: int, subindex: int, value: Value) -> None:
+        if subindex == 0 and int(value) == 0:
+            raise SdoAbort(AbortCode.VALUE_TOO_LOW, "a skin has at least one ridge spacing")
+
+    def _validate_calibration(self, index: int, subindex: int, value: Value) -> None:
+        if subindex == CAL_ZERO:
+            bits = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_BITS))
+            if int(value) >= (1 << bits) - 1:
+                raise SdoAbort(AbortCode.VALUE_TOO_HIGH, "zero offset must be below full scale")
+        if subindex == CAL_BITS:
+            zero = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_ZERO))
+            if zero >= (1 << int(value)) - 1:
+                raise SdoAbort(AbortCode.VALUE_TOO_LOW, "resolution leaves no range above zero")
+
+    def _on_change(self, index: int, subindex: int, value: Value) -> None:
+        if index == obj.SKIN_LAYOUT_PRESET and int(value) in PRESET_CODES:
+            self._load_preset(PRESET_CODES[int(value)])
+        elif index == obj.SKIN_RIDGE_SPACING_UM and not self._loading_preset:
+            self.store.set(obj.SKIN_LAYOUT_PRESET, 0, 0)
+        elif index == obj.SKIN_SAMPLE_RATE_HZ and self.clock is not None:
+            self._restart_sampling(self.node.pdo.now_us)
+
+    def _load_preset(self, name: str) -> None:
+        spacings = LAYOUTS_MM[name]
+        self._loading_preset = True
+        try:
+            self.store.set(obj.SKIN_RIDGE_SPACING_UM, 0, len(spacings))
+            for sub, mm in enumerate(spacings, start=1):
+                self.store.set(obj.SKIN_RIDGE_SPACING_UM, sub, round(mm * UM_PER_MM))
+        finally:
+            self._loading_preset = False
+
+    # -- behaviour ----------------------------------------------------------------
+    def on_reset(self, t_us: int) -> None:
+        self._restart_sampling(t_us)
+
+    def _restart_sampling(self, t_us: int) -> None:
+        self.clock = SampleClock(self.rate_hz, t_us)
+        self._static = np.zeros(max(1, round(self.rate_hz * STATIC_WINDOW_S)))
+        self._static_fill = 0
+        self._ring_pos = 0
+
+    def to_counts(self, force_n: np.ndarray) -> np.ndarray:
+        """ADC counts for forces (the device's linearised FSR calibration)."""
+        full = self.full_scale_counts()
+        zero = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_ZERO))
+        scale_mn = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_FULL_SCALE_MN))
+        span = full - zero
+        counts = zero + np.nan_to_num(force_n, nan=0.0) * MN_PER_N / scale_mn * span
+        return np.clip(np.rint(counts), 0, full).astype(np.int64)
+
+    def to_force_mn(self, counts: np.ndarray | float) -> np.ndarray:
+        full = self.full_scale_counts()
+        zero = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_ZERO))
+        scale_mn = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_FULL_SCALE_MN))
+        return (np.asarray(counts, dtype=np.float64) - zero) * scale_mn / (full - zero)
+
+    def advance(self, t_us: int) -> list[Frame]:
+        clock = self.clock
+        if clock is None:
+            return []
+        per_pdo = self.samples_per_pdo
+        due = clock.due_until(t_us)
+        packets = (due - clock.next_index) // per_pdo
+        if packets <= 0:
+            return []
+        if packets > MAX_PACKETS_PER_ADVANCE:
+            skipped = packets - MAX_PACKETS_PER_ADVANCE
+            self.dropped_packets += skipped
+            clock.next_index += skipped * per_pdo
+            packets = MAX_PACKETS_PER_ADVANCE
+        start = clock.next_index
+        forces = self.source.samples(start, packets * per_pdo, clock.rate_hz)
+        counts = self.to_counts(forces)
+        self._track_saturation(counts, t_us)
+        self._track_static(counts)
+        frames: list[Frame] = []
+        operational = self.node.state == NmtState.OPERATIONAL
+        sequence = int(self.store.get(obj.SKIN_PACKET_SEQUENCE))
+        for p in range(packets):
+            block = counts[p * per_pdo:(p + 1) * per_pdo]
+            for slot, value in enumerate(block, start=1):
+                self.store.set(obj.SKIN_SAMPLE_SLOTS, slot, int(value))
+            sequence = (sequence + 1) & 0xFF
+            self.store.set(obj.SKIN_PACKET_SEQUENCE, 0, sequence)
+            end_index = start + (p + 1) * per_pdo
+            self.store.set(obj.SKIN_SAMPLE_COUNTER, 0, end_index & 0xFFFFFFFF)
+            if operational:
+                frames += self.node.transmit_tpdo(TPDO_SAMPLES, clock.time_of(end_index - 1))
+        clock.next_index = start + packets * per_pdo
+        self.store.set(obj.SKIN_STATIC_FORCE_MN, 0, int(round(float(
+            self.to_force_mn(self._static[:self._static_fill].mean())))))
+        return frames
+
+    def next_deadline_us(self) -> int | None:
+        if self.clock is None:
+            return None
+        return self.clock.time_of(self.clock.next_index + self.samples_per_pdo - 1)
+
+    def _track_static(self, counts: np.ndarray) -> None:
+        """Ring buffer of the last STATIC_WINDOW_S of samples (bounded memory)."""
+        ring = self._static
+        tail = counts[-len(ring):]
+        ring[(self._ring_pos + np.arange(len(tail))) % len(ring)] = tail
+        self._ring_pos = (self._ring_pos + len(tail)) % len(ring)
+        self._static_fill = min(len(ring), self._static_fill + len(tail))
+
+    def _track_saturation(self, counts: np.ndarray, t_us: int) -> None:
+        saturated = int(np.count_nonzero(counts >= self.full_scale_counts()))
+        self.saturated_samples += saturated
+        if saturated and not self.node.emcy.is_active(em.SENSOR_SATURATED):
+            self.node.emcy.raise_error(em.SENSOR_SATURATED, em.REG_MANUFACTURER, t_us)
+        elif not saturated and self.node.emcy.is_active(em.SENSOR_SATURATED):
+            self.node.emcy.clear_error(em.SENSOR_SATURATED, t_us)

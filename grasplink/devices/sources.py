@@ -1,0 +1,40 @@
+"""Where a sensing node's physical signal comes from.
+
+A node samples its source at its own configured rate; the source answers
+for sample indices, not times, so time stays an exact integer count. With
+no scene attached a sensor reads a constant (zero unless told): the node
+simulates nothing a scene did not ask for. Simulators plug in here.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+
+class SampleSource(Protocol):
+    def samples(self, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+        """Physical values (float64) of samples start_index .. start_index+count-1."""
+        ...
+
+
+class ConstantSource:
+    """A sensor at rest: every sample reads `value`."""
+
+    def __init__(self, value: float = 0.0):
+        self.value = float(value)
+
+    def samples(self, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+        return np.full(count, self.value)
+
+
+class FunctionSource:
+    """A signal given as a vectorised function of time in seconds (tests, demos)."""
+
+    def __init__(self, fn):
+        self.fn = fn
+
+    def samples(self, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+        index = np.arange(start_index, start_index + count, dtype=np.int64)
+        return np.asarray(self.fn(index / rate_hz), dtype=np.float64)

@@ -1,0 +1,1 @@
+"""Gateway: masters the network, decodes the skin and EMG streams, closes the loop."""

@@ -1,0 +1,1 @@
+"""Simulators: the physical signals a scene asks for, and nothing more."""
