@@ -1,0 +1,174 @@
+"""The `grasplink` command line.
+
+Every error a user can cause prints one line naming the problem and exits
+non-zero; tracebacks are for bugs only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from grasplink.errors import ConfigError, GrasplinkError
+
+EXIT_ERROR = 1
+PROBE_S = 0.35  # longer than the default 100 ms heartbeat period, several times over
+
+
+def node_id_arg(text: str) -> int:
+    """Node-IDs in decimal or 0x-hex, 1..127."""
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"node-ID {text!r} is not a number") from None
+    if not 1 <= value <= 127:
+        raise argparse.ArgumentTypeError(f"node-ID {text} is outside 1..127")
+    return value
+
+
+def positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"duration must be a positive number of seconds, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from grasplink.bus.url import DEFAULT_BUS_URL, DEFAULT_HUB_PORT
+    from grasplink.profiles import DEVICE_KINDS
+
+    parser = argparse.ArgumentParser(prog="grasplink", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    node = sub.add_parser("node", help="run one device node as its own process")
+    node.add_argument("kind", choices=DEVICE_KINDS, help="which device")
+    node.add_argument("--bus", default=DEFAULT_BUS_URL,
+                      help=f"bus URL (default {DEFAULT_BUS_URL}; see docs/buses.md)")
+    node.add_argument("--node-id", type=node_id_arg, default=None,
+                      help="CANopen node-ID 1..127 (default: the profile's)")
+    node.add_argument("--duration", type=positive_seconds, default=None,
+                      help="stop after this many seconds (default: run until Ctrl-C)")
+
+    bus = sub.add_parser("bus", help="bus tools")
+    bus_sub = bus.add_subparsers(dest="bus_command", required=True, metavar="BUS_COMMAND")
+    hub = bus_sub.add_parser("hub", help="run a loopback CAN hub for several processes")
+    hub.add_argument("--host", default="127.0.0.1")
+    hub.add_argument("--port", type=int, default=DEFAULT_HUB_PORT)
+
+    demo = sub.add_parser("demo", help="boot all nodes with a master and report the bus")
+    demo.add_argument("--duration", type=positive_seconds, default=3.0)
+    demo.add_argument("--bus", default=None, help="bus URL (default: a private virtual bus)")
+
+    profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
+    prof_sub = profiles.add_subparsers(dest="profiles_command", required=True,
+                                       metavar="PROFILES_COMMAND")
+    doc = prof_sub.add_parser("doc", help="generate docs/profiles.md from the EDS files")
+    doc.add_argument("--out", type=Path, default=Path("docs/profiles.md"))
+    check = prof_sub.add_parser("check", help="validate EDS files")
+    check.add_argument("files", nargs="+", type=Path)
+    return parser
+
+
+def cmd_node(args: argparse.Namespace) -> int:
+    from grasplink.bus import NodeRunner, open_bus
+    from grasplink.devices.factory import build_node
+
+    node = build_node(args.kind, args.node_id)
+    bus = open_bus(args.bus)
+    try:
+        _refuse_if_node_id_taken(bus, node.node_id, args.bus)
+        stop = threading.Event()
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        with NodeRunner(bus, [node]) as runner:
+            print(f"{args.kind} node 0x{node.node_id:02X} running on {args.bus}", flush=True)
+            deadline = None if args.duration is None else time.monotonic() + args.duration
+            heartbeat_id = 0x700 + node.node_id
+            try:
+                while not stop.wait(0.1):
+                    if runner.stats.rx_by_cob_id[heartbeat_id]:
+                        raise ConfigError(f"another node with node-ID 0x{node.node_id:02X} "
+                                          f"appeared on {args.bus}; stopping")
+                    if deadline is not None and time.monotonic() >= deadline:
+                        break
+            except KeyboardInterrupt:
+                pass
+            stats = runner.stats
+        print(f"stopped: {stats.frames_tx} frames sent, {stats.frames_rx} received", flush=True)
+    finally:
+        bus.shutdown()
+    return 0
+
+
+def _refuse_if_node_id_taken(bus, node_id: int, url: str) -> None:
+    """Listen before booting: a heartbeat, EMCY or TPDO with our node-ID means a clash."""
+    from grasplink.bus.url import message_to_frame
+
+    ours = {0x080 + node_id, 0x700 + node_id, 0x580 + node_id,
+            *(base + node_id for base in (0x180, 0x280, 0x380, 0x480))}
+    deadline = time.monotonic() + PROBE_S
+    while (left := deadline - time.monotonic()) > 0:
+        msg = bus.recv(left)
+        frame = message_to_frame(msg) if msg is not None else None
+        if frame is not None and frame.can_id in ours:
+            raise ConfigError(f"node-ID 0x{node_id:02X} is already in use on {url} "
+                              f"(saw COB-ID 0x{frame.can_id:03X}); choose another with --node-id")
+
+
+def cmd_bus(args: argparse.Namespace) -> int:
+    from grasplink.bus import run_hub
+
+    run_hub(args.host, args.port)
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from grasplink.demo import run_demo
+
+    figures = run_demo(args.duration, args.bus)
+    silent = [kind for kind, state in figures["states"].items() if state != "OPERATIONAL"]
+    if silent:
+        print(f"grasplink: error: nodes not operational: {', '.join(silent)}", file=sys.stderr)
+        return EXIT_ERROR
+    return 0
+
+
+def cmd_profiles(args: argparse.Namespace) -> int:
+    if args.profiles_command == "doc":
+        from grasplink.profiles.docgen import write_profiles_doc
+
+        write_profiles_doc(args.out)
+        print(f"wrote {args.out}")
+        return 0
+    from grasplink.profiles.eds import validate_eds
+
+    for path in args.files:
+        validate_eds(path)
+        print(f"{path}: ok")
+    return 0
+
+
+COMMANDS = {"node": cmd_node, "bus": cmd_bus, "demo": cmd_demo, "profiles": cmd_profiles}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except GrasplinkError as exc:
+        print(f"grasplink: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
