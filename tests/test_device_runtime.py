@@ -461,3 +461,10 @@ def test_emg_envelope_and_level_follow_the_contraction():
 def test_sdo_segmented_read_of_device_name():
     net, _ = network("hand")
     assert sdo_read(net, HAND, obj.DEVICE_NAME).decode().startswith("grasplink")
+
+
+def test_skin_uniform4_preset_fits_all_21_spacings():
+    net, _ = network("skin")
+    write_uint(net, SKIN, obj.SKIN_LAYOUT_PRESET, 0, 7, 1)
+    assert read_uint(net, SKIN, obj.SKIN_RIDGE_SPACING_UM, 0) == 21
+    assert {read_uint(net, SKIN, obj.SKIN_RIDGE_SPACING_UM, s) for s in range(1, 22)} == {4000}

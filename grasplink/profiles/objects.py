@@ -40,7 +40,7 @@ SKIN_STATIC_FORCE_MN = 0x2110  # I32 [mN]
 SKIN_SAMPLE_RATE_HZ = 0x2120  # U16 [Hz]
 SKIN_SAMPLES_PER_PDO = 0x2121  # U8, 1..3
 SKIN_FSR_CALIBRATION = 0x2130  # RECORD: sub1 ADC bits, sub2 full scale [mN], sub3 zero [counts]
-SKIN_RIDGE_SPACING_UM = 0x2140  # ARRAY U32 [µm]; sub0 = number of spacings (1..12)
+SKIN_RIDGE_SPACING_UM = 0x2140  # ARRAY U32 [µm]; sub0 = number of spacings (1..40)
 SKIN_LAYOUT_PRESET = 0x2141  # U8: 0 custom, 1..7 named layouts (profiles.layouts)
 SKIN_RIDGE_SIDE_UM = 0x2142  # U32 [µm], side of the triangular ridge section
 

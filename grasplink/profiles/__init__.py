@@ -1,0 +1,66 @@
+"""Device profiles: the shipped EDS files and how to load them.
+
+The four .eds files next to this module are the source of truth for every
+object a grasplink node has (type, access, limits, default, unit). Devices
+and the gateway load them through `load_profile`, which validates first so a
+broken file fails with an EdsError naming file, section and key instead of
+canopen silently dropping a default.
+
+canopen is imported lazily: `grasplink.profiles.objects` is imported by
+almost everything and should stay cheap.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from grasplink.errors import ConfigError, EdsError
+from grasplink.profiles.eds import validate_eds
+
+if TYPE_CHECKING:
+    import canopen
+
+__all__ = ["DEVICE_KINDS", "eds_path", "load_profile", "validate_eds"]
+
+DEVICE_KINDS: tuple[str, ...] = ("skin", "belt", "emg", "hand")
+_PROFILE_DIR = Path(__file__).resolve().parent
+
+
+def eds_path(kind: str) -> Path:
+    """Path of the shipped EDS for a device kind ("skin", "belt", "emg", "hand")."""
+    if kind not in DEVICE_KINDS:
+        raise ConfigError(f"unknown device kind {kind!r}; valid kinds: {', '.join(DEVICE_KINDS)}")
+    return _PROFILE_DIR / f"{kind}.eds"
+
+
+def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictionary:
+    """Validate an EDS and import it with canopen, $NODEID resolved to `node_id`.
+
+    `kind_or_path` is a device kind or a path to an .eds/.dcf file (a Path, or
+    a string containing a path separator or ending in .eds/.dcf).
+    """
+    if isinstance(node_id, bool) or not isinstance(node_id, int) or not 1 <= node_id <= 127:
+        raise ConfigError(f"node-ID {node_id!r} is outside 1..127")
+    path = _resolve(kind_or_path)
+    validate_eds(path)
+    from canopen.objectdictionary import import_od
+
+    try:
+        return import_od(str(path), node_id=node_id)
+    except Exception as exc:  # canopen raises bare KeyError/ValueError/configparser errors
+        raise EdsError(str(path), None, None, f"canopen cannot import it: {exc!r}") from exc
+
+
+def _resolve(kind_or_path: str | Path) -> Path:
+    if isinstance(kind_or_path, Path):
+        return kind_or_path
+    text = str(kind_or_path)
+    if text in DEVICE_KINDS:
+        return eds_path(text)
+    if "/" in text or "\\" in text or text.lower().endswith((".eds", ".dcf")):
+        return Path(text)
+    raise ConfigError(
+        f"unknown device kind {text!r}; valid kinds: {', '.join(DEVICE_KINDS)} "
+        "(or a path to an .eds file)"
+    )

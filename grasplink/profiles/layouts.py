@@ -1,0 +1,87 @@
+"""Named ridge layouts of the skin sensor (thesis ch. 5, table 5.1).
+
+A layout is the list of spacings between successive ridges, in mm, along an
+84 mm skin. The skin node stores the spacings in 0x2140 (in µm, at most
+`MAX_NODE_SPACINGS`) and the preset number in 0x2141, so a layout given on
+the command line or in a scene file has to be turned into those numbers; this
+module is the one place that knows the names and checks user input.
+"""
+
+from __future__ import annotations
+
+import math
+
+from grasplink.errors import ConfigError
+
+#: Spacings in mm. The α layouts come from the thesis's genetic search
+#: (fitness α·accuracy + (1 − α)·resolution); fibonacci is its reference
+#: layout; uniform4 is the best uniform skin of ch. 4 (D = 4 mm).
+LAYOUTS_MM: dict[str, tuple[float, ...]] = {
+    "alpha0.1": (19.0, 12.0, 5.0, 8.0, 4.0, 3.0, 33.0),
+    "alpha0.3": (4.0, 3.0, 48.0, 29.0),
+    "alpha0.5": (5.0, 12.0, 67.0),
+    "alpha0.7": (7.0, 64.0, 13.0),
+    "alpha0.9": (6.0, 20.0, 58.0),
+    "fibonacci": (5.0, 34.0, 21.0, 8.0, 3.0, 13.0),
+    "uniform4": (4.0,) * 21,
+}
+
+#: Values of the skin node's 0x2141 "Ridge layout preset"; 0 means custom
+#: (the spacings in 0x2140 are authoritative).
+PRESET_CODES: dict[int, str] = {code: name for code, name in enumerate(LAYOUTS_MM, start=1)}
+CUSTOM_PRESET = 0
+
+#: Spacing sub-indices in 0x2140: room for every named layout (uniform4 has
+#: 21) and for a 2.5 mm pitch over the 84 mm skin (34).
+MAX_NODE_SPACINGS = 40
+
+
+def parse_layout(text: str) -> tuple[float, ...]:
+    """Turn a layout name or "19,12,5" (mm) into spacings in mm.
+
+    Raises ConfigError naming the offending value, so a typo in a command
+    line reports what was wrong rather than a bare ValueError. More than
+    `MAX_NODE_SPACINGS` spacings are accepted here (simulators can use
+    them); only the node's object dictionary is limited.
+    """
+    stripped = text.strip()
+    if not stripped:
+        raise ConfigError("ridge layout is empty; give a name or comma-separated spacings in mm")
+    if stripped in LAYOUTS_MM:
+        return LAYOUTS_MM[stripped]
+    if "," not in stripped and not _is_number(stripped):
+        raise ConfigError(
+            f"unknown ridge layout {stripped!r}; valid names: {', '.join(LAYOUTS_MM)} "
+            "(or comma-separated spacings in mm)"
+        )
+    spacings: list[float] = []
+    for position, item in enumerate(stripped.split(","), start=1):
+        spacings.append(_parse_spacing(item.strip(), position))
+    return tuple(spacings)
+
+
+def spacings_um(spacings_mm: tuple[float, ...]) -> tuple[int, ...]:
+    """Spacings rounded to whole µm, the unit of the node's 0x2140 entries."""
+    return tuple(round(s * 1000) for s in spacings_mm)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _parse_spacing(item: str, position: int) -> float:
+    if not item:
+        raise ConfigError(f"ridge spacing #{position} is empty")
+    try:
+        value = float(item)
+    except ValueError:
+        raise ConfigError(f"ridge spacing #{position} {item!r} is not a number (mm)") from None
+    if not math.isfinite(value):
+        raise ConfigError(f"ridge spacing #{position} {item!r} is not a finite number")
+    if value <= 0:
+        raise ConfigError(f"ridge spacing #{position} {item!r} must be > 0 mm")
+    return value
