@@ -1,0 +1,303 @@
+"""NodeRunner: the IO edge that runs sans-IO devices on a python-can bus in real time."""
+
+from __future__ import annotations
+
+import copy
+import logging
+import queue
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+
+import can
+
+from grasplink.bus.url import frame_to_message, message_to_frame
+from grasplink.devices.frames import Frame
+from grasplink.devices.protocol import SansIoDevice
+
+logger = logging.getLogger(__name__)
+
+DEVICE_BACKOFF_US = 100_000
+
+
+def monotonic_us() -> int:
+    """The runner's default clock: integer microseconds, monotonic."""
+    return time.monotonic_ns() // 1000
+
+
+@dataclass
+class RunnerStats:
+    """Counters a `NodeRunner` keeps; `NodeRunner.stats` returns a snapshot copy."""
+
+    frames_rx: int = 0  # CANopen frames received from the bus
+    frames_tx: int = 0  # frames sent on the bus (devices' and submitted ones)
+    rx_by_cob_id: Counter[int] = field(default_factory=Counter)
+    tx_by_cob_id: Counter[int] = field(default_factory=Counter)
+    tx_by_node: Counter[int] = field(default_factory=Counter)  # frames each device emitted
+    injected: int = 0  # frames taken from submit()
+    ignored: int = 0  # bus frames CANopen cannot carry (error, 29-bit, FD) or own echoes
+    dropped: int = 0  # submit() queue full, or a reply cascade over the limit
+    send_errors: int = 0
+    bus_errors: int = 0  # bus.recv() failures
+    device_errors: int = 0  # exceptions raised by a device
+
+
+class NodeRunner:
+    """Run sans-IO devices on one python-can bus in a background thread.
+
+    Every frame a device returns is sent on the bus and also delivered to the
+    runner's other devices (a bus never echoes a sender's own frames, yet
+    devices sharing a runner must hear each other). Frames from the bus go to
+    every device. Timers run from ``clock_us`` (default: monotonic µs); the
+    thread waits on ``bus.recv`` until the earliest device deadline, at most
+    ``max_wait_s``, which also bounds how late a `submit`-ted frame goes out.
+
+    The bus should not echo own frames (``receive_own_messages=False``);
+    echoes that python-can marks as such (``is_rx=False``) are ignored.
+    The caller owns the bus: `stop` does not shut it down.
+    """
+
+    def __init__(
+        self,
+        bus: can.BusABC,
+        devices: Sequence[SansIoDevice],
+        *,
+        clock_us: Callable[[], int] | None = None,
+        max_wait_s: float = 0.02,
+        submit_queue_size: int = 256,
+        cascade_limit: int = 1000,
+        name: str = "grasplink-node-runner",
+    ) -> None:
+        if not devices:
+            raise ValueError("NodeRunner needs at least one device")
+        self.bus = bus
+        self.devices = list(devices)
+        self._clock = clock_us or monotonic_us
+        self._max_wait_s = max_wait_s
+        self._cascade_limit = cascade_limit
+        self._name = name
+        self._submitted: queue.Queue[tuple[Frame, bool]] = queue.Queue(submit_queue_size)
+        self._stats = RunnerStats()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._booted = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._bus_failing = False
+        self._send_failing = False
+        self._backoff_until: dict[int, int] = {}  # id(device) -> µs; after it raised
+
+    # -- control (any thread) -------------------------------------------------
+
+    def start(self, timeout: float = 5.0) -> NodeRunner:
+        """Start the thread; returns once every device's boot-up has been sent."""
+        if self._thread is not None:
+            raise RuntimeError("NodeRunner can only be started once")
+        self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
+        self._thread.start()
+        self._booted.wait(timeout)
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop the thread and wait for it (idempotent)."""
+        self._stop.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+            if thread.is_alive():
+                logger.warning("%s did not stop within %.1f s", self._name, timeout)
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def submit(self, frame: Frame, *, to_bus: bool = True) -> bool:
+        """Inject a frame from another thread, as if a local tool transmitted it.
+
+        The runner delivers it to all its devices and, if ``to_bus``, sends it
+        on the bus. Returns False (and counts it dropped) if the bounded queue
+        is full.
+        """
+        if not isinstance(frame, Frame):
+            raise TypeError(f"submit() takes a Frame, not {type(frame).__name__}")
+        try:
+            self._submitted.put_nowait((frame, to_bus))
+        except queue.Full:
+            with self._lock:
+                self._stats.dropped += 1
+            return False
+        return True
+
+    @property
+    def stats(self) -> RunnerStats:
+        """A consistent snapshot of the counters."""
+        with self._lock:
+            return copy.deepcopy(self._stats)
+
+    def __enter__(self) -> NodeRunner:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    # -- the runner thread ------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            now = self._clock()
+            boot: list[tuple[Frame, SansIoDevice | None, bool]] = []
+            for device in self.devices:  # power every device on before anyone hears a frame
+                boot.extend((f, device, True) for f in self._call(device, "start", now))
+            self._dispatch(boot, now)
+        finally:
+            self._booted.set()
+        while not self._stop.is_set():
+            try:
+                self._step()
+            except Exception:  # never let one bad cycle kill the node
+                logger.exception("%s: unexpected error", self._name)
+                self._stop.wait(self._max_wait_s)
+
+    def _step(self) -> None:
+        now = self._clock()
+        wait_s = self._max_wait_s
+        if not self._submitted.empty():
+            wait_s = 0.0
+        else:
+            deadline = self._earliest_deadline()
+            if deadline is not None:
+                wait_s = min(wait_s, max(0, deadline - now) / 1e6)
+        msg = self._recv(wait_s)
+        now = self._clock()
+        work: list[tuple[Frame, SansIoDevice | None, bool]] = []
+        if msg is not None:
+            frame = message_to_frame(msg) if msg.is_rx else None
+            with self._lock:
+                if frame is None:
+                    self._stats.ignored += 1
+                else:
+                    self._stats.frames_rx += 1
+                    self._stats.rx_by_cob_id[frame.can_id] += 1
+            if frame is not None:
+                work.append((frame, None, False))
+        while True:
+            try:
+                frame, to_bus = self._submitted.get_nowait()
+            except queue.Empty:
+                break
+            with self._lock:
+                self._stats.injected += 1
+            work.append((frame, None, to_bus))
+        self._dispatch(work, now)
+        for device in self.devices:
+            deadline = self._effective_deadline(device)
+            if deadline is not None and deadline <= now:
+                out = self._call(device, "advance", now)
+                self._dispatch([(f, device, True) for f in out], now)
+
+    def _earliest_deadline(self) -> int | None:
+        deadlines = [d for d in map(self._effective_deadline, self.devices) if d is not None]
+        return min(deadlines) if deadlines else None
+
+    def _effective_deadline(self, device: SansIoDevice) -> int | None:
+        """The device's deadline, held back for a while after the device raised."""
+        deadline = self._call_deadline(device)
+        backoff = self._backoff_until.get(id(device))
+        if backoff is None:
+            return deadline
+        if self._clock() >= backoff:
+            del self._backoff_until[id(device)]
+            return deadline
+        return None if deadline is None else max(deadline, backoff)
+
+    def _recv(self, wait_s: float) -> can.Message | None:
+        try:
+            msg = self.bus.recv(timeout=wait_s)
+        except Exception as exc:
+            with self._lock:
+                self._stats.bus_errors += 1
+            if not self._bus_failing:
+                logger.error("%s: receiving from %s failed: %s", self._name, self.bus, exc)
+            self._bus_failing = True
+            self._stop.wait(max(wait_s, 0.001))  # a dead bus must not spin the CPU
+            return None
+        self._bus_failing = False
+        return msg
+
+    def _dispatch(self, work: Iterable[tuple[Frame, SansIoDevice | None, bool]], now: int) -> None:
+        """Send frames and deliver them locally; replies join the same work list."""
+        pending = deque(work)
+        handled = 0
+        while pending:
+            if handled >= self._cascade_limit:
+                logger.error(
+                    "%s: more than %d frames in one reply cascade; dropping %d",
+                    self._name,
+                    self._cascade_limit,
+                    len(pending),
+                )
+                with self._lock:
+                    self._stats.dropped += len(pending)
+                return
+            handled += 1
+            frame, source, to_bus = pending.popleft()
+            if to_bus:
+                self._send(frame)
+            for device in self.devices:
+                if device is not source:
+                    pending.extend(
+                        (f, device, True) for f in self._call(device, "receive", frame, now)
+                    )
+
+    def _send(self, frame: Frame) -> None:
+        try:
+            self.bus.send(frame_to_message(frame))
+        except Exception as exc:
+            with self._lock:
+                self._stats.send_errors += 1
+            log = logger.debug if self._send_failing else logger.warning
+            log("%s: sending 0x%03X failed: %s", self._name, frame.can_id, exc)
+            self._send_failing = True
+            return
+        self._send_failing = False
+        with self._lock:
+            self._stats.frames_tx += 1
+            self._stats.tx_by_cob_id[frame.can_id] += 1
+
+    def _call(self, device: SansIoDevice, method: str, *args: object) -> list[Frame]:
+        try:
+            out = getattr(device, method)(*args)
+            frames = list(out or ())
+            bad = [f for f in frames if not isinstance(f, Frame)]
+            if bad:
+                raise TypeError(f"{method}() returned {type(bad[0]).__name__}, not Frame")
+        except Exception:
+            logger.exception("device node %s: %s() failed", _node_id(device), method)
+            self._device_failed(device)
+            return []
+        if frames:
+            with self._lock:
+                self._stats.tx_by_node[_node_id(device)] += len(frames)
+        return frames
+
+    def _call_deadline(self, device: SansIoDevice) -> int | None:
+        try:
+            return device.next_deadline_us()
+        except Exception:
+            if id(device) not in self._backoff_until:
+                logger.exception("device node %s: next_deadline_us() failed", _node_id(device))
+                self._device_failed(device)
+            return None
+
+    def _device_failed(self, device: SansIoDevice) -> None:
+        # A device that raises at its deadline would otherwise be retried in a
+        # tight loop; give it 100 ms before its timers run again.
+        self._backoff_until[id(device)] = self._clock() + DEVICE_BACKOFF_US
+        with self._lock:
+            self._stats.device_errors += 1
+
+
+def _node_id(device: object) -> int:
+    node_id = getattr(device, "node_id", -1)
+    return node_id if isinstance(node_id, int) else -1
