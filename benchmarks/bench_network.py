@@ -18,6 +18,7 @@ Run: `make bench` or `.venv/bin/python benchmarks/bench_network.py [--quick]`.
 from __future__ import annotations
 
 import argparse
+import itertools
 import statistics
 import sys
 import threading
@@ -87,10 +88,16 @@ def per_node_cost(seconds: int) -> list[dict]:
         cpu0 = time.process_time()
         net.run_for(seconds * S)
         cpu = time.process_time() - cpu0
-        rows.append({"kind": kind, "node_id": node.node_id, "frames_s": meter.frames / seconds,
-                     "load": 100 * meter.bits / seconds / BITRATE,
-                     "cpu_percent": 100 * cpu / seconds,
-                     "us_per_frame": 1e6 * cpu / max(1, meter.frames)})
+        rows.append(
+            {
+                "kind": kind,
+                "node_id": node.node_id,
+                "frames_s": meter.frames / seconds,
+                "load": 100 * meter.bits / seconds / BITRATE,
+                "cpu_percent": 100 * cpu / seconds,
+                "us_per_frame": 1e6 * cpu / max(1, meter.frames),
+            }
+        )
     return rows
 
 
@@ -101,8 +108,12 @@ def prosthesis_load(seconds: int) -> dict:
     cpu0 = time.process_time()
     net.run_for(seconds * S)
     cpu = time.process_time() - cpu0
-    return {"frames_s": meter.frames / seconds, "load": 100 * meter.bits / seconds / BITRATE,
-            "cpu_percent": 100 * cpu / seconds, "realtime_factor": seconds / max(cpu, 1e-9)}
+    return {
+        "frames_s": meter.frames / seconds,
+        "load": 100 * meter.bits / seconds / BITRATE,
+        "cpu_percent": 100 * cpu / seconds,
+        "realtime_factor": seconds / max(cpu, 1e-9),
+    }
 
 
 def load_for(skin_rate_hz: int, per_pdo: int, emg_raw: bool, seconds: int) -> float:
@@ -164,10 +175,12 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
             cases = {
                 "expedited read 1000h (4 B)": lambda: remote.sdo.upload(0x1000, 0),
                 "expedited write 1017h (2 B)": lambda: remote.sdo.download(
-                    0x1017, 0, (100).to_bytes(2, "little")),
+                    0x1017, 0, (100).to_bytes(2, "little")
+                ),
                 "segmented read 1008h": lambda: remote.sdo.upload(0x1008, 0),
                 "block read 1008h (CRC)": lambda: remote.sdo.open(
-                    0x1008, 0, "rb", block_transfer=True, request_crc_support=True).read(),
+                    0x1008, 0, "rb", block_transfer=True, request_crc_support=True
+                ).read(),
             }
             for name, call in cases.items():
                 times = []
@@ -175,8 +188,11 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
                     t0 = time.perf_counter()
                     call()
                     times.append((time.perf_counter() - t0) * 1e6)
-                figures[name] = (statistics.median(times), percentile(times, 0.9),
-                                 percentile(times, 0.99))
+                figures[name] = (
+                    statistics.median(times),
+                    percentile(times, 0.9),
+                    percentile(times, 0.99),
+                )
             time.sleep(heartbeat_s)
             stop.set()
             thread.join(1)
@@ -185,12 +201,15 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
         network.disconnect()
         node_bus.shutdown()
         watch_bus.shutdown()
-    periods_ms = [(b - a) * 1e3 for a, b in zip(beats, beats[1:], strict=False)]
+    periods_ms = [(b - a) * 1e3 for a, b in itertools.pairwise(beats)]
     deviations = [abs(p - 100.0) for p in periods_ms]
-    figures["heartbeat"] = {"count": len(periods_ms), "mean_ms": statistics.mean(periods_ms),
-                            "sd_ms": statistics.pstdev(periods_ms),
-                            "p99_dev_ms": percentile(deviations, 0.99),
-                            "max_dev_ms": max(deviations)}
+    figures["heartbeat"] = {
+        "count": len(periods_ms),
+        "mean_ms": statistics.mean(periods_ms),
+        "sd_ms": statistics.pstdev(periods_ms),
+        "p99_dev_ms": percentile(deviations, 0.99),
+        "max_dev_ms": max(deviations),
+    }
     return figures
 
 
@@ -235,8 +254,10 @@ def write_doc(nodes, total, resolution, rt, seconds, path: Path) -> None:
         "|---|---|---:|---:|---:|---:|",
     ]
     for r in nodes:
-        lines.append(f"| {r['kind']} | 0x{r['node_id']:02X} | {r['frames_s']:.1f} | "
-                     f"{r['load']:.2f} | {r['cpu_percent']:.2f} | {r['us_per_frame']:.1f} |")
+        lines.append(
+            f"| {r['kind']} | 0x{r['node_id']:02X} | {r['frames_s']:.1f} | "
+            f"{r['load']:.2f} | {r['cpu_percent']:.2f} | {r['us_per_frame']:.1f} |"
+        )
     verdict = "meets" if total["load"] <= TARGET_LOAD_PERCENT else "MISSES"
     lines += [
         "",

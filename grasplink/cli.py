@@ -37,7 +37,9 @@ def positive_seconds(text: str) -> float:
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
     if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"duration must be a positive number of seconds, got {text}")
+        raise argparse.ArgumentTypeError(
+            f"duration must be a positive number of seconds, got {text}"
+        )
     return value
 
 
@@ -50,12 +52,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     node = sub.add_parser("node", help="run one device node as its own process")
     node.add_argument("kind", choices=DEVICE_KINDS, help="which device")
-    node.add_argument("--bus", default=DEFAULT_BUS_URL,
-                      help=f"bus URL (default {DEFAULT_BUS_URL}; see docs/buses.md)")
-    node.add_argument("--node-id", type=node_id_arg, default=None,
-                      help="CANopen node-ID 1..127 (default: the profile's)")
-    node.add_argument("--duration", type=positive_seconds, default=None,
-                      help="stop after this many seconds (default: run until Ctrl-C)")
+    node.add_argument(
+        "--bus",
+        default=DEFAULT_BUS_URL,
+        help=f"bus URL (default {DEFAULT_BUS_URL}; see docs/buses.md)",
+    )
+    node.add_argument(
+        "--node-id",
+        type=node_id_arg,
+        default=None,
+        help="CANopen node-ID 1..127 (default: the profile's)",
+    )
+    node.add_argument(
+        "--duration",
+        type=positive_seconds,
+        default=None,
+        help="stop after this many seconds (default: run until Ctrl-C)",
+    )
 
     bus = sub.add_parser("bus", help="bus tools")
     bus_sub = bus.add_subparsers(dest="bus_command", required=True, metavar="BUS_COMMAND")
@@ -68,8 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--bus", default=None, help="bus URL (default: a private virtual bus)")
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
-    prof_sub = profiles.add_subparsers(dest="profiles_command", required=True,
-                                       metavar="PROFILES_COMMAND")
+    prof_sub = profiles.add_subparsers(
+        dest="profiles_command", required=True, metavar="PROFILES_COMMAND"
+    )
     doc = prof_sub.add_parser("doc", help="generate docs/profiles.md from the EDS files")
     doc.add_argument("--out", type=Path, default=Path("docs/profiles.md"))
     check = prof_sub.add_parser("check", help="validate EDS files")
@@ -95,8 +109,10 @@ def cmd_node(args: argparse.Namespace) -> int:
             try:
                 while not stop.wait(0.1):
                     if runner.stats.rx_by_cob_id[heartbeat_id]:
-                        raise ConfigError(f"another node with node-ID 0x{node.node_id:02X} "
-                                          f"appeared on {args.bus}; stopping")
+                        raise ConfigError(
+                            f"another node with node-ID 0x{node.node_id:02X} "
+                            f"appeared on {args.bus}; stopping"
+                        )
                     if deadline is not None and time.monotonic() >= deadline:
                         break
             except KeyboardInterrupt:
@@ -112,15 +128,21 @@ def _refuse_if_node_id_taken(bus, node_id: int, url: str) -> None:
     """Listen before booting: a heartbeat, EMCY or TPDO with our node-ID means a clash."""
     from grasplink.bus.url import message_to_frame
 
-    ours = {0x080 + node_id, 0x700 + node_id, 0x580 + node_id,
-            *(base + node_id for base in (0x180, 0x280, 0x380, 0x480))}
+    ours = {
+        0x080 + node_id,
+        0x700 + node_id,
+        0x580 + node_id,
+        *(base + node_id for base in (0x180, 0x280, 0x380, 0x480)),
+    }
     deadline = time.monotonic() + PROBE_S
     while (left := deadline - time.monotonic()) > 0:
         msg = bus.recv(left)
         frame = message_to_frame(msg) if msg is not None else None
         if frame is not None and frame.can_id in ours:
-            raise ConfigError(f"node-ID 0x{node_id:02X} is already in use on {url} "
-                              f"(saw COB-ID 0x{frame.can_id:03X}); choose another with --node-id")
+            raise ConfigError(
+                f"node-ID 0x{node_id:02X} is already in use on {url} "
+                f"(saw COB-ID 0x{frame.can_id:03X}); choose another with --node-id"
+            )
 
 
 def cmd_bus(args: argparse.Namespace) -> int:

@@ -9,6 +9,7 @@ states, PDO rates, heartbeat jitter, and bus load with worst-case stuffing.
 
 from __future__ import annotations
 
+import itertools
 import os
 import statistics
 import struct
@@ -33,9 +34,20 @@ LEVEL_DWELL_US = 500_000
 # Force belt levels (rad/s, ch. 8) then the slip belt levels (negative velocity).
 BELT_LEVELS_MRAD_S = (3500, 5000, 6500, 8000, -2000, -3700, -5300, -7000)
 ENABLE_SEQUENCE = (0x06, 0x07, 0x0F)  # shutdown, switch on, enable operation
-FUNCTIONS = {0x080: "EMCY", 0x180: "TPDO1", 0x280: "TPDO2", 0x380: "TPDO3", 0x480: "TPDO4",
-             0x200: "RPDO1", 0x300: "RPDO2", 0x400: "RPDO3", 0x500: "RPDO4",
-             0x580: "SDO tx", 0x600: "SDO rx", 0x700: "heartbeat"}
+FUNCTIONS = {
+    0x080: "EMCY",
+    0x180: "TPDO1",
+    0x280: "TPDO2",
+    0x380: "TPDO3",
+    0x480: "TPDO4",
+    0x200: "RPDO1",
+    0x300: "RPDO2",
+    0x400: "RPDO3",
+    0x500: "RPDO4",
+    0x580: "SDO tx",
+    0x600: "SDO rx",
+    0x700: "heartbeat",
+}
 
 
 class DemoMaster(NmtMaster):
@@ -68,12 +80,19 @@ class DemoMaster(NmtMaster):
         frames = []
         if self._operational(self.belt_id):
             level = BELT_LEVELS_MRAD_S[(elapsed_us // LEVEL_DWELL_US) % len(BELT_LEVELS_MRAD_S)]
-            frames.append(Frame(0x200 + self.belt_id,
-                                struct.pack("<Hi", self._controlword(self.belt_id), level)))
+            frames.append(
+                Frame(
+                    0x200 + self.belt_id, struct.pack("<Hi", self._controlword(self.belt_id), level)
+                )
+            )
         if self._operational(self.hand_id):
             grip_mn = min(30_000, elapsed_us // 100)  # 10 N/s ramp up to 30 N
-            frames.append(Frame(0x200 + self.hand_id,
-                                struct.pack("<HI", self._controlword(self.hand_id), grip_mn)))
+            frames.append(
+                Frame(
+                    0x200 + self.hand_id,
+                    struct.pack("<HI", self._controlword(self.hand_id), grip_mn),
+                )
+            )
         return frames
 
     def _controlword(self, node_id: int) -> int:
@@ -129,8 +148,9 @@ def describe(can_id: int, kinds: dict[int, str]) -> str:
     return f"{kind} {FUNCTIONS.get(function, hex(function))}"
 
 
-def run_demo(duration_s: float = 3.0, bus_url: str | None = None,
-             out: Callable[[str], None] = print) -> dict:
+def run_demo(
+    duration_s: float = 3.0, bus_url: str | None = None, out: Callable[[str], None] = print
+) -> dict:
     """Run the demo; returns the figures it printed (for tests)."""
     url = bus_url or f"virtual:grasplink-demo-{os.getpid()}"
     kinds = {obj.DEFAULT_NODE_IDS[k]: k for k in ("skin", "belt", "emg", "hand")}
@@ -165,9 +185,12 @@ def _report(url, duration_s, kinds, nodes, master, watch, out) -> dict:
         state = status.state.name if status and status.state is not None else "silent"
         states[kinds[node.node_id]] = state
         beats = watch.heartbeat_times.get(node.node_id, [])
-        periods = [(b - a) * 1e3 for a, b in zip(beats, beats[1:], strict=False)]
-        beat = (f"{statistics.mean(periods):6.1f} ms ± {statistics.pstdev(periods):.2f} ms"
-                if len(periods) > 1 else "-")
+        periods = [(b - a) * 1e3 for a, b in itertools.pairwise(beats)]
+        beat = (
+            f"{statistics.mean(periods):6.1f} ms ± {statistics.pstdev(periods):.2f} ms"
+            if len(periods) > 1
+            else "-"
+        )
         boots = status.boots if status else 0
         out(f"{kinds[node.node_id]:<6}{node.node_id:#6x}  {state:<16}{boots:>6}  {beat}")
     out("")
@@ -177,17 +200,23 @@ def _report(url, duration_s, kinds, nodes, master, watch, out) -> dict:
         count = watch.frames[can_id]
         name = describe(can_id, kinds)
         rates[name] = count / span_s
-        out(f"{can_id:#05x}   {name:<18}{count:>8}{count / span_s:>9.1f}"
-            f"{watch.bytes[can_id] / count:>13.1f}")
+        out(
+            f"{can_id:#05x}   {name:<18}{count:>8}{count / span_s:>9.1f}"
+            f"{watch.bytes[can_id] / count:>13.1f}"
+        )
     load = 100.0 * watch.bits / span_s / BITRATE
     total = sum(watch.frames.values())
     out("")
-    out(f"bus load: {load:.2f} % of 1 Mbit/s ({total} frames, {total / span_s:.0f} frames/s, "
-        "worst-case bit stuffing)")
+    out(
+        f"bus load: {load:.2f} % of 1 Mbit/s ({total} frames, {total / span_s:.0f} frames/s, "
+        "worst-case bit stuffing)"
+    )
     belt = next(n for n in nodes if kinds[n.node_id] == "belt")
     hand = next(n for n in nodes if kinds[n.node_id] == "hand")
-    out(f"belt: {belt.app.velocity_mrad_s / 1000:+.2f} rad/s "
+    out(
+        f"belt: {belt.app.velocity_mrad_s / 1000:+.2f} rad/s "
         f"(tap {int(belt.store.get(obj.BELT_TAP_FREQUENCY_MHZ)) / 1000:.2f} Hz, "
         f"slip belt {int(belt.store.get(obj.BELT_SURFACE_SPEED_MM_S))} mm/s); "
-        f"hand grip {hand.app.grip_mn / 1000:.1f} N")
+        f"hand grip {hand.app.grip_mn / 1000:.1f} N"
+    )
     return {"states": states, "rates_per_s": rates, "bus_load_percent": load, "frames": total}

@@ -28,13 +28,13 @@ def sdo_read(net: LockstepNetwork, node_id: int, index: int, sub: int = 0) -> by
     data = _reply(net, node_id, struct.pack("<BHB4x", 0x40, index, sub))
     if data[0] & 0x02:  # expedited
         size = 4 - ((data[0] >> 2) & 3) if data[0] & 0x01 else 4
-        return bytes(data[4:4 + size])
+        return bytes(data[4 : 4 + size])
     size = struct.unpack_from("<I", data, 4)[0]
     out, toggle = b"", 0
     while True:
         seg = _reply(net, node_id, bytes([0x60 | toggle << 4]) + bytes(7))
         unused = (seg[0] >> 1) & 7
-        out += bytes(seg[1:8 - unused])
+        out += bytes(seg[1 : 8 - unused])
         toggle ^= 1
         if seg[0] & 1:
             assert len(out) == size

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import struct
 
 import pytest
@@ -131,32 +132,45 @@ def test_duplicate_node_ids_on_one_network_are_refused():
 
 @pytest.mark.parametrize("node_id", [0, 128, -1])
 def test_node_id_outside_1_127_is_refused(node_id):
-    with pytest.raises(ConfigError, match="1..127"):
+    with pytest.raises(ConfigError, match=r"1\.\.127"):
         build_node("belt", node_id)
 
 
 def test_unknown_node_type_lists_the_known_ones():
-    with pytest.raises(ConfigError, match="skin.*belt.*emg.*hand"):
+    with pytest.raises(ConfigError, match=r"skin.*belt.*emg.*hand"):
         build_node("elbow")
 
 
 # -- SDO access checks -----------------------------------------------------------------
-@pytest.mark.parametrize(("call", "code"), [
-    (lambda n: write_uint(n, BELT, obj.DEVICE_TYPE, 0, 1, 4), AbortCode.READ_ONLY),
-    (lambda n: read_uint(n, BELT, 0x1004), AbortCode.NO_OBJECT),
-    (lambda n: read_uint(n, BELT, obj.DEVICE_TYPE, 1), AbortCode.NO_SUBINDEX),
-    (lambda n: write_uint(n, BELT, obj.HEARTBEAT_PRODUCER_MS, 0, 100, 4), AbortCode.LENGTH_MISMATCH),
-    (lambda n: write_uint(n, BELT, obj.HEARTBEAT_PRODUCER_MS, 0, 100, 1), AbortCode.LENGTH_MISMATCH),
-    (lambda n: write_uint(n, BELT, obj.ERROR_BEHAVIOUR, 1, 3, 1), AbortCode.VALUE_TOO_HIGH),
-    (lambda n: write_int(n, BELT, obj.BELT_TARGET_VELOCITY_MRAD_S, 0, 9000, 4),
-     AbortCode.VALUE_TOO_HIGH),
-    (lambda n: write_int(n, BELT, obj.BELT_TARGET_VELOCITY_MRAD_S, 0, -8000, 4),
-     AbortCode.VALUE_TOO_LOW),
-    (lambda n: write_int(n, BELT, obj.MODES_OF_OPERATION, 0, 1, 1), AbortCode.VALUE_TOO_LOW),
-    (lambda n: write_uint(n, BELT, obj.ERROR_HISTORY, 0, 1, 1), AbortCode.INVALID_VALUE),
-    (lambda n: write_uint(n, BELT, obj.COB_ID_SYNC, 0, 0x40000080, 4), AbortCode.INVALID_VALUE),
-    (lambda n: write_uint(n, BELT, obj.COB_ID_EMCY, 0, 0x85, 4), AbortCode.INVALID_VALUE),
-])
+@pytest.mark.parametrize(
+    ("call", "code"),
+    [
+        (lambda n: write_uint(n, BELT, obj.DEVICE_TYPE, 0, 1, 4), AbortCode.READ_ONLY),
+        (lambda n: read_uint(n, BELT, 0x1004), AbortCode.NO_OBJECT),
+        (lambda n: read_uint(n, BELT, obj.DEVICE_TYPE, 1), AbortCode.NO_SUBINDEX),
+        (
+            lambda n: write_uint(n, BELT, obj.HEARTBEAT_PRODUCER_MS, 0, 100, 4),
+            AbortCode.LENGTH_MISMATCH,
+        ),
+        (
+            lambda n: write_uint(n, BELT, obj.HEARTBEAT_PRODUCER_MS, 0, 100, 1),
+            AbortCode.LENGTH_MISMATCH,
+        ),
+        (lambda n: write_uint(n, BELT, obj.ERROR_BEHAVIOUR, 1, 3, 1), AbortCode.VALUE_TOO_HIGH),
+        (
+            lambda n: write_int(n, BELT, obj.BELT_TARGET_VELOCITY_MRAD_S, 0, 9000, 4),
+            AbortCode.VALUE_TOO_HIGH,
+        ),
+        (
+            lambda n: write_int(n, BELT, obj.BELT_TARGET_VELOCITY_MRAD_S, 0, -8000, 4),
+            AbortCode.VALUE_TOO_LOW,
+        ),
+        (lambda n: write_int(n, BELT, obj.MODES_OF_OPERATION, 0, 1, 1), AbortCode.VALUE_TOO_LOW),
+        (lambda n: write_uint(n, BELT, obj.ERROR_HISTORY, 0, 1, 1), AbortCode.INVALID_VALUE),
+        (lambda n: write_uint(n, BELT, obj.COB_ID_SYNC, 0, 0x40000080, 4), AbortCode.INVALID_VALUE),
+        (lambda n: write_uint(n, BELT, obj.COB_ID_EMCY, 0, 0x85, 4), AbortCode.INVALID_VALUE),
+    ],
+)
 def test_sdo_refusals_carry_the_cia301_abort_code(call, code):
     net, _ = network("belt")
     assert abort_of(call, net) == code
@@ -191,33 +205,48 @@ def _remap(net, node_id, comm, mapping, entries):
 
 def test_mapping_procedure_remaps_a_tpdo():
     net, rec = network("belt")
-    _remap(net, BELT, obj.TPDO_COMM, obj.TPDO_MAP,
-           [(obj.BELT_VELOCITY_ACTUAL_MRAD_S << 16) | 32])
+    _remap(net, BELT, obj.TPDO_COMM, obj.TPDO_MAP, [(obj.BELT_VELOCITY_ACTUAL_MRAD_S << 16) | 32])
     nmt(net, 0x01, BELT)
     net.run_until(200 * MS)
     assert all(len(f.data) == 4 for _, f in rec.of(0x1A0))
 
 
-@pytest.mark.parametrize(("sub", "value", "code"), [
-    (1, (obj.BELT_TARGET_VELOCITY_MRAD_S << 16) | 32, AbortCode.UNSUPPORTED_ACCESS),
-])
+@pytest.mark.parametrize(
+    ("sub", "value", "code"),
+    [
+        (1, (obj.BELT_TARGET_VELOCITY_MRAD_S << 16) | 32, AbortCode.UNSUPPORTED_ACCESS),
+    ],
+)
 def test_mapping_a_valid_pdo_is_refused(sub, value, code):
     net, _ = network("belt")
     assert abort_of(write_uint, net, BELT, obj.TPDO_MAP, sub, value, 4) == code
     assert abort_of(write_uint, net, BELT, obj.TPDO_MAP, 0, 0, 1) == code
 
 
-@pytest.mark.parametrize(("pdo_map", "pdo_comm", "entry", "code"), [
-    # output object into a TPDO, input object into an RPDO, non-mappable object
-    (obj.TPDO_MAP, obj.TPDO_COMM, (obj.CONTROLWORD << 16) | 16, None),  # rw: allowed both ways
-    (obj.RPDO_MAP, obj.RPDO_COMM, (obj.STATUSWORD << 16) | 16, AbortCode.NOT_MAPPABLE),
-    (obj.TPDO_MAP, obj.TPDO_COMM, (obj.HEARTBEAT_PRODUCER_MS << 16) | 16, AbortCode.NOT_MAPPABLE),
-    (obj.RPDO_MAP, obj.RPDO_COMM, (obj.BELT_NUB_COUNT << 16) | 8, AbortCode.NOT_MAPPABLE),
-    (obj.TPDO_MAP, obj.TPDO_COMM, (obj.STATUSWORD << 16) | 32, AbortCode.PARAMETER_INCOMPATIBLE),
-    (obj.TPDO_MAP, obj.TPDO_COMM, (0x2999 << 16) | 8, AbortCode.NO_OBJECT),
-    (obj.RPDO_MAP, obj.RPDO_COMM, (0x0005 << 16) | 8, None),  # dummy in RPDO
-    (obj.TPDO_MAP, obj.TPDO_COMM, (0x0005 << 16) | 8, AbortCode.NOT_MAPPABLE),
-])
+@pytest.mark.parametrize(
+    ("pdo_map", "pdo_comm", "entry", "code"),
+    [
+        # output object into a TPDO, input object into an RPDO, non-mappable object
+        (obj.TPDO_MAP, obj.TPDO_COMM, (obj.CONTROLWORD << 16) | 16, None),  # rw: allowed both ways
+        (obj.RPDO_MAP, obj.RPDO_COMM, (obj.STATUSWORD << 16) | 16, AbortCode.NOT_MAPPABLE),
+        (
+            obj.TPDO_MAP,
+            obj.TPDO_COMM,
+            (obj.HEARTBEAT_PRODUCER_MS << 16) | 16,
+            AbortCode.NOT_MAPPABLE,
+        ),
+        (obj.RPDO_MAP, obj.RPDO_COMM, (obj.BELT_NUB_COUNT << 16) | 8, AbortCode.NOT_MAPPABLE),
+        (
+            obj.TPDO_MAP,
+            obj.TPDO_COMM,
+            (obj.STATUSWORD << 16) | 32,
+            AbortCode.PARAMETER_INCOMPATIBLE,
+        ),
+        (obj.TPDO_MAP, obj.TPDO_COMM, (0x2999 << 16) | 8, AbortCode.NO_OBJECT),
+        (obj.RPDO_MAP, obj.RPDO_COMM, (0x0005 << 16) | 8, None),  # dummy in RPDO
+        (obj.TPDO_MAP, obj.TPDO_COMM, (0x0005 << 16) | 8, AbortCode.NOT_MAPPABLE),
+    ],
+)
 def test_mapping_entries_are_checked_against_the_dictionary(pdo_map, pdo_comm, entry, code):
     net, _ = network("belt")
     cob = read_uint(net, BELT, pdo_comm, 1)
@@ -313,7 +342,7 @@ def test_inhibit_time_spaces_change_driven_tpdos():
     net.run_for(200 * MS)
     times = [t for t, _ in rec.of(0x1A0)]
     assert len(times) > 5
-    assert min(b - a for a, b in zip(times, times[1:], strict=False)) >= 10 * MS
+    assert min(b - a for a, b in itertools.pairwise(times)) >= 10 * MS
 
 
 # -- RPDO, EMCY -----------------------------------------------------------------------------
@@ -347,7 +376,7 @@ def test_belt_limits_out_of_range_rpdo_targets_and_flags_them(target, actual):
 
 
 def test_short_rpdo_raises_emcy_8210_and_is_not_applied():
-    net, rec = network("belt")
+    net, _rec = network("belt")
     nmt(net, 0x01, BELT)
     caused = net.inject(Frame(0x220, b"\x06\x00"))
     emcy = [f for f in caused if f.can_id == 0xA0]
@@ -410,9 +439,9 @@ def test_skin_packets_carry_consecutive_samples_and_a_sequence_number():
     net.run_for(1000 * MS)
     packets = [f.data for _, f in rec.of(0x190)]
     sequences = [p[6] for p in packets]
-    assert all((b - a) & 0xFF == 1 for a, b in zip(sequences, sequences[1:], strict=False))
+    assert all((b - a) & 0xFF == 1 for a, b in itertools.pairwise(sequences))
     samples = [v for p in packets for v in struct.unpack_from("<3H", p)]
-    assert all(b >= a for a, b in zip(samples, samples[1:], strict=False))
+    assert all(b >= a for a, b in itertools.pairwise(samples))
     assert samples[-1] > samples[0]
 
 
@@ -425,7 +454,8 @@ def test_skin_layout_preset_loads_spacings_and_custom_spacing_clears_it():
     write_uint(net, SKIN, obj.SKIN_RIDGE_SPACING_UM, 1, 6000, 4)
     assert read_uint(net, SKIN, obj.SKIN_LAYOUT_PRESET) == 0
     assert abort_of(write_uint, net, SKIN, obj.SKIN_RIDGE_SPACING_UM, 0, 0, 1) in (
-        AbortCode.VALUE_TOO_LOW,)
+        AbortCode.VALUE_TOO_LOW,
+    )
 
 
 def test_skin_saturation_raises_a_manufacturer_emcy():

@@ -71,8 +71,9 @@ class LockstepNetwork:
     def run_for(self, duration_us: int) -> None:
         self.run_until(self.t_us + duration_us)
 
-    def _deliver(self, sender: SansIoDevice | None, frames: list[Frame],
-                 caused: list[Frame] | None = None) -> None:
+    def _deliver(
+        self, sender: SansIoDevice | None, frames: list[Frame], caused: list[Frame] | None = None
+    ) -> None:
         queue: deque[tuple[SansIoDevice | None, Frame]] = deque((sender, f) for f in frames)
         while queue:
             origin, frame = queue.popleft()

@@ -51,7 +51,8 @@ class BeltApp(DriveApp):
             return 0
         target = int(self.store.get(obj.BELT_TARGET_VELOCITY_MRAD_S))
         limited, self.internal_limit = limit_belt_velocity(
-            target, int(self.store.get(obj.BELT_MAX_PROFILE_VELOCITY_MRAD_S)))
+            target, int(self.store.get(obj.BELT_MAX_PROFILE_VELOCITY_MRAD_S))
+        )
         return limited
 
     def control(self, dt_s: float) -> None:

@@ -73,15 +73,19 @@ class DriveStateMachine:
 
     def apply(self, controlword: int, quick_stop_option: int) -> DriveState:
         rising_fault_reset = controlword & CW_FAULT_RESET and not (
-            self._last_controlword & CW_FAULT_RESET)
+            self._last_controlword & CW_FAULT_RESET
+        )
         self._last_controlword = controlword
         if self.state == DriveState.FAULT:
             if rising_fault_reset:
                 self.state = DriveState.SWITCH_ON_DISABLED
             return self.state
         command = _command(controlword)
-        if self.state == DriveState.QUICK_STOP_ACTIVE and command == "enable_operation" and (
-                quick_stop_option >= 5):
+        if (
+            self.state == DriveState.QUICK_STOP_ACTIVE
+            and command == "enable_operation"
+            and (quick_stop_option >= 5)
+        ):
             self.state = DriveState.OPERATION_ENABLED
         elif command is not None:
             self.state = _TRANSITIONS.get((self.state, command), self.state)
@@ -104,8 +108,12 @@ class DriveStateMachine:
 
     def statusword(self, *, target_reached: bool, internal_limit: bool) -> int:
         word = self.state.value | SW_REMOTE
-        if self.state in (DriveState.READY_TO_SWITCH_ON, DriveState.SWITCHED_ON,
-                          DriveState.OPERATION_ENABLED, DriveState.QUICK_STOP_ACTIVE):
+        if self.state in (
+            DriveState.READY_TO_SWITCH_ON,
+            DriveState.SWITCHED_ON,
+            DriveState.OPERATION_ENABLED,
+            DriveState.QUICK_STOP_ACTIVE,
+        ):
             word |= SW_VOLTAGE_ENABLED
         if target_reached:
             word |= SW_TARGET_REACHED

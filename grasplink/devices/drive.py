@@ -36,8 +36,9 @@ class DriveApp(DeviceApp):
 
     def _validate_mode(self, index: int, subindex: int, value: Value) -> None:
         if int(value) != self.supported_mode:
-            raise SdoAbort(AbortCode.INVALID_VALUE,
-                           f"mode {value} not supported (only {self.supported_mode})")
+            raise SdoAbort(
+                AbortCode.INVALID_VALUE, f"mode {value} not supported (only {self.supported_mode})"
+            )
 
     @property
     def quick_stop_option(self) -> int:
@@ -58,8 +59,9 @@ class DriveApp(DeviceApp):
     def on_reset(self, t_us: int) -> None:
         self.drive.reset()
         self._next_tick_us = self._last_tick_us = t_us
-        self.store.set(obj.MODES_OF_OPERATION_DISPLAY, 0,
-                       int(self.store.get(obj.MODES_OF_OPERATION)))
+        self.store.set(
+            obj.MODES_OF_OPERATION_DISPLAY, 0, int(self.store.get(obj.MODES_OF_OPERATION))
+        )
         self._publish_status()
 
     def enter_safe_state(self, t_us: int, reason: str) -> None:
@@ -86,8 +88,9 @@ class DriveApp(DeviceApp):
         return self.drive.state == DriveState.OPERATION_ENABLED
 
     def _publish_status(self) -> None:
-        word = self.drive.statusword(target_reached=self.target_reached,
-                                     internal_limit=self.internal_limit)
+        word = self.drive.statusword(
+            target_reached=self.target_reached, internal_limit=self.internal_limit
+        )
         self.store.set(obj.STATUSWORD, 0, word)
 
     def on_state(self, state: NmtState, t_us: int) -> None:

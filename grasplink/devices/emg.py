@@ -66,8 +66,9 @@ class EmgApp(DeviceApp):
         other = int(self.store.get(obj.EMG_CALIBRATION, E_MAX if subindex == E_MIN else E_MIN))
         e_min, e_max = (int(value), other) if subindex == E_MIN else (other, int(value))
         if e_max <= e_min:
-            raise SdoAbort(AbortCode.MAX_LESS_THAN_MIN,
-                           f"e_max ({e_max} uV) must be above e_min ({e_min} uV)")
+            raise SdoAbort(
+                AbortCode.MAX_LESS_THAN_MIN, f"e_max ({e_max} uV) must be above e_min ({e_min} uV)"
+            )
 
     def _on_change(self, index: int, subindex: int, value: Value) -> None:
         if index in (obj.EMG_SAMPLE_RATE_HZ, obj.EMG_WINDOW_MS) and self.clock is not None:
@@ -102,14 +103,14 @@ class EmgApp(DeviceApp):
             return []
         values = np.nan_to_num(self.source.samples(clock.next_index, count, clock.rate_hz))
         clock.next_index += count
-        rectified = np.abs(values)[-len(self._window):]
+        rectified = np.abs(values)[-len(self._window) :]
         self._window[(self._pos + np.arange(len(rectified))) % len(self._window)] = rectified
         self._pos = (self._pos + len(rectified)) % len(self._window)
         self._fill = min(len(self._window), self._fill + len(rectified))
         return self._stream_raw(values, t_us)
 
     def _publish_envelope(self, t_us: int) -> list[Frame]:
-        envelope = float(self._window[:self._fill].mean()) if self._fill else 0.0
+        envelope = float(self._window[: self._fill].mean()) if self._fill else 0.0
         e_min = int(self.store.get(obj.EMG_CALIBRATION, E_MIN))
         e_max = int(self.store.get(obj.EMG_CALIBRATION, E_MAX))
         self.store.set(obj.EMG_ENVELOPE_UV, 0, min(0xFFFF, round(envelope)))
@@ -134,5 +135,3 @@ class EmgApp(DeviceApp):
             self.store.set(obj.EMG_RAW_SEQUENCE, 0, sequence)
             frames += self.node.transmit_tpdo(TPDO_RAW, t_us)
         return frames
-
-

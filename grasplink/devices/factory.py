@@ -26,8 +26,9 @@ def make_app(kind: str, source: SampleSource | None = None) -> DeviceApp:
     raise ConfigError(f"unknown node type {kind!r}; choose one of {', '.join(DEVICE_KINDS)}")
 
 
-def build_node(kind: str, node_id: int | None = None,
-               source: SampleSource | None = None) -> DeviceNode:
+def build_node(
+    kind: str, node_id: int | None = None, source: SampleSource | None = None
+) -> DeviceNode:
     """A ready-to-start node of `kind` at `node_id` (default from objects.DEFAULT_NODE_IDS)."""
     app = make_app(kind, source)
     node_id = obj.DEFAULT_NODE_IDS[kind] if node_id is None else node_id

@@ -41,8 +41,9 @@ class HandApp(DriveApp):
             self.internal_limit = False
             return self.grip_mn
         target = int(self.store.get(obj.HAND_TARGET_GRIP_MN))
-        ceiling = min(int(self.store.get(obj.HAND_CRUSH_LIMIT_MN)),
-                      int(self.store.get(obj.HAND_MAX_GRIP_MN)))
+        ceiling = min(
+            int(self.store.get(obj.HAND_CRUSH_LIMIT_MN)), int(self.store.get(obj.HAND_MAX_GRIP_MN))
+        )
         self.internal_limit = target > ceiling
         return float(min(target, ceiling))
 

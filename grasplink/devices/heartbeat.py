@@ -79,7 +79,9 @@ class HeartbeatConsumer:
             if node_id and time_ms:
                 previous = old.get(node_id)
                 keep = previous is not None and previous.timeout_us == time_ms * US_PER_MS
-                self._monitors[node_id] = previous if keep else _Monitor(node_id, time_ms * US_PER_MS)
+                self._monitors[node_id] = (
+                    previous if keep else _Monitor(node_id, time_ms * US_PER_MS)
+                )
 
     def on_heartbeat(self, node_id: int, state: int, t_us: int) -> bool:
         """Feed a heartbeat; True when it ends a timeout (the node is back)."""
@@ -105,8 +107,9 @@ class HeartbeatConsumer:
         return any(m.timed_out for m in self._monitors.values())
 
     def next_deadline_us(self) -> int | None:
-        deadlines = [m.last_us + m.timeout_us + 1 for m in self._monitors.values()
-                     if m.last_us is not None]
+        deadlines = [
+            m.last_us + m.timeout_us + 1 for m in self._monitors.values() if m.last_us is not None
+        ]
         return min(deadlines, default=None)
 
     def _subindices(self) -> list[int]:
@@ -124,8 +127,10 @@ class HeartbeatConsumer:
                 continue
             other_id, other_ms = _split(int(self.store.get(obj.HEARTBEAT_CONSUMER, sub)))
             if other_id == node_id and other_ms:
-                raise SdoAbort(AbortCode.PARAMETER_INCOMPATIBLE,
-                               f"node 0x{node_id:02X} is already monitored by 1016h:{sub:02X}")
+                raise SdoAbort(
+                    AbortCode.PARAMETER_INCOMPATIBLE,
+                    f"node 0x{node_id:02X} is already monitored by 1016h:{sub:02X}",
+                )
 
     def _on_change(self, index: int, subindex: int, value: Value) -> None:
         if index == obj.HEARTBEAT_CONSUMER:

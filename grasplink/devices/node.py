@@ -45,8 +45,14 @@ def dummy_usage(od: cod.ObjectDictionary) -> frozenset[int]:
 class DeviceNode:
     """The behaviour every grasplink device shares; see module docstring."""
 
-    def __init__(self, od: cod.ObjectDictionary, node_id: int, app: DeviceApp | None = None,
-                 *, dummies: frozenset[int] | None = None):
+    def __init__(
+        self,
+        od: cod.ObjectDictionary,
+        node_id: int,
+        app: DeviceApp | None = None,
+        *,
+        dummies: frozenset[int] | None = None,
+    ):
         if not 1 <= node_id <= 127:
             raise ConfigError(f"node-ID {node_id} is outside 1..127")
         self.node_id = node_id
@@ -54,9 +60,12 @@ class DeviceNode:
         self.emcy = em.EmcyProducer(self.store)
         self.heartbeat = HeartbeatProducer(self.store)
         self.consumer = HeartbeatConsumer(self.store)
-        self.pdo = PdoEngine(self.store, self.emcy,
-                             dummy_usage(od) if dummies is None else dummies,
-                             on_rpdo=self._on_rpdo)
+        self.pdo = PdoEngine(
+            self.store,
+            self.emcy,
+            dummy_usage(od) if dummies is None else dummies,
+            on_rpdo=self._on_rpdo,
+        )
         self.sdo = SdoServer(self.store)
         self.app = app or DeviceApp()
         self.state = NmtState.INITIALISING
@@ -117,8 +126,11 @@ class DeviceNode:
     def next_deadline_us(self) -> int | None:
         if not self.powered:
             return None
-        candidates = [self.heartbeat.next_deadline_us(), self.consumer.next_deadline_us(),
-                      self.app.next_deadline_us()]
+        candidates = [
+            self.heartbeat.next_deadline_us(),
+            self.consumer.next_deadline_us(),
+            self.app.next_deadline_us(),
+        ]
         if self.state in SDO_ALLOWED:
             candidates += [self.sdo.next_deadline_us(), self.emcy.next_deadline_us()]
         candidates.append(self.pdo.next_deadline_us())
@@ -136,8 +148,11 @@ class DeviceNode:
             return self._reset(t_us, application=True)
         if command == NmtCommand.RESET_COMMUNICATION:
             return self._reset(t_us, application=False)
-        target = {NmtCommand.START: NmtState.OPERATIONAL, NmtCommand.STOP: NmtState.STOPPED,
-                  NmtCommand.ENTER_PRE_OPERATIONAL: NmtState.PRE_OPERATIONAL}[command]
+        target = {
+            NmtCommand.START: NmtState.OPERATIONAL,
+            NmtCommand.STOP: NmtState.STOPPED,
+            NmtCommand.ENTER_PRE_OPERATIONAL: NmtState.PRE_OPERATIONAL,
+        }[command]
         return self._enter(target, t_us)
 
     def _enter(self, state: NmtState, t_us: int) -> list[Frame]:
@@ -215,14 +230,17 @@ class DeviceNode:
     def _validate_sync_cob_id(self, index: int, subindex: int, value: Value) -> None:
         value = int(value)
         if value & SYNC_GENERATE:
-            raise SdoAbort(AbortCode.INVALID_VALUE, "this device consumes SYNC; it cannot produce it")
+            raise SdoAbort(
+                AbortCode.INVALID_VALUE, "this device consumes SYNC; it cannot produce it"
+            )
         self._check_service_cob_id(value)
 
     def _validate_emcy_cob_id(self, index: int, subindex: int, value: Value) -> None:
         value = int(value)
         current = int(self.store.get(obj.COB_ID_EMCY))
         if not (current & COB_ID_INVALID or value & COB_ID_INVALID) and (
-                (value ^ current) & CAN_ID_MASK):
+            (value ^ current) & CAN_ID_MASK
+        ):
             raise SdoAbort(AbortCode.INVALID_VALUE, "set bit 31 before changing the EMCY CAN-ID")
         if not value & COB_ID_INVALID:
             self._check_service_cob_id(value)

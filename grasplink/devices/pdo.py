@@ -35,8 +35,16 @@ TYPE_EVENT_PROFILE = 255
 DUMMY_BITS = {0x0002: 8, 0x0003: 16, 0x0004: 32, 0x0005: 8, 0x0006: 16, 0x0007: 32}
 
 # CAN-IDs no PDO, SYNC or EMCY may use (CiA 301 7.3.5, "restricted CAN-IDs").
-_RESTRICTED = ((0x000, 0x000), (0x001, 0x07F), (0x101, 0x180), (0x581, 0x5FF),
-               (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x77F), (0x780, 0x7FF))
+_RESTRICTED = (
+    (0x000, 0x000),
+    (0x001, 0x07F),
+    (0x101, 0x180),
+    (0x581, 0x5FF),
+    (0x601, 0x67F),
+    (0x6E0, 0x6FF),
+    (0x701, 0x77F),
+    (0x780, 0x7FF),
+)
 
 
 def is_restricted_can_id(can_id: int) -> bool:
@@ -77,8 +85,13 @@ class _Pdo:
 
 
 class PdoEngine:
-    def __init__(self, store: ObjectStore, emcy: em.EmcyProducer, dummy_usage: frozenset[int],
-                 on_rpdo: Callable[[int, int], None] | None = None):
+    def __init__(
+        self,
+        store: ObjectStore,
+        emcy: em.EmcyProducer,
+        dummy_usage: frozenset[int],
+        on_rpdo: Callable[[int, int], None] | None = None,
+    ):
         self.store = store
         self.emcy = emcy
         self.dummy_usage = dummy_usage
@@ -97,8 +110,11 @@ class PdoEngine:
         self.reload()
 
     def _discover(self, comm_base: int, map_base: int, transmit: bool) -> list[_Pdo]:
-        return [_Pdo(n + 1, transmit, comm_base + n, map_base + n) for n in range(MAX_PDOS)
-                if self.store.has(comm_base + n, 1) and self.store.has(map_base + n, 0)]
+        return [
+            _Pdo(n + 1, transmit, comm_base + n, map_base + n)
+            for n in range(MAX_PDOS)
+            if self.store.has(comm_base + n, 1) and self.store.has(map_base + n, 0)
+        ]
 
     # -- parameters ----------------------------------------------------------
     def cob_id(self, pdo: _Pdo) -> int:
@@ -111,7 +127,9 @@ class PdoEngine:
         return int(self.store.get(pdo.comm_index, 2))
 
     def _param(self, pdo: _Pdo, sub: int) -> int:
-        return int(self.store.get(pdo.comm_index, sub)) if self.store.has(pdo.comm_index, sub) else 0
+        return (
+            int(self.store.get(pdo.comm_index, sub)) if self.store.has(pdo.comm_index, sub) else 0
+        )
 
     def inhibit_us(self, pdo: _Pdo) -> int:
         return self._param(pdo, 3) * 100
@@ -124,8 +142,9 @@ class PdoEngine:
         self._watchers.clear()
         for pdo in self._by_comm.values():
             count = int(self.store.get(pdo.map_index, 0))
-            pdo.mapping = [MapEntry.decode(int(self.store.get(pdo.map_index, s)))
-                           for s in range(1, count + 1)]
+            pdo.mapping = [
+                MapEntry.decode(int(self.store.get(pdo.map_index, s))) for s in range(1, count + 1)
+            ]
             if pdo.transmit:
                 for entry in pdo.mapping:
                     self._watchers.setdefault((entry.index, entry.subindex), []).append(pdo)
@@ -145,8 +164,12 @@ class PdoEngine:
             pdo.timer_origin_us = t_us
             # Entering OPERATIONAL publishes every event-driven TPDO once, so a
             # master sees current values without waiting for a change.
-            pdo.pending = operational and pdo.transmit and self.is_valid(pdo) and (
-                self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER)
+            pdo.pending = (
+                operational
+                and pdo.transmit
+                and self.is_valid(pdo)
+                and (self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER)
+            )
 
     # -- device side -----------------------------------------------------------
     def trigger(self, number: int, t_us: int) -> list[Frame]:
@@ -242,12 +265,14 @@ class PdoEngine:
     def _receive(self, pdo: _Pdo, data: bytes, t_us: int) -> None:
         needed = self.mapped_bytes(pdo)
         if len(data) < needed:
-            self.emcy.raise_error(em.PDO_LENGTH_ERROR, em.REG_COMMUNICATION, t_us,
-                                  bytes([pdo.number, len(data)]))
+            self.emcy.raise_error(
+                em.PDO_LENGTH_ERROR, em.REG_COMMUNICATION, t_us, bytes([pdo.number, len(data)])
+            )
             return
         if len(data) > needed:
-            self.emcy.raise_error(em.PDO_LENGTH_EXCEEDED, em.REG_COMMUNICATION, t_us,
-                                  bytes([pdo.number, len(data)]))
+            self.emcy.raise_error(
+                em.PDO_LENGTH_EXCEEDED, em.REG_COMMUNICATION, t_us, bytes([pdo.number, len(data)])
+            )
         else:
             self.emcy.clear_error(em.PDO_LENGTH_ERROR, t_us)
             self.emcy.clear_error(em.PDO_LENGTH_EXCEEDED, t_us)
@@ -265,7 +290,9 @@ class PdoEngine:
             size = entry.bits // 8
             if not entry.is_dummy:
                 var = self.store.entry(entry.index, entry.subindex).var
-                self.store.set(entry.index, entry.subindex, var.decode_raw(data[offset:offset + size]))
+                self.store.set(
+                    entry.index, entry.subindex, var.decode_raw(data[offset : offset + size])
+                )
             offset += size
         if self.on_rpdo is not None:
             self.on_rpdo(pdo.number, t_us)
@@ -325,11 +352,15 @@ class PdoEngine:
         elif subindex == 2:
             allowed = value <= SYNC_TYPE_MAX or value >= TYPE_EVENT_MANUFACTURER
             if not allowed:
-                raise SdoAbort(AbortCode.INVALID_VALUE,
-                               f"transmission type {value} not supported (0-240, 254, 255)")
+                raise SdoAbort(
+                    AbortCode.INVALID_VALUE,
+                    f"transmission type {value} not supported (0-240, 254, 255)",
+                )
         elif subindex in (3, 6) and pdo.transmit and valid and value != self._param(pdo, subindex):
-            raise SdoAbort(AbortCode.INVALID_VALUE,
-                           f"{index:04X}h:{subindex:02X} can change only while the PDO is invalid")
+            raise SdoAbort(
+                AbortCode.INVALID_VALUE,
+                f"{index:04X}h:{subindex:02X} can change only while the PDO is invalid",
+            )
         if subindex == 6 and value > SYNC_TYPE_MAX:
             raise SdoAbort(AbortCode.INVALID_VALUE, "SYNC start value must be 0-240")
 
@@ -345,16 +376,21 @@ class PdoEngine:
         if is_restricted_can_id(can_id):
             raise SdoAbort(AbortCode.INVALID_VALUE, f"CAN-ID 0x{can_id:03X} is restricted")
         for other in self._by_comm.values():
-            if other is not pdo and self.is_valid(other) and (
-                    self.cob_id(other) & CAN_ID_MASK) == can_id:
+            if (
+                other is not pdo
+                and self.is_valid(other)
+                and (self.cob_id(other) & CAN_ID_MASK) == can_id
+            ):
                 raise SdoAbort(AbortCode.INVALID_VALUE, f"CAN-ID 0x{can_id:03X} already in use")
 
     def _validate_map(self, index: int, subindex: int, value: Value) -> None:
         pdo = self._by_map[index]
         value = int(value)
         if self.is_valid(pdo):
-            raise SdoAbort(AbortCode.UNSUPPORTED_ACCESS,
-                           "mapping can change only while the PDO is invalid (COB-ID bit 31)")
+            raise SdoAbort(
+                AbortCode.UNSUPPORTED_ACCESS,
+                "mapping can change only while the PDO is invalid (COB-ID bit 31)",
+            )
         if subindex == 0:
             entries = [MapEntry.decode(int(self.store.get(index, s))) for s in range(1, value + 1)]
             for entry in entries:
@@ -363,8 +399,9 @@ class PdoEngine:
                 raise SdoAbort(AbortCode.PDO_TOO_LONG, f"mapping exceeds {MAX_PDO_BITS} bits")
             return
         if int(self.store.get(index, 0)) != 0:
-            raise SdoAbort(AbortCode.UNSUPPORTED_ACCESS,
-                           "set sub-index 0 to 0 before writing mapping entries")
+            raise SdoAbort(
+                AbortCode.UNSUPPORTED_ACCESS, "set sub-index 0 to 0 before writing mapping entries"
+            )
         if value:
             self._check_entry(pdo, MapEntry.decode(value))
 
@@ -377,16 +414,25 @@ class PdoEngine:
             return
         var = self.store.entry(entry.index, entry.subindex).var  # raises NO_OBJECT / NO_SUBINDEX
         if not var.pdo_mappable:
-            raise SdoAbort(AbortCode.NOT_MAPPABLE,
-                           f"0x{entry.index:04X}:{entry.subindex:02X} is not PDO-mappable")
+            raise SdoAbort(
+                AbortCode.NOT_MAPPABLE,
+                f"0x{entry.index:04X}:{entry.subindex:02X} is not PDO-mappable",
+            )
         access = var.access_type
-        direction_ok = access in ("ro", "rw", "rwr", "const") if pdo.transmit else (
-            access in ("wo", "rw", "rww"))
+        direction_ok = (
+            access in ("ro", "rw", "rwr", "const")
+            if pdo.transmit
+            else (access in ("wo", "rw", "rww"))
+        )
         if not direction_ok:
-            raise SdoAbort(AbortCode.NOT_MAPPABLE,
-                           f"0x{entry.index:04X}:{entry.subindex:02X} ({access}) cannot go into a "
-                           f"{'T' if pdo.transmit else 'R'}PDO")
+            raise SdoAbort(
+                AbortCode.NOT_MAPPABLE,
+                f"0x{entry.index:04X}:{entry.subindex:02X} ({access}) cannot go into a "
+                f"{'T' if pdo.transmit else 'R'}PDO",
+            )
         if entry.bits != len(var):
-            raise SdoAbort(AbortCode.PARAMETER_INCOMPATIBLE,
-                           f"0x{entry.index:04X}:{entry.subindex:02X} is {len(var)} bits, "
-                           f"mapping says {entry.bits}")
+            raise SdoAbort(
+                AbortCode.PARAMETER_INCOMPATIBLE,
+                f"0x{entry.index:04X}:{entry.subindex:02X} is {len(var)} bits, "
+                f"mapping says {entry.bits}",
+            )

@@ -19,9 +19,9 @@ from grasplink.devices.app import DeviceApp
 from grasplink.devices.frames import Frame
 from grasplink.devices.nmt import NmtState
 from grasplink.devices.sampling import SampleClock
+from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sources import ConstantSource, SampleSource
 from grasplink.devices.store import Value
-from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, PRESET_CODES
 
@@ -61,8 +61,10 @@ class SkinApp(DeviceApp):
 
     def layout_mm(self) -> tuple[float, ...]:
         count = int(self.store.get(obj.SKIN_RIDGE_SPACING_UM, 0))
-        return tuple(int(self.store.get(obj.SKIN_RIDGE_SPACING_UM, s)) / UM_PER_MM
-                     for s in range(1, count + 1))
+        return tuple(
+            int(self.store.get(obj.SKIN_RIDGE_SPACING_UM, s)) / UM_PER_MM
+            for s in range(1, count + 1)
+        )
 
     def full_scale_counts(self) -> int:
         return (1 << int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_BITS))) - 1
@@ -147,7 +149,7 @@ class SkinApp(DeviceApp):
         operational = self.node.state == NmtState.OPERATIONAL
         sequence = int(self.store.get(obj.SKIN_PACKET_SEQUENCE))
         for p in range(packets):
-            block = counts[p * per_pdo:(p + 1) * per_pdo]
+            block = counts[p * per_pdo : (p + 1) * per_pdo]
             for slot, value in enumerate(block, start=1):
                 self.store.set(obj.SKIN_SAMPLE_SLOTS, slot, int(value))
             sequence = (sequence + 1) & 0xFF
@@ -157,8 +159,11 @@ class SkinApp(DeviceApp):
             if operational:
                 frames += self.node.transmit_tpdo(TPDO_SAMPLES, clock.time_of(end_index - 1))
         clock.next_index = start + packets * per_pdo
-        self.store.set(obj.SKIN_STATIC_FORCE_MN, 0, int(round(float(
-            self.to_force_mn(self._static[:self._static_fill].mean())))))
+        self.store.set(
+            obj.SKIN_STATIC_FORCE_MN,
+            0,
+            round(float(self.to_force_mn(self._static[: self._static_fill].mean()))),
+        )
         return frames
 
     def next_deadline_us(self) -> int | None:
@@ -169,7 +174,7 @@ class SkinApp(DeviceApp):
     def _track_static(self, counts: np.ndarray) -> None:
         """Ring buffer of the last STATIC_WINDOW_S of samples (bounded memory)."""
         ring = self._static
-        tail = counts[-len(ring):]
+        tail = counts[-len(ring) :]
         ring[(self._ring_pos + np.arange(len(tail))) % len(ring)] = tail
         self._ring_pos = (self._ring_pos + len(tail)) % len(ring)
         self._static_fill = min(len(ring), self._static_fill + len(tail))

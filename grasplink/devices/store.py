@@ -33,8 +33,11 @@ Command = Callable[[int, Value], None]
 
 COMMUNICATION_AREA = range(0x1000, 0x2000)
 APPLICATION_AREA = range(0x2000, 0xA000)
-_STORE_SUB_AREAS = {1: (COMMUNICATION_AREA, APPLICATION_AREA), 2: (COMMUNICATION_AREA,),
-                    3: (APPLICATION_AREA,)}
+_STORE_SUB_AREAS = {
+    1: (COMMUNICATION_AREA, APPLICATION_AREA),
+    2: (COMMUNICATION_AREA,),
+    3: (APPLICATION_AREA,),
+}
 
 
 @dataclass(slots=True)
@@ -206,8 +209,11 @@ class ObjectStore:
     def _on_store(self, subindex: int, value: Value) -> None:
         self._check_signature(subindex, value, obj.STORE_SIGNATURE)
         for (index, sub), entry in self._entries.items():
-            if entry.is_parameter and self._in(index, subindex) and index not in (
-                    obj.STORE_PARAMETERS, obj.RESTORE_DEFAULTS):
+            if (
+                entry.is_parameter
+                and self._in(index, subindex)
+                and index not in (obj.STORE_PARAMETERS, obj.RESTORE_DEFAULTS)
+            ):
                 self.nvm[(index, sub)] = entry.value
 
     def _on_restore(self, subindex: int, value: Value) -> None:

@@ -29,9 +29,15 @@ class NodeStatus:
 
 
 class NmtMaster:
-    def __init__(self, node_id: int = obj.GATEWAY_NODE_ID, *, heartbeat_ms: int = 100,
-                 node_heartbeat_ms: int = 100, autostart: bool = True,
-                 interval_history: int = 1000):
+    def __init__(
+        self,
+        node_id: int = obj.GATEWAY_NODE_ID,
+        *,
+        heartbeat_ms: int = 100,
+        node_heartbeat_ms: int = 100,
+        autostart: bool = True,
+        interval_history: int = 1000,
+    ):
         self.node_id = node_id
         self.heartbeat_us = heartbeat_ms * 1000
         self.node_heartbeat_us = node_heartbeat_ms * 1000
@@ -43,20 +49,26 @@ class NmtMaster:
     # -- SansIoDevice --------------------------------------------------------------
     def start(self, t_us: int) -> list[Frame]:
         self._next_beat_us = t_us + self.heartbeat_us
-        return [Frame(HEARTBEAT_BASE + self.node_id, bytes([NmtState.INITIALISING])),
-                self.command(NmtCommand.RESET_COMMUNICATION, 0)]
+        return [
+            Frame(HEARTBEAT_BASE + self.node_id, bytes([NmtState.INITIALISING])),
+            self.command(NmtCommand.RESET_COMMUNICATION, 0),
+        ]
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
         node_id = frame.can_id - HEARTBEAT_BASE
-        if not (1 <= node_id <= 127) or frame.rtr or len(frame.data) != 1 or (
-                node_id == self.node_id):
+        if (
+            not (1 <= node_id <= 127)
+            or frame.rtr
+            or len(frame.data) != 1
+            or (node_id == self.node_id)
+        ):
             return []
         status = self.nodes.setdefault(node_id, NodeStatus(node_id))
         state = frame.data[0]
         if status.last_heartbeat_us is not None and state != NmtState.INITIALISING:
             intervals = status.heartbeat_intervals_us
             intervals.append(t_us - status.last_heartbeat_us)
-            del intervals[:-self.interval_history]
+            del intervals[: -self.interval_history]
         status.last_heartbeat_us = None if state == NmtState.INITIALISING else t_us
         status.lost = False
         if state == NmtState.INITIALISING:
@@ -74,7 +86,8 @@ class NmtMaster:
         if self._next_beat_us is not None and t_us >= self._next_beat_us:
             frames.append(Frame(HEARTBEAT_BASE + self.node_id, bytes([NmtState.OPERATIONAL])))
             self._next_beat_us += self.heartbeat_us * (
-                1 + (t_us - self._next_beat_us) // self.heartbeat_us)
+                1 + (t_us - self._next_beat_us) // self.heartbeat_us
+            )
         limit = self.node_heartbeat_us * LOST_AFTER_PERIODS
         for status in self.nodes.values():
             if status.last_heartbeat_us is not None and t_us - status.last_heartbeat_us > limit:
