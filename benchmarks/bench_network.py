@@ -30,7 +30,7 @@ import canopen
 
 from grasplink.bus import NodeRunner, frame_bits_worst_case, message_to_frame, open_bus
 from grasplink.bus.lockstep import LockstepNetwork
-from grasplink.demo import DemoMaster
+from grasplink.demo import demo_master
 from grasplink.devices.factory import build_node
 from grasplink.devices.frames import Frame
 from grasplink.profiles import eds_path
@@ -62,7 +62,7 @@ class Meter:
 
 def prosthesis(configure=None, with_master: bool = True) -> tuple[LockstepNetwork, Meter]:
     kinds = {obj.DEFAULT_NODE_IDS[k]: k for k in KINDS}
-    devices = [DemoMaster(kinds)] if with_master else []
+    devices = [demo_master(kinds)] if with_master else []
     devices += [build_node(kind, node_id) for node_id, kind in kinds.items()]
     net = LockstepNetwork(devices)
     meter = Meter(net)
@@ -148,8 +148,20 @@ def percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
+def _heartbeat_stats(beats: list[float]) -> dict:
+    periods_ms = [(b - a) * 1e3 for a, b in itertools.pairwise(beats)]
+    deviations = [abs(p - 100.0) for p in periods_ms]
+    return {"count": len(periods_ms), "mean_ms": statistics.mean(periods_ms),
+            "sd_ms": statistics.pstdev(periods_ms), "p99_dev_ms": percentile(deviations, 0.99),
+            "max_dev_ms": max(deviations)}
+
+
 def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
-    """SDO round trip and heartbeat jitter on the python-can virtual bus, in real time."""
+    """SDO round trip and heartbeat jitter on the python-can virtual bus, in real time.
+
+    Heartbeats are timed twice: while the SDO client hammers the node from the
+    same process (shared GIL), and in a quiet window afterwards.
+    """
     channel = f"bench-{time.monotonic_ns()}"
     node = build_node("hand")
     node_bus = open_bus(f"virtual:{channel}")
@@ -167,7 +179,7 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
     network = canopen.Network()
     network.connect(interface="virtual", channel=channel, receive_own_messages=False)
     remote = network.add_node(node.node_id, str(eds_path("hand")))
-    figures: dict = {}
+    figures: dict = {"sdo": {}}
     try:
         with NodeRunner(node_bus, [node]):
             thread = threading.Thread(target=watch, daemon=True)
@@ -175,12 +187,10 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
             cases = {
                 "expedited read 1000h (4 B)": lambda: remote.sdo.upload(0x1000, 0),
                 "expedited write 1017h (2 B)": lambda: remote.sdo.download(
-                    0x1017, 0, (100).to_bytes(2, "little")
-                ),
+                    0x1017, 0, (100).to_bytes(2, "little")),
                 "segmented read 1008h": lambda: remote.sdo.upload(0x1008, 0),
                 "block read 1008h (CRC)": lambda: remote.sdo.open(
-                    0x1008, 0, "rb", block_transfer=True, request_crc_support=True
-                ).read(),
+                    0x1008, 0, "rb", block_transfer=True, request_crc_support=True).read(),
             }
             for name, call in cases.items():
                 times = []
@@ -188,12 +198,12 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
                     t0 = time.perf_counter()
                     call()
                     times.append((time.perf_counter() - t0) * 1e6)
-                figures[name] = (
-                    statistics.median(times),
-                    percentile(times, 0.9),
-                    percentile(times, 0.99),
-                )
+                figures["sdo"][name] = (statistics.median(times), percentile(times, 0.9),
+                                        percentile(times, 0.99))
+            figures["heartbeat_under_sdo_load"] = _heartbeat_stats(beats)
+            beats.clear()
             time.sleep(heartbeat_s)
+            figures["heartbeat_quiet"] = _heartbeat_stats(beats)
             stop.set()
             thread.join(1)
     finally:
@@ -201,15 +211,6 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
         network.disconnect()
         node_bus.shutdown()
         watch_bus.shutdown()
-    periods_ms = [(b - a) * 1e3 for a, b in itertools.pairwise(beats)]
-    deviations = [abs(p - 100.0) for p in periods_ms]
-    figures["heartbeat"] = {
-        "count": len(periods_ms),
-        "mean_ms": statistics.mean(periods_ms),
-        "sd_ms": statistics.pstdev(periods_ms),
-        "p99_dev_ms": percentile(deviations, 0.99),
-        "max_dev_ms": max(deviations),
-    }
     return figures
 
 
@@ -290,17 +291,25 @@ def write_doc(nodes, total, resolution, rt, seconds, path: Path) -> None:
         "| transfer | median µs | p90 µs | p99 µs |",
         "|---|---:|---:|---:|",
     ]
-    for name, figures in rt.items():
-        if name != "heartbeat":
-            med, p90, p99 = figures
-            lines.append(f"| {name} | {med:.0f} | {p90:.0f} | {p99:.0f} |")
-    hb = rt["heartbeat"]
+    for name, (med, p90, p99) in rt["sdo"].items():
+        lines.append(f"| {name} | {med:.0f} | {p90:.0f} | {p99:.0f} |")
     lines += [
         "",
-        f"Heartbeat (100 ms) over {hb['count']} periods: mean {hb['mean_ms']:.3f} ms, "
-        f"sd {hb['sd_ms']:.3f} ms, p99 |deviation| {hb['p99_dev_ms']:.3f} ms, "
-        f"max {hb['max_dev_ms']:.3f} ms. The producer keeps a fixed grid, so jitter never",
-        "accumulates into drift.",
+        "Heartbeat period (producer 100 ms) seen by a second bus handle:",
+        "",
+        "| condition | periods | mean ms | sd ms | p99 abs. deviation ms | max abs. deviation ms |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for label, key in (("quiet", "heartbeat_quiet"),
+                       ("during the SDO runs above", "heartbeat_under_sdo_load")):
+        hb = rt[key]
+        lines.append(f"| {label} | {hb['count']} | {hb['mean_ms']:.3f} | {hb['sd_ms']:.3f} | "
+                     f"{hb['p99_dev_ms']:.3f} | {hb['max_dev_ms']:.3f} |")
+    lines += [
+        "",
+        "The producer keeps a fixed grid, so a late beat is followed by an early one and",
+        "jitter never accumulates into drift; stalls under load are the Python process",
+        "(GIL shared with the SDO client), not the bus.",
         "",
     ]
     path.write_text("\n".join(lines))

@@ -80,6 +80,16 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--duration", type=positive_seconds, default=3.0)
     demo.add_argument("--bus", default=None, help="bus URL (default: a private virtual bus)")
 
+    run = sub.add_parser("run", help="run a scene and record what happened")
+    run.add_argument("scene", type=Path, help="scene file (scenes/*.toml)")
+    run.add_argument("--out", type=Path, default=None,
+                     help="output folder (default out/<scene name>)")
+    run.add_argument("--realtime", action="store_true",
+                     help="pace the scene to the wall clock (hardware in the loop)")
+
+    plot = sub.add_parser("plot", help="draw PNGs of a recording made by `grasplink run`")
+    plot.add_argument("recording", type=Path, help="folder written by grasplink run")
+
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
     prof_sub = profiles.add_subparsers(
         dest="profiles_command", required=True, metavar="PROFILES_COMMAND"
@@ -163,6 +173,33 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    from grasplink.simulators.engine import Simulation
+    from grasplink.simulators.recording import Recorder
+    from grasplink.simulators.scene import load_scene
+
+    scene = load_scene(args.scene)
+    out = args.out or Path("out") / args.scene.stem
+    sim = Simulation(scene, Recorder(out))
+    realtime = args.realtime or scene.clock == "realtime"
+    summary = sim.run(realtime=realtime)
+    states = ", ".join(f"{k} {v['state'].lower()}" for k, v in summary["nodes"].items())
+    speed = scene.duration_s / max(sim.wall_s, 1e-9)
+    print(f"{scene.name}: {scene.duration_s:g} s simulated in {sim.wall_s:.2f} s "
+          f"({speed:.0f}x real time{', paced' if realtime else ''})")
+    print(f"  nodes: {states or 'none'}; effects: {', '.join(summary['effects']) or 'none'}")
+    print(f"  wrote {out}/ ({', '.join(sorted(p.name for p in out.iterdir()))})")
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from grasplink.simulators.plots import plot_recording
+
+    for path in plot_recording(args.recording):
+        print(f"wrote {path}")
+    return 0
+
+
 def cmd_profiles(args: argparse.Namespace) -> int:
     if args.profiles_command == "doc":
         from grasplink.profiles.docgen import write_profiles_doc
@@ -178,7 +215,8 @@ def cmd_profiles(args: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS = {"node": cmd_node, "bus": cmd_bus, "demo": cmd_demo, "profiles": cmd_profiles}
+COMMANDS = {"node": cmd_node, "bus": cmd_bus, "demo": cmd_demo, "run": cmd_run, "plot": cmd_plot,
+            "profiles": cmd_profiles}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import itertools
 import os
 import statistics
-import struct
 import threading
 import time
 from collections import Counter
@@ -23,9 +22,7 @@ import can
 
 from grasplink.bus import NodeRunner, frame_bits_worst_case, message_to_frame, open_bus
 from grasplink.devices.factory import build_node
-from grasplink.devices.frames import Frame
-from grasplink.devices.nmt import NmtState
-from grasplink.gateway.master import NmtMaster
+from grasplink.gateway.scripted import ScriptedMaster
 from grasplink.profiles import objects as obj
 
 BITRATE = 1_000_000
@@ -33,7 +30,6 @@ COMMAND_PERIOD_US = 50_000
 LEVEL_DWELL_US = 500_000
 # Force belt levels (rad/s, ch. 8) then the slip belt levels (negative velocity).
 BELT_LEVELS_MRAD_S = (3500, 5000, 6500, 8000, -2000, -3700, -5300, -7000)
-ENABLE_SEQUENCE = (0x06, 0x07, 0x0F)  # shutdown, switch on, enable operation
 FUNCTIONS = {
     0x080: "EMCY",
     0x180: "TPDO1",
@@ -50,60 +46,15 @@ FUNCTIONS = {
 }
 
 
-class DemoMaster(NmtMaster):
+def demo_master(kinds: dict[int, str]) -> ScriptedMaster:
     """The NMT master plus a stand-in controller: steps belt levels and ramps the grip."""
-
-    def __init__(self, kinds: dict[int, str]):
-        super().__init__()
-        self.belt_id = next((i for i, k in kinds.items() if k == "belt"), None)
-        self.hand_id = next((i for i, k in kinds.items() if k == "hand"), None)
-        self._next_command_us: int | None = None
-        self._started_us = 0
-        self._enable_steps: dict[int, int] = {}
-
-    def start(self, t_us: int) -> list[Frame]:
-        self._started_us = t_us
-        self._next_command_us = t_us + COMMAND_PERIOD_US
-        return super().start(t_us)
-
-    def advance(self, t_us: int) -> list[Frame]:
-        frames = super().advance(t_us)
-        if self._next_command_us is not None and t_us >= self._next_command_us:
-            self._next_command_us += COMMAND_PERIOD_US
-            frames += self._commands(t_us - self._started_us)
-        return frames
-
-    def next_deadline_us(self) -> int | None:
-        return min(d for d in (super().next_deadline_us(), self._next_command_us) if d is not None)
-
-    def _commands(self, elapsed_us: int) -> list[Frame]:
-        frames = []
-        if self._operational(self.belt_id):
-            level = BELT_LEVELS_MRAD_S[(elapsed_us // LEVEL_DWELL_US) % len(BELT_LEVELS_MRAD_S)]
-            frames.append(
-                Frame(
-                    0x200 + self.belt_id, struct.pack("<Hi", self._controlword(self.belt_id), level)
-                )
-            )
-        if self._operational(self.hand_id):
-            grip_mn = min(30_000, elapsed_us // 100)  # 10 N/s ramp up to 30 N
-            frames.append(
-                Frame(
-                    0x200 + self.hand_id,
-                    struct.pack("<HI", self._controlword(self.hand_id), grip_mn),
-                )
-            )
-        return frames
-
-    def _controlword(self, node_id: int) -> int:
-        """Walk the CiA 402 enable sequence once per drive, then hold 'enable operation'."""
-        step = self._enable_steps.get(node_id, 0)
-        self._enable_steps[node_id] = step + 1
-        return ENABLE_SEQUENCE[min(step, len(ENABLE_SEQUENCE) - 1)]
-
-    def _operational(self, node_id: int | None) -> bool:
-        status = self.nodes.get(node_id) if node_id is not None else None
-        return status is not None and status.state == NmtState.OPERATIONAL
+    dwell_s = LEVEL_DWELL_US / 1e6
+    belt_profile = [(i * dwell_s, float(v)) for i, v in enumerate(BELT_LEVELS_MRAD_S * 4)]
+    grip_profile = [(t / 10, min(30.0, t)) for t in range(0, 31)]  # 10 N/s up to 30 N
+    ids = {kind: node_id for node_id, kind in kinds.items()}
+    return ScriptedMaster(belt_id=ids.get("belt"), hand_id=ids.get("hand"),
+                          belt_mrad_s=belt_profile, hand_grip_n=grip_profile,
+                          command_period_us=COMMAND_PERIOD_US)
 
 
 @dataclass
@@ -155,7 +106,7 @@ def run_demo(
     url = bus_url or f"virtual:grasplink-demo-{os.getpid()}"
     kinds = {obj.DEFAULT_NODE_IDS[k]: k for k in ("skin", "belt", "emg", "hand")}
     nodes = [build_node(kind, node_id) for node_id, kind in kinds.items()]
-    master = DemoMaster(kinds)
+    master = demo_master(kinds)
     watch, stop = BusWatch(), threading.Event()
     node_bus, watch_bus = open_bus(url), open_bus(url)
     watcher = threading.Thread(target=_watch, args=(watch_bus, watch, stop), daemon=True)

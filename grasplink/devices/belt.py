@@ -17,6 +17,7 @@ from grasplink.profiles import objects as obj
 
 ACTIVE_NONE, ACTIVE_FORCE, ACTIVE_SLIP = 0, 1, 2
 MHZ_PER_HZ = 1000
+STANDSTILL_MRAD_S = 1.0
 UM_PER_MM = 1000
 
 
@@ -37,10 +38,15 @@ class BeltApp(DriveApp):
 
     def __init__(self) -> None:
         super().__init__()
-        self.velocity_mrad_s = 0.0  # actual; a motor simulator may drive this instead
+        self.setpoint_mrad_s = 0.0  # the profile ramp's output: what the motor is asked for
+        self.velocity_mrad_s = 0.0  # actual motor velocity
+        # True when a simulator (scene effect belt.motor) owns velocity_mrad_s.
+        self.simulated_motor = False
 
     def on_reset(self, t_us: int) -> None:
-        self.velocity_mrad_s = 0.0
+        self.setpoint_mrad_s = 0.0
+        if not self.simulated_motor:
+            self.velocity_mrad_s = 0.0
         super().on_reset(t_us)
         self._publish_display()
 
@@ -56,22 +62,26 @@ class BeltApp(DriveApp):
         return limited
 
     def control(self, dt_s: float) -> None:
+        """Ramp the velocity setpoint; without a motor simulator the motor follows it exactly."""
         demand = self.demand_mrad_s()
+        setpoint = self.setpoint_mrad_s
         if self.drive.state == DriveState.QUICK_STOP_ACTIVE:
             rate = int(self.store.get(obj.BELT_QUICK_STOP_DECELERATION))
-        elif abs(demand) > abs(self.velocity_mrad_s) and demand * self.velocity_mrad_s >= 0:
+        elif abs(demand) > abs(setpoint) and demand * setpoint >= 0:
             rate = int(self.store.get(obj.BELT_PROFILE_ACCELERATION))
         else:
             rate = int(self.store.get(obj.BELT_PROFILE_DECELERATION))
         if self.drive.state in (DriveState.SWITCH_ON_DISABLED, DriveState.FAULT):
-            self.velocity_mrad_s = 0.0  # voltage off: the motor stops driving the belt
+            setpoint = 0.0  # voltage off: the motor stops driving the belt
         else:
             step = rate * dt_s
-            delta = demand - self.velocity_mrad_s
-            self.velocity_mrad_s += max(-step, min(step, delta))
-        if self.velocity_mrad_s == 0.0:
+            setpoint += max(-step, min(step, demand - setpoint))
+        self.setpoint_mrad_s = setpoint
+        if not self.simulated_motor:
+            self.velocity_mrad_s = setpoint
+        if abs(self.velocity_mrad_s) < STANDSTILL_MRAD_S and setpoint == 0.0:
             self.drive.standstill_reached(self.quick_stop_option)
-        self.target_reached = abs(demand - self.velocity_mrad_s) < 1.0
+        self.target_reached = abs(demand - self.velocity_mrad_s) < STANDSTILL_MRAD_S
         self.store.set(obj.BELT_VELOCITY_ACTUAL_MRAD_S, 0, round(self.velocity_mrad_s))
         self._publish_display()
 

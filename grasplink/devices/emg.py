@@ -101,7 +101,8 @@ class EmgApp(DeviceApp):
         count = min(clock.due_until(t_us) - clock.next_index, MAX_SAMPLES_PER_ADVANCE)
         if count <= 0:
             return []
-        values = np.nan_to_num(self.source.samples(clock.next_index, count, clock.rate_hz))
+        values = self.source.samples(clock.t0_us, clock.next_index, count, clock.rate_hz)
+        values = np.nan_to_num(values)
         clock.next_index += count
         rectified = np.abs(values)[-len(self._window) :]
         self._window[(self._pos + np.arange(len(rectified))) % len(self._window)] = rectified

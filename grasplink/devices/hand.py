@@ -18,11 +18,16 @@ class HandApp(DriveApp):
 
     def __init__(self) -> None:
         super().__init__()
-        self.grip_mn = 0.0  # actual; a hand simulator may drive this instead
+        self.setpoint_mn = 0.0  # the rate-limited grip command
+        self.grip_mn = 0.0  # actual grip force
+        # True when a simulator (scene effect hand.actuator) owns grip_mn.
+        self.simulated_actuator = False
         self.holding = False
 
     def on_reset(self, t_us: int) -> None:
-        self.grip_mn = 0.0
+        self.setpoint_mn = 0.0
+        if not self.simulated_actuator:
+            self.grip_mn = 0.0
         self.holding = False
         super().on_reset(t_us)
         self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, 0)
@@ -39,6 +44,7 @@ class HandApp(DriveApp):
     def demand_mn(self) -> float:
         if self.holding or not self.enabled:
             self.internal_limit = False
+            self.setpoint_mn = self.grip_mn  # hold what the hand has, resume from there
             return self.grip_mn
         target = int(self.store.get(obj.HAND_TARGET_GRIP_MN))
         ceiling = min(
@@ -48,8 +54,11 @@ class HandApp(DriveApp):
         return float(min(target, ceiling))
 
     def control(self, dt_s: float) -> None:
+        """Slew the grip setpoint; without an actuator simulator the grip follows it exactly."""
         demand = self.demand_mn()
         step = int(self.store.get(obj.HAND_GRIP_RATE_MN_S)) * dt_s
-        self.grip_mn += max(-step, min(step, demand - self.grip_mn))
+        self.setpoint_mn += max(-step, min(step, demand - self.setpoint_mn))
+        if not self.simulated_actuator:
+            self.grip_mn = self.setpoint_mn
         self.target_reached = abs(demand - self.grip_mn) < 1.0
         self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, round(self.grip_mn))

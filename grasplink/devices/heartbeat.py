@@ -83,6 +83,12 @@ class HeartbeatConsumer:
                     previous if keep else _Monitor(node_id, time_ms * US_PER_MS)
                 )
 
+    def reset(self) -> None:
+        """NMT reset node / communication: forget every monitor's state, so that
+        monitoring restarts with each node's first heartbeat (CiA 301 7.2.8.3.2)."""
+        self._monitors = {}
+        self.reload()
+
     def on_heartbeat(self, node_id: int, state: int, t_us: int) -> bool:
         """Feed a heartbeat; True when it ends a timeout (the node is back)."""
         monitor = self._monitors.get(node_id)

@@ -176,7 +176,7 @@ class DeviceNode:
         self.store.load_defaults(COMMUNICATION_AREA)
         self.emcy.reset()
         self.pdo.reload()
-        self.consumer.reload()
+        self.consumer.reset()
         if application:
             self.app.on_reset(t_us)
         self.heartbeat.restart(t_us)

@@ -173,9 +173,19 @@ class PdoEngine:
 
     # -- device side -----------------------------------------------------------
     def trigger(self, number: int, t_us: int) -> list[Frame]:
-        """The application asks TPDO `number` to go out now (event-driven types)."""
+        """The application signals an event for TPDO `number`.
+
+        Event-driven types (254/255) go out now, inhibit time permitting; an
+        acyclic synchronous TPDO (type 0) goes with the next SYNC; a cyclic
+        synchronous one (1-240) is sent by the SYNC alone (CiA 301 7.2.2.2).
+        """
         pdo = self.tpdos[number - 1]
+        kind = self.transmission_type(pdo)
+        if 0 < kind <= SYNC_TYPE_MAX:
+            return []
         pdo.pending = True
+        if kind == 0:
+            return []
         return self._flush(pdo, t_us) if self.operational else []
 
     def advance(self, t_us: int) -> list[Frame]:

@@ -141,7 +141,7 @@ class SkinApp(DeviceApp):
             clock.next_index += skipped * per_pdo
             packets = MAX_PACKETS_PER_ADVANCE
         start = clock.next_index
-        forces = self.source.samples(start, packets * per_pdo, clock.rate_hz)
+        forces = self.source.samples(clock.t0_us, start, packets * per_pdo, clock.rate_hz)
         counts = self.to_counts(forces)
         self._track_saturation(counts, t_us)
         self._track_static(counts)

@@ -14,8 +14,11 @@ import numpy as np
 
 
 class SampleSource(Protocol):
-    def samples(self, start_index: int, count: int, rate_hz: int) -> np.ndarray:
-        """Physical values (float64) of samples start_index .. start_index+count-1."""
+    def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+        """Physical values (float64) of samples start_index .. start_index+count-1.
+
+        Sample k falls at t0_us + k * 1e6 // rate_hz (the node's sample clock).
+        """
         ...
 
 
@@ -25,7 +28,7 @@ class ConstantSource:
     def __init__(self, value: float = 0.0):
         self.value = float(value)
 
-    def samples(self, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+    def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
         return np.full(count, self.value)
 
 
@@ -35,6 +38,7 @@ class FunctionSource:
     def __init__(self, fn):
         self.fn = fn
 
-    def samples(self, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+    def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
         index = np.arange(start_index, start_index + count, dtype=np.int64)
-        return np.asarray(self.fn(index / rate_hz), dtype=np.float64)
+        times_us = t0_us + index * 1_000_000 // rate_hz
+        return np.asarray(self.fn(times_us / 1e6), dtype=np.float64)

@@ -1,0 +1,84 @@
+"""A master that commands the belt and hand from time profiles (until the feedback loop lands).
+
+It is the NMT master plus a stand-in controller: every command period it
+sends RPDO1 to the belt (controlword, target velocity mrad/s) and to the
+hand (controlword, target grip mN), walking each drive through the CiA 402
+enable sequence first. Profiles are step functions of time since start.
+"""
+
+from __future__ import annotations
+
+import bisect
+import struct
+from collections.abc import Sequence
+
+from grasplink.devices.frames import RPDO_BASES, Frame
+from grasplink.devices.nmt import NmtState
+from grasplink.gateway.master import NmtMaster
+
+COMMAND_PERIOD_US = 50_000
+ENABLE_SEQUENCE = (0x06, 0x07, 0x0F)  # shutdown, switch on, enable operation
+
+Profile = Sequence[tuple[float, float]]  # (t_s, value), step-wise
+
+
+def step_value(profile: Profile | None, t_s: float) -> float | None:
+    """The value of a step profile at t_s (None before its first point or without profile)."""
+    if not profile:
+        return None
+    times = [t for t, _ in profile]
+    index = bisect.bisect_right(times, t_s) - 1
+    return profile[index][1] if index >= 0 else None
+
+
+class ScriptedMaster(NmtMaster):
+    def __init__(self, *, belt_id: int | None = None, hand_id: int | None = None,
+                 belt_mrad_s: Profile | None = None, hand_grip_n: Profile | None = None,
+                 command_period_us: int = COMMAND_PERIOD_US, **master_options):
+        super().__init__(**master_options)
+        self.belt_id, self.hand_id = belt_id, hand_id
+        self.belt_profile, self.hand_profile = belt_mrad_s, hand_grip_n
+        self.command_period_us = command_period_us
+        self._next_command_us: int | None = None
+        self._started_us = 0
+        self._enable_steps: dict[int, int] = {}
+
+    def start(self, t_us: int) -> list[Frame]:
+        self._started_us = t_us
+        if self.belt_profile or self.hand_profile:
+            self._next_command_us = t_us + self.command_period_us
+        return super().start(t_us)
+
+    def advance(self, t_us: int) -> list[Frame]:
+        frames = super().advance(t_us)
+        if self._next_command_us is not None and t_us >= self._next_command_us:
+            self._next_command_us += self.command_period_us
+            frames += self.commands((t_us - self._started_us) / 1e6)
+        return frames
+
+    def next_deadline_us(self) -> int | None:
+        deadlines = (super().next_deadline_us(), self._next_command_us)
+        return min((d for d in deadlines if d is not None), default=None)
+
+    def commands(self, t_s: float) -> list[Frame]:
+        frames = []
+        belt = step_value(self.belt_profile, t_s)
+        if belt is not None and self._operational(self.belt_id):
+            frames.append(Frame(RPDO_BASES[0] + self.belt_id,
+                                struct.pack("<Hi", self._controlword(self.belt_id), round(belt))))
+        grip_n = step_value(self.hand_profile, t_s)
+        if grip_n is not None and self._operational(self.hand_id):
+            frames.append(Frame(RPDO_BASES[0] + self.hand_id,
+                                struct.pack("<HI", self._controlword(self.hand_id),
+                                            max(0, round(grip_n * 1000)))))
+        return frames
+
+    def _controlword(self, node_id: int) -> int:
+        """Walk the CiA 402 enable sequence once per drive, then hold 'enable operation'."""
+        step = self._enable_steps.get(node_id, 0)
+        self._enable_steps[node_id] = step + 1
+        return ENABLE_SEQUENCE[min(step, len(ENABLE_SEQUENCE) - 1)]
+
+    def _operational(self, node_id: int | None) -> bool:
+        status = self.nodes.get(node_id) if node_id is not None else None
+        return status is not None and status.state == NmtState.OPERATIONAL

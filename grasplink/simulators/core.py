@@ -1,0 +1,198 @@
+"""Effects, domains and the graph a scene builds from the effects it asks for.
+
+An effect is a small unit that declares the signals it consumes and
+produces and steps on one *domain*'s integer sample clock: `physics`
+(object, hand, belt, wearer; the scene's physics rate), `skin` (the skin
+node's sample rate) or `emg` (the EMG node's sample rate). A scene builds
+the graph of the requested effects only, ordered so every input is produced
+before it is read; a requested effect whose input nothing provides is an
+error naming the missing signal and what could provide it.
+
+Signals carry their unit in their name (`object.speed_mm_s`). An effect
+that lists a signal as both input and output *modifies* it (e.g. ridge
+speed dips, noise): it runs after the producer and before the consumers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from grasplink.simulators.params import Params, SceneError
+
+PHYSICS, SKIN, EMG = "physics", "skin", "emg"
+DOMAINS = (PHYSICS, SKIN, EMG)  # the order domains step in: physics feeds the sensors
+
+
+@dataclass
+class Context:
+    """What an effect may know about its scene when it is built."""
+
+    source: str
+    seed: int
+    rates_hz: dict[str, int]
+    layout_mm: tuple[float, ...] | None = None
+    nodes: dict[str, dict] = field(default_factory=dict)
+
+    def rng(self, effect_key: str) -> np.random.Generator:
+        """A generator per effect, independent of which other effects exist."""
+        digest = hashlib.sha256(effect_key.encode()).digest()
+        return np.random.default_rng([self.seed, int.from_bytes(digest[:8], "little")])
+
+    def require_layout(self, params: Params, what: str) -> tuple[float, ...]:
+        if self.layout_mm is None:
+            raise params.error("type", f"{what} needs a skin layout: set [nodes.skin] layout "
+                                       "or [scene] layout")
+        return self.layout_mm
+
+
+class Io:
+    """One domain chunk's view of the signals: read inputs, write outputs."""
+
+    def __init__(self, times_us: np.ndarray, read: Callable[[str, np.ndarray], np.ndarray],
+                 write: Callable[[str, np.ndarray], None]):
+        self.times_us = times_us
+        self.t_s = times_us / 1e6
+        self._read = read
+        self._write = write
+
+    def __len__(self) -> int:
+        return len(self.times_us)
+
+    def get(self, name: str) -> np.ndarray:
+        return self._read(name, self.times_us)
+
+    def put(self, name: str, values: np.ndarray) -> None:
+        values = np.asarray(values, dtype=np.float64)
+        if values.shape != self.times_us.shape:
+            raise ValueError(f"{name}: {values.shape} values for {len(self.times_us)} samples")
+        self._write(name, values)
+
+
+class Effect:
+    """Base of every effect; subclasses set the class variables and `step`."""
+
+    kind: ClassVar[str]
+    domain: ClassVar[str]
+    inputs: ClassVar[tuple[str, ...]] = ()
+    outputs: ClassVar[tuple[str, ...]] = ()
+    summary: ClassVar[str] = ""
+
+    def __init__(self, params: Params, ctx: Context):
+        self.params = params
+        self.ctx = ctx
+
+    @property
+    def modifies(self) -> tuple[str, ...]:
+        return tuple(s for s in self.outputs if s in self.inputs)
+
+    def step(self, io: Io) -> None:
+        raise NotImplementedError
+
+
+REGISTRY: dict[str, type[Effect]] = {}
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    """Class decorator: make an effect available to scenes by its `kind`."""
+    if cls.domain not in DOMAINS:
+        raise ValueError(f"{cls.__name__}: unknown domain {cls.domain!r}")
+    REGISTRY[cls.kind] = cls
+    return cls
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A node's side of the graph: signals it reads (sensor) or writes (actuator command)."""
+
+    node: str
+    reads: tuple[str, ...] = ()
+    writes: tuple[str, ...] = ()
+    domain: str = PHYSICS
+
+
+def build_graph(effects: list[Effect], endpoints: list[Endpoint], source: str
+                ) -> tuple[list[Effect], dict[str, str]]:
+    """Order effects so inputs come first; return (ordered effects, signal -> domain).
+
+    Raises SceneError when an input has no producer, two effects produce the
+    same signal, or an effect reads a signal from a domain that steps later.
+    """
+    producers: dict[str, str] = {}
+    domain_of: dict[str, str] = {}
+    for endpoint in endpoints:
+        for name in endpoint.writes:
+            producers[name] = f"node {endpoint.node}"
+            domain_of[name] = endpoint.domain
+    for index, effect in enumerate(effects):
+        for name in effect.outputs:
+            if name in effect.inputs:
+                continue
+            if name in producers:
+                raise SceneError(source, f"effects[{index}]",
+                                 f"{effect.kind} produces {name}, already produced by "
+                                 f"{producers[name]}")
+            producers[name] = effect.kind
+            domain_of[name] = effect.domain
+    for index, effect in enumerate(effects):
+        for name in effect.inputs:
+            if name not in producers:
+                raise SceneError(source, f"effects[{index}]",
+                                 f"{effect.kind} needs {name}, which nothing in this scene "
+                                 f"provides; add {_providers_of(name)}")
+            if DOMAINS.index(domain_of[name]) > DOMAINS.index(effect.domain):
+                raise SceneError(source, f"effects[{index}]",
+                                 f"{effect.kind} ({effect.domain}) cannot read {name} from "
+                                 f"the later {domain_of[name]} domain")
+    return _topological(effects, source), domain_of
+
+
+def _providers_of(signal: str) -> str:
+    kinds = [k for k, cls in REGISTRY.items()
+             if signal in cls.outputs and signal not in cls.inputs]
+    nodes = {"belt.command_mrad_s": "[nodes.belt]", "hand.target_n": "[nodes.hand]"}
+    options = [f"an effect of type {k!r}" for k in sorted(kinds)]
+    if signal in nodes:
+        options.append(nodes[signal])
+    return " or ".join(options) if options else "an effect that produces it"
+
+
+def _topological(effects: list[Effect], source: str) -> list[Effect]:
+    """Producers, then modifiers in scene order, then consumers; stable otherwise."""
+    remaining = list(range(len(effects)))
+    ordered: list[int] = []
+    ready_signals: set[str] = set()
+    external = {name for e in effects for name in e.inputs} - {
+        name for e in effects for name in e.outputs}
+    ready_signals |= external
+    # A modified signal is ready for plain consumers only after all its modifiers ran.
+    modifiers: dict[str, list[int]] = {}
+    for i, effect in enumerate(effects):
+        for name in effect.modifies:
+            modifiers.setdefault(name, []).append(i)
+    produced: set[str] = set(external)
+    while remaining:
+        progress = False
+        for i in list(remaining):
+            effect = effects[i]
+            needs_ok = True
+            for name in effect.inputs:
+                if name in effect.modifies:
+                    earlier = [m for m in modifiers[name] if m < i]
+                    if name not in produced or any(m in remaining for m in earlier):
+                        needs_ok = False
+                elif name not in produced or any(m in remaining for m in modifiers.get(name, [])):
+                    needs_ok = False
+            if needs_ok:
+                ordered.append(i)
+                remaining.remove(i)
+                produced.update(effect.outputs)
+                progress = True
+        if not progress:
+            kinds = ", ".join(effects[i].kind for i in remaining)
+            raise SceneError(source, "effects", f"effects depend on each other in a loop: {kinds}")
+    return [effects[i] for i in ordered]

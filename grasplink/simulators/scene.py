@@ -1,0 +1,225 @@
+"""Scene files (`scenes/*.toml`): which nodes exist, the clock, the seed, and the effects asked for.
+
+A scene is validated completely on load; every error names the file, the key
+and what was expected. See docs/scenes.md for the format.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import grasplink.simulators.effects  # noqa: F401  (registers every effect)
+from grasplink.errors import ConfigError
+from grasplink.profiles import objects as obj
+from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
+from grasplink.simulators.core import REGISTRY, Context, Effect
+from grasplink.simulators.params import Params, SceneError
+
+US_PER_S = 1_000_000
+NODE_KINDS = ("skin", "emg", "belt", "hand")
+CLOCKS = ("virtual", "realtime")
+DEFAULT_RATES_HZ = {"skin": 400, "emg": 1500}
+MAX_DURATION_S = 7 * 24 * 3600.0
+
+
+@dataclass
+class NodeSpec:
+    kind: str
+    node_id: int
+    sample_rate_hz: int | None = None
+    samples_per_pdo: int | None = None
+    layout: str | None = None
+
+
+@dataclass
+class GatewaySpec:
+    enabled: bool = True
+    belt_mrad_s: tuple[tuple[float, float], ...] | None = None
+    hand_grip_n: tuple[tuple[float, float], ...] | None = None
+
+
+@dataclass
+class PowerLoss:
+    node: str
+    at_s: float
+    restore_s: float | None
+
+
+@dataclass
+class BusFaults:
+    latency_us: int = 0
+    jitter_us: int = 0
+    drop_probability: float = 0.0
+    error_frames_per_s: float = 0.0
+    power_loss: list[PowerLoss] = field(default_factory=list)
+
+
+@dataclass
+class Scene:
+    path: str
+    name: str
+    description: str
+    seed: int
+    duration_s: float
+    clock: str
+    physics_rate_hz: int
+    chunk_us: int
+    layout_mm: tuple[float, ...] | None
+    layout_name: str | None
+    nodes: dict[str, NodeSpec]
+    gateway: GatewaySpec
+    effects: list[Effect]
+    bus: BusFaults | None
+    context: Context
+
+    @property
+    def duration_us(self) -> int:
+        return round(self.duration_s * US_PER_S)
+
+    def rate_hz(self, domain: str) -> int:
+        return self.context.rates_hz[domain]
+
+
+def load_scene(path: str | Path) -> Scene:
+    source = str(path)
+    try:
+        with open(path, "rb") as handle:
+            data = tomllib.load(handle)
+    except FileNotFoundError:
+        raise SceneError(source, "", "no such scene file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(source, "", f"not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise SceneError(source, "", f"cannot read: {exc.strerror}") from None
+    return parse_scene(data, source)
+
+
+def parse_scene(data: dict, source: str) -> Scene:
+    top = Params(data, source)
+    head = top.table_of("scene")
+    name = head.string("name", Path(source).stem)
+    description = head.string("description", "")
+    seed = head.integer("seed", 0, low=0)
+    duration_s = head.number("duration_s", low=0.0, low_open=True, high=MAX_DURATION_S)
+    clock = head.string("clock", "virtual", choices=CLOCKS)
+    physics_rate_hz = head.integer("physics_rate_hz", 1000, low=10, high=100_000)
+    if US_PER_S % physics_rate_hz:
+        raise head.error("physics_rate_hz", "must divide 1000000 (e.g. 500, 1000, 2000)")
+    chunk_ms = head.number("chunk_ms", 10.0, low=0.0, low_open=True, high=1000.0)
+    chunk_us = round(chunk_ms * 1000)
+    period_us = US_PER_S // physics_rate_hz
+    if chunk_us % period_us:
+        raise head.error("chunk_ms", f"must be a multiple of the physics period "
+                                     f"({period_us} us)")
+    scene_layout = head.raw("layout", None)
+    head.finish()
+
+    nodes = _parse_nodes(top.table_of("nodes", {}))
+    layout_text = nodes["skin"].layout if "skin" in nodes and nodes["skin"].layout else None
+    layout_text = layout_text or scene_layout
+    layout_mm, layout_name = _parse_layout(layout_text, source)
+    gateway = _parse_gateway(top.table_of("gateway", {}), nodes)
+    rates = {"physics": physics_rate_hz,
+             "skin": (nodes["skin"].sample_rate_hz if "skin" in nodes else None)
+             or DEFAULT_RATES_HZ["skin"],
+             "emg": (nodes["emg"].sample_rate_hz if "emg" in nodes else None)
+             or DEFAULT_RATES_HZ["emg"]}
+    context = Context(source, seed, rates, layout_mm, {k: vars(v) for k, v in nodes.items()})
+    effects, bus = _parse_effects(top.raw("effects", []), source, context)
+    top.finish()
+    return Scene(source, name, description, seed, duration_s, clock, physics_rate_hz, chunk_us,
+                 layout_mm, layout_name, nodes, gateway, effects, bus, context)
+
+
+def _parse_nodes(table: Params) -> dict[str, NodeSpec]:
+    nodes: dict[str, NodeSpec] = {}
+    used_ids: dict[int, str] = {}
+    for kind in list(table.table):
+        if kind not in NODE_KINDS:
+            raise table.error(kind, f"unknown node type; expected one of {', '.join(NODE_KINDS)}")
+        p = table.table_of(kind)
+        spec = NodeSpec(kind, p.integer("node_id", obj.DEFAULT_NODE_IDS[kind], low=1, high=127))
+        if spec.node_id in used_ids or spec.node_id == obj.GATEWAY_NODE_ID:
+            other = used_ids.get(spec.node_id, "gateway")
+            raise p.error("node_id", f"0x{spec.node_id:02X} is already used by {other}")
+        used_ids[spec.node_id] = kind
+        if kind == "skin":
+            spec.sample_rate_hz = p.integer("sample_rate_hz", DEFAULT_RATES_HZ["skin"],
+                                            low=80, high=1000)
+            spec.samples_per_pdo = p.integer("samples_per_pdo", 3, low=1, high=3)
+            spec.layout = p.string("layout", "alpha0.1")
+        elif kind == "emg":
+            spec.sample_rate_hz = p.integer("sample_rate_hz", DEFAULT_RATES_HZ["emg"],
+                                            low=500, high=4000)
+        p.finish()
+        nodes[kind] = spec
+    return nodes
+
+
+def _parse_layout(text, source: str) -> tuple[tuple[float, ...] | None, str | None]:
+    if text is None:
+        return None, None
+    if not isinstance(text, str):
+        raise SceneError(source, "scene.layout", "expected a layout name or spacings in mm "
+                                                 "such as \"19,12,5\"")
+    try:
+        spacings = parse_layout(text)
+    except ConfigError as exc:
+        raise SceneError(source, "layout", str(exc)) from None
+    return spacings, text if text in LAYOUTS_MM else None
+
+
+def _parse_gateway(p: Params, nodes: dict[str, NodeSpec]) -> GatewaySpec:
+    spec = GatewaySpec(enabled=p.boolean("enabled", True))
+    if p.has("belt_mrad_s"):
+        if "belt" not in nodes:
+            raise p.error("belt_mrad_s", "commands a belt, but the scene has no [nodes.belt]")
+        spec.belt_mrad_s = p.pairs("belt_mrad_s")
+    if p.has("hand_grip_n"):
+        if "hand" not in nodes:
+            raise p.error("hand_grip_n", "commands a hand, but the scene has no [nodes.hand]")
+        spec.hand_grip_n = p.pairs("hand_grip_n")
+    p.finish()
+    return spec
+
+
+def _parse_effects(items, source: str, context: Context) -> tuple[list[Effect], BusFaults | None]:
+    if not isinstance(items, list):
+        raise SceneError(source, "effects", "expected an array of tables ([[effects]])")
+    effects: list[Effect] = []
+    bus: BusFaults | None = None
+    for index, item in enumerate(items):
+        p = Params(item, source, f"effects[{index}]")
+        kind = p.string("type")
+        if kind == "bus.faults":
+            if bus is not None:
+                raise p.error("type", "bus.faults is given twice")
+            bus = _parse_bus(p, context)
+            continue
+        cls = REGISTRY.get(kind)
+        if cls is None:
+            known = ", ".join(sorted([*REGISTRY, "bus.faults"]))
+            raise p.error("type", f"unknown effect {kind!r}; known effects: {known}")
+        effects.append(cls(p, context))
+        p.finish()
+    return effects, bus
+
+
+def _parse_bus(p: Params, context: Context) -> BusFaults:
+    faults = BusFaults(
+        latency_us=p.integer("latency_us", 0, low=0, high=1_000_000),
+        jitter_us=p.integer("jitter_us", 0, low=0, high=1_000_000),
+        drop_probability=p.number("drop_probability", 0.0, low=0.0, high=1.0),
+        error_frames_per_s=p.number("error_frames_per_s", 0.0, low=0.0, high=10_000.0),
+    )
+    for i, item in enumerate(p.raw("power_loss", [])):
+        q = Params(item, p.source, p.key(f"power_loss[{i}]"))
+        node = q.string("node", choices=tuple(context.nodes))
+        at_s = q.number("at_s", low=0.0)
+        restore_s = q.number("restore_s", None, low=at_s, low_open=True)
+        q.finish()
+        faults.power_loss.append(PowerLoss(node, at_s, restore_s))
+    p.finish()
+    return faults
