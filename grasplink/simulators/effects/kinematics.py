@@ -20,6 +20,7 @@ one-shot stepping.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -195,17 +196,17 @@ class CoulombObject(Effect):
         dt_s = np.diff(times, prepend=previous) / US_PER_S
         static_n = self.surfaces * self.mu_static * grip
         kinetic_n = self.surfaces * self.mu_kinetic * grip
-        holds = np.abs(load) <= static_n
+        breaks = np.flatnonzero(np.abs(load) > static_n)  # samples where a resting object moves
         position = np.empty(n)
         speed = np.empty(n)
         x, v, i = self.position_mm, self.speed_mm_s, 0
         while i < n:
             if v == 0.0:
-                breaks = np.flatnonzero(~holds[i:])
-                if breaks.size == 0:
+                following = int(np.searchsorted(breaks, i))
+                if following == breaks.size:
                     position[i:], speed[i:] = x, 0.0
                     break
-                j = i + int(breaks[0])
+                j = int(breaks[following])
                 position[i:j], speed[i:j] = x, 0.0
                 i = j
                 direction = math.copysign(1.0, load[i])
@@ -243,13 +244,16 @@ class RidgeDips(Effect):
     [4, 15], the thesis' 4–15 mm/s fluctuations): each crossing draws a dip
     depth d uniformly from the interval (from `ctx.rng("object.ridge_dips")`),
     capped at the speed magnitude at the crossing; `recovery_s` (default
-    0.05): the dip decays as d·exp(−(t − t_c)/recovery_s).
+    0.05): the dip decays as d·exp(−(t − t_c)/recovery_s) and ends (exactly
+    0) after 30 recovery times, where it is below 1e-13 of its depth — a
+    finite tail keeps the work per sample bounded and chunk-independent.
 
     Speed: v = sign(v0)·max(|v0| − D(t), 0) with D the sum of active dips,
     so a dip slows the object but never reverses it.
     Position: p = p0 − offset, where over each sample interval the offset
     grows by the closed-form integral of the dips,
-    Σ d·τ·(e^(−(t_{k−1}−t_c)/τ) − e^(−(t_k−t_c)/τ)), against the direction of
+    Σ d·τ·(e^(−a_{k−1}/τ) − e^(−a_k/τ)) with a_k = clip(t_k − t_c, 0, 30τ),
+    against the direction of
     the original displacement and never by more than that displacement (so
     the object never moves backwards because of a dip).
     Crossings are detected on the modified position, in either direction:
@@ -265,7 +269,8 @@ class RidgeDips(Effect):
     outputs = OBJECT_OUTPUTS
     summary = "real speed dips and recovers at each ridge crossing (4-15 mm/s)"
 
-    NEGLIGIBLE_AGE = 800.0  # in recovery times: exp(-800) underflows to exactly 0.0
+    TAIL = 30.0  # a dip ends after this many recovery times (exp(-30) ≈ 9e-14)
+    WINDOW = 64  # first look-ahead for the next crossing; doubles while none is found
 
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
@@ -277,6 +282,7 @@ class RidgeDips(Effect):
                                              f"got {list(depth)}")
         self.depth_low, self.depth_high = depth
         self.recovery_s = params.number("recovery_s", 0.05, low=0.0, low_open=True)
+        self.tail_us = self.TAIL * self.recovery_s * US_PER_S
         self.rng = ctx.rng(self.kind)
         self.dip_start_us: list[int] = []
         self.dip_depth: list[float] = []
@@ -290,16 +296,21 @@ class RidgeDips(Effect):
         """(total dip at each t_k in mm/s, its integral over (t_{k-1}, t_k] in mm)."""
         total = np.zeros(len(times_us))
         area = np.zeros(len(times_us))
-        tau = self.recovery_s
+        tau_us = self.recovery_s * US_PER_S
         for start_us, depth in zip(self.dip_start_us, self.dip_depth, strict=True):
-            age_s = (times_us - start_us) / US_PER_S
-            active = age_s >= 0
-            now = np.where(active, np.exp(-np.maximum(age_s, 0.0) / tau), 0.0)
-            before_s = np.maximum((previous_us - start_us) / US_PER_S, 0.0)
-            then = np.where(active, np.exp(-before_s / tau), 0.0)
-            total += depth * now
-            area += depth * tau * (then - now)
+            age_us = times_us - start_us
+            upper = np.exp(-np.clip(age_us, 0, self.tail_us) / tau_us)
+            lower = np.exp(-np.clip(previous_us - start_us, 0, self.tail_us) / tau_us)
+            total += np.where((age_us >= 0) & (age_us <= self.tail_us), depth * upper, 0.0)
+            area += (depth * self.recovery_s) * (lower - upper)
         return total, area
+
+    def _forget(self, now_us: int) -> None:
+        """Drop dips that have ended by `now_us` (they add exactly 0.0 from then on)."""
+        keep = [j for j, s in enumerate(self.dip_start_us) if now_us - s <= self.tail_us]
+        if len(keep) < len(self.dip_start_us):
+            self.dip_start_us = [self.dip_start_us[j] for j in keep]
+            self.dip_depth = [self.dip_depth[j] for j in keep]
 
     def step(self, io: Io) -> None:
         times = io.times_us
@@ -316,35 +327,39 @@ class RidgeDips(Effect):
         moved = np.diff(p0, prepend=self.last_p0_mm)
         moved_abs, moved_sign = np.abs(moved), np.sign(moved)
         position = np.empty(n)
-        i = 0
-        while i < n:
-            _, area = self._dips(times[i:], previous_us[i:])
-            lost = moved_sign[i:] * np.minimum(area, moved_abs[i:])
+        dip = np.empty(n)
+        i, window = 0, self.WINDOW
+        while i < n:  # look ahead in growing windows until the next crossing
+            end = min(i + window, n)
+            self._forget(int(previous_us[i]))
+            total, area = self._dips(times[i:end], previous_us[i:end])
+            lost = moved_sign[i:end] * np.minimum(area, moved_abs[i:end])
             offsets = np.cumsum(np.concatenate(([self.offset_mm], lost)))[1:]
-            modified = p0[i:] - offsets
+            modified = p0[i:end] - offsets
             behind = np.searchsorted(self.ridges_mm, modified, side="right")
             changes = np.flatnonzero(behind != self.behind)
-            count = int(changes[0]) + 1 if changes.size else n - i
+            count = int(changes[0]) + 1 if changes.size else end - i
             position[i:i + count] = modified[:count]
+            dip[i:i + count] = total[:count]
             self.offset_mm = float(offsets[count - 1])
             i += count
-            if changes.size:
-                k = i - 1
-                now = int(behind[count - 1])
-                crossed = (range(self.behind, now) if now > self.behind
-                           else range(self.behind - 1, now - 1, -1))
-                for _ in crossed:
-                    depth = float(self.rng.uniform(self.depth_low, self.depth_high))
-                    self.dip_start_us.append(int(times[k]))
-                    self.dip_depth.append(min(depth, abs(float(v0[k]))))
-                self.behind = now
-        total, _ = self._dips(times, previous_us)
-        speed = np.sign(v0) * np.maximum(np.abs(v0) - total, 0.0)
+            if not changes.size:
+                window *= 2
+                continue
+            k, now = i - 1, int(behind[count - 1])
+            crossed = (range(self.behind, now) if now > self.behind
+                       else range(self.behind - 1, now - 1, -1))
+            for _ in crossed:  # a new dip starts at full depth at the detecting sample
+                depth = float(self.rng.uniform(self.depth_low, self.depth_high))
+                depth = min(depth, abs(float(v0[k])))
+                self.dip_start_us.append(int(times[k]))
+                self.dip_depth.append(depth)
+                dip[k] += depth
+            self.behind = now
+            window = self.WINDOW
+        speed = np.sign(v0) * np.maximum(np.abs(v0) - dip, 0.0)
         self.last_us, self.last_p0_mm = int(times[-1]), float(p0[-1])
-        horizon_us = self.NEGLIGIBLE_AGE * self.recovery_s * US_PER_S
-        keep = [j for j, s in enumerate(self.dip_start_us) if self.last_us - s <= horizon_us]
-        self.dip_start_us = [self.dip_start_us[j] for j in keep]
-        self.dip_depth = [self.dip_depth[j] for j in keep]
+        self._forget(self.last_us)
         put_object(io, position, speed)
 
 
@@ -394,7 +409,7 @@ class SlipTask(Effect):
         super().__init__(params, ctx)
         speeds = params.numbers("level_speeds_mm_s", [1.8, 3.2, 4.6, 6.0],
                                 low=0.0, low_open=True, min_len=4)
-        if len(speeds) != 4 or any(b <= a for a, b in zip(speeds, speeds[1:], strict=False)):
+        if len(speeds) != 4 or any(b <= a for a, b in itertools.pairwise(speeds)):
             raise params.error("level_speeds_mm_s", f"expected 4 strictly increasing speeds "
                                                     f"(levels e1..e4), got {list(speeds)}")
         self.level_speeds = speeds

@@ -1,0 +1,199 @@
+"""Actuators and scripted forces (physics domain): the hand's grip, the load, the belt motor.
+
+- `hand.actuator`: the hand follows its commanded grip with a first-order lag;
+- `grip.scripted` / `load.scripted`: force profiles for scenes without a hand;
+- `belt.motor`: the haptic belt's single DC motor (thesis ch. 8): positive
+  speed drives the force belt (taps), negative speed the slip belt (brushing).
+
+First-order lags use the exact discretisation of dy/dt = (u − y)/τ for an
+input held over each sample interval: y_k = α·y_{k−1} + (1 − α)·u_k with
+α = exp(−dt_k/τ), dt_k the (integer microsecond) sample interval.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+from scipy.signal import lfilter
+
+from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
+from grasplink.simulators.effects.kinematics import INTERPOLATIONS, US_PER_S, Profile
+from grasplink.simulators.params import Params
+
+G_M_S2 = 9.81
+
+
+class FirstOrderLag:
+    """y_k = α_k·y_{k−1} + (1 − α_k)·u_k, α_k = exp(−dt_k/τ), state carried across chunks.
+
+    Runs of equal sample intervals are filtered in one `lfilter` call each;
+    every sample is computed by the same two products and one sum whatever
+    the chunking, so chunked and one-shot outputs agree bit for bit.
+    """
+
+    def __init__(self, time_constant_s: float, initial: float = 0.0):
+        self.time_constant_s = time_constant_s
+        self.value = initial
+        self.last_us: int | None = None
+
+    def step(self, times_us: np.ndarray, target: np.ndarray) -> np.ndarray:
+        n = len(times_us)
+        out = np.empty(n)
+        if n == 0:
+            return out
+        previous = times_us[0] if self.last_us is None else self.last_us
+        dt_us = np.diff(times_us, prepend=previous)
+        edges = [0, *(np.flatnonzero(np.diff(dt_us)) + 1).tolist(), n]
+        y = self.value
+        for a, b in itertools.pairwise(edges):
+            alpha = math.exp(-(dt_us[a] / US_PER_S) / self.time_constant_s)
+            out[a:b], _ = lfilter([1.0 - alpha], [1.0, -alpha], target[a:b], zi=[alpha * y])
+            y = float(out[b - 1])
+        self.value, self.last_us = y, int(times_us[-1])
+        return out
+
+
+class CrushLatch:
+    """1.0 from the first sample whose grip exceeds the limit on (None: never)."""
+
+    def __init__(self, limit_n: float | None):
+        self.limit_n = limit_n
+        self.crushed = False
+
+    def step(self, grip_n: np.ndarray) -> np.ndarray:
+        if self.limit_n is None:
+            return np.zeros(len(grip_n))
+        over = np.logical_or.accumulate(np.concatenate(([self.crushed], grip_n > self.limit_n)))
+        self.crushed = bool(over[-1])
+        return over[1:].astype(np.float64)
+
+
+@register
+class HandActuator(Effect):
+    """The hand closes towards its commanded grip with a first-order lag.
+
+    Parameters: `time_constant_s` (default 0.1), `max_force_n` (default 100:
+    the commanded grip is clamped to [0, max_force_n]), `initial_n` (grip at
+    the first sample, default 0), `crush_limit_n` (the object's crush limit;
+    default none = uncrushable). `hand.crushed` latches to 1.0 at the first
+    sample whose grip exceeds the limit; the grip itself keeps following the
+    command (the crushed object no longer resists).
+    """
+
+    kind = "hand.actuator"
+    domain = PHYSICS
+    inputs = ("hand.target_n",)
+    outputs = ("hand.grip_n", "hand.crushed")
+    summary = "hand grip follows its command with a first-order lag; latches a crush"
+
+    def __init__(self, params: Params, ctx: Context):
+        super().__init__(params, ctx)
+        tau = params.number("time_constant_s", 0.1, low=0.0, low_open=True)
+        self.max_force_n = params.number("max_force_n", 100.0, low=0.0, low_open=True)
+        initial = params.number("initial_n", 0.0, low=0.0, high=self.max_force_n)
+        self.lag = FirstOrderLag(tau, initial)
+        self.latch = CrushLatch(params.number("crush_limit_n", None, low=0.0, low_open=True))
+
+    def step(self, io: Io) -> None:
+        target = np.clip(io.get("hand.target_n"), 0.0, self.max_force_n)
+        grip = self.lag.step(io.times_us, target)
+        io.put("hand.grip_n", grip)
+        io.put("hand.crushed", self.latch.step(grip))
+
+
+@register
+class ScriptedGrip(Effect):
+    """The grip force follows a profile: `grip_n` = [[t_s, N], ...] (N >= 0).
+
+    `interpolation`: "linear" (default) or "step"; the first value is held
+    before the first point, the last after the last.
+    """
+
+    kind = "grip.scripted"
+    domain = PHYSICS
+    outputs = ("hand.grip_n",)
+    summary = "grip force from a scripted [t_s, N] profile"
+
+    def __init__(self, params: Params, ctx: Context):
+        super().__init__(params, ctx)
+        interpolation = params.string("interpolation", "linear", choices=INTERPOLATIONS)
+        pairs = params.pairs("grip_n")
+        for i, (_, force) in enumerate(pairs):
+            if force < 0:
+                raise params.error(f"grip_n[{i}][1]", f"expected a grip >= 0 N, got {force:g}")
+        self.profile = Profile(params, "grip_n", interpolation, pairs)
+
+    def step(self, io: Io) -> None:
+        io.put("hand.grip_n", self.profile.value(io.times_us))
+
+
+@register
+class ScriptedLoad(Effect):
+    """The tangential load on the object: a profile or an object's weight.
+
+    Give exactly one of `force_n` = [[t_s, N], ...] (signed: + pulls towards
+    the last ridge; `interpolation` "linear" default or "step") or
+    `mass_kg` (> 0): a constant load of mass_kg·9.81 N.
+    """
+
+    kind = "load.scripted"
+    domain = PHYSICS
+    outputs = ("load.force_n",)
+    summary = "tangential load from a [t_s, N] profile or a constant weight mass_kg*g"
+
+    def __init__(self, params: Params, ctx: Context):
+        super().__init__(params, ctx)
+        interpolation = params.string("interpolation", "linear", choices=INTERPOLATIONS)
+        has_force, has_mass = params.has("force_n"), params.has("mass_kg")
+        if has_force == has_mass:
+            raise params.error("force_n", "give exactly one of force_n (a [t_s, N] profile) "
+                                          "or mass_kg (a constant weight)")
+        self.profile: Profile | None = None
+        self.weight_n = 0.0
+        if has_force:
+            self.profile = Profile(params, "force_n", interpolation)
+        else:
+            self.weight_n = params.number("mass_kg", low=0.0, low_open=True) * G_M_S2
+
+    def step(self, io: Io) -> None:
+        if self.profile is None:
+            io.put("load.force_n", np.full(len(io), self.weight_n))
+        else:
+            io.put("load.force_n", self.profile.value(io.times_us))
+
+
+@register
+class BeltMotor(Effect):
+    """The haptic belt's DC motor (thesis ch. 8): one motor, the direction picks the belt.
+
+    `belt.command_mrad_s` is the signed speed demand; the motor follows it
+    with a first-order lag (`time_constant_s`, default 0.05), so a change of
+    direction passes through zero as the ratchet requires.
+    - w > 0 drives the force belt: `belt.tap_hz` = nubs·w/(2π) (`nubs`,
+      default 6 square nubs on the force belt), else 0;
+    - w < 0 drives the slip belt: `belt.surface_mm_s` = |w|·r
+      (`effective_radius_mm`, default 27: 2.0/3.7/5.3/7.0 rad/s ↔
+      ≈55/100/145/190 mm/s), else 0.
+    """
+
+    kind = "belt.motor"
+    domain = PHYSICS
+    inputs = ("belt.command_mrad_s",)
+    outputs = ("belt.velocity_mrad_s", "belt.tap_hz", "belt.surface_mm_s")
+    summary = "belt DC motor: first-order speed; + taps the force belt, - runs the slip belt"
+
+    def __init__(self, params: Params, ctx: Context):
+        super().__init__(params, ctx)
+        tau = params.number("time_constant_s", 0.05, low=0.0, low_open=True)
+        self.nubs = params.integer("nubs", 6, low=1)
+        self.radius_mm = params.number("effective_radius_mm", 27.0, low=0.0, low_open=True)
+        self.lag = FirstOrderLag(tau)
+
+    def step(self, io: Io) -> None:
+        velocity = self.lag.step(io.times_us, io.get("belt.command_mrad_s"))
+        rad_s = velocity / 1000.0
+        io.put("belt.velocity_mrad_s", velocity)
+        io.put("belt.tap_hz", np.where(rad_s > 0, self.nubs * rad_s / (2 * math.pi), 0.0))
+        io.put("belt.surface_mm_s", np.where(rad_s < 0, -rad_s * self.radius_mm, 0.0))

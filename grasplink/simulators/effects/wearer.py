@@ -1,0 +1,36 @@
+"""The wearer (physics domain): a scripted contraction level for scenes without a human model."""
+
+from __future__ import annotations
+
+from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
+from grasplink.simulators.effects.kinematics import Profile
+from grasplink.simulators.params import Params
+
+LEVELS = 5  # e0 (below e_min) .. e5 (above e_max), thesis ch. 2.3.3
+
+
+@register
+class WearerScript(Effect):
+    """The wearer's contraction level e0..e5 follows a script.
+
+    `levels` = [[t_s, level], ...], times strictly increasing, each level an
+    integer 0..5. Step-wise: a level holds from its time until the next
+    point; the first level is held before the first point.
+    """
+
+    kind = "wearer.script"
+    domain = PHYSICS
+    outputs = ("wearer.level",)
+    summary = "scripted contraction level e0..e5 (step-wise [t_s, level] points)"
+
+    def __init__(self, params: Params, ctx: Context):
+        super().__init__(params, ctx)
+        pairs = params.pairs("levels")
+        for i, (_, level) in enumerate(pairs):
+            if not float(level).is_integer() or not 0 <= level <= LEVELS:
+                raise params.error(f"levels[{i}][1]", f"expected an integer level 0..{LEVELS}, "
+                                                      f"got {level:g}")
+        self.profile = Profile(params, "levels", "step", pairs)
+
+    def step(self, io: Io) -> None:
+        io.put("wearer.level", self.profile.value(io.times_us))
