@@ -33,6 +33,10 @@ class LockstepNetwork:
         # Frames in flight on a slow link: (deliver_at_us, order, sender, frame).
         self._in_flight: list[tuple[int, int, object, Frame]] = []
         self._order = itertools.count()
+        # A sans-IO device's deadline changes only when it is called, so within a
+        # run it is asked again only then (device index -> deadline; missing = ask).
+        # Each run starts afresh: callers may have changed devices in between.
+        self._deadlines: dict[int, int | None] = {}
         for device in devices:
             self.add(device)
 
@@ -43,11 +47,17 @@ class LockstepNetwork:
 
     def start(self) -> None:
         for device in self.devices:
-            self._deliver(device, device.start(self.t_us))
+            self.start_device(device)
 
     def start_device(self, device: SansIoDevice) -> None:
         """Power one device (again) at the current time."""
+        self._deadlines.pop(self.devices.index(device), None)
         self._deliver(device, device.start(self.t_us))
+
+    def _deadline(self, i: int) -> int | None:
+        if i not in self._deadlines:
+            self._deadlines[i] = self.devices[i].next_deadline_us()
+        return self._deadlines[i]
 
     def inject(self, frame: Frame) -> list[Frame]:
         """Send a frame as an external tool would; returns every frame it caused."""
@@ -56,9 +66,10 @@ class LockstepNetwork:
         return caused[1:]
 
     def run_until(self, t_end_us: int) -> None:
+        self._deadlines.clear()
         steps_at_t = 0
         while True:
-            due = [(d.next_deadline_us(), i) for i, d in enumerate(self.devices)]
+            due = [(self._deadline(i), i) for i in range(len(self.devices))]
             due = [(t, i) for t, i in due if t is not None]
             t_next = min((t for t, _ in due), default=None)
             t_next = _earliest(t_next, self._in_flight[0][0] if self._in_flight else None)
@@ -84,6 +95,7 @@ class LockstepNetwork:
             for t, i in due:
                 if t <= self.t_us:
                     device = self.devices[i]
+                    self._deadlines.pop(i, None)
                     self._deliver(device, device.advance(self.t_us))
 
     def run_for(self, duration_us: int) -> None:
@@ -111,8 +123,9 @@ class LockstepNetwork:
 
     def _replies(self, origin: object, frame: Frame) -> list[tuple[SansIoDevice, Frame]]:
         replies: list[tuple[SansIoDevice, Frame]] = []
-        for device in self.devices:
+        for i, device in enumerate(self.devices):
             if device is not origin:
+                self._deadlines.pop(i, None)
                 replies.extend((device, f) for f in device.receive(frame, self.t_us))
         return replies
 

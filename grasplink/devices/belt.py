@@ -35,10 +35,14 @@ def limit_belt_velocity(target_mrad_s: int, max_mrad_s: int) -> tuple[int, bool]
 
 class BeltApp(DriveApp):
     supported_mode = obj.MODE_PROFILE_VELOCITY
+    inputs = (*DriveApp.inputs, obj.BELT_TARGET_VELOCITY_MRAD_S,
+              obj.BELT_MAX_PROFILE_VELOCITY_MRAD_S, obj.BELT_PROFILE_ACCELERATION,
+              obj.BELT_PROFILE_DECELERATION, obj.BELT_QUICK_STOP_DECELERATION)
 
     def __init__(self) -> None:
         super().__init__()
         self.setpoint_mrad_s = 0.0  # the profile ramp's output: what the motor is asked for
+        self._demand = 0.0
         self.velocity_mrad_s = 0.0  # actual motor velocity
         # True when a simulator (scene effect belt.motor) owns velocity_mrad_s.
         self.simulated_motor = False
@@ -64,6 +68,7 @@ class BeltApp(DriveApp):
     def control(self, dt_s: float) -> None:
         """Ramp the velocity setpoint; without a motor simulator the motor follows it exactly."""
         demand = self.demand_mrad_s()
+        self._demand = demand
         setpoint = self.setpoint_mrad_s
         if self.drive.state == DriveState.QUICK_STOP_ACTIVE:
             rate = int(self.store.get(obj.BELT_QUICK_STOP_DECELERATION))
@@ -79,11 +84,19 @@ class BeltApp(DriveApp):
         self.setpoint_mrad_s = setpoint
         if not self.simulated_motor:
             self.velocity_mrad_s = setpoint
-        if abs(self.velocity_mrad_s) < STANDSTILL_MRAD_S and setpoint == 0.0:
+
+    def report(self) -> None:
+        if abs(self.velocity_mrad_s) < STANDSTILL_MRAD_S and self.setpoint_mrad_s == 0.0:
             self.drive.standstill_reached(self.quick_stop_option)
-        self.target_reached = abs(demand - self.velocity_mrad_s) < STANDSTILL_MRAD_S
+        self.target_reached = abs(self._demand - self.velocity_mrad_s) < STANDSTILL_MRAD_S
         self.store.set(obj.BELT_VELOCITY_ACTUAL_MRAD_S, 0, round(self.velocity_mrad_s))
         self._publish_display()
+        self._publish_status()
+
+    def settled(self) -> bool:
+        return (self.setpoint_mrad_s == self._demand
+                and self.drive.state != DriveState.QUICK_STOP_ACTIVE
+                and (self.simulated_motor or self.velocity_mrad_s == self.setpoint_mrad_s))
 
     def _publish_display(self) -> None:
         omega_rad_s = abs(self.velocity_mrad_s) / 1000.0

@@ -1,8 +1,12 @@
 """What the belt and hand share: a CiA 402 drive fed by an RPDO, ticking on its own clock.
 
 The drive function (velocity ramp, grip-force loop) runs at a fixed control
-rate while the drive is enabled; subclasses implement `control(dt_s)` and
-`stop_target()`. Statusword changes publish through TPDOs of type 255.
+rate; subclasses implement `control(dt_s)` (move the setpoint) and `report()`
+(publish the actual value). Once the setpoint has settled the loop sleeps
+until an input changes (RPDO, SDO write, NMT, safe state): a settled loop
+would compute the same thing again, and virtual time should not pay for it.
+When a simulator owns the actual value it calls `report()` after changing it.
+Statusword changes publish through TPDOs of type 255.
 """
 
 from __future__ import annotations
@@ -21,18 +25,20 @@ CONTROL_PERIOD_US = 5_000  # 200 Hz drive loop
 
 class DriveApp(DeviceApp):
     supported_mode: int = 0
+    # Objects whose change alters the demand and so wakes a sleeping loop.
+    inputs: tuple[int, ...] = (obj.CONTROLWORD, obj.MODES_OF_OPERATION, obj.QUICK_STOP_OPTION)
 
     def __init__(self) -> None:
         self.drive = DriveStateMachine()
         self.internal_limit = False
         self.target_reached = True
-        self._next_tick_us = 0
+        self._next_tick_us: int | None = 0
         self._last_tick_us = 0
 
     def attach(self, node) -> None:
         super().attach(node)
         self.store.add_validator(obj.MODES_OF_OPERATION, self._validate_mode)
-        self.store.add_listener(self._on_change)
+        self.store.add_listener(self._on_change, self.inputs)
 
     def _validate_mode(self, index: int, subindex: int, value: Value) -> None:
         if int(value) != self.supported_mode:
@@ -50,11 +56,13 @@ class DriveApp(DeviceApp):
             self._publish_status()
         elif index == obj.MODES_OF_OPERATION:
             self.store.set(obj.MODES_OF_OPERATION_DISPLAY, 0, int(value))
+        self.wake(self.node.pdo.now_us)
 
     def on_rpdo(self, number: int, t_us: int) -> None:
         # Re-apply the controlword even when unchanged: a repeated command is a command.
         self.drive.apply(int(self.store.get(obj.CONTROLWORD)), self.quick_stop_option)
         self._publish_status()
+        self.wake(t_us)
 
     def on_reset(self, t_us: int) -> None:
         self.drive.reset()
@@ -67,20 +75,42 @@ class DriveApp(DeviceApp):
     def enter_safe_state(self, t_us: int, reason: str) -> None:
         self.drive.quick_stop()
         self._publish_status()
+        self.wake(t_us)
+
+    def wake(self, t_us: int) -> None:
+        """Resume the control loop (one period's step first: no catch-up after a sleep)."""
+        if self._next_tick_us is None:
+            self._next_tick_us = t_us
+            self._last_tick_us = t_us - CONTROL_PERIOD_US
 
     def advance(self, t_us: int) -> list[Frame]:
-        while self._next_tick_us <= t_us:
+        while self._next_tick_us is not None and self._next_tick_us <= t_us:
             dt_s = (self._next_tick_us - self._last_tick_us) / US_PER_S
             self._last_tick_us = self._next_tick_us
             self.control(dt_s)
-            self._publish_status()
+            self.report()
             self._next_tick_us += CONTROL_PERIOD_US
+            if self.settled():
+                self._next_tick_us = None
         return []
 
     def next_deadline_us(self) -> int | None:
         return self._next_tick_us
 
+    def publish_actual(self) -> None:
+        """A simulator changed the actual value: publish it (this never wakes the loop)."""
+        self.report()
+
     def control(self, dt_s: float) -> None:
+        """Move the setpoint one control period towards the demand."""
+        raise NotImplementedError
+
+    def report(self) -> None:
+        """Publish the actual value, target-reached and the statusword."""
+        raise NotImplementedError
+
+    def settled(self) -> bool:
+        """True when another tick would change nothing."""
         raise NotImplementedError
 
     @property
@@ -95,3 +125,4 @@ class DriveApp(DeviceApp):
 
     def on_state(self, state: NmtState, t_us: int) -> None:
         self._publish_status()
+        self.wake(t_us)

@@ -52,7 +52,7 @@ class EmgApp(DeviceApp):
     def attach(self, node) -> None:
         super().attach(node)
         self.store.add_validator(obj.EMG_CALIBRATION, self._validate_calibration)
-        self.store.add_listener(self._on_change)
+        self.store.add_listener(self._on_change, (obj.EMG_SAMPLE_RATE_HZ, obj.EMG_WINDOW_MS))
 
     @property
     def rate_hz(self) -> int:

@@ -15,10 +15,13 @@ from grasplink.profiles import objects as obj
 
 class HandApp(DriveApp):
     supported_mode = obj.MODE_GRIP_FORCE
+    inputs = (*DriveApp.inputs, obj.HAND_TARGET_GRIP_MN, obj.HAND_CRUSH_LIMIT_MN,
+              obj.HAND_GRIP_RATE_MN_S)
 
     def __init__(self) -> None:
         super().__init__()
         self.setpoint_mn = 0.0  # the rate-limited grip command
+        self._demand = 0.0
         self.grip_mn = 0.0  # actual grip force
         # True when a simulator (scene effect hand.actuator) owns grip_mn.
         self.simulated_actuator = False
@@ -56,9 +59,17 @@ class HandApp(DriveApp):
     def control(self, dt_s: float) -> None:
         """Slew the grip setpoint; without an actuator simulator the grip follows it exactly."""
         demand = self.demand_mn()
+        self._demand = demand
         step = int(self.store.get(obj.HAND_GRIP_RATE_MN_S)) * dt_s
         self.setpoint_mn += max(-step, min(step, demand - self.setpoint_mn))
         if not self.simulated_actuator:
             self.grip_mn = self.setpoint_mn
-        self.target_reached = abs(demand - self.grip_mn) < 1.0
+
+    def report(self) -> None:
+        self.target_reached = abs(self._demand - self.grip_mn) < 1.0
         self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, round(self.grip_mn))
+        self._publish_status()
+
+    def settled(self) -> bool:
+        return self.setpoint_mn == self._demand and (
+            self.simulated_actuator or self.grip_mn == self.setpoint_mn)

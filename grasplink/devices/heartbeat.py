@@ -17,7 +17,7 @@ class HeartbeatProducer:
     def __init__(self, store: ObjectStore):
         self.store = store
         self._next_us: int | None = None
-        store.add_listener(self._on_change)
+        store.add_listener(self._on_change, (obj.HEARTBEAT_PRODUCER_MS,))
         self.now_us = 0
 
     def restart(self, t_us: int) -> None:
@@ -67,7 +67,7 @@ class HeartbeatConsumer:
         self.store = store
         self._monitors: dict[int, _Monitor] = {}
         store.add_validator(obj.HEARTBEAT_CONSUMER, self._validate)
-        store.add_listener(self._on_change)
+        store.add_listener(self._on_change, (obj.HEARTBEAT_CONSUMER,))
         self.reload()
 
     def reload(self) -> None:

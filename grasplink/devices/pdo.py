@@ -82,6 +82,9 @@ class _Pdo:
     buffered: bytes | None = None  # RPDO data waiting for SYNC
     last_rx_us: int | None = None  # RPDO deadline monitoring
     mapping: list[MapEntry] = field(default_factory=list)
+    # Communication parameters as the store holds them, cached by `reload()` (which
+    # runs on every change of a PDO parameter): the hot path reads these, not the store.
+    params: dict[int, int] = field(default_factory=dict)
 
 
 class PdoEngine:
@@ -118,18 +121,16 @@ class PdoEngine:
 
     # -- parameters ----------------------------------------------------------
     def cob_id(self, pdo: _Pdo) -> int:
-        return int(self.store.get(pdo.comm_index, 1))
+        return pdo.params[1]
 
     def is_valid(self, pdo: _Pdo) -> bool:
-        return not self.cob_id(pdo) & COB_ID_INVALID
+        return not pdo.params[1] & COB_ID_INVALID
 
     def transmission_type(self, pdo: _Pdo) -> int:
-        return int(self.store.get(pdo.comm_index, 2))
+        return pdo.params[2]
 
     def _param(self, pdo: _Pdo, sub: int) -> int:
-        return (
-            int(self.store.get(pdo.comm_index, sub)) if self.store.has(pdo.comm_index, sub) else 0
-        )
+        return pdo.params.get(sub, 0)
 
     def inhibit_us(self, pdo: _Pdo) -> int:
         return self._param(pdo, 3) * 100
@@ -141,6 +142,8 @@ class PdoEngine:
         """Re-read every mapping (after a reset or a parameter change)."""
         self._watchers.clear()
         for pdo in self._by_comm.values():
+            pdo.params = {sub: int(self.store.get(pdo.comm_index, sub))
+                          for sub in range(1, 7) if self.store.has(pdo.comm_index, sub)}
             count = int(self.store.get(pdo.map_index, 0))
             pdo.mapping = [
                 MapEntry.decode(int(self.store.get(pdo.map_index, s))) for s in range(1, count + 1)

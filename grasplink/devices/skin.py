@@ -41,6 +41,7 @@ class SkinApp(DeviceApp):
         self._static_fill = 0
         self._ring_pos = 0
         self._loading_preset = False
+        self._calibration: tuple[int, int, float] | None = None
         self.saturated_samples = 0
         self.dropped_packets = 0
 
@@ -48,7 +49,9 @@ class SkinApp(DeviceApp):
         super().attach(node)
         self.store.add_validator(obj.SKIN_RIDGE_SPACING_UM, self._validate_spacing)
         self.store.add_validator(obj.SKIN_FSR_CALIBRATION, self._validate_calibration)
-        self.store.add_listener(self._on_change)
+        watched = (obj.SKIN_LAYOUT_PRESET, obj.SKIN_RIDGE_SPACING_UM, obj.SKIN_SAMPLE_RATE_HZ,
+                   obj.SKIN_FSR_CALIBRATION)
+        self.store.add_listener(self._on_change, watched)
 
     # -- configuration ----------------------------------------------------------
     @property
@@ -88,6 +91,8 @@ class SkinApp(DeviceApp):
             self._load_preset(PRESET_CODES[int(value)])
         elif index == obj.SKIN_RIDGE_SPACING_UM and not self._loading_preset:
             self.store.set(obj.SKIN_LAYOUT_PRESET, 0, 0)
+        elif index == obj.SKIN_FSR_CALIBRATION:
+            self._calibration = None
         elif index == obj.SKIN_SAMPLE_RATE_HZ and self.clock is not None:
             self._restart_sampling(self.node.pdo.now_us)
 
@@ -111,20 +116,24 @@ class SkinApp(DeviceApp):
         self._static_fill = 0
         self._ring_pos = 0
 
+    def calibration(self) -> tuple[int, int, float]:
+        """(zero counts, full-scale counts, mN per count), cached until 2130h changes."""
+        if self._calibration is None:
+            full = self.full_scale_counts()
+            zero = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_ZERO))
+            scale_mn = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_FULL_SCALE_MN))
+            self._calibration = (zero, full, scale_mn / (full - zero))
+        return self._calibration
+
     def to_counts(self, force_n: np.ndarray) -> np.ndarray:
         """ADC counts for forces (the device's linearised FSR calibration)."""
-        full = self.full_scale_counts()
-        zero = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_ZERO))
-        scale_mn = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_FULL_SCALE_MN))
-        span = full - zero
-        counts = zero + np.nan_to_num(force_n, nan=0.0) * MN_PER_N / scale_mn * span
+        zero, full, mn_per_count = self.calibration()
+        counts = zero + np.nan_to_num(force_n, nan=0.0) * (MN_PER_N / mn_per_count)
         return np.clip(np.rint(counts), 0, full).astype(np.int64)
 
     def to_force_mn(self, counts: np.ndarray | float) -> np.ndarray:
-        full = self.full_scale_counts()
-        zero = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_ZERO))
-        scale_mn = int(self.store.get(obj.SKIN_FSR_CALIBRATION, CAL_FULL_SCALE_MN))
-        return (np.asarray(counts, dtype=np.float64) - zero) * scale_mn / (full - zero)
+        zero, _, mn_per_count = self.calibration()
+        return (np.asarray(counts, dtype=np.float64) - zero) * mn_per_count
 
     def advance(self, t_us: int) -> list[Frame]:
         clock = self.clock
@@ -180,7 +189,7 @@ class SkinApp(DeviceApp):
         self._static_fill = min(len(ring), self._static_fill + len(tail))
 
     def _track_saturation(self, counts: np.ndarray, t_us: int) -> None:
-        saturated = int(np.count_nonzero(counts >= self.full_scale_counts()))
+        saturated = int(np.count_nonzero(counts >= self.calibration()[1]))
         self.saturated_samples += saturated
         if saturated and not self.node.emcy.is_active(em.SENSOR_SATURATED):
             self.node.emcy.raise_error(em.SENSOR_SATURATED, em.REG_MANUFACTURER, t_us)

@@ -93,6 +93,7 @@ class ObjectStore:
             self._objects.add(var.index)
         self._validators: dict[int, list[Validator]] = {}
         self._listeners: list[Listener] = []
+        self._listeners_by_index: dict[int, list[Listener]] = {}
         self._commands: dict[int, Command] = {}
         self.nvm: dict[Key, Value] = {}
         self.add_command(obj.STORE_PARAMETERS, self._on_store)
@@ -126,7 +127,12 @@ class ObjectStore:
         if entry.value == value:
             return
         entry.value = value
+        self._notify(index, subindex, value)
+
+    def _notify(self, index: int, subindex: int, value: Value) -> None:
         for listener in self._listeners:
+            listener(index, subindex, value)
+        for listener in self._listeners_by_index.get(index, ()):
             listener(index, subindex, value)
 
     def encode(self, index: int, subindex: int = 0) -> bytes:
@@ -139,8 +145,13 @@ class ObjectStore:
     def add_validator(self, index: int, validator: Validator) -> None:
         self._validators.setdefault(index, []).append(validator)
 
-    def add_listener(self, listener: Listener) -> None:
-        self._listeners.append(listener)
+    def add_listener(self, listener: Listener, indices: tuple[int, ...] | None = None) -> None:
+        """Call `listener` on every change, or only on changes of `indices`."""
+        if indices is None:
+            self._listeners.append(listener)
+        else:
+            for index in indices:
+                self._listeners_by_index.setdefault(index, []).append(listener)
 
     def add_command(self, index: int, command: Command) -> None:
         """Writes to `index` call `command(subindex, value)` and are not stored."""
@@ -167,8 +178,7 @@ class ObjectStore:
         elif entry.value == value:
             # Writing the current value is accepted and still notifies: writing
             # a signature twice or re-writing 6040h are meaningful commands.
-            for listener in self._listeners:
-                listener(index, subindex, value)
+            self._notify(index, subindex, value)
         else:
             self.set(index, subindex, value)
 

@@ -244,9 +244,11 @@ class Simulation:
         velocity = physics.values.get("belt.velocity_mrad_s")
         if "belt" in self.nodes and velocity is not None and len(velocity):
             self.nodes["belt"].app.velocity_mrad_s = float(velocity[-1])
+            self.nodes["belt"].app.publish_actual()
         grip = physics.values.get("hand.grip_n")
         if "hand" in self.nodes and grip is not None and len(grip):
             self.nodes["hand"].app.grip_mn = float(grip[-1]) * MN_PER_N
+            self.nodes["hand"].app.publish_actual()
 
     def _run_network(self, t_end_us: int) -> None:
         """Run the bus to just before t_end, applying power events at their exact time."""

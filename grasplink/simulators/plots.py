@@ -82,8 +82,8 @@ def _contact_times(truth: dict[str, np.ndarray], ridges: np.ndarray | None) -> n
     t, x = truth["t_s"], truth["object.position_mm"]
     times = []
     for ridge in ridges:
-        side = np.sign(x - ridge)
-        crossing = np.nonzero(side[:-1] * side[1:] < 0)[0]
+        beyond = x >= ridge
+        crossing = np.nonzero(beyond[:-1] != beyond[1:])[0]
         for i in crossing:
             frac = (ridge - x[i]) / (x[i + 1] - x[i])
             times.append(t[i] + frac * (t[i + 1] - t[i]))

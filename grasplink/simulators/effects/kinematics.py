@@ -265,7 +265,7 @@ class RidgeDips(Effect):
 
     kind = "object.ridge_dips"
     domain = PHYSICS
-    inputs = (POSITION, SPEED)
+    inputs = OBJECT_OUTPUTS  # modifies position, speed and slip state
     outputs = OBJECT_OUTPUTS
     summary = "real speed dips and recovers at each ridge crossing (4-15 mm/s)"
 
