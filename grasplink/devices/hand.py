@@ -28,9 +28,12 @@ class HandApp(DriveApp):
         self.holding = False
 
     def on_reset(self, t_us: int) -> None:
-        self.setpoint_mn = 0.0
-        if not self.simulated_actuator:
-            self.grip_mn = 0.0
+        # A reset does not open the hand: a simulated (real) actuator keeps its grip
+        # and the drive holds it until commanded otherwise.
+        if self.simulated_actuator:
+            self.setpoint_mn = self.grip_mn
+        else:
+            self.setpoint_mn = self.grip_mn = 0.0
         self.holding = False
         super().on_reset(t_us)
         self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, 0)

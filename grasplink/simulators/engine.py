@@ -24,7 +24,7 @@ from grasplink.devices.sampling import SampleClock
 from grasplink.gateway.scripted import ScriptedMaster
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import PRESET_CODES, spacings_um
-from grasplink.simulators.core import DOMAINS, EMG, PHYSICS, SKIN, Endpoint, Io, build_graph
+from grasplink.simulators.core import DOMAINS, EMG, PHYSICS, SKIN, Io
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import Scene
 
@@ -65,14 +65,22 @@ class DomainState:
 
 
 class Simulation:
-    def __init__(self, scene: Scene, recorder: Recorder | None = None):
+    """A scene ready to run. `measure=True` accounts CPU time per effect and for the network."""
+
+    def __init__(self, scene: Scene, recorder: Recorder | None = None, *, measure: bool = False):
         self.scene = scene
         self.recorder = recorder
+        self.measure = measure
+        self.cost_s: dict[str, float] = {}  # effect kind (or "network") -> process time
+        # Work done, a deterministic measure of cost: samples computed per domain and
+        # effect steps, frames on the bus.
+        self.samples: dict[str, int] = {}
+        self.effect_steps = 0
         self.nodes: dict[str, DeviceNode] = {}
-        endpoints = self._endpoints()
-        ordered, self.domain_of = build_graph(scene.effects, endpoints, scene.path)
-        self.effects = {d: [e for e in ordered if e.domain == d] for d in DOMAINS}
-        self._endpoints_by_domain = {d: [e for e in endpoints if e.domain == d] for d in DOMAINS}
+        self.domain_of = scene.domain_of
+        self.effects = {d: [e for e in scene.ordered if e.domain == d] for d in DOMAINS}
+        self._endpoints_by_domain = {d: [e for e in scene.endpoints if e.domain == d]
+                                     for d in DOMAINS}
         self.sources: dict[str, SceneSource] = {}
         produced = {name for e in scene.effects for name in e.outputs}
         for kind, signal, domain in (("skin", "skin.force_n", SKIN), ("emg", "emg.raw_uv", EMG)):
@@ -107,20 +115,6 @@ class Simulation:
         self.t_us = 0
 
     # -- construction --------------------------------------------------------------
-    def _endpoints(self) -> list[Endpoint]:
-        nodes = self.scene.nodes
-        endpoints = []
-        if "belt" in nodes:
-            endpoints.append(Endpoint("belt", reads=("belt.velocity_mrad_s",),
-                                      writes=("belt.command_mrad_s",)))
-        if "hand" in nodes:
-            endpoints.append(Endpoint("hand", reads=("hand.grip_n",), writes=("hand.target_n",)))
-        if "skin" in nodes:
-            endpoints.append(Endpoint("skin", reads=("skin.force_n",), domain=SKIN))
-        if "emg" in nodes:
-            endpoints.append(Endpoint("emg", reads=("emg.raw_uv",), domain=EMG))
-        return endpoints
-
     def _build_nodes(self, produced: set[str]) -> None:
         for kind, spec in self.scene.nodes.items():
             node = build_node(kind, spec.node_id, self.sources.get(kind))
@@ -129,7 +123,12 @@ class Simulation:
         if "belt" in self.nodes:
             self.nodes["belt"].app.simulated_motor = "belt.velocity_mrad_s" in produced
         if "hand" in self.nodes:
-            self.nodes["hand"].app.simulated_actuator = "hand.grip_n" in produced
+            hand = self.nodes["hand"].app
+            hand.simulated_actuator = "hand.grip_n" in produced
+            # A scene may start with the object already held: the node boots holding it.
+            initial_n = next((getattr(e, "initial_n", 0.0) for e in self.scene.effects
+                              if e.kind == "hand.actuator"), 0.0)
+            hand.grip_mn = initial_n * MN_PER_N
 
     def _configure(self, node: DeviceNode, spec) -> None:
         """Scene settings become the node's stored parameters (they survive its resets)."""
@@ -185,8 +184,14 @@ class Simulation:
                 # Physics includes the sample at t_end so sensors can interpolate up to it.
                 self._step_domain(state, t_end_us if domain == PHYSICS else t_end_us - 1)
         self._read_actuators()
+        t0 = time.process_time() if self.measure else 0.0
         self._run_network(t_end_us)
+        if self.measure:
+            self._charge("network (nodes + bus)", t0)
         self.t_us = t_end_us
+
+    def _charge(self, what: str, since: float) -> None:
+        self.cost_s[what] = self.cost_s.get(what, 0.0) + time.process_time() - since
 
     def _step_domain(self, state: DomainState, t_last_us: int) -> None:
         clock = state.clock
@@ -205,8 +210,15 @@ class Simulation:
         io = Io(times, lambda name, at, s=state: self._read(s, name, at),
                 lambda name, values, s=state: s.values.__setitem__(name, values))
         if len(times):
+            self.samples[state.name] = self.samples.get(state.name, 0) + len(times)
             for effect in self.effects[state.name]:
-                effect.step(io)
+                self.effect_steps += 1
+                if self.measure:
+                    t0 = time.process_time()
+                    effect.step(io)
+                    self._charge(effect.kind, t0)
+                else:
+                    effect.step(io)
         for kind, source in self.sources.items():
             signal = "skin.force_n" if kind == "skin" else "emg.raw_uv"
             if self.domain_of.get(signal) == state.name and signal in state.values:

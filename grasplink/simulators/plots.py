@@ -72,7 +72,51 @@ def plot_recording(folder: Path) -> list[Path]:
     commands = _commands_from_log(folder / "can.asc", summary)
     if commands:
         written.append(_plot_commands(plt, folder, title, commands, truth))
+    if (folder / "can.asc").is_file():
+        written.append(_plot_bus(plt, folder, title, summary))
     return written
+
+
+FUNCTIONS = ((0x000, 0x000, "NMT"), (0x080, 0x0FF, "EMCY/SYNC"), (0x180, 0x4FF, "TPDO"),
+             (0x200, 0x57F, "RPDO"), (0x580, 0x67F, "SDO"), (0x700, 0x77F, "heartbeat"))
+BUS_BIN_S = 0.1
+
+
+def _function_of(can_id: int) -> str:
+    if 0x200 <= can_id <= 0x57F and (can_id & 0x180) == 0:
+        return "RPDO"
+    for low, high, name in FUNCTIONS:
+        if low <= can_id <= high:
+            return name
+    return "other"
+
+
+def _plot_bus(plt, folder, title, summary) -> Path:
+    """Frames per second by CANopen function, and bus load, over the scene."""
+    from grasplink.bus.load import frame_bits_worst_case
+
+    duration_s = float(summary.get("duration_s") or 1.0)
+    bins = np.arange(0.0, duration_s + BUS_BIN_S, BUS_BIN_S)
+    series: dict[str, list[float]] = {}
+    bits, times = [], []
+    for msg in can.ASCReader(str(folder / "can.asc")):
+        name = "error frame" if msg.is_error_frame else _function_of(msg.arbitration_id)
+        series.setdefault(name, []).append(msg.timestamp)
+        times.append(msg.timestamp)
+        bits.append(23 if msg.is_error_frame else frame_bits_worst_case(msg.dlc,
+                                                                        msg.is_remote_frame))
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), dpi=110, sharex=True)
+    for name, stamps in sorted(series.items()):
+        counts, _ = np.histogram(stamps, bins=bins)
+        axes[0].step(bins[:-1], counts / BUS_BIN_S, where="post", label=name)
+    axes[0].set_ylabel("frames/s")
+    axes[0].legend(fontsize=8, ncol=3)
+    load, _ = np.histogram(times, bins=bins, weights=bits)
+    axes[1].step(bins[:-1], 100 * load / BUS_BIN_S / 1e6, where="post", color="tab:red")
+    axes[1].set_ylabel("bus load [% of 1 Mbit/s]")
+    axes[1].set_xlabel("time [s]")
+    axes[0].set_title(f"{title}: bus traffic (worst-case stuffing)")
+    return _save(plt, fig, folder / "bus.png")
 
 
 def _contact_times(truth: dict[str, np.ndarray], ridges: np.ndarray | None) -> np.ndarray:

@@ -14,7 +14,7 @@ import grasplink.simulators.effects  # noqa: F401  (registers every effect)
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
-from grasplink.simulators.core import REGISTRY, Context, Effect
+from grasplink.simulators.core import EMG, REGISTRY, SKIN, Context, Effect, Endpoint, build_graph
 from grasplink.simulators.params import Params, SceneError
 
 US_PER_S = 1_000_000
@@ -70,9 +70,12 @@ class Scene:
     layout_name: str | None
     nodes: dict[str, NodeSpec]
     gateway: GatewaySpec
-    effects: list[Effect]
+    effects: list[Effect]  # as written in the scene
     bus: BusFaults | None
     context: Context
+    endpoints: list[Endpoint]  # what the nodes read and write
+    ordered: list[Effect]  # effects in the order they step
+    domain_of: dict[str, str]  # signal -> domain
 
     @property
     def duration_us(self) -> int:
@@ -129,8 +132,26 @@ def parse_scene(data: dict, source: str) -> Scene:
     context = Context(source, seed, rates, layout_mm, {k: vars(v) for k, v in nodes.items()})
     effects, bus = _parse_effects(top.raw("effects", []), source, context)
     top.finish()
+    endpoints = node_endpoints(nodes)
+    ordered, domain_of = build_graph(effects, endpoints, source)
     return Scene(source, name, description, seed, duration_s, clock, physics_rate_hz, chunk_us,
-                 layout_mm, layout_name, nodes, gateway, effects, bus, context)
+                 layout_mm, layout_name, nodes, gateway, effects, bus, context, endpoints,
+                 ordered, domain_of)
+
+
+def node_endpoints(nodes: dict[str, NodeSpec]) -> list[Endpoint]:
+    """Signals the nodes read (sensors, actual values) and write (actuator commands)."""
+    endpoints = []
+    if "belt" in nodes:
+        endpoints.append(Endpoint("belt", reads=("belt.velocity_mrad_s",),
+                                  writes=("belt.command_mrad_s",)))
+    if "hand" in nodes:
+        endpoints.append(Endpoint("hand", reads=("hand.grip_n",), writes=("hand.target_n",)))
+    if "skin" in nodes:
+        endpoints.append(Endpoint("skin", reads=("skin.force_n",), domain=SKIN))
+    if "emg" in nodes:
+        endpoints.append(Endpoint("emg", reads=("emg.raw_uv",), domain=EMG))
+    return endpoints
 
 
 def _parse_nodes(table: Params) -> dict[str, NodeSpec]:

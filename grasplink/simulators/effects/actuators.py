@@ -93,6 +93,7 @@ class HandActuator(Effect):
         tau = params.number("time_constant_s", 0.1, low=0.0, low_open=True)
         self.max_force_n = params.number("max_force_n", 100.0, low=0.0, low_open=True)
         initial = params.number("initial_n", 0.0, low=0.0, high=self.max_force_n)
+        self.initial_n = initial  # the hand node starts out holding this grip
         self.lag = FirstOrderLag(tau, initial)
         self.latch = CrushLatch(params.number("crush_limit_n", None, low=0.0, low_open=True))
 
