@@ -1,10 +1,11 @@
 """NMT master (sans-IO): boots the network, starts the nodes and watches them.
 
 On start it resets communication on every node so nodes already running
-boot again, then starts each node when its boot-up arrives. It produces
-its own heartbeat (the nodes' 1016h consumers watch it) and tracks every
-node's state from their heartbeats, flagging a node as lost when its
-heartbeat is overdue.
+boot again, then starts each node when its boot-up arrives - or when a
+heartbeat shows a node back in PRE-OPERATIONAL, since a boot-up frame can
+be lost like any other. It produces its own heartbeat (the nodes' 1016h
+consumers watch it) and tracks every node's state from their heartbeats,
+flagging a node as lost when its heartbeat is overdue.
 """
 
 from __future__ import annotations
@@ -74,12 +75,22 @@ class NmtMaster:
         if state == NmtState.INITIALISING:
             status.boots += 1
             status.state = NmtState.PRE_OPERATIONAL
-            return [self.command(NmtCommand.START, node_id)] if self.autostart else []
+            return self._start(node_id) if self.autostart else []
         try:
             status.state = NmtState(state)
         except ValueError:
             status.state = None
+        if self.autostart and status.state == NmtState.PRE_OPERATIONAL:
+            return self._start(node_id)
         return []
+
+    def _start(self, node_id: int) -> list[Frame]:
+        """Start a node that (re)entered PRE-OPERATIONAL."""
+        self.on_node_restart(node_id)
+        return [self.command(NmtCommand.START, node_id)]
+
+    def on_node_restart(self, node_id: int) -> None:
+        """Hook: a node booted or fell back to PRE-OPERATIONAL and is being started."""
 
     def advance(self, t_us: int) -> list[Frame]:
         frames = []

@@ -73,6 +73,10 @@ class ScriptedMaster(NmtMaster):
                                             max(0, round(grip_n * 1000)))))
         return frames
 
+    def on_node_restart(self, node_id: int) -> None:
+        # A rebooted drive is back in SWITCH ON DISABLED: walk the enable sequence again.
+        self._enable_steps.pop(node_id, None)
+
     def _controlword(self, node_id: int) -> int:
         """Walk the CiA 402 enable sequence once per drive, then hold 'enable operation'."""
         step = self._enable_steps.get(node_id, 0)
