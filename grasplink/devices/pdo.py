@@ -13,6 +13,7 @@ entries, sub-index 0 = n, validate) is enforced.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -85,6 +86,8 @@ class _Pdo:
     # Communication parameters as the store holds them, cached by `reload()` (which
     # runs on every change of a PDO parameter): the hot path reads these, not the store.
     params: dict[int, int] = field(default_factory=dict)
+    # struct packer for the mapped values (None if a mapped type has no fixed size).
+    packer: struct.Struct | None = None
 
 
 class PdoEngine:
@@ -106,6 +109,7 @@ class PdoEngine:
         self._by_comm = {p.comm_index: p for p in self.tpdos + self.rpdos}
         self._by_map = {p.map_index: p for p in self.tpdos + self.rpdos}
         self._watchers: dict[tuple[int, int], list[_Pdo]] = {}
+        self._event_tpdos: list[_Pdo] = []  # valid TPDOs of type 254/255, kept by reload()
         for pdo in self._by_comm.values():
             store.add_validator(pdo.comm_index, self._validate_comm)
             store.add_validator(pdo.map_index, self._validate_map)
@@ -141,6 +145,7 @@ class PdoEngine:
     def reload(self) -> None:
         """Re-read every mapping (after a reset or a parameter change)."""
         self._watchers.clear()
+        self._event_tpdos = []
         for pdo in self._by_comm.values():
             pdo.params = {sub: int(self.store.get(pdo.comm_index, sub))
                           for sub in range(1, 7) if self.store.has(pdo.comm_index, sub)}
@@ -151,6 +156,21 @@ class PdoEngine:
             if pdo.transmit:
                 for entry in pdo.mapping:
                     self._watchers.setdefault((entry.index, entry.subindex), []).append(pdo)
+                pdo.packer = self._packer(pdo)
+                if self.is_valid(pdo) and self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER:
+                    self._event_tpdos.append(pdo)
+
+    def _packer(self, pdo: _Pdo) -> struct.Struct | None:
+        codes = []
+        for entry in pdo.mapping:
+            if not self.store.has(entry.index, entry.subindex):
+                return None
+            var = self.store.entry(entry.index, entry.subindex).var
+            layout = var.STRUCT_TYPES.get(var.data_type)
+            if not isinstance(layout, struct.Struct):
+                return None
+            codes.append(layout.format.lstrip("<"))
+        return struct.Struct("<" + "".join(codes))
 
     def mapped_bytes(self, pdo: _Pdo) -> int:
         return sum(e.bits for e in pdo.mapping) // 8
@@ -196,9 +216,7 @@ class PdoEngine:
         if not self.operational:
             return []
         frames: list[Frame] = []
-        for pdo in self.tpdos:
-            if not self.is_valid(pdo) or self.transmission_type(pdo) < TYPE_EVENT_MANUFACTURER:
-                continue
+        for pdo in self._event_tpdos:
             timer = self.event_timer_us(pdo)
             if timer and t_us >= self._timer_deadline(pdo, timer):
                 pdo.pending = True
@@ -211,9 +229,7 @@ class PdoEngine:
         if not self.operational:
             return None
         deadlines = []
-        for pdo in self.tpdos:
-            if not self.is_valid(pdo) or self.transmission_type(pdo) < TYPE_EVENT_MANUFACTURER:
-                continue
+        for pdo in self._event_tpdos:
             if pdo.pending:
                 deadlines.append(self._inhibit_end(pdo))
             timer = self.event_timer_us(pdo)
@@ -330,7 +346,10 @@ class PdoEngine:
         return [self._build(pdo, t_us)]
 
     def _build(self, pdo: _Pdo, t_us: int) -> Frame:
-        data = b"".join(self.store.encode(e.index, e.subindex) for e in pdo.mapping)
+        if pdo.packer is not None:
+            data = pdo.packer.pack(*(self.store.get(e.index, e.subindex) for e in pdo.mapping))
+        else:
+            data = b"".join(self.store.encode(e.index, e.subindex) for e in pdo.mapping)
         pdo.pending = False
         pdo.last_tx_us = t_us
         return Frame(self.cob_id(pdo) & CAN_ID_MASK, data)

@@ -37,7 +37,8 @@ class SkinApp(DeviceApp):
     def __init__(self, source: SampleSource | None = None):
         self.source = source or ConstantSource(0.0)
         self.clock: SampleClock | None = None
-        self._static = np.zeros(1)
+        self._static = [0]
+        self._static_sum = 0
         self._static_fill = 0
         self._ring_pos = 0
         self._loading_preset = False
@@ -112,7 +113,8 @@ class SkinApp(DeviceApp):
 
     def _restart_sampling(self, t_us: int) -> None:
         self.clock = SampleClock(self.rate_hz, t_us)
-        self._static = np.zeros(max(1, round(self.rate_hz * STATIC_WINDOW_S)))
+        self._static = [0] * max(1, round(self.rate_hz * STATIC_WINDOW_S))
+        self._static_sum = 0
         self._static_fill = 0
         self._ring_pos = 0
 
@@ -126,10 +128,11 @@ class SkinApp(DeviceApp):
         return self._calibration
 
     def to_counts(self, force_n: np.ndarray) -> np.ndarray:
-        """ADC counts for forces (the device's linearised FSR calibration)."""
+        """ADC counts for forces (the device's linearised FSR calibration); NaN reads 0 N."""
         zero, full, mn_per_count = self.calibration()
-        counts = zero + np.nan_to_num(force_n, nan=0.0) * (MN_PER_N / mn_per_count)
-        return np.clip(np.rint(counts), 0, full).astype(np.int64)
+        force_n = np.where(np.isnan(force_n), 0.0, force_n)
+        counts = np.rint(zero + force_n * (MN_PER_N / mn_per_count))
+        return np.clip(counts, 0, full).astype(np.int64)
 
     def to_force_mn(self, counts: np.ndarray | float) -> np.ndarray:
         zero, _, mn_per_count = self.calibration()
@@ -168,11 +171,8 @@ class SkinApp(DeviceApp):
             if operational:
                 frames += self.node.transmit_tpdo(TPDO_SAMPLES, clock.time_of(end_index - 1))
         clock.next_index = start + packets * per_pdo
-        self.store.set(
-            obj.SKIN_STATIC_FORCE_MN,
-            0,
-            round(float(self.to_force_mn(self._static[: self._static_fill].mean()))),
-        )
+        mean_counts = self._static_sum / self._static_fill
+        self.store.set(obj.SKIN_STATIC_FORCE_MN, 0, round(float(self.to_force_mn(mean_counts))))
         return frames
 
     def next_deadline_us(self) -> int | None:
@@ -181,12 +181,19 @@ class SkinApp(DeviceApp):
         return self.clock.time_of(self.clock.next_index + self.samples_per_pdo - 1)
 
     def _track_static(self, counts: np.ndarray) -> None:
-        """Ring buffer of the last STATIC_WINDOW_S of samples (bounded memory)."""
+        """Ring buffer of the last STATIC_WINDOW_S of samples (bounded memory), with its sum.
+
+        Counts are integers, so the running sum stays exact however long the node runs.
+        """
         ring = self._static
-        tail = counts[-len(ring) :]
-        ring[(self._ring_pos + np.arange(len(tail))) % len(ring)] = tail
-        self._ring_pos = (self._ring_pos + len(tail)) % len(ring)
-        self._static_fill = min(len(ring), self._static_fill + len(tail))
+        tail = counts[-len(ring) :].tolist()
+        size, pos = len(ring), self._ring_pos
+        for value in tail:
+            self._static_sum += value - ring[pos]
+            ring[pos] = value
+            pos = (pos + 1) % size
+        self._ring_pos = pos
+        self._static_fill = min(size, self._static_fill + len(tail))
 
     def _track_saturation(self, counts: np.ndarray, t_us: int) -> None:
         saturated = int(np.count_nonzero(counts >= self.calibration()[1]))
