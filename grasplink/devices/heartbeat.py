@@ -89,6 +89,9 @@ class HeartbeatConsumer:
         self._monitors = {}
         self.reload()
 
+    def watches(self, node_id: int) -> bool:
+        return node_id in self._monitors
+
     def on_heartbeat(self, node_id: int, state: int, t_us: int) -> bool:
         """Feed a heartbeat; True when it ends a timeout (the node is back)."""
         monitor = self._monitors.get(node_id)

@@ -70,19 +70,29 @@ class DeviceNode:
         self.app = app or DeviceApp()
         self.state = NmtState.INITIALISING
         self.powered = False
+        self._deadline: int | None = None
+        self._deadline_stale = True
+        # Any change in the dictionary (SDO, RPDO, the application, a simulator
+        # pushing an actual value) may move a timer: recompute the deadline.
+        self.store.add_listener(self._mark_stale)
         self.store.add_validator(obj.COB_ID_SYNC, self._validate_sync_cob_id)
         self.store.add_validator(obj.COB_ID_EMCY, self._validate_emcy_cob_id)
         self.app.attach(self)
 
     # -- SansIoDevice ------------------------------------------------------------
+    def _mark_stale(self, *_change: object) -> None:
+        self._deadline_stale = True
+
     def start(self, t_us: int) -> list[Frame]:
         """Power on: initialise the whole dictionary and boot."""
+        self._deadline_stale = True
         self.powered = True
         return self._reset(t_us, application=True)
 
     def power_off(self) -> None:
         """Lose power: silent until `start` is called again (NVM survives)."""
         self.powered = False
+        self._deadline_stale = True
         self.state = NmtState.INITIALISING
         self.pdo.set_operational(False, 0)
 
@@ -90,13 +100,24 @@ class DeviceNode:
         if not self.powered or self.state == NmtState.INITIALISING:
             return []
         self._touch(t_us)
+        frames = self._dispatch(frame, t_us)
+        if frames is None:
+            return []  # not for this node: nothing in it changed
+        self._deadline_stale = True
+        return frames
+
+    def _dispatch(self, frame: Frame, t_us: int) -> list[Frame] | None:
+        """Handle a frame; None when the frame concerns no service of this node."""
         can_id = frame.can_id
         if can_id == NMT_COB_ID:
             return self._on_nmt(frame, t_us)
         if HEARTBEAT_BASE < can_id <= HEARTBEAT_BASE + 127 and not frame.rtr and frame.data:
-            return self._on_heartbeat(can_id - HEARTBEAT_BASE, frame.data[0], t_us)
+            node_id = can_id - HEARTBEAT_BASE
+            if not self.consumer.watches(node_id):
+                return None
+            return self._on_heartbeat(node_id, frame.data[0], t_us)
         if self.state not in SDO_ALLOWED:
-            return []
+            return None
         if can_id == SDO_RX_BASE + self.node_id and not frame.rtr:
             return self._sdo_frames(self.sdo.on_request(bytes(frame.data), t_us))
         if can_id == self._sync_can_id() and len(frame.data) <= 1 and not frame.rtr:
@@ -105,11 +126,12 @@ class DeviceNode:
         handled = self.pdo.on_frame(frame, t_us)
         if handled is not None:
             return handled + self._emcy(t_us)
-        return []
+        return None
 
     def advance(self, t_us: int) -> list[Frame]:
         if not self.powered or self.state == NmtState.INITIALISING:
             return []
+        self._deadline_stale = True
         self._touch(t_us)
         frames: list[Frame] = []
         for node_id in self.consumer.expired(t_us):
@@ -124,6 +146,13 @@ class DeviceNode:
         return frames
 
     def next_deadline_us(self) -> int | None:
+        """The earliest timer; cached until a frame, a tick or a store change can move it."""
+        if self._deadline_stale:
+            self._deadline = self._compute_deadline()
+            self._deadline_stale = False
+        return self._deadline
+
+    def _compute_deadline(self) -> int | None:
         if not self.powered:
             return None
         candidates = [

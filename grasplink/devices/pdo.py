@@ -110,6 +110,7 @@ class PdoEngine:
         self._by_map = {p.map_index: p for p in self.tpdos + self.rpdos}
         self._watchers: dict[tuple[int, int], list[_Pdo]] = {}
         self._event_tpdos: list[_Pdo] = []  # valid TPDOs of type 254/255, kept by reload()
+        self._by_can_id: dict[int, _Pdo] = {}  # CAN-ID of each valid PDO, kept by reload()
         for pdo in self._by_comm.values():
             store.add_validator(pdo.comm_index, self._validate_comm)
             store.add_validator(pdo.map_index, self._validate_map)
@@ -146,9 +147,12 @@ class PdoEngine:
         """Re-read every mapping (after a reset or a parameter change)."""
         self._watchers.clear()
         self._event_tpdos = []
+        self._by_can_id = {}
         for pdo in self._by_comm.values():
             pdo.params = {sub: int(self.store.get(pdo.comm_index, sub))
                           for sub in range(1, 7) if self.store.has(pdo.comm_index, sub)}
+            if self.is_valid(pdo):
+                self._by_can_id.setdefault(self.cob_id(pdo) & CAN_ID_MASK, pdo)
             count = int(self.store.get(pdo.map_index, 0))
             pdo.mapping = [
                 MapEntry.decode(int(self.store.get(pdo.map_index, s))) for s in range(1, count + 1)
@@ -278,18 +282,16 @@ class PdoEngine:
 
     def on_frame(self, frame: Frame, t_us: int) -> list[Frame] | None:
         """Handle a frame addressed to one of our PDOs; None if it is not ours."""
-        for pdo in self.rpdos:
-            if self.is_valid(pdo) and frame.can_id == self.cob_id(pdo) & CAN_ID_MASK:
-                if not frame.rtr and self.operational:
-                    self._receive(pdo, frame.data, t_us)
-                return []
-        for pdo in self.tpdos:
-            cob = self.cob_id(pdo)
-            if frame.rtr and self.is_valid(pdo) and frame.can_id == cob & CAN_ID_MASK:
-                if self.operational and not cob & COB_ID_NO_RTR:
-                    return [self._build(pdo, t_us)]
-                return []
-        return None
+        pdo = self._by_can_id.get(frame.can_id)
+        if pdo is None:
+            return None
+        if not pdo.transmit:
+            if not frame.rtr and self.operational:
+                self._receive(pdo, frame.data, t_us)
+            return []
+        if frame.rtr and self.operational and not self.cob_id(pdo) & COB_ID_NO_RTR:
+            return [self._build(pdo, t_us)]
+        return []
 
     def _receive(self, pdo: _Pdo, data: bytes, t_us: int) -> None:
         needed = self.mapped_bytes(pdo)
