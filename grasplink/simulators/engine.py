@@ -36,6 +36,7 @@ class SceneSource:
     """A node's SampleSource fed by a sensor domain: a bounded ring of recent samples."""
 
     def __init__(self, rate_hz: int):
+        self.period_us = -(-1_000_000 // rate_hz)
         self.capacity = max(16, int(rate_hz * RING_SECONDS))
         self.times_us = np.zeros(0, dtype=np.int64)
         self.values = np.zeros(0)
@@ -49,7 +50,10 @@ class SceneSource:
         times = t0_us + index * 1_000_000 // rate_hz
         if not len(self.times_us):
             return np.zeros(count)
-        if times[-1] > self.times_us[-1]:
+        # A node reset mid-scene restarts its clock off the scene's grid; its last
+        # sample may then fall less than one period after the last scene sample
+        # (held). Further ahead would be an engine bug.
+        if times[-1] >= self.times_us[-1] + self.period_us:
             raise RuntimeError("a node sampled ahead of the simulation")
         return np.interp(times, self.times_us, self.values)
 
@@ -242,11 +246,17 @@ class Simulation:
 
     # -- node coupling ------------------------------------------------------------------
     def _command(self, name: str) -> float:
-        """A node's actuator command, held over the chunk (zero-order hold)."""
+        """A node's actuator command, held over the chunk (zero-order hold).
+
+        Without power the belt motor stops; the hand's gear holds its grip.
+        """
         if name == "belt.command_mrad_s":
-            return float(self.nodes["belt"].app.setpoint_mrad_s)
+            belt = self.nodes["belt"]
+            return float(belt.app.setpoint_mrad_s) if belt.powered else 0.0
         if name == "hand.target_n":
-            return float(self.nodes["hand"].app.setpoint_mn) / MN_PER_N
+            hand = self.nodes["hand"]
+            mn = hand.app.setpoint_mn if hand.powered else hand.app.grip_mn
+            return float(mn) / MN_PER_N
         raise KeyError(name)
 
     def _read_actuators(self) -> None:
@@ -267,6 +277,7 @@ class Simulation:
         while self._power_events and self._power_events[0][0] < t_end_us:
             at_us, action, kind = self._power_events.pop(0)
             self.network.run_until(at_us - 1)
+            self.network.t_us = at_us  # the event happens at its own time, before others at it
             node = self.nodes[kind]
             if action == "off":
                 node.power_off()

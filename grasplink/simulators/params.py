@@ -77,6 +77,8 @@ class Params:
     def string(self, name: str, default: Any = _MISSING, *,
                choices: Sequence[str] | None = None) -> str:
         value = self._get(name, default)
+        if value is None and default is None:
+            return None  # optional and absent
         if not isinstance(value, str):
             raise self.error(name, f"expected a string, got {_describe(value)}")
         if choices is not None and value not in choices:

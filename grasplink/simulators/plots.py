@@ -77,18 +77,15 @@ def plot_recording(folder: Path) -> list[Path]:
     return written
 
 
-FUNCTIONS = ((0x000, 0x000, "NMT"), (0x080, 0x0FF, "EMCY/SYNC"), (0x180, 0x4FF, "TPDO"),
-             (0x200, 0x57F, "RPDO"), (0x580, 0x67F, "SDO"), (0x700, 0x77F, "heartbeat"))
+FUNCTIONS = {0x000: "NMT", 0x080: "EMCY/SYNC", 0x180: "TPDO", 0x280: "TPDO", 0x380: "TPDO",
+             0x480: "TPDO", 0x200: "RPDO", 0x300: "RPDO", 0x400: "RPDO", 0x500: "RPDO",
+             0x580: "SDO", 0x600: "SDO", 0x700: "heartbeat"}
 BUS_BIN_S = 0.1
 
 
 def _function_of(can_id: int) -> str:
-    if 0x200 <= can_id <= 0x57F and (can_id & 0x180) == 0:
-        return "RPDO"
-    for low, high, name in FUNCTIONS:
-        if low <= can_id <= high:
-            return name
-    return "other"
+    """CANopen's predefined connection set: the function code is the top 4 bits."""
+    return FUNCTIONS.get(can_id & 0x780, "other")
 
 
 def _plot_bus(plt, folder, title, summary) -> Path:

@@ -22,6 +22,7 @@ NODE_KINDS = ("skin", "emg", "belt", "hand")
 CLOCKS = ("virtual", "realtime")
 DEFAULT_RATES_HZ = {"skin": 400, "emg": 1500}
 MAX_DURATION_S = 7 * 24 * 3600.0
+DEFAULT_LAYOUT = "alpha0.1"  # the skin node's EDS default (thesis best skin)
 
 
 @dataclass
@@ -122,6 +123,8 @@ def parse_scene(data: dict, source: str) -> Scene:
     nodes = _parse_nodes(top.table_of("nodes", {}))
     layout_text = nodes["skin"].layout if "skin" in nodes and nodes["skin"].layout else None
     layout_text = layout_text or scene_layout
+    if layout_text is None and "skin" in nodes:
+        layout_text = DEFAULT_LAYOUT  # a skin node always has a layout
     layout_mm, layout_name = _parse_layout(layout_text, source)
     gateway = _parse_gateway(top.table_of("gateway", {}), nodes)
     rates = {"physics": physics_rate_hz,
@@ -170,7 +173,7 @@ def _parse_nodes(table: Params) -> dict[str, NodeSpec]:
             spec.sample_rate_hz = p.integer("sample_rate_hz", DEFAULT_RATES_HZ["skin"],
                                             low=80, high=1000)
             spec.samples_per_pdo = p.integer("samples_per_pdo", 3, low=1, high=3)
-            spec.layout = p.string("layout", "alpha0.1")
+            spec.layout = p.string("layout", None)
         elif kind == "emg":
             spec.sample_rate_hz = p.integer("sample_rate_hz", DEFAULT_RATES_HZ["emg"],
                                             low=500, high=4000)

@@ -118,15 +118,15 @@ def test_a_scene_without_noise_is_noiseless(tmp_path):
     a = read_columns(tmp_path / "a" / "skin.csv")["skin.force_n"]
     b = read_columns(tmp_path / "b" / "skin.csv")["skin.force_n"]
     assert np.array_equal(a, b)
-    # Before the first ridge contact the FSR reads the ch. 4.3 model exactly: grip over the
-    # covered share of the sensor plus k*P while slipping (no ripple from anywhere).
+    # Before the first ridge contact the FSR reads the ch. 4.3 model exactly: (1 - k mu) W
+    # + k P over the covered share of the sensor while slipping (no ripple from anywhere).
     skin = read_columns(tmp_path / "a" / "skin.csv")
     t = skin["t_s"]
     before = t < 5.0 / 60.0  # the leading edge reaches the first ridge (x=0) at 5 mm / 60 mm/s
     edge_mm = -5.0 + 60.0 * t[before]
     k = np.cos(np.pi / 3) / (np.sin(np.pi / 3) + 0.7813 * np.cos(np.pi / 3))
-    w = 5.0 * np.clip(edge_mm, 0, None) / 90.0
-    expected = (1 - k * 0.7813) * w + k * 0.2 * 9.81
+    share = np.clip(edge_mm, 0, None) / 90.0
+    expected = (1 - k * 0.7813) * 5.0 * share + k * 0.2 * 9.81 * share
     assert np.allclose(a[before], expected, atol=1e-9)
 
 

@@ -17,7 +17,8 @@ edge facing the first ridge and the object covers [position, position + length].
 
 Models (thesis ch. 4.3, 5.3.1, 5.4.2, 3.4):
 
-* `skin.fsr` -- M(t) = (1 - k mu) W(t) + k |P(t)| while slipping, M = W when
+* `skin.fsr` -- M(t) = (1 - k mu) W(t) + k |P(t)| c(t) while slipping (c: the share of
+  the object over the sensor, W = grip c), M = W when
   not (blended by `object.slipping`, which arrives interpolated), with
   k = cos(gamma) / (sin(gamma) + mu cos(gamma)) and W(t) the grip force times
   the share of the object's length lying over the sensor [0, sum(spacings)].
@@ -127,9 +128,12 @@ class FsrForce(Effect):
         forward = _forward_flags(speed, self._forward)
         if len(forward):
             self._forward = bool(forward[-1])
-        weight_n = io.get(GRIP) * self.coverage(io.get(POSITION), forward)
+        share = self.coverage(io.get(POSITION), forward)
+        weight_n = io.get(GRIP) * share
         slipping = np.clip(io.get(SLIPPING), 0.0, 1.0)
-        extra_n = self.k * np.abs(io.get(LOAD)) - self.k * self.mu * weight_n
+        # Only the ridges under the object resist it: the load acts on the sensor with
+        # the same share as the grip (an object off the skin presses nothing).
+        extra_n = self.k * np.abs(io.get(LOAD)) * share - self.k * self.mu * weight_n
         io.put(FORCE, weight_n + slipping * extra_n)
 
 
