@@ -139,8 +139,9 @@ def test_fsr_while_slipping_is_the_thesis_model():
     times = harness.sample_times_us(SKIN_HZ, 0.5)
     inputs = slide(times, 0.0, 60.0, grip_n=6.0, load_n=2.5, slipping=1.0)
     out, _ = run_one(skin.FsrForce, skin_ctx(), times, inputs)
-    weight = 6.0 * 60 / 90
-    assert np.allclose(out["skin.force_n"], (1 - K_THESIS * 0.7813) * weight + K_THESIS * 2.5)
+    share = 60 / 90  # of the object over the sensor: grip and load act with this share
+    expected = (1 - K_THESIS * 0.7813) * 6.0 * share + K_THESIS * 2.5 * share
+    assert np.allclose(out["skin.force_n"], expected)
 
 
 def test_fsr_keeps_the_direction_while_the_object_stands():
