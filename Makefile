@@ -34,8 +34,12 @@ $(STAMP_PY): pyproject.toml | $(VENV)/bin/python
 	$(PY) -m pip install -q -e '.[dev]'
 	@touch $@
 
+HEADLINE := scenes/headline_slip.toml
+
 demo: setup
 	$(VENV)/bin/grasplink demo
+	$(VENV)/bin/grasplink run $(HEADLINE) --out out/headline
+	$(VENV)/bin/grasplink plot out/headline
 
 test: setup
 	$(VENV)/bin/ruff check grasplink tests benchmarks
@@ -52,6 +56,7 @@ docs: setup
 
 bench: setup
 	$(PY) benchmarks/bench_network.py
+	$(PY) benchmarks/bench_scenes.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

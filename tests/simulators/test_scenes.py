@@ -296,3 +296,18 @@ def test_every_shipped_scene_runs_and_plots(tmp_path, scene, capsys):
     assert pngs, f"no plot for {scene.name}"
     summary = json.loads((out / "summary.json").read_text())
     assert all(node["state"] == "OPERATIONAL" for node in summary["nodes"].values())
+
+
+def test_realtime_clock_paces_the_same_scene_to_the_wall_clock(tmp_path):
+    """Same code, same result: only the pacing differs."""
+    import time
+
+    path = scene_text(tmp_path, SLIP.format(seed=4, extra="").replace(
+        "duration_s = 1.5", "duration_s = 0.6"))
+    virtual = Simulation(load_scene(path), Recorder(tmp_path / "v"))
+    virtual.run()
+    t0 = time.monotonic()
+    paced = Simulation(load_scene(path), Recorder(tmp_path / "r"))
+    paced.run(realtime=True)
+    assert time.monotonic() - t0 >= 0.6
+    assert (tmp_path / "v" / "skin.csv").read_text() == (tmp_path / "r" / "skin.csv").read_text()
