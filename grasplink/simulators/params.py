@@ -96,8 +96,10 @@ class Params:
         return tuple(self._check_number(f"{name}[{i}]", v, low, high, low_open)
                      for i, v in enumerate(value))
 
-    def pairs(self, name: str, default: Any = _MISSING) -> tuple[tuple[float, float], ...]:
-        """A list of [x, y] number pairs (a profile over time)."""
+    def pairs(self, name: str, default: Any = _MISSING, *, low: float | None = None,
+              high: float | None = None, integer: bool = False,
+              what: str = "value") -> tuple[tuple[float, float], ...]:
+        """A list of [time_s, value] pairs (a profile over time), values within bounds."""
         value = self._get(name, default)
         if not isinstance(value, list) or not value:
             raise self.error(name, f"expected a list of [time_s, value] pairs, "
@@ -107,8 +109,14 @@ class Params:
             if not isinstance(item, list) or len(item) != 2:
                 raise self.error(f"{name}[{i}]", f"expected a [time_s, value] pair, "
                                                  f"got {_describe(item)}")
-            out.append((self._check_number(f"{name}[{i}][0]", item[0], 0.0, None, False),
-                        self._check_number(f"{name}[{i}][1]", item[1], None, None, False)))
+            value = self._check_number(f"{name}[{i}][1]", item[1], None, None, False)
+            out_of_range = (low is not None and value < low) or (high is not None and value > high)
+            if out_of_range or (integer and not float(value).is_integer()):
+                span = f"{low:g}..{high:g}" if high is not None else f">= {low:g}"
+                kind = "an integer " if integer else "a "
+                raise self.error(f"{name}[{i}][1]", f"expected {kind}{what} {span}, "
+                                                    f"got {value:g}")
+            out.append((self._check_number(f"{name}[{i}][0]", item[0], 0.0, None, False), value))
         times = [t for t, _ in out]
         if any(b <= a for a, b in itertools.pairwise(times)):
             raise self.error(name, "times must increase strictly")

@@ -120,10 +120,7 @@ class ScriptedGrip(Effect):
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
         interpolation = params.string("interpolation", "linear", choices=INTERPOLATIONS)
-        pairs = params.pairs("grip_n")
-        for i, (_, force) in enumerate(pairs):
-            if force < 0:
-                raise params.error(f"grip_n[{i}][1]", f"expected a grip >= 0 N, got {force:g}")
+        pairs = params.pairs("grip_n", low=0.0, what="grip [N]")
         self.profile = Profile(params, "grip_n", interpolation, pairs)
 
     def step(self, io: Io) -> None:

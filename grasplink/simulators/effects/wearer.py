@@ -25,11 +25,7 @@ class WearerScript(Effect):
 
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
-        pairs = params.pairs("levels")
-        for i, (_, level) in enumerate(pairs):
-            if not float(level).is_integer() or not 0 <= level <= LEVELS:
-                raise params.error(f"levels[{i}][1]", f"expected an integer level 0..{LEVELS}, "
-                                                      f"got {level:g}")
+        pairs = params.pairs("levels", low=0, high=LEVELS, integer=True, what="level")
         self.profile = Profile(params, "levels", "step", pairs)
 
     def step(self, io: Io) -> None:
