@@ -498,3 +498,9 @@ def test_skin_uniform4_preset_fits_all_21_spacings():
     write_uint(net, SKIN, obj.SKIN_LAYOUT_PRESET, 0, 7, 1)
     assert read_uint(net, SKIN, obj.SKIN_RIDGE_SPACING_UM, 0) == 21
     assert {read_uint(net, SKIN, obj.SKIN_RIDGE_SPACING_UM, s) for s in range(1, 22)} == {4000}
+
+
+def test_reading_a_dummy_type_answers_its_length_in_bits():
+    net, _ = network("belt")
+    assert read_uint(net, BELT, 0x0003) == 16
+    assert read_uint(net, BELT, 0x0007) == 32

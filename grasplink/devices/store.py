@@ -31,6 +31,7 @@ Listener = Callable[[int, int, Value], None]
 # A command object acts on a write instead of storing it (1010h "save", 1003h:00 = 0).
 Command = Callable[[int, Value], None]
 
+DATA_TYPE_AREA_END = 0x0020  # 0001h..001Fh: static data types
 COMMUNICATION_AREA = range(0x1000, 0x2000)
 APPLICATION_AREA = range(0x2000, 0xA000)
 _STORE_SUB_AREAS = {
@@ -160,6 +161,10 @@ class ObjectStore:
     # -- bus side (SDO) ----------------------------------------------------
     def sdo_read(self, index: int, subindex: int) -> bytes:
         entry = self.entry(index, subindex)
+        if index < DATA_TYPE_AREA_END:
+            # Static data types (dummies for mapping): CiA 301 answers their length
+            # in bits as UNSIGNED32.
+            return len(entry.var).to_bytes(4, "little")
         if not entry.readable:
             raise SdoAbort(AbortCode.WRITE_ONLY, f"0x{index:04X}:{subindex:02X} is write-only")
         return entry.var.encode_raw(entry.value)
