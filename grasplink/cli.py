@@ -43,6 +43,17 @@ def positive_seconds(text: str) -> float:
     return value
 
 
+def positive_hz(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of Hz") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"sample rate must be a positive number of Hz, got "
+                                         f"{text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     from grasplink.bus.url import DEFAULT_BUS_URL, DEFAULT_HUB_PORT
     from grasplink.profiles import DEVICE_KINDS
@@ -89,6 +100,31 @@ def build_parser() -> argparse.ArgumentParser:
 
     plot = sub.add_parser("plot", help="draw PNGs of a recording made by `grasplink run`")
     plot.add_argument("recording", type=Path, help="folder written by grasplink run")
+
+    decode = sub.add_parser(
+        "decode", help="decode slip, speed, position and grip force from a skin recording")
+    decode.add_argument("file", type=Path,
+                        help="CSV (header t_s,force_n), NPZ (t_s, force_n) or a CAN log of "
+                             "the skin node (.asc, .blf, .log)")
+    decode.add_argument("--skin", required=True, metavar="LAYOUT",
+                        help="ridge layout: a name (alpha0.1, fibonacci, uniform4, ...) or "
+                             "comma-separated spacings in mm")
+    decode.add_argument("--fs", type=positive_hz, default=None, metavar="HZ",
+                        help="sample rate (default: from the median time step of a CSV/NPZ; "
+                             "the EDS default, 400 Hz, for a CAN log)")
+    decode.add_argument("--decoder", default=None, metavar="NAME",
+                        help="fft, ratio, mmse, dtw or tracker (default: the one the "
+                             "decoding benchmark recommends, registry.DEFAULT_DECODER)")
+    decode.add_argument("--node-id", type=node_id_arg, default=0x10,
+                        help="skin node-ID in a CAN log (default 0x10)")
+
+    bench = sub.add_parser("bench", help="benchmarks that write their figures into docs/")
+    bench_sub = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
+    bench_decode = bench_sub.add_parser(
+        "decode", help="every skin decoder over simulated scenes: accuracy against cost")
+    bench_decode.add_argument("--quick", action="store_true", help="reduced grid (smoke test)")
+    bench_decode.add_argument("--out", type=Path, default=None,
+                              help="folder for decoding.md/.json/.png (default docs/benchmarks)")
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
     prof_sub = profiles.add_subparsers(
@@ -200,6 +236,35 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+DECODE_CHUNK = 4096  # samples per feed(): streams like a gateway would, prints as it goes
+
+
+def cmd_decode(args: argparse.Namespace) -> int:
+    import json
+
+    from grasplink.gateway.decoding import io, registry
+    from grasplink.profiles.layouts import parse_layout
+
+    layout = parse_layout(args.skin)
+    name = args.decoder or registry.DEFAULT_DECODER
+    registry.decoder_class(name)  # an unknown or missing decoder fails before reading
+    suffix = args.file.suffix.lower()
+    if suffix in io.CAN_EXTENSIONS:
+        t, force, stats = io.read_can_log(args.file, node_id=args.node_id, fs_hz=args.fs)
+        fs = stats.rate_hz
+    else:
+        t, force = io.read_recording(args.file)
+        fs = args.fs or io.infer_rate(t, str(args.file))
+    decoder = registry.make_decoder(name, layout, fs)
+    out = sys.stdout
+    for start in range(0, len(t), DECODE_CHUNK):
+        for estimate in decoder.feed(t[start:start + DECODE_CHUNK],
+                                     force[start:start + DECODE_CHUNK]):
+            out.write(json.dumps(estimate.as_dict()) + "\n")
+        out.flush()
+    return 0
+
+
 def cmd_profiles(args: argparse.Namespace) -> int:
     if args.profiles_command == "doc":
         from grasplink.profiles.docgen import write_profiles_doc
@@ -215,8 +280,17 @@ def cmd_profiles(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from grasplink.gateway.decoding import bench
+
+    out = args.out or bench.DOCS
+    results = bench.run(args.quick, out)
+    print(f"recommended default decoder: {results['recommended_default']}; wrote {out}/decoding.md")
+    return 0
+
+
 COMMANDS = {"node": cmd_node, "bus": cmd_bus, "demo": cmd_demo, "run": cmd_run, "plot": cmd_plot,
-            "profiles": cmd_profiles}
+            "decode": cmd_decode, "bench": cmd_bench, "profiles": cmd_profiles}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

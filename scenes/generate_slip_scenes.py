@@ -43,6 +43,7 @@ start_mm = {start}
 
 [[effects]]
 type = "skin.fsr"
+direction = "{direction}"   # which edge of the resting object leads
 
 [[effects]]
 type = "skin.ridge_contacts"

@@ -40,6 +40,8 @@ def slip_recording(layout_mm: tuple[float, ...], speed_mm_s: float, *, fs_hz: in
                    tips: float = 0.0, onset_s: float = 0.3, grip_n: float = 5.0,
                    seed: int = 1, tail_s: float = 0.3) -> SkinRecording:
     """Constant-speed slip across the whole skin (plus ramps of zero speed around it)."""
+    if not speed_mm_s > 0:
+        raise ValueError(f"slip speed must be > 0 mm/s, got {speed_mm_s} (use static_recording)")
     length = float(sum(layout_mm))
     travel = length + 2 * LEAD_MM
     duration = onset_s + travel / abs(speed_mm_s) + tail_s
@@ -52,7 +54,7 @@ def slip_recording(layout_mm: tuple[float, ...], speed_mm_s: float, *, fs_hz: in
     if dips:
         physics.append((kinematics.RidgeDips, {}))
     return _record(layout_mm, fs_hz, duration, seed, physics, grip_n=[[0.0, grip_n]],
-                   noise_scale=noise_scale, tips=tips)
+                   noise_scale=noise_scale, tips=tips, reverse=reverse)
 
 
 def static_recording(layout_mm: tuple[float, ...], grip_steps_n: list[list[float]], *,
@@ -66,13 +68,14 @@ def static_recording(layout_mm: tuple[float, ...], grip_steps_n: list[list[float
 
 
 def _record(layout_mm, fs_hz, duration_s, seed, physics, *, grip_n, noise_scale, tips,
-            grip_interpolation: str = "step") -> SkinRecording:
+            grip_interpolation: str = "step", reverse: bool = False) -> SkinRecording:
     ctx = harness.context(seed=seed, rate_hz=fs_hz, layout_mm=tuple(layout_mm))
     effects = [harness.make(cls, ctx, **params) for cls, params in physics]
     effects += [
         harness.make(actuators.ScriptedGrip, ctx, grip_n=grip_n, interpolation=grip_interpolation),
         harness.make(actuators.ScriptedLoad, ctx, mass_kg=0.2),
-        harness.make(skin.FsrForce, ctx, object_length_mm=OBJECT_LENGTH_MM),
+        harness.make(skin.FsrForce, ctx, object_length_mm=OBJECT_LENGTH_MM,
+                     direction="reverse" if reverse else "forward"),
     ]
     contacts = harness.make(skin.RidgeContacts, ctx, tip_probability=tips)
     effects.append(contacts)

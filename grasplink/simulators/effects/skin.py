@@ -114,7 +114,9 @@ class FsrForce(Effect):
                                              high=90.0, low_open=True)
         self.skin_length_mm = float(sum(ctx.require_layout(params, self.kind)))
         self.k = ridge_factor(self.mu, self.ridge_angle_deg)
-        self._forward = True  # direction before the first moving sample
+        # The object's orientation before it first moves: which edge leads.
+        self._forward = params.string("direction", "forward",
+                                      choices=("forward", "reverse")) == "forward"
 
     def coverage(self, position_mm: np.ndarray, forward: np.ndarray) -> np.ndarray:
         """Share (0..1) of the object's length lying over the sensor."""

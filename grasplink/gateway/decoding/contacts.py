@@ -1,0 +1,442 @@
+"""Streaming ridge-contact detector: finds the ONSET of every ridge pulse in the FSR signal.
+
+Physics (thesis ch. 5.3.1, 5.4): when the object's leading edge reaches a
+ridge the FSR force starts to rise fast (over the time the edge needs to
+push the ridge over, ~1.25 mm of travel) and then relaxes. Whatever the exact
+pulse shape, its onset is a *kink*: the slope of the force jumps up. The
+kink is also what survives when pulses merge at high speed (a new pulse
+starting on the decay of the previous one) and it is blind to the slow
+trends of the signal (drift, the object covering more of the sensor).
+
+Detector (all filters are FIR, run with carried state so chunking cannot
+change a single bit):
+
+* a bank of *hinge* filters, one per scale w (5, 10, 20, 40 ms by default):
+  h_w(n) = slope of x over [n, n + w] minus slope over [n - w, n] (least
+  squares slopes), i.e. the slope jump at n. The best scale for a pulse is
+  about half its rise, so fast pulses show on the short scales, slow pulses
+  (weak slope, long rise) on the long ones;
+* each scale is normalised by its own robust noise level (median |h_w| of
+  fixed blocks of samples, taken low over the last second, with a floor), so
+  thresholds are in noise units and amplitudes do not matter;
+* a contact candidate is a local maximum of z_w = h_w / noise_w over +-w
+  above `threshold`, with a rising force after the kink (a grip released
+  ends in a kink too, but does not rise), its time refined to a fraction of
+  a sample by a parabola; scales are merged finest first (a candidate close
+  to an earlier contact is the same contact);
+* every contact is then watched: a *pulse* rises and falls back (by
+  `drop_fraction` of its rise, trend-corrected); a grip step rises and stays.
+  The verdict (pulse or not, or undecided when the next contact comes
+  first) is reported later as a `PulseCheck`.
+
+Events carry `emit_index`, the index of the sample whose arrival decided
+them, so a caller can replay them exactly in step with its own updates.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from scipy.signal import lfilter, lfilter_zi
+
+DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
+NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
+MAD_TO_STD = 1.0 / 0.6745
+STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
+
+
+class ContactEvent(NamedTuple):
+    """A detected ridge contact (pulse onset)."""
+
+    id: int
+    t_s: float  # onset time, sub-sample
+    index: int  # global index of the sample nearest the onset
+    emit_index: int  # global index of the sample that decided it
+    z: float  # strength: slope jump in noise units
+    jump_n_s: float  # slope jump, N/s
+    scale_s: float  # the scale that found it
+    sigma_s: float  # timing uncertainty (one sigma)
+
+
+class PulseCheck(NamedTuple):
+    """Later verdict on a contact: did the force fall back like a pulse?"""
+
+    id: int
+    emit_index: int
+    pulse: bool | None  # True: rose and fell back; False: rose and stayed (a step); None: unclear
+
+
+@dataclass
+class _Channel:
+    width: int  # w, samples
+    b: np.ndarray  # LS slope kernel over w + 1 samples, as lfilter taps
+    zi: np.ndarray | None = None
+    after: deque = field(default_factory=deque)  # slope over [n, n + w], by n (last w + 1 kept)
+    next_n: int = 0  # next hinge centre to compute
+    hinge: list = field(default_factory=list)  # (hinge, after) of block 0 awaiting its noise
+    noise_by_block: dict = field(default_factory=dict)
+    z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # z by centre, from z_start
+    zh: np.ndarray = field(default_factory=lambda: np.zeros(0))  # hinge (N/sample), same index
+    za: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slope after, same index
+    z_start: int = 0  # global centre index of z[0]
+    next_test: int = 0  # next centre to test for a local maximum
+    block_abs: list = field(default_factory=list)  # |h| of the block being filled
+    block_noise: dict = field(default_factory=dict)  # completed block -> robust noise
+
+
+@dataclass
+class _Watch:
+    id: int
+    index: int  # onset sample
+    base: float  # level before the onset
+    trend: float  # rising trend before the onset (N/sample, >= 0)
+    noise: float  # level noise (N)
+    peak: float = -math.inf
+    early: float = -math.inf  # highest level in the first quarter of the watch
+    history: np.ndarray = field(default_factory=lambda: np.zeros(0))  # running peak by sample
+    next_k: int = 0  # next level sample to examine
+
+
+def _hinge_gain(width: int) -> float:
+    """Noise of a hinge output per unit of white input noise (two LS slopes sharing a sample)."""
+    s = width * (width + 1) * (width + 2) / 12.0  # sum of squared centred offsets
+    return math.sqrt(2.0 / s + width * width / (2.0 * s * s))
+
+
+def _slope_taps(width: int) -> np.ndarray:
+    """lfilter taps whose output at m is the LS slope of x[m - w .. m] (N/sample)."""
+    k = np.arange(width + 1, dtype=np.float64) - width / 2.0
+    kernel = k / float(np.sum(k * k))  # applied to x[n + 0 .. n + w]
+    return kernel[::-1].copy()
+
+
+class ContactDetector:
+    """Finds ridge-contact onsets in a uniformly sampled FSR stream (see module doc)."""
+
+    def __init__(self, fs_hz: float, *, scales_s: tuple[float, ...] = DEFAULT_SCALES_S,
+                 threshold: float = 4.5, refine_z: float = 3.0, merge_widths: float = 2.0,
+                 block_s: float = 0.125, noise_blocks: int = 8,
+                 rise_fraction: float = 0.1, drop_fraction: float = 0.3,
+                 watch_s: float = 1.0, level_s: float = 0.01, trend_s: float = 0.1,
+                 decay_rises: float = 5.0):
+        self.fs_hz = float(fs_hz)
+        widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
+        self.channels = [_Channel(w, _slope_taps(w)) for w in widths]
+        self.noise_blocks = int(noise_blocks)
+        self.threshold = float(threshold)
+        self.refine_z = float(refine_z)
+        self.merge_widths = float(merge_widths)
+        self.block = max(16, round(block_s * self.fs_hz))
+        self.rise_fraction = float(rise_fraction)
+        self.drop_fraction = float(drop_fraction)
+        self.watch = max(8, round(watch_s * self.fs_hz))
+        self.decay_rises = float(decay_rises)
+        self.min_rise = max(1, round(0.005 * self.fs_hz))
+        half = max(0, round(level_s * self.fs_hz / 2.0))
+        self.level_half = half
+        self._level_b = np.full(2 * half + 1, 1.0 / (2 * half + 1))
+        self._level_zi: np.ndarray | None = None
+        self._n = 0  # samples received
+        keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
+        self._keep = keep
+        self._t = np.zeros(0)  # recent sample times
+        self._t_start = 0
+        self._level = np.zeros(0)  # box-smoothed level, by centre index
+        self._level_start = 0
+        self._next_id = 0
+        self._recent: deque[float] = deque(maxlen=16)  # times of the contacts emitted
+        self._watches: list[_Watch] = []
+        self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
+        self.trend_n = max(1, round(trend_s * self.fs_hz))
+
+    # ------------------------------------------------------------------ feeding
+    def feed(self, t: np.ndarray, x: np.ndarray) -> tuple[list[ContactEvent], list[PulseCheck]]:
+        """Take accepted samples; return contacts and pulse verdicts decided by them."""
+        if not len(x):
+            return [], []
+        n0 = self._n
+        self._n += len(x)
+        self._t = np.concatenate([self._t, t])
+        candidates: list[tuple[int, int, int, float, float, float]] = []
+        for ci, ch in enumerate(self.channels):
+            self._run_channel(ci, ch, x, n0, candidates)
+        self._run_level(x)
+        events = self._merge(candidates)
+        checks = self._check_pulses(events)
+        self._trim()
+        # block noises still needed: the last noise_blocks before the slowest channel's block
+        oldest = min(ch.next_n for ch in self.channels) // self.block - self.noise_blocks - 2
+        for ch in self.channels:
+            for cache in (ch.block_noise, ch.noise_by_block):
+                for b in [b for b in cache if b < oldest]:
+                    del cache[b]
+        return events, checks
+
+    def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int,
+                     candidates: list) -> None:
+        w = ch.width
+        a = np.array([1.0, 0.0])  # IIR form: lfilter then runs its exact sample-by-sample loop
+        if ch.zi is None:  # as if the first sample had been held before: slopes start at 0
+            ch.zi = lfilter_zi(ch.b, a) * x[0]
+        y, ch.zi = lfilter(ch.b, a, x, zi=ch.zi)
+        # y[m] is the slope over [m - w, m], i.e. "after" of centre n = m - w; `after`
+        # holds centres ch.next_n - w, ...; hinge(n) = after(n) - after(n - w).
+        after = ch.after
+        after.extend(y.tolist())
+        count = len(after) - w
+        if count <= 0:
+            return
+        arr = np.fromiter(after, dtype=np.float64, count=len(after))
+        slope_after = arr[w:]
+        hinge = slope_after - arr[:count]
+        start = ch.next_n
+        ch.next_n += count
+        for _ in range(count):
+            after.popleft()
+        self._normalise(ch, start, hinge, slope_after)
+        self._local_maxima(ci, ch, candidates)
+
+    def _normalise(self, ch: _Channel, start: int, hinge: np.ndarray,
+                   slope_after: np.ndarray) -> None:
+        """Noise per block of centres; z for every centre whose noise is known.
+
+        Centres of block b > 0 use the noise of the blocks before it; block 0
+        waits for its own noise (detections there are decided late).
+        """
+        B = self.block
+        pos = 0
+        n = start
+        while pos < len(hinge):
+            block = n // B
+            end = min(len(hinge), pos + (block + 1) * B - n)
+            seg_h, seg_a = hinge[pos:end], slope_after[pos:end]
+            ch.block_abs.append(np.abs(seg_h))
+            if block == 0:
+                ch.hinge.append((seg_h, seg_a))
+            else:
+                self._append_z(ch, seg_h, seg_a, self._noise(ch, block))
+            n += end - pos
+            pos = end
+            if n % B == 0:  # block complete
+                values = np.concatenate(ch.block_abs)
+                ch.block_abs = []
+                ch.block_noise[block] = float(np.median(values)) * MAD_TO_STD
+                if block == 0:
+                    noise = self._noise(ch, 0)
+                    for seg_h, seg_a in ch.hinge:
+                        self._append_z(ch, seg_h, seg_a, noise)
+                    ch.hinge = []
+
+    @staticmethod
+    def _append_z(ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float) -> None:
+        ch.z = np.concatenate([ch.z, seg_h / noise])
+        ch.zh = np.concatenate([ch.zh, seg_h])
+        ch.za = np.concatenate([ch.za, seg_a])
+
+    def _noise(self, ch: _Channel, block: int) -> float:
+        """Noise of the hinge for centres of `block`.
+
+        The larger of: the white noise seen by the finest scale (a low
+        quantile of its recent blocks) times this scale's gain, and a low
+        quantile of this scale's own recent blocks (coloured noise, busy
+        signals). The own estimate alone underestimates at long scales,
+        whose outputs are correlated over a whole block.
+        """
+        cached = ch.noise_by_block.get(block)
+        if cached is not None:
+            return cached
+        fine = self.channels[0]
+        blocks = range(max(0, block - self.noise_blocks), block) if block else range(1)
+        values = sorted(fine.block_noise[b] for b in blocks)
+        white = max(values[(len(values) - 1) // 2] / _hinge_gain(fine.width), NOISE_FLOOR_N)
+        noise = white * _hinge_gain(ch.width)
+        if ch is not fine:
+            own = sorted(ch.block_noise[b] for b in blocks)
+            noise = max(noise, own[(len(own) - 1) // 2])
+        # few blocks yet: the estimate is itself noisy, be more careful
+        noise *= 1.0 + STARTUP_MARGIN * (self.noise_blocks - len(blocks)) / self.noise_blocks
+        ch.noise_by_block[block] = noise
+        return noise
+
+    def _local_maxima(self, ci: int, ch: _Channel, candidates: list) -> None:
+        w = ch.width
+        z = ch.z
+        last = ch.z_start + len(z) - 1  # last centre with z
+        lo = max(ch.next_test, ch.z_start + w)
+        hi = last - w  # test centres lo .. hi
+        if hi < lo:
+            return
+        i0, i1 = lo - ch.z_start, hi - ch.z_start
+        ch.next_test = hi + 1
+        above = np.flatnonzero(z[i0:i1 + 1] >= self.threshold)
+        for h in above.tolist():  # a local maximum over +-w (ties: the first)
+            i = i0 + h
+            zc = z[i]
+            if zc <= z[i - w:i].max() or zc < z[i + 1:i + w + 1].max():
+                continue
+            n = ch.z_start + i
+            jump, rising = ch.zh[i], ch.za[i]
+            if rising < self.rise_fraction * jump:
+                continue
+            n_at, delta, placed = self._refine(ci, n)
+            emit = max(n + 2 * w, self.block - 1 + w)
+            candidates.append((emit, w, n_at, delta, float(z[i]), float(jump), placed))
+
+    def _refine(self, ci: int, n: int) -> tuple[int, float, int]:
+        """Coarse to fine: move the onset to the peak of each finer scale that sees it.
+
+        Returns (sample, fraction of a sample, width of the scale that placed it).
+        """
+        reach = self.channels[ci].width
+        for fi in range(ci, -1, -1):
+            ch = self.channels[fi]
+            i = n - ch.z_start
+            if fi < ci:
+                lo, hi = max(1, i - reach), min(len(ch.z) - 2, i + reach)
+                if hi < lo:
+                    break
+                j = lo + int(np.argmax(ch.z[lo:hi + 1]))
+                if ch.z[j] < self.refine_z or j in (lo, hi):
+                    break
+                i, n, reach = j, ch.z_start + j, ch.width
+            zc, zl, zr = ch.z[i], ch.z[i - 1], ch.z[i + 1]
+            denom = zl - 2.0 * zc + zr
+            delta = 0.5 * (zl - zr) / denom if denom < 0 else 0.0
+            best = (n, min(0.5, max(-0.5, delta)), ch.width)
+        return best
+
+    def _time(self, n: int, delta: float) -> float:
+        i = n - self._t_start
+        t = self._t
+        if delta >= 0 and i + 1 < len(t):
+            return float(t[i] + delta * (t[i + 1] - t[i]))
+        if delta < 0 and i - 1 >= 0:
+            return float(t[i] + delta * (t[i] - t[i - 1]))
+        return float(t[i])
+
+    def _merge(self, candidates: list) -> list[ContactEvent]:
+        events = []
+        candidates.sort(key=lambda c: (c[0], c[1], c[2]))
+        for emit, w, n, delta, z, jump, placed in candidates:
+            t = self._time(n, delta)
+            # the same kink seen again (by a coarser scale, later): within its own reach
+            reach = self.merge_widths * w / self.fs_hz
+            if any(abs(t - t_old) <= reach for t_old in self._recent):
+                continue
+            self._recent.append(t)
+            # timing: a quarter of the placing scale (the hinge peak is that wide), and
+            # the sub-sample interpolation
+            sigma = (0.25 * placed + 0.3) / self.fs_hz
+            ev = ContactEvent(self._next_id, t, n, emit, z, jump * self.fs_hz, w / self.fs_hz,
+                              sigma)
+            self._next_id += 1
+            events.append(ev)
+        return events
+
+    # ------------------------------------------------------------------ pulse checks
+    def _run_level(self, x: np.ndarray) -> None:
+        a = np.array([1.0, 0.0])
+        if self._level_zi is None:
+            self._level_zi = lfilter_zi(self._level_b, a) * x[0]
+        y, self._level_zi = lfilter(self._level_b, a, x, zi=self._level_zi)
+        # y[m] is the mean of x[m - 2h .. m]: the level centred on m - h.
+        self._level = np.concatenate([self._level, y])
+
+    def _level_at(self, k: int) -> float | None:
+        i = k + self.level_half - self._level_start  # centre k is output m = k + h
+        if 0 <= i < len(self._level):
+            return float(self._level[i])
+        return None
+
+    def _check_pulses(self, events: list[ContactEvent]) -> list[PulseCheck]:
+        checks: list[PulseCheck] = []
+        fine = self.channels[0]
+        h = self.level_half
+        for ev in events:
+            before = ev.index - 2 * h - 1  # last level centre not touched by the pulse
+            base = self._level_at(before)
+            if base is None:
+                base = self._level_at(ev.index)
+            earlier = self._level_at(before - self.trend_n)
+            trend = 0.0
+            if base is not None and earlier is not None:  # rising trend before the onset
+                trend = max(0.0, (base - earlier) / self.trend_n)
+            white = self._noise(fine, ev.index // self.block) / _hinge_gain(fine.width)
+            noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
+            self._watches.append(_Watch(ev.id, ev.index, 0.0 if base is None else base, trend,
+                                        noise, next_k=ev.index))
+        still = []
+        for watch in self._watches:
+            done = self._advance(watch)
+            if done is None:
+                still.append(watch)
+            else:
+                checks.append(done)
+        self._watches = still
+        return checks
+
+    def _advance(self, watch: _Watch) -> PulseCheck | None:
+        """Examine the level from watch.next_k on; a verdict, or None while undecided.
+
+        The rising trend of the `trend_s` before the onset (the object
+        covering more of the sensor) is taken out. A pulse falls back by
+        `drop_fraction` of its height within `decay_rises` times its rise time
+        (to 90 % of its peak) after that (a grip step up and, later, down is no pulse); a step
+        stays level for the whole watch.
+        A level that keeps rising (more of the object on the sensor) decides
+        nothing.
+        """
+        h = self.level_half
+        end = min(watch.index + self.watch, self._level_start + len(self._level) - 1 - h)
+        if end >= watch.next_k:
+            i0 = watch.next_k + h - self._level_start
+            level = self._level[i0:i0 + end - watch.next_k + 1]
+            k = np.arange(watch.next_k, end + 1)
+            d = level - watch.base - watch.trend * (k - watch.index + 2 * h + 1)
+            peak = np.maximum.accumulate(np.maximum(d, watch.peak))
+            history = np.concatenate([watch.history, peak])  # running peak since the onset
+            watch.history = history
+            # rise time: onset to the first sample at 90 % of the peak so far (a noisy
+            # plateau keeps nudging the peak, not this)
+            rise = np.searchsorted(history, 0.9 * peak)
+            rise = np.maximum(rise, self.min_rise)
+            since = k - watch.index
+            ok = ((peak >= 4.0 * watch.noise) & (peak - d >= self.drop_fraction * peak)
+                  & (since <= (1.0 + self.decay_rises) * rise))
+            hit = np.flatnonzero(ok)
+            if len(hit):
+                return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
+            early = k <= watch.index + self.watch // 4
+            if early.any():
+                watch.early = max(watch.early, float(peak[early][-1]))
+            watch.peak = float(peak[-1])
+            watch.next_k = end + 1
+        if watch.next_k > watch.index + self.watch:
+            level = watch.peak <= 1.5 * watch.early
+            return PulseCheck(watch.id, watch.index + self.watch + h, False if level else None)
+        return None
+
+    # ------------------------------------------------------------------ memory
+    def _trim(self) -> None:
+        keep = self._keep
+        if len(self._t) > 2 * keep:
+            cut = len(self._t) - keep
+            self._t = self._t[cut:]
+            self._t_start += cut
+        oldest_watch = min((w.next_k for w in self._watches), default=None)
+        lv_keep = keep
+        if oldest_watch is not None:
+            lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
+        if len(self._level) > 2 * lv_keep:
+            cut = len(self._level) - lv_keep
+            self._level = self._level[cut:]
+            self._level_start += cut
+        for ch in self.channels:
+            if len(ch.z) > 2 * keep:
+                cut = len(ch.z) - keep
+                ch.z, ch.zh, ch.za = ch.z[cut:], ch.zh[cut:], ch.za[cut:]
+                ch.z_start += cut

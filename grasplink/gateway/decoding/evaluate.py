@@ -1,0 +1,131 @@
+"""Score a decoder against a recording with ground truth.
+
+Definitions (the benchmark states them too):
+
+- An update is *scored* when the truth is slipping and the leading edge has
+  passed the third ridge contact after onset (before that no layout can tell
+  position, the *physical limit*).
+- Speed error: |v_est - v_true| / |v_true| (a wrong sign counts in full);
+  position error: |x_est - x_true| in mm. A scored update without an
+  estimate counts as *missing* and is excluded from the error statistics.
+- NRMSD (thesis table 5.2): RMS error divided by the range of the true
+  values over the scored updates of a recording set.
+- Detection: slip flagged - time of the first update with slip=True after
+  onset, in ridge intervals (the time between the first two contacts);
+  first good estimate - first update with speed within 10 % (and the right
+  sign), compared with the time of the third contact.
+- False slip: share of updates flagged slip while the truth is not slipping.
+- Cost: process time per input sample (CPU µs), peak memory (tracemalloc)
+  of a separate run.
+"""
+
+from __future__ import annotations
+
+import time
+import tracemalloc
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from grasplink.gateway.decoding.base import Decoder, SlipEstimate
+from grasplink.gateway.decoding.synth import SkinRecording
+
+CHUNK = 256  # samples per feed(): the streaming path, as a gateway would call it
+GOOD_SPEED = 0.10
+
+
+@dataclass
+class RecordingScore:
+    speed_rel_err: np.ndarray  # scored updates with an estimate
+    speed_abs_err: np.ndarray
+    speed_true: np.ndarray
+    position_err_mm: np.ndarray
+    position_true: np.ndarray
+    scored: int
+    missing: int
+    slip_flag_delay_intervals: float | None  # None: never flagged
+    first_good_s: float | None  # time after onset of the first estimate within 10 %
+    physical_limit_s: float | None  # time after onset of the third contact
+    false_slip_updates: int
+    static_updates: int
+    cpu_us_per_sample: float
+    samples: int
+
+
+def run_decoder(make: Callable[[], Decoder], rec: SkinRecording
+                ) -> tuple[list[SlipEstimate], float]:
+    """Feed the recording in chunks; returns estimates and CPU µs per sample."""
+    decoder = make()
+    estimates: list[SlipEstimate] = []
+    t0 = time.process_time()
+    for start in range(0, len(rec.t_s), CHUNK):
+        estimates += decoder.feed(rec.t_s[start:start + CHUNK], rec.force_n[start:start + CHUNK])
+    cpu = time.process_time() - t0
+    return estimates, 1e6 * cpu / max(1, len(rec.t_s))
+
+
+def peak_memory_kib(make: Callable[[], Decoder], rec: SkinRecording) -> float:
+    tracemalloc.start()
+    try:
+        decoder = make()
+        for start in range(0, len(rec.t_s), CHUNK):
+            decoder.feed(rec.t_s[start:start + CHUNK], rec.force_n[start:start + CHUNK])
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    return peak / 1024
+
+
+def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
+    estimates, cpu_us = run_decoder(make, rec)
+    if not estimates:
+        empty = np.zeros(0)
+        return RecordingScore(empty, empty, empty, empty, empty, 0, 0, None, None, None, 0, 0,
+                              cpu_us, len(rec.t_s))
+    t_upd = np.array([e.t_s for e in estimates])
+    slipping = np.interp(t_upd, rec.t_s, rec.slipping) > 0.5
+    v_true = np.interp(t_upd, rec.t_s, rec.speed_mm_s)
+    x_true = np.interp(t_upd, rec.t_s, rec.position_mm)
+    onset = _onset(rec)
+    contacts = rec.contact_times_s[rec.contact_times_s >= (onset or 0.0)]
+    third = contacts[2] if len(contacts) >= 3 else None
+    scored_mask = slipping & (t_upd >= third) if third is not None else np.zeros_like(slipping)
+    v_est = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
+    x_est = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
+    flags = np.array([e.slip for e in estimates])
+    have_v = scored_mask & np.isfinite(v_est)
+    rel = np.abs(v_est[have_v] - v_true[have_v]) / np.maximum(np.abs(v_true[have_v]), 1e-9)
+    have_x = scored_mask & np.isfinite(x_est)
+    slip_delay = first_good = None
+    if onset is not None and len(contacts) >= 2:
+        interval = contacts[1] - contacts[0]
+        after = t_upd >= onset
+        flagged = np.nonzero(after & flags)[0]
+        if len(flagged):
+            slip_delay = (t_upd[flagged[0]] - onset) / max(interval, 1e-9)
+        good = after & np.isfinite(v_est) & (np.abs(v_est - v_true) <= GOOD_SPEED * np.abs(v_true))
+        good &= slipping
+        good_idx = np.nonzero(good)[0]
+        if len(good_idx):
+            first_good = t_upd[good_idx[0]] - onset
+    return RecordingScore(
+        speed_rel_err=rel, speed_abs_err=np.abs(v_est[have_v] - v_true[have_v]),
+        speed_true=v_true[have_v], position_err_mm=np.abs(x_est[have_x] - x_true[have_x]),
+        position_true=x_true[have_x], scored=int(scored_mask.sum()),
+        missing=int((scored_mask & ~np.isfinite(v_est)).sum()),
+        slip_flag_delay_intervals=slip_delay, first_good_s=first_good,
+        physical_limit_s=(third - onset) if third is not None and onset is not None else None,
+        false_slip_updates=int((flags & ~slipping).sum()), static_updates=int((~slipping).sum()),
+        cpu_us_per_sample=cpu_us, samples=len(rec.t_s))
+
+
+def _onset(rec: SkinRecording) -> float | None:
+    moving = np.nonzero(rec.slipping > 0.5)[0]
+    return float(rec.t_s[moving[0]]) if len(moving) else None
+
+
+def nrmsd(errors: np.ndarray, truth: np.ndarray) -> float | None:
+    if len(errors) == 0 or np.ptp(truth) == 0:
+        return None
+    return float(np.sqrt(np.mean(errors ** 2)) / np.ptp(truth))

@@ -1,0 +1,419 @@
+"""Streaming signal blocks shared by the skin decoders, all chunk-invariant.
+
+* `SosFilter` -- a Butterworth filter in second-order sections with carried
+  state, starting settled on the first sample (a DC offset of +50 N gives
+  no start-up transient). Second-order sections, not a transfer function:
+  a 4th-order 0.3-3 Hz band-pass at 1 kHz has poles within ~1e-3 of z = 1,
+  and the (b, a) polynomial form loses them to rounding (see
+  `transfer_function_is_unstable` and tests/decoding/test_stability.py).
+* `PeakDetector` -- maxima protruding by a threshold above their
+  surroundings on both sides (hysteresis, reported as soon as the signal
+  has dropped), the time refined by a parabola through the three samples
+  around the maximum. Carries a bounded state (the running extremum and its
+  neighbours) so a peak straddling a chunk boundary is found exactly once,
+  at the same time, however the input is chunked.
+* `NoiseEstimator` -- white-noise sigma from the median absolute deviation
+  (MAD) of first differences, on blocks aligned to the sample count since
+  the last reset (so the estimate does not depend on chunking), robust to
+  the ridge pulses and immune to DC and drift.
+* `PulseFrontEnd` -- the pulse decoders' common front: band-pass, static
+  force (base.StaticForce), noise-scaled peak threshold and peaks, restarted
+  after gaps; `pulse_events` orders its output by the time each peak became
+  known. `PeakLag` -- how far past a ridge its band-passed pulse peaks.
+  `PeakActivity` -- the slip flag from pulses, with hysteresis.
+
+Every block processes samples in order and changes state only per sample or
+per fixed-size block, which is what makes feeding a recording in pieces give
+bit-identical results to feeding it in one piece.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
+
+
+def bandpass_sos(low_hz: float, high_hz: float, fs_hz: float, order: int = 2) -> np.ndarray:
+    """Butterworth band-pass as second-order sections (`order` per edge, 2*order poles).
+
+    The upper corner is kept below 0.45 fs and above the lower corner, so a
+    decoder configured for 400 Hz still builds a valid filter at 100 Hz.
+    """
+    high = min(high_hz, 0.45 * fs_hz)
+    low = min(low_hz, 0.5 * high)
+    return signal.butter(order, [low, high], btype="bandpass", fs=fs_hz, output="sos")
+
+
+def noise_gain(sos: np.ndarray, n: int = 1 << 14) -> float:
+    """RMS gain of the filter for white noise: sqrt(sum h^2) of its impulse response."""
+    impulse = np.zeros(n)
+    impulse[0] = 1.0
+    h = signal.sosfilt(sos, impulse)
+    return float(np.sqrt(np.sum(h * h)))
+
+
+def transfer_function_is_unstable(b: np.ndarray, a: np.ndarray) -> bool:
+    """True when the (b, a) form's poles left the unit circle through rounding."""
+    return bool(np.max(np.abs(np.roots(a))) >= 1.0)
+
+
+class SosFilter:
+    """`sosfilt` with carried state; starts settled on the first sample it sees."""
+
+    def __init__(self, sos: np.ndarray):
+        self.sos = np.asarray(sos, dtype=np.float64)
+        self._zi_unit = signal.sosfilt_zi(self.sos)
+        self._zi: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the state; the next sample settles the filter again (after a gap)."""
+        self._zi = None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        if not len(x):
+            return np.zeros(0)
+        if self._zi is None:
+            self._zi = self._zi_unit * x[0]
+        y, self._zi = signal.sosfilt(self.sos, x, zi=self._zi)
+        return y
+
+
+@dataclass(frozen=True, slots=True)
+class Peak:
+    t_s: float  # interpolated time of the maximum
+    height: float  # interpolated height (band-passed units)
+    index: int  # sample index since the last reset
+    t_confirm: float  # time of the sample that confirmed it (the drop below the peak)
+
+
+class PeakDetector:
+    """Streaming peak detector with hysteresis and parabolic refinement.
+
+    A peak is a maximum that protrudes by at least `threshold` above the
+    lowest value since the previous peak AND is followed by a drop of at
+    least `threshold` below it (the thesis' "protrudes beyond its immediate
+    surroundings by some predetermined threshold"; Billauer's peakdet). It
+    is reported as soon as the drop happens, so the delay is set by the
+    signal, not by a window. The time comes from a parabola through the
+    samples either side of the maximum (sub-sample); the first sample of a
+    plateau wins. State (mode, running extremum, neighbours) is carried, so
+    a peak straddling chunk boundaries is found once, identically. The
+    threshold may change between calls; a call applies one threshold.
+    """
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self._seeking_max = False  # first a rise of `threshold` above a minimum
+        self._min = math.inf
+        self._max = -math.inf
+        self._max_t = self._before_t = self._after_t = math.nan
+        self._before = self._after = math.nan  # samples either side of the running max
+        self._after_pending = False
+        self._prev_t = math.nan
+        self._prev = math.nan
+        self._index = 0  # samples since reset
+        self._max_index = 0
+
+    def __call__(self, t: np.ndarray, y: np.ndarray, threshold: float) -> list[Peak]:
+        peaks: list[Peak] = []
+        seeking_max, lo, hi = self._seeking_max, self._min, self._max
+        prev_t, prev = self._prev_t, self._prev
+        index = self._index
+        for tk, yk in zip(t.tolist(), y.tolist(), strict=True):
+            if self._after_pending:
+                self._after, self._after_t = yk, tk
+                self._after_pending = False
+            if seeking_max:
+                if yk > hi:
+                    hi = yk
+                    self._max_t, self._max_index = tk, index
+                    self._before, self._before_t = prev, prev_t
+                    self._after_pending = True
+                elif yk <= hi - threshold:
+                    peaks.append(self._refined(hi, tk))
+                    seeking_max, lo = False, yk
+            elif yk < lo:
+                lo = yk
+            elif yk >= lo + threshold:
+                seeking_max, hi = True, yk
+                self._max_t, self._max_index = tk, index
+                self._before, self._before_t = prev, prev_t
+                self._after_pending = True
+            prev_t, prev = tk, yk
+            index += 1
+        self._seeking_max, self._min, self._max = seeking_max, lo, hi
+        self._prev_t, self._prev, self._index = prev_t, prev, index
+        return peaks
+
+    def _refined(self, top: float, t_confirm: float) -> Peak:
+        y0, y2 = self._before, self._after
+        t1 = self._max_t
+        if not (math.isfinite(y0) and math.isfinite(y2)):
+            return Peak(t1, top, self._max_index, t_confirm)
+        denom = y0 - 2.0 * top + y2
+        delta = 0.0 if denom >= 0 else 0.5 * (y0 - y2) / denom
+        delta = min(0.5, max(-0.5, delta))
+        step = (self._after_t - t1) if delta >= 0 else (t1 - self._before_t)
+        return Peak(t1 + delta * step, top - 0.25 * (y0 - y2) * delta, self._max_index,
+                    t_confirm)
+
+
+class NoiseEstimator:
+    """Robust noise sigma from the median absolute deviation, per aligned block.
+
+    Each complete block of `block` samples gives sigma_b = 1.4826 MAD of the
+    block (`differences=False`: of the values, for a band-passed signal whose
+    pulses are sparse) or of its first differences divided by sqrt(2)
+    (`differences=True`: white noise only, immune to DC, drift and slow
+    pulses); the estimate is the median of the last `history` blocks.
+    Until the first block completes, `sigma` is None. Block boundaries count
+    from the last reset, so the estimate does not depend on chunking.
+    """
+
+    def __init__(self, block: int = 200, history: int = 8, *, differences: bool = True):
+        self.block = max(8, int(block))
+        self.differences = differences
+        self.history = max(1, int(history))
+        self._blocks: list[float] = []
+        self.reset()
+
+    def reset(self, keep_history: bool = True) -> None:
+        self._pending = np.zeros(0)  # samples of the block being filled
+        if not keep_history:
+            self._blocks = []
+
+    @property
+    def room(self) -> int:
+        """Samples still needed to complete the current block."""
+        return self.block - len(self._pending)
+
+    @property
+    def sigma(self) -> float | None:
+        if not self._blocks:
+            return None
+        return float(np.median(self._blocks))
+
+    def __call__(self, x: np.ndarray) -> None:
+        pending = np.concatenate([self._pending, x])
+        full = len(pending) // self.block
+        for b in range(full):
+            chunk = pending[b * self.block:(b + 1) * self.block]
+            if self.differences:
+                self._blocks.append(mad_sigma(np.diff(chunk)) / math.sqrt(2.0))
+            else:
+                self._blocks.append(mad_sigma(chunk))
+            if len(self._blocks) > self.history:
+                self._blocks.pop(0)
+        self._pending = pending[full * self.block:].copy()
+
+
+def mad_sigma(x: np.ndarray) -> float:
+    """Robust sigma of a sample: 1.4826 median |x - median(x)|."""
+    x = np.asarray(x, dtype=np.float64)
+    if not len(x):
+        return 0.0
+    return MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
+
+
+@dataclass
+class Segment:
+    """Samples between two gaps (or chunk/update boundaries), after the front end."""
+
+    t: np.ndarray
+    x: np.ndarray  # raw force, N
+    y: np.ndarray  # band-passed force, N
+    force_n: np.ndarray  # static grip force (low-passed), N
+    peaks: list[Peak]
+    after_gap: bool  # the front end restarted at t[0] (first samples or after a gap)
+
+
+class PulseFrontEnd:
+    """Band-pass, static force, noise estimate and peaks for the pulse decoders.
+
+    Parameters: `band_hz` (low, high) of the Butterworth band-pass (order
+    `order` per edge, i.e. the thesis' 2nd-order design gives 4 poles),
+    the peak (hysteresis) threshold max(`threshold_n`, `threshold_sigmas` x band-passed noise
+    sigma), `static_corner_hz` for the grip force (base.StaticForce).
+
+    Gaps (a step longer than `gap_periods` sample periods) restart the
+    filters settled on the first sample after the gap and clear the peak
+    detector's tail; the noise estimate keeps its history. Work is split at
+    gaps and at noise-estimate block boundaries so the threshold in force
+    for every sample does not depend on how the input was chunked.
+    """
+
+    def __init__(self, fs_hz: float, *, band_hz: tuple[float, float] = (0.5, 30.0),
+                 order: int = 1, threshold_n: float = 0.05,
+                 threshold_sigmas: float = 6.0, static_corner_hz: float = 2.0,
+                 noise_block_s: float = 0.5, noise_from: str = "white",
+                 gap_periods: float = 3.0):
+        from grasplink.gateway.decoding.base import StaticForce
+
+        self.fs_hz = float(fs_hz)
+        self._static_factory = lambda: StaticForce(self.fs_hz, static_corner_hz)
+        self.sos = bandpass_sos(band_hz[0], band_hz[1], self.fs_hz, order)
+        self.band_gain = noise_gain(self.sos)
+        self.bandpass = SosFilter(self.sos)
+        self.static = self._static_factory()
+        self.peaks = PeakDetector()
+        if noise_from not in ("band", "white"):
+            raise ValueError(f"noise_from must be 'band' or 'white', got {noise_from!r}")
+        self.noise_from = noise_from
+        self.noise = NoiseEstimator(max(8, round(noise_block_s * self.fs_hz)),
+                                    differences=noise_from == "white")
+        self.threshold_n = float(threshold_n)
+        self.threshold_sigmas = float(threshold_sigmas)
+        self.gap_s = gap_periods / self.fs_hz
+        self._last_t: float | None = None
+        self.gaps = 0
+
+    @property
+    def threshold(self) -> float:
+        sigma = self.noise.sigma
+        if sigma is None:
+            return self.threshold_n
+        gain = self.band_gain if self.noise_from == "white" else 1.0
+        return max(self.threshold_n, self.threshold_sigmas * sigma * gain)
+
+    def restart(self) -> None:
+        self.bandpass.reset()
+        self.static = self._static_factory()
+        self.peaks.reset()
+        self.noise.reset(keep_history=True)
+
+    def __call__(self, t: np.ndarray, x: np.ndarray) -> list[Segment]:
+        """Run samples (finite, increasing) through; one Segment per piece between gaps."""
+        if not len(t):
+            return []
+        previous = -np.inf if self._last_t is None else self._last_t
+        steps = np.diff(np.concatenate([[previous], t]))
+        cuts = np.nonzero(steps > self.gap_s)[0].tolist()  # includes 0 at the very start
+        bounds = [*cuts, len(t)] if cuts and cuts[0] == 0 else [0, *cuts, len(t)]
+        segments: list[Segment] = []
+        for a, b in itertools.pairwise(bounds):
+            if a == b:
+                continue
+            after_gap = a in cuts
+            if after_gap:
+                if self._last_t is not None:
+                    self.gaps += 1
+                self.restart()
+            segments.append(self._run(t[a:b], x[a:b], after_gap))
+        self._last_t = float(t[-1])
+        return segments
+
+    def _run(self, t: np.ndarray, x: np.ndarray, after_gap: bool) -> Segment:
+        y = self.bandpass(x)
+        force = self.static.filter(x)
+        peaks: list[Peak] = []
+        start = 0
+        while start < len(t):
+            stop = min(len(t), start + self.noise.room)
+            peaks += self.peaks(t[start:stop], y[start:stop], self.threshold)
+            self.noise(x[start:stop] if self.noise_from == "white" else y[start:stop])
+            start = stop
+        return Segment(t, x, y, force, peaks, after_gap)
+
+
+class PeakLag:
+    """Where the band-passed peak of a ridge pulse lies, in mm past the ridge.
+
+    The pulse model of thesis ch. 5.3.1 peaks when the edge is half a ridge
+    side past the ridge (rise time L / (2 v)); the band-pass shifts the peak
+    by a speed-dependent amount. This table is computed once from the
+    decoder's own filter on model pulses, so position estimates do not
+    carry the filter's delay whatever the band or sample rate.
+    """
+
+    def __init__(self, sos: np.ndarray, fs_hz: float, ridge_side_mm: float = 2.5,
+                 speeds_mm_s: np.ndarray | None = None):
+        speeds = np.geomspace(1.0, 1000.0, 31) if speeds_mm_s is None else speeds_mm_s
+        lags = []
+        for v in speeds:
+            rise = min(max(ridge_side_mm / (2.0 * v), 0.002), 0.2)
+            n = int(fs_hz * (8 * rise + 0.5)) + 8
+            tau = np.arange(n) / fs_hz
+            u = tau / rise
+            y = signal.sosfilt(sos, u * np.exp(1.0 - u))
+            k = int(np.argmax(y))
+            if 0 < k < n - 1:
+                denom = y[k - 1] - 2 * y[k] + y[k + 1]
+                delta = 0.5 * (y[k - 1] - y[k + 1]) / denom if denom < 0 else 0.0
+            else:
+                delta = 0.0
+            lags.append(v * (k + delta) / fs_hz)
+        self._log_v = np.log(speeds)
+        self._lag = np.asarray(lags)
+
+    def __call__(self, speed_mm_s: float) -> float:
+        return float(np.interp(math.log(max(abs(speed_mm_s), 1e-6)), self._log_v, self._lag))
+
+
+def pulse_events(segments: list[Segment]) -> list[tuple[float, Peak | None]]:
+    """Front-end output as time-ordered events: (time, None) = restart, (time, peak).
+
+    A peak's event time is its confirmation (the sample where the signal
+    dropped below it), so an update at time g sees exactly the peaks the
+    samples up to g revealed, however the input was chunked.
+    """
+    events: list[tuple[float, Peak | None]] = []
+    for seg in segments:
+        if seg.after_gap:
+            events.append((float(seg.t[0]), None))
+        events += [(p.t_confirm, p) for p in seg.peaks]
+    return events
+
+
+class PeakActivity:
+    """Slip flag from ridge pulses, with hysteresis.
+
+    On at a second peak within `pair_s` of the previous one; off when no peak
+    came for the hold time: `hold_factor` x the time the widest spacing takes
+    at the decoded speed when a decoder supplies one, else `hold_factor` x the
+    last interval x (widest / narrowest spacing) - a skin with one 33 mm gap
+    among 3 mm ones must not drop the flag in the gap - within
+    [`min_hold_s`, `max_hold_s`].
+    """
+
+    def __init__(self, spacings_mm: np.ndarray, *, pair_s: float = 1.5,
+                 hold_factor: float = 1.5, min_hold_s: float = 0.2, max_hold_s: float = 3.0):
+        self.widest = float(np.max(spacings_mm))
+        self.spread = float(np.max(spacings_mm) / np.min(spacings_mm))
+        self.pair_s, self.hold_factor = float(pair_s), float(hold_factor)
+        self.min_hold_s, self.max_hold_s = float(min_hold_s), float(max_hold_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self.last_peak: float | None = None
+        self.interval: float | None = None
+        self.on = False
+        self.episode_start: float | None = None  # first peak of the current slip
+
+    def peak(self, t: float) -> None:
+        if self.last_peak is not None and not self.on and t - self.last_peak <= self.pair_s:
+            self.on = True
+            self.episode_start = self.last_peak
+        if self.last_peak is not None:
+            self.interval = t - self.last_peak
+        self.last_peak = t
+
+    def active(self, g: float, speed_mm_s: float | None = None) -> bool:
+        if not self.on or self.last_peak is None:
+            return False
+        if speed_mm_s:
+            expected = self.widest / abs(speed_mm_s)
+        else:
+            expected = (self.interval or self.pair_s) * self.spread
+        hold = min(self.max_hold_s, max(self.min_hold_s, self.hold_factor * expected))
+        if g - self.last_peak > hold:
+            self.on = False
+            self.episode_start = None
+        return self.on

@@ -1,0 +1,62 @@
+"""Skin decoders by name: `make_decoder("ratio", layout_mm, fs_hz, **settings)`.
+
+Decoder modules are imported on first use, so a decoder whose module is
+missing (or broken) fails only when it is asked for, with an error naming it.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+
+from grasplink.errors import ConfigError
+from grasplink.gateway.decoding.base import Decoder
+
+#: name -> "module:Class"
+DECODERS: dict[str, str] = {
+    "fft": "grasplink.gateway.decoding.fft:FftDecoder",
+    "ratio": "grasplink.gateway.decoding.ratio:RatioDecoder",
+    "mmse": "grasplink.gateway.decoding.mmse:MmseDecoder",
+    "dtw": "grasplink.gateway.decoding.dtw:DtwDecoder",
+    "tracker": "grasplink.gateway.decoding.tracker:TrackerDecoder",
+}
+
+#: The decoder `grasplink decode` uses unless told otherwise (set from the benchmark).
+DEFAULT_DECODER = "tracker"
+
+
+def decoder_class(name: str) -> type[Decoder]:
+    """The class registered under `name` (imported now); ConfigError if unknown or missing."""
+    if name not in DECODERS:
+        raise ConfigError(f"unknown decoder {name!r}; valid decoders: {', '.join(DECODERS)}")
+    module_name, _, class_name = DECODERS[name].partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name is not None and module_name.startswith(exc.name):
+            raise ConfigError(f"decoder {name!r} is not available: module {module_name} "
+                              "is not installed") from None
+        raise
+    cls = getattr(module, class_name, None)
+    if cls is None:
+        raise ConfigError(f"decoder {name!r} is not available: {module_name} has no "
+                          f"class {class_name}")
+    return cls
+
+
+def available(name: str) -> bool:
+    """Whether the decoder's module can be imported (without raising)."""
+    try:
+        decoder_class(name)
+    except ConfigError:
+        return False
+    return True
+
+
+def make_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, **settings) -> Decoder:
+    """Build a decoder; unknown names or settings raise ConfigError naming them."""
+    cls = decoder_class(name)
+    try:
+        return cls(layout_mm, fs_hz, **settings)
+    except TypeError as exc:
+        raise ConfigError(f"decoder {name!r}: bad settings {sorted(settings)}: {exc}") from None

@@ -1,0 +1,247 @@
+"""`grasplink decode`: recordings in, JSON lines out; bad input, one line and exit 1."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from grasplink.cli import main
+from grasplink.gateway.decoding import io, registry, synth
+from grasplink.profiles.layouts import LAYOUTS_MM
+
+ROOT = Path(__file__).resolve().parents[2]
+FIELDS = {"t_s", "slip", "speed_mm_s", "position_mm", "force_n", "confidence"}
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return synth.slip_recording(LAYOUTS_MM["alpha0.1"], 40.0, seed=21)
+
+
+def write_csv(path: Path, t, x, header: str = "t_s,force_n") -> Path:
+    lines = [header] + [f"{float(a)!r},{float(b)!r}" for a, b in zip(t, x, strict=True)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def decode(capsys, *args: str) -> tuple[int, list[dict], str]:
+    rc = main(["decode", *map(str, args)])
+    captured = capsys.readouterr()
+    lines = [json.loads(line) for line in captured.out.splitlines()]
+    return rc, lines, captured.err
+
+
+def assert_error(capsys, *args, contains: list[str]) -> str:
+    rc, lines, err = decode(capsys, *args)
+    assert rc == 1
+    assert not lines
+    assert err.startswith("grasplink: error: ") and err.count("\n") == 1, err
+    assert "Traceback" not in err
+    for text in contains:
+        assert text in err, (text, err)
+    return err
+
+
+def assert_slip_decoded(lines: list[dict], duration_s: float) -> None:
+    assert lines and all(set(d) == FIELDS for d in lines)
+    assert abs(len(lines) - duration_s / 0.01) <= 2
+    speeds = [d["speed_mm_s"] for d in lines if d["speed_mm_s"] is not None]
+    assert any(d["slip"] for d in lines) and speeds
+    assert abs(np.median(speeds) - 40.0) <= 4.0
+    for d in lines:
+        assert isinstance(d["slip"], bool) and 0.0 <= d["confidence"] <= 1.0
+
+
+# -- CSV and NPZ ---------------------------------------------------------------------------
+def test_csv(tmp_path, capsys, recording):
+    path = write_csv(tmp_path / "rec.csv", recording.t_s, recording.force_n)
+    rc, lines, err = decode(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio")
+    assert rc == 0 and not err
+    assert_slip_decoded(lines, recording.t_s[-1])
+
+
+def test_csv_header_and_value_whitespace_tolerated(tmp_path, capsys, recording):
+    rows = [" t_s , force_n "] + [f" {float(a)!r} ,\t{float(b)!r} " for a, b in
+                                  zip(recording.t_s, recording.force_n, strict=True)]
+    path = tmp_path / "spaced.csv"
+    path.write_text("\n".join(rows) + "\n\n")
+    rc, lines, _ = decode(capsys, path, "--skin", "19,12,5,8,4,3,33", "--decoder", "ratio")
+    assert rc == 0
+    assert_slip_decoded(lines, recording.t_s[-1])
+
+
+def test_npz_and_explicit_rate(tmp_path, capsys, recording):
+    path = tmp_path / "rec.npz"
+    np.savez(path, t_s=recording.t_s, force_n=recording.force_n)
+    rc, lines, _ = decode(capsys, path, "--skin", "alpha0.1", "--decoder", "mmse")
+    assert rc == 0
+    assert_slip_decoded(lines, recording.t_s[-1])
+    rc, again, _ = decode(capsys, path, "--skin", "alpha0.1", "--decoder", "mmse", "--fs", "400")
+    assert rc == 0 and again == lines
+
+
+def test_every_registered_decoder_runs(tmp_path, capsys, recording):
+    path = write_csv(tmp_path / "rec.csv", recording.t_s[:800], recording.force_n[:800])
+    for name in registry.DECODERS:
+        if not registry.available(name):
+            continue
+        rc, lines, _ = decode(capsys, path, "--skin", "alpha0.1", "--decoder", name)
+        assert rc == 0 and lines and all(set(d) == FIELDS for d in lines), name
+
+
+def test_default_decoder(tmp_path, capsys, recording):
+    path = write_csv(tmp_path / "rec.csv", recording.t_s[:400], recording.force_n[:400])
+    if registry.available(registry.DEFAULT_DECODER):
+        rc, lines, _ = decode(capsys, path, "--skin", "alpha0.1")
+        assert rc == 0 and lines
+    else:
+        assert_error(capsys, path, "--skin", "alpha0.1",
+                     contains=[registry.DEFAULT_DECODER, "not available"])
+
+
+# -- bad input: one line, exit 1 ----------------------------------------------------------------
+def test_csv_errors(tmp_path, capsys):
+    good = "t_s,force_n\n0.0,1.0\n0.0025,1.1\n0.005,1.2\n"
+    cases = {
+        "header.csv": ("time,force\n0,1\n", ["header must be 't_s,force_n'", "'time,force'"]),
+        "columns.csv": ("force_n,t_s\n0,1\n", ["'force_n,t_s'"]),
+        "text.csv": (good + "0.0075,abc\n", [":5:", "force_n 'abc'"]),
+        "nan.csv": (good + "0.0075,nan\n", [":5:", "'nan'"]),
+        "inf_time.csv": (good + "inf,1.0\n", [":5:", "t_s 'inf'"]),
+        "backwards.csv": (good + "0.004,1.0\n", [":5:", "0.004", "time must increase"]),
+        "repeat.csv": (good + "0.005,1.0\n", [":5:", "not after"]),
+        "empty.csv": ("", ["empty file"]),
+        "header_only.csv": ("t_s,force_n\n", ["no samples"]),
+        "three.csv": (good + "0.0075,1,2\n", [":5:", "expected 2 values"]),
+        "one_sample.csv": ("t_s,force_n\n0.0,1.0\n", ["cannot tell the sample rate", "--fs"]),
+    }
+    for name, (text, expected) in cases.items():
+        path = tmp_path / name
+        path.write_text(text)
+        assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
+                     contains=[name, *expected])
+    assert_error(capsys, tmp_path / "missing.csv", "--skin", "alpha0.1", "--decoder", "ratio",
+                 contains=["missing.csv", "no such file"])
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(b"\xff\xfe\x00\x01garbage")
+    assert_error(capsys, binary, "--skin", "alpha0.1", "--decoder", "ratio",
+                 contains=["binary.csv"])
+
+
+def test_npz_errors(tmp_path, capsys):
+    t = np.arange(10) / 400.0
+    cases = {
+        "keys.npz": (dict(time=t, force_n=t), ["missing array(s) t_s", "found"]),
+        "both.npz": (dict(a=t), ["t_s, force_n"]),
+        "nan.npz": (dict(t_s=t, force_n=np.where(t > 0.01, np.nan, 1.0)), ["force_n[5]", "nan"]),
+        "back.npz": (dict(t_s=np.r_[t[:5], t[3], t[6:]], force_n=t), ["t_s[5]",
+                                                                     "time must increase"]),
+        "length.npz": (dict(t_s=t, force_n=t[:5]), ["10 values", "force_n 5"]),
+        "shape.npz": (dict(t_s=t.reshape(2, 5), force_n=t.reshape(2, 5)), ["1-D"]),
+    }
+    for name, (arrays, expected) in cases.items():
+        path = tmp_path / name
+        np.savez(path, **arrays)
+        assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
+                     contains=[name, *expected])
+    fake = tmp_path / "fake.npz"
+    fake.write_text("not a zip")
+    assert_error(capsys, fake, "--skin", "alpha0.1", "--decoder", "ratio", contains=["fake.npz"])
+
+
+def test_option_errors(tmp_path, capsys, recording):
+    path = write_csv(tmp_path / "rec.csv", recording.t_s[:100], recording.force_n[:100])
+    assert_error(capsys, path, "--skin", "alpha9", "--decoder", "ratio",
+                 contains=["unknown ridge layout 'alpha9'", "alpha0.1"])
+    assert_error(capsys, path, "--skin", "5,-3", "--decoder", "ratio",
+                 contains=["spacing #2", "-3"])
+    assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "magic",
+                 contains=["unknown decoder 'magic'", "fft, ratio, mmse, dtw, tracker"])
+    with pytest.raises(SystemExit):
+        main(["decode", str(path), "--skin", "alpha0.1", "--fs", "-5"])
+    assert "positive number of Hz" in capsys.readouterr().err
+
+
+def test_missing_decoder_module_is_a_clear_error(monkeypatch, tmp_path, capsys, recording):
+    monkeypatch.setitem(registry.DECODERS, "tracker",
+                        "grasplink.gateway.decoding.no_such_module:TrackerDecoder")
+    path = write_csv(tmp_path / "rec.csv", recording.t_s[:100], recording.force_n[:100])
+    assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "tracker",
+                 contains=["decoder 'tracker' is not available", "no_such_module"])
+
+
+# -- CAN logs ------------------------------------------------------------------------------------
+def skin_frames(counts: np.ndarray, *, node_id: int = 0x10, t0: float = 1.0, fs: float = 400.0,
+                drop: tuple[int, ...] = (), repeat: tuple[int, ...] = ()) -> list[can.Message]:
+    """TPDO1 frames of 3 samples + sequence, the last sample of each at its time stamp."""
+    frames = []
+    for k in range(len(counts) // 3):
+        stamp = t0 + (3 * k + 2) / fs
+        data = b"".join(int(c).to_bytes(2, "little") for c in counts[3 * k:3 * k + 3])
+        data += ((k + 1) & 0xFF).to_bytes(1, "little")
+        msg = can.Message(timestamp=stamp, arbitration_id=0x180 + node_id, data=data,
+                          is_extended_id=False)
+        if k not in drop:
+            frames.append(msg)
+        if k in repeat:
+            frames.append(can.Message(timestamp=stamp + 0.001, arbitration_id=msg.arbitration_id,
+                                      data=data, is_extended_id=False))
+        if k % 5 == 0:  # other traffic on the bus
+            frames.append(can.Message(timestamp=stamp, arbitration_id=0x710, data=b"\x05",
+                                      is_extended_id=False))
+    return frames
+
+
+def write_log(path: Path, frames: list[can.Message]) -> Path:
+    with can.Logger(str(path)) as logger:
+        for msg in frames:
+            logger.on_message_received(msg)
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".asc", ".blf", ".log"])
+def test_can_log_formats(tmp_path, suffix):
+    counts = (np.arange(300) * 7) % 4096
+    path = write_log(tmp_path / f"skin{suffix}", skin_frames(counts, drop=(10, 11), repeat=(20,)))
+    t, force, stats = io.read_can_log(path)
+    assert stats.lost_packets == 2 and stats.republished == 1
+    assert len(t) == 300 - 6
+    assert np.all(np.diff(t) > 0)
+    expected_t = 1.0 + np.delete(np.arange(300), np.arange(30, 36)) / 400.0
+    # .asc and .blf store times from the start of the log: compare from the first sample
+    np.testing.assert_allclose(t - t[0], expected_t - expected_t[0], atol=2e-6)
+    expected = np.delete(counts, np.arange(30, 36)) * 98067.0 / 4095 / 1000
+    np.testing.assert_allclose(force, expected, rtol=1e-12)
+
+
+def test_can_log_node_id_and_errors(tmp_path, capsys):
+    counts = np.full(60, 1000)
+    path = write_log(tmp_path / "other.asc", skin_frames(counts, node_id=0x22))
+    assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
+                 contains=["other.asc", "no skin TPDO1 frames", "0x190", "0x1A2"])
+    rc, lines, _ = decode(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
+                          "--node-id", "0x22")
+    assert rc == 0 and lines
+    junk = tmp_path / "junk.blf"
+    junk.write_bytes(b"definitely not a BLF file" * 10)
+    assert_error(capsys, junk, "--skin", "alpha0.1", "--decoder", "ratio", contains=["junk.blf"])
+
+
+def test_can_log_of_a_scene_matches_the_simulated_signal(tmp_path, capsys):
+    out = tmp_path / "hl"
+    assert main(["run", str(ROOT / "scenes" / "headline_slip.toml"), "--out", str(out)]) == 0
+    capsys.readouterr()
+    t, force, stats = io.read_can_log(out / "can.asc")
+    assert stats.lost_packets == 0 and stats.malformed == 0
+    sim = np.genfromtxt(out / "skin.csv", delimiter=",", skip_header=1)
+    inside = (t >= sim[0, 0]) & (t <= sim[-1, 0])
+    assert inside.sum() > 0.99 * len(sim) - 3
+    lsb = 98.067 / 4095
+    assert np.max(np.abs(force[inside] - np.interp(t[inside], sim[:, 0], sim[:, 1]))) <= lsb / 2
+    rc, lines, _ = decode(capsys, out / "can.asc", "--skin", "alpha0.1", "--decoder", "ratio")
+    assert rc == 0 and all(set(d) == FIELDS for d in lines)
+    assert abs(len(lines) - 350) <= 2 and any(d["slip"] for d in lines)
