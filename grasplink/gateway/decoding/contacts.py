@@ -8,26 +8,30 @@ kink is also what survives when pulses merge at high speed (a new pulse
 starting on the decay of the previous one) and it is blind to the slow
 trends of the signal (drift, the object covering more of the sensor).
 
-Detector (all filters are FIR, run with carried state so chunking cannot
-change a single bit):
+Detector (all filters are FIR, run by lfilter's sample-by-sample loop with
+carried state, so chunking cannot change a single bit):
 
-* a bank of *hinge* filters, one per scale w (5, 10, 20, 40 ms by default):
-  h_w(n) = slope of x over [n, n + w] minus slope over [n - w, n] (least
-  squares slopes), i.e. the slope jump at n. The best scale for a pulse is
-  about half its rise, so fast pulses show on the short scales, slow pulses
+* a bank of *hinge* filters, one per scale w (5, 10, 20, 40, 80 ms by
+  default): h_w(n) = slope of x over [n, n + w] minus slope over [n - w, n]
+  (least-squares slopes), i.e. the slope jump at n. A pure kink gives the
+  same h at every scale while noise falls as w^-1.5, so the best scale is
+  about half the rise: fast pulses show on the short scales, slow pulses
   (weak slope, long rise) on the long ones;
-* each scale is normalised by its own robust noise level (median |h_w| of
-  fixed blocks of samples, taken low over the last second, with a floor), so
-  thresholds are in noise units and amplitudes do not matter;
+* each scale is normalised by its noise (per fixed block of 0.125 s: the
+  finest scale's white noise times the scale's gain, or - if larger, for
+  coloured noise - the scale's own median |h| over the last 10 s, with a
+  floor and a margin while few blocks are known), so thresholds are in noise
+  units and pulse amplitudes do not matter;
 * a contact candidate is a local maximum of z_w = h_w / noise_w over +-w
-  above `threshold`, with a rising force after the kink (a grip released
-  ends in a kink too, but does not rise), its time refined to a fraction of
-  a sample by a parabola; scales are merged finest first (a candidate close
-  to an earlier contact is the same contact);
+  above `threshold`, after which the force rises (the end of a grip release
+  is a kink too, but flat after); its time is refined coarse to fine (the
+  finest scale that still sees it places it) and to a fraction of a sample
+  by a parabola; a candidate within its own reach of an earlier contact is
+  that contact again (long scales decide later);
 * every contact is then watched: a *pulse* rises and falls back (by
-  `drop_fraction` of its rise, trend-corrected); a grip step rises and stays.
-  The verdict (pulse or not, or undecided when the next contact comes
-  first) is reported later as a `PulseCheck`.
+  `drop_fraction` of its height, rising trend removed) within a few rise
+  times; a grip step rises and stays level. The verdict (True, False, or
+  None when the force kept rising) is reported later as a `PulseCheck`.
 
 Events carry `emit_index`, the index of the sample whose arrival decided
 them, so a caller can replay them exactly in step with its own updates.
@@ -45,7 +49,10 @@ from scipy.signal import lfilter, lfilter_zi
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
-MAD_TO_STD = 1.0 / 0.6745
+MEDIAN_TO_STD = 1.0 / 0.6745
+# FIR taps run through lfilter with a = [1, 0]: its sample-by-sample loop (the
+# plain FIR path convolves, and then chunking changes the rounding)
+_IIR_ONE = np.array([1.0, 0.0])
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
 
 
@@ -75,7 +82,7 @@ class _Channel:
     width: int  # w, samples
     b: np.ndarray  # LS slope kernel over w + 1 samples, as lfilter taps
     zi: np.ndarray | None = None
-    after: deque = field(default_factory=deque)  # slope over [n, n + w], by n (last w + 1 kept)
+    after: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slopes not yet paired
     next_n: int = 0  # next hinge centre to compute
     hinge: list = field(default_factory=list)  # (hinge, after) of block 0 awaiting its noise
     noise_by_block: dict = field(default_factory=dict)
@@ -119,19 +126,22 @@ class ContactDetector:
 
     def __init__(self, fs_hz: float, *, scales_s: tuple[float, ...] = DEFAULT_SCALES_S,
                  threshold: float = 4.5, refine_z: float = 3.0, merge_widths: float = 2.0,
-                 block_s: float = 0.125, noise_blocks: int = 8,
-                 rise_fraction: float = 0.1, drop_fraction: float = 0.3,
+                 block_s: float = 0.125, noise_blocks: int = 8, history_s: float = 10.0,
+                 rise_fraction: float = 0.1, coarse_rise_fraction: float = 0.3,
+                 drop_fraction: float = 0.3,
                  watch_s: float = 1.0, level_s: float = 0.01, trend_s: float = 0.1,
                  decay_rises: float = 5.0):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
         self.channels = [_Channel(w, _slope_taps(w)) for w in widths]
         self.noise_blocks = int(noise_blocks)
+        self.history_blocks = max(self.noise_blocks, round(history_s / block_s))
         self.threshold = float(threshold)
         self.refine_z = float(refine_z)
         self.merge_widths = float(merge_widths)
         self.block = max(16, round(block_s * self.fs_hz))
         self.rise_fraction = float(rise_fraction)
+        self.coarse_rise_fraction = float(coarse_rise_fraction)
         self.drop_fraction = float(drop_fraction)
         self.watch = max(8, round(watch_s * self.fs_hz))
         self.decay_rises = float(decay_rises)
@@ -169,7 +179,8 @@ class ContactDetector:
         checks = self._check_pulses(events)
         self._trim()
         # block noises still needed: the last noise_blocks before the slowest channel's block
-        oldest = min(ch.next_n for ch in self.channels) // self.block - self.noise_blocks - 2
+        oldest = (min(ch.next_n for ch in self.channels) // self.block
+                  - max(self.noise_blocks, self.history_blocks) - 2)
         for ch in self.channels:
             for cache in (ch.block_noise, ch.noise_by_block):
                 for b in [b for b in cache if b < oldest]:
@@ -179,24 +190,22 @@ class ContactDetector:
     def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int,
                      candidates: list) -> None:
         w = ch.width
-        a = np.array([1.0, 0.0])  # IIR form: lfilter then runs its exact sample-by-sample loop
+        a = _IIR_ONE
         if ch.zi is None:  # as if the first sample had been held before: slopes start at 0
             ch.zi = lfilter_zi(ch.b, a) * x[0]
         y, ch.zi = lfilter(ch.b, a, x, zi=ch.zi)
         # y[m] is the slope over [m - w, m], i.e. "after" of centre n = m - w; `after`
-        # holds centres ch.next_n - w, ...; hinge(n) = after(n) - after(n - w).
-        after = ch.after
-        after.extend(y.tolist())
+        # holds the slopes of centres ch.next_n - w, ...; hinge(n) = after(n) - after(n - w).
+        after = np.concatenate([ch.after, y]) if len(ch.after) else y
         count = len(after) - w
         if count <= 0:
+            ch.after = after
             return
-        arr = np.fromiter(after, dtype=np.float64, count=len(after))
-        slope_after = arr[w:]
-        hinge = slope_after - arr[:count]
+        slope_after = after[w:]
+        hinge = slope_after - after[:count]
+        ch.after = after[count:]
         start = ch.next_n
         ch.next_n += count
-        for _ in range(count):
-            after.popleft()
         self._normalise(ch, start, hinge, slope_after)
         self._local_maxima(ci, ch, candidates)
 
@@ -224,7 +233,8 @@ class ContactDetector:
             if n % B == 0:  # block complete
                 values = np.concatenate(ch.block_abs)
                 ch.block_abs = []
-                ch.block_noise[block] = float(np.median(values)) * MAD_TO_STD
+                k = len(values) // 2
+                ch.block_noise[block] = float(np.partition(values, k)[k]) * MEDIAN_TO_STD
                 if block == 0:
                     noise = self._noise(ch, 0)
                     for seg_h, seg_a in ch.hinge:
@@ -238,13 +248,14 @@ class ContactDetector:
         ch.za = np.concatenate([ch.za, seg_a])
 
     def _noise(self, ch: _Channel, block: int) -> float:
-        """Noise of the hinge for centres of `block`.
+        """Noise of the hinge for centres of `block` (only earlier blocks are used).
 
-        The larger of: the white noise seen by the finest scale (a low
-        quantile of its recent blocks) times this scale's gain, and a low
-        quantile of this scale's own recent blocks (coloured noise, busy
-        signals). The own estimate alone underestimates at long scales,
-        whose outputs are correlated over a whole block.
+        The larger of: the white noise seen by the finest scale (the median of
+        its last `noise_blocks` blocks) times this scale's gain, and the median
+        of this scale's own blocks over the last `history_s` - coloured noise
+        that the white estimate misses; the long history keeps a slip over
+        dense ridges (which keeps the long scales busy) from hiding its own
+        pulses for a while.
         """
         cached = ch.noise_by_block.get(block)
         if cached is not None:
@@ -255,7 +266,8 @@ class ContactDetector:
         white = max(values[(len(values) - 1) // 2] / _hinge_gain(fine.width), NOISE_FLOOR_N)
         noise = white * _hinge_gain(ch.width)
         if ch is not fine:
-            own = sorted(ch.block_noise[b] for b in blocks)
+            history = range(max(0, block - self.history_blocks), block) if block else range(1)
+            own = sorted(ch.block_noise[b] for b in history)
             noise = max(noise, own[(len(own) - 1) // 2])
         # few blocks yet: the estimate is itself noisy, be more careful
         noise *= 1.0 + STARTUP_MARGIN * (self.noise_blocks - len(blocks)) / self.noise_blocks
@@ -280,7 +292,10 @@ class ContactDetector:
                 continue
             n = ch.z_start + i
             jump, rising = ch.zh[i], ch.za[i]
-            if rising < self.rise_fraction * jump:
+            # a contact makes the force rise; long scales must see a clear rise (the
+            # slow bend at the end of a fast pulse's decay is no contact)
+            needed = self.rise_fraction if w / self.fs_hz < 0.03 else self.coarse_rise_fraction
+            if rising < needed * jump:
                 continue
             n_at, delta, placed = self._refine(ci, n)
             emit = max(n + 2 * w, self.block - 1 + w)
@@ -339,7 +354,7 @@ class ContactDetector:
 
     # ------------------------------------------------------------------ pulse checks
     def _run_level(self, x: np.ndarray) -> None:
-        a = np.array([1.0, 0.0])
+        a = _IIR_ONE
         if self._level_zi is None:
             self._level_zi = lfilter_zi(self._level_b, a) * x[0]
         y, self._level_zi = lfilter(self._level_b, a, x, zi=self._level_zi)

@@ -13,9 +13,12 @@ Design (a small multiple-hypothesis tracker):
 * `contacts.ContactDetector` turns the signal into contact onsets (sub-sample
   times) and, later, tells whether each one fell back like a pulse.
 * A hypothesis is a direction, the ridge of the last contact it assigned,
-  and a constant-velocity Kalman filter on the distance travelled (ridge
-  positions are measurements at contact times, with process noise for real
-  speed changes, dips included). Each new contact branches every hypothesis:
+  and a Kalman filter on the distance travelled, the speed and the distance
+  each ridge's speed dip costs (ridge positions are measurements at contact
+  times). Each assignment is tried with a steady speed (little process
+  noise: the dip loss stays identifiable) and with a changing one (much
+  more): the likelier survives, so accelerating or braking slips are
+  followed. Each new contact branches every hypothesis:
   assign it to the next ridge, to a later one (missed contacts: weak pulses
   after short spacings), or call it spurious (tip pulses, noise, grip
   changes). A contact may also start a new track at any ridge, either way,
@@ -123,6 +126,8 @@ class TrackerDecoder(Decoder):
     SIGMA_POS_MM = 0.3  # ridge-contact position noise (ridge compliance, speed dips)
     SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
     SPEED_WALK_MM = 10.0
+    SPEED_WALK_CHANGING = 0.3  # ... while the slip speeds up or slows down
+    LOG_SPEED_CHANGE = 0.0  # prior log odds changing : steady at each contact (the data decide)
     DIP_RECOVERY_S = 0.05  # the speed recovers from a ridge's dip within about this time
     DIP_PRIOR_MM = 1.0  # prior sigma of the distance lost at each ridge (mean 0)
     DIP_MAX_MM = 1.5
@@ -135,20 +140,22 @@ class TrackerDecoder(Decoder):
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
     STRONG_Z = 60.0  # ridge contacts: strengths spread log-uniformly up to about this
     STRENGTH_MIN, STRENGTH_MAX = math.log(0.1), math.log(3.0)
-    REFRESH_S = 0.1  # how often silence (and the agreement) is re-scored between contacts
+    REFRESH_S = 0.2  # how often silence (and the agreement) is re-scored between contacts
     NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out of the posterior
     MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts
     START_CONTACTS = 2  # a slip may start at any of the last this many contacts
     PER_START = 4  # tracks kept per start contact, beyond the best max_hypotheses
     DETECT_MM = 1.2  # travel after a contact before the detector has decided it
-    DETECT_BLOCK_S = 0.02  # the detector runs on whole blocks of this length
+    DETECT_BLOCK_S = 0.03  # the detector runs on whole blocks of this length (by default)
     AGREE_MM = 3.0
     AGREE_SPEED = 0.15
-    CONF_POS_MM = 3.0
+    CONF_POS_MM = 3.0  # the position's own sigma halves the confidence at this value
+    CONF_CONTACTS = 2.0  # confidence grows as 1 - exp(-(contacts - 1) / this)
 
     def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
                  update_period_s: float = DEFAULT_UPDATE_S, max_hypotheses: int = 24,
-                 history: int = 8, detector: ContactDetector | None = None):
+                 history: int = 8, detect_block_s: float | None = None,
+                 detector: ContactDetector | None = None):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         geometry = self.geometry
         x = geometry.ridges_mm
@@ -166,16 +173,31 @@ class TrackerDecoder(Decoder):
         total = 2.0 * float(sum(before[1]))
         self._log_prior = {d: [math.log(b / total) for b in before[d]] for d in (1, -1)}
         self._p_detect = {d: [self._detect_probability(b) for b in before[d]] for d in (1, -1)}
+        # per start ridge: (log distance, P(all missed up to it)) of every ridge ahead
+        self._ahead: dict[int, list[list[tuple[float, float]]]] = {}
+        for d in (1, -1):
+            pos, pd = self._pos[d], self._p_detect[d]
+            rows = []
+            for r in range(self.count):
+                row, missed = [], 1.0
+                for k in range(r + 1, self.count):
+                    missed *= 1.0 - pd[k]
+                    row.append((math.log(float(pos[k] - pos[r])), missed))
+                rows.append(row)
+            self._ahead[d] = rows
+        self._erf_scale = 1.0 / (self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0))
         self.max_hypotheses = int(max_hypotheses)
         self.detector = detector or ContactDetector(fs_hz)
-        self._max_latency = self.detector.lag / self.fs_hz  # a contact is known at most this late
-        self._min_latency = 2.0 * self.detector.channels[0].width / self.fs_hz
+        block_s = self.DETECT_BLOCK_S if detect_block_s is None else float(detect_block_s)
+        self._block = max(1, round(block_s * self.fs_hz))  # latency against CPU
+        # a contact is known this late: the detector's own delay, then the block's end
+        self._max_latency = (self.detector.lag + self._block) / self.fs_hz
+        self._min_latency = (2.0 * self.detector.channels[0].width + self._block / 2) / self.fs_hz
         self._static = StaticForce(fs_hz)  # its design (2nd-order Butterworth at 2 Hz)
         self._sos = [tuple(float(c) for c in row) for row in self._static._sos]
         self._zi: list[list[float]] | None = None
         self._n_in = 0  # samples taken by the detector
         self._n_seen = 0  # samples accepted
-        self._block = max(1, round(self.DETECT_BLOCK_S * self.fs_hz))
         self._pending_t = np.zeros(0)
         self._pending_x = np.zeros(0)
         self._items: list[tuple[int, int, int, object]] = []  # (emit, kind, id, item) queue
@@ -325,8 +347,15 @@ class TrackerDecoder(Decoder):
                 c = self._start_speed(h, k, tc, dt, skipped, ev.sigma_s)
                 if c is not None:
                     c.score += miss + math.log(pd[k]) + self._log_speed_prior(c.v) - math.log(dt)
-            else:
-                c = self._kalman(h, k, tc, dt, skipped, ev.sigma_s, miss + math.log(pd[k]))
+            else:  # steady, or changing speed (the likelier of the two survives pruning)
+                c = self._kalman(h, k, tc, dt, skipped, ev.sigma_s, miss + math.log(pd[k]),
+                                 self.SPEED_WALK)
+                c2 = self._kalman(h, k, tc, dt, skipped, ev.sigma_s,
+                                  miss + math.log(pd[k]) + self.LOG_SPEED_CHANGE,
+                                  self.SPEED_WALK_CHANGING)
+                if c2 is not None:
+                    c2.ids = ids
+                    out.append(c2)
             if c is not None:
                 c.ids = ids
                 out.append(c)
@@ -343,17 +372,15 @@ class TrackerDecoder(Decoder):
         elapsed = g - h.t - self._max_latency
         if elapsed <= 0:
             return 0.0
-        pos = self._pos[h.direction]
-        pd = self._p_detect[h.direction]
-        sigma = self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0)
-        total, missed, reached_before = 0.0, 1.0, 0.0
-        for k in range(h.ridge + 1, self.count):
-            v_reach = (pos[k] - h.s) / elapsed  # slower than this: not there yet
-            not_reached = 0.5 * (1.0 + math.erf(math.log(v_reach / self.SPEED_PRIOR_MM_S)
-                                                / sigma))
+        shift = math.log(elapsed * self.SPEED_PRIOR_MM_S)
+        total, reached_before = 0.0, 0.0
+        missed = 1.0
+        for log_dist, missed_after in self._ahead[h.direction][h.ridge]:
+            # P(v < dist / elapsed): not there yet
+            not_reached = 0.5 * (1.0 + math.erf((log_dist - shift) * self._erf_scale))
             total += missed * (not_reached - reached_before)
             reached_before = not_reached
-            missed *= 1.0 - pd[k]
+            missed = missed_after
         total += missed * (1.0 - reached_before)  # past the last ridge, all missed
         return math.log(max(total, 1e-12))
 
@@ -397,13 +424,13 @@ class TrackerDecoder(Decoder):
         return c
 
     def _kalman(self, h: _Track, k: int, tc: float, dt: float, skipped: int, sigma_t: float,
-                log_prior: float) -> _Track | None:
+                log_prior: float, walk: float) -> _Track | None:
         """Predict h to tc and update it with ridge k; None if the speed leaves the range."""
         pos = self._pos[h.direction]
         v, d = h.v, h.d
         decay = math.exp(-dt / self.DIP_RECOVERY_S)
         a = h.m * (1.0 - decay) + skipped  # lag to come, in units of d
-        q = self.SPEED_WALK ** 2 * v ** 3 / self.SPEED_WALK_MM
+        q = walk ** 2 * v ** 3 / self.SPEED_WALK_MM
         p00 = (h.p00 + 2 * dt * h.p01 - 2 * a * h.p02 + dt * dt * h.p11 - 2 * a * dt * h.p12
                + a * a * h.p22 + q * dt ** 3 / 3.0)
         p01 = h.p01 + dt * h.p11 - a * h.p12 + q * dt * dt / 2.0
@@ -564,13 +591,16 @@ class TrackerDecoder(Decoder):
             self._cache = self._posterior(g)
         _, chosen, p_slip, agree = self._cache
         if chosen is None:
-            return SlipEstimate(g, False, None, None, force, 1.0 - p_slip)
+            return SlipEstimate(g, False, None, None, force, min(1.0, max(0.0, 1.0 - p_slip)))
         _, h, stopped, _, limit, _ = chosen
         s, speed, sigma = self._where(h, g, stopped, limit)
-        conf = agree / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
-        x = self._x(h, s)
+        # a posterior from few contacts is fragile (timing outliers, model errors)
+        maturity = 1.0 - math.exp(-(h.n - 1) / self.CONF_CONTACTS)
+        conf = agree * maturity / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
+        x = float(self._x(h, s))
+        conf = min(1.0, max(0.0, float(conf)))
         if not stopped:
-            return SlipEstimate(g, True, h.direction * speed, x, force, conf)
+            return SlipEstimate(g, True, float(h.direction * speed), x, force, conf)
         return SlipEstimate(g, False, 0.0, x, force, conf)
 
     def _x(self, h: _Track, s: float) -> float:
@@ -586,9 +616,13 @@ class TrackerDecoder(Decoder):
         entries = []
         until = g + self.REFRESH_S
         best = max(h.score for h in self._tracks)
+        # one-contact tracks only lose to silence: skip those that cannot matter
+        best_long = max([self._null, *(h.score for h in self._tracks if h.n >= 2)])
         for h in self._tracks:
             if h.score < best - self.NEGLIGIBLE:
                 continue  # weight below e^-20 whatever its silence and pulses
+            if h.n == 1 and h.score + 2 * self.LOG_PULSE < best_long - self.NEGLIGIBLE:
+                continue
             sched = self._schedule(h)
             adj, stopped, limit = self._state_at(sched, g)
             for entry in sched:

@@ -1,0 +1,42 @@
+"""The default decoder comes from the benchmark, and the benchmark's scoring is sound."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from grasplink.gateway.decoding import evaluate as ev
+from grasplink.gateway.decoding.bench import COST_BUDGET_US, recommend
+from grasplink.gateway.decoding.registry import DEFAULT_DECODER, make_decoder
+from grasplink.gateway.decoding.synth import slip_recording
+from grasplink.profiles.layouts import LAYOUTS_MM
+
+RESULTS = Path(__file__).resolve().parents[2] / "docs" / "benchmarks" / "decoding.json"
+
+
+def test_registry_default_is_the_benchmarks_recommendation():
+    results = json.loads(RESULTS.read_text())
+    assert not results["quick"], "docs hold a quick run; run `grasplink bench decode`"
+    assert results["recommended_default"] == DEFAULT_DECODER
+
+
+def _entry(p90: float, pos: float, cost: float) -> dict:
+    return {"target": {"speed_p90_pct": p90, "position_p90_mm": pos, "cpu_us_per_sample": cost}}
+
+
+def test_recommendation_is_the_most_accurate_decoder_within_the_cost_budget():
+    decoders = {"cheap": _entry(9.0, 3.0, 5.0), "best": _entry(1.0, 0.5, COST_BUDGET_US - 1),
+                "expensive": _entry(0.1, 0.1, COST_BUDGET_US * 10)}
+    assert recommend(decoders) == "best"
+
+
+def test_scoring_counts_missing_estimates_and_the_physical_limit():
+    rec = slip_recording(LAYOUTS_MM["alpha0.1"], 40.0, noise_scale=0.0, seed=3)
+    score = ev.score(lambda: make_decoder("ratio", rec.layout_mm, rec.fs_hz), rec)
+    contacts = rec.contact_times_s
+    onset = rec.t_s[np.argmax(rec.slipping > 0.5)]
+    assert score.physical_limit_s == contacts[2] - onset
+    assert score.scored > 0 and 0 <= score.missing <= score.scored
+    assert len(score.speed_rel_err) == score.scored - score.missing
