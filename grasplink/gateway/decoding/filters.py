@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -417,3 +418,21 @@ class PeakActivity:
             self.on = False
             self.episode_start = None
         return self.on
+
+
+def interleave(events: list[tuple[float, Peak | None]], points: list[tuple[int, float]],
+               apply: Callable[[tuple[float, Peak | None]], None]
+               ) -> Iterator[tuple[int, float]]:
+    """Apply events in time order, pausing at each update point: yields (count, t_update).
+
+    Events at or before an update reach the decoder before it is asked for that
+    estimate; the rest are applied when the generator is exhausted (consume it fully).
+    """
+    e = 0
+    for count, g in points:
+        while e < len(events) and events[e][0] <= g + 1e-12:
+            apply(events[e])
+            e += 1
+        yield count, g
+    for event in events[e:]:
+        apply(event)

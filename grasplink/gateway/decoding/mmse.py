@@ -58,7 +58,12 @@ import numpy as np
 
 from grasplink.errors import ConfigError
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
-from grasplink.gateway.decoding.filters import PeakActivity, PulseFrontEnd, pulse_events
+from grasplink.gateway.decoding.filters import (
+    PeakActivity,
+    PulseFrontEnd,
+    interleave,
+    pulse_events,
+)
 
 FLAT_N = 1e-4  # a segment with a std below this (N) is flat: it z-normalises to zeros
 REFERENCE_SEED = 20240  # fixed: the reference is the same every time
@@ -153,17 +158,11 @@ class WindowDecoder(Decoder):
         all_x = np.concatenate([self._x, x])
         offset = len(self._t)
         out = []
-        e = 0
-        for count, g in self.update_points(t):
-            while e < len(events) and events[e][0] <= g + 1e-12:
-                self._apply(events[e])
-                e += 1
+        for count, g in interleave(events, self.update_points(t), self._apply):
             if count:
                 self._force = float(force[count - 1])
             begin = self._window_begin(all_t, restarts, offset, count)
             out.append(self._estimate(g, all_t[begin:offset + count], all_x[begin:offset + count]))
-        for event in events[e:]:
-            self._apply(event)
         begin = self._window_begin(all_t, restarts, offset, len(t))
         self._t, self._x = all_t[begin:], all_x[begin:]
         self._force = float(force[-1])

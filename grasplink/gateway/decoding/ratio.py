@@ -58,7 +58,7 @@ import numpy as np
 
 from grasplink.errors import ConfigError
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
-from grasplink.gateway.decoding.filters import PeakLag, PulseFrontEnd, pulse_events
+from grasplink.gateway.decoding.filters import PeakLag, PulseFrontEnd, interleave, pulse_events
 
 RIDGE_SIDE_MM = 2.5  # skin node 0x2142 default (thesis ch. 5: L = 2.5 mm)
 PEAK_HISTORY = 8
@@ -118,16 +118,10 @@ class RatioDecoder(Decoder):
         events = pulse_events(segments)
         force = np.concatenate([seg.force_n for seg in segments])
         out = []
-        e = 0
-        for count, g in self.update_points(t):
-            while e < len(events) and events[e][0] <= g + 1e-12:
-                self._apply(events[e])
-                e += 1
+        for count, g in interleave(events, self.update_points(t), self._apply):
             if count:
                 self._force = float(force[count - 1])
             out.append(self._estimate(g))
-        for event in events[e:]:
-            self._apply(event)
         self._force = float(force[-1])
         return out
 
