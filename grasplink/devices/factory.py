@@ -32,6 +32,4 @@ def build_node(
     """A ready-to-start node of `kind` at `node_id` (default from objects.DEFAULT_NODE_IDS)."""
     app = make_app(kind, source)
     node_id = obj.DEFAULT_NODE_IDS[kind] if node_id is None else node_id
-    if not 1 <= node_id <= 127:
-        raise ConfigError(f"node-ID {node_id} is outside 1..127")
     return DeviceNode(load_profile(kind, node_id), node_id, app)
