@@ -151,9 +151,13 @@ def percentile(values: list[float], q: float) -> float:
 def _heartbeat_stats(beats: list[float]) -> dict:
     periods_ms = [(b - a) * 1e3 for a, b in itertools.pairwise(beats)]
     deviations = [abs(p - 100.0) for p in periods_ms]
-    return {"count": len(periods_ms), "mean_ms": statistics.mean(periods_ms),
-            "sd_ms": statistics.pstdev(periods_ms), "p99_dev_ms": percentile(deviations, 0.99),
-            "max_dev_ms": max(deviations)}
+    return {
+        "count": len(periods_ms),
+        "mean_ms": statistics.mean(periods_ms),
+        "sd_ms": statistics.pstdev(periods_ms),
+        "p99_dev_ms": percentile(deviations, 0.99),
+        "max_dev_ms": max(deviations),
+    }
 
 
 def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
@@ -187,10 +191,12 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
             cases = {
                 "expedited read 1000h (4 B)": lambda: remote.sdo.upload(0x1000, 0),
                 "expedited write 1017h (2 B)": lambda: remote.sdo.download(
-                    0x1017, 0, (100).to_bytes(2, "little")),
+                    0x1017, 0, (100).to_bytes(2, "little")
+                ),
                 "segmented read 1008h": lambda: remote.sdo.upload(0x1008, 0),
                 "block read 1008h (CRC)": lambda: remote.sdo.open(
-                    0x1008, 0, "rb", block_transfer=True, request_crc_support=True).read(),
+                    0x1008, 0, "rb", block_transfer=True, request_crc_support=True
+                ).read(),
             }
             for name, call in cases.items():
                 times = []
@@ -198,8 +204,11 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
                     t0 = time.perf_counter()
                     call()
                     times.append((time.perf_counter() - t0) * 1e6)
-                figures["sdo"][name] = (statistics.median(times), percentile(times, 0.9),
-                                        percentile(times, 0.99))
+                figures["sdo"][name] = (
+                    statistics.median(times),
+                    percentile(times, 0.9),
+                    percentile(times, 0.99),
+                )
             figures["heartbeat_under_sdo_load"] = _heartbeat_stats(beats)
             beats.clear()
             time.sleep(heartbeat_s)
@@ -300,11 +309,15 @@ def write_doc(nodes, total, resolution, rt, seconds, path: Path) -> None:
         "| condition | periods | mean ms | sd ms | p99 abs. deviation ms | max abs. deviation ms |",
         "|---|---:|---:|---:|---:|---:|",
     ]
-    for label, key in (("quiet", "heartbeat_quiet"),
-                       ("during the SDO runs above", "heartbeat_under_sdo_load")):
+    for label, key in (
+        ("quiet", "heartbeat_quiet"),
+        ("during the SDO runs above", "heartbeat_under_sdo_load"),
+    ):
         hb = rt[key]
-        lines.append(f"| {label} | {hb['count']} | {hb['mean_ms']:.3f} | {hb['sd_ms']:.3f} | "
-                     f"{hb['p99_dev_ms']:.3f} | {hb['max_dev_ms']:.3f} |")
+        lines.append(
+            f"| {label} | {hb['count']} | {hb['mean_ms']:.3f} | {hb['sd_ms']:.3f} | "
+            f"{hb['p99_dev_ms']:.3f} | {hb['max_dev_ms']:.3f} |"
+        )
     lines += [
         "",
         "The producer keeps a fixed grid, so a late beat is followed by an early one and",

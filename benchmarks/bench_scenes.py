@@ -28,8 +28,11 @@ TARGET_X = 50.0
 
 
 def chosen_scenes() -> list[Path]:
-    hand_written = sorted(p for p in SCENES.glob("*.toml") if not p.name.startswith("slip_")
-                          or p.stem in ("slip_friction", "slip_task_ch2"))
+    hand_written = sorted(
+        p
+        for p in SCENES.glob("*.toml")
+        if not p.name.startswith("slip_") or p.stem in ("slip_friction", "slip_task_ch2")
+    )
     generated = [SCENES / f"slip_alpha0.1_{v}mm_s_forward.toml" for v in (20, 60, 120)]
     return hand_written + generated
 
@@ -76,8 +79,10 @@ def write_doc(rows, costs, path: Path) -> None:
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for name, chunk_ms, n_effects, wall, x, cpu, duration in rows:
-        lines.append(f"| {name} | {chunk_ms:g} | {n_effects} | {duration:g} | {wall:.3f} | "
-                     f"{x:.0f} | {cpu:.3f} |")
+        lines.append(
+            f"| {name} | {chunk_ms:g} | {n_effects} | {duration:g} | {wall:.3f} | "
+            f"{x:.0f} | {cpu:.3f} |"
+        )
     lines += [
         "",
         "A scene costs what it asks for: `boot` (no effects) pays only for the nodes and the",
@@ -107,10 +112,21 @@ def main(argv: list[str] | None = None) -> int:
     for path in chosen_scenes():
         scene = load_scene(path)
         duration, wall, cpu = speed(path, repeats)
-        rows.append((path.stem, scene.chunk_us / 1000, len(scene.effects), wall,
-                     duration / wall, cpu, duration))
-    costs = {name: effect_costs(SCENES / f"{name}.toml", repeats)
-             for name in (HEADLINE, "static_grip_steps", "slip_task_ch2", "boot")}
+        rows.append(
+            (
+                path.stem,
+                scene.chunk_us / 1000,
+                len(scene.effects),
+                wall,
+                duration / wall,
+                cpu,
+                duration,
+            )
+        )
+    costs = {
+        name: effect_costs(SCENES / f"{name}.toml", repeats)
+        for name in (HEADLINE, "static_grip_steps", "slip_task_ch2", "boot")
+    }
     args.out.mkdir(parents=True, exist_ok=True)
     write_doc(rows, costs, args.out / "scenes.md")
     print((args.out / "scenes.md").read_text())

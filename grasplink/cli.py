@@ -49,8 +49,7 @@ def positive_hz(text: str) -> float:
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number of Hz") from None
     if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"sample rate must be a positive number of Hz, got "
-                                         f"{text}")
+        raise argparse.ArgumentTypeError(f"sample rate must be a positive number of Hz, got {text}")
     return value
 
 
@@ -93,38 +92,65 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="run a scene and record what happened")
     run.add_argument("scene", type=Path, help="scene file (scenes/*.toml)")
-    run.add_argument("--out", type=Path, default=None,
-                     help="output folder (default out/<scene name>)")
-    run.add_argument("--realtime", action="store_true",
-                     help="pace the scene to the wall clock (hardware in the loop)")
+    run.add_argument(
+        "--out", type=Path, default=None, help="output folder (default out/<scene name>)"
+    )
+    run.add_argument(
+        "--realtime",
+        action="store_true",
+        help="pace the scene to the wall clock (hardware in the loop)",
+    )
 
     plot = sub.add_parser("plot", help="draw PNGs of a recording made by `grasplink run`")
     plot.add_argument("recording", type=Path, help="folder written by grasplink run")
 
     decode = sub.add_parser(
-        "decode", help="decode slip, speed, position and grip force from a skin recording")
-    decode.add_argument("file", type=Path,
-                        help="CSV (header t_s,force_n), NPZ (t_s, force_n) or a CAN log of "
-                             "the skin node (.asc, .blf, .log)")
-    decode.add_argument("--skin", required=True, metavar="LAYOUT",
-                        help="ridge layout: a name (alpha0.1, fibonacci, uniform4, ...) or "
-                             "comma-separated spacings in mm")
-    decode.add_argument("--fs", type=positive_hz, default=None, metavar="HZ",
-                        help="sample rate (default: from the median time step of a CSV/NPZ; "
-                             "the EDS default, 400 Hz, for a CAN log)")
-    decode.add_argument("--decoder", default=None, metavar="NAME",
-                        help="fft, ratio, mmse, dtw or tracker (default: the one the "
-                             "decoding benchmark recommends, registry.DEFAULT_DECODER)")
-    decode.add_argument("--node-id", type=node_id_arg, default=0x10,
-                        help="skin node-ID in a CAN log (default 0x10)")
+        "decode", help="decode slip, speed, position and grip force from a skin recording"
+    )
+    decode.add_argument(
+        "file",
+        type=Path,
+        help="CSV (header t_s,force_n), NPZ (t_s, force_n) or a CAN log of "
+        "the skin node (.asc, .blf, .log)",
+    )
+    decode.add_argument(
+        "--skin",
+        required=True,
+        metavar="LAYOUT",
+        help="ridge layout: a name (alpha0.1, fibonacci, uniform4, ...) or "
+        "comma-separated spacings in mm",
+    )
+    decode.add_argument(
+        "--fs",
+        type=positive_hz,
+        default=None,
+        metavar="HZ",
+        help="sample rate (default: from the median time step of a CSV/NPZ; "
+        "the EDS default, 400 Hz, for a CAN log)",
+    )
+    decode.add_argument(
+        "--decoder",
+        default=None,
+        metavar="NAME",
+        help="fft, ratio, mmse, dtw or tracker (default: the one the "
+        "decoding benchmark recommends, registry.DEFAULT_DECODER)",
+    )
+    decode.add_argument(
+        "--node-id", type=node_id_arg, default=0x10, help="skin node-ID in a CAN log (default 0x10)"
+    )
 
     bench = sub.add_parser("bench", help="benchmarks that write their figures into docs/")
     bench_sub = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
     bench_decode = bench_sub.add_parser(
-        "decode", help="every skin decoder over simulated scenes: accuracy against cost")
+        "decode", help="every skin decoder over simulated scenes: accuracy against cost"
+    )
     bench_decode.add_argument("--quick", action="store_true", help="reduced grid (smoke test)")
-    bench_decode.add_argument("--out", type=Path, default=None,
-                              help="folder for decoding.md/.json/.png (default docs/benchmarks)")
+    bench_decode.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="folder for decoding.md/.json/.png (default docs/benchmarks)",
+    )
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
     prof_sub = profiles.add_subparsers(
@@ -221,8 +247,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     summary = sim.run(realtime=realtime)
     states = ", ".join(f"{k} {v['state'].lower()}" for k, v in summary["nodes"].items())
     speed = scene.duration_s / max(sim.wall_s, 1e-9)
-    print(f"{scene.name}: {scene.duration_s:g} s simulated in {sim.wall_s:.2f} s "
-          f"({speed:.0f}x real time{', paced' if realtime else ''})")
+    print(
+        f"{scene.name}: {scene.duration_s:g} s simulated in {sim.wall_s:.2f} s "
+        f"({speed:.0f}x real time{', paced' if realtime else ''})"
+    )
     print(f"  nodes: {states or 'none'}; effects: {', '.join(summary['effects']) or 'none'}")
     print(f"  wrote {out}/ ({', '.join(sorted(p.name for p in out.iterdir()))})")
     return 0
@@ -258,8 +286,9 @@ def cmd_decode(args: argparse.Namespace) -> int:
     decoder = registry.make_decoder(name, layout, fs)
     out = sys.stdout
     for start in range(0, len(t), DECODE_CHUNK):
-        for estimate in decoder.feed(t[start:start + DECODE_CHUNK],
-                                     force[start:start + DECODE_CHUNK]):
+        for estimate in decoder.feed(
+            t[start : start + DECODE_CHUNK], force[start : start + DECODE_CHUNK]
+        ):
             out.write(json.dumps(estimate.as_dict()) + "\n")
         out.flush()
     return 0
@@ -289,8 +318,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS = {"node": cmd_node, "bus": cmd_bus, "demo": cmd_demo, "run": cmd_run, "plot": cmd_plot,
-            "decode": cmd_decode, "bench": cmd_bench, "profiles": cmd_profiles}
+COMMANDS = {
+    "node": cmd_node,
+    "bus": cmd_bus,
+    "demo": cmd_demo,
+    "run": cmd_run,
+    "plot": cmd_plot,
+    "decode": cmd_decode,
+    "bench": cmd_bench,
+    "profiles": cmd_profiles,
+}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

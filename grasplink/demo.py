@@ -52,9 +52,13 @@ def demo_master(kinds: dict[int, str]) -> ScriptedMaster:
     belt_profile = [(i * dwell_s, float(v)) for i, v in enumerate(BELT_LEVELS_MRAD_S * 4)]
     grip_profile = [(t / 10, min(30.0, t)) for t in range(0, 31)]  # 10 N/s up to 30 N
     ids = {kind: node_id for node_id, kind in kinds.items()}
-    return ScriptedMaster(belt_id=ids.get("belt"), hand_id=ids.get("hand"),
-                          belt_mrad_s=belt_profile, hand_grip_n=grip_profile,
-                          command_period_us=COMMAND_PERIOD_US)
+    return ScriptedMaster(
+        belt_id=ids.get("belt"),
+        hand_id=ids.get("hand"),
+        belt_mrad_s=belt_profile,
+        hand_grip_n=grip_profile,
+        command_period_us=COMMAND_PERIOD_US,
+    )
 
 
 @dataclass

@@ -70,9 +70,15 @@ def main() -> None:
                 start = -LEAD_MM if direction == "forward" else length + LEAD_MM
                 travel = length + 2 * LEAD_MM
                 duration = round(0.2 + travel / speed + 0.3, 2)
-                text = TEMPLATE.format(layout=layout, speed=speed, direction=direction,
-                                       spacings=",".join(f"{s:g}" for s in spacings),
-                                       seed=seed, duration=duration, start=start)
+                text = TEMPLATE.format(
+                    layout=layout,
+                    speed=speed,
+                    direction=direction,
+                    spacings=",".join(f"{s:g}" for s in spacings),
+                    seed=seed,
+                    duration=duration,
+                    start=start,
+                )
                 (here / f"slip_{layout}_{speed}mm_s_{direction}.toml").write_text(text)
 
 

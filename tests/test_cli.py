@@ -21,8 +21,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def run_cli(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
-    return subprocess.run([*GRASPLINK, *args], capture_output=True, text=True, timeout=timeout,
-                          cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    return subprocess.run(
+        [*GRASPLINK, *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
 
 
 def free_port() -> int:
@@ -90,8 +96,13 @@ def hub():
 
 
 def _spawn_node(kind: str, url: str, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([*GRASPLINK, "node", kind, "--bus", url, "--duration", "20", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    return subprocess.Popen(
+        [*GRASPLINK, "node", kind, "--bus", url, "--duration", "20", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
 
 
 def _wait_line(proc: subprocess.Popen, needle: str, timeout_s: float = 15) -> str:
@@ -133,9 +144,13 @@ def test_second_node_with_the_same_id_refuses_to_start(hub):
     first = _spawn_node("emg", hub.url)
     try:
         _wait_line(first, "running on")
-        second = subprocess.run([*GRASPLINK, "node", "hand", "--node-id", "0x30", "--bus",
-                                 hub.url, "--duration", "3"], capture_output=True, text=True,
-                                timeout=30, cwd=ROOT)
+        second = subprocess.run(
+            [*GRASPLINK, "node", "hand", "--node-id", "0x30", "--bus", hub.url, "--duration", "3"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+            cwd=ROOT,
+        )
         assert_clean_error(second, "node-ID 0x30 is already in use")
     finally:
         first.terminate()

@@ -20,8 +20,9 @@ def test_master_starts_every_node_on_its_boot_up():
     net = LockstepNetwork([master, *nodes])
     net.start()
     net.run_for(300 * MS)
-    assert {n.node_id: n.state for n in nodes} == dict.fromkeys((0x10, 0x20, 0x30, 0x40),
-                                                                NmtState.OPERATIONAL)
+    assert {n.node_id: n.state for n in nodes} == dict.fromkeys(
+        (0x10, 0x20, 0x30, 0x40), NmtState.OPERATIONAL
+    )
     assert all(master.nodes[n.node_id].state == NmtState.OPERATIONAL for n in nodes)
 
 

@@ -28,8 +28,15 @@ class ErrorFrame:
 
 
 class FaultyLink:
-    def __init__(self, rng: np.random.Generator, *, latency_us: int = 0, jitter_us: int = 0,
-                 drop_probability: float = 0.0, error_frames_per_s: float = 0.0):
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        *,
+        latency_us: int = 0,
+        jitter_us: int = 0,
+        drop_probability: float = 0.0,
+        error_frames_per_s: float = 0.0,
+    ):
         self.rng = rng
         self.latency_us = latency_us
         self.jitter_us = jitter_us

@@ -101,8 +101,9 @@ class LockstepNetwork:
     def run_for(self, duration_us: int) -> None:
         self.run_until(self.t_us + duration_us)
 
-    def _deliver(self, sender: SansIoDevice | None, frames: list[Frame],
-                 caused: list[Frame] | None = None) -> None:
+    def _deliver(
+        self, sender: SansIoDevice | None, frames: list[Frame], caused: list[Frame] | None = None
+    ) -> None:
         """Put frames on the bus; replies cascade at once (or later on a slow link)."""
         queue: deque[tuple[SansIoDevice | None, Frame]] = deque((sender, f) for f in frames)
         while queue:

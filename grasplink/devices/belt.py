@@ -35,9 +35,14 @@ def limit_belt_velocity(target_mrad_s: int, max_mrad_s: int) -> tuple[int, bool]
 
 class BeltApp(DriveApp):
     supported_mode = obj.MODE_PROFILE_VELOCITY
-    inputs = (*DriveApp.inputs, obj.BELT_TARGET_VELOCITY_MRAD_S,
-              obj.BELT_MAX_PROFILE_VELOCITY_MRAD_S, obj.BELT_PROFILE_ACCELERATION,
-              obj.BELT_PROFILE_DECELERATION, obj.BELT_QUICK_STOP_DECELERATION)
+    inputs = (
+        *DriveApp.inputs,
+        obj.BELT_TARGET_VELOCITY_MRAD_S,
+        obj.BELT_MAX_PROFILE_VELOCITY_MRAD_S,
+        obj.BELT_PROFILE_ACCELERATION,
+        obj.BELT_PROFILE_DECELERATION,
+        obj.BELT_QUICK_STOP_DECELERATION,
+    )
 
     def __init__(self) -> None:
         super().__init__()
@@ -94,9 +99,11 @@ class BeltApp(DriveApp):
         self._publish_status()
 
     def settled(self) -> bool:
-        return (self.setpoint_mrad_s == self._demand
-                and self.drive.state != DriveState.QUICK_STOP_ACTIVE
-                and (self.simulated_motor or self.velocity_mrad_s == self.setpoint_mrad_s))
+        return (
+            self.setpoint_mrad_s == self._demand
+            and self.drive.state != DriveState.QUICK_STOP_ACTIVE
+            and (self.simulated_motor or self.velocity_mrad_s == self.setpoint_mrad_s)
+        )
 
     def _publish_display(self) -> None:
         omega_rad_s = abs(self.velocity_mrad_s) / 1000.0

@@ -15,8 +15,12 @@ from grasplink.profiles import objects as obj
 
 class HandApp(DriveApp):
     supported_mode = obj.MODE_GRIP_FORCE
-    inputs = (*DriveApp.inputs, obj.HAND_TARGET_GRIP_MN, obj.HAND_CRUSH_LIMIT_MN,
-              obj.HAND_GRIP_RATE_MN_S)
+    inputs = (
+        *DriveApp.inputs,
+        obj.HAND_TARGET_GRIP_MN,
+        obj.HAND_CRUSH_LIMIT_MN,
+        obj.HAND_GRIP_RATE_MN_S,
+    )
 
     def __init__(self) -> None:
         super().__init__()
@@ -75,4 +79,5 @@ class HandApp(DriveApp):
 
     def settled(self) -> bool:
         return self.setpoint_mn == self._demand and (
-            self.simulated_actuator or self.grip_mn == self.setpoint_mn)
+            self.simulated_actuator or self.grip_mn == self.setpoint_mn
+        )

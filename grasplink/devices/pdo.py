@@ -149,8 +149,11 @@ class PdoEngine:
         self._event_tpdos = []
         self._by_can_id = {}
         for pdo in self._by_comm.values():
-            pdo.params = {sub: int(self.store.get(pdo.comm_index, sub))
-                          for sub in range(1, 7) if self.store.has(pdo.comm_index, sub)}
+            pdo.params = {
+                sub: int(self.store.get(pdo.comm_index, sub))
+                for sub in range(1, 7)
+                if self.store.has(pdo.comm_index, sub)
+            }
             if self.is_valid(pdo):
                 self._by_can_id.setdefault(self.cob_id(pdo) & CAN_ID_MASK, pdo)
             count = int(self.store.get(pdo.map_index, 0))

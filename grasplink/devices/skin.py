@@ -50,8 +50,12 @@ class SkinApp(DeviceApp):
         super().attach(node)
         self.store.add_validator(obj.SKIN_RIDGE_SPACING_UM, self._validate_spacing)
         self.store.add_validator(obj.SKIN_FSR_CALIBRATION, self._validate_calibration)
-        watched = (obj.SKIN_LAYOUT_PRESET, obj.SKIN_RIDGE_SPACING_UM, obj.SKIN_SAMPLE_RATE_HZ,
-                   obj.SKIN_FSR_CALIBRATION)
+        watched = (
+            obj.SKIN_LAYOUT_PRESET,
+            obj.SKIN_RIDGE_SPACING_UM,
+            obj.SKIN_SAMPLE_RATE_HZ,
+            obj.SKIN_FSR_CALIBRATION,
+        )
         self.store.add_listener(self._on_change, watched)
 
     # -- configuration ----------------------------------------------------------

@@ -32,9 +32,16 @@ def step_value(profile: Profile | None, t_s: float) -> float | None:
 
 
 class ScriptedMaster(NmtMaster):
-    def __init__(self, *, belt_id: int | None = None, hand_id: int | None = None,
-                 belt_mrad_s: Profile | None = None, hand_grip_n: Profile | None = None,
-                 command_period_us: int = COMMAND_PERIOD_US, **master_options):
+    def __init__(
+        self,
+        *,
+        belt_id: int | None = None,
+        hand_id: int | None = None,
+        belt_mrad_s: Profile | None = None,
+        hand_grip_n: Profile | None = None,
+        command_period_us: int = COMMAND_PERIOD_US,
+        **master_options,
+    ):
         super().__init__(**master_options)
         self.belt_id, self.hand_id = belt_id, hand_id
         self.belt_profile, self.hand_profile = belt_mrad_s, hand_grip_n
@@ -64,13 +71,22 @@ class ScriptedMaster(NmtMaster):
         frames = []
         belt = step_value(self.belt_profile, t_s)
         if belt is not None and self._operational(self.belt_id):
-            frames.append(Frame(RPDO_BASES[0] + self.belt_id,
-                                struct.pack("<Hi", self._controlword(self.belt_id), round(belt))))
+            frames.append(
+                Frame(
+                    RPDO_BASES[0] + self.belt_id,
+                    struct.pack("<Hi", self._controlword(self.belt_id), round(belt)),
+                )
+            )
         grip_n = step_value(self.hand_profile, t_s)
         if grip_n is not None and self._operational(self.hand_id):
-            frames.append(Frame(RPDO_BASES[0] + self.hand_id,
-                                struct.pack("<HI", self._controlword(self.hand_id),
-                                            max(0, round(grip_n * 1000)))))
+            frames.append(
+                Frame(
+                    RPDO_BASES[0] + self.hand_id,
+                    struct.pack(
+                        "<HI", self._controlword(self.hand_id), max(0, round(grip_n * 1000))
+                    ),
+                )
+            )
         return frames
 
     def on_node_restart(self, node_id: int) -> None:

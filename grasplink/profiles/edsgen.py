@@ -446,8 +446,15 @@ def hand() -> tuple[list[Obj], list[Pdo], list[Pdo]]:
         var(ob.HAND_GRIP_RATE_MN_S, "Grip force rate [mN/s]", U32, "rw", 50000, 1000, 1000000),
     ]
     rx = [Pdo(((ob.CONTROLWORD, 0), (ob.HAND_TARGET_GRIP_MN, 0)), valid=True, ttype=255)]
-    tx = [Pdo(((ob.STATUSWORD, 0), (ob.HAND_ACTUAL_GRIP_MN, 0)), valid=True, ttype=255,
-               inhibit=100, event=20)]
+    tx = [
+        Pdo(
+            ((ob.STATUSWORD, 0), (ob.HAND_ACTUAL_GRIP_MN, 0)),
+            valid=True,
+            ttype=255,
+            inhibit=100,
+            event=20,
+        )
+    ]
     return objs, _pad(tx), [*rx, *(Pdo(ttype=255) for _ in range(3))]
 
 

@@ -45,16 +45,21 @@ class Context:
 
     def require_layout(self, params: Params, what: str) -> tuple[float, ...]:
         if self.layout_mm is None:
-            raise params.error("type", f"{what} needs a skin layout: set [nodes.skin] layout "
-                                       "or [scene] layout")
+            raise params.error(
+                "type", f"{what} needs a skin layout: set [nodes.skin] layout or [scene] layout"
+            )
         return self.layout_mm
 
 
 class Io:
     """One domain chunk's view of the signals: read inputs, write outputs."""
 
-    def __init__(self, times_us: np.ndarray, read: Callable[[str, np.ndarray], np.ndarray],
-                 write: Callable[[str, np.ndarray], None]):
+    def __init__(
+        self,
+        times_us: np.ndarray,
+        read: Callable[[str, np.ndarray], np.ndarray],
+        write: Callable[[str, np.ndarray], None],
+    ):
         self.times_us = times_us
         self.t_s = times_us / 1e6
         self._read = read
@@ -115,8 +120,9 @@ class Endpoint:
     domain: str = PHYSICS
 
 
-def build_graph(effects: list[Effect], endpoints: list[Endpoint], source: str
-                ) -> tuple[list[Effect], dict[str, str]]:
+def build_graph(
+    effects: list[Effect], endpoints: list[Endpoint], source: str
+) -> tuple[list[Effect], dict[str, str]]:
     """Order effects so inputs come first; return (ordered effects, signal -> domain).
 
     Raises SceneError when an input has no producer, two effects produce the
@@ -133,27 +139,34 @@ def build_graph(effects: list[Effect], endpoints: list[Endpoint], source: str
             if name in effect.inputs:
                 continue
             if name in producers:
-                raise SceneError(source, f"effects[{index}]",
-                                 f"{effect.kind} produces {name}, already produced by "
-                                 f"{producers[name]}")
+                raise SceneError(
+                    source,
+                    f"effects[{index}]",
+                    f"{effect.kind} produces {name}, already produced by {producers[name]}",
+                )
             producers[name] = effect.kind
             domain_of[name] = effect.domain
     for index, effect in enumerate(effects):
         for name in effect.inputs:
             if name not in producers:
-                raise SceneError(source, f"effects[{index}]",
-                                 f"{effect.kind} needs {name}, which nothing in this scene "
-                                 f"provides; add {_providers_of(name)}")
+                raise SceneError(
+                    source,
+                    f"effects[{index}]",
+                    f"{effect.kind} needs {name}, which nothing in this scene "
+                    f"provides; add {_providers_of(name)}",
+                )
             if DOMAINS.index(domain_of[name]) > DOMAINS.index(effect.domain):
-                raise SceneError(source, f"effects[{index}]",
-                                 f"{effect.kind} ({effect.domain}) cannot read {name} from "
-                                 f"the later {domain_of[name]} domain")
+                raise SceneError(
+                    source,
+                    f"effects[{index}]",
+                    f"{effect.kind} ({effect.domain}) cannot read {name} from "
+                    f"the later {domain_of[name]} domain",
+                )
     return _topological(effects, source), domain_of
 
 
 def _providers_of(signal: str) -> str:
-    kinds = [k for k, cls in REGISTRY.items()
-             if signal in cls.outputs and signal not in cls.inputs]
+    kinds = [k for k, cls in REGISTRY.items() if signal in cls.outputs and signal not in cls.inputs]
     nodes = {"belt.command_mrad_s": "[nodes.belt]", "hand.target_n": "[nodes.hand]"}
     options = [f"an effect of type {k!r}" for k in sorted(kinds)]
     if signal in nodes:
@@ -167,7 +180,8 @@ def _topological(effects: list[Effect], source: str) -> list[Effect]:
     ordered: list[int] = []
     ready_signals: set[str] = set()
     external = {name for e in effects for name in e.inputs} - {
-        name for e in effects for name in e.outputs}
+        name for e in effects for name in e.outputs
+    }
     ready_signals |= external
     # A modified signal is ready for plain consumers only after all its modifiers ran.
     modifiers: dict[str, list[int]] = {}

@@ -42,8 +42,8 @@ class SceneSource:
         self.values = np.zeros(0)
 
     def append(self, times_us: np.ndarray, values: np.ndarray) -> None:
-        self.times_us = np.concatenate([self.times_us, times_us])[-self.capacity:]
-        self.values = np.concatenate([self.values, values])[-self.capacity:]
+        self.times_us = np.concatenate([self.times_us, times_us])[-self.capacity :]
+        self.values = np.concatenate([self.values, values])[-self.capacity :]
 
     def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
         index = np.arange(start_index, start_index + count, dtype=np.int64)
@@ -83,8 +83,9 @@ class Simulation:
         self.nodes: dict[str, DeviceNode] = {}
         self.domain_of = scene.domain_of
         self.effects = {d: [e for e in scene.ordered if e.domain == d] for d in DOMAINS}
-        self._endpoints_by_domain = {d: [e for e in scene.endpoints if e.domain == d]
-                                     for d in DOMAINS}
+        self._endpoints_by_domain = {
+            d: [e for e in scene.endpoints if e.domain == d] for d in DOMAINS
+        }
         self.sources: dict[str, SceneSource] = {}
         produced = {name for e in scene.effects for name in e.outputs}
         for kind, signal, domain in (("skin", "skin.force_n", SKIN), ("emg", "emg.raw_uv", EMG)):
@@ -95,27 +96,37 @@ class Simulation:
         link = None
         if scene.bus is not None:
             b = scene.bus
-            link = FaultyLink(scene.context.rng("bus.faults"), latency_us=b.latency_us,
-                              jitter_us=b.jitter_us, drop_probability=b.drop_probability,
-                              error_frames_per_s=b.error_frames_per_s)
+            link = FaultyLink(
+                scene.context.rng("bus.faults"),
+                latency_us=b.latency_us,
+                jitter_us=b.jitter_us,
+                drop_probability=b.drop_probability,
+                error_frames_per_s=b.error_frames_per_s,
+            )
         devices = ([self.master] if self.master else []) + list(self.nodes.values())
         self.network = LockstepNetwork(devices, link)
         self.domains: dict[str, DomainState] = {}
         for domain in DOMAINS:
             signals = sorted({n for n, d in self.domain_of.items() if d == domain})
             if signals:
-                self.domains[domain] = DomainState(domain, SampleClock(scene.rate_hz(domain), 0),
-                                                   signals)
+                self.domains[domain] = DomainState(
+                    domain, SampleClock(scene.rate_hz(domain), 0), signals
+                )
         if recorder is not None:
             for domain, state in self.domains.items():
                 recorder.open_domain(domain, state.signals)
             self.network.taps.append(recorder.tap)
         self._power_events = sorted(
-            [(round(p.at_s * 1e6), "off", p.node) for p in (scene.bus.power_loss if scene.bus
-                                                            else [])]
-            + [(round(p.restore_s * 1e6), "on", p.node) for p in (scene.bus.power_loss
-                                                                  if scene.bus else [])
-               if p.restore_s is not None])
+            [
+                (round(p.at_s * 1e6), "off", p.node)
+                for p in (scene.bus.power_loss if scene.bus else [])
+            ]
+            + [
+                (round(p.restore_s * 1e6), "on", p.node)
+                for p in (scene.bus.power_loss if scene.bus else [])
+                if p.restore_s is not None
+            ]
+        )
         self.t_us = 0
 
     # -- construction --------------------------------------------------------------
@@ -130,8 +141,14 @@ class Simulation:
             hand = self.nodes["hand"].app
             hand.simulated_actuator = "hand.grip_n" in produced
             # A scene may start with the object already held: the node boots holding it.
-            initial_n = next((getattr(e, "initial_n", 0.0) for e in self.scene.effects
-                              if e.kind == "hand.actuator"), 0.0)
+            initial_n = next(
+                (
+                    getattr(e, "initial_n", 0.0)
+                    for e in self.scene.effects
+                    if e.kind == "hand.actuator"
+                ),
+                0.0,
+            )
             hand.grip_mn = initial_n * MN_PER_N
 
     def _configure(self, node: DeviceNode, spec) -> None:
@@ -141,8 +158,9 @@ class Simulation:
             nvm[(obj.SKIN_SAMPLE_RATE_HZ, 0)] = spec.sample_rate_hz
             nvm[(obj.SKIN_SAMPLES_PER_PDO, 0)] = spec.samples_per_pdo
             layout = self.scene.layout_mm or ()
-            preset = next((code for code, name in PRESET_CODES.items()
-                           if name == self.scene.layout_name), 0)
+            preset = next(
+                (code for code, name in PRESET_CODES.items() if name == self.scene.layout_name), 0
+            )
             nvm[(obj.SKIN_LAYOUT_PRESET, 0)] = preset
             if not preset and layout:
                 nvm[(obj.SKIN_RIDGE_SPACING_UM, 0)] = len(layout)
@@ -156,8 +174,12 @@ class Simulation:
         if not gateway.enabled:
             return None
         ids = {k: n.node_id for k, n in self.nodes.items()}
-        return ScriptedMaster(belt_id=ids.get("belt"), hand_id=ids.get("hand"),
-                              belt_mrad_s=gateway.belt_mrad_s, hand_grip_n=gateway.hand_grip_n)
+        return ScriptedMaster(
+            belt_id=ids.get("belt"),
+            hand_id=ids.get("hand"),
+            belt_mrad_s=gateway.belt_mrad_s,
+            hand_grip_n=gateway.hand_grip_n,
+        )
 
     # -- running ---------------------------------------------------------------------
     def run(self, *, realtime: bool = False) -> dict:
@@ -211,8 +233,11 @@ class Simulation:
         for endpoint in self._endpoints_by_domain[state.name]:
             for name in endpoint.writes:
                 state.values[name] = np.full(len(times), self._command(name))
-        io = Io(times, lambda name, at, s=state: self._read(s, name, at),
-                lambda name, values, s=state: s.values.__setitem__(name, values))
+        io = Io(
+            times,
+            lambda name, at, s=state: self._read(s, name, at),
+            lambda name, values, s=state: s.values.__setitem__(name, values),
+        )
         if len(times):
             self.samples[state.name] = self.samples.get(state.name, 0) + len(times)
             for effect in self.effects[state.name]:
@@ -228,9 +253,11 @@ class Simulation:
             if self.domain_of.get(signal) == state.name and signal in state.values:
                 source.append(times, state.values[signal])
         if self.recorder is not None:
-            self.recorder.write_chunk(state.name, times,
-                                      {n: state.values.get(n, np.full(len(times), np.nan))
-                                       for n in state.signals})
+            self.recorder.write_chunk(
+                state.name,
+                times,
+                {n: state.values.get(n, np.full(len(times), np.nan)) for n in state.signals},
+            )
 
     def _read(self, state: DomainState, name: str, at_us: np.ndarray) -> np.ndarray:
         home = self.domain_of[name]
@@ -296,11 +323,12 @@ class Simulation:
             "clock": scene.clock,
             "rates_hz": {d: scene.rate_hz(d) for d in self.domains},
             "layout": scene.layout_name or (list(scene.layout_mm) if scene.layout_mm else None),
-            "nodes": {k: {"node_id": n.node_id, "state": n.state.name}
-                      for k, n in self.nodes.items()},
+            "nodes": {
+                k: {"node_id": n.node_id, "state": n.state.name} for k, n in self.nodes.items()
+            },
             "gateway": scene.gateway.enabled,
             "effects": [e.kind for e in scene.effects],
             "bus_faults": vars(scene.bus) | {"power_loss": [vars(p) for p in scene.bus.power_loss]}
-            if scene.bus else None,
+            if scene.bus
+            else None,
         }
-

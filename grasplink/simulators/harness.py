@@ -33,8 +33,12 @@ def make(kind_cls: type[Effect], ctx: Context, **params) -> Effect:
     return effect
 
 
-def run(effects: list[Effect], times_us: np.ndarray, inputs: Mapping[str, np.ndarray] | None = None,
-        chunk: int | None = None) -> dict[str, np.ndarray]:
+def run(
+    effects: list[Effect],
+    times_us: np.ndarray,
+    inputs: Mapping[str, np.ndarray] | None = None,
+    chunk: int | None = None,
+) -> dict[str, np.ndarray]:
     """Step `effects` (already in order, one domain) over `times_us` in chunks of `chunk`."""
     inputs = {k: np.asarray(v, dtype=np.float64) for k, v in (inputs or {}).items()}
     outputs: dict[str, list[np.ndarray]] = {}

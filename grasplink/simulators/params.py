@@ -54,15 +54,23 @@ class Params:
             raise self.error(name, "is required")
         return default
 
-    def number(self, name: str, default: Any = _MISSING, *, low: float | None = None,
-               high: float | None = None, low_open: bool = False) -> float:
+    def number(
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+    ) -> float:
         value = self._get(name, default)
         if value is None:
             return value
         return self._check_number(name, value, low, high, low_open)
 
-    def integer(self, name: str, default: Any = _MISSING, *, low: int | None = None,
-                high: int | None = None) -> int:
+    def integer(
+        self, name: str, default: Any = _MISSING, *, low: int | None = None, high: int | None = None
+    ) -> int:
         value = self._get(name, default)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, f"expected an integer, got {_describe(value)}")
@@ -74,48 +82,67 @@ class Params:
             raise self.error(name, f"expected true or false, got {_describe(value)}")
         return value
 
-    def string(self, name: str, default: Any = _MISSING, *,
-               choices: Sequence[str] | None = None) -> str:
+    def string(
+        self, name: str, default: Any = _MISSING, *, choices: Sequence[str] | None = None
+    ) -> str:
         value = self._get(name, default)
         if value is None and default is None:
             return None  # optional and absent
         if not isinstance(value, str):
             raise self.error(name, f"expected a string, got {_describe(value)}")
         if choices is not None and value not in choices:
-            raise self.error(name, f"expected one of {', '.join(map(repr, choices))}, "
-                                   f"got {value!r}")
+            raise self.error(
+                name, f"expected one of {', '.join(map(repr, choices))}, got {value!r}"
+            )
         return value
 
-    def numbers(self, name: str, default: Any = _MISSING, *, low: float | None = None,
-                high: float | None = None, low_open: bool = False,
-                min_len: int = 1) -> tuple[float, ...]:
+    def numbers(
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+        min_len: int = 1,
+    ) -> tuple[float, ...]:
         value = self._get(name, default)
         if not isinstance(value, list) or len(value) < min_len:
-            raise self.error(name, f"expected a list of at least {min_len} numbers, "
-                                   f"got {_describe(value)}")
-        return tuple(self._check_number(f"{name}[{i}]", v, low, high, low_open)
-                     for i, v in enumerate(value))
+            raise self.error(
+                name, f"expected a list of at least {min_len} numbers, got {_describe(value)}"
+            )
+        return tuple(
+            self._check_number(f"{name}[{i}]", v, low, high, low_open) for i, v in enumerate(value)
+        )
 
-    def pairs(self, name: str, default: Any = _MISSING, *, low: float | None = None,
-              high: float | None = None, integer: bool = False,
-              what: str = "value") -> tuple[tuple[float, float], ...]:
+    def pairs(
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        integer: bool = False,
+        what: str = "value",
+    ) -> tuple[tuple[float, float], ...]:
         """A list of [time_s, value] pairs (a profile over time), values within bounds."""
         value = self._get(name, default)
         if not isinstance(value, list) or not value:
-            raise self.error(name, f"expected a list of [time_s, value] pairs, "
-                                   f"got {_describe(value)}")
+            raise self.error(
+                name, f"expected a list of [time_s, value] pairs, got {_describe(value)}"
+            )
         out = []
         for i, item in enumerate(value):
             if not isinstance(item, list) or len(item) != 2:
-                raise self.error(f"{name}[{i}]", f"expected a [time_s, value] pair, "
-                                                 f"got {_describe(item)}")
+                raise self.error(
+                    f"{name}[{i}]", f"expected a [time_s, value] pair, got {_describe(item)}"
+                )
             value = self._check_number(f"{name}[{i}][1]", item[1], None, None, False)
             out_of_range = (low is not None and value < low) or (high is not None and value > high)
             if out_of_range or (integer and not float(value).is_integer()):
                 span = f"{low:g}..{high:g}" if high is not None else f">= {low:g}"
                 kind = "an integer " if integer else "a "
-                raise self.error(f"{name}[{i}][1]", f"expected {kind}{what} {span}, "
-                                                    f"got {value:g}")
+                raise self.error(f"{name}[{i}][1]", f"expected {kind}{what} {span}, got {value:g}")
             out.append((self._check_number(f"{name}[{i}][0]", item[0], 0.0, None, False), value))
         times = [t for t, _ in out]
         if any(b <= a for a, b in itertools.pairwise(times)):
@@ -136,8 +163,9 @@ class Params:
             known = ", ".join(sorted(self._used)) or "none"
             raise self.error(unknown[0], f"unknown key (known here: {known})")
 
-    def _check_number(self, name: str, value: Any, low: float | None, high: float | None,
-                      low_open: bool) -> float:
+    def _check_number(
+        self, name: str, value: Any, low: float | None, high: float | None, low_open: bool
+    ) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.error(name, f"expected a number, got {_describe(value)}")
         if not math.isfinite(value):

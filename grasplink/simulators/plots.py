@@ -53,8 +53,10 @@ def plot_recording(folder: Path) -> list[Path]:
     folder = Path(folder)
     summary_path = folder / "summary.json"
     if not summary_path.is_file():
-        raise GrasplinkError(f"{folder}: not a recording (no summary.json); "
-                             "make one with `grasplink run SCENE --out DIR`")
+        raise GrasplinkError(
+            f"{folder}: not a recording (no summary.json); "
+            "make one with `grasplink run SCENE --out DIR`"
+        )
     summary = json.loads(summary_path.read_text())
     ridges = ridge_positions_mm(summary.get("layout"))
     truth = read_csv(folder / "truth.csv") if (folder / "truth.csv").is_file() else {}
@@ -77,9 +79,21 @@ def plot_recording(folder: Path) -> list[Path]:
     return written
 
 
-FUNCTIONS = {0x000: "NMT", 0x080: "EMCY/SYNC", 0x180: "TPDO", 0x280: "TPDO", 0x380: "TPDO",
-             0x480: "TPDO", 0x200: "RPDO", 0x300: "RPDO", 0x400: "RPDO", 0x500: "RPDO",
-             0x580: "SDO", 0x600: "SDO", 0x700: "heartbeat"}
+FUNCTIONS = {
+    0x000: "NMT",
+    0x080: "EMCY/SYNC",
+    0x180: "TPDO",
+    0x280: "TPDO",
+    0x380: "TPDO",
+    0x480: "TPDO",
+    0x200: "RPDO",
+    0x300: "RPDO",
+    0x400: "RPDO",
+    0x500: "RPDO",
+    0x580: "SDO",
+    0x600: "SDO",
+    0x700: "heartbeat",
+}
 BUS_BIN_S = 0.1
 
 
@@ -100,8 +114,9 @@ def _plot_bus(plt, folder, title, summary) -> Path:
         name = "error frame" if msg.is_error_frame else _function_of(msg.arbitration_id)
         series.setdefault(name, []).append(msg.timestamp)
         times.append(msg.timestamp)
-        bits.append(23 if msg.is_error_frame else frame_bits_worst_case(msg.dlc,
-                                                                        msg.is_remote_frame))
+        bits.append(
+            23 if msg.is_error_frame else frame_bits_worst_case(msg.dlc, msg.is_remote_frame)
+        )
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), dpi=110, sharex=True)
     for name, stamps in sorted(series.items()):
         counts, _ = np.histogram(stamps, bins=bins)
@@ -142,8 +157,13 @@ def _plot_fsr(plt, folder, title, skin, truth, ridges) -> Path:
     ax.set_ylabel("force [N]")
     if "object.position_mm" in truth:
         twin = ax.twinx()
-        twin.plot(truth["t_s"], truth["object.position_mm"], color="tab:blue", lw=1,
-                  label="leading edge (truth) [mm]")
+        twin.plot(
+            truth["t_s"],
+            truth["object.position_mm"],
+            color="tab:blue",
+            lw=1,
+            label="leading edge (truth) [mm]",
+        )
         twin.set_ylabel("position [mm]", color="tab:blue")
         twin.legend(loc="upper right", fontsize=8)
     ax.legend(loc="upper left", fontsize=8)
@@ -185,8 +205,13 @@ def _plot_emg(plt, folder, title, emg, truth) -> Path:
     ax.set_ylabel("µV")
     if "wearer.level" in truth:
         twin = ax.twinx()
-        twin.step(truth["t_s"], truth["wearer.level"], where="post", color="tab:orange",
-                  label="contraction level")
+        twin.step(
+            truth["t_s"],
+            truth["wearer.level"],
+            where="post",
+            color="tab:orange",
+            label="contraction level",
+        )
         twin.set_ylabel("level (e0..e5)", color="tab:orange")
         twin.set_ylim(-0.2, 5.5)
     ax.legend(loc="upper left", fontsize=8)
@@ -221,8 +246,9 @@ def _plot_commands(plt, folder, title, commands, truth) -> Path:
     for label, (times, values) in commands.items():
         ax.step(times, values, where="post", label=label)
     if "belt.velocity_mrad_s" in truth:
-        ax.plot(truth["t_s"], truth["belt.velocity_mrad_s"] / 1000, lw=1,
-                label="belt velocity [rad/s]")
+        ax.plot(
+            truth["t_s"], truth["belt.velocity_mrad_s"] / 1000, lw=1, label="belt velocity [rad/s]"
+        )
     if "hand.grip_n" in truth:
         ax.plot(truth["t_s"], truth["hand.grip_n"], lw=1, label="grip force [N]")
     ax.axhline(0, color="0.7", lw=0.6)

@@ -89,20 +89,29 @@ class Recorder:
             return
         self.frames[frame.can_id] += 1
         self.bits += frame_bits_worst_case(frame.length, frame.rtr)
-        self._asc.on_message_received(can.Message(
-            timestamp=t_us / 1e6, arbitration_id=frame.can_id, is_extended_id=False,
-            is_remote_frame=frame.rtr, dlc=frame.length, data=b"" if frame.rtr else frame.data))
+        self._asc.on_message_received(
+            can.Message(
+                timestamp=t_us / 1e6,
+                arbitration_id=frame.can_id,
+                is_extended_id=False,
+                is_remote_frame=frame.rtr,
+                dlc=frame.length,
+                data=b"" if frame.rtr else frame.data,
+            )
+        )
 
     def close(self, summary: dict) -> None:
         for stream in self._streams.values():
             stream.close()
         self._asc.stop()
         duration_s = summary.get("duration_s") or 1.0
-        summary = {**summary,
-                   "files": {d: DOMAIN_FILES[d] for d in self._streams} | {"can": "can.asc"},
-                   "samples": {d: s.rows for d, s in self._streams.items()},
-                   "frames": {f"0x{k:03X}": v for k, v in sorted(self.frames.items())},
-                   "error_frames": self.error_frames,
-                   "bus_load_percent": round(100.0 * self.bits / duration_s / BITRATE, 4)}
+        summary = {
+            **summary,
+            "files": {d: DOMAIN_FILES[d] for d in self._streams} | {"can": "can.asc"},
+            "samples": {d: s.rows for d, s in self._streams.items()},
+            "frames": {f"0x{k:03X}": v for k, v in sorted(self.frames.items())},
+            "error_frames": self.error_frames,
+            "bus_load_percent": round(100.0 * self.bits / duration_s / BITRATE, 4),
+        }
         text = json.dumps(summary, indent=2, sort_keys=True)
         (self.out_dir / "summary.json").write_text(text + "\n")

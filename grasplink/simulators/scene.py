@@ -115,8 +115,7 @@ def parse_scene(data: dict, source: str) -> Scene:
     chunk_us = round(chunk_ms * 1000)
     period_us = US_PER_S // physics_rate_hz
     if chunk_us % period_us:
-        raise head.error("chunk_ms", f"must be a multiple of the physics period "
-                                     f"({period_us} us)")
+        raise head.error("chunk_ms", f"must be a multiple of the physics period ({period_us} us)")
     scene_layout = head.raw("layout", None)
     head.finish()
 
@@ -127,27 +126,46 @@ def parse_scene(data: dict, source: str) -> Scene:
         layout_text = DEFAULT_LAYOUT  # a skin node always has a layout
     layout_mm, layout_name = _parse_layout(layout_text, source)
     gateway = _parse_gateway(top.table_of("gateway", {}), nodes)
-    rates = {"physics": physics_rate_hz,
-             "skin": (nodes["skin"].sample_rate_hz if "skin" in nodes else None)
-             or DEFAULT_RATES_HZ["skin"],
-             "emg": (nodes["emg"].sample_rate_hz if "emg" in nodes else None)
-             or DEFAULT_RATES_HZ["emg"]}
+    rates = {
+        "physics": physics_rate_hz,
+        "skin": (nodes["skin"].sample_rate_hz if "skin" in nodes else None)
+        or DEFAULT_RATES_HZ["skin"],
+        "emg": (nodes["emg"].sample_rate_hz if "emg" in nodes else None) or DEFAULT_RATES_HZ["emg"],
+    }
     context = Context(source, seed, rates, layout_mm, {k: vars(v) for k, v in nodes.items()})
     effects, bus = _parse_effects(top.raw("effects", []), source, context)
     top.finish()
     endpoints = node_endpoints(nodes)
     ordered, domain_of = build_graph(effects, endpoints, source)
-    return Scene(source, name, description, seed, duration_s, clock, physics_rate_hz, chunk_us,
-                 layout_mm, layout_name, nodes, gateway, effects, bus, context, endpoints,
-                 ordered, domain_of)
+    return Scene(
+        source,
+        name,
+        description,
+        seed,
+        duration_s,
+        clock,
+        physics_rate_hz,
+        chunk_us,
+        layout_mm,
+        layout_name,
+        nodes,
+        gateway,
+        effects,
+        bus,
+        context,
+        endpoints,
+        ordered,
+        domain_of,
+    )
 
 
 def node_endpoints(nodes: dict[str, NodeSpec]) -> list[Endpoint]:
     """Signals the nodes read (sensors, actual values) and write (actuator commands)."""
     endpoints = []
     if "belt" in nodes:
-        endpoints.append(Endpoint("belt", reads=("belt.velocity_mrad_s",),
-                                  writes=("belt.command_mrad_s",)))
+        endpoints.append(
+            Endpoint("belt", reads=("belt.velocity_mrad_s",), writes=("belt.command_mrad_s",))
+        )
     if "hand" in nodes:
         endpoints.append(Endpoint("hand", reads=("hand.grip_n",), writes=("hand.target_n",)))
     if "skin" in nodes:
@@ -170,13 +188,15 @@ def _parse_nodes(table: Params) -> dict[str, NodeSpec]:
             raise p.error("node_id", f"0x{spec.node_id:02X} is already used by {other}")
         used_ids[spec.node_id] = kind
         if kind == "skin":
-            spec.sample_rate_hz = p.integer("sample_rate_hz", DEFAULT_RATES_HZ["skin"],
-                                            low=80, high=1000)
+            spec.sample_rate_hz = p.integer(
+                "sample_rate_hz", DEFAULT_RATES_HZ["skin"], low=80, high=1000
+            )
             spec.samples_per_pdo = p.integer("samples_per_pdo", 3, low=1, high=3)
             spec.layout = p.string("layout", None)
         elif kind == "emg":
-            spec.sample_rate_hz = p.integer("sample_rate_hz", DEFAULT_RATES_HZ["emg"],
-                                            low=500, high=4000)
+            spec.sample_rate_hz = p.integer(
+                "sample_rate_hz", DEFAULT_RATES_HZ["emg"], low=500, high=4000
+            )
         p.finish()
         nodes[kind] = spec
     return nodes
@@ -186,8 +206,9 @@ def _parse_layout(text, source: str) -> tuple[tuple[float, ...] | None, str | No
     if text is None:
         return None, None
     if not isinstance(text, str):
-        raise SceneError(source, "scene.layout", "expected a layout name or spacings in mm "
-                                                 "such as \"19,12,5\"")
+        raise SceneError(
+            source, "scene.layout", 'expected a layout name or spacings in mm such as "19,12,5"'
+        )
     try:
         spacings = parse_layout(text)
     except ConfigError as exc:

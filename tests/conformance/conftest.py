@@ -66,8 +66,9 @@ ABORT_NO_DATA = 0x08000024
 ABORT_DEVICE_STATE = 0x08000022
 # A mapping write outside the CiA 301 mapping procedure (PDO valid, or sub-index 0
 # not 0) must be refused; CiA 301 names no single code for it.
-MAPPING_LOCKED = frozenset({ABORT_UNSUPPORTED_ACCESS, ABORT_DEVICE_STATE,
-                            ABORT_PARAMETER_INCOMPATIBLE})
+MAPPING_LOCKED = frozenset(
+    {ABORT_UNSUPPORTED_ACCESS, ABORT_DEVICE_STATE, ABORT_PARAMETER_INCOMPATIBLE}
+)
 
 COB_INVALID = 0x80000000
 COB_NO_RTR = 0x40000000
@@ -75,8 +76,23 @@ SAVE = obj.STORE_SIGNATURE  # "save"
 LOAD = obj.RESTORE_SIGNATURE  # "load"
 
 # CiA 301 7.3.5, table 31: CAN-IDs no PDO, SYNC or EMCY may use.
-RESTRICTED_CAN_IDS = (0x000, 0x001, 0x07F, 0x101, 0x180, 0x581, 0x5FF, 0x601, 0x67F,
-                      0x6E0, 0x6FF, 0x701, 0x77F, 0x780, 0x7FF)
+RESTRICTED_CAN_IDS = (
+    0x000,
+    0x001,
+    0x07F,
+    0x101,
+    0x180,
+    0x581,
+    0x5FF,
+    0x601,
+    0x67F,
+    0x6E0,
+    0x6FF,
+    0x701,
+    0x77F,
+    0x780,
+    0x7FF,
+)
 
 FAST_HEARTBEAT_MS = 20
 FRAME_TIMEOUT_S = 1.0  # bounded wait for a frame that must come
@@ -214,21 +230,30 @@ class FrameLog(can.Listener):
         with self._cond:
             return len(self._frames)
 
-    def since(self, mark: int = 0, predicate: Callable[[can.Message], bool] | None = None
-              ) -> list[can.Message]:
+    def since(
+        self, mark: int = 0, predicate: Callable[[can.Message], bool] | None = None
+    ) -> list[can.Message]:
         with self._cond:
             frames = self._frames[mark:]
         return [m for m in frames if predicate is None or predicate(m)]
 
-    def wait_for(self, predicate: Callable[[can.Message], bool], timeout: float = FRAME_TIMEOUT_S,
-                 since: int | None = None) -> can.Message | None:
+    def wait_for(
+        self,
+        predicate: Callable[[can.Message], bool],
+        timeout: float = FRAME_TIMEOUT_S,
+        since: int | None = None,
+    ) -> can.Message | None:
         """The first frame after `since` (default: now) matching, or None after `timeout`."""
         found = self.wait_count(predicate, 1, timeout, since)
         return found[0] if found else None
 
-    def wait_count(self, predicate: Callable[[can.Message], bool], count: int,
-                   timeout: float = FRAME_TIMEOUT_S, since: int | None = None
-                   ) -> list[can.Message]:
+    def wait_count(
+        self,
+        predicate: Callable[[can.Message], bool],
+        count: int,
+        timeout: float = FRAME_TIMEOUT_S,
+        since: int | None = None,
+    ) -> list[can.Message]:
         """Up to `count` matching frames after `since`; fewer if the timeout expires."""
         start = self.mark() if since is None else since
         self._wait(predicate, count, timeout, start)
@@ -246,8 +271,9 @@ class FrameLog(can.Listener):
                     return False
                 self._cond.wait(left)
 
-    def collect(self, predicate: Callable[[can.Message], bool], duration: float,
-                since: int | None = None) -> list[can.Message]:
+    def collect(
+        self, predicate: Callable[[can.Message], bool], duration: float, since: int | None = None
+    ) -> list[can.Message]:
         """Matching frames seen during the next `duration` seconds."""
         start = self.mark() if since is None else since
         time.sleep(duration)
@@ -272,8 +298,7 @@ class Dut:
         self.kind = kind
         self.channel = channel
         self.log = FrameLog()
-        self.master_bus = can.Bus(interface="virtual", channel=channel,
-                                  receive_own_messages=False)
+        self.master_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self.network = canopen.Network(self.master_bus)
         self.network.NOTIFIER_CYCLE = 0.01  # quick teardown
         self.network.listeners.append(self.log)
@@ -285,10 +310,10 @@ class Dut:
         self.sdo = self.node.sdo
         self.sdo.RESPONSE_TIMEOUT = 0.5
         self.network.connect()
-        self.device_bus = can.Bus(interface="virtual", channel=channel,
-                                  receive_own_messages=False)
-        self.runner = NodeRunner(self.device_bus, [self.device], max_wait_s=0.01,
-                                 name=f"dut-{kind}")
+        self.device_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.runner = NodeRunner(
+            self.device_bus, [self.device], max_wait_s=0.01, name=f"dut-{kind}"
+        )
         self.bootup_mark = self.log.mark()
         self.runner.start()
 
@@ -369,11 +394,16 @@ class Dut:
         raise AssertionError(f"{fn.__name__}{args} succeeded; an SDO abort was expected")
 
     # -- raw frames ----------------------------------------------------------------------------
-    def send(self, can_id: int, data: bytes = b"", *, rtr: bool = False, dlc: int | None = None
-             ) -> None:
-        msg = can.Message(arbitration_id=can_id, is_extended_id=False, is_remote_frame=rtr,
-                          data=None if rtr else data,
-                          dlc=dlc if dlc is not None else (0 if rtr else len(data)))
+    def send(
+        self, can_id: int, data: bytes = b"", *, rtr: bool = False, dlc: int | None = None
+    ) -> None:
+        msg = can.Message(
+            arbitration_id=can_id,
+            is_extended_id=False,
+            is_remote_frame=rtr,
+            data=None if rtr else data,
+            dlc=dlc if dlc is not None else (0 if rtr else len(data)),
+        )
         self.master_bus.send(msg)
 
     def sdo_request(self, payload: bytes, timeout: float = FRAME_TIMEOUT_S) -> bytes | None:
@@ -400,11 +430,17 @@ class Dut:
     def set_heartbeat(self, ms: int = FAST_HEARTBEAT_MS) -> None:
         self.set(obj.HEARTBEAT_PRODUCER_MS, 0, ms)
 
-    def wait_heartbeat(self, state: int | None = None, timeout: float = FRAME_TIMEOUT_S,
-                       since: int | None = None) -> can.Message | None:
+    def wait_heartbeat(
+        self, state: int | None = None, timeout: float = FRAME_TIMEOUT_S, since: int | None = None
+    ) -> can.Message | None:
         def match(m: can.Message) -> bool:
-            return (m.arbitration_id == self.heartbeat_id and not m.is_remote_frame
-                    and len(m.data) == 1 and (state is None or m.data[0] == state))
+            return (
+                m.arbitration_id == self.heartbeat_id
+                and not m.is_remote_frame
+                and len(m.data) == 1
+                and (state is None or m.data[0] == state)
+            )
+
         return self.log.wait_for(match, timeout, since)
 
     def wait_bootup(self, since: int, timeout: float = FRAME_TIMEOUT_S) -> can.Message | None:
@@ -415,7 +451,8 @@ class Dut:
         mark = self.log.mark()
         self.nmt(command)
         assert self.wait_heartbeat(state, since=mark) is not None, (
-            f"no heartbeat with state 0x{state:02X} after NMT 0x{command:02X}")
+            f"no heartbeat with state 0x{state:02X} after NMT 0x{command:02X}"
+        )
 
     def start(self) -> None:
         """NMT start; the barrier returns once the device has handled it."""
@@ -453,9 +490,17 @@ class Dut:
             self.set(map_index, sub, value)
         self.set(map_index, 0, len(entries))
 
-    def configure_tpdo(self, number: int, *, transmission_type: int, inhibit_100us: int = 0,
-                       event_timer_ms: int = 0, sync_start: int = 0, rtr: bool = False,
-                       mapping: list[int] | None = None) -> tuple[int, int]:
+    def configure_tpdo(
+        self,
+        number: int,
+        *,
+        transmission_type: int,
+        inhibit_100us: int = 0,
+        event_timer_ms: int = 0,
+        sync_start: int = 0,
+        rtr: bool = False,
+        mapping: list[int] | None = None,
+    ) -> tuple[int, int]:
         """Configure TPDO `number` with the PDO invalid, then validate it.
 
         Returns (CAN-ID, mapped length in bytes). A TPDO without any mapping gets
@@ -504,12 +549,15 @@ class Dut:
 # A mapping entry whose value changes on events: the skin's sample counter and the
 # EMG's envelope sequence change on their own (sampling); the drives' statusword
 # changes when the master writes the controlword.
-EVENT_MAPPING = {"skin": 0x21020020, "emg": 0x22020008, "belt": 0x60410010,
-                 "hand": 0x60410010}
+EVENT_MAPPING = {"skin": 0x21020020, "emg": 0x22020008, "belt": 0x60410010, "hand": 0x60410010}
 SELF_CHANGING = frozenset({"skin", "emg"})
 # TPDOs the application triggers itself (transmission type 254 events).
-APP_TRIGGERED = {"skin": frozenset({1}), "emg": frozenset({1, 2}), "belt": frozenset(),
-                 "hand": frozenset()}
+APP_TRIGGERED = {
+    "skin": frozenset({1}),
+    "emg": frozenset({1, 2}),
+    "belt": frozenset(),
+    "hand": frozenset(),
+}
 # Slow the application's own TPDO triggers down (skin: 80 Hz / 3 samples = 37.5 ms,
 # EMG: one envelope per second), so event timers can be seen.
 SLOW_APP = {"skin": (obj.SKIN_SAMPLE_RATE_HZ, 0, 80), "emg": (obj.EMG_ENVELOPE_PERIOD_MS, 0, 1000)}
@@ -554,8 +602,9 @@ def emcy_code(msg: can.Message) -> int:
 
 
 def mappable_objects(dut: Dut, *, accesses: tuple[str, ...]) -> list[EdsEntry]:
-    return [e for e in dut.entries if e.var.pdo_mappable and e.access in accesses
-            and e.size is not None]
+    return [
+        e for e in dut.entries if e.var.pdo_mappable and e.access in accesses and e.size is not None
+    ]
 
 
 def mapping_locked(dut: Dut, index: int, subindex: int) -> bool:
@@ -569,8 +618,9 @@ def mapping_locked(dut: Dut, index: int, subindex: int) -> bool:
 
 
 def records(dut: Dut) -> list[int]:
-    return sorted(i for i in {e.index for e in dut.entries}
-                  if isinstance(dut.od[i], ODRecord | ODArray))
+    return sorted(
+        i for i in {e.index for e in dut.entries} if isinstance(dut.od[i], ODRecord | ODArray)
+    )
 
 
 # -- raw SDO frames (CiA 301 7.2.4.3) ------------------------------------------------------
@@ -604,7 +654,7 @@ def raw_upload(dut: Dut, index: int, subindex: int = 0) -> RawUpload:
     sized = bool(reply[0] & 0x01)
     if reply[0] & 0x02:  # expedited
         unused = (reply[0] >> 2) & 0x03 if sized else 0
-        data = bytes(reply[4:8 - unused])
+        data = bytes(reply[4 : 8 - unused])
         return RawUpload(True, data, len(data) if sized else None, [])
     size = struct.unpack_from("<I", reply, 4)[0] if sized else None
     data, toggle, commands = b"", 0, []
@@ -617,7 +667,7 @@ def raw_upload(dut: Dut, index: int, subindex: int = 0) -> RawUpload:
         assert seg[0] >> 5 == 0, f"segment response 0x{seg[0]:02X} has scs {seg[0] >> 5}"
         assert (seg[0] >> 4) & 1 == toggle, "toggle bit of the segment response is wrong"
         unused = (seg[0] >> 1) & 0x07
-        data += bytes(seg[1:8 - unused])
+        data += bytes(seg[1 : 8 - unused])
         toggle ^= 1
         if seg[0] & 0x01:
             break

@@ -24,8 +24,13 @@ def test_1_0_check_eds_file(kind: str) -> None:
     """
     path = eds_path(kind)
     assert DCFCHK.exists(), "dcfchk missing: install the dev extras (dcf-tools)"
-    result = subprocess.run([str(DCFCHK), "-n", str(obj.DEFAULT_NODE_IDS[kind]), str(path)],
-                            capture_output=True, text=True, timeout=60, check=False)
+    result = subprocess.run(
+        [str(DCFCHK), "-n", str(obj.DEFAULT_NODE_IDS[kind]), str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     assert not (result.stdout + result.stderr).strip(), result.stdout + result.stderr
 
@@ -40,8 +45,9 @@ def test_1_0_check_eds_file(kind: str) -> None:
         assert len(indices) == count
         listed |= set(indices)
     assert {0x1000, 0x1001, 0x1018} <= objects
-    assert listed == objects, f"listed but no section: {listed - objects}, " \
-        f"section not listed: {objects - listed}"
+    assert listed == objects, (
+        f"listed but no section: {listed - objects}, section not listed: {objects - listed}"
+    )
     info = eds["DeviceInfo"]
     assert int(info["NrOfRXPDO"]) == sum(1 for i in objects if 0x1400 <= i <= 0x15FF)
     assert int(info["NrOfTXPDO"]) == sum(1 for i in objects if 0x1800 <= i <= 0x19FF)

@@ -61,7 +61,7 @@ def boot(dut: Dut, command: int) -> None:
     assert bootup.dlc == 1 and bytes(bootup.data) == bytes([STATE_BOOTUP])
     dut.barrier()
     frames = dut.log.since(mark)
-    after = frames[next(i for i, m in enumerate(frames) if m is bootup) + 1:]
+    after = frames[next(i for i, m in enumerate(frames) if m is bootup) + 1 :]
     assert [m for m in after if is_pdo(m)] == [], "PDO after the boot-up message"
     assert {m.data[0] for m in after if m.arbitration_id == dut.heartbeat_id} <= {STATE_PRE_OP}
 

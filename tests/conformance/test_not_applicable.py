@@ -39,16 +39,25 @@ def test_na_2_14_2_20_2_24_write_100ch(dut: Dut, transfer: str) -> None:
     if transfer == "segmented":
         code = dut.abort_of(dut.write, GUARD_TIME, 0, data, force_segment=True)
     else:
+
         def block() -> None:
             from canopen.sdo.exceptions import SdoAbortedError
 
             from tests.conformance.conftest import SdoAbort
+
             try:
-                with dut.sdo.open(GUARD_TIME, 0, "wb", size=2, block_transfer=True,
-                                  request_crc_support=transfer == "block-crc") as fp:
+                with dut.sdo.open(
+                    GUARD_TIME,
+                    0,
+                    "wb",
+                    size=2,
+                    block_transfer=True,
+                    request_crc_support=transfer == "block-crc",
+                ) as fp:
                     fp.write(data)
             except SdoAbortedError as exc:
                 raise SdoAbort(exc.code) from None
+
         code = dut.abort_of(block)
     assert code == ABORT_NO_OBJECT
     absent(dut, GUARD_TIME)

@@ -55,8 +55,9 @@ def check_write_back(dut: Dut, entry: EdsEntry) -> None:
     try:
         dut.write(entry.index, entry.subindex, value)
     except SdoAbort as exc:
-        assert mapping_locked(dut, entry.index, entry.subindex) and exc.code in MAPPING_LOCKED, \
+        assert mapping_locked(dut, entry.index, entry.subindex) and exc.code in MAPPING_LOCKED, (
             f"{entry}: write-back refused with 0x{exc.code:08X}"
+        )
     assert dut.read(entry.index, entry.subindex) == value, str(entry)
 
 
@@ -146,8 +147,10 @@ def test_4_5_subindex_255(dut: Dut) -> None:
 def out_of_range(entry: EdsEntry) -> list[tuple[int, int]]:
     """(value, expected abort) just beyond the EDS limits, where the type can carry it."""
     cases = []
-    for limit, step, code in ((entry.var.max, 1, ABORT_VALUE_HIGH),
-                              (entry.var.min, -1, ABORT_VALUE_LOW)):
+    for limit, step, code in (
+        (entry.var.max, 1, ABORT_VALUE_HIGH),
+        (entry.var.min, -1, ABORT_VALUE_LOW),
+    ):
         if limit is None:
             continue
         try:

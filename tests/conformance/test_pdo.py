@@ -75,8 +75,9 @@ def scan(dut: Dut, comm_base: int, map_base: int, count_key: str) -> None:
             for sub in range(0, 9):
                 if sub in record.subindices:
                     var = record[sub]
-                    assert dut.read(param, sub) == var.encode_raw(var.default), \
+                    assert dut.read(param, sub) == var.encode_raw(var.default), (
                         f"{param:04X}h:{sub:02X} differs from the EDS"
+                    )
                 else:
                     assert dut.abort_of(dut.read, param, sub) == ABORT_NO_SUBINDEX
 
@@ -237,9 +238,12 @@ def check_event_driven(dut: Dut, numbers: list[int], window: float = WINDOW_S) -
         # One frame at once, then at most one per started inhibit period.
         allowed = 2 + int((time.monotonic() - began) / 0.020)
         for can_id, _ in pdos.values():  # the last state goes out after the inhibit time
+
             def final(m, can_id=can_id) -> bool:
-                return m.arbitration_id == can_id and struct.unpack_from("<H", m.data)[0] == \
-                    statusword
+                return (
+                    m.arbitration_id == can_id and struct.unpack_from("<H", m.data)[0] == statusword
+                )
+
             assert dut.log.wait_for(final, since=mark) is not None
         time.sleep(0.03)
         for can_id, _ in pdos.values():
@@ -266,11 +270,13 @@ def check_event_timer(dut: Dut, numbers: list[int], window: float = WINDOW_S) ->
         # A long silence means no timer; single late frames are the OS, not the device.
         assert max(gaps) <= 4 * EVENT_TIMER_MS / 1000, f"TPDO{number}: gap {max(gaps):.3f} s"
         assert median(gaps) == pytest.approx(EVENT_TIMER_MS / 1000, abs=0.008) or (
-            number in APP_TRIGGERED[dut.kind]), f"TPDO{number}: median gap {median(gaps):.3f} s"
+            number in APP_TRIGGERED[dut.kind]
+        ), f"TPDO{number}: median gap {median(gaps):.3f} s"
 
 
-def sync_pattern(dut: Dut, pdos: dict[int, tuple[int, int]], count: int,
-                 counter: bool = False) -> dict[int, list[int]]:
+def sync_pattern(
+    dut: Dut, pdos: dict[int, tuple[int, int]], count: int, counter: bool = False
+) -> dict[int, list[int]]:
     """Send `count` SYNCs (counter 1..count if `counter`); for each TPDO the SYNC
     numbers it answered. A frame without a SYNC would show as a doubled entry."""
     sent = {n: [] for n in pdos}
@@ -325,8 +331,10 @@ def check_sync_acyclic(dut: Dut, numbers: list[int]) -> None:
 def check_sync_start(dut: Dut, numbers: list[int]) -> None:
     """Type 2 with SYNC start value: first transmission at the SYNC whose counter
     equals the start value, then every 2nd SYNC."""
+
     def start(n: int) -> int:
         return 2 + numbers.index(n)
+
     pdos = setup(dut, numbers, transmission_type=2, sync_start=start)
     for n in numbers:
         assert dut.get(0x1800 + n - 1, 6) == start(n)
@@ -511,7 +519,7 @@ def test_3_21_default_mapping(dut: Dut) -> None:
             total += bits
             entry = dut.entry(index, subindex)
             assert entry.var.pdo_mappable, str(entry)
-            assert (entry.readable if transmit else entry.writable), str(entry)
+            assert entry.readable if transmit else entry.writable, str(entry)
             assert len(dut.read(index, subindex)) * 8 == bits == len(entry.var), str(entry)
         assert total <= 64
 
@@ -564,7 +572,11 @@ def test_3_22_new_mapping_with_procedure(dut: Dut) -> None:
     rpdo.enabled = True
     rpdo.save()
     assert [dut.get(0x1600, s) for s in range(0, 4)] == [
-        3, 0x60400010, 0x00050008, target.index << 16 | target.subindex << 8 | 32]
+        3,
+        0x60400010,
+        0x00050008,
+        target.index << 16 | target.subindex << 8 | 32,
+    ]
     dut.start()
     rpdo.map[0].raw = 0x06
     rpdo.map[2].raw = 1234
@@ -636,8 +648,7 @@ def test_3_25_mapping_too_many_objects(dut: Dut) -> None:
         dut.remap(mapping, [entry] * 8)
         assert dut.get(mapping, 0) == 8
         assert dut.abort_of(dut.set, mapping, 0, 9) in {ABORT_VALUE_HIGH, ABORT_PDO_TOO_LONG}
-        assert dut.abort_of(dut.write, mapping, 9, struct.pack("<I", entry)) == \
-            ABORT_NO_SUBINDEX
+        assert dut.abort_of(dut.write, mapping, 9, struct.pack("<I", entry)) == ABORT_NO_SUBINDEX
         assert dut.get(mapping, 0) == 8
 
 
@@ -667,8 +678,9 @@ def test_3_26_mapping_objects_too_long(dut: Dut) -> None:
     assert dut.abort_of(dut.set, 0x1A00, 1, 0x10010010) in WRONG_LENGTH
 
 
-def check_maps(dut: Dut, comm: int, mapping: int, entries: list[EdsEntry],
-               refused: int | None) -> None:
+def check_maps(
+    dut: Dut, comm: int, mapping: int, entries: list[EdsEntry], refused: int | None
+) -> None:
     assert entries
     dut.invalidate(comm)
     dut.set(mapping, 0, 0)

@@ -73,9 +73,14 @@ def test_2_2_read_write_random_rw_entries(dut: Dut) -> None:
     moment (PDO valid, or sub-index 0 not 0: they are refused, see 3.23/3.24).
     """
     rng = random.Random(f"2.2-{dut.kind}")
-    candidates = [e for e in dut.entries if 0x1000 <= e.index <= 0x1FFF and e.access == "rw"
-                  and e.index not in (obj.STORE_PARAMETERS, obj.RESTORE_DEFAULTS)
-                  and not mapping_locked(dut, e.index, e.subindex)]
+    candidates = [
+        e
+        for e in dut.entries
+        if 0x1000 <= e.index <= 0x1FFF
+        and e.access == "rw"
+        and e.index not in (obj.STORE_PARAMETERS, obj.RESTORE_DEFAULTS)
+        and not mapping_locked(dut, e.index, e.subindex)
+    ]
     sample = rng.sample(candidates, min(15, len(candidates)))
     for entry in sample:
         value = dut.read(entry.index, entry.subindex)
@@ -127,8 +132,9 @@ def test_2_6_read_missing_object_1004h(dut: Dut) -> None:
     assert dut.abort_of(dut.read, 0x1004, 0) == ABORT_NO_OBJECT
 
 
-@pytest.mark.parametrize("command", [0xE0, 0x60, 0x00],
-                         ids=["ccs7", "upload-segment", "download-segment"])
+@pytest.mark.parametrize(
+    "command", [0xE0, 0x60, 0x00], ids=["ccs7", "upload-segment", "download-segment"]
+)
 def test_2_7_read_with_wrong_command_specifier(dut: Dut, command: int) -> None:
     """2.7 SDO 07: "Read with wrong command specifier"
 
@@ -211,8 +217,9 @@ def test_2_11_write_too_low_value(dut: Dut) -> None:
     assert candidates, f"{dut.kind}.eds has no LowLimit above a type minimum"
     entry, value = candidates[0]
     before = dut.read(entry.index, entry.subindex)
-    assert dut.abort_of(dut.write, entry.index, entry.subindex, entry.encode(value)) == \
-        ABORT_VALUE_LOW, str(entry)
+    assert (
+        dut.abort_of(dut.write, entry.index, entry.subindex, entry.encode(value)) == ABORT_VALUE_LOW
+    ), str(entry)
     assert dut.read(entry.index, entry.subindex) == before
 
 
@@ -301,8 +308,7 @@ def test_2_18_read_object_segmented(dut: Dut) -> None:
 
 
 def block_read(dut: Dut, index: int, crc: bool) -> tuple[bytes, bool]:
-    fp = dut.sdo.open(index, 0, "rb", buffering=0, block_transfer=True,
-                      request_crc_support=crc)
+    fp = dut.sdo.open(index, 0, "rb", buffering=0, block_transfer=True, request_crc_support=crc)
     try:
         data = fp.read()
         return data, fp.crc_supported
@@ -311,8 +317,9 @@ def block_read(dut: Dut, index: int, crc: bool) -> tuple[bytes, bool]:
 
 
 def block_write(dut: Dut, index: int, data: bytes, crc: bool) -> None:
-    with dut.sdo.open(index, 0, "wb", size=len(data), block_transfer=True,
-                      request_crc_support=crc) as fp:
+    with dut.sdo.open(
+        index, 0, "wb", size=len(data), block_transfer=True, request_crc_support=crc
+    ) as fp:
         fp.write(data)
 
 
@@ -396,4 +403,3 @@ def test_2_27_block_read_wrong_sequence_number(dut: Dut) -> None:
     assert frames[-1].data[0] & 0x80
     ack = dut.sdo_request(bytes([0xA2, 128, 127]))
     assert abort_code(ack) == ABORT_SEQUENCE
-

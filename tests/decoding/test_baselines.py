@@ -24,8 +24,9 @@ ALL_AVAILABLE = [name for name in DECODERS if available(name)]
 FIELDS = {"t_s", "slip", "speed_mm_s", "position_mm", "force_n", "confidence"}
 
 
-def run(name: str, rec: synth.SkinRecording, chunk: int | None = 256, t=None, x=None,
-        **settings) -> list[SlipEstimate]:
+def run(
+    name: str, rec: synth.SkinRecording, chunk: int | None = 256, t=None, x=None, **settings
+) -> list[SlipEstimate]:
     """Feed a recording (or t, x) in chunks of `chunk` samples (None: one piece)."""
     decoder = make_decoder(name, rec.layout_mm, rec.fs_hz, **settings)
     t = rec.t_s if t is None else t
@@ -34,15 +35,18 @@ def run(name: str, rec: synth.SkinRecording, chunk: int | None = 256, t=None, x=
         return decoder.feed(t, x)
     out: list[SlipEstimate] = []
     for start in range(0, len(t), chunk):
-        out += decoder.feed(t[start:start + chunk], x[start:start + chunk])
+        out += decoder.feed(t[start : start + chunk], x[start : start + chunk])
     return out
 
 
 def truth_at(rec: synth.SkinRecording, estimates: list[SlipEstimate]):
     times = np.array([e.t_s for e in estimates])
-    return (times, np.interp(times, rec.t_s, rec.speed_mm_s),
-            np.interp(times, rec.t_s, rec.position_mm),
-            np.interp(times, rec.t_s, rec.slipping) > 0.5)
+    return (
+        times,
+        np.interp(times, rec.t_s, rec.speed_mm_s),
+        np.interp(times, rec.t_s, rec.position_mm),
+        np.interp(times, rec.t_s, rec.slipping) > 0.5,
+    )
 
 
 def scored(rec: synth.SkinRecording, estimates: list[SlipEstimate]):
@@ -142,8 +146,11 @@ def test_no_slip_and_no_estimate_when_held(name):
 
 @pytest.mark.parametrize("name", BASELINES)
 def test_no_slip_before_onset_and_fields_never_nan(name):
-    for layout, speed, reverse in (("alpha0.1", 30.0, False), ("fibonacci", 90.0, True),
-                                   ("uniform4", 50.0, False)):
+    for layout, speed, reverse in (
+        ("alpha0.1", 30.0, False),
+        ("fibonacci", 90.0, True),
+        ("uniform4", 50.0, False),
+    ):
         rec = synth.slip_recording(LAYOUTS_MM[layout], speed, reverse=reverse, seed=2)
         estimates = run(name, rec)
         assert_clean(estimates)
@@ -175,14 +182,21 @@ def test_mmse_search_is_the_thesis_brute_force():
     from grasplink.gateway.decoding.mmse import ReferenceSearch, mse_profile_bruteforce
 
     rec = synth.slip_recording(LAYOUTS_MM["alpha0.1"], 30.0, seed=17)
-    search = ReferenceSearch(rec.layout_mm, rec.fs_hz, np.array([15.0, 30.0, 45.0]),
-                             window_s=1.0, v_ref=20.0, resolution_mm=0.5, seed=1)
+    search = ReferenceSearch(
+        rec.layout_mm,
+        rec.fs_hz,
+        np.array([15.0, 30.0, 45.0]),
+        window_s=1.0,
+        v_ref=20.0,
+        resolution_mm=0.5,
+        seed=1,
+    )
     window = (rec.t_s > 1.0) & (rec.t_s <= 2.0)
     warped = search.warp(rec.t_s[window], rec.force_n[window])
     profiles = search.profiles(warped)
     for ref, rows in zip(search.references, profiles, strict=True):
         for w, (first, mse) in zip(warped, rows, strict=True):
-            loop = mse_profile_bruteforce(w, ref.values)[first:first + len(mse)]
+            loop = mse_profile_bruteforce(w, ref.values)[first : first + len(mse)]
             np.testing.assert_allclose(mse, loop, atol=1e-9)
     best = search.search(rec.t_s[window], rec.force_n[window])[0]
     assert best.speed == 30.0

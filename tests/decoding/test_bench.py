@@ -27,8 +27,11 @@ def _entry(p90: float, pos: float, cost: float) -> dict:
 
 
 def test_recommendation_is_the_most_accurate_decoder_within_the_cost_budget():
-    decoders = {"cheap": _entry(9.0, 3.0, 5.0), "best": _entry(1.0, 0.5, COST_BUDGET_US - 1),
-                "expensive": _entry(0.1, 0.1, COST_BUDGET_US * 10)}
+    decoders = {
+        "cheap": _entry(9.0, 3.0, 5.0),
+        "best": _entry(1.0, 0.5, COST_BUDGET_US - 1),
+        "expensive": _entry(0.1, 0.1, COST_BUDGET_US * 10),
+    }
     assert recommend(decoders) == "best"
 
 

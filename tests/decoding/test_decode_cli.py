@@ -65,8 +65,10 @@ def test_csv(tmp_path, capsys, recording):
 
 
 def test_csv_header_and_value_whitespace_tolerated(tmp_path, capsys, recording):
-    rows = [" t_s , force_n "] + [f" {float(a)!r} ,\t{float(b)!r} " for a, b in
-                                  zip(recording.t_s, recording.force_n, strict=True)]
+    rows = [" t_s , force_n "] + [
+        f" {float(a)!r} ,\t{float(b)!r} "
+        for a, b in zip(recording.t_s, recording.force_n, strict=True)
+    ]
     path = tmp_path / "spaced.csv"
     path.write_text("\n".join(rows) + "\n\n")
     rc, lines, _ = decode(capsys, path, "--skin", "19,12,5,8,4,3,33", "--decoder", "ratio")
@@ -99,8 +101,9 @@ def test_default_decoder(tmp_path, capsys, recording):
         rc, lines, _ = decode(capsys, path, "--skin", "alpha0.1")
         assert rc == 0 and lines
     else:
-        assert_error(capsys, path, "--skin", "alpha0.1",
-                     contains=[registry.DEFAULT_DECODER, "not available"])
+        assert_error(
+            capsys, path, "--skin", "alpha0.1", contains=[registry.DEFAULT_DECODER, "not available"]
+        )
 
 
 # -- bad input: one line, exit 1 ----------------------------------------------------------------
@@ -122,14 +125,23 @@ def test_csv_errors(tmp_path, capsys):
     for name, (text, expected) in cases.items():
         path = tmp_path / name
         path.write_text(text)
-        assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
-                     contains=[name, *expected])
-    assert_error(capsys, tmp_path / "missing.csv", "--skin", "alpha0.1", "--decoder", "ratio",
-                 contains=["missing.csv", "no such file"])
+        assert_error(
+            capsys, path, "--skin", "alpha0.1", "--decoder", "ratio", contains=[name, *expected]
+        )
+    assert_error(
+        capsys,
+        tmp_path / "missing.csv",
+        "--skin",
+        "alpha0.1",
+        "--decoder",
+        "ratio",
+        contains=["missing.csv", "no such file"],
+    )
     binary = tmp_path / "binary.csv"
     binary.write_bytes(b"\xff\xfe\x00\x01garbage")
-    assert_error(capsys, binary, "--skin", "alpha0.1", "--decoder", "ratio",
-                 contains=["binary.csv"])
+    assert_error(
+        capsys, binary, "--skin", "alpha0.1", "--decoder", "ratio", contains=["binary.csv"]
+    )
 
 
 def test_npz_errors(tmp_path, capsys):
@@ -138,16 +150,19 @@ def test_npz_errors(tmp_path, capsys):
         "keys.npz": (dict(time=t, force_n=t), ["missing array(s) t_s", "found"]),
         "both.npz": (dict(a=t), ["t_s, force_n"]),
         "nan.npz": (dict(t_s=t, force_n=np.where(t > 0.01, np.nan, 1.0)), ["force_n[5]", "nan"]),
-        "back.npz": (dict(t_s=np.r_[t[:5], t[3], t[6:]], force_n=t), ["t_s[5]",
-                                                                     "time must increase"]),
+        "back.npz": (
+            dict(t_s=np.r_[t[:5], t[3], t[6:]], force_n=t),
+            ["t_s[5]", "time must increase"],
+        ),
         "length.npz": (dict(t_s=t, force_n=t[:5]), ["10 values", "force_n 5"]),
         "shape.npz": (dict(t_s=t.reshape(2, 5), force_n=t.reshape(2, 5)), ["1-D"]),
     }
     for name, (arrays, expected) in cases.items():
         path = tmp_path / name
         np.savez(path, **arrays)
-        assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
-                     contains=[name, *expected])
+        assert_error(
+            capsys, path, "--skin", "alpha0.1", "--decoder", "ratio", contains=[name, *expected]
+        )
     fake = tmp_path / "fake.npz"
     fake.write_text("not a zip")
     assert_error(capsys, fake, "--skin", "alpha0.1", "--decoder", "ratio", contains=["fake.npz"])
@@ -155,44 +170,84 @@ def test_npz_errors(tmp_path, capsys):
 
 def test_option_errors(tmp_path, capsys, recording):
     path = write_csv(tmp_path / "rec.csv", recording.t_s[:100], recording.force_n[:100])
-    assert_error(capsys, path, "--skin", "alpha9", "--decoder", "ratio",
-                 contains=["unknown ridge layout 'alpha9'", "alpha0.1"])
-    assert_error(capsys, path, "--skin", "5,-3", "--decoder", "ratio",
-                 contains=["spacing #2", "-3"])
-    assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "magic",
-                 contains=["unknown decoder 'magic'", "fft, ratio, mmse, dtw, tracker"])
+    assert_error(
+        capsys,
+        path,
+        "--skin",
+        "alpha9",
+        "--decoder",
+        "ratio",
+        contains=["unknown ridge layout 'alpha9'", "alpha0.1"],
+    )
+    assert_error(
+        capsys, path, "--skin", "5,-3", "--decoder", "ratio", contains=["spacing #2", "-3"]
+    )
+    assert_error(
+        capsys,
+        path,
+        "--skin",
+        "alpha0.1",
+        "--decoder",
+        "magic",
+        contains=["unknown decoder 'magic'", "fft, ratio, mmse, dtw, tracker"],
+    )
     with pytest.raises(SystemExit):
         main(["decode", str(path), "--skin", "alpha0.1", "--fs", "-5"])
     assert "positive number of Hz" in capsys.readouterr().err
 
 
 def test_missing_decoder_module_is_a_clear_error(monkeypatch, tmp_path, capsys, recording):
-    monkeypatch.setitem(registry.DECODERS, "tracker",
-                        "grasplink.gateway.decoding.no_such_module:TrackerDecoder")
+    monkeypatch.setitem(
+        registry.DECODERS, "tracker", "grasplink.gateway.decoding.no_such_module:TrackerDecoder"
+    )
     path = write_csv(tmp_path / "rec.csv", recording.t_s[:100], recording.force_n[:100])
-    assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "tracker",
-                 contains=["decoder 'tracker' is not available", "no_such_module"])
+    assert_error(
+        capsys,
+        path,
+        "--skin",
+        "alpha0.1",
+        "--decoder",
+        "tracker",
+        contains=["decoder 'tracker' is not available", "no_such_module"],
+    )
 
 
 # -- CAN logs ------------------------------------------------------------------------------------
-def skin_frames(counts: np.ndarray, *, node_id: int = 0x10, t0: float = 1.0, fs: float = 400.0,
-                drop: tuple[int, ...] = (), repeat: tuple[int, ...] = ()) -> list[can.Message]:
+def skin_frames(
+    counts: np.ndarray,
+    *,
+    node_id: int = 0x10,
+    t0: float = 1.0,
+    fs: float = 400.0,
+    drop: tuple[int, ...] = (),
+    repeat: tuple[int, ...] = (),
+) -> list[can.Message]:
     """TPDO1 frames of 3 samples + sequence, the last sample of each at its time stamp."""
     frames = []
     for k in range(len(counts) // 3):
         stamp = t0 + (3 * k + 2) / fs
-        data = b"".join(int(c).to_bytes(2, "little") for c in counts[3 * k:3 * k + 3])
+        data = b"".join(int(c).to_bytes(2, "little") for c in counts[3 * k : 3 * k + 3])
         data += ((k + 1) & 0xFF).to_bytes(1, "little")
-        msg = can.Message(timestamp=stamp, arbitration_id=0x180 + node_id, data=data,
-                          is_extended_id=False)
+        msg = can.Message(
+            timestamp=stamp, arbitration_id=0x180 + node_id, data=data, is_extended_id=False
+        )
         if k not in drop:
             frames.append(msg)
         if k in repeat:
-            frames.append(can.Message(timestamp=stamp + 0.001, arbitration_id=msg.arbitration_id,
-                                      data=data, is_extended_id=False))
+            frames.append(
+                can.Message(
+                    timestamp=stamp + 0.001,
+                    arbitration_id=msg.arbitration_id,
+                    data=data,
+                    is_extended_id=False,
+                )
+            )
         if k % 5 == 0:  # other traffic on the bus
-            frames.append(can.Message(timestamp=stamp, arbitration_id=0x710, data=b"\x05",
-                                      is_extended_id=False))
+            frames.append(
+                can.Message(
+                    timestamp=stamp, arbitration_id=0x710, data=b"\x05", is_extended_id=False
+                )
+            )
     return frames
 
 
@@ -221,10 +276,18 @@ def test_can_log_formats(tmp_path, suffix):
 def test_can_log_node_id_and_errors(tmp_path, capsys):
     counts = np.full(60, 1000)
     path = write_log(tmp_path / "other.asc", skin_frames(counts, node_id=0x22))
-    assert_error(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
-                 contains=["other.asc", "no skin TPDO1 frames", "0x190", "0x1A2"])
-    rc, lines, _ = decode(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio",
-                          "--node-id", "0x22")
+    assert_error(
+        capsys,
+        path,
+        "--skin",
+        "alpha0.1",
+        "--decoder",
+        "ratio",
+        contains=["other.asc", "no skin TPDO1 frames", "0x190", "0x1A2"],
+    )
+    rc, lines, _ = decode(
+        capsys, path, "--skin", "alpha0.1", "--decoder", "ratio", "--node-id", "0x22"
+    )
     assert rc == 0 and lines
     junk = tmp_path / "junk.blf"
     junk.write_bytes(b"definitely not a BLF file" * 10)

@@ -54,8 +54,11 @@ def test_near_zero_speed_no_confident_fast_slip(name):
     rec = synth.slip_recording((3.0, 3.0, 3.0), 2.0, seed=5)
     estimates = run(name, rec)
     assert_clean(estimates)
-    wrong = [e for e in estimates if e.confidence >= 0.5 and e.speed_mm_s is not None
-             and abs(e.speed_mm_s) > 4.0]
+    wrong = [
+        e
+        for e in estimates
+        if e.confidence >= 0.5 and e.speed_mm_s is not None and abs(e.speed_mm_s) > 4.0
+    ]
     assert len(wrong) <= 0.02 * len(estimates), wrong[:3]
 
 
@@ -79,8 +82,11 @@ def test_pulses_merging_at_high_speed(name):
     onset = rec.t_s[np.nonzero(rec.slipping)[0][0]]
     assert not any(e.slip for e in estimates if e.t_s < onset)
     assert any(e.slip for e in estimates)
-    confident = [(e, v) for e, v in zip(estimates, v_true, strict=True)
-                 if e.confidence >= 0.5 and e.speed_mm_s is not None and v != 0]
+    confident = [
+        (e, v)
+        for e, v in zip(estimates, v_true, strict=True)
+        if e.confidence >= 0.5 and e.speed_mm_s is not None and v != 0
+    ]
     wrong = [e for e, v in confident if abs(abs(e.speed_mm_s) - abs(v)) > 0.5 * abs(v)]
     assert len(wrong) <= 0.1 * max(1, len(confident)), wrong[:3]
 
@@ -175,8 +181,11 @@ def test_float32_input(name):
     assert len(single) == len(reference)
     agree = np.mean([a.slip == b.slip for a, b in zip(single, reference, strict=True)])
     assert agree >= 0.97
-    both = [(a.speed_mm_s, b.speed_mm_s) for a, b in zip(single, reference, strict=True)
-            if a.speed_mm_s is not None and b.speed_mm_s is not None]
+    both = [
+        (a.speed_mm_s, b.speed_mm_s)
+        for a, b in zip(single, reference, strict=True)
+        if a.speed_mm_s is not None and b.speed_mm_s is not None
+    ]
     assert both
     close = np.mean([abs(a - b) <= 0.05 * abs(b) + 0.5 for a, b in both])
     assert close >= 0.9
@@ -197,7 +206,7 @@ def test_nan_and_inf_rejected_state_not_poisoned(name):
     decoder = make_decoder(name, rec.layout_mm, rec.fs_hz)
     dirty = []
     for start in range(0, len(t), 100):
-        dirty += decoder.feed(t[start:start + 100], x[start:start + 100])
+        dirty += decoder.feed(t[start : start + 100], x[start : start + 100])
     assert decoder.stats.rejected_nonfinite == len(bad)
     keep = np.ones(len(t), bool)
     keep[bad] = False
@@ -215,7 +224,7 @@ def test_gap_resets_and_recovers(name):
     decoder = make_decoder(name, rec.layout_mm, rec.fs_hz)
     estimates = []
     for start in range(0, int(np.count_nonzero(~cut)), 128):
-        idx = np.nonzero(~cut)[0][start:start + 128]
+        idx = np.nonzero(~cut)[0][start : start + 128]
         estimates += decoder.feed(t[idx], x[idx])
     assert decoder.stats.gaps >= 1
     assert_clean(estimates)
@@ -284,7 +293,7 @@ def test_peak_detector_across_chunk_boundaries():
         det = filters.PeakDetector()
         found = []
         for a in range(0, len(t), chunk):
-            found += det(t[a:a + chunk], y[a:a + chunk], 0.3)
+            found += det(t[a : a + chunk], y[a : a + chunk], 0.3)
         assert found == whole, chunk
     # sub-sample time: the true centre lies between samples
     assert abs(whole[1].t_s - 1.0123) < 2e-4
@@ -298,7 +307,7 @@ def test_noise_estimate_is_robust_and_chunk_invariant():
     whole(x)
     parts = filters.NoiseEstimator(200)
     for a in range(0, 4000, 333):
-        parts(x[a:a + 333])
+        parts(x[a : a + 333])
     assert whole.sigma == parts.sigma
     assert 0.015 < whole.sigma < 0.03
     assert abs(filters.mad_sigma(rng.normal(0, 2.0, 20000)) - 2.0) < 0.1

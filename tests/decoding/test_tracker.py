@@ -30,7 +30,7 @@ def decode(rec: synth.SkinRecording, chunk: int | None = 64, **settings) -> list
         return decoder.feed(rec.t_s, rec.force_n)
     out: list[SlipEstimate] = []
     for start in range(0, len(rec.t_s), chunk):
-        out += decoder.feed(rec.t_s[start:start + chunk], rec.force_n[start:start + chunk])
+        out += decoder.feed(rec.t_s[start : start + chunk], rec.force_n[start : start + chunk])
     return out
 
 
@@ -57,13 +57,15 @@ class Score:
         contacts = rec.contact_times_s
         mask = slipping & (t >= contacts[2])
         # no estimate where one is due counts as fully wrong
-        self.speed_rel = np.where(np.isfinite(v[mask]),
-                                  np.abs(v[mask] - v_true[mask]) / np.abs(v_true[mask]), 1.0)
+        self.speed_rel = np.where(
+            np.isfinite(v[mask]), np.abs(v[mask] - v_true[mask]) / np.abs(v_true[mask]), 1.0
+        )
         self.position_mm = np.where(np.isfinite(x[mask]), np.abs(x[mask] - x_true[mask]), 99.0)
         onset = float(rec.t_s[np.nonzero(rec.slipping > 0.5)[0][0]])
         flagged = t[np.array([e.slip for e in estimates]) & (t >= onset)]
-        self.flag_intervals = ((flagged[0] - onset) / (contacts[1] - contacts[0])
-                               if len(flagged) else math.inf)
+        self.flag_intervals = (
+            (flagged[0] - onset) / (contacts[1] - contacts[0]) if len(flagged) else math.inf
+        )
         good = slipping & np.isfinite(v) & (np.abs(v - v_true) <= 0.1 * np.abs(v_true))
         first_good = t[good][0] - onset if good.any() else math.inf
         self.first_good_ratio = first_good / (contacts[2] - onset)
@@ -72,11 +74,14 @@ class Score:
 def aggregate(scores: list[Score]) -> dict[str, float]:
     speed = np.concatenate([s.speed_rel for s in scores])
     position = np.concatenate([s.position_mm for s in scores])
-    return {"speed_median": float(np.median(speed)), "speed_p90": float(np.percentile(speed, 90)),
-            "position_median": float(np.median(position)),
-            "position_p90": float(np.percentile(position, 90)),
-            "flag_intervals": float(np.median([s.flag_intervals for s in scores])),
-            "first_good_ratio": float(np.median([s.first_good_ratio for s in scores]))}
+    return {
+        "speed_median": float(np.median(speed)),
+        "speed_p90": float(np.percentile(speed, 90)),
+        "position_median": float(np.median(position)),
+        "position_p90": float(np.percentile(position, 90)),
+        "flag_intervals": float(np.median([s.flag_intervals for s in scores])),
+        "first_good_ratio": float(np.median([s.first_good_ratio for s in scores])),
+    }
 
 
 def assert_targets(figures: dict[str, float]) -> None:
@@ -97,8 +102,9 @@ def grid() -> dict[tuple, Score]:
         for i, speed in enumerate(SPEEDS):
             for reverse in (False, True):
                 dips = (i + reverse) % 2 == 1
-                rec = synth.slip_recording(layout, speed, reverse=reverse, dips=dips,
-                                           noise_scale=1.0, seed=11 + i)
+                rec = synth.slip_recording(
+                    layout, speed, reverse=reverse, dips=dips, noise_scale=1.0, seed=11 + i
+                )
                 estimates = decode(rec)
                 assert_clean(estimates)
                 out[(name, speed, reverse, dips)] = Score(rec, estimates)
@@ -106,8 +112,9 @@ def grid() -> dict[tuple, Score]:
 
 
 # -- streaming ------------------------------------------------------------------------
-@pytest.mark.parametrize("layout,speed,reverse", [(ALPHA, 47.0, False), (FIB, 83.0, True),
-                                                   (ALPHA, 12.0, True)])
+@pytest.mark.parametrize(
+    "layout,speed,reverse", [(ALPHA, 47.0, False), (FIB, 83.0, True), (ALPHA, 12.0, True)]
+)
 def test_chunked_equals_one_shot_exactly(layout, speed, reverse):
     rec = synth.slip_recording(layout, speed, reverse=reverse, dips=True, tips=0.3, seed=4)
     whole = decode(rec, chunk=None)
@@ -119,7 +126,7 @@ def test_chunked_equals_one_shot_exactly(layout, speed, reverse):
     out, start = [], 0
     while start < len(rec.t_s):
         size = int(rng.integers(1, 40))
-        out += decoder.feed(rec.t_s[start:start + size], rec.force_n[start:start + size])
+        out += decoder.feed(rec.t_s[start : start + size], rec.force_n[start : start + size])
         start += size
     assert out == whole
 
@@ -131,7 +138,7 @@ def test_detector_chunked_equals_one_shot_exactly():
         detector = ContactDetector(rec.fs_hz)
         events, checks = [], []
         for start in range(0, len(rec.t_s), chunk):
-            e, c = detector.feed(rec.t_s[start:start + chunk], rec.force_n[start:start + chunk])
+            e, c = detector.feed(rec.t_s[start : start + chunk], rec.force_n[start : start + chunk])
             events += e
             checks += c
         assert events == whole[0]
@@ -146,7 +153,8 @@ def test_updates_on_the_grid_and_memory_bounded():
     assert np.allclose(np.diff(t), 0.01)
     assert len(decoder._contacts) <= decoder._history
     assert len(decoder._tracks) <= decoder.max_hypotheses + 2 * decoder.count * (
-        decoder.START_CONTACTS + decoder.PER_START)
+        decoder.START_CONTACTS + decoder.PER_START
+    )
 
 
 # -- accuracy: the targets ----------------------------------------------------------------
@@ -183,9 +191,21 @@ def test_slip_flagged_before_the_third_contact_on_most_slips(grid):
 
 # -- robustness ---------------------------------------------------------------------------
 def test_static_grip_steps_no_false_slip():
-    steps = [[0.0, 2.0], [1.0, 2.0], [1.01, 6.0], [2.0, 6.0], [2.01, 9.0], [3.0, 9.0],
-             [3.01, 4.0], [4.0, 4.0], [4.01, 10.0], [5.0, 10.0], [5.2, 5.0], [6.0, 5.0],
-             [6.01, 8.0]]
+    steps = [
+        [0.0, 2.0],
+        [1.0, 2.0],
+        [1.01, 6.0],
+        [2.0, 6.0],
+        [2.01, 9.0],
+        [3.0, 9.0],
+        [3.01, 4.0],
+        [4.0, 4.0],
+        [4.01, 10.0],
+        [5.0, 10.0],
+        [5.2, 5.0],
+        [6.0, 5.0],
+        [6.01, 8.0],
+    ]
     updates = false = 0
     for seed, layout in enumerate((ALPHA, FIB, ALPHA)):
         rec = synth.static_recording(layout, steps, duration_s=8.0, seed=seed + 1)
@@ -227,8 +247,7 @@ def test_tip_pulses_and_missed_contacts_still_tracked():
     scores = []
     for layout in (ALPHA, FIB):
         for speed, reverse in ((25.0, False), (70.0, True), (110.0, False)):
-            rec = synth.slip_recording(layout, speed, reverse=reverse, tips=0.5, dips=True,
-                                       seed=21)
+            rec = synth.slip_recording(layout, speed, reverse=reverse, tips=0.5, dips=True, seed=21)
             assert len(rec.contact_times_s) >= 5
             scores.append(Score(rec, decode(rec)))
     figures = aggregate(scores)
@@ -270,7 +289,7 @@ def test_nan_samples_rejected_without_poisoning():
     decoder = TrackerDecoder(FIB, rec.fs_hz)
     estimates = []
     for start in range(0, len(x), 64):
-        estimates += decoder.feed(rec.t_s[start:start + 64], x[start:start + 64])
+        estimates += decoder.feed(rec.t_s[start : start + 64], x[start : start + 64])
     assert decoder.stats.rejected_nonfinite == len(bad) + len(bad[::3])
     assert_clean(estimates)
     figures = aggregate([Score(rec, estimates)])
@@ -280,13 +299,17 @@ def test_nan_samples_rejected_without_poisoning():
 def test_outputs_never_nan_on_hostile_input():
     rng = np.random.default_rng(9)
     t = np.arange(4000) / 400.0
-    x = np.concatenate([rng.normal(0, 1e-9, 1000),  # almost silent
-                        np.full(1000, 98.0),  # saturated
-                        rng.normal(5, 3, 1000),  # wild
-                        np.where(np.arange(1000) % 40 < 20, 0.0, 5.0)])  # square wave
+    x = np.concatenate(
+        [
+            rng.normal(0, 1e-9, 1000),  # almost silent
+            np.full(1000, 98.0),  # saturated
+            rng.normal(5, 3, 1000),  # wild
+            np.where(np.arange(1000) % 40 < 20, 0.0, 5.0),
+        ]
+    )  # square wave
     for layout in (ALPHA, (4.0,), (3.0, 3.0, 3.0)):
         decoder = TrackerDecoder(layout, 400.0)
         estimates = []
         for start in range(0, len(t), 13):
-            estimates += decoder.feed(t[start:start + 13], x[start:start + 13])
+            estimates += decoder.feed(t[start : start + 13], x[start : start + 13])
         assert_clean(estimates)

@@ -43,56 +43,137 @@ def ones(times, value=1.0):
 
 def _cases():
     """(name, rate_hz, duration_s, effects factory, inputs factory)."""
+
     def t_s(times):
         return times / 1e6
 
     return [
-        ("scripted-linear", 1000, 3.0,
-         lambda: [make(ScriptedObject, ctx(), speed_mm_s=[[0, 0], [1, 30], [2.5, -10]],
-                       start_mm=-3)], lambda t: {}),
-        ("scripted-step", 700, 3.0,
-         lambda: [make(ScriptedObject, ctx(), speed_mm_s=[[0.2, 5], [1, 30]],
-                       interpolation="step", direction="reverse")], lambda t: {}),
-        ("coulomb-stick-slip", 1000, 3.0,
-         lambda: [make(CoulombObject, ctx(), mass_kg=0.1, mu_static=0.5, mu_kinetic=0.4)],
-         lambda t: {"hand.grip_n": 1.0 + 0.3 * np.sin(7 * t_s(t)),
-                    "load.force_n": 1.1 * np.sin(3 * t_s(t))}),
-        ("coulomb-odd-rate", 700, 3.0,
-         lambda: [make(CoulombObject, ctx(), mass_kg=0.2)],
-         lambda t: {"hand.grip_n": ones(t), "load.force_n": 2.0 * np.cos(2 * t_s(t))}),
-        ("ridge-dips-back-and-forth", 1000, 4.0,
-         lambda: [make(ScriptedObject, ctx(), speed_mm_s=[[0, 40], [1.5, 40], [2, -40]],
-                       start_mm=-5),
-                  make(RidgeDips, ctx())], lambda t: {}),
-        ("ridge-dips-oscillating-long", 1000, 12.0,
-         lambda: [make(ScriptedObject, ctx(), start_mm=3,
-                       speed_mm_s=[[0.5 * i, 30.0 * (-1) ** i] for i in range(25)]),
-                  make(RidgeDips, ctx(), recovery_s=0.002, depth_mm_s=[10, 40])], lambda t: {}),
-        ("slip-task", 1000, 4.0,
-         lambda: [make(WearerScript, ctx(), levels=[[0, 0], [0.5, 1], [2.3, 2]]),
-                  make(SlipTask, ctx(), update_period_s=0.75)], lambda t: {}),
-        ("slip-task-fast-phases", 700, 1.0,
-         lambda: [make(WearerScript, ctx(), levels=[[0, 1]]),
-                  make(SlipTask, ctx(), update_period_s=0.0005)], lambda t: {}),
-        ("hand-actuator", 700, 2.0,
-         lambda: [make(HandActuator, ctx(), crush_limit_n=40, max_force_n=60)],
-         lambda t: {"hand.target_n": np.where(t_s(t) < 1, 80.0, 10.0)}),
-        ("grip-and-load-scripted", 1000, 2.0,
-         lambda: [make(ScriptedGrip, ctx(), grip_n=[[0, 0], [1, 5]]),
-                  make(ScriptedLoad, ctx(), force_n=[[0, 1], [1.5, -2]], interpolation="step")],
-         lambda t: {}),
-        ("load-weight", 1000, 0.5, lambda: [make(ScriptedLoad, ctx(), mass_kg=0.3)],
-         lambda t: {}),
-        ("belt-motor", 700, 2.0, lambda: [make(BeltMotor, ctx())],
-         lambda t: {"belt.command_mrad_s": np.where(t_s(t) < 1, 5000.0, -3700.0)}),
-        ("wearer-script", 1000, 2.0,
-         lambda: [make(WearerScript, ctx(), levels=[[0.1, 2], [0.5, 5], [1.2, 0]])],
-         lambda t: {}),
+        (
+            "scripted-linear",
+            1000,
+            3.0,
+            lambda: [
+                make(ScriptedObject, ctx(), speed_mm_s=[[0, 0], [1, 30], [2.5, -10]], start_mm=-3)
+            ],
+            lambda t: {},
+        ),
+        (
+            "scripted-step",
+            700,
+            3.0,
+            lambda: [
+                make(
+                    ScriptedObject,
+                    ctx(),
+                    speed_mm_s=[[0.2, 5], [1, 30]],
+                    interpolation="step",
+                    direction="reverse",
+                )
+            ],
+            lambda t: {},
+        ),
+        (
+            "coulomb-stick-slip",
+            1000,
+            3.0,
+            lambda: [make(CoulombObject, ctx(), mass_kg=0.1, mu_static=0.5, mu_kinetic=0.4)],
+            lambda t: {
+                "hand.grip_n": 1.0 + 0.3 * np.sin(7 * t_s(t)),
+                "load.force_n": 1.1 * np.sin(3 * t_s(t)),
+            },
+        ),
+        (
+            "coulomb-odd-rate",
+            700,
+            3.0,
+            lambda: [make(CoulombObject, ctx(), mass_kg=0.2)],
+            lambda t: {"hand.grip_n": ones(t), "load.force_n": 2.0 * np.cos(2 * t_s(t))},
+        ),
+        (
+            "ridge-dips-back-and-forth",
+            1000,
+            4.0,
+            lambda: [
+                make(ScriptedObject, ctx(), speed_mm_s=[[0, 40], [1.5, 40], [2, -40]], start_mm=-5),
+                make(RidgeDips, ctx()),
+            ],
+            lambda t: {},
+        ),
+        (
+            "ridge-dips-oscillating-long",
+            1000,
+            12.0,
+            lambda: [
+                make(
+                    ScriptedObject,
+                    ctx(),
+                    start_mm=3,
+                    speed_mm_s=[[0.5 * i, 30.0 * (-1) ** i] for i in range(25)],
+                ),
+                make(RidgeDips, ctx(), recovery_s=0.002, depth_mm_s=[10, 40]),
+            ],
+            lambda t: {},
+        ),
+        (
+            "slip-task",
+            1000,
+            4.0,
+            lambda: [
+                make(WearerScript, ctx(), levels=[[0, 0], [0.5, 1], [2.3, 2]]),
+                make(SlipTask, ctx(), update_period_s=0.75),
+            ],
+            lambda t: {},
+        ),
+        (
+            "slip-task-fast-phases",
+            700,
+            1.0,
+            lambda: [
+                make(WearerScript, ctx(), levels=[[0, 1]]),
+                make(SlipTask, ctx(), update_period_s=0.0005),
+            ],
+            lambda t: {},
+        ),
+        (
+            "hand-actuator",
+            700,
+            2.0,
+            lambda: [make(HandActuator, ctx(), crush_limit_n=40, max_force_n=60)],
+            lambda t: {"hand.target_n": np.where(t_s(t) < 1, 80.0, 10.0)},
+        ),
+        (
+            "grip-and-load-scripted",
+            1000,
+            2.0,
+            lambda: [
+                make(ScriptedGrip, ctx(), grip_n=[[0, 0], [1, 5]]),
+                make(ScriptedLoad, ctx(), force_n=[[0, 1], [1.5, -2]], interpolation="step"),
+            ],
+            lambda t: {},
+        ),
+        ("load-weight", 1000, 0.5, lambda: [make(ScriptedLoad, ctx(), mass_kg=0.3)], lambda t: {}),
+        (
+            "belt-motor",
+            700,
+            2.0,
+            lambda: [make(BeltMotor, ctx())],
+            lambda t: {"belt.command_mrad_s": np.where(t_s(t) < 1, 5000.0, -3700.0)},
+        ),
+        (
+            "wearer-script",
+            1000,
+            2.0,
+            lambda: [make(WearerScript, ctx(), levels=[[0.1, 2], [0.5, 5], [1.2, 0]])],
+            lambda t: {},
+        ),
     ]
 
 
-@pytest.mark.parametrize(("rate_hz", "duration_s", "effects", "inputs"),
-                         [c[1:] for c in _cases()], ids=[c[0] for c in _cases()])
+@pytest.mark.parametrize(
+    ("rate_hz", "duration_s", "effects", "inputs"),
+    [c[1:] for c in _cases()],
+    ids=[c[0] for c in _cases()],
+)
 def test_chunked_stepping_is_bit_identical_to_one_shot(rate_hz, duration_s, effects, inputs):
     times = sample_times_us(rate_hz, duration_s)
     whole = run(effects(), times, inputs(times))
@@ -105,8 +186,17 @@ def test_chunked_stepping_is_bit_identical_to_one_shot(rate_hz, duration_s, effe
 
 
 def test_every_physics_effect_is_registered_under_its_kind():
-    for cls in (ScriptedObject, CoulombObject, RidgeDips, SlipTask, HandActuator, ScriptedGrip,
-                ScriptedLoad, BeltMotor, WearerScript):
+    for cls in (
+        ScriptedObject,
+        CoulombObject,
+        RidgeDips,
+        SlipTask,
+        HandActuator,
+        ScriptedGrip,
+        ScriptedLoad,
+        BeltMotor,
+        WearerScript,
+    ):
         assert REGISTRY[cls.kind] is cls
         assert cls.domain == "physics"
         assert cls.summary
@@ -117,15 +207,17 @@ def test_every_physics_effect_is_registered_under_its_kind():
 
 def test_scripted_position_is_the_exact_integral_of_a_linear_profile():
     times = sample_times_us(1000, 8.0)
-    effect = make(ScriptedObject, ctx(), speed_mm_s=[[0, 0], [2, 10], [5, 10], [6, 0]],
-                  start_mm=1.5)
+    effect = make(
+        ScriptedObject, ctx(), speed_mm_s=[[0, 0], [2, 10], [5, 10], [6, 0]], start_mm=1.5
+    )
     out = run([effect], times)
     t = times / 1e6
     expected_speed = np.interp(t, [0, 2, 5, 6], [0, 10, 10, 0])
     expected_position = 1.5 + np.select(
         [t <= 2, t <= 5, t <= 6],
         [2.5 * t**2, 10 + 10 * (t - 2), 40 + 10 * (t - 5) - 5 * (t - 5) ** 2],
-        45.0)
+        45.0,
+    )
     np.testing.assert_allclose(out["object.speed_mm_s"], expected_speed, rtol=0, atol=1e-12)
     np.testing.assert_allclose(out["object.position_mm"], expected_position, rtol=0, atol=1e-12)
     assert np.array_equal(out["object.slipping"], (expected_speed != 0).astype(float))
@@ -133,23 +225,33 @@ def test_scripted_position_is_the_exact_integral_of_a_linear_profile():
 
 def test_scripted_step_profile_holds_values_and_the_first_value_before_the_first_point():
     times = sample_times_us(1000, 4.0)
-    out = run([make(ScriptedObject, ctx(), speed_mm_s=[[1, 3], [2, 8]],
-                    interpolation="step")], times)
+    out = run(
+        [make(ScriptedObject, ctx(), speed_mm_s=[[1, 3], [2, 8]], interpolation="step")], times
+    )
     t = times / 1e6
     np.testing.assert_array_equal(out["object.speed_mm_s"], np.where(t < 2, 3.0, 8.0))
-    np.testing.assert_allclose(out["object.position_mm"],
-                               np.where(t < 2, 3 * t, 6 + 8 * (t - 2)), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        out["object.position_mm"], np.where(t < 2, 3 * t, 6 + 8 * (t - 2)), rtol=0, atol=1e-12
+    )
 
 
 def test_scripted_reverse_direction_negates_speed_and_position():
     times = sample_times_us(1000, 2.0)
-    forward = run([make(ScriptedObject, ctx(), speed_mm_s=[[0, 4], [1, 6]],
-                        direction="forward")], times)
-    reverse = run([make(ScriptedObject, ctx(), speed_mm_s=[[0, 4], [1, 6]],
-                        direction="reverse", start_mm=84)], times)
+    forward = run(
+        [make(ScriptedObject, ctx(), speed_mm_s=[[0, 4], [1, 6]], direction="forward")], times
+    )
+    reverse = run(
+        [
+            make(
+                ScriptedObject, ctx(), speed_mm_s=[[0, 4], [1, 6]], direction="reverse", start_mm=84
+            )
+        ],
+        times,
+    )
     np.testing.assert_array_equal(reverse["object.speed_mm_s"], -forward["object.speed_mm_s"])
-    np.testing.assert_allclose(reverse["object.position_mm"],
-                               84 - forward["object.position_mm"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        reverse["object.position_mm"], 84 - forward["object.position_mm"], rtol=0, atol=1e-12
+    )
 
 
 def test_scripted_signed_speeds_are_allowed_without_direction_but_not_with_it():
@@ -198,8 +300,7 @@ def test_coulomb_object_holds_while_load_is_within_two_surfaces_of_static_fricti
     times = sample_times_us(1000, 2.0)
     capacity = 2 * 0.5 * 3.0
     for sign in (1, -1):
-        out = _coulomb(times, ones(times, 3.0), ones(times, sign * fraction * capacity),
-                       start_mm=7)
+        out = _coulomb(times, ones(times, 3.0), ones(times, sign * fraction * capacity), start_mm=7)
         assert np.all(out["object.speed_mm_s"] == 0)
         assert np.all(out["object.position_mm"] == 7)
         assert np.all(out["object.slipping"] == 0)
@@ -222,8 +323,9 @@ def test_coulomb_slip_acceleration_is_load_minus_kinetic_friction_over_mass():
         np.testing.assert_allclose(np.diff(speed) / 1e-3, a_mm_s2, rtol=1e-9)
         n = np.arange(len(times))
         # semi-implicit Euler: x_n = a·dt²·n(n+1)/2
-        np.testing.assert_allclose(out["object.position_mm"], a_mm_s2 * 1e-6 * n * (n + 1) / 2,
-                                   rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(
+            out["object.position_mm"], a_mm_s2 * 1e-6 * n * (n + 1) / 2, rtol=1e-9, atol=1e-12
+        )
         assert np.all(out["object.slipping"][1:] == 1)
 
 
@@ -311,8 +413,7 @@ def test_ridge_dips_position_is_consistent_with_the_dipped_speed():
 
 
 def test_ridge_dips_work_in_reverse():
-    original, out = _dipped({"speed_mm_s": [[0, 40]], "direction": "reverse",
-                                    "start_mm": 65})
+    original, out = _dipped({"speed_mm_s": [[0, 40]], "direction": "reverse", "start_mm": 65})
     drops = _drops(original, out)
     jumps = np.flatnonzero(np.diff(drops) > 1.0) + 1
     assert len(jumps) == len(RIDGES_MM)
@@ -326,8 +427,10 @@ def test_ridge_dips_work_in_reverse():
 
 def test_ridge_dips_count_each_crossing_once_when_the_object_turns_back():
     # 5 → 25 mm (crosses the ridge at 10) → back to 5 mm (crosses it again)
-    original, out = _dipped({"speed_mm_s": [[0, 20], [1, 20], [1.001, -20]],
-                                    "interpolation": "step", "start_mm": 5}, duration_s=2.0)
+    original, out = _dipped(
+        {"speed_mm_s": [[0, 20], [1, 20], [1.001, -20]], "interpolation": "step", "start_mm": 5},
+        duration_s=2.0,
+    )
     jumps = np.flatnonzero(np.diff(_drops(original, out)) > 1.0) + 1
     assert len(jumps) == 2
     same_sign = np.sign(out["object.speed_mm_s"]) == np.sign(original["object.speed_mm_s"])
@@ -379,8 +482,9 @@ def test_slip_task_spec_example_six_mm_s_at_level_e3_becomes_1_8_mm_s():
     assert np.all(speed[times >= 1_000_000] == 1.8)
     assert np.all(out["hand.crushed"] == 0)
     after = times >= 1_000_000
-    np.testing.assert_allclose(out["object.position_mm"][after],
-                               6.0 + 1.8 * (times[after] / 1e6 - 1.0), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        out["object.position_mm"][after], 6.0 + 1.8 * (times[after] / 1e6 - 1.0), rtol=0, atol=1e-12
+    )
 
 
 def test_slip_task_level_e0_leaves_the_speed_unchanged():
@@ -399,11 +503,22 @@ def test_slip_task_level_e5_crushes_the_object():
     assert np.all(out["object.slipping"][~before] == 0)
 
 
-@pytest.mark.parametrize(("initial", "level", "after", "crushed"), [
-    (6.0, 4, 0.0, 0), (6.0, 1, 4.6, 0), (6.0, 2, 3.2, 0), (3.2, 2, 0.0, 0),
-    (3.2, 1, 1.8, 0), (3.2, 3, 0.0, 1), (1.8, 1, 0.0, 0), (1.8, 2, 0.0, 1)])
+@pytest.mark.parametrize(
+    ("initial", "level", "after", "crushed"),
+    [
+        (6.0, 4, 0.0, 0),
+        (6.0, 1, 4.6, 0),
+        (6.0, 2, 3.2, 0),
+        (3.2, 2, 0.0, 0),
+        (3.2, 1, 1.8, 0),
+        (3.2, 3, 0.0, 1),
+        (1.8, 1, 0.0, 0),
+        (1.8, 2, 0.0, 1),
+    ],
+)
 def test_slip_task_level_ej_at_speed_vi_goes_to_v_i_minus_j_stops_at_i_crushes_above(
-        initial, level, after, crushed):
+    initial, level, after, crushed
+):
     _, out = _task([[0, level]], duration_s=1.5, initial_speed_mm_s=initial)
     assert out["object.speed_mm_s"][-1] == after
     assert out["hand.crushed"][-1] == crushed
@@ -431,8 +546,11 @@ def test_slip_task_reverse_direction_moves_towards_the_first_ridge():
 
 def test_hand_actuator_reaches_63_percent_of_a_step_at_one_time_constant():
     times = sample_times_us(1000, 1.0)
-    out = run([make(HandActuator, ctx(), time_constant_s=0.1)], times,
-              {"hand.target_n": ones(times, 50.0)})
+    out = run(
+        [make(HandActuator, ctx(), time_constant_s=0.1)],
+        times,
+        {"hand.target_n": ones(times, 50.0)},
+    )
     grip = out["hand.grip_n"]
     assert grip[0] == 0.0
     assert grip[100] == pytest.approx(50.0 * (1 - math.exp(-1)), rel=1e-12)
@@ -443,8 +561,9 @@ def test_hand_actuator_reaches_63_percent_of_a_step_at_one_time_constant():
 def test_hand_actuator_is_limited_to_its_maximum_force_and_never_pulls():
     times = sample_times_us(1000, 2.0)
     target = np.where(times < 1_000_000, 500.0, -20.0)
-    grip = run([make(HandActuator, ctx(), max_force_n=80)], times,
-               {"hand.target_n": target})["hand.grip_n"]
+    grip = run([make(HandActuator, ctx(), max_force_n=80)], times, {"hand.target_n": target})[
+        "hand.grip_n"
+    ]
     assert grip[999] == pytest.approx(80.0, rel=1e-4)
     assert np.max(grip) <= 80.0
     assert np.min(grip) >= 0.0
@@ -462,8 +581,13 @@ def test_hand_actuator_latches_crushed_once_the_grip_exceeds_the_crush_limit():
 
 def test_scripted_grip_and_weight_load():
     times = sample_times_us(1000, 2.0)
-    out = run([make(ScriptedGrip, ctx(), grip_n=[[0, 0], [1, 5]]),
-               make(ScriptedLoad, ctx(), mass_kg=0.25)], times)
+    out = run(
+        [
+            make(ScriptedGrip, ctx(), grip_n=[[0, 0], [1, 5]]),
+            make(ScriptedLoad, ctx(), mass_kg=0.25),
+        ],
+        times,
+    )
     np.testing.assert_allclose(out["hand.grip_n"], np.minimum(5 * times / 1e6, 5), atol=1e-12)
     np.testing.assert_array_equal(out["load.force_n"], 0.25 * 9.81)
 
@@ -471,8 +595,7 @@ def test_scripted_grip_and_weight_load():
 @pytest.mark.parametrize(("rad_s", "mm_s"), [(2.0, 55), (3.7, 100), (5.3, 145), (7.0, 190)])
 def test_belt_motor_slip_levels_match_thesis_belt_speeds(rad_s, mm_s):
     times = sample_times_us(1000, 1.0)
-    out = run([make(BeltMotor, ctx())], times,
-              {"belt.command_mrad_s": ones(times, -1000 * rad_s)})
+    out = run([make(BeltMotor, ctx())], times, {"belt.command_mrad_s": ones(times, -1000 * rad_s)})
     assert out["belt.surface_mm_s"][-1] == pytest.approx(mm_s, rel=0.02)
     assert np.all(out["belt.tap_hz"] == 0)
 
@@ -489,8 +612,9 @@ def test_belt_motor_force_levels_tap_at_nubs_times_revolutions(rad_s):
 def test_belt_motor_reversal_passes_through_zero_and_drives_one_belt_at_a_time():
     times = sample_times_us(1000, 1.0)
     command = np.where(times < 500_000, 5000.0, -5000.0)
-    out = run([make(BeltMotor, ctx(), time_constant_s=0.05)], times,
-              {"belt.command_mrad_s": command})
+    out = run(
+        [make(BeltMotor, ctx(), time_constant_s=0.05)], times, {"belt.command_mrad_s": command}
+    )
     velocity = out["belt.velocity_mrad_s"]
     assert np.max(np.abs(np.diff(velocity))) < 10000 * (1 - math.exp(-0.02)) + 1e-9
     assert np.all((out["belt.tap_hz"] == 0) | (out["belt.surface_mm_s"] == 0))
@@ -512,39 +636,42 @@ def test_wearer_script_holds_each_level_until_the_next_point():
 # ---------------------------------------------------------------- parameter errors
 
 
-@pytest.mark.parametrize(("cls", "params", "key"), [
-    (CoulombObject, {"mass_kg": -1}, "mass_kg"),
-    (CoulombObject, {"mass_kg": 0}, "mass_kg"),
-    (CoulombObject, {}, "mass_kg"),
-    (CoulombObject, {"mass_kg": 1, "mu_static": 0.3, "mu_kinetic": 0.5}, "mu_kinetic"),
-    (CoulombObject, {"mass_kg": 1, "contact_surfaces": 0}, "contact_surfaces"),
-    (CoulombObject, {"mas_kg": 1, "mass_kg": 1}, "mas_kg"),
-    (ScriptedObject, {"speed_mm_s": []}, "speed_mm_s"),
-    (ScriptedObject, {"speed_mm_s": [[0, 1], [0, 2]]}, "speed_mm_s"),
-    (ScriptedObject, {"speed_mm_s": [[1, 1], [0.5, 2]]}, "speed_mm_s"),
-    (ScriptedObject, {"speed_mm_s": [[0, 1]], "interpolation": "cubic"}, "interpolation"),
-    (ScriptedObject, {"speed_mm_s": [[0, 1]], "direction": "up"}, "direction"),
-    (ScriptedObject, {"speed_mm_s": [[0, 1]], "start": 3}, "start"),
-    (RidgeDips, {"depth_mm_s": [15, 4]}, "depth_mm_s"),
-    (RidgeDips, {"depth_mm_s": [4, 8, 15]}, "depth_mm_s"),
-    (RidgeDips, {"depth_mm_s": [-1, 4]}, r"depth_mm_s\[0\]"),
-    (RidgeDips, {"recovery_s": 0}, "recovery_s"),
-    (SlipTask, {"initial_speed_mm_s": 5.0}, "initial_speed_mm_s"),
-    (SlipTask, {"level_speeds_mm_s": [1, 3, 2, 4]}, "level_speeds_mm_s"),
-    (SlipTask, {"level_speeds_mm_s": [1, 2, 3]}, "level_speeds_mm_s"),
-    (SlipTask, {"update_period_s": -1}, "update_period_s"),
-    (HandActuator, {"time_constant_s": 0}, "time_constant_s"),
-    (HandActuator, {"crush_limit_n": -5}, "crush_limit_n"),
-    (ScriptedGrip, {"grip_n": [[0, -1]]}, r"grip_n\[0\]\[1\]"),
-    (ScriptedLoad, {}, "force_n"),
-    (ScriptedLoad, {"force_n": [[0, 1]], "mass_kg": 1}, "force_n"),
-    (ScriptedLoad, {"mass_kg": -2}, "mass_kg"),
-    (BeltMotor, {"nubs": 0}, "nubs"),
-    (BeltMotor, {"effective_radius_mm": 0}, "effective_radius_mm"),
-    (WearerScript, {"levels": [[0, 2.5]]}, r"levels\[0\]\[1\]"),
-    (WearerScript, {"levels": [[0, 1], [1, 6]]}, r"levels\[1\]\[1\]"),
-    (WearerScript, {"levels": [[0, 1], [0.5, 2], [0.5, 3]]}, "levels"),
-])
+@pytest.mark.parametrize(
+    ("cls", "params", "key"),
+    [
+        (CoulombObject, {"mass_kg": -1}, "mass_kg"),
+        (CoulombObject, {"mass_kg": 0}, "mass_kg"),
+        (CoulombObject, {}, "mass_kg"),
+        (CoulombObject, {"mass_kg": 1, "mu_static": 0.3, "mu_kinetic": 0.5}, "mu_kinetic"),
+        (CoulombObject, {"mass_kg": 1, "contact_surfaces": 0}, "contact_surfaces"),
+        (CoulombObject, {"mas_kg": 1, "mass_kg": 1}, "mas_kg"),
+        (ScriptedObject, {"speed_mm_s": []}, "speed_mm_s"),
+        (ScriptedObject, {"speed_mm_s": [[0, 1], [0, 2]]}, "speed_mm_s"),
+        (ScriptedObject, {"speed_mm_s": [[1, 1], [0.5, 2]]}, "speed_mm_s"),
+        (ScriptedObject, {"speed_mm_s": [[0, 1]], "interpolation": "cubic"}, "interpolation"),
+        (ScriptedObject, {"speed_mm_s": [[0, 1]], "direction": "up"}, "direction"),
+        (ScriptedObject, {"speed_mm_s": [[0, 1]], "start": 3}, "start"),
+        (RidgeDips, {"depth_mm_s": [15, 4]}, "depth_mm_s"),
+        (RidgeDips, {"depth_mm_s": [4, 8, 15]}, "depth_mm_s"),
+        (RidgeDips, {"depth_mm_s": [-1, 4]}, r"depth_mm_s\[0\]"),
+        (RidgeDips, {"recovery_s": 0}, "recovery_s"),
+        (SlipTask, {"initial_speed_mm_s": 5.0}, "initial_speed_mm_s"),
+        (SlipTask, {"level_speeds_mm_s": [1, 3, 2, 4]}, "level_speeds_mm_s"),
+        (SlipTask, {"level_speeds_mm_s": [1, 2, 3]}, "level_speeds_mm_s"),
+        (SlipTask, {"update_period_s": -1}, "update_period_s"),
+        (HandActuator, {"time_constant_s": 0}, "time_constant_s"),
+        (HandActuator, {"crush_limit_n": -5}, "crush_limit_n"),
+        (ScriptedGrip, {"grip_n": [[0, -1]]}, r"grip_n\[0\]\[1\]"),
+        (ScriptedLoad, {}, "force_n"),
+        (ScriptedLoad, {"force_n": [[0, 1]], "mass_kg": 1}, "force_n"),
+        (ScriptedLoad, {"mass_kg": -2}, "mass_kg"),
+        (BeltMotor, {"nubs": 0}, "nubs"),
+        (BeltMotor, {"effective_radius_mm": 0}, "effective_radius_mm"),
+        (WearerScript, {"levels": [[0, 2.5]]}, r"levels\[0\]\[1\]"),
+        (WearerScript, {"levels": [[0, 1], [1, 6]]}, r"levels\[1\]\[1\]"),
+        (WearerScript, {"levels": [[0, 1], [0.5, 2], [0.5, 3]]}, "levels"),
+    ],
+)
 def test_bad_parameters_raise_scene_errors_naming_the_key(cls, params, key):
     with pytest.raises(SceneError, match=rf"test: effect\.{key}"):
         make(cls, ctx(), **params)

@@ -84,8 +84,7 @@ def test_same_scene_and_seed_give_a_byte_identical_recording(tmp_path):
     record(path, tmp_path / "b")
     names = sorted(p.name for p in (tmp_path / "a").iterdir())
     assert names == ["can.asc", "skin.csv", "summary.json", "truth.csv"]
-    _, mismatch, errors = filecmp.cmpfiles(tmp_path / "a", tmp_path / "b", names,
-                                               shallow=False)
+    _, mismatch, errors = filecmp.cmpfiles(tmp_path / "a", tmp_path / "b", names, shallow=False)
     assert mismatch == [] and errors == []
 
 
@@ -110,9 +109,10 @@ def test_can_log_reads_back_with_python_can(tmp_path):
 def test_a_scene_without_noise_is_noiseless(tmp_path):
     """Without noise effects the signal is a pure function of the scene: seeds don't matter
     once the random ridge parameters are pinned."""
-    extra = 'alpha_n = [1.0, 1.0]\nrise_jitter = [1.0, 1.0]\n'
-    body = SLIP.replace('type = "skin.ridge_contacts"\n{extra}', 'type = "skin.ridge_contacts"\n'
-                        + extra)
+    extra = "alpha_n = [1.0, 1.0]\nrise_jitter = [1.0, 1.0]\n"
+    body = SLIP.replace(
+        'type = "skin.ridge_contacts"\n{extra}', 'type = "skin.ridge_contacts"\n' + extra
+    )
     record(scene_text(tmp_path, body.format(seed=1), "a.toml"), tmp_path / "a")
     record(scene_text(tmp_path, body.format(seed=99), "b.toml"), tmp_path / "b")
     a = read_columns(tmp_path / "a" / "skin.csv")["skin.force_n"]
@@ -146,8 +146,7 @@ def test_a_minimal_scene_does_measurably_less_work_than_a_full_one():
     boot.run()
     full = Simulation(load_scene(ROOT / "scenes" / "headline_slip.toml"))
     full.run()
-    assert boot.effect_steps == 0 and sum(boot.samples.values()) <= boot.samples.get(
-        "physics", 0)
+    assert boot.effect_steps == 0 and sum(boot.samples.values()) <= boot.samples.get("physics", 0)
     assert full.effect_steps > 0 and full.samples["skin"] > 0
     assert set(boot.cost_s) == set()  # nothing measured unless asked
 
@@ -172,8 +171,11 @@ def test_belt_levels_scene_shows_the_chapter_8_surface_speeds(tmp_path):
 def test_belt_node_reports_the_simulated_motor(tmp_path):
     sim = Simulation(load_scene(ROOT / "scenes" / "belt_levels_ch8.toml"), Recorder(tmp_path))
     sim.run()
-    frames = [m for m in can.LogReader(str(tmp_path / "can.asc"))
-              if m.arbitration_id == 0x2A0 and len(m.data) == 7]
+    frames = [
+        m
+        for m in can.LogReader(str(tmp_path / "can.asc"))
+        if m.arbitration_id == 0x2A0 and len(m.data) == 7
+    ]
     surface = [struct.unpack_from("<IHB", m.data)[1] for m in frames if m.timestamp > 8.6]
     assert surface and abs(surface[-1] - 189) <= 2
 
@@ -181,8 +183,9 @@ def test_belt_node_reports_the_simulated_motor(tmp_path):
 def test_slip_task_scene_follows_the_chapter_2_speed_update(tmp_path):
     record(ROOT / "scenes" / "slip_task_ch2.toml", tmp_path / "task")
     truth = read_columns(tmp_path / "task" / "truth.csv")
-    speed_at = {round(t, 3): v for t, v in zip(truth["t_s"], truth["object.speed_mm_s"],
-                                               strict=True)}
+    speed_at = {
+        round(t, 3): v for t, v in zip(truth["t_s"], truth["object.speed_mm_s"], strict=True)
+    }
     assert speed_at[0.5] == pytest.approx(6.0)
     assert speed_at[1.5] == pytest.approx(4.6)  # e1: one step of 1.4 mm/s
     assert speed_at[2.5] == pytest.approx(1.8)  # e2 at 4.6 -> v1
@@ -241,10 +244,13 @@ def test_scene_ending_mid_pulse_records_up_to_its_end(tmp_path):
 
 
 def test_hours_of_simulated_time_keep_the_clock_exact():
-    scene = parse_scene({
-        "scene": {"duration_s": 2 * 3600.0, "chunk_ms": 1000.0, "layout": "alpha0.1"},
-        "effects": [{"type": "object.scripted", "speed_mm_s": [[0.0, 0.5]]}],
-    }, "long.toml")
+    scene = parse_scene(
+        {
+            "scene": {"duration_s": 2 * 3600.0, "chunk_ms": 1000.0, "layout": "alpha0.1"},
+            "effects": [{"type": "object.scripted", "speed_mm_s": [[0.0, 0.5]]}],
+        },
+        "long.toml",
+    )
     sim = Simulation(scene)
     sim.run()
     physics = sim.domains["physics"]
@@ -261,18 +267,26 @@ def test_saturated_sensor_clips_at_full_scale(tmp_path):
 
 
 # -- bad scenes: the error names file, key and what was expected ---------------------------
-@pytest.mark.parametrize(("text", "needle"), [
-    ('[scene]\nduration_s = -1\n', "scene.duration_s: expected a number > 0"),
-    ('[scene]\nduration_s = 1\nlayout = "4,0,5"\n', "layout"),
-    ('[scene]\nduration_s = 1\n[nodes.elbow]\n', "nodes.elbow: unknown node type"),
-    ('[scene]\nduration_s = 1\ndurtion = 2\n', "scene.durtion: unknown key"),
-    ('[scene]\nduration_s = 1\n[[effects]]\ntype = "skin.fsr"\n', "needs a skin layout"),
-    ('[scene]\nduration_s = 1\nlayout = "alpha0.1"\n[[effects]]\ntype = "skin.fsr"\n',
-     "needs hand.grip_n, which nothing in this scene provides; add"),
-    ('[scene]\nduration_s = 1\n[[effects]]\ntype = "warp.drive"\n', "unknown effect 'warp.drive'"),
-    ('[scene]\nduration_s = 1\n[nodes.skin]\nnode_id = 1\n', "already used by gateway"),
-    ('[scene\nduration_s = 1\n', "not valid TOML"),
-])
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("[scene]\nduration_s = -1\n", "scene.duration_s: expected a number > 0"),
+        ('[scene]\nduration_s = 1\nlayout = "4,0,5"\n', "layout"),
+        ("[scene]\nduration_s = 1\n[nodes.elbow]\n", "nodes.elbow: unknown node type"),
+        ("[scene]\nduration_s = 1\ndurtion = 2\n", "scene.durtion: unknown key"),
+        ('[scene]\nduration_s = 1\n[[effects]]\ntype = "skin.fsr"\n', "needs a skin layout"),
+        (
+            '[scene]\nduration_s = 1\nlayout = "alpha0.1"\n[[effects]]\ntype = "skin.fsr"\n',
+            "needs hand.grip_n, which nothing in this scene provides; add",
+        ),
+        (
+            '[scene]\nduration_s = 1\n[[effects]]\ntype = "warp.drive"\n',
+            "unknown effect 'warp.drive'",
+        ),
+        ("[scene]\nduration_s = 1\n[nodes.skin]\nnode_id = 1\n", "already used by gateway"),
+        ("[scene\nduration_s = 1\n", "not valid TOML"),
+    ],
+)
 def test_bad_scene_errors_name_the_file_key_and_expectation(tmp_path, text, needle):
     path = scene_text(tmp_path, text, "bad.toml")
     with pytest.raises(SceneError) as info:
@@ -302,8 +316,9 @@ def test_realtime_clock_paces_the_same_scene_to_the_wall_clock(tmp_path):
     """Same code, same result: only the pacing differs."""
     import time
 
-    path = scene_text(tmp_path, SLIP.format(seed=4, extra="").replace(
-        "duration_s = 1.5", "duration_s = 0.6"))
+    path = scene_text(
+        tmp_path, SLIP.format(seed=4, extra="").replace("duration_s = 1.5", "duration_s = 0.6")
+    )
     virtual = Simulation(load_scene(path), Recorder(tmp_path / "v"))
     virtual.run()
     t0 = time.monotonic()

@@ -17,8 +17,9 @@ SKIN_HZ, EMG_HZ = 400, 1500
 ALPHA_01 = (19.0, 12.0, 5.0, 8.0, 4.0, 3.0, 33.0)  # table 5.1, alpha = 0.1
 UNIFORM_4 = (4.0,) * 20
 FIXED = {"rise_jitter": [1.0, 1.0], "alpha_n": [1.0, 1.0]}  # no random pulse parameters
-K_THESIS = math.cos(math.radians(60)) / (math.sin(math.radians(60))
-                                        + 0.7813 * math.cos(math.radians(60)))
+K_THESIS = math.cos(math.radians(60)) / (
+    math.sin(math.radians(60)) + 0.7813 * math.cos(math.radians(60))
+)
 
 
 def skin_ctx(layout=ALPHA_01, seed=1, rate_hz=SKIN_HZ):
@@ -29,10 +30,14 @@ def slide(times_us, speed_mm_s, start_mm, grip_n=2.0, load_n=1.0, slipping=1.0):
     """Physics inputs of an object sliding at constant speed (consistent position/speed)."""
     t = times_us / 1e6
     n = len(t)
-    return {"object.position_mm": start_mm + speed_mm_s * t,
-            "object.speed_mm_s": np.full(n, float(speed_mm_s)),
-            "hand.grip_n": np.full(n, grip_n), "load.force_n": np.full(n, load_n),
-            "object.slipping": np.full(n, slipping), "skin.force_n": np.zeros(n)}
+    return {
+        "object.position_mm": start_mm + speed_mm_s * t,
+        "object.speed_mm_s": np.full(n, float(speed_mm_s)),
+        "hand.grip_n": np.full(n, grip_n),
+        "load.force_n": np.full(n, load_n),
+        "object.slipping": np.full(n, slipping),
+        "skin.force_n": np.zeros(n),
+    }
 
 
 def rich_scene(times_us):
@@ -45,11 +50,16 @@ def rich_scene(times_us):
     reverse = t >= 3.0
     position[reverse] = position[reverse] - 90.0  # the leading edge is now the other edge
     n = len(t)
-    return {"object.position_mm": position, "object.speed_mm_s": speed,
-            "hand.grip_n": 3 + np.sin(t), "load.force_n": 1.5 + 0.2 * np.cos(3 * t),
-            "object.slipping": (speed != 0).astype(float),
-            "skin.force_n": 2 + np.sin(2 * np.pi * 0.7 * t) * 3,
-            "emg.raw_uv": np.zeros(n), "wearer.level": np.clip(2.5 + 2.6 * np.sin(t), 0, 5)}
+    return {
+        "object.position_mm": position,
+        "object.speed_mm_s": speed,
+        "hand.grip_n": 3 + np.sin(t),
+        "load.force_n": 1.5 + 0.2 * np.cos(3 * t),
+        "object.slipping": (speed != 0).astype(float),
+        "skin.force_n": 2 + np.sin(2 * np.pi * 0.7 * t) * 3,
+        "emg.raw_uv": np.zeros(n),
+        "wearer.level": np.clip(2.5 + 2.6 * np.sin(t), 0, 5),
+    }
 
 
 def run_one(kind, ctx, times_us, inputs, chunk=None, **params):
@@ -67,8 +77,12 @@ def contacts_for(times_us, inputs, layout, **params):
 CHUNKED = [
     ("skin.fsr", skin.FsrForce, SKIN_HZ, {}),
     ("skin.ridge_contacts", skin.RidgeContacts, SKIN_HZ, {"tip_probability": 0.5}),
-    ("skin.ridge_contacts fast", skin.RidgeContacts, SKIN_HZ,
-     {"min_rise_s": 0.05, "tip_probability": 1.0}),
+    (
+        "skin.ridge_contacts fast",
+        skin.RidgeContacts,
+        SKIN_HZ,
+        {"min_rise_s": 0.05, "tip_probability": 1.0},
+    ),
     ("skin.hysteresis", skin.Hysteresis, SKIN_HZ, {"width_n": 0.5}),
     ("skin.saturation", skin.Saturation, SKIN_HZ, {"full_scale_n": 3.0}),
     ("skin.adc", skin.Adc, SKIN_HZ, {"bits": 8, "full_scale_n": 5.0}),
@@ -81,8 +95,9 @@ CHUNKED = [
 ]
 
 
-@pytest.mark.parametrize(("name", "kind", "rate_hz", "params"), CHUNKED,
-                         ids=[c[0] for c in CHUNKED])
+@pytest.mark.parametrize(
+    ("name", "kind", "rate_hz", "params"), CHUNKED, ids=[c[0] for c in CHUNKED]
+)
 def test_chunked_stepping_equals_one_shot_exactly(name, kind, rate_hz, params):
     times = harness.sample_times_us(rate_hz, 6.0)
     inputs = rich_scene(times)
@@ -103,6 +118,7 @@ def test_the_rich_scene_makes_contacts_both_ways():
 
 
 # -- skin.fsr (thesis ch. 4.3) -------------------------------------------------------------
+
 
 def test_ridge_factor_is_the_thesis_k():
     assert skin.ridge_factor(0.7813, 60.0) == pytest.approx(K_THESIS, rel=1e-12)
@@ -153,6 +169,7 @@ def test_fsr_keeps_the_direction_while_the_object_stands():
 
 
 # -- skin.ridge_contacts (thesis ch. 5.3.1, 5.4.2) -----------------------------------------
+
 
 def test_contacts_come_when_the_edge_reaches_each_ridge_with_sub_sample_timing():
     times = harness.sample_times_us(SKIN_HZ, 3.0)
@@ -314,8 +331,13 @@ def test_tip_probability_thins_the_tip_contacts():
     layout = (20.0,) * 4
     counts = []
     for seed in range(40):
-        _, effect = run_one(skin.RidgeContacts, skin_ctx(layout, seed=seed), times,
-                              slide(times, 10.0, -1.0), tip_probability=0.5)
+        _, effect = run_one(
+            skin.RidgeContacts,
+            skin_ctx(layout, seed=seed),
+            times,
+            slide(times, 10.0, -1.0),
+            tip_probability=0.5,
+        )
         counts.append(sum(c.tip for c in effect.contacts))
     assert 0.35 < np.mean(counts) / 4 < 0.65
 
@@ -329,20 +351,23 @@ def test_a_run_ending_mid_pulse_carries_on_seamlessly():
     first = harness.run([effect], times[:cut], {k: v[:cut] for k, v in inputs.items()})
     assert 0 < first["skin.force_n"][-1] < max(c.alpha_n for c in effect.contacts)
     rest = harness.run([effect], times[cut:], {k: v[cut:] for k, v in inputs.items()})
-    assert np.array_equal(np.concatenate([first["skin.force_n"], rest["skin.force_n"]]),
-                          whole["skin.force_n"])
+    assert np.array_equal(
+        np.concatenate([first["skin.force_n"], rest["skin.force_n"]]), whole["skin.force_n"]
+    )
 
 
 def test_the_contact_record_is_bounded():
     layout = (1.0,) * 1500
     times = harness.sample_times_us(SKIN_HZ, 16.0)
-    _, effect = run_one(skin.RidgeContacts, skin_ctx(layout), times,
-                        slide(times, 100.0, -1.0), **FIXED)
+    _, effect = run_one(
+        skin.RidgeContacts, skin_ctx(layout), times, slide(times, 100.0, -1.0), **FIXED
+    )
     assert len(effect.contacts) == skin.CONTACT_RECORD
     assert effect.contacts[-1].ridge == 1500
 
 
 # -- sensor non-idealities -----------------------------------------------------------------
+
 
 def test_saturation_clips_to_the_fsr_range():
     times = harness.sample_times_us(SKIN_HZ, 1.0)
@@ -360,8 +385,9 @@ def test_adc_quantises_to_its_levels():
     assert np.allclose(values / step, np.round(values / step), atol=1e-9)
     assert np.all(np.abs(values - np.clip(force, 0, 98.067)) <= step / 2 + 1e-12)
     assert values.min() == 0 and values.max() == pytest.approx(98.067)
-    small, _ = run_one(skin.Adc, skin_ctx(), times, {"skin.force_n": force}, bits=3,
-                       full_scale_n=7.0)
+    small, _ = run_one(
+        skin.Adc, skin_ctx(), times, {"skin.force_n": force}, bits=3, full_scale_n=7.0
+    )
     assert np.allclose(np.unique(small["skin.force_n"]), np.arange(8.0))
 
 
@@ -371,7 +397,7 @@ def test_hysteresis_loop_is_width_wide_and_unloads_to_zero():
     force = np.concatenate([up, up[::-1]])
     out, _ = run_one(skin.Hysteresis, skin_ctx(), times, {"skin.force_n": force}, width_n=0.4)
     y = out["skin.force_n"]
-    rising, falling = y[: len(up)], y[len(up):][::-1]
+    rising, falling = y[: len(up)], y[len(up) :][::-1]
     middle = (up > 1) & (up < 9)
     assert np.allclose(rising[middle], up[middle] - 0.2)
     assert np.allclose(falling[middle], up[middle] + 0.2)
@@ -382,12 +408,16 @@ def test_hysteresis_loop_is_width_wide_and_unloads_to_zero():
 
 # -- noise ---------------------------------------------------------------------------------
 
+
 def test_noise_steps_in_the_domain_of_its_signal():
     ctx = skin_ctx()
     on_skin = harness.make(noise.WhiteNoise, ctx, std=0.1)
     on_emg = harness.make(noise.Drift, ctx, signal="emg.raw_uv", std=2.0)
-    assert (on_skin.kind, on_skin.domain, on_skin.inputs) == ("noise.white", SKIN,
-                                                             ("skin.force_n",))
+    assert (on_skin.kind, on_skin.domain, on_skin.inputs) == (
+        "noise.white",
+        SKIN,
+        ("skin.force_n",),
+    )
     assert (on_emg.kind, on_emg.domain, on_emg.outputs) == ("noise.drift", EMG, ("emg.raw_uv",))
     assert isinstance(on_emg, noise.Drift) and type(on_emg).domain == EMG
     assert type(harness.make(noise.Drift, ctx, signal="emg.raw_uv")) is type(on_emg)
@@ -395,13 +425,25 @@ def test_noise_steps_in_the_domain_of_its_signal():
 
 def test_modifiers_run_in_scene_order_after_the_producer():
     ctx = harness.Context("test", 1, {"physics": 1000, SKIN: SKIN_HZ, EMG: EMG_HZ}, ALPHA_01)
-    effects = [harness.make(skin.Adc, ctx), harness.make(noise.WhiteNoise, ctx),
-               harness.make(skin.RidgeContacts, ctx), harness.make(skin.FsrForce, ctx),
-               harness.make(emg.SurfaceEmg, ctx), harness.make(noise.WhiteNoise, ctx,
-                                                               signal="emg.raw_uv")]
-    physics = Endpoint("physics", writes=("object.position_mm", "object.speed_mm_s",
-                                          "object.slipping", "hand.grip_n", "load.force_n",
-                                          "wearer.level"))
+    effects = [
+        harness.make(skin.Adc, ctx),
+        harness.make(noise.WhiteNoise, ctx),
+        harness.make(skin.RidgeContacts, ctx),
+        harness.make(skin.FsrForce, ctx),
+        harness.make(emg.SurfaceEmg, ctx),
+        harness.make(noise.WhiteNoise, ctx, signal="emg.raw_uv"),
+    ]
+    physics = Endpoint(
+        "physics",
+        writes=(
+            "object.position_mm",
+            "object.speed_mm_s",
+            "object.slipping",
+            "hand.grip_n",
+            "load.force_n",
+            "wearer.level",
+        ),
+    )
     ordered, domain_of = build_graph(effects, [physics], "test")
     kinds = [e.kind for e in ordered]
     assert kinds.index("skin.fsr") < kinds.index("skin.adc")
@@ -411,8 +453,9 @@ def test_modifiers_run_in_scene_order_after_the_producer():
 
 def test_white_noise_has_the_asked_std_and_no_memory():
     times = harness.sample_times_us(SKIN_HZ, 250.0)
-    out, _ = run_one(noise.WhiteNoise, skin_ctx(), times,
-                     {"skin.force_n": np.full(len(times), 3.0)}, std=0.5)
+    out, _ = run_one(
+        noise.WhiteNoise, skin_ctx(), times, {"skin.force_n": np.full(len(times), 3.0)}, std=0.5
+    )
     added = out["skin.force_n"] - 3.0
     assert np.std(added) == pytest.approx(0.5, rel=0.01)
     assert abs(np.mean(added)) < 0.01
@@ -421,8 +464,15 @@ def test_white_noise_has_the_asked_std_and_no_memory():
 
 def test_drift_has_the_asked_std_and_only_low_frequencies():
     times = harness.sample_times_us(SKIN_HZ, 3000.0)
-    out, _ = run_one(noise.Drift, skin_ctx(), times, {"skin.force_n": np.zeros(len(times))},
-                     std=0.3, corner_hz=0.5, offset=1.0)
+    out, _ = run_one(
+        noise.Drift,
+        skin_ctx(),
+        times,
+        {"skin.force_n": np.zeros(len(times))},
+        std=0.3,
+        corner_hz=0.5,
+        offset=1.0,
+    )
     drift = out["skin.force_n"]
     assert np.mean(drift) == pytest.approx(1.0, abs=0.03)
     assert np.std(drift) == pytest.approx(0.3, rel=0.05)
@@ -436,8 +486,9 @@ def test_drift_is_stationary_from_the_first_sample():
     times = harness.sample_times_us(SKIN_HZ, 0.01)
     firsts = []
     for seed in range(1500):
-        out, _ = run_one(noise.Drift, skin_ctx(seed=seed), times,
-                         {"skin.force_n": np.zeros(len(times))}, std=0.3)
+        out, _ = run_one(
+            noise.Drift, skin_ctx(seed=seed), times, {"skin.force_n": np.zeros(len(times))}, std=0.3
+        )
         firsts.append(out["skin.force_n"][0])
     assert np.std(firsts) == pytest.approx(0.3, rel=0.06)
 
@@ -453,6 +504,7 @@ def test_stationary_variance_matches_a_long_impulse_response():
 
 
 # -- determinism ---------------------------------------------------------------------------
+
 
 class NoRandomness(harness.Context):
     def rng(self, effect_key):
@@ -474,11 +526,15 @@ def test_skin_signal_without_noise_is_exactly_deterministic():
 def test_effects_without_randomness_never_touch_the_rng():
     times = harness.sample_times_us(SKIN_HZ, 6.0)
     ctx = NoRandomness("test", 1, {SKIN: SKIN_HZ, EMG: EMG_HZ, "physics": SKIN_HZ}, ALPHA_01)
-    effects = [harness.make(skin.FsrForce, ctx), harness.make(skin.RidgeContacts, ctx, **FIXED),
-               harness.make(noise.WhiteNoise, ctx, std=0.0),
-               harness.make(noise.Drift, ctx, std=0.0, offset=0.5),
-               harness.make(skin.Hysteresis, ctx), harness.make(skin.Saturation, ctx),
-               harness.make(skin.Adc, ctx)]
+    effects = [
+        harness.make(skin.FsrForce, ctx),
+        harness.make(skin.RidgeContacts, ctx, **FIXED),
+        harness.make(noise.WhiteNoise, ctx, std=0.0),
+        harness.make(noise.Drift, ctx, std=0.0, offset=0.5),
+        harness.make(skin.Hysteresis, ctx),
+        harness.make(skin.Saturation, ctx),
+        harness.make(skin.Adc, ctx),
+    ]
     out = harness.run(effects, times, rich_scene(times))["skin.force_n"]
     assert np.all(np.isfinite(out))
 
@@ -502,18 +558,24 @@ def test_two_noise_streams_on_one_signal_are_independent():
 
 # -- emg.surface (thesis ch. 2.3) ----------------------------------------------------------
 
+
 def emg_run(level, duration_s=1.0, seed=1, chunk=None, **params):
     times = harness.sample_times_us(EMG_HZ, duration_s)
     levels = np.broadcast_to(np.asarray(level, float), times.shape).copy()
-    out, effect = run_one(emg.SurfaceEmg, harness.context(seed=seed, rate_hz=EMG_HZ), times,
-                          {"wearer.level": levels}, chunk=chunk, **params)
+    out, effect = run_one(
+        emg.SurfaceEmg,
+        harness.context(seed=seed, rate_hz=EMG_HZ),
+        times,
+        {"wearer.level": levels},
+        chunk=chunk,
+        **params,
+    )
     return out["emg.raw_uv"], effect
 
 
 @pytest.mark.parametrize("level", [0, 1, 2, 3, 4, 5])
 def test_emg_rectified_mean_is_the_level_target_within_5_percent(level):
-    targets = [10.0, 50 + 0.5 * 112.5, 50 + 1.5 * 112.5, 50 + 2.5 * 112.5, 50 + 3.5 * 112.5,
-               625.0]
+    targets = [10.0, 50 + 0.5 * 112.5, 50 + 1.5 * 112.5, 50 + 2.5 * 112.5, 50 + 3.5 * 112.5, 625.0]
     for seed in range(5):
         raw, _ = emg_run(level, seed=seed)
         assert np.mean(np.abs(raw)) == pytest.approx(targets[level], rel=0.05)
@@ -530,7 +592,7 @@ def test_unregulated_emg_is_a_stationary_gaussian_with_the_target_mean():
     sigma = 331.25 * math.sqrt(math.pi / 2)
     assert np.mean(np.abs(raw)) == pytest.approx(331.25, rel=0.02)
     assert np.std(raw) == pytest.approx(sigma, rel=0.02)
-    kurtosis = np.mean(raw ** 4) / np.mean(raw ** 2) ** 2
+    kurtosis = np.mean(raw**4) / np.mean(raw**2) ** 2
     assert kurtosis == pytest.approx(3.0, abs=0.15)
 
 
@@ -608,8 +670,7 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize(("kind", "params", "key"), BAD,
-                         ids=[f"{b[0].kind}-{b[2]}" for b in BAD])
+@pytest.mark.parametrize(("kind", "params", "key"), BAD, ids=[f"{b[0].kind}-{b[2]}" for b in BAD])
 def test_bad_parameters_name_the_key(kind, params, key):
     rate = EMG_HZ if kind is emg.SurfaceEmg else SKIN_HZ
     with pytest.raises(SceneError) as caught:

@@ -34,9 +34,14 @@ class SlipEstimate:
     confidence: float  # 0..1
 
     def as_dict(self) -> dict:
-        return {"t_s": round(self.t_s, 6), "slip": self.slip,
-                "speed_mm_s": _clean(self.speed_mm_s), "position_mm": _clean(self.position_mm),
-                "force_n": _clean(self.force_n), "confidence": round(float(self.confidence), 4)}
+        return {
+            "t_s": round(self.t_s, 6),
+            "slip": self.slip,
+            "speed_mm_s": _clean(self.speed_mm_s),
+            "position_mm": _clean(self.position_mm),
+            "force_n": _clean(self.force_n),
+            "confidence": round(float(self.confidence), 4),
+        }
 
 
 def _clean(value: float | None) -> float | None:
@@ -79,8 +84,9 @@ class Decoder:
 
     name: ClassVar[str] = "base"
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
-                 update_period_s: float = DEFAULT_UPDATE_S):
+    def __init__(
+        self, layout_mm: Sequence[float], fs_hz: float, *, update_period_s: float = DEFAULT_UPDATE_S
+    ):
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ConfigError(f"sample rate must be a positive number of Hz, got {fs_hz}")
         if not (math.isfinite(update_period_s) and update_period_s > 0):
@@ -116,8 +122,9 @@ class Decoder:
         t, x = t[increasing], x[increasing]
         if len(t):
             steps = np.diff(np.concatenate([[previous], t]))
-            self.stats.gaps += int(np.count_nonzero(steps[np.isfinite(steps)]
-                                                    > GAP_PERIODS / self.fs_hz))
+            self.stats.gaps += int(
+                np.count_nonzero(steps[np.isfinite(steps)] > GAP_PERIODS / self.fs_hz)
+            )
             self._last_t = float(t[-1])
             self.stats.accepted += len(t)
         return t, x

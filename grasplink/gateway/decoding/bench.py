@@ -32,18 +32,31 @@ TARGET_LAYOUTS = ("alpha0.1", "fibonacci")
 ALL_SPEEDS = (6, 11, 23, 37, 52, 68, 83, 97, 118, 143)
 QUICK_SPEEDS = (11, 52, 118)
 COST_BUDGET_US = 50.0
-TARGETS = {"speed_median_pct": 3.0, "speed_p90_pct": 10.0, "position_median_mm": 1.5,
-           "position_p90_mm": 4.0, "slip_flag_intervals": 2.0, "first_good_ratio": 1.2,
-           "false_slip_pct": 1.0, "cpu_us_per_sample": COST_BUDGET_US}
+TARGETS = {
+    "speed_median_pct": 3.0,
+    "speed_p90_pct": 10.0,
+    "position_median_mm": 1.5,
+    "position_p90_mm": 4.0,
+    "slip_flag_intervals": 2.0,
+    "first_good_ratio": 1.2,
+    "false_slip_pct": 1.0,
+    "cpu_us_per_sample": COST_BUDGET_US,
+}
 # Main settings per decoder (name -> list of (label, settings)). The faithful mmse is
 # slow: it runs on the target subset only, and the speed-up is stated against it.
 SETTINGS: dict[str, list[tuple[str, dict]]] = {
-    "tracker": [("default", {}), ("8 hypotheses", {"max_hypotheses": 8}),
-                ("detect every 10 ms", {"detect_block_s": 0.01})],
+    "tracker": [
+        ("default", {}),
+        ("8 hypotheses", {"max_hypotheses": 8}),
+        ("detect every 10 ms", {"detect_block_s": 0.01}),
+    ],
     "ratio": [("band 0.5-30 Hz", {}), ("thesis band 1-20 Hz", {"band_hz": (1.0, 20.0)})],
     "fft": [("window 1 s", {"window_s": 1.0}), ("window 0.5 s", {"window_s": 0.5})],
-    "dtw": [("speed grid x1.1, hop 0.2 s", {}),
-            ("speed grid x1.2", {"speed_ratio": 1.2}), ("hop 0.1 s", {"hop_s": 0.1})],
+    "dtw": [
+        ("speed grid x1.1, hop 0.2 s", {}),
+        ("speed grid x1.2", {"speed_ratio": 1.2}),
+        ("hop 0.1 s", {"hop_s": 0.1}),
+    ],
     "mmse": [("window 5 s", {}), ("window 2 s", {"window_s": 2.0})],
 }
 SLOW = {"mmse"}
@@ -61,9 +74,16 @@ class Case:
     tags: set[str] = field(default_factory=set)
 
     def recording(self, seed: int) -> SkinRecording:
-        return slip_recording(LAYOUTS_MM[self.layout], self.speed_mm_s, fs_hz=self.fs_hz,
-                              reverse=self.reverse, noise_scale=self.noise, dips=self.dips,
-                              tips=self.tips, seed=seed)
+        return slip_recording(
+            LAYOUTS_MM[self.layout],
+            self.speed_mm_s,
+            fs_hz=self.fs_hz,
+            reverse=self.reverse,
+            noise_scale=self.noise,
+            dips=self.dips,
+            tips=self.tips,
+            seed=seed,
+        )
 
 
 def cases(quick: bool) -> list[Case]:
@@ -90,8 +110,10 @@ def cases(quick: bool) -> list[Case]:
 def static_cases(quick: bool) -> list[SkinRecording]:
     steps = [[0.0, 2.0], [3.0, 5.0], [6.0, 10.0], [9.0, 5.0], [12.0, 2.0], [15.0, 8.0]]
     duration = 8.0 if quick else 18.0
-    return [static_recording(LAYOUTS_MM[layout], steps, duration_s=duration, seed=i + 1)
-            for i, layout in enumerate(TARGET_LAYOUTS)]
+    return [
+        static_recording(LAYOUTS_MM[layout], steps, duration_s=duration, seed=i + 1)
+        for i, layout in enumerate(TARGET_LAYOUTS)
+    ]
 
 
 def _factory(name: str, settings: dict, rec: SkinRecording) -> Callable:
@@ -105,25 +127,33 @@ def summarise(scores: list[ev.RecordingScore]) -> dict:
     pos = np.concatenate([s.position_err_mm for s in scores]) if scores else np.zeros(0)
     pos_true = np.concatenate([s.position_true for s in scores]) if scores else np.zeros(0)
     scored = sum(s.scored for s in scores)
-    delays = [s.slip_flag_delay_intervals for s in scores
-              if s.slip_flag_delay_intervals is not None]
-    ratios = [s.first_good_s / s.physical_limit_s for s in scores
-              if s.first_good_s is not None and s.physical_limit_s]
+    delays = [
+        s.slip_flag_delay_intervals for s in scores if s.slip_flag_delay_intervals is not None
+    ]
+    ratios = [
+        s.first_good_s / s.physical_limit_s
+        for s in scores
+        if s.first_good_s is not None and s.physical_limit_s
+    ]
     never = sum(1 for s in scores if s.physical_limit_s and s.first_good_s is None)
     samples = sum(s.samples for s in scores)
     return {
-        "speed_median_pct": _pct(rel, 50), "speed_p90_pct": _pct(rel, 90),
+        "speed_median_pct": _pct(rel, 50),
+        "speed_p90_pct": _pct(rel, 90),
         "speed_nrmsd": ev.nrmsd(abs_err, v_true),
-        "position_median_mm": _q(pos, 50), "position_p90_mm": _q(pos, 90),
+        "position_median_mm": _q(pos, 50),
+        "position_p90_mm": _q(pos, 90),
         "position_nrmsd": ev.nrmsd(pos, pos_true),
         "missing_pct": 100.0 * sum(s.missing for s in scores) / scored if scored else None,
         "slip_flag_intervals": float(np.median(delays)) if delays else None,
-        "slip_never_flagged": sum(1 for s in scores if s.slip_flag_delay_intervals is None
-                                  and s.physical_limit_s),
+        "slip_never_flagged": sum(
+            1 for s in scores if s.slip_flag_delay_intervals is None and s.physical_limit_s
+        ),
         "first_good_ratio": float(np.median(ratios)) if ratios else None,
         "never_good": never,
         "cpu_us_per_sample": sum(s.cpu_us_per_sample * s.samples for s in scores) / samples
-        if samples else None,
+        if samples
+        else None,
     }
 
 
@@ -146,27 +176,34 @@ def run(quick: bool = False, out: Path = DOCS, log: Callable[[str], None] = prin
         for label, settings in settings_list:
             key = f"{name} ({label})" if len(settings_list) > 1 else name
             started = time.monotonic()
-            subset = [(c, r) for c, r in recordings
-                      if name not in SLOW or ("target" in c.tags and c.speed_mm_s in QUICK_SPEEDS)]
+            subset = [
+                (c, r)
+                for c, r in recordings
+                if name not in SLOW or ("target" in c.tags and c.speed_mm_s in QUICK_SPEEDS)
+            ]
             scored = [(c, ev.score(_factory(name, settings, r), r)) for c, r in subset]
             static_scores = [ev.score(_factory(name, settings, r), r) for r in statics]
-            groups = {"target": [s for c, s in scored if "target" in c.tags],
-                      "all layouts": [s for c, s in scored if "grid" in c.tags]}
+            groups = {
+                "target": [s for c, s in scored if "target" in c.tags],
+                "all layouts": [s for c, s in scored if "grid" in c.tags],
+            }
             for tag in ("fs100", "fs200", "fs1000", "noise0", "noise2", "dips+tips"):
                 groups[tag] = [s for c, s in scored if tag in c.tags]
-            per_layout = {layout: summarise([s for c, s in scored
-                                             if c.layout == layout and "grid" in c.tags])
-                          for layout in LAYOUTS_MM}
+            per_layout = {
+                layout: summarise([s for c, s in scored if c.layout == layout and "grid" in c.tags])
+                for layout in LAYOUTS_MM
+            }
             false_updates = sum(s.false_slip_updates for s in static_scores)
             static_updates = sum(s.static_updates for s in static_scores)
-            memory = ev.peak_memory_kib(_factory(name, settings, recordings[0][1]),
-                                        recordings[0][1])
+            memory = ev.peak_memory_kib(
+                _factory(name, settings, recordings[0][1]), recordings[0][1]
+            )
             entry = {g: summarise(v) for g, v in groups.items() if v}
             entry["per_layout"] = per_layout
             entry["false_slip_pct"] = 100.0 * false_updates / max(1, static_updates)
             entry["memory_kib"] = memory
             entry["recordings"] = len(subset)
-            entry["subset"] = ("target layouts at 11/52/118 mm/s" if name in SLOW else "full")
+            entry["subset"] = "target layouts at 11/52/118 mm/s" if name in SLOW else "full"
             entry["decoder"] = name
             entry["default_settings"] = label == settings_list[0][0]
             results["decoders"][key] = entry
@@ -187,6 +224,7 @@ def recommend(decoders: dict) -> str:
     is cheap enough on 256-sample chunks may not be on a gateway's 3-sample ones.
     """
     decoders = {k: v for k, v in decoders.items() if v.get("default_settings", True)}
+
     def key(item):
         _, entry = item
         target = entry.get("target", {})
@@ -195,6 +233,7 @@ def recommend(decoders: dict) -> str:
         pos = target.get("position_p90_mm")
         accuracy = (p90 if p90 is not None else 1e9) + (pos if pos is not None else 1e9)
         return (cost > COST_BUDGET_US, accuracy, cost)
+
     best_key, best = min(decoders.items(), key=key)
     return best.get("decoder", best_key.split(" (")[0])
 
@@ -214,8 +253,9 @@ def plot_pareto(results: dict, path: Path) -> None:
         ax.scatter(cost, p90, s=40)
         ax.annotate(key, (cost, p90), textcoords="offset points", xytext=(5, 4), fontsize=8)
     ax.axvline(COST_BUDGET_US, color="red", lw=0.8, ls=":", label="cost budget 50 µs/sample")
-    ax.axhline(TARGETS["speed_p90_pct"], color="green", lw=0.8, ls=":",
-               label="target p90 speed error 10 %")
+    ax.axhline(
+        TARGETS["speed_p90_pct"], color="green", lw=0.8, ls=":", label="target p90 speed error 10 %"
+    )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("CPU per sample [µs] (streaming, this machine)")
@@ -238,8 +278,14 @@ def _fmt(value, digits: int = 1) -> str:
 
 def render(results: dict) -> str:
     decoders = results["decoders"]
-    baseline = next((v["target"].get("cpu_us_per_sample") for v in decoders.values()
-                     if v.get("decoder") == "mmse" and v.get("default_settings")), None)
+    baseline = next(
+        (
+            v["target"].get("cpu_us_per_sample")
+            for v in decoders.values()
+            if v.get("decoder") == "mmse" and v.get("default_settings")
+        ),
+        None,
+    )
     lines = [
         "# Skin decoding benchmark: what accuracy costs in time",
         "",
@@ -271,36 +317,60 @@ def render(results: dict) -> str:
             f"{_fmt(t.get('position_p90_mm'))} | {_fmt(t.get('position_nrmsd'), 3)} | "
             f"{_fmt(t.get('missing_pct'))} | {_fmt(t.get('slip_flag_intervals'), 2)} | "
             f"{_fmt(t.get('first_good_ratio'), 2)} | {_fmt(entry.get('false_slip_pct'), 2)} | "
-            f"{_fmt(t.get('cpu_us_per_sample'))} | {_fmt(entry.get('memory_kib'), 0)} |")
-    lines += ["", "Targets (best decoder): " + ", ".join(
-        f"{k} ≤ {v:g}" for k, v in results["targets"].items()) + ".", ""]
+            f"{_fmt(t.get('cpu_us_per_sample'))} | {_fmt(entry.get('memory_kib'), 0)} |"
+        )
+    lines += [
+        "",
+        "Targets (best decoder): "
+        + ", ".join(f"{k} ≤ {v:g}" for k, v in results["targets"].items())
+        + ".",
+        "",
+    ]
     if baseline:
-        lines += ["Speed-up against the faithful thesis MMSE (CPU per sample, target subset): "
-                  + ", ".join(f"{k} {baseline / v['target']['cpu_us_per_sample']:.1f}×"
-                              for k, v in decoders.items()
-                              if v.get("decoder") != "mmse"
-                              and v.get("target", {}).get("cpu_us_per_sample"))
-                  + ".", ""]
-    lines += ["![Pareto: speed error against CPU per sample](decoding_pareto.png)", "",
-              "## Every layout (6-143 mm/s, both directions): speed p90 % / position p90 mm", "",
-              "| decoder | " + " | ".join(LAYOUTS_MM) + " |", "|---|" + "---:|" * len(LAYOUTS_MM)]
+        lines += [
+            "Speed-up against the faithful thesis MMSE (CPU per sample, target subset): "
+            + ", ".join(
+                f"{k} {baseline / v['target']['cpu_us_per_sample']:.1f}×"
+                for k, v in decoders.items()
+                if v.get("decoder") != "mmse" and v.get("target", {}).get("cpu_us_per_sample")
+            )
+            + ".",
+            "",
+        ]
+    lines += [
+        "![Pareto: speed error against CPU per sample](decoding_pareto.png)",
+        "",
+        "## Every layout (6-143 mm/s, both directions): speed p90 % / position p90 mm",
+        "",
+        "| decoder | " + " | ".join(LAYOUTS_MM) + " |",
+        "|---|" + "---:|" * len(LAYOUTS_MM),
+    ]
     for key, entry in decoders.items():
-        cells = [f"{_fmt(s.get('speed_p90_pct'), 0)} / {_fmt(s.get('position_p90_mm'), 1)}"
-                 for s in (entry["per_layout"][layout] for layout in LAYOUTS_MM)]
+        cells = [
+            f"{_fmt(s.get('speed_p90_pct'), 0)} / {_fmt(s.get('position_p90_mm'), 1)}"
+            for s in (entry["per_layout"][layout] for layout in LAYOUTS_MM)
+        ]
         lines.append(f"| {key} | " + " | ".join(cells) + " |")
-    lines += ["", "## Sample rate, noise, speed dips and tip contacts "
-              "(alpha0.1 + fibonacci, 23/68/118 mm/s): speed p90 % / position p90 mm", "",
-              "| decoder | 100 Hz | 200 Hz | 1000 Hz | no noise | 2× noise | dips + tips |",
-              "|---|---:|---:|---:|---:|---:|---:|"]
+    lines += [
+        "",
+        "## Sample rate, noise, speed dips and tip contacts "
+        "(alpha0.1 + fibonacci, 23/68/118 mm/s): speed p90 % / position p90 mm",
+        "",
+        "| decoder | 100 Hz | 200 Hz | 1000 Hz | no noise | 2× noise | dips + tips |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for key, entry in decoders.items():
         cells = []
         for tag in ("fs100", "fs200", "fs1000", "noise0", "noise2", "dips+tips"):
             s = entry.get(tag, {})
-            cells.append(f"{_fmt(s.get('speed_p90_pct'), 0)} / "
-                         f"{_fmt(s.get('position_p90_mm'), 1)}")
+            cells.append(f"{_fmt(s.get('speed_p90_pct'), 0)} / {_fmt(s.get('position_p90_mm'), 1)}")
         lines.append(f"| {key} | " + " | ".join(cells) + " |")
-    lines += ["", "Thesis (table 5.2, best skin alpha0.1, real signals ≤ 80 mm/s): NRMSD speed "
-              "0.21, position 0.15; reliable only below 60 mm/s.", ""]
+    lines += [
+        "",
+        "Thesis (table 5.2, best skin alpha0.1, real signals ≤ 80 mm/s): NRMSD speed "
+        "0.21, position 0.15; reliable only below 60 mm/s.",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -312,8 +382,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=DOCS)
     args = parser.parse_args(argv)
     results = run(args.quick, args.out)
-    print(f"recommended default: {results['recommended_default']}; "
-          f"wrote {args.out / 'decoding.md'}")
+    print(
+        f"recommended default: {results['recommended_default']}; wrote {args.out / 'decoding.md'}"
+    )
     return 0
 
 

@@ -124,13 +124,25 @@ def _slope_taps(width: int) -> np.ndarray:
 class ContactDetector:
     """Finds ridge-contact onsets in a uniformly sampled FSR stream (see module doc)."""
 
-    def __init__(self, fs_hz: float, *, scales_s: tuple[float, ...] = DEFAULT_SCALES_S,
-                 threshold: float = 4.5, refine_z: float = 3.0, merge_widths: float = 2.0,
-                 block_s: float = 0.125, noise_blocks: int = 8, history_s: float = 10.0,
-                 rise_fraction: float = 0.1, coarse_rise_fraction: float = 0.3,
-                 drop_fraction: float = 0.3,
-                 watch_s: float = 1.0, level_s: float = 0.01, trend_s: float = 0.1,
-                 decay_rises: float = 5.0):
+    def __init__(
+        self,
+        fs_hz: float,
+        *,
+        scales_s: tuple[float, ...] = DEFAULT_SCALES_S,
+        threshold: float = 4.5,
+        refine_z: float = 3.0,
+        merge_widths: float = 2.0,
+        block_s: float = 0.125,
+        noise_blocks: int = 8,
+        history_s: float = 10.0,
+        rise_fraction: float = 0.1,
+        coarse_rise_fraction: float = 0.3,
+        drop_fraction: float = 0.3,
+        watch_s: float = 1.0,
+        level_s: float = 0.01,
+        trend_s: float = 0.1,
+        decay_rises: float = 5.0,
+    ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
         self.channels = [_Channel(w, _slope_taps(w)) for w in widths]
@@ -179,16 +191,18 @@ class ContactDetector:
         checks = self._check_pulses(events)
         self._trim()
         # block noises still needed: the last noise_blocks before the slowest channel's block
-        oldest = (min(ch.next_n for ch in self.channels) // self.block
-                  - max(self.noise_blocks, self.history_blocks) - 2)
+        oldest = (
+            min(ch.next_n for ch in self.channels) // self.block
+            - max(self.noise_blocks, self.history_blocks)
+            - 2
+        )
         for ch in self.channels:
             for cache in (ch.block_noise, ch.noise_by_block):
                 for b in [b for b in cache if b < oldest]:
                     del cache[b]
         return events, checks
 
-    def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int,
-                     candidates: list) -> None:
+    def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int, candidates: list) -> None:
         w = ch.width
         a = _IIR_ONE
         if ch.zi is None:  # as if the first sample had been held before: slopes start at 0
@@ -209,8 +223,9 @@ class ContactDetector:
         self._normalise(ch, start, hinge, slope_after)
         self._local_maxima(ci, ch, candidates)
 
-    def _normalise(self, ch: _Channel, start: int, hinge: np.ndarray,
-                   slope_after: np.ndarray) -> None:
+    def _normalise(
+        self, ch: _Channel, start: int, hinge: np.ndarray, slope_after: np.ndarray
+    ) -> None:
         """Noise per block of centres; z for every centre whose noise is known.
 
         Centres of block b > 0 use the noise of the blocks before it; block 0
@@ -284,11 +299,11 @@ class ContactDetector:
             return
         i0, i1 = lo - ch.z_start, hi - ch.z_start
         ch.next_test = hi + 1
-        above = np.flatnonzero(z[i0:i1 + 1] >= self.threshold)
+        above = np.flatnonzero(z[i0 : i1 + 1] >= self.threshold)
         for h in above.tolist():  # a local maximum over +-w (ties: the first)
             i = i0 + h
             zc = z[i]
-            if zc <= z[i - w:i].max() or zc < z[i + 1:i + w + 1].max():
+            if zc <= z[i - w : i].max() or zc < z[i + 1 : i + w + 1].max():
                 continue
             n = ch.z_start + i
             jump, rising = ch.zh[i], ch.za[i]
@@ -314,7 +329,7 @@ class ContactDetector:
                 lo, hi = max(1, i - reach), min(len(ch.z) - 2, i + reach)
                 if hi < lo:
                     break
-                j = lo + int(np.argmax(ch.z[lo:hi + 1]))
+                j = lo + int(np.argmax(ch.z[lo : hi + 1]))
                 if ch.z[j] < self.refine_z or j in (lo, hi):
                     break
                 i, n, reach = j, ch.z_start + j, ch.width
@@ -346,8 +361,9 @@ class ContactDetector:
             # timing: a quarter of the placing scale (the hinge peak is that wide), and
             # the sub-sample interpolation
             sigma = (0.25 * placed + 0.3) / self.fs_hz
-            ev = ContactEvent(self._next_id, t, n, emit, z, jump * self.fs_hz, w / self.fs_hz,
-                              sigma)
+            ev = ContactEvent(
+                self._next_id, t, n, emit, z, jump * self.fs_hz, w / self.fs_hz, sigma
+            )
             self._next_id += 1
             events.append(ev)
         return events
@@ -382,8 +398,11 @@ class ContactDetector:
                 trend = max(0.0, (base - earlier) / self.trend_n)
             white = self._noise(fine, ev.index // self.block) / _hinge_gain(fine.width)
             noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
-            self._watches.append(_Watch(ev.id, ev.index, 0.0 if base is None else base, trend,
-                                        noise, next_k=ev.index))
+            self._watches.append(
+                _Watch(
+                    ev.id, ev.index, 0.0 if base is None else base, trend, noise, next_k=ev.index
+                )
+            )
         still = []
         for watch in self._watches:
             done = self._advance(watch)
@@ -409,7 +428,7 @@ class ContactDetector:
         end = min(watch.index + self.watch, self._level_start + len(self._level) - 1 - h)
         if end >= watch.next_k:
             i0 = watch.next_k + h - self._level_start
-            level = self._level[i0:i0 + end - watch.next_k + 1]
+            level = self._level[i0 : i0 + end - watch.next_k + 1]
             k = np.arange(watch.next_k, end + 1)
             d = level - watch.base - watch.trend * (k - watch.index + 2 * h + 1)
             peak = np.maximum.accumulate(np.maximum(d, watch.peak))
@@ -420,8 +439,11 @@ class ContactDetector:
             rise = np.searchsorted(history, 0.9 * peak)
             rise = np.maximum(rise, self.min_rise)
             since = k - watch.index
-            ok = ((peak >= 4.0 * watch.noise) & (peak - d >= self.drop_fraction * peak)
-                  & (since <= (1.0 + self.decay_rises) * rise))
+            ok = (
+                (peak >= 4.0 * watch.noise)
+                & (peak - d >= self.drop_fraction * peak)
+                & (since <= (1.0 + self.decay_rises) * rise)
+            )
             hit = np.flatnonzero(ok)
             if len(hit):
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)

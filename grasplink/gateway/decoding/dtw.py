@@ -82,8 +82,9 @@ def coarse_speeds(low: float = 4.0, high: float = 250.0, ratio: float = 1.25) ->
     return low * ratio ** np.arange(count)
 
 
-def banded_dtw(query: np.ndarray, ref: np.ndarray, band: int
-               ) -> tuple[float, list[tuple[int, int]]]:
+def banded_dtw(
+    query: np.ndarray, ref: np.ndarray, band: int
+) -> tuple[float, list[tuple[int, int]]]:
     """Subsequence DTW of `query` (n) against `ref` (n + 2 band), within the band.
 
     Cell (i, k) aligns query[i] with ref[i + k], k in 0..2 band (the band
@@ -146,33 +147,62 @@ def _znorm(a: np.ndarray) -> np.ndarray:
 class DtwDecoder(WindowDecoder):
     name = "dtw"
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
-                 update_period_s: float = DEFAULT_UPDATE_S, window_s: float = 5.0,
-                 resolution_mm: float = 0.5, band_mm: float = 1.0, min_mm: float = 15.0,
-                 v_low: float = 5.0, v_high: float = 250.0, speed_ratio: float = 1.1,
-                 v_ref: float = V_REF, hop_s: float = 0.2,
-                 min_correlation: float = 0.5, distinct_mm: float = 10.0,
-                 reference_seed: int = REFERENCE_SEED, warp_refine: bool = True, **front):
-        super().__init__(layout_mm, fs_hz, update_period_s=update_period_s,
-                         window_s=window_s, hop_s=hop_s, **front)
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        *,
+        update_period_s: float = DEFAULT_UPDATE_S,
+        window_s: float = 5.0,
+        resolution_mm: float = 0.5,
+        band_mm: float = 1.0,
+        min_mm: float = 15.0,
+        v_low: float = 5.0,
+        v_high: float = 250.0,
+        speed_ratio: float = 1.1,
+        v_ref: float = V_REF,
+        hop_s: float = 0.2,
+        min_correlation: float = 0.5,
+        distinct_mm: float = 10.0,
+        reference_seed: int = REFERENCE_SEED,
+        warp_refine: bool = True,
+        **front,
+    ):
+        super().__init__(
+            layout_mm,
+            fs_hz,
+            update_period_s=update_period_s,
+            window_s=window_s,
+            hop_s=hop_s,
+            **front,
+        )
         self.warp_refine = bool(warp_refine)
-        for label, value in (("resolution_mm", resolution_mm), ("band_mm", band_mm),
-                             ("min_mm", min_mm)):
+        for label, value in (
+            ("resolution_mm", resolution_mm),
+            ("band_mm", band_mm),
+            ("min_mm", min_mm),
+        ):
             if not (math.isfinite(value) and value > 0):
                 raise ConfigError(f"{label} must be > 0, got {value}")
         if not (0 < v_low < v_high and speed_ratio > 1):
-            raise ConfigError(f"need 0 < v_low < v_high and speed_ratio > 1, got "
-                              f"{v_low}, {v_high}, {speed_ratio}")
+            raise ConfigError(
+                f"need 0 < v_low < v_high and speed_ratio > 1, got {v_low}, {v_high}, {speed_ratio}"
+            )
         self.resolution_mm = float(resolution_mm)
         self.band = max(1, round(band_mm / resolution_mm))
         self.min_cells = max(8, round(min_mm / resolution_mm))
         self.min_correlation = float(min_correlation)
         self.distinct_mm = float(distinct_mm)
         self._fine = speed_ratio ** (np.arange(-3, 4) / 4.0)
-        self.searcher = ReferenceSearch(self.geometry.spacings_mm, self.fs_hz,
-                                        coarse_speeds(v_low, v_high, speed_ratio),
-                                        window_s=window_s, v_ref=v_ref,
-                                        resolution_mm=resolution_mm, seed=reference_seed)
+        self.searcher = ReferenceSearch(
+            self.geometry.spacings_mm,
+            self.fs_hz,
+            coarse_speeds(v_low, v_high, speed_ratio),
+            window_s=window_s,
+            v_ref=v_ref,
+            resolution_mm=resolution_mm,
+            seed=reference_seed,
+        )
 
     def match(self, t: np.ndarray, x: np.ndarray) -> tuple[float, float | None, float] | None:
         candidates = self.searcher.search(t, x, self.min_cells)
@@ -185,8 +215,9 @@ class DtwDecoder(WindowDecoder):
             if best is not None:
                 fine_speeds.append(abs(best.speed) * self._fine)
         if fine_speeds:
-            fine = self.searcher.search(t, x, self.min_cells, np.unique(np.concatenate(
-                fine_speeds)))
+            fine = self.searcher.search(
+                t, x, self.min_cells, np.unique(np.concatenate(fine_speeds))
+            )
             candidates = sorted(candidates + fine, key=lambda c: c.mse)
         coarse = candidates[0]
         if 1.0 - coarse.mse / 2.0 < self.min_correlation:
@@ -204,11 +235,11 @@ class DtwDecoder(WindowDecoder):
         # alignment was poor: trust falls to 0 at a factor of 2 (the slope limit)
         agreement = 1.0 - abs(math.log(abs(speed) / abs(coarse.speed))) / math.log(2.0)
         trust *= float(np.clip(agreement, 0.1, 1.0))
-        return speed, position, float(np.clip(explained(2.0 * (1.0 - rho), t, x) * trust,
-                                              0.0, 1.0))
+        return speed, position, float(np.clip(explained(2.0 * (1.0 - rho), t, x) * trust, 0.0, 1.0))
 
-    def refine(self, coarse: Candidate, t: np.ndarray, x: np.ndarray
-               ) -> tuple[float, float, float] | None:
+    def refine(
+        self, coarse: Candidate, t: np.ndarray, x: np.ndarray
+    ) -> tuple[float, float, float] | None:
         """Banded DTW of the window around the coarse alignment: (speed, position, rho)."""
         v0 = abs(coarse.speed)
         warped = warp_window(t, x, v0, self.resolution_mm, self.searcher.max_len)
@@ -222,7 +253,7 @@ class DtwDecoder(WindowDecoder):
         last = end + self.band
         if first < 0 or last >= len(ref.values):
             return None
-        segment = _znorm(ref.values[first:last + 1])
+        segment = _znorm(ref.values[first : last + 1])
         cost, path = banded_dtw(query, segment, self.band)
         # reference distance over warped time: a least-squares line through the path
         # (its free ends wander within the band; the line does not)

@@ -53,14 +53,17 @@ class RecordingScore:
     samples: int
 
 
-def run_decoder(make: Callable[[], Decoder], rec: SkinRecording
-                ) -> tuple[list[SlipEstimate], float]:
+def run_decoder(
+    make: Callable[[], Decoder], rec: SkinRecording
+) -> tuple[list[SlipEstimate], float]:
     """Feed the recording in chunks; returns estimates and CPU µs per sample."""
     decoder = make()
     estimates: list[SlipEstimate] = []
     t0 = time.process_time()
     for start in range(0, len(rec.t_s), CHUNK):
-        estimates += decoder.feed(rec.t_s[start:start + CHUNK], rec.force_n[start:start + CHUNK])
+        estimates += decoder.feed(
+            rec.t_s[start : start + CHUNK], rec.force_n[start : start + CHUNK]
+        )
     cpu = time.process_time() - t0
     return estimates, 1e6 * cpu / max(1, len(rec.t_s))
 
@@ -70,7 +73,7 @@ def peak_memory_kib(make: Callable[[], Decoder], rec: SkinRecording) -> float:
     try:
         decoder = make()
         for start in range(0, len(rec.t_s), CHUNK):
-            decoder.feed(rec.t_s[start:start + CHUNK], rec.force_n[start:start + CHUNK])
+            decoder.feed(rec.t_s[start : start + CHUNK], rec.force_n[start : start + CHUNK])
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
@@ -81,8 +84,9 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
     estimates, cpu_us = run_decoder(make, rec)
     if not estimates:
         empty = np.zeros(0)
-        return RecordingScore(empty, empty, empty, empty, empty, 0, 0, None, None, None, 0, 0,
-                              cpu_us, len(rec.t_s))
+        return RecordingScore(
+            empty, empty, empty, empty, empty, 0, 0, None, None, None, 0, 0, cpu_us, len(rec.t_s)
+        )
     t_upd = np.array([e.t_s for e in estimates])
     slipping = np.interp(t_upd, rec.t_s, rec.slipping) > 0.5
     v_true = np.interp(t_upd, rec.t_s, rec.speed_mm_s)
@@ -110,14 +114,21 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
         if len(good_idx):
             first_good = t_upd[good_idx[0]] - onset
     return RecordingScore(
-        speed_rel_err=rel, speed_abs_err=np.abs(v_est[have_v] - v_true[have_v]),
-        speed_true=v_true[have_v], position_err_mm=np.abs(x_est[have_x] - x_true[have_x]),
-        position_true=x_true[have_x], scored=int(scored_mask.sum()),
+        speed_rel_err=rel,
+        speed_abs_err=np.abs(v_est[have_v] - v_true[have_v]),
+        speed_true=v_true[have_v],
+        position_err_mm=np.abs(x_est[have_x] - x_true[have_x]),
+        position_true=x_true[have_x],
+        scored=int(scored_mask.sum()),
         missing=int((scored_mask & ~np.isfinite(v_est)).sum()),
-        slip_flag_delay_intervals=slip_delay, first_good_s=first_good,
+        slip_flag_delay_intervals=slip_delay,
+        first_good_s=first_good,
         physical_limit_s=(third - onset) if third is not None and onset is not None else None,
-        false_slip_updates=int((flags & ~slipping).sum()), static_updates=int((~slipping).sum()),
-        cpu_us_per_sample=cpu_us, samples=len(rec.t_s))
+        false_slip_updates=int((flags & ~slipping).sum()),
+        static_updates=int((~slipping).sum()),
+        cpu_us_per_sample=cpu_us,
+        samples=len(rec.t_s),
+    )
 
 
 def _onset(rec: SkinRecording) -> float | None:
@@ -128,4 +139,4 @@ def _onset(rec: SkinRecording) -> float | None:
 def nrmsd(errors: np.ndarray, truth: np.ndarray) -> float | None:
     if len(errors) == 0 or np.ptp(truth) == 0:
         return None
-    return float(np.sqrt(np.mean(errors ** 2)) / np.ptp(truth))
+    return float(np.sqrt(np.mean(errors**2)) / np.ptp(truth))

@@ -61,14 +61,27 @@ from grasplink.gateway.decoding.filters import NoiseEstimator
 class FftDecoder(Decoder):
     name = "fft"
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
-                 update_period_s: float = DEFAULT_UPDATE_S, window_s: float = 1.0,
-                 f_min_hz: float = 1.0, v_max: float = 150.0, on_ratio: float = 100.0,
-                 off_ratio: float = 30.0, min_noise_n: float = 0.002, max_width: float = 3.0,
-                 min_fill: float = 0.5, min_cycles: float = 1.5, differentiate: bool = True,
-                 nfft: int | None = None,
-                 uniform_confidence: float = 0.5, nonuniform_confidence: float = 0.25,
-                 static_corner_hz: float = 2.0):
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        *,
+        update_period_s: float = DEFAULT_UPDATE_S,
+        window_s: float = 1.0,
+        f_min_hz: float = 1.0,
+        v_max: float = 150.0,
+        on_ratio: float = 100.0,
+        off_ratio: float = 30.0,
+        min_noise_n: float = 0.002,
+        max_width: float = 3.0,
+        min_fill: float = 0.5,
+        min_cycles: float = 1.5,
+        differentiate: bool = True,
+        nfft: int | None = None,
+        uniform_confidence: float = 0.5,
+        nonuniform_confidence: float = 0.25,
+        static_corner_hz: float = 2.0,
+    ):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         if not window_s > 0:
             raise ConfigError(f"window_s must be > 0, got {window_s}")
@@ -88,15 +101,17 @@ class FftDecoder(Decoder):
         f_min = max(f_min_hz, min_cycles / window_s)  # a line needs cycles in the window
         self.band = np.nonzero((self.freqs >= f_min) & (self.freqs <= f_max))[0]
         if len(self.band) < 3:
-            raise ConfigError(f"band {f_min:g}-{f_max:g} Hz is too narrow at "
-                              f"{self.fs_hz:g} Hz with a {window_s:g} s window")
+            raise ConfigError(
+                f"band {f_min:g}-{f_max:g} Hz is too narrow at "
+                f"{self.fs_hz:g} Hz with a {window_s:g} s window"
+            )
         self.on_ratio, self.off_ratio = float(on_ratio), float(off_ratio)
         self.max_width_hz = float(max_width) / window_s
         self.differentiate = bool(differentiate)
         self._f2 = self.freqs[self.band] ** 2
         self.cap = uniform_confidence if self.uniform else nonuniform_confidence
         self._hann = np.hanning(self.window)
-        self._hann_energy = float(np.sum(self._hann ** 2))
+        self._hann_energy = float(np.sum(self._hann**2))
         self.min_noise_n = float(min_noise_n)
         self.noise = NoiseEstimator(max(8, round(0.5 * self.fs_hz)))
         self._static_corner = static_corner_hz
@@ -128,10 +143,10 @@ class FftDecoder(Decoder):
             if count:
                 self._force = float(force[count - 1])
                 begin = self._window_begin(restarts, count, offset)
-                self._buffer = combined[begin:offset + count]
+                self._buffer = combined[begin : offset + count]
             out.append(self._estimate(g))
         self._advance(x, restarts, fed, len(x))
-        self._buffer = combined[self._window_begin(restarts, len(x), offset):]
+        self._buffer = combined[self._window_begin(restarts, len(x), offset) :]
         self._force = float(force[-1])
         self._last_t = float(t[-1])
         return out
@@ -173,7 +188,7 @@ class FftDecoder(Decoder):
         """Width of the spectral peak at half its power."""
         half = power[i] / 2
         below = np.nonzero(power[:i] < half)[0]
-        above = np.nonzero(power[i + 1:] < half)[0]
+        above = np.nonzero(power[i + 1 :] < half)[0]
         if not len(below) or not len(above):
             return np.inf
         step = self.freqs[1] - self.freqs[0]
@@ -198,7 +213,7 @@ class FftDecoder(Decoder):
             i -= 1
         delta = 0.0
         if 0 < i < len(raw) - 1:
-            lo, mid, hi = np.log(raw[i - 1:i + 2] + 1e-300)
+            lo, mid, hi = np.log(raw[i - 1 : i + 2] + 1e-300)
             denom = lo - 2 * mid + hi
             delta = 0.5 * (lo - hi) / denom if denom < 0 else 0.0
         step = self.freqs[1] - self.freqs[0]

@@ -163,8 +163,7 @@ class PeakDetector:
         delta = 0.0 if denom >= 0 else 0.5 * (y0 - y2) / denom
         delta = min(0.5, max(-0.5, delta))
         step = (self._after_t - t1) if delta >= 0 else (t1 - self._before_t)
-        return Peak(t1 + delta * step, top - 0.25 * (y0 - y2) * delta, self._max_index,
-                    t_confirm)
+        return Peak(t1 + delta * step, top - 0.25 * (y0 - y2) * delta, self._max_index, t_confirm)
 
 
 class NoiseEstimator:
@@ -206,14 +205,14 @@ class NoiseEstimator:
         pending = np.concatenate([self._pending, x])
         full = len(pending) // self.block
         for b in range(full):
-            chunk = pending[b * self.block:(b + 1) * self.block]
+            chunk = pending[b * self.block : (b + 1) * self.block]
             if self.differences:
                 self._blocks.append(mad_sigma(np.diff(chunk)) / math.sqrt(2.0))
             else:
                 self._blocks.append(mad_sigma(chunk))
             if len(self._blocks) > self.history:
                 self._blocks.pop(0)
-        self._pending = pending[full * self.block:].copy()
+        self._pending = pending[full * self.block :].copy()
 
 
 def mad_sigma(x: np.ndarray) -> float:
@@ -251,11 +250,19 @@ class PulseFrontEnd:
     for every sample does not depend on how the input was chunked.
     """
 
-    def __init__(self, fs_hz: float, *, band_hz: tuple[float, float] = (0.5, 30.0),
-                 order: int = 1, threshold_n: float = 0.05,
-                 threshold_sigmas: float = 6.0, static_corner_hz: float = 2.0,
-                 noise_block_s: float = 0.5, noise_from: str = "white",
-                 gap_periods: float = 3.0):
+    def __init__(
+        self,
+        fs_hz: float,
+        *,
+        band_hz: tuple[float, float] = (0.5, 30.0),
+        order: int = 1,
+        threshold_n: float = 0.05,
+        threshold_sigmas: float = 6.0,
+        static_corner_hz: float = 2.0,
+        noise_block_s: float = 0.5,
+        noise_from: str = "white",
+        gap_periods: float = 3.0,
+    ):
         from grasplink.gateway.decoding.base import StaticForce
 
         self.fs_hz = float(fs_hz)
@@ -268,8 +275,9 @@ class PulseFrontEnd:
         if noise_from not in ("band", "white"):
             raise ValueError(f"noise_from must be 'band' or 'white', got {noise_from!r}")
         self.noise_from = noise_from
-        self.noise = NoiseEstimator(max(8, round(noise_block_s * self.fs_hz)),
-                                    differences=noise_from == "white")
+        self.noise = NoiseEstimator(
+            max(8, round(noise_block_s * self.fs_hz)), differences=noise_from == "white"
+        )
         self.threshold_n = float(threshold_n)
         self.threshold_sigmas = float(threshold_sigmas)
         self.gap_s = gap_periods / self.fs_hz
@@ -334,8 +342,13 @@ class PeakLag:
     carry the filter's delay whatever the band or sample rate.
     """
 
-    def __init__(self, sos: np.ndarray, fs_hz: float, ridge_side_mm: float = 2.5,
-                 speeds_mm_s: np.ndarray | None = None):
+    def __init__(
+        self,
+        sos: np.ndarray,
+        fs_hz: float,
+        ridge_side_mm: float = 2.5,
+        speeds_mm_s: np.ndarray | None = None,
+    ):
         speeds = np.geomspace(1.0, 1000.0, 31) if speeds_mm_s is None else speeds_mm_s
         lags = []
         for v in speeds:
@@ -384,8 +397,15 @@ class PeakActivity:
     [`min_hold_s`, `max_hold_s`].
     """
 
-    def __init__(self, spacings_mm: np.ndarray, *, pair_s: float = 1.5,
-                 hold_factor: float = 1.5, min_hold_s: float = 0.2, max_hold_s: float = 3.0):
+    def __init__(
+        self,
+        spacings_mm: np.ndarray,
+        *,
+        pair_s: float = 1.5,
+        hold_factor: float = 1.5,
+        min_hold_s: float = 0.2,
+        max_hold_s: float = 3.0,
+    ):
         self.widest = float(np.max(spacings_mm))
         self.spread = float(np.max(spacings_mm) / np.min(spacings_mm))
         self.pair_s, self.hold_factor = float(pair_s), float(hold_factor)
@@ -420,9 +440,11 @@ class PeakActivity:
         return self.on
 
 
-def interleave(events: list[tuple[float, Peak | None]], points: list[tuple[int, float]],
-               apply: Callable[[tuple[float, Peak | None]], None]
-               ) -> Iterator[tuple[int, float]]:
+def interleave(
+    events: list[tuple[float, Peak | None]],
+    points: list[tuple[int, float]],
+    apply: Callable[[tuple[float, Peak | None]], None],
+) -> Iterator[tuple[int, float]]:
     """Apply events in time order, pausing at each update point: yields (count, t_update).
 
     Events at or before an update reach the decoder before it is asked for that

@@ -53,8 +53,9 @@ class CanStats:
     other_ids: set[int] = field(default_factory=set)
 
 
-def read_recording(path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID,
-                   fs_hz: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def read_recording(
+    path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID, fs_hz: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Read any supported recording by its extension."""
     p = Path(path)
     suffix = p.suffix.lower()
@@ -74,8 +75,9 @@ def _open_text(path: Path) -> list[str]:
     except IsADirectoryError:
         raise RecordingError(f"{path}: is a directory, not a recording") from None
     except UnicodeDecodeError as exc:
-        raise RecordingError(f"{path}: not a text (CSV) file: {exc.reason} at byte "
-                             f"{exc.start}") from None
+        raise RecordingError(
+            f"{path}: not a text (CSV) file: {exc.reason} at byte {exc.start}"
+        ) from None
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read: {exc.strerror}") from None
 
@@ -90,8 +92,9 @@ def read_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     header_line, header = numbered[0]
     names = tuple(name.strip() for name in header.split(","))
     if names != CSV_HEADER:
-        raise RecordingError(f"{p}:{header_line}: header must be 't_s,force_n', found "
-                             f"{header.strip()!r}")
+        raise RecordingError(
+            f"{p}:{header_line}: header must be 't_s,force_n', found {header.strip()!r}"
+        )
     rows = numbered[1:]
     if not rows:
         raise RecordingError(f"{p}: no samples after the header")
@@ -100,17 +103,19 @@ def read_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     for k, (n, line) in enumerate(rows):
         fields = line.split(",")
         if len(fields) != 2:
-            raise RecordingError(f"{p}:{n}: expected 2 values (t_s,force_n), found "
-                                 f"{len(fields)}: {line.strip()!r}")
+            raise RecordingError(
+                f"{p}:{n}: expected 2 values (t_s,force_n), found {len(fields)}: {line.strip()!r}"
+            )
         for column, (name, text) in enumerate(zip(CSV_HEADER, fields, strict=True)):
             value = _number(text)
             if value is None:
-                raise RecordingError(f"{p}:{n}: {name} {text.strip()!r} is not a finite "
-                                     "number")
+                raise RecordingError(f"{p}:{n}: {name} {text.strip()!r} is not a finite number")
             (t if column == 0 else force)[k] = value
         if k and t[k] <= t[k - 1]:
-            raise RecordingError(f"{p}:{n}: time {fields[0].strip()} s is not after the "
-                                 f"previous sample's {t[k - 1]:g} s (time must increase)")
+            raise RecordingError(
+                f"{p}:{n}: time {fields[0].strip()} s is not after the "
+                f"previous sample's {t[k - 1]:g} s (time must increase)"
+            )
     return t, force
 
 
@@ -133,12 +138,13 @@ def read_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise RecordingError(f"{p}: not a readable .npz archive ({exc})") from None
     with archive:
         if not hasattr(archive, "files"):
-            raise RecordingError(f"{p}: a single array, not an .npz archive with t_s and "
-                                 "force_n")
+            raise RecordingError(f"{p}: a single array, not an .npz archive with t_s and force_n")
         missing = [key for key in CSV_HEADER if key not in archive.files]
         if missing:
-            raise RecordingError(f"{p}: missing array(s) {', '.join(missing)}; found "
-                                 f"{', '.join(archive.files) or 'none'}")
+            raise RecordingError(
+                f"{p}: missing array(s) {', '.join(missing)}; found "
+                f"{', '.join(archive.files) or 'none'}"
+            )
         try:
             t = np.asarray(archive["t_s"], dtype=np.float64)
             force = np.asarray(archive["force_n"], dtype=np.float64)
@@ -154,13 +160,16 @@ def read_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     for name, a in (("t_s", t), ("force_n", force)):
         bad = np.nonzero(~np.isfinite(a))[0]
         if len(bad):
-            raise RecordingError(f"{p}: {name}[{bad[0]}] is {a[bad[0]]} (every value must be "
-                                 "a finite number)")
+            raise RecordingError(
+                f"{p}: {name}[{bad[0]}] is {a[bad[0]]} (every value must be a finite number)"
+            )
     steps = np.nonzero(np.diff(t) <= 0)[0]
     if len(steps):
         k = int(steps[0]) + 1
-        raise RecordingError(f"{p}: t_s[{k}] = {t[k]:g} s is not after t_s[{k - 1}] = "
-                             f"{t[k - 1]:g} s (time must increase)")
+        raise RecordingError(
+            f"{p}: t_s[{k}] = {t[k]:g} s is not after t_s[{k - 1}] = "
+            f"{t[k - 1]:g} s (time must increase)"
+        )
     return t, force
 
 
@@ -170,8 +179,10 @@ def infer_rate(t: np.ndarray, source: str) -> float:
         raise RecordingError(f"{source}: one sample cannot tell the sample rate; give --fs")
     step = float(np.median(np.diff(t)))
     if not step > 0:
-        raise RecordingError(f"{source}: the median time step is {step:g} s; cannot infer "
-                             "the sample rate (give --fs)")
+        raise RecordingError(
+            f"{source}: the median time step is {step:g} s; cannot infer "
+            "the sample rate (give --fs)"
+        )
     return 1.0 / step
 
 
@@ -191,8 +202,11 @@ class SkinPdo:
 
     def to_newton(self, counts: np.ndarray) -> np.ndarray:
         levels = (1 << self.bits) - 1 - self.zero
-        return (np.asarray(counts, dtype=np.float64) - self.zero) * (
-            self.full_scale_mn / levels) / 1000.0
+        return (
+            (np.asarray(counts, dtype=np.float64) - self.zero)
+            * (self.full_scale_mn / levels)
+            / 1000.0
+        )
 
 
 def skin_pdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinPdo:
@@ -214,8 +228,10 @@ def skin_pdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinPdo:
         mapped = default(TPDO1_MAP, sub)
         index, subindex, bits = mapped >> 16, (mapped >> 8) & 0xFF, mapped & 0xFF
         if bits % 8:
-            raise ConfigError(f"skin EDS: TPDO1 maps 0x{index:04X}:{subindex} with {bits} bits; "
-                              "only whole bytes are supported")
+            raise ConfigError(
+                f"skin EDS: TPDO1 maps 0x{index:04X}:{subindex} with {bits} bits; "
+                "only whole bytes are supported"
+            )
         size = bits // 8
         if index == SAMPLE_SLOTS:
             slots.append((subindex, offset, size))
@@ -230,12 +246,22 @@ def skin_pdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinPdo:
     zero = default(CALIBRATION, 3)
     if zero >= (1 << bits) - 1:
         raise ConfigError(f"skin EDS: zero offset {zero} is not below full scale at {bits} bits")
-    return SkinPdo(cob_id, offset, ordered[:per_pdo], sequence, per_pdo,
-                   float(default(SAMPLE_RATE)), zero, float(default(CALIBRATION, 2)), bits)
+    return SkinPdo(
+        cob_id,
+        offset,
+        ordered[:per_pdo],
+        sequence,
+        per_pdo,
+        float(default(SAMPLE_RATE)),
+        zero,
+        float(default(CALIBRATION, 2)),
+        bits,
+    )
 
 
-def read_can_log(path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID,
-                 fs_hz: float | None = None) -> tuple[np.ndarray, np.ndarray, CanStats]:
+def read_can_log(
+    path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID, fs_hz: float | None = None
+) -> tuple[np.ndarray, np.ndarray, CanStats]:
     """Skin TPDO1 samples from a python-can log: (t_s, force_n, stats)."""
     import can
 
@@ -261,29 +287,31 @@ def read_can_log(path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID,
             if len(data) != pdo.length:
                 stats.malformed += 1
                 continue
-            counts = [int.from_bytes(data[o:o + s], "little") for o, s in pdo.slots]
+            counts = [int.from_bytes(data[o : o + s], "little") for o, s in pdo.slots]
             seq = None
             if pdo.sequence is not None:
                 o, s = pdo.sequence
-                seq = int.from_bytes(data[o:o + s], "little")
+                seq = int.from_bytes(data[o : o + s], "little")
             packets.append((float(msg.timestamp), seq, counts))
     except RecordingError:
         raise
     except Exception as exc:  # python-can raises assorted errors on a corrupt log
-        raise RecordingError(f"{p}: cannot read as a CAN log ({type(exc).__name__}: "
-                             f"{exc})") from None
+        raise RecordingError(
+            f"{p}: cannot read as a CAN log ({type(exc).__name__}: {exc})"
+        ) from None
     if not packets:
         seen = ", ".join(f"0x{i:03X}" for i in sorted(stats.other_ids)[:12]) or "none"
-        raise RecordingError(f"{p}: no skin TPDO1 frames (COB-ID 0x{pdo.cob_id:03X}, node-ID "
-                             f"0x{node_id:02X}, {pdo.length} data bytes); CAN-IDs seen: {seen}")
+        raise RecordingError(
+            f"{p}: no skin TPDO1 frames (COB-ID 0x{pdo.cob_id:03X}, node-ID "
+            f"0x{node_id:02X}, {pdo.length} data bytes); CAN-IDs seen: {seen}"
+        )
     t, counts = _assemble(packets, pdo, rate, stats)
     if not len(t):
         raise RecordingError(f"{p}: no usable skin samples")
     return t, pdo.to_newton(counts), stats
 
 
-def _assemble(packets, pdo: SkinPdo, rate: float, stats: CanStats
-              ) -> tuple[np.ndarray, np.ndarray]:
+def _assemble(packets, pdo: SkinPdo, rate: float, stats: CanStats) -> tuple[np.ndarray, np.ndarray]:
     per = pdo.samples_per_pdo
     period = 1.0 / rate
     kept: list[tuple[float, int | None, list[int]]] = []

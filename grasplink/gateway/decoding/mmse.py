@@ -78,13 +78,27 @@ class Reference:
     slip) and after (the last value) the travel.
     """
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, direction: int, *,
-                 v_ref: float, resolution_mm: float, pad: int, seed: int = REFERENCE_SEED):
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        direction: int,
+        *,
+        v_ref: float,
+        resolution_mm: float,
+        pad: int,
+        seed: int = REFERENCE_SEED,
+    ):
         from grasplink.gateway.decoding import synth
 
-        rec = synth.slip_recording(tuple(float(s) for s in layout_mm), v_ref,
-                                   fs_hz=max(1, round(fs_hz)), reverse=direction < 0,
-                                   noise_scale=0.0, seed=seed)
+        rec = synth.slip_recording(
+            tuple(float(s) for s in layout_mm),
+            v_ref,
+            fs_hz=max(1, round(fs_hz)),
+            reverse=direction < 0,
+            noise_scale=0.0,
+            seed=seed,
+        )
         moving = rec.speed_mm_s != 0
         x = rec.position_mm[moving]
         f = rec.force_n[moving]
@@ -99,8 +113,7 @@ class Reference:
         self.pad = pad
         # Before the slip the reference is at rest: the window's pre-slip part matches
         # the recording's resting level, whatever the simulator makes of it.
-        self.values = np.concatenate([np.full(pad, rec.force_n[0]), core,
-                                      np.full(pad, core[-1])])
+        self.values = np.concatenate([np.full(pad, rec.force_n[0]), core, np.full(pad, core[-1])])
 
     def position(self, end_index: int | np.ndarray) -> float | np.ndarray:
         """Edge position for a window ending at padded index `end_index`."""
@@ -120,12 +133,22 @@ class WindowDecoder(Decoder):
     or None.
     """
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
-                 update_period_s: float = DEFAULT_UPDATE_S, window_s: float = 5.0,
-                 min_window_s: float = 1.0, lead_s: float = 0.25, hop_s: float = 0.05,
-                 min_fill: float = 0.5, pair_s: float = 1.5,
-                 hold_factor: float = 1.5, threshold_n: float = 0.05,
-                 threshold_sigmas: float = 6.0):
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        *,
+        update_period_s: float = DEFAULT_UPDATE_S,
+        window_s: float = 5.0,
+        min_window_s: float = 1.0,
+        lead_s: float = 0.25,
+        hop_s: float = 0.05,
+        min_fill: float = 0.5,
+        pair_s: float = 1.5,
+        hold_factor: float = 1.5,
+        threshold_n: float = 0.05,
+        threshold_sigmas: float = 6.0,
+    ):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         if not window_s > 0:
             raise ConfigError(f"window_s must be > 0, got {window_s}")
@@ -136,10 +159,12 @@ class WindowDecoder(Decoder):
         self.lead_s = float(lead_s)
         self.hop = max(1, round(hop_s / self.update_period_s))
         self.min_samples = max(4, round(min_fill * self.min_window_s * self.fs_hz))
-        self.front = PulseFrontEnd(self.fs_hz, threshold_n=threshold_n,
-                                   threshold_sigmas=threshold_sigmas)
-        self.activity = PeakActivity(self.geometry.spacings_mm, pair_s=pair_s,
-                                     hold_factor=hold_factor)
+        self.front = PulseFrontEnd(
+            self.fs_hz, threshold_n=threshold_n, threshold_sigmas=threshold_sigmas
+        )
+        self.activity = PeakActivity(
+            self.geometry.spacings_mm, pair_s=pair_s, hold_factor=hold_factor
+        )
         self._t = np.zeros(0)
         self._x = np.zeros(0)
         self._force: float | None = None
@@ -152,8 +177,9 @@ class WindowDecoder(Decoder):
         segments = self.front(t, x)
         events = pulse_events(segments)
         force = np.concatenate([seg.force_n for seg in segments])
-        restarts = np.array([start for start, seg in _segment_starts(segments)
-                             if seg.after_gap], dtype=np.int64)
+        restarts = np.array(
+            [start for start, seg in _segment_starts(segments) if seg.after_gap], dtype=np.int64
+        )
         all_t = np.concatenate([self._t, t])
         all_x = np.concatenate([self._x, x])
         offset = len(self._t)
@@ -162,14 +188,17 @@ class WindowDecoder(Decoder):
             if count:
                 self._force = float(force[count - 1])
             begin = self._window_begin(all_t, restarts, offset, count)
-            out.append(self._estimate(g, all_t[begin:offset + count], all_x[begin:offset + count]))
+            out.append(
+                self._estimate(g, all_t[begin : offset + count], all_x[begin : offset + count])
+            )
         begin = self._window_begin(all_t, restarts, offset, len(t))
         self._t, self._x = all_t[begin:], all_x[begin:]
         self._force = float(force[-1])
         return out
 
-    def _window_begin(self, all_t: np.ndarray, restarts: np.ndarray, offset: int,
-                      count: int) -> int:
+    def _window_begin(
+        self, all_t: np.ndarray, restarts: np.ndarray, offset: int, count: int
+    ) -> int:
         end = offset + count
         if end == 0:
             return 0
@@ -243,36 +272,61 @@ class ReferenceSearch:
     `mse_profile_bruteforce`.
     """
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, speeds: np.ndarray, *,
-                 window_s: float, v_ref: float, resolution_mm: float, seed: int,
-                 end_margin_mm: float = 30.0):
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        speeds: np.ndarray,
+        *,
+        window_s: float,
+        v_ref: float,
+        resolution_mm: float,
+        seed: int,
+        end_margin_mm: float = 30.0,
+    ):
         self.speeds = np.asarray(speeds, dtype=np.float64)
         self.resolution_mm = float(resolution_mm)
         self.margin = max(0, round(end_margin_mm / self.resolution_mm))
         # a window longer than the skin (plus margins) compares padding: keep its recent part
-        longest_mm = min(float(self.speeds.max()) * window_s,
-                         float(sum(layout_mm)) + 2 * end_margin_mm)
+        longest_mm = min(
+            float(self.speeds.max()) * window_s, float(sum(layout_mm)) + 2 * end_margin_mm
+        )
         self.max_len = math.floor(longest_mm / resolution_mm) + 1
-        self.references = [Reference(layout_mm, fs_hz, d, v_ref=v_ref,
-                                     resolution_mm=self.resolution_mm, pad=self.max_len,
-                                     seed=seed) for d in (1, -1)]
+        self.references = [
+            Reference(
+                layout_mm,
+                fs_hz,
+                d,
+                v_ref=v_ref,
+                resolution_mm=self.resolution_mm,
+                pad=self.max_len,
+                seed=seed,
+            )
+            for d in (1, -1)
+        ]
         n = len(self.references[0].values)
         self.nfft = 1 << math.ceil(math.log2(n))
         self._spectra = []
         self._sums = []
         for ref in self.references:
             r = np.zeros(self.nfft)
-            r[:len(ref.values)] = ref.values
+            r[: len(ref.values)] = ref.values
             self._spectra.append(np.fft.rfft(r))
-            self._sums.append((np.concatenate([[0.0], np.cumsum(ref.values)]),
-                               np.concatenate([[0.0], np.cumsum(ref.values ** 2)])))
+            self._sums.append(
+                (
+                    np.concatenate([[0.0], np.cumsum(ref.values)]),
+                    np.concatenate([[0.0], np.cumsum(ref.values**2)]),
+                )
+            )
 
-    def warp(self, t: np.ndarray, x: np.ndarray, speeds: np.ndarray | None = None
-             ) -> list[np.ndarray]:
+    def warp(
+        self, t: np.ndarray, x: np.ndarray, speeds: np.ndarray | None = None
+    ) -> list[np.ndarray]:
         """The window resampled at one grid step per sample, for every candidate speed."""
         speeds = self.speeds if speeds is None else speeds
-        return warp_batch(t, x, np.asarray(speeds, dtype=np.float64), self.resolution_mm,
-                          self.max_len)
+        return warp_batch(
+            t, x, np.asarray(speeds, dtype=np.float64), self.resolution_mm, self.max_len
+        )
 
     def profiles(self, warped: list[np.ndarray]) -> list[list[tuple[int, np.ndarray]]]:
         """MSE of each z-normalised warped window: [direction][speed] -> (first offset, MSE).
@@ -286,14 +340,13 @@ class ReferenceSearch:
         stds = []
         for k, w in enumerate(warped):
             centred = w - w.mean()
-            std = float(np.sqrt(np.mean(centred ** 2)))
+            std = float(np.sqrt(np.mean(centred**2)))
             stds.append(std)
             if std > FLAT_N:
-                batch[k, :len(w)] = centred / std
+                batch[k, : len(w)] = centred / std
         spectra = np.fft.rfft(batch, axis=1)
         result = []
-        for ref, spectrum, (s1, s2) in zip(self.references, self._spectra, self._sums,
-                                           strict=True):
+        for ref, spectrum, (s1, s2) in zip(self.references, self._spectra, self._sums, strict=True):
             corr = np.fft.irfft(np.conj(spectra) * spectrum, self.nfft, axis=1)
             rows = []
             n = len(s1) - 1
@@ -305,8 +358,8 @@ class ReferenceSearch:
                 if stop <= first:
                     rows.append((first, np.full(1, 2.0)))
                     continue
-                mean = (s1[first + length:stop + length] - s1[first:stop]) / length
-                var = (s2[first + length:stop + length] - s2[first:stop]) / length - mean ** 2
+                mean = (s1[first + length : stop + length] - s1[first:stop]) / length
+                var = (s2[first + length : stop + length] - s2[first:stop]) / length - mean**2
                 sd = np.sqrt(np.maximum(var, 0.0))
                 flat = sd <= FLAT_N
                 if stds[k] <= FLAT_N:  # a flat window (z-normalised: zeros) against z(r)
@@ -319,8 +372,9 @@ class ReferenceSearch:
             result.append(rows)
         return result
 
-    def search(self, t: np.ndarray, x: np.ndarray, min_length: int = 2,
-               speeds: np.ndarray | None = None) -> list[Candidate]:
+    def search(
+        self, t: np.ndarray, x: np.ndarray, min_length: int = 2, speeds: np.ndarray | None = None
+    ) -> list[Candidate]:
         """The best offset per (direction, speed), best first.
 
         `speeds`: the candidates (default: the grid). Speeds whose warped window
@@ -340,8 +394,9 @@ class ReferenceSearch:
         for ref, rows in zip(self.references, self.profiles(warped), strict=True):
             for v, (first, mse), w in zip(speeds, rows, warped, strict=True):
                 o = int(np.argmin(mse))
-                out.append(Candidate(float(mse[o]), ref.direction * float(v), first + o, len(w),
-                                     ref, w))
+                out.append(
+                    Candidate(float(mse[o]), ref.direction * float(v), first + o, len(w), ref, w)
+                )
         out.sort(key=lambda c: c.mse)
         return out
 
@@ -388,8 +443,11 @@ def rivalry(candidates: list[Candidate], distinct_mm: float) -> float:
     falling linearly to 0.1 as the two become equal (an ambiguous skin).
     """
     best = candidates[0]
-    rivals = [c for c in candidates[1:] if (c.speed > 0) != (best.speed > 0)
-              or abs(c.position - best.position) > distinct_mm]
+    rivals = [
+        c
+        for c in candidates[1:]
+        if (c.speed > 0) != (best.speed > 0) or abs(c.position - best.position) > distinct_mm
+    ]
     if not rivals or rivals[0].mse <= 0:
         return 1.0
     margin = 1.0 - best.mse / rivals[0].mse
@@ -399,25 +457,49 @@ def rivalry(candidates: list[Candidate], distinct_mm: float) -> float:
 class MmseDecoder(WindowDecoder):
     name = "mmse"
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
-                 update_period_s: float = DEFAULT_UPDATE_S, window_s: float = 5.0,
-                 v_ref: float = V_REF, v_lower: float = 5.0, v_upper: float = 150.0,
-                 v_step: float = 5.0, resolution_mm: float = 0.25, hop_s: float = 0.05,
-                 min_correlation: float = 0.5, distinct_mm: float = 10.0,
-                 reference_seed: int = REFERENCE_SEED, **front):
-        super().__init__(layout_mm, fs_hz, update_period_s=update_period_s,
-                         window_s=window_s, hop_s=hop_s, **front)
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        *,
+        update_period_s: float = DEFAULT_UPDATE_S,
+        window_s: float = 5.0,
+        v_ref: float = V_REF,
+        v_lower: float = 5.0,
+        v_upper: float = 150.0,
+        v_step: float = 5.0,
+        resolution_mm: float = 0.25,
+        hop_s: float = 0.05,
+        min_correlation: float = 0.5,
+        distinct_mm: float = 10.0,
+        reference_seed: int = REFERENCE_SEED,
+        **front,
+    ):
+        super().__init__(
+            layout_mm,
+            fs_hz,
+            update_period_s=update_period_s,
+            window_s=window_s,
+            hop_s=hop_s,
+            **front,
+        )
         if not 0 < v_lower <= v_upper or not v_step > 0:
-            raise ConfigError(f"need 0 < v_lower <= v_upper and v_step > 0, got "
-                              f"{v_lower}, {v_upper}, {v_step}")
+            raise ConfigError(
+                f"need 0 < v_lower <= v_upper and v_step > 0, got {v_lower}, {v_upper}, {v_step}"
+            )
         if not resolution_mm > 0:
             raise ConfigError(f"resolution_mm must be > 0, got {resolution_mm}")
         self.min_correlation = float(min_correlation)
         self.distinct_mm = float(distinct_mm)
-        self.searcher = ReferenceSearch(self.geometry.spacings_mm, self.fs_hz,
-                                        np.arange(v_lower, v_upper + 1e-9 * v_upper, v_step),
-                                        window_s=window_s, v_ref=v_ref,
-                                        resolution_mm=resolution_mm, seed=reference_seed)
+        self.searcher = ReferenceSearch(
+            self.geometry.spacings_mm,
+            self.fs_hz,
+            np.arange(v_lower, v_upper + 1e-9 * v_upper, v_step),
+            window_s=window_s,
+            v_ref=v_ref,
+            resolution_mm=resolution_mm,
+            seed=reference_seed,
+        )
 
     def match(self, t: np.ndarray, x: np.ndarray) -> tuple[float, float | None, float] | None:
         candidates = self.searcher.search(t, x)
@@ -427,13 +509,17 @@ class MmseDecoder(WindowDecoder):
         rho = 1.0 - best.mse / 2.0
         if rho < self.min_correlation:
             return None
-        confidence = (explained(best.mse, t, x) * rivalry(candidates, self.distinct_mm)
-                      * edge_factor(candidates))
+        confidence = (
+            explained(best.mse, t, x)
+            * rivalry(candidates, self.distinct_mm)
+            * edge_factor(candidates)
+        )
         return best.speed, best.position, float(np.clip(confidence, 0.0, 1.0))
 
 
-def warp_window(t: np.ndarray, x: np.ndarray, speed: float, step_mm: float,
-                max_len: int) -> np.ndarray:
+def warp_window(
+    t: np.ndarray, x: np.ndarray, speed: float, step_mm: float, max_len: int
+) -> np.ndarray:
     """Resample (t, x) at one sample per `step_mm` of travel at `speed`, ending at t[-1]."""
     duration = float(t[-1] - t[0])
     dt = step_mm / speed
@@ -452,8 +538,9 @@ def warp_window(t: np.ndarray, x: np.ndarray, speed: float, step_mm: float,
         return np.where(width > 0, (a_hi - a_lo) / width, np.interp(times, t, x))
 
 
-def warp_batch(t: np.ndarray, x: np.ndarray, speeds: np.ndarray, step_mm: float,
-               max_len: int) -> list[np.ndarray]:
+def warp_batch(
+    t: np.ndarray, x: np.ndarray, speeds: np.ndarray, step_mm: float, max_len: int
+) -> list[np.ndarray]:
     """`warp_window` for many speeds at once (one interpolation over all of them)."""
     if len(t) < 2:
         return [warp_window(t, x, v, step_mm, max_len) for v in speeds]
@@ -474,7 +561,8 @@ def warp_batch(t: np.ndarray, x: np.ndarray, speeds: np.ndarray, step_mm: float,
         hi = np.clip(tb + db / 2, t[0], t[-1])
         width = hi - lo
         mean = (_integral(t, x, area, hi) - _integral(t, x, area, lo)) / np.where(
-            width > 0, width, 1.0)
+            width > 0, width, 1.0
+        )
         values[boxed] = np.where(width > 0, mean, values[boxed])
     return np.split(values, starts[1:-1])
 
@@ -489,11 +577,16 @@ def _integral(t: np.ndarray, x: np.ndarray, area: np.ndarray, at: np.ndarray) ->
 
 def mse_profile_bruteforce(window: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """The thesis' loop for one warped window: z-normalised MSE at every offset."""
+
     def z(a: np.ndarray) -> np.ndarray:
         sd = a.std()
         return (a - a.mean()) / sd if sd > FLAT_N else np.zeros_like(a)
 
     length = len(window)
     w = z(window)
-    return np.array([np.mean((w - z(reference[o:o + length])) ** 2)
-                     for o in range(len(reference) - length + 1)])
+    return np.array(
+        [
+            np.mean((w - z(reference[o : o + length])) ** 2)
+            for o in range(len(reference) - length + 1)
+        ]
+    )

@@ -80,21 +80,38 @@ class Answer:
 class RatioDecoder(Decoder):
     name = "ratio"
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
-                 update_period_s: float = DEFAULT_UPDATE_S,
-                 band_hz: tuple[float, float] = (0.5, 30.0), order: int = 1,
-                 threshold_n: float = 0.05, threshold_sigmas: float = 6.0,
-                 ratio_tol: float = 0.2, v_min: float = 4.0, v_max: float = 400.0,
-                 hold_factor: float = 2.0, min_hold_s: float = 0.1, max_hold_s: float = 1.5,
-                 pair_onset_s: float = 1.0, slip_evidence: float = 0.15,
-                 ridge_side_mm: float = RIDGE_SIDE_MM):
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        *,
+        update_period_s: float = DEFAULT_UPDATE_S,
+        band_hz: tuple[float, float] = (0.5, 30.0),
+        order: int = 1,
+        threshold_n: float = 0.05,
+        threshold_sigmas: float = 6.0,
+        ratio_tol: float = 0.2,
+        v_min: float = 4.0,
+        v_max: float = 400.0,
+        hold_factor: float = 2.0,
+        min_hold_s: float = 0.1,
+        max_hold_s: float = 1.5,
+        pair_onset_s: float = 1.0,
+        slip_evidence: float = 0.15,
+        ridge_side_mm: float = RIDGE_SIDE_MM,
+    ):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         if not ratio_tol > 0:
             raise ConfigError(f"ratio_tol must be > 0, got {ratio_tol}")
         if not 0 < v_min < v_max:
             raise ConfigError(f"need 0 < v_min < v_max, got {v_min}, {v_max}")
-        self.front = PulseFrontEnd(self.fs_hz, band_hz=band_hz, order=order,
-                                   threshold_n=threshold_n, threshold_sigmas=threshold_sigmas)
+        self.front = PulseFrontEnd(
+            self.fs_hz,
+            band_hz=band_hz,
+            order=order,
+            threshold_n=threshold_n,
+            threshold_sigmas=threshold_sigmas,
+        )
         self.lag = PeakLag(self.front.sos, self.fs_hz, ridge_side_mm)
         self.ratio_tol = float(ratio_tol)
         self.v_min, self.v_max = float(v_min), float(v_max)
@@ -162,8 +179,7 @@ class RatioDecoder(Decoder):
         speed = float(self._spacings[0]) / interval
         if not self.v_min <= speed <= self.v_max:
             return
-        self._answer = Answer(peaks[-1], speed, None, 0.4,
-                              self._hold(None, None, interval), True)
+        self._answer = Answer(peaks[-1], speed, None, 0.4, self._hold(None, None, interval), True)
 
     def _triple_answer(self) -> None:
         p = self._peaks
@@ -184,8 +200,9 @@ class RatioDecoder(Decoder):
                 chains[(j, direction)] = chain
                 ridge = j + 2 if direction > 0 else j
                 position = float(self.geometry.ridges_mm[ridge])
-                candidates.append((chain, float(errors[j]), j, direction, direction * speed,
-                                   position))
+                candidates.append(
+                    (chain, float(errors[j]), j, direction, direction * speed, position)
+                )
         self._chains = chains
         if not candidates:
             self._keep_alive(t2)
@@ -208,9 +225,14 @@ class RatioDecoder(Decoder):
         if position is not None:
             at_peak = position + direction * self.lag(speed)
         ridge = best[2] + 2 if direction > 0 else best[2]
-        self._answer = Answer(self._peaks[-1], speed, at_peak, confidence,
-                              self._hold(ridge, direction, t2),
-                              quality * support >= self.slip_evidence)
+        self._answer = Answer(
+            self._peaks[-1],
+            speed,
+            at_peak,
+            confidence,
+            self._hold(ridge, direction, t2),
+            quality * support >= self.slip_evidence,
+        )
 
     def _keep_alive(self, interval: float) -> None:
         """An unmatched peak during a slip: keep the answer (less trusted) a while longer."""
@@ -219,8 +241,14 @@ class RatioDecoder(Decoder):
         if answer is None or t_peak - answer.t_peak > answer.hold_s:
             return
         hold = (t_peak - answer.t_peak) + self._hold(None, None, interval)
-        self._answer = Answer(answer.t_peak, answer.speed, answer.position_at_peak,
-                              answer.confidence * KEEP_ALIVE_TRUST, hold, answer.slip)
+        self._answer = Answer(
+            answer.t_peak,
+            answer.speed,
+            answer.position_at_peak,
+            answer.confidence * KEEP_ALIVE_TRUST,
+            hold,
+            answer.slip,
+        )
 
     def _hold(self, ridge: int | None, direction: int | None, interval: float) -> float:
         """How long to keep slip flagged without a new peak.

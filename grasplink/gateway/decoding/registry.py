@@ -34,13 +34,15 @@ def decoder_class(name: str) -> type[Decoder]:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
         if exc.name is not None and module_name.startswith(exc.name):
-            raise ConfigError(f"decoder {name!r} is not available: module {module_name} "
-                              "is not installed") from None
+            raise ConfigError(
+                f"decoder {name!r} is not available: module {module_name} is not installed"
+            ) from None
         raise
     cls = getattr(module, class_name, None)
     if cls is None:
-        raise ConfigError(f"decoder {name!r} is not available: {module_name} has no "
-                          f"class {class_name}")
+        raise ConfigError(
+            f"decoder {name!r} is not available: {module_name} has no class {class_name}"
+        )
     return cls
 
 

@@ -35,10 +35,20 @@ class SkinRecording:
     fs_hz: int
 
 
-def slip_recording(layout_mm: tuple[float, ...], speed_mm_s: float, *, fs_hz: int = 400,
-                   reverse: bool = False, noise_scale: float = 1.0, dips: bool = False,
-                   tips: float = 0.0, onset_s: float = 0.3, grip_n: float = 5.0,
-                   seed: int = 1, tail_s: float = 0.3) -> SkinRecording:
+def slip_recording(
+    layout_mm: tuple[float, ...],
+    speed_mm_s: float,
+    *,
+    fs_hz: int = 400,
+    reverse: bool = False,
+    noise_scale: float = 1.0,
+    dips: bool = False,
+    tips: float = 0.0,
+    onset_s: float = 0.3,
+    grip_n: float = 5.0,
+    seed: int = 1,
+    tail_s: float = 0.3,
+) -> SkinRecording:
     """Constant-speed slip across the whole skin (plus ramps of zero speed around it)."""
     if not speed_mm_s > 0:
         raise ValueError(f"slip speed must be > 0 mm/s, got {speed_mm_s} (use static_recording)")
@@ -48,46 +58,101 @@ def slip_recording(layout_mm: tuple[float, ...], speed_mm_s: float, *, fs_hz: in
     start = length + LEAD_MM if reverse else -LEAD_MM
     profile = [[0.0, 0.0], [onset_s, 0.0], [onset_s + 1e-6, abs(speed_mm_s)]]
     physics = [
-        (kinematics.ScriptedObject, {"speed_mm_s": profile, "start_mm": start,
-                                     "direction": "reverse" if reverse else "forward"}),
+        (
+            kinematics.ScriptedObject,
+            {
+                "speed_mm_s": profile,
+                "start_mm": start,
+                "direction": "reverse" if reverse else "forward",
+            },
+        ),
     ]
     if dips:
         physics.append((kinematics.RidgeDips, {}))
-    return _record(layout_mm, fs_hz, duration, seed, physics, grip_n=[[0.0, grip_n]],
-                   noise_scale=noise_scale, tips=tips, reverse=reverse)
+    return _record(
+        layout_mm,
+        fs_hz,
+        duration,
+        seed,
+        physics,
+        grip_n=[[0.0, grip_n]],
+        noise_scale=noise_scale,
+        tips=tips,
+        reverse=reverse,
+    )
 
 
-def static_recording(layout_mm: tuple[float, ...], grip_steps_n: list[list[float]], *,
-                     fs_hz: int = 400, duration_s: float = 6.0, noise_scale: float = 1.0,
-                     seed: int = 1) -> SkinRecording:
+def static_recording(
+    layout_mm: tuple[float, ...],
+    grip_steps_n: list[list[float]],
+    *,
+    fs_hz: int = 400,
+    duration_s: float = 6.0,
+    noise_scale: float = 1.0,
+    seed: int = 1,
+) -> SkinRecording:
     """A held object (no slip) under grip-force steps: the false-slip test."""
-    physics = [(kinematics.ScriptedObject, {"speed_mm_s": [[0.0, 0.0]],
-                                            "start_mm": float(sum(layout_mm))})]
-    return _record(layout_mm, fs_hz, duration_s, seed, physics, grip_n=grip_steps_n,
-                   noise_scale=noise_scale, tips=0.0, grip_interpolation="linear")
+    physics = [
+        (kinematics.ScriptedObject, {"speed_mm_s": [[0.0, 0.0]], "start_mm": float(sum(layout_mm))})
+    ]
+    return _record(
+        layout_mm,
+        fs_hz,
+        duration_s,
+        seed,
+        physics,
+        grip_n=grip_steps_n,
+        noise_scale=noise_scale,
+        tips=0.0,
+        grip_interpolation="linear",
+    )
 
 
-def _record(layout_mm, fs_hz, duration_s, seed, physics, *, grip_n, noise_scale, tips,
-            grip_interpolation: str = "step", reverse: bool = False) -> SkinRecording:
+def _record(
+    layout_mm,
+    fs_hz,
+    duration_s,
+    seed,
+    physics,
+    *,
+    grip_n,
+    noise_scale,
+    tips,
+    grip_interpolation: str = "step",
+    reverse: bool = False,
+) -> SkinRecording:
     ctx = harness.context(seed=seed, rate_hz=fs_hz, layout_mm=tuple(layout_mm))
     effects = [harness.make(cls, ctx, **params) for cls, params in physics]
     effects += [
         harness.make(actuators.ScriptedGrip, ctx, grip_n=grip_n, interpolation=grip_interpolation),
         harness.make(actuators.ScriptedLoad, ctx, mass_kg=0.2),
-        harness.make(skin.FsrForce, ctx, object_length_mm=OBJECT_LENGTH_MM,
-                     direction="reverse" if reverse else "forward"),
+        harness.make(
+            skin.FsrForce,
+            ctx,
+            object_length_mm=OBJECT_LENGTH_MM,
+            direction="reverse" if reverse else "forward",
+        ),
     ]
     contacts = harness.make(skin.RidgeContacts, ctx, tip_probability=tips)
     effects.append(contacts)
     if noise_scale > 0:
         effects += [
             harness.make(noise.WhiteNoise, ctx, std=NOISE_WHITE_N * noise_scale),
-            harness.make(noise.Drift, ctx, std=NOISE_DRIFT_N * noise_scale,
-                         corner_hz=DRIFT_CORNER_HZ),
+            harness.make(
+                noise.Drift, ctx, std=NOISE_DRIFT_N * noise_scale, corner_hz=DRIFT_CORNER_HZ
+            ),
         ]
     times = harness.sample_times_us(fs_hz, duration_s)
     out = harness.run(effects, times, chunk=4096)
     true_contacts = np.array([c.time_s for c in contacts.contacts if not c.tip])
-    return SkinRecording(times / 1e6, out["skin.force_n"], out["object.position_mm"],
-                         out["object.speed_mm_s"], out["object.slipping"], out["hand.grip_n"],
-                         true_contacts, tuple(layout_mm), fs_hz)
+    return SkinRecording(
+        times / 1e6,
+        out["skin.force_n"],
+        out["object.position_mm"],
+        out["object.speed_mm_s"],
+        out["object.slipping"],
+        out["hand.grip_n"],
+        true_contacts,
+        tuple(layout_mm),
+        fs_hz,
+    )

@@ -75,12 +75,40 @@ class _Track:
     dips so far, in units of d (1 right after a contact).
     """
 
-    __slots__ = ("crossings", "d", "direction", "evidence", "first", "ids", "m", "n", "p00",
-                 "p01", "p02", "p11", "p12", "p22", "ridge", "s", "schedule", "score", "sig", "t",
-                 "v")
+    __slots__ = (
+        "crossings",
+        "d",
+        "direction",
+        "evidence",
+        "first",
+        "ids",
+        "m",
+        "n",
+        "p00",
+        "p01",
+        "p02",
+        "p11",
+        "p12",
+        "p22",
+        "ridge",
+        "s",
+        "schedule",
+        "score",
+        "sig",
+        "t",
+        "v",
+    )
 
-    def __init__(self, direction: int, ridge: int, t: float, s: float, score: float,
-                 ids: tuple[int, ...], sig: float):
+    def __init__(
+        self,
+        direction: int,
+        ridge: int,
+        t: float,
+        s: float,
+        score: float,
+        ids: tuple[int, ...],
+        sig: float,
+    ):
         self.direction = direction
         self.sig = sig  # timing sigma of the last contact
         self.ridge = ridge  # index along the travel order
@@ -99,8 +127,12 @@ class _Track:
 
     def copy(self) -> _Track:
         c = _Track.__new__(_Track)
-        c.crossings, c.d, c.direction, c.evidence = self.crossings, self.d, self.direction, \
-            self.evidence
+        c.crossings, c.d, c.direction, c.evidence = (
+            self.crossings,
+            self.d,
+            self.direction,
+            self.evidence,
+        )
         c.first, c.ids, c.m, c.n, c.p00 = self.first, self.ids, self.m, self.n, self.p00
         c.p01, c.p02, c.p11, c.p12, c.p22 = self.p01, self.p02, self.p11, self.p12, self.p22
         c.ridge, c.s, c.schedule, c.score = self.ridge, self.s, self.schedule, self.score
@@ -152,10 +184,17 @@ class TrackerDecoder(Decoder):
     CONF_POS_MM = 3.0  # the position's own sigma halves the confidence at this value
     CONF_CONTACTS = 2.0  # confidence grows as 1 - exp(-(contacts - 1) / this)
 
-    def __init__(self, layout_mm: Sequence[float], fs_hz: float, *,
-                 update_period_s: float = DEFAULT_UPDATE_S, max_hypotheses: int = 24,
-                 history: int = 8, detect_block_s: float | None = None,
-                 detector: ContactDetector | None = None):
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        *,
+        update_period_s: float = DEFAULT_UPDATE_S,
+        max_hypotheses: int = 24,
+        history: int = 8,
+        detect_block_s: float | None = None,
+        detector: ContactDetector | None = None,
+    ):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         geometry = self.geometry
         x = geometry.ridges_mm
@@ -168,8 +207,10 @@ class TrackerDecoder(Decoder):
         # the first ridge met is as likely as any within the skin
         lead = self.length
         self._coast = float(np.max(spacings))  # how far past the last ridge a slip goes on
-        before = {1: np.concatenate([[lead], spacings]),
-                  -1: np.concatenate([[lead], spacings[::-1]])}
+        before = {
+            1: np.concatenate([[lead], spacings]),
+            -1: np.concatenate([[lead], spacings[::-1]]),
+        }
         total = 2.0 * float(sum(before[1]))
         self._log_prior = {d: [math.log(b / total) for b in before[d]] for d in (1, -1)}
         self._p_detect = {d: [self._detect_probability(b) for b in before[d]] for d in (1, -1)}
@@ -239,8 +280,9 @@ class TrackerDecoder(Decoder):
         CAN frame brings; the same arithmetic whatever the chunking)."""
         sos = self._sos
         if self._zi is None:
-            self._zi = [[float(z) * float(x[0]) for z in section]
-                        for section in self._static._zi_unit]
+            self._zi = [
+                [float(z) * float(x[0]) for z in section] for section in self._static._zi_unit
+            ]
         zi = self._zi
         out = []
         for value in x.tolist():
@@ -320,10 +362,13 @@ class TrackerDecoder(Decoder):
         for d in (1, -1):
             pos = self._pos[d]
             for r in range(self.count):
-                children.append(_Track(d, r, tc, float(pos[r]), base + self._log_prior[d][r],
-                                       (ev.id,), ev.sigma_s))
+                children.append(
+                    _Track(
+                        d, r, tc, float(pos[r]), base + self._log_prior[d][r], (ev.id,), ev.sigma_s
+                    )
+                )
         self._null += self.LOG_CLUTTER_IDLE
-        recent = {c.id for c in self._contacts[-self.START_CONTACTS:]}
+        recent = {c.id for c in self._contacts[-self.START_CONTACTS :]}
         self._tracks = self._prune(children, recent)
 
     def _branch(self, h: _Track, ev: ContactEvent, rate: float) -> list[_Track]:
@@ -348,11 +393,19 @@ class TrackerDecoder(Decoder):
                 if c is not None:
                     c.score += miss + math.log(pd[k]) + self._log_speed_prior(c.v) - math.log(dt)
             else:  # steady, or changing speed (the likelier of the two survives pruning)
-                c = self._kalman(h, k, tc, dt, skipped, ev.sigma_s, miss + math.log(pd[k]),
-                                 self.SPEED_WALK)
-                c2 = self._kalman(h, k, tc, dt, skipped, ev.sigma_s,
-                                  miss + math.log(pd[k]) + self.LOG_SPEED_CHANGE,
-                                  self.SPEED_WALK_CHANGING)
+                c = self._kalman(
+                    h, k, tc, dt, skipped, ev.sigma_s, miss + math.log(pd[k]), self.SPEED_WALK
+                )
+                c2 = self._kalman(
+                    h,
+                    k,
+                    tc,
+                    dt,
+                    skipped,
+                    ev.sigma_s,
+                    miss + math.log(pd[k]) + self.LOG_SPEED_CHANGE,
+                    self.SPEED_WALK_CHANGING,
+                )
                 if c2 is not None:
                     c2.ids = ids
                     out.append(c2)
@@ -400,9 +453,17 @@ class TrackerDecoder(Decoder):
         z = math.log(v / self.SPEED_PRIOR_MM_S) / self.SPEED_PRIOR_LOG_SIGMA
         return -0.5 * z * z - math.log(self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0 * math.pi))
 
-    def _start_speed(self, h: _Track, k: int, tc: float, dt: float, skipped: int,
-                     sigma_t: float, d: float = 0.0, var_d: float | None = None
-                     ) -> _Track | None:
+    def _start_speed(
+        self,
+        h: _Track,
+        k: int,
+        tc: float,
+        dt: float,
+        skipped: int,
+        sigma_t: float,
+        d: float = 0.0,
+        var_d: float | None = None,
+    ) -> _Track | None:
         """A track at ridge k whose speed comes from its last contact and this one."""
         pos = self._pos[h.direction]
         lag = h.m * (1.0 - math.exp(-dt / self.DIP_RECOVERY_S)) + skipped
@@ -410,7 +471,7 @@ class TrackerDecoder(Decoder):
         if not V_MIN_MM_S <= v <= V_MAX_MM_S:
             return None
         c = h.copy()
-        var_d = self.DIP_PRIOR_MM ** 2 if var_d is None else var_d
+        var_d = self.DIP_PRIOR_MM**2 if var_d is None else var_d
         r = self._meas_var(v, sigma_t)
         r_before = self._meas_var(v, h.sig)
         c.ridge, c.t, c.s, c.v, c.d, c.n = k, tc, float(pos[k]), v, d, max(h.n + 1, 2)
@@ -423,25 +484,45 @@ class TrackerDecoder(Decoder):
         c.schedule = c.crossings = c.evidence = None
         return c
 
-    def _kalman(self, h: _Track, k: int, tc: float, dt: float, skipped: int, sigma_t: float,
-                log_prior: float, walk: float) -> _Track | None:
+    def _kalman(
+        self,
+        h: _Track,
+        k: int,
+        tc: float,
+        dt: float,
+        skipped: int,
+        sigma_t: float,
+        log_prior: float,
+        walk: float,
+    ) -> _Track | None:
         """Predict h to tc and update it with ridge k; None if the speed leaves the range."""
         pos = self._pos[h.direction]
         v, d = h.v, h.d
         decay = math.exp(-dt / self.DIP_RECOVERY_S)
         a = h.m * (1.0 - decay) + skipped  # lag to come, in units of d
-        q = walk ** 2 * v ** 3 / self.SPEED_WALK_MM
-        p00 = (h.p00 + 2 * dt * h.p01 - 2 * a * h.p02 + dt * dt * h.p11 - 2 * a * dt * h.p12
-               + a * a * h.p22 + q * dt ** 3 / 3.0)
+        q = walk**2 * v**3 / self.SPEED_WALK_MM
+        p00 = (
+            h.p00
+            + 2 * dt * h.p01
+            - 2 * a * h.p02
+            + dt * dt * h.p11
+            - 2 * a * dt * h.p12
+            + a * a * h.p22
+            + q * dt**3 / 3.0
+        )
         p01 = h.p01 + dt * h.p11 - a * h.p12 + q * dt * dt / 2.0
         p02 = h.p02 + dt * h.p12 - a * h.p22
         p11 = h.p11 + q * dt
         p12, p22 = h.p12, h.p22
         s_pred = h.s + v * dt - a * d
-        var = p00 + self._meas_var(v, sigma_t) + skipped * self.SIGMA_POS_MM ** 2
+        var = p00 + self._meas_var(v, sigma_t) + skipped * self.SIGMA_POS_MM**2
         resid = pos[k] - s_pred
-        inlier = ((1.0 - self.ROBUST_FLOOR) * v * math.exp(-0.5 * resid * resid / var)
-                  / math.sqrt(2 * math.pi * var))
+        inlier = (
+            (1.0 - self.ROBUST_FLOOR)
+            * v
+            * math.exp(-0.5 * resid * resid / var)
+            / math.sqrt(2 * math.pi * var)
+        )
         outlier = self.ROBUST_FLOOR * v / (4.0 * max(pos[k] - h.s, 1.0))  # within a few intervals
         if inlier >= outlier:
             c = h.copy()
@@ -457,8 +538,9 @@ class TrackerDecoder(Decoder):
             if not V_MIN_MM_S <= c.v <= V_MAX_MM_S:
                 return None
         else:  # far off: the speed changed; start again from the last two contacts
-            c = self._start_speed(h, k, tc, dt, skipped, sigma_t, d,
-                                  max(h.p22, self.DIP_PRIOR_MM ** 2))
+            c = self._start_speed(
+                h, k, tc, dt, skipped, sigma_t, d, max(h.p22, self.DIP_PRIOR_MM**2)
+            )
             if c is None or not 1.0 / self.MAX_SPEED_JUMP <= c.v / v <= self.MAX_SPEED_JUMP:
                 return None
         c.score += log_prior + math.log(inlier + outlier)
@@ -472,7 +554,7 @@ class TrackerDecoder(Decoder):
 
     def _meas_var(self, v: float, sigma_t: float) -> float:
         """Variance of a ridge contact as a position measurement at speed v."""
-        return self.SIGMA_POS_MM ** 2 + (v * sigma_t) ** 2
+        return self.SIGMA_POS_MM**2 + (v * sigma_t) ** 2
 
     def _prune(self, children: list[_Track], recent: set[int]) -> list[_Track]:
         """Best first, one per (direction, ridge, last three contacts); bounded.
@@ -570,8 +652,7 @@ class TrackerDecoder(Decoder):
         return sched
 
     @staticmethod
-    def _state_at(sched: list[tuple[float, float, bool, int]], g: float
-                  ) -> tuple[float, bool, int]:
+    def _state_at(sched: list[tuple[float, float, bool, int]], g: float) -> tuple[float, bool, int]:
         state = sched[0]
         for entry in sched:
             if g >= entry[0]:
@@ -663,8 +744,9 @@ class TrackerDecoder(Decoder):
             _, o, o_stopped, evident, o_limit, w = e
             if w < floor or not evident or o_stopped != stopped:
                 continue
-            if not stopped and (o.direction != h.direction
-                                or abs(o.v - h.v) > self.AGREE_SPEED * h.v):
+            if not stopped and (
+                o.direction != h.direction or abs(o.v - h.v) > self.AGREE_SPEED * h.v
+            ):
                 continue
             if abs(self._x(o, self._where(o, g, o_stopped, o_limit)[0]) - x_ref) <= self.AGREE_MM:
                 agree += w
@@ -691,8 +773,7 @@ class TrackerDecoder(Decoder):
         h.evidence = (self._verdicts, result)
         return result
 
-    def _where(self, h: _Track, g: float, stopped: bool, limit: int
-               ) -> tuple[float, float, float]:
+    def _where(self, h: _Track, g: float, stopped: bool, limit: int) -> tuple[float, float, float]:
         """(travelled distance of the edge from the first ridge met, speed, sigma) at g.
 
         Predicted from the last contact; a stopped slip stopped before the ridge

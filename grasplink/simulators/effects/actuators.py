@@ -146,8 +146,10 @@ class ScriptedLoad(Effect):
         interpolation = params.string("interpolation", "linear", choices=INTERPOLATIONS)
         has_force, has_mass = params.has("force_n"), params.has("mass_kg")
         if has_force == has_mass:
-            raise params.error("force_n", "give exactly one of force_n (a [t_s, N] profile) "
-                                          "or mass_kg (a constant weight)")
+            raise params.error(
+                "force_n",
+                "give exactly one of force_n (a [t_s, N] profile) or mass_kg (a constant weight)",
+            )
         self.profile: Profile | None = None
         self.weight_n = 0.0
         if has_force:

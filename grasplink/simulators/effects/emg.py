@@ -91,8 +91,15 @@ class NoiseBank:
     around it, so it varies smoothly.
     """
 
-    def __init__(self, bands: list[np.ndarray], rng: np.random.Generator, block: int,
-                 regulate: bool, warmup: int, impulse_length: int):
+    def __init__(
+        self,
+        bands: list[np.ndarray],
+        rng: np.random.Generator,
+        block: int,
+        regulate: bool,
+        warmup: int,
+        impulse_length: int,
+    ):
         self.bands = bands
         self.rng = rng
         self.block = block
@@ -110,8 +117,9 @@ class NoiseBank:
         draws = self.rng.standard_normal((self.block, len(self.bands)))
         data = np.empty_like(draws)
         for column, sos in enumerate(self.bands):
-            data[:, column], self.states[column] = signal.sosfilt(sos, draws[:, column],
-                                                                  zi=self.states[column])
+            data[:, column], self.states[column] = signal.sosfilt(
+                sos, draws[:, column], zi=self.states[column]
+            )
         if self.regulate:
             gains = math.sqrt(2.0 / math.pi) / np.mean(np.abs(data), axis=0)
         else:
@@ -155,8 +163,10 @@ class SurfaceEmg(Effect):
     domain: ClassVar[str] = EMG
     inputs: ClassVar[tuple[str, ...]] = (LEVEL,)
     outputs: ClassVar[tuple[str, ...]] = (RAW,)
-    summary: ClassVar[str] = ("band-limited Gaussian EMG whose rectified mean is the centre of "
-                              "the contraction level's band")
+    summary: ClassVar[str] = (
+        "band-limited Gaussian EMG whose rectified mean is the centre of "
+        "the contraction level's band"
+    )
 
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
@@ -164,35 +174,50 @@ class SurfaceEmg(Effect):
         nyquist = self.rate_hz / 2
         band = params.numbers("band_hz", [20.0, 450.0], low=0.0, low_open=True, min_len=2)
         if len(band) != 2 or not band[0] < band[1] < nyquist:
-            raise params.error("band_hz", f"expected [low, high] with 0 < low < high < "
-                                          f"{nyquist:g} Hz (the EMG Nyquist frequency), "
-                                          f"got {list(band)}")
+            raise params.error(
+                "band_hz",
+                f"expected [low, high] with 0 < low < high < "
+                f"{nyquist:g} Hz (the EMG Nyquist frequency), "
+                f"got {list(band)}",
+            )
         self.band_hz = band
         self.order = params.integer("order", 4, low=1, high=8)
         self.rest_uv = params.number("rest_uv", 10.0, low=0.0)
         self.e_min_uv = params.number("e_min_uv", 50.0, low=0.0)
         self.e_max_uv = params.number("e_max_uv", 500.0, low=0.0)
         if self.e_max_uv <= self.e_min_uv:
-            raise params.error("e_max_uv", f"expected a number above e_min_uv "
-                                           f"({self.e_min_uv:g}), got {self.e_max_uv:g}")
+            raise params.error(
+                "e_max_uv",
+                f"expected a number above e_min_uv ({self.e_min_uv:g}), got {self.e_max_uv:g}",
+            )
         self.onset_s = params.number("onset_s", 0.05, low=0.0)
         self.fatigue_per_s = params.number("fatigue_per_s", 0.0, low=0.0)
         self.regulate_s = params.number("regulate_s", 0.25, low=0.0)
         block = round(self.regulate_s * self.rate_hz)
         if self.regulate_s > 0 and block < 2:
-            raise params.error("regulate_s", f"expected 0 or at least two EMG samples "
-                                             f"({2 / self.rate_hz:g} s), got {self.regulate_s:g}")
+            raise params.error(
+                "regulate_s",
+                f"expected 0 or at least two EMG samples "
+                f"({2 / self.rate_hz:g} s), got {self.regulate_s:g}",
+            )
         self.targets_uv = level_targets_uv(self.rest_uv, self.e_min_uv, self.e_max_uv)
 
         scales = FATIGUE_SCALES if self.fatigue_per_s > 0 else FATIGUE_SCALES[:1]
-        bands = [signal.butter(self.order, [band[0] * s, band[1] * s], "bandpass",
-                               fs=self.rate_hz, output="sos") for s in scales]
+        bands = [
+            signal.butter(
+                self.order, [band[0] * s, band[1] * s], "bandpass", fs=self.rate_hz, output="sos"
+            )
+            for s in scales
+        ]
         lowest_hz = band[0] * scales[-1]
         self._noise = NoiseBank(
-            bands, ctx.rng(self.kind), block=block or max(1, round(DEFAULT_BLOCK_S * self.rate_hz)),
+            bands,
+            ctx.rng(self.kind),
+            block=block or max(1, round(DEFAULT_BLOCK_S * self.rate_hz)),
             regulate=self.regulate_s > 0,
             warmup=math.ceil(WARMUP_CYCLES * self.rate_hz / lowest_hz),
-            impulse_length=max(4096, math.ceil(5 * WARMUP_CYCLES * self.rate_hz / lowest_hz)))
+            impulse_length=max(4096, math.ceil(5 * WARMUP_CYCLES * self.rate_hz / lowest_hz)),
+        )
         self._sample = 0  # absolute index of the next sample
 
         self._smooth_sos = None
@@ -204,8 +229,7 @@ class SurfaceEmg(Effect):
 
     def sigma_uv(self, level: np.ndarray) -> np.ndarray:
         """Gaussian amplitude whose rectified mean is the level's target."""
-        target = np.interp(np.nan_to_num(level, nan=0.0), np.arange(TOP_LEVEL + 1),
-                           self.targets_uv)
+        target = np.interp(np.nan_to_num(level, nan=0.0), np.arange(TOP_LEVEL + 1), self.targets_uv)
         return target * RECTIFIED_MEAN_TO_SIGMA
 
     def step(self, io: Io) -> None:
@@ -218,15 +242,18 @@ class SurfaceEmg(Effect):
         if self._smooth_sos is not None:
             if self._smooth_state is None:
                 self._smooth_state = signal.sosfilt_zi(self._smooth_sos) * sigma[0]
-            sigma, self._smooth_state = signal.sosfilt(self._smooth_sos, sigma,
-                                                       zi=self._smooth_state)
+            sigma, self._smooth_state = signal.sosfilt(
+                self._smooth_sos, sigma, zi=self._smooth_state
+            )
 
         bank = self._noise.take(self._sample, n)
         self._sample += n
 
         if self.fatigue_per_s > 0:
-            contraction = np.clip(np.nan_to_num(level, nan=0.0) / LEVELS, 0.0,
-                                  TOP_LEVEL / LEVELS) / self.rate_hz
+            contraction = (
+                np.clip(np.nan_to_num(level, nan=0.0) / LEVELS, 0.0, TOP_LEVEL / LEVELS)
+                / self.rate_hz
+            )
             accumulated = np.cumsum(np.concatenate([[self._contraction_s], contraction]))[1:]
             self._contraction_s = float(accumulated[-1])
             fatigue = self.fatigue_per_s * accumulated
@@ -235,8 +262,9 @@ class SurfaceEmg(Effect):
             lower = np.minimum(np.floor(position).astype(int), len(FATIGUE_SCALES) - 2)
             weight = np.clip(position - lower, 0.0, 1.0)
             rows = np.arange(n)
-            noise = (np.sqrt(1.0 - weight) * bank[rows, lower]
-                     + np.sqrt(weight) * bank[rows, lower + 1])
+            noise = (
+                np.sqrt(1.0 - weight) * bank[rows, lower] + np.sqrt(weight) * bank[rows, lower + 1]
+            )
             sigma = sigma * (1.0 + fatigue)
         else:
             noise = bank[:, 0]

@@ -44,8 +44,13 @@ class Profile:
     microsecond clock (the scene clock cannot resolve finer).
     """
 
-    def __init__(self, params: Params, name: str, interpolation: str,
-                 pairs: tuple[tuple[float, float], ...] | None = None):
+    def __init__(
+        self,
+        params: Params,
+        name: str,
+        interpolation: str,
+        pairs: tuple[tuple[float, float], ...] | None = None,
+    ):
         pairs = params.pairs(name) if pairs is None else pairs
         knots_us = np.array([round(t * US_PER_S) for t, _ in pairs], dtype=np.int64)
         if np.any(np.diff(knots_us) <= 0):
@@ -81,8 +86,11 @@ class Profile:
         """∫_0^t value dt in value·s, closed form per segment (no accumulation over samples)."""
         index, elapsed_s = self._segment(times_us)
         slope = np.where(elapsed_s > 0, self.slopes[index], 0.0)
-        return (self.cumulative[index] + self.values[index] * elapsed_s
-                + 0.5 * slope * elapsed_s * elapsed_s)
+        return (
+            self.cumulative[index]
+            + self.values[index] * elapsed_s
+            + 0.5 * slope * elapsed_s * elapsed_s
+        )
 
 
 def put_object(io: Io, position_mm: np.ndarray, speed_mm_s: np.ndarray) -> None:
@@ -131,9 +139,11 @@ class ScriptedObject(Effect):
         if magnitudes:
             for i, (_, speed) in enumerate(pairs):
                 if speed < 0:
-                    raise params.error(f"speed_mm_s[{i}][1]",
-                                       f"expected a speed magnitude >= 0 when direction is "
-                                       f"given (the direction sets the sign), got {speed:g}")
+                    raise params.error(
+                        f"speed_mm_s[{i}][1]",
+                        f"expected a speed magnitude >= 0 when direction is "
+                        f"given (the direction sets the sign), got {speed:g}",
+                    )
         self.profile = Profile(params, "speed_mm_s", interpolation, pairs)
         self.start_mm = params.number("start_mm", 0.0)
 
@@ -177,8 +187,10 @@ class CoulombObject(Effect):
         self.mu_static = params.number("mu_static", MU_SKIN, low=0.0)
         self.mu_kinetic = params.number("mu_kinetic", self.mu_static, low=0.0)
         if self.mu_kinetic > self.mu_static:
-            raise params.error("mu_kinetic", f"expected a number <= mu_static "
-                                             f"({self.mu_static:g}), got {self.mu_kinetic:g}")
+            raise params.error(
+                "mu_kinetic",
+                f"expected a number <= mu_static ({self.mu_static:g}), got {self.mu_kinetic:g}",
+            )
         self.surfaces = params.integer("contact_surfaces", 2, low=1)
         self.position_mm = params.number("start_mm", 0.0)
         self.speed_mm_s = 0.0
@@ -216,16 +228,19 @@ class CoulombObject(Effect):
             while True:
                 end = min(i + window, n)
                 # a in m/s² = N / kg; ×1000 for mm/s²
-                increments = (load[i:end] - direction * kinetic_n[i:end]) \
-                    * (1000.0 / self.mass_kg) * dt_s[i:end]
+                increments = (
+                    (load[i:end] - direction * kinetic_n[i:end])
+                    * (1000.0 / self.mass_kg)
+                    * dt_s[i:end]
+                )
                 speeds = np.cumsum(np.concatenate(([v], increments)))[1:]
                 stops = np.flatnonzero(direction * speeds <= 0.0)
                 count = int(stops[0]) + 1 if stops.size else end - i
                 speeds = speeds[:count]
                 if stops.size:
                     speeds[-1] = 0.0
-                positions = np.cumsum(np.concatenate(([x], speeds * dt_s[i:i + count])))[1:]
-                speed[i:i + count], position[i:i + count] = speeds, positions
+                positions = np.cumsum(np.concatenate(([x], speeds * dt_s[i : i + count])))[1:]
+                speed[i : i + count], position[i : i + count] = speeds, positions
                 v, x = float(speeds[-1]), float(positions[-1])
                 i += count
                 if stops.size or i >= n:
@@ -278,8 +293,9 @@ class RidgeDips(Effect):
         self.ridges_mm = np.cumsum([0.0, *layout])
         depth = params.numbers("depth_mm_s", [4.0, 15.0], low=0.0, min_len=2)
         if len(depth) != 2 or depth[0] > depth[1]:
-            raise params.error("depth_mm_s", f"expected [low, high] with low <= high, "
-                                             f"got {list(depth)}")
+            raise params.error(
+                "depth_mm_s", f"expected [low, high] with low <= high, got {list(depth)}"
+            )
         self.depth_low, self.depth_high = depth
         self.recovery_s = params.number("recovery_s", 0.05, low=0.0, low_open=True)
         self.tail_us = self.TAIL * self.recovery_s * US_PER_S
@@ -291,8 +307,7 @@ class RidgeDips(Effect):
         self.last_p0_mm = 0.0
         self.behind = 0  # ridges at or behind the (modified) leading edge
 
-    def _dips(self, times_us: np.ndarray, previous_us: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def _dips(self, times_us: np.ndarray, previous_us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(total dip at each t_k in mm/s, its integral over (t_{k-1}, t_k] in mm)."""
         total = np.zeros(len(times_us))
         area = np.zeros(len(times_us))
@@ -339,16 +354,19 @@ class RidgeDips(Effect):
             behind = np.searchsorted(self.ridges_mm, modified, side="right")
             changes = np.flatnonzero(behind != self.behind)
             count = int(changes[0]) + 1 if changes.size else end - i
-            position[i:i + count] = modified[:count]
-            dip[i:i + count] = total[:count]
+            position[i : i + count] = modified[:count]
+            dip[i : i + count] = total[:count]
             self.offset_mm = float(offsets[count - 1])
             i += count
             if not changes.size:
                 window *= 2
                 continue
             k, now = i - 1, int(behind[count - 1])
-            crossed = (range(self.behind, now) if now > self.behind
-                       else range(self.behind - 1, now - 1, -1))
+            crossed = (
+                range(self.behind, now)
+                if now > self.behind
+                else range(self.behind - 1, now - 1, -1)
+            )
             for _ in crossed:  # a new dip starts at full depth at the detecting sample
                 depth = float(self.rng.uniform(self.depth_low, self.depth_high))
                 depth = min(depth, abs(float(v0[k])))
@@ -407,17 +425,22 @@ class SlipTask(Effect):
 
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
-        speeds = params.numbers("level_speeds_mm_s", [1.8, 3.2, 4.6, 6.0],
-                                low=0.0, low_open=True, min_len=4)
+        speeds = params.numbers(
+            "level_speeds_mm_s", [1.8, 3.2, 4.6, 6.0], low=0.0, low_open=True, min_len=4
+        )
         if len(speeds) != 4 or any(b <= a for a, b in itertools.pairwise(speeds)):
-            raise params.error("level_speeds_mm_s", f"expected 4 strictly increasing speeds "
-                                                    f"(levels e1..e4), got {list(speeds)}")
+            raise params.error(
+                "level_speeds_mm_s",
+                f"expected 4 strictly increasing speeds (levels e1..e4), got {list(speeds)}",
+            )
         self.level_speeds = speeds
         initial = params.number("initial_speed_mm_s", 6.0)
         matches = [i for i, v in enumerate(speeds) if math.isclose(v, initial, abs_tol=1e-9)]
         if not matches:
-            raise params.error("initial_speed_mm_s", f"expected one of the level speeds "
-                                                     f"{list(speeds)}, got {initial:g}")
+            raise params.error(
+                "initial_speed_mm_s",
+                f"expected one of the level speeds {list(speeds)}, got {initial:g}",
+            )
         self.speed_index = matches[0] + 1  # 1..4, 0 once over
         period_s = params.number("update_period_s", 1.0, low=0.0, low_open=True)
         self.period_us = round(period_s * US_PER_S)
@@ -467,7 +490,6 @@ class SlipTask(Effect):
 
     def _fill(self, times, position, speed, crushed, start: int, stop: int) -> None:
         v = self._speed()
-        position[start:stop] = self.anchor_mm + v * (times[start:stop] - self.anchor_us) \
-            / US_PER_S
+        position[start:stop] = self.anchor_mm + v * (times[start:stop] - self.anchor_us) / US_PER_S
         speed[start:stop] = v
         crushed[start:stop] = float(self.crushed)

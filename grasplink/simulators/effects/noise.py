@@ -60,10 +60,19 @@ class SignalModifier(Effect):
         front = cls.front or cls
         key = (front, name)
         if key not in _VARIANTS:
-            _VARIANTS[key] = type(f"{front.__name__}[{name}]", (front,), {
-                "domain": domain, "inputs": (name,), "outputs": (name,), "front": front,
-                "__module__": front.__module__, "__doc__": front.__doc__,
-                "__qualname__": f"{front.__qualname__}[{name}]"})
+            _VARIANTS[key] = type(
+                f"{front.__name__}[{name}]",
+                (front,),
+                {
+                    "domain": domain,
+                    "inputs": (name,),
+                    "outputs": (name,),
+                    "front": front,
+                    "__module__": front.__module__,
+                    "__doc__": front.__doc__,
+                    "__qualname__": f"{front.__qualname__}[{name}]",
+                },
+            )
         return super().__new__(_VARIANTS[key])
 
     def __init__(self, params: Params, ctx: Context):
@@ -126,8 +135,10 @@ class Drift(SignalModifier):
     """
 
     kind: ClassVar[str] = "noise.drift"
-    summary: ClassVar[str] = ("low-frequency drift: white noise through a 2nd-order Butterworth "
-                              "low-pass at corner_hz, std in the signal's unit, plus offset")
+    summary: ClassVar[str] = (
+        "low-frequency drift: white noise through a 2nd-order Butterworth "
+        "low-pass at corner_hz, std in the signal's unit, plus offset"
+    )
 
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
@@ -135,9 +146,12 @@ class Drift(SignalModifier):
         nyquist = self.rate_hz / 2
         self.corner_hz = params.number("corner_hz", 0.5, low=0.0, low_open=True)
         if self.corner_hz >= nyquist:
-            raise params.error("corner_hz", f"expected a number below the {self.domain} "
-                                            f"Nyquist frequency {nyquist:g} Hz, "
-                                            f"got {self.corner_hz:g}")
+            raise params.error(
+                "corner_hz",
+                f"expected a number below the {self.domain} "
+                f"Nyquist frequency {nyquist:g} Hz, "
+                f"got {self.corner_hz:g}",
+            )
         self.offset = params.number("offset", 0.0)
         self.sos = signal.butter(2, self.corner_hz, "lowpass", fs=self.rate_hz, output="sos")
         cov, variance = stationary_state(self.sos[0])
@@ -151,7 +165,8 @@ class Drift(SignalModifier):
     def step(self, io: Io) -> None:
         values = io.get(self.signal) + self.offset
         if self._rng is not None:
-            drift, self._zi = signal.sosfilt(self.sos, self._rng.standard_normal(len(values)),
-                                             zi=self._zi)
+            drift, self._zi = signal.sosfilt(
+                self.sos, self._rng.standard_normal(len(values)), zi=self._zi
+            )
             values = values + self.gain * drift
         io.put(self.signal, values)

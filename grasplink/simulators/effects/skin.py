@@ -73,8 +73,14 @@ def ridge_positions_mm(layout_mm: tuple[float, ...]) -> np.ndarray:
     return np.cumsum([0.0, *layout_mm])
 
 
-def interval_param(params: Params, name: str, default: list[float], *,
-                   low: float | None = None, low_open: bool = False) -> tuple[float, float]:
+def interval_param(
+    params: Params,
+    name: str,
+    default: list[float],
+    *,
+    low: float | None = None,
+    low_open: bool = False,
+) -> tuple[float, float]:
     """A [low, high] pair with low <= high (a range random draws come from)."""
     values = params.numbers(name, default, low=low, low_open=low_open, min_len=2)
     if len(values) != 2:
@@ -103,20 +109,23 @@ class FsrForce(Effect):
     domain: ClassVar[str] = SKIN
     inputs: ClassVar[tuple[str, ...]] = (GRIP, LOAD, POSITION, SLIPPING, SPEED)
     outputs: ClassVar[tuple[str, ...]] = (FORCE,)
-    summary: ClassVar[str] = ("FSR force M = (1 - k mu) W + k P while slipping, W = grip x "
-                              "object share over the skin")
+    summary: ClassVar[str] = (
+        "FSR force M = (1 - k mu) W + k P while slipping, W = grip x object share over the skin"
+    )
 
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
         self.object_length_mm = params.number("object_length_mm", 90.0, low=0.0, low_open=True)
         self.mu = params.number("mu", MU_THESIS, low=0.0)
-        self.ridge_angle_deg = params.number("ridge_angle_deg", RIDGE_ANGLE_DEG, low=0.0,
-                                             high=90.0, low_open=True)
+        self.ridge_angle_deg = params.number(
+            "ridge_angle_deg", RIDGE_ANGLE_DEG, low=0.0, high=90.0, low_open=True
+        )
         self.skin_length_mm = float(sum(ctx.require_layout(params, self.kind)))
         self.k = ridge_factor(self.mu, self.ridge_angle_deg)
         # The object's orientation before it first moves: which edge leads.
-        self._forward = params.string("direction", "forward",
-                                      choices=("forward", "reverse")) == "forward"
+        self._forward = (
+            params.string("direction", "forward", choices=("forward", "reverse")) == "forward"
+        )
 
     def coverage(self, position_mm: np.ndarray, forward: np.ndarray) -> np.ndarray:
         """Share (0..1) of the object's length lying over the sensor."""
@@ -157,8 +166,9 @@ class _Points(NamedTuple):
     height: np.ndarray  # relative height (spacing factor, times tip_height for tips)
 
 
-def pulse(tau_s: np.ndarray, alpha: np.ndarray, rise_s: np.ndarray,
-          start: np.ndarray) -> np.ndarray:
+def pulse(
+    tau_s: np.ndarray, alpha: np.ndarray, rise_s: np.ndarray, start: np.ndarray
+) -> np.ndarray:
     """c(t) of thesis ch. 5.3.1 at tau = t - t_i (>= 0).
 
     Rise (tau < 1/beta): start + (alpha - start) kappa tau e^(-beta tau), with
@@ -210,8 +220,7 @@ class RidgeContacts(Effect):
         self.ridge_side_mm = params.number("ridge_side_mm", 2.5, low=0.0, low_open=True)
         self.min_rise_s = params.number("min_rise_s", 0.002, low=0.0, low_open=True)
         self.max_rise_s = params.number("max_rise_s", 0.2, low=self.min_rise_s)
-        self.rise_jitter = interval_param(params, "rise_jitter", [0.9, 1.1], low=0.0,
-                                          low_open=True)
+        self.rise_jitter = interval_param(params, "rise_jitter", [0.9, 1.1], low=0.0, low_open=True)
         self.alpha_n = interval_param(params, "alpha_n", [0.8, 1.2], low=0.0)
         self.spacing_scale_mm = params.number("spacing_scale_mm", 10.0, low=0.0, low_open=True)
         self.lead_in_mm = params.number("lead_in_mm", 20.0, low=0.0)
@@ -220,8 +229,11 @@ class RidgeContacts(Effect):
         self.tip_height = params.number("tip_height", 0.4, low=0.0)
         self.tip_distance_mm = params.number("tip_distance_mm", 5.0, low=0.0, low_open=True)
 
-        random = (self.rise_jitter[0] != self.rise_jitter[1]
-                  or self.alpha_n[0] != self.alpha_n[1] or self.tip_probability > 0)
+        random = (
+            self.rise_jitter[0] != self.rise_jitter[1]
+            or self.alpha_n[0] != self.alpha_n[1]
+            or self.tip_probability > 0
+        )
         self._rng = ctx.rng(self.kind) if random else None
         self._forward_points = self._points(layout, +1)
         self._reverse_points = self._points(layout, -1)
@@ -259,8 +271,12 @@ class RidgeContacts(Effect):
             hs.append(self.tip_height * height[tipping])
         x_all = np.concatenate(xs)
         order = np.argsort(x_all, kind="stable")
-        return _Points(x_all[order], np.concatenate(rs)[order], np.concatenate(tips)[order],
-                       np.concatenate(hs)[order])
+        return _Points(
+            x_all[order],
+            np.concatenate(rs)[order],
+            np.concatenate(tips)[order],
+            np.concatenate(hs)[order],
+        )
 
     def _crossings(self, t: np.ndarray, x: np.ndarray, v: np.ndarray):
         """Crossings between consecutive samples, in time order.
@@ -276,8 +292,13 @@ class RidgeContacts(Effect):
         direction = np.where(v0 != 0, np.sign(v0), np.sign(v1))
         with np.errstate(invalid="ignore"):
             reach = JUMP_SLACK * np.maximum(np.abs(v0), np.abs(v1)) * (t1 - t0) + JUMP_TOLERANCE_MM
-            valid = ((v0 * v1 >= 0) & (direction != 0) & np.isfinite(x0) & np.isfinite(x1)
-                     & (np.abs(x1 - x0) <= reach))
+            valid = (
+                (v0 * v1 >= 0)
+                & (direction != 0)
+                & np.isfinite(x0)
+                & np.isfinite(x1)
+                & (np.abs(x1 - x0) <= reach)
+            )
         found = []
         for sign, points in ((1, self._forward_points), (-1, self._reverse_points)):
             use = valid & (direction == sign)
@@ -294,8 +315,17 @@ class RidgeContacts(Effect):
             interval = np.repeat(np.arange(len(counts)), counts)
             within = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
             index = lo[interval] + within if sign > 0 else hi[interval] - 1 - within
-            found.append((interval, within, np.full(total, sign), points.x_mm[index],
-                          points.ridge[index], points.tip[index], points.height[index]))
+            found.append(
+                (
+                    interval,
+                    within,
+                    np.full(total, sign),
+                    points.x_mm[index],
+                    points.ridge[index],
+                    points.tip[index],
+                    points.height[index],
+                )
+            )
         if not found:
             return None
         columns = [np.concatenate(column) for column in zip(*found, strict=True)]
@@ -337,8 +367,9 @@ class RidgeContacts(Effect):
             return
         if self._last_sample is not None:
             lt, lx, lv = self._last_sample
-            events = self._events(np.concatenate([[lt], t]), np.concatenate([[lx], x]),
-                                  np.concatenate([[lv], v]))
+            events = self._events(
+                np.concatenate([[lt], t]), np.concatenate([[lx], x]), np.concatenate([[lv], v])
+            )
         else:
             events = self._events(t, x, v)
         self._last_sample = (float(t[-1]), float(x[-1]), float(v[-1]))
@@ -354,19 +385,32 @@ class RidgeContacts(Effect):
                     st, sa, sr, s0 = self._segment
                     start = float(pulse(np.float64(times[i] - st), sa, sr, s0))
                 self._segment = (float(times[i]), float(alpha[i]), float(rise[i]), start)
-                for column, value in zip((seg_t, seg_alpha, seg_rise, seg_start),
-                                         self._segment, strict=True):
+                for column, value in zip(
+                    (seg_t, seg_alpha, seg_rise, seg_start), self._segment, strict=True
+                ):
                     column.append(value)
-                self.contacts.append(Contact(float(times[i]), int(ridge[i]), int(sign[i]),
-                                             bool(tip[i]), float(alpha[i]), float(rise[i])))
+                self.contacts.append(
+                    Contact(
+                        float(times[i]),
+                        int(ridge[i]),
+                        int(sign[i]),
+                        bool(tip[i]),
+                        float(alpha[i]),
+                        float(rise[i]),
+                    )
+                )
         seg_t_arr = np.asarray(seg_t)
         which = np.searchsorted(seg_t_arr[1:], t, side="right")  # 0 = the carried segment
         active = np.isfinite(seg_t_arr[which])
         values = np.zeros(len(t))
         if active.any():
             w = which[active]
-            values[active] = pulse(t[active] - seg_t_arr[w], np.asarray(seg_alpha)[w],
-                                   np.asarray(seg_rise)[w], np.asarray(seg_start)[w])
+            values[active] = pulse(
+                t[active] - seg_t_arr[w],
+                np.asarray(seg_alpha)[w],
+                np.asarray(seg_rise)[w],
+                np.asarray(seg_start)[w],
+            )
         io.put(FORCE, base + values)
 
 
