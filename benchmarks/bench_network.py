@@ -30,9 +30,9 @@ import canopen
 
 from grasplink.bus import NodeRunner, frame_bits_worst_case, message_to_frame, open_bus
 from grasplink.bus.lockstep import LockstepNetwork
+from grasplink.core.frames import Frame
 from grasplink.demo import demo_master
 from grasplink.devices.factory import build_node
-from grasplink.devices.frames import Frame
 from grasplink.profiles import eds_path
 from grasplink.profiles import objects as obj
 

@@ -165,6 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def cmd_node(args: argparse.Namespace) -> int:
     from grasplink.bus import NodeRunner, open_bus
+    from grasplink.core.frames import HEARTBEAT_BASE
     from grasplink.devices.factory import build_node
 
     node = build_node(args.kind, args.node_id)
@@ -177,7 +178,7 @@ def cmd_node(args: argparse.Namespace) -> int:
         with NodeRunner(bus, [node]) as runner:
             print(f"{args.kind} node 0x{node.node_id:02X} running on {args.bus}", flush=True)
             deadline = None if args.duration is None else time.monotonic() + args.duration
-            heartbeat_id = 0x700 + node.node_id
+            heartbeat_id = HEARTBEAT_BASE + node.node_id
             try:
                 while not stop.wait(0.1):
                     if runner.stats.rx_by_cob_id[heartbeat_id]:
@@ -199,13 +200,9 @@ def cmd_node(args: argparse.Namespace) -> int:
 def _refuse_if_node_id_taken(bus, node_id: int, url: str) -> None:
     """Listen before booting: a heartbeat, EMCY or TPDO with our node-ID means a clash."""
     from grasplink.bus.url import message_to_frame
+    from grasplink.core.frames import node_cob_ids
 
-    ours = {
-        0x080 + node_id,
-        0x700 + node_id,
-        0x580 + node_id,
-        *(base + node_id for base in (0x180, 0x280, 0x380, 0x480)),
-    }
+    ours = set(node_cob_ids(node_id))
     deadline = time.monotonic() + PROBE_S
     while (left := deadline - time.monotonic()) > 0:
         msg = bus.recv(left)

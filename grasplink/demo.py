@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import can
 
 from grasplink.bus import NodeRunner, frame_bits_worst_case, message_to_frame, open_bus
+from grasplink.core.frames import function_of
 from grasplink.devices.factory import build_node
 from grasplink.gateway.scripted import ScriptedMaster
 from grasplink.profiles import objects as obj
@@ -30,20 +31,6 @@ COMMAND_PERIOD_US = 50_000
 LEVEL_DWELL_US = 500_000
 # Force belt levels (rad/s, ch. 8) then the slip belt levels (negative velocity).
 BELT_LEVELS_MRAD_S = (3500, 5000, 6500, 8000, -2000, -3700, -5300, -7000)
-FUNCTIONS = {
-    0x080: "EMCY",
-    0x180: "TPDO1",
-    0x280: "TPDO2",
-    0x380: "TPDO3",
-    0x480: "TPDO4",
-    0x200: "RPDO1",
-    0x300: "RPDO2",
-    0x400: "RPDO3",
-    0x500: "RPDO4",
-    0x580: "SDO tx",
-    0x600: "SDO rx",
-    0x700: "heartbeat",
-}
 
 
 def demo_master(kinds: dict[int, str]) -> ScriptedMaster:
@@ -82,8 +69,9 @@ class BusWatch:
         self.frames[frame.can_id] += 1
         self.bytes[frame.can_id] += len(frame.data)
         self.bits += frame_bits_worst_case(frame.length, frame.rtr)
-        if 0x700 < frame.can_id <= 0x77F and frame.data and frame.data[0] != 0:
-            self.heartbeat_times.setdefault(frame.can_id - 0x700, []).append(msg.timestamp)
+        function, node_id = function_of(frame.can_id)
+        if function == "heartbeat" and node_id and frame.data and frame.data[0] != 0:
+            self.heartbeat_times.setdefault(node_id, []).append(msg.timestamp)
 
 
 def _watch(bus: can.BusABC, watch: BusWatch, stop: threading.Event) -> None:
@@ -94,13 +82,11 @@ def _watch(bus: can.BusABC, watch: BusWatch, stop: threading.Event) -> None:
 
 
 def describe(can_id: int, kinds: dict[int, str]) -> str:
-    if can_id == 0x000:
-        return "NMT"
-    if can_id == 0x080:
-        return "SYNC"
-    function, node_id = can_id & 0x780, can_id & 0x7F
+    function, node_id = function_of(can_id)
+    if function in ("NMT", "SYNC"):
+        return function
     kind = kinds.get(node_id, "gateway" if node_id == obj.GATEWAY_NODE_ID else f"node {node_id}")
-    return f"{kind} {FUNCTIONS.get(function, hex(function))}"
+    return f"{kind} {function}"
 
 
 def run_demo(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import struct
 
 from grasplink.bus.lockstep import LockstepNetwork
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 
 
 class SdoAbortReply(Exception):

@@ -37,7 +37,7 @@ from grasplink.bus.url import (
     parse_bus_url,
     socketcan_available,
 )
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 from grasplink.errors import BusError
 
 REPO = Path(__file__).resolve().parents[1]
@@ -358,7 +358,7 @@ CHILD_CLIENT = textwrap.dedent(
     """
     import sys, time
     from grasplink.bus.url import frame_to_message, message_to_frame, open_bus
-    from grasplink.devices.frames import Frame
+    from grasplink.core.frames import Frame
 
     bus = open_bus(sys.argv[1])
     try:

@@ -8,9 +8,9 @@ import struct
 import pytest
 
 from grasplink.bus.lockstep import LockstepNetwork
+from grasplink.core.frames import Frame
+from grasplink.core.nmt import NmtState
 from grasplink.devices.factory import build_node
-from grasplink.devices.frames import Frame
-from grasplink.devices.nmt import NmtState
 from grasplink.devices.sdo_abort import AbortCode
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj

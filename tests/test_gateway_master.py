@@ -5,9 +5,9 @@ from __future__ import annotations
 import struct
 
 from grasplink.bus.lockstep import LockstepNetwork
+from grasplink.core.frames import Frame
+from grasplink.core.nmt import NmtState
 from grasplink.devices.factory import build_node
-from grasplink.devices.frames import Frame
-from grasplink.devices.nmt import NmtState
 from grasplink.gateway.master import NmtMaster
 from grasplink.gateway.scripted import ScriptedMaster
 

@@ -16,7 +16,7 @@ from canopen.objectdictionary import DOMAIN, UNSIGNED16, UNSIGNED32, VISIBLE_STR
 from canopen.sdo.base import CrcXmodem
 from canopen.sdo.client import BlockUploadStream
 
-from grasplink.devices.frames import SDO_RX_BASE, SDO_TX_BASE
+from grasplink.core.frames import SDO_RX_BASE, SDO_TX_BASE
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sdo_server import SdoServer, sdo_crc
 

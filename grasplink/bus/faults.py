@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 
 # An error frame: 6 dominant bits of error flag, up to 6 of echo, 8 delimiter, 3 intermission.
 ERROR_FRAME_BITS = 23

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from collections import deque
 
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 
 STUFFED_OVERHEAD_BITS = 34  # SOF..DLC (19) + CRC (15), base format
 FIXED_TAIL_BITS = 10  # CRC delimiter, ACK slot, ACK delimiter, EOF (7)

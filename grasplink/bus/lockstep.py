@@ -15,8 +15,8 @@ from collections import deque
 from collections.abc import Callable, Iterable
 
 from grasplink.bus.faults import ErrorFrame, FaultyLink
-from grasplink.devices.frames import Frame
-from grasplink.devices.protocol import SansIoDevice
+from grasplink.core.frames import Frame
+from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import ConfigError
 
 Tap = Callable[[int, Frame | ErrorFrame, object], None]  # (t_us, frame, sender or None)

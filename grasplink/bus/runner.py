@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import can
 
 from grasplink.bus.url import frame_to_message, message_to_frame
-from grasplink.devices.frames import Frame
-from grasplink.devices.protocol import SansIoDevice
+from grasplink.core.frames import Frame
+from grasplink.core.protocol import SansIoDevice
 
 logger = logging.getLogger(__name__)
 

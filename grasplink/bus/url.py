@@ -34,7 +34,7 @@ from can_remote.client import DEFAULT_SSL_CONTEXT, RemoteBus, RemoteClientProtoc
 from can_remote.protocol import RemoteError
 from can_remote.websocket import WebSocket, WebsocketClosed, get_accept_key
 
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 from grasplink.errors import BusError
 
 DEFAULT_HUB_PORT = CAN_REMOTE_DEFAULT_PORT  # 54701

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from grasplink.devices.frames import Frame
-from grasplink.devices.nmt import NmtState
+from grasplink.core.frames import Frame
+from grasplink.core.nmt import NmtState
 
 if TYPE_CHECKING:
     from grasplink.devices.node import DeviceNode

@@ -11,10 +11,10 @@ Statusword changes publish through TPDOs of type 255.
 
 from __future__ import annotations
 
+from grasplink.core.frames import Frame
+from grasplink.core.nmt import NmtState
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.cia402 import DriveState, DriveStateMachine
-from grasplink.devices.frames import Frame
-from grasplink.devices.nmt import NmtState
 from grasplink.devices.sampling import US_PER_S
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.store import Value

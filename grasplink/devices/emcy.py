@@ -11,7 +11,7 @@ from __future__ import annotations
 import struct
 from collections import deque
 
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.store import ObjectStore, Value
 from grasplink.profiles import objects as obj

@@ -8,8 +8,8 @@ holds the grip it has: dropping an object is worse than keeping it.
 
 from __future__ import annotations
 
+from grasplink.core.nmt import NmtState
 from grasplink.devices.drive import DriveApp
-from grasplink.devices.nmt import NmtState
 from grasplink.profiles import objects as obj
 
 

@@ -9,17 +9,17 @@ from __future__ import annotations
 
 import canopen.objectdictionary as cod
 
-from grasplink.devices import emcy as em
-from grasplink.devices.app import DeviceApp
-from grasplink.devices.frames import HEARTBEAT_BASE, NMT_COB_ID, SDO_RX_BASE, SDO_TX_BASE, Frame
-from grasplink.devices.heartbeat import HeartbeatConsumer, HeartbeatProducer
-from grasplink.devices.nmt import (
+from grasplink.core.frames import HEARTBEAT_BASE, NMT_COB_ID, SDO_RX_BASE, SDO_TX_BASE, Frame
+from grasplink.core.nmt import (
     EMCY_ALLOWED,
     SDO_ALLOWED,
     SYNC_ALLOWED,
     NmtCommand,
     NmtState,
 )
+from grasplink.devices import emcy as em
+from grasplink.devices.app import DeviceApp
+from grasplink.devices.heartbeat import HeartbeatConsumer, HeartbeatProducer
 from grasplink.devices.pdo import CAN_ID_MASK, PdoEngine, is_restricted_can_id
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sdo_server import SdoServer

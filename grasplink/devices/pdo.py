@@ -17,8 +17,8 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from grasplink.core.frames import Frame
 from grasplink.devices import emcy as em
-from grasplink.devices.frames import Frame
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.store import ObjectStore, Value
 from grasplink.profiles import objects as obj

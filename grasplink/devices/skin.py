@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from grasplink.core.frames import Frame
+from grasplink.core.nmt import NmtState
 from grasplink.devices import emcy as em
 from grasplink.devices.app import DeviceApp
-from grasplink.devices.frames import Frame
-from grasplink.devices.nmt import NmtState
 from grasplink.devices.sampling import SampleClock
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sources import ConstantSource, SampleSource

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from grasplink.devices.frames import HEARTBEAT_BASE, NMT_COB_ID, Frame
-from grasplink.devices.nmt import NmtCommand, NmtState
+from grasplink.core.frames import HEARTBEAT_BASE, NMT_COB_ID, Frame
+from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.profiles import objects as obj
 
 LOST_AFTER_PERIODS = 3

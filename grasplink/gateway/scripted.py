@@ -12,8 +12,8 @@ import bisect
 import struct
 from collections.abc import Sequence
 
-from grasplink.devices.frames import RPDO_BASES, Frame
-from grasplink.devices.nmt import NmtState
+from grasplink.core.frames import RPDO_BASES, Frame
+from grasplink.core.nmt import NmtState
 from grasplink.gateway.master import NmtMaster
 
 COMMAND_PERIOD_US = 50_000

@@ -17,6 +17,7 @@ from pathlib import Path
 import can
 import numpy as np
 
+from grasplink.core.frames import RPDO_BASES, function_of
 from grasplink.errors import GrasplinkError
 from grasplink.profiles.layouts import parse_layout
 
@@ -79,27 +80,17 @@ def plot_recording(folder: Path) -> list[Path]:
     return written
 
 
-FUNCTIONS = {
-    0x000: "NMT",
-    0x080: "EMCY/SYNC",
-    0x180: "TPDO",
-    0x280: "TPDO",
-    0x380: "TPDO",
-    0x480: "TPDO",
-    0x200: "RPDO",
-    0x300: "RPDO",
-    0x400: "RPDO",
-    0x500: "RPDO",
-    0x580: "SDO",
-    0x600: "SDO",
-    0x700: "heartbeat",
-}
 BUS_BIN_S = 0.1
 
 
 def _function_of(can_id: int) -> str:
-    """CANopen's predefined connection set: the function code is the top 4 bits."""
-    return FUNCTIONS.get(can_id & 0x780, "other")
+    """The service of a CAN-ID, PDO numbers folded ("TPDO", "RPDO", "SDO", "EMCY/SYNC")."""
+    name = function_of(can_id)[0]
+    if name in ("EMCY", "SYNC"):
+        return "EMCY/SYNC"
+    return (
+        name.rstrip("1234").removesuffix(" tx").removesuffix(" rx") if name[0] != "0" else "other"
+    )
 
 
 def _plot_bus(plt, folder, title, summary) -> Path:
@@ -223,9 +214,9 @@ def _commands_from_log(path: Path, summary: dict) -> dict[str, tuple[list, list]
     nodes = summary.get("nodes", {})
     targets = {}
     if "belt" in nodes:
-        targets[0x200 + nodes["belt"]["node_id"]] = ("belt command [rad/s]", "<Hi", 1e-3)
+        targets[RPDO_BASES[0] + nodes["belt"]["node_id"]] = ("belt command [rad/s]", "<Hi", 1e-3)
     if "hand" in nodes:
-        targets[0x200 + nodes["hand"]["node_id"]] = ("hand grip command [N]", "<HI", 1e-3)
+        targets[RPDO_BASES[0] + nodes["hand"]["node_id"]] = ("hand grip command [N]", "<HI", 1e-3)
     if not targets or not path.is_file():
         return {}
     series: dict[str, tuple[list, list]] = {}

@@ -26,7 +26,7 @@ import numpy as np
 
 from grasplink.bus.faults import ERROR_FRAME_BITS, ErrorFrame
 from grasplink.bus.load import frame_bits_worst_case
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 
 SCENE_EPOCH = datetime(2000, 1, 1, tzinfo=UTC)
 BITRATE = 1_000_000

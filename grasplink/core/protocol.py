@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from grasplink.devices.frames import Frame
+from grasplink.core.frames import Frame
 
 
 class SansIoDevice(Protocol):

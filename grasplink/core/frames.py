@@ -1,0 +1,64 @@
+"""The CAN frame the sans-IO core speaks, and CANopen's predefined COB-IDs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+NMT_COB_ID = 0x000
+SYNC_COB_ID_DEFAULT = 0x080
+EMCY_BASE = 0x080
+TPDO_BASES = (0x180, 0x280, 0x380, 0x480)
+RPDO_BASES = (0x200, 0x300, 0x400, 0x500)
+SDO_TX_BASE = 0x580  # server -> client
+SDO_RX_BASE = 0x600  # client -> server
+HEARTBEAT_BASE = 0x700
+NODE_ID_MASK = 0x7F
+
+# Function code (CAN-ID without the node-ID) -> the service it carries, as an analyser names it.
+FUNCTION_NAMES = {
+    NMT_COB_ID: "NMT",
+    EMCY_BASE: "EMCY",  # SYNC shares 080h with node-ID 0
+    **{base: f"TPDO{n}" for n, base in enumerate(TPDO_BASES, start=1)},
+    **{base: f"RPDO{n}" for n, base in enumerate(RPDO_BASES, start=1)},
+    SDO_TX_BASE: "SDO tx",
+    SDO_RX_BASE: "SDO rx",
+    HEARTBEAT_BASE: "heartbeat",
+}
+
+
+def function_of(can_id: int) -> tuple[str, int]:
+    """(service name, node-ID) of a predefined-connection-set CAN-ID; ("SYNC", 0) for 080h."""
+    base, node_id = can_id & ~NODE_ID_MASK, can_id & NODE_ID_MASK
+    if can_id == SYNC_COB_ID_DEFAULT:
+        return "SYNC", 0
+    return FUNCTION_NAMES.get(base, f"0x{base:03X}"), node_id
+
+
+def node_cob_ids(node_id: int) -> tuple[int, ...]:
+    """Every CAN-ID a node with `node_id` transmits on in the predefined connection set."""
+    return (
+        EMCY_BASE + node_id,
+        HEARTBEAT_BASE + node_id,
+        SDO_TX_BASE + node_id,
+        *(base + node_id for base in TPDO_BASES),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """An 11-bit CAN 2.0A data or remote frame (CANopen uses no extended IDs)."""
+
+    can_id: int
+    data: bytes = b""
+    rtr: bool = False
+    dlc: int | None = None  # for remote frames, the requested length
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.can_id <= 0x7FF:
+            raise ValueError(f"CAN-ID 0x{self.can_id:X} is not an 11-bit identifier")
+        if len(self.data) > 8:
+            raise ValueError(f"CAN frame 0x{self.can_id:03X} carries {len(self.data)} > 8 bytes")
+
+    @property
+    def length(self) -> int:
+        return self.dlc if self.rtr and self.dlc is not None else len(self.data)
