@@ -20,6 +20,7 @@ import numpy as np
 from grasplink.core.frames import RPDO_BASES, function_of
 from grasplink.errors import GrasplinkError
 from grasplink.profiles.layouts import parse_layout
+from grasplink.simulators import signals as sig
 
 ENVELOPE_WINDOW_S = 0.1
 
@@ -66,11 +67,11 @@ def plot_recording(folder: Path) -> list[Path]:
     written = []
     title = summary.get("scene", folder.name)
     plt = _pyplot()
-    if "skin.force_n" in skin:
+    if sig.SKIN_FORCE_N in skin:
         written.append(_plot_fsr(plt, folder, title, skin, truth, ridges))
-    if "object.position_mm" in truth:
+    if sig.OBJECT_POSITION_MM in truth:
         written.append(_plot_kinematics(plt, folder, title, truth, ridges))
-    if "emg.raw_uv" in emg:
+    if sig.EMG_RAW_UV in emg:
         written.append(_plot_emg(plt, folder, title, emg, truth))
     commands = _commands_from_log(folder / "can.asc", summary)
     if commands:
@@ -124,9 +125,9 @@ def _plot_bus(plt, folder, title, summary) -> Path:
 
 def _contact_times(truth: dict[str, np.ndarray], ridges: np.ndarray | None) -> np.ndarray:
     """Times the leading edge crosses a ridge (linear interpolation between truth samples)."""
-    if ridges is None or "object.position_mm" not in truth:
+    if ridges is None or sig.OBJECT_POSITION_MM not in truth:
         return np.zeros(0)
-    t, x = truth["t_s"], truth["object.position_mm"]
+    t, x = truth["t_s"], truth[sig.OBJECT_POSITION_MM]
     times = []
     for ridge in ridges:
         beyond = x >= ridge
@@ -139,18 +140,18 @@ def _contact_times(truth: dict[str, np.ndarray], ridges: np.ndarray | None) -> n
 
 def _plot_fsr(plt, folder, title, skin, truth, ridges) -> Path:
     fig, ax = plt.subplots(figsize=(10, 4.5), dpi=110)
-    ax.plot(skin["t_s"], skin["skin.force_n"], lw=0.8, color="tab:red", label="FSR signal [N]")
+    ax.plot(skin["t_s"], skin[sig.SKIN_FORCE_N], lw=0.8, color="tab:red", label="FSR signal [N]")
     contacts = _contact_times(truth, ridges)
     for i, t in enumerate(contacts):
         label = "ridge contact" if i == 0 else None
         ax.axvline(t, color="tab:orange", lw=0.7, ls="--", label=label)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("force [N]")
-    if "object.position_mm" in truth:
+    if sig.OBJECT_POSITION_MM in truth:
         twin = ax.twinx()
         twin.plot(
             truth["t_s"],
-            truth["object.position_mm"],
+            truth[sig.OBJECT_POSITION_MM],
             color="tab:blue",
             lw=1,
             label="leading edge (truth) [mm]",
@@ -164,7 +165,7 @@ def _plot_fsr(plt, folder, title, skin, truth, ridges) -> Path:
 
 def _plot_kinematics(plt, folder, title, truth, ridges) -> Path:
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2), dpi=110)
-    t, x, v = truth["t_s"], truth["object.position_mm"], truth.get("object.speed_mm_s")
+    t, x, v = truth["t_s"], truth[sig.OBJECT_POSITION_MM], truth.get(sig.OBJECT_SPEED_MM_S)
     axes[0].plot(t, x, color="tab:blue", label="position [mm]")
     axes[0].set_xlabel("time [s]")
     axes[0].set_ylabel("leading edge [mm]")
@@ -185,7 +186,7 @@ def _plot_kinematics(plt, folder, title, truth, ridges) -> Path:
 
 
 def _plot_emg(plt, folder, title, emg, truth) -> Path:
-    t, raw = emg["t_s"], emg["emg.raw_uv"]
+    t, raw = emg["t_s"], emg[sig.EMG_RAW_UV]
     rate = 1.0 / np.median(np.diff(t)) if len(t) > 1 else 1.0
     window = max(1, int(ENVELOPE_WINDOW_S * rate))
     envelope = np.convolve(np.abs(raw), np.ones(window) / window, mode="same")
@@ -194,11 +195,11 @@ def _plot_emg(plt, folder, title, emg, truth) -> Path:
     ax.plot(t, envelope, lw=1.2, color="tab:purple", label="envelope (rectified, 100 ms) [µV]")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("µV")
-    if "wearer.level" in truth:
+    if sig.WEARER_LEVEL in truth:
         twin = ax.twinx()
         twin.step(
             truth["t_s"],
-            truth["wearer.level"],
+            truth[sig.WEARER_LEVEL],
             where="post",
             color="tab:orange",
             label="contraction level",
@@ -236,12 +237,15 @@ def _plot_commands(plt, folder, title, commands, truth) -> Path:
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     for label, (times, values) in commands.items():
         ax.step(times, values, where="post", label=label)
-    if "belt.velocity_mrad_s" in truth:
+    if sig.BELT_VELOCITY_MRAD_S in truth:
         ax.plot(
-            truth["t_s"], truth["belt.velocity_mrad_s"] / 1000, lw=1, label="belt velocity [rad/s]"
+            truth["t_s"],
+            truth[sig.BELT_VELOCITY_MRAD_S] / 1000,
+            lw=1,
+            label="belt velocity [rad/s]",
         )
-    if "hand.grip_n" in truth:
-        ax.plot(truth["t_s"], truth["hand.grip_n"], lw=1, label="grip force [N]")
+    if sig.HAND_GRIP_N in truth:
+        ax.plot(truth["t_s"], truth[sig.HAND_GRIP_N], lw=1, label="grip force [N]")
     ax.axhline(0, color="0.7", lw=0.6)
     ax.set_xlabel("time [s]")
     ax.set_title(f"{title}: commands on the bus (+ force belt, - slip belt)")
