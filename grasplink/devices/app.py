@@ -3,27 +3,62 @@
 `DeviceNode` handles the protocol; a `DeviceApp` reads its configuration
 from the store, produces process data (setting mapped objects and asking
 for TPDOs), and reacts to RPDO writes and NMT changes. It is sans-IO too.
+An application sees its node only through `AppServices`: the store, the
+NMT state, the clock, TPDO requests and EMCY — the few things firmware
+gives an application task, so an app cannot reach into the protocol engines.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
+from grasplink.devices.store import ObjectStore
 
-if TYPE_CHECKING:
-    from grasplink.devices.node import DeviceNode
+
+class AppServices(Protocol):
+    """What a node offers its application."""
+
+    store: ObjectStore
+
+    @property
+    def nmt_state(self) -> NmtState:
+        """The node's NMT state (process data flows only in OPERATIONAL)."""
+        ...
+
+    def now_us(self) -> int:
+        """The time of the call the node is handling (a frame, a tick, a store change)."""
+        ...
+
+    def transmit_tpdo(self, number: int, t_us: int) -> list[Frame]:
+        """Send TPDO `number` now, its inhibit time permitting."""
+        ...
+
+    def tpdo_enabled(self, number: int) -> bool:
+        """Whether TPDO `number` exists and its COB-ID is valid."""
+        ...
+
+    def raise_error(self, code: int, register_bit: int, t_us: int, data: bytes = b"") -> None:
+        """Signal an error through EMCY and the error register (1001h)."""
+        ...
+
+    def clear_error(self, code: int, t_us: int) -> None:
+        """The error `code` went away (EMCY error reset once none is left)."""
+        ...
+
+    def error_active(self, code: int) -> bool: ...
 
 
 class DeviceApp:
     """Base application: does nothing (a bare communication-only device)."""
 
-    node: DeviceNode
+    services: AppServices
+    store: ObjectStore
 
-    def attach(self, node: DeviceNode) -> None:
-        self.node = node
-        self.store = node.store
+    def attach(self, services: AppServices) -> None:
+        self.services = services
+        self.store = services.store
 
     def on_reset(self, t_us: int) -> None:
         """Reset application: the store holds defaults (and stored parameters) again."""

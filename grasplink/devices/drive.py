@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
-from grasplink.devices.app import DeviceApp
+from grasplink.devices.app import AppServices, DeviceApp
 from grasplink.devices.cia402 import DriveState, DriveStateMachine
 from grasplink.devices.sampling import US_PER_S
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
@@ -35,8 +35,8 @@ class DriveApp(DeviceApp):
         self._next_tick_us: int | None = 0
         self._last_tick_us = 0
 
-    def attach(self, node) -> None:
-        super().attach(node)
+    def attach(self, services: AppServices) -> None:
+        super().attach(services)
         self.store.add_validator(obj.MODES_OF_OPERATION, self._validate_mode)
         self.store.add_listener(self._on_change, self.inputs)
 
@@ -56,7 +56,7 @@ class DriveApp(DeviceApp):
             self._publish_status()
         elif index == obj.MODES_OF_OPERATION:
             self.store.set(obj.MODES_OF_OPERATION_DISPLAY, 0, int(value))
-        self.wake(self.node.pdo.now_us)
+        self.wake(self.services.now_us())
 
     def on_rpdo(self, number: int, t_us: int) -> None:
         # Re-apply the controlword even when unchanged: a repeated command is a command.

@@ -13,7 +13,7 @@ import numpy as np
 
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
-from grasplink.devices.app import DeviceApp
+from grasplink.devices.app import AppServices, DeviceApp
 from grasplink.devices.sampling import SampleClock
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sources import ConstantSource, SampleSource
@@ -49,8 +49,8 @@ class EmgApp(DeviceApp):
         self._next_envelope_us = 0
         self._raw: list[int] = []
 
-    def attach(self, node) -> None:
-        super().attach(node)
+    def attach(self, services: AppServices) -> None:
+        super().attach(services)
         self.store.add_validator(obj.EMG_CALIBRATION, self._validate_calibration)
         self.store.add_listener(self._on_change, (obj.EMG_SAMPLE_RATE_HZ, obj.EMG_WINDOW_MS))
 
@@ -72,7 +72,7 @@ class EmgApp(DeviceApp):
 
     def _on_change(self, index: int, subindex: int, value: Value) -> None:
         if index in (obj.EMG_SAMPLE_RATE_HZ, obj.EMG_WINDOW_MS) and self.clock is not None:
-            self._restart(self.node.pdo.now_us)
+            self._restart(self.services.now_us())
 
     def on_reset(self, t_us: int) -> None:
         self._restart(t_us)
@@ -118,13 +118,14 @@ class EmgApp(DeviceApp):
         self.store.set(obj.EMG_LEVEL, 0, contraction_level(envelope, e_min, e_max))
         sequence = (int(self.store.get(obj.EMG_ENVELOPE_SEQUENCE)) + 1) & 0xFF
         self.store.set(obj.EMG_ENVELOPE_SEQUENCE, 0, sequence)
-        if self.node.state != NmtState.OPERATIONAL:
+        if self.services.nmt_state != NmtState.OPERATIONAL:
             return []
-        return self.node.transmit_tpdo(TPDO_ENVELOPE, t_us)
+        return self.services.transmit_tpdo(TPDO_ENVELOPE, t_us)
 
     def _stream_raw(self, values: np.ndarray, t_us: int) -> list[Frame]:
-        pdo = self.node.pdo.tpdos[TPDO_RAW - 1]
-        if self.node.state != NmtState.OPERATIONAL or not self.node.pdo.is_valid(pdo):
+        if self.services.nmt_state != NmtState.OPERATIONAL or not self.services.tpdo_enabled(
+            TPDO_RAW
+        ):
             return []
         frames = []
         self._raw.extend(np.clip(np.rint(values), INT16_MIN, INT16_MAX).astype(int).tolist())
@@ -134,5 +135,5 @@ class EmgApp(DeviceApp):
             del self._raw[:RAW_PER_PDO]
             sequence = (int(self.store.get(obj.EMG_RAW_SEQUENCE)) + 1) & 0xFF
             self.store.set(obj.EMG_RAW_SEQUENCE, 0, sequence)
-            frames += self.node.transmit_tpdo(TPDO_RAW, t_us)
+            frames += self.services.transmit_tpdo(TPDO_RAW, t_us)
         return frames

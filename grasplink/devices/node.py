@@ -77,7 +77,7 @@ class DeviceNode:
         self.store.add_listener(self._mark_stale)
         self.store.add_validator(obj.COB_ID_SYNC, self._validate_sync_cob_id)
         self.store.add_validator(obj.COB_ID_EMCY, self._validate_emcy_cob_id)
-        self.app.attach(self)
+        self.app.attach(NodeServices(self))
 
     # -- SansIoDevice ------------------------------------------------------------
     def _mark_stale(self, *_change: object) -> None:
@@ -234,10 +234,6 @@ class DeviceNode:
         return frames
 
     # -- helpers ------------------------------------------------------------------------
-    def transmit_tpdo(self, number: int, t_us: int) -> list[Frame]:
-        """For applications: send TPDO `number` now (its inhibit time permitting)."""
-        return self.pdo.trigger(number, t_us)
-
     def _on_rpdo(self, number: int, t_us: int) -> None:
         self.app.on_rpdo(number, t_us)
 
@@ -281,3 +277,34 @@ class DeviceNode:
         can_id = value & CAN_ID_MASK
         if is_restricted_can_id(can_id):
             raise SdoAbort(AbortCode.INVALID_VALUE, f"CAN-ID 0x{can_id:03X} is restricted")
+
+
+class NodeServices:
+    """`AppServices` of one node: the narrow view its application gets."""
+
+    def __init__(self, node: DeviceNode):
+        self._node = node
+        self.store = node.store
+
+    @property
+    def nmt_state(self) -> NmtState:
+        return self._node.state
+
+    def now_us(self) -> int:
+        return self._node.pdo.now_us
+
+    def transmit_tpdo(self, number: int, t_us: int) -> list[Frame]:
+        return self._node.pdo.trigger(number, t_us)
+
+    def tpdo_enabled(self, number: int) -> bool:
+        tpdos = self._node.pdo.tpdos
+        return 1 <= number <= len(tpdos) and self._node.pdo.is_valid(tpdos[number - 1])
+
+    def raise_error(self, code: int, register_bit: int, t_us: int, data: bytes = b"") -> None:
+        self._node.emcy.raise_error(code, register_bit, t_us, data)
+
+    def clear_error(self, code: int, t_us: int) -> None:
+        self._node.emcy.clear_error(code, t_us)
+
+    def error_active(self, code: int) -> bool:
+        return self._node.emcy.is_active(code)

@@ -17,7 +17,7 @@ import numpy as np
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
 from grasplink.devices import emcy as em
-from grasplink.devices.app import DeviceApp
+from grasplink.devices.app import AppServices, DeviceApp
 from grasplink.devices.sampling import SampleClock
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sources import ConstantSource, SampleSource
@@ -46,8 +46,8 @@ class SkinApp(DeviceApp):
         self.saturated_samples = 0
         self.dropped_packets = 0
 
-    def attach(self, node) -> None:
-        super().attach(node)
+    def attach(self, services: AppServices) -> None:
+        super().attach(services)
         self.store.add_validator(obj.SKIN_RIDGE_SPACING_UM, self._validate_spacing)
         self.store.add_validator(obj.SKIN_FSR_CALIBRATION, self._validate_calibration)
         watched = (
@@ -99,7 +99,7 @@ class SkinApp(DeviceApp):
         elif index == obj.SKIN_FSR_CALIBRATION:
             self._calibration = None
         elif index == obj.SKIN_SAMPLE_RATE_HZ and self.clock is not None:
-            self._restart_sampling(self.node.pdo.now_us)
+            self._restart_sampling(self.services.now_us())
 
     def _load_preset(self, name: str) -> None:
         spacings = LAYOUTS_MM[name]
@@ -162,7 +162,7 @@ class SkinApp(DeviceApp):
         self._track_saturation(counts, t_us)
         self._track_static(counts)
         frames: list[Frame] = []
-        operational = self.node.state == NmtState.OPERATIONAL
+        operational = self.services.nmt_state == NmtState.OPERATIONAL
         sequence = int(self.store.get(obj.SKIN_PACKET_SEQUENCE))
         for p in range(packets):
             block = counts[p * per_pdo : (p + 1) * per_pdo]
@@ -173,7 +173,7 @@ class SkinApp(DeviceApp):
             end_index = start + (p + 1) * per_pdo
             self.store.set(obj.SKIN_SAMPLE_COUNTER, 0, end_index & 0xFFFFFFFF)
             if operational:
-                frames += self.node.transmit_tpdo(TPDO_SAMPLES, clock.time_of(end_index - 1))
+                frames += self.services.transmit_tpdo(TPDO_SAMPLES, clock.time_of(end_index - 1))
         clock.next_index = start + packets * per_pdo
         mean_counts = self._static_sum / self._static_fill
         self.store.set(obj.SKIN_STATIC_FORCE_MN, 0, round(float(self.to_force_mn(mean_counts))))
@@ -202,7 +202,7 @@ class SkinApp(DeviceApp):
     def _track_saturation(self, counts: np.ndarray, t_us: int) -> None:
         saturated = int(np.count_nonzero(counts >= self.calibration()[1]))
         self.saturated_samples += saturated
-        if saturated and not self.node.emcy.is_active(em.SENSOR_SATURATED):
-            self.node.emcy.raise_error(em.SENSOR_SATURATED, em.REG_MANUFACTURER, t_us)
-        elif not saturated and self.node.emcy.is_active(em.SENSOR_SATURATED):
-            self.node.emcy.clear_error(em.SENSOR_SATURATED, t_us)
+        if saturated and not self.services.error_active(em.SENSOR_SATURATED):
+            self.services.raise_error(em.SENSOR_SATURATED, em.REG_MANUFACTURER, t_us)
+        elif not saturated and self.services.error_active(em.SENSOR_SATURATED):
+            self.services.clear_error(em.SENSOR_SATURATED, t_us)

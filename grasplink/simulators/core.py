@@ -22,6 +22,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from grasplink.simulators import signals as sig
 from grasplink.simulators.params import Params, SceneError
 
 PHYSICS, SKIN, EMG = "physics", "skin", "emg"
@@ -167,7 +168,7 @@ def build_graph(
 
 def _providers_of(signal: str) -> str:
     kinds = [k for k, cls in REGISTRY.items() if signal in cls.outputs and signal not in cls.inputs]
-    nodes = {"belt.command_mrad_s": "[nodes.belt]", "hand.target_n": "[nodes.hand]"}
+    nodes = {"belt.command_mrad_s": "[nodes.belt]", sig.HAND_TARGET_N: "[nodes.hand]"}
     options = [f"an effect of type {k!r}" for k in sorted(kinds)]
     if signal in nodes:
         options.append(nodes[signal])

@@ -24,6 +24,7 @@ from grasplink.devices.sampling import SampleClock
 from grasplink.gateway.scripted import ScriptedMaster
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import PRESET_CODES, spacings_um
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import DOMAINS, EMG, PHYSICS, SKIN, Io
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import Scene
@@ -88,7 +89,10 @@ class Simulation:
         }
         self.sources: dict[str, SceneSource] = {}
         produced = {name for e in scene.effects for name in e.outputs}
-        for kind, signal, domain in (("skin", "skin.force_n", SKIN), ("emg", "emg.raw_uv", EMG)):
+        for kind, signal, domain in (
+            ("skin", sig.SKIN_FORCE_N, SKIN),
+            ("emg", sig.EMG_RAW_UV, EMG),
+        ):
             if kind in scene.nodes and signal in produced:
                 self.sources[kind] = SceneSource(scene.rate_hz(domain))
         self._build_nodes(produced)
@@ -136,10 +140,10 @@ class Simulation:
             self._configure(node, spec)
             self.nodes[kind] = node
         if "belt" in self.nodes:
-            self.nodes["belt"].app.simulated_motor = "belt.velocity_mrad_s" in produced
+            self.nodes["belt"].app.simulated_motor = sig.BELT_VELOCITY_MRAD_S in produced
         if "hand" in self.nodes:
             hand = self.nodes["hand"].app
-            hand.simulated_actuator = "hand.grip_n" in produced
+            hand.simulated_actuator = sig.HAND_GRIP_N in produced
             # A scene may start with the object already held: the node boots holding it.
             initial_n = next(
                 (
@@ -249,7 +253,7 @@ class Simulation:
                 else:
                     effect.step(io)
         for kind, source in self.sources.items():
-            signal = "skin.force_n" if kind == "skin" else "emg.raw_uv"
+            signal = sig.SKIN_FORCE_N if kind == "skin" else sig.EMG_RAW_UV
             if self.domain_of.get(signal) == state.name and signal in state.values:
                 source.append(times, state.values[signal])
         if self.recorder is not None:
@@ -277,10 +281,10 @@ class Simulation:
 
         Without power the belt motor stops; the hand's gear holds its grip.
         """
-        if name == "belt.command_mrad_s":
+        if name == sig.BELT_COMMAND_MRAD_S:
             belt = self.nodes["belt"]
             return float(belt.app.setpoint_mrad_s) if belt.powered else 0.0
-        if name == "hand.target_n":
+        if name == sig.HAND_TARGET_N:
             hand = self.nodes["hand"]
             mn = hand.app.setpoint_mn if hand.powered else hand.app.grip_mn
             return float(mn) / MN_PER_N
@@ -290,11 +294,11 @@ class Simulation:
         physics = self.domains.get(PHYSICS)
         if physics is None:
             return
-        velocity = physics.values.get("belt.velocity_mrad_s")
+        velocity = physics.values.get(sig.BELT_VELOCITY_MRAD_S)
         if "belt" in self.nodes and velocity is not None and len(velocity):
             self.nodes["belt"].app.velocity_mrad_s = float(velocity[-1])
             self.nodes["belt"].app.publish_actual()
-        grip = physics.values.get("hand.grip_n")
+        grip = physics.values.get(sig.HAND_GRIP_N)
         if "hand" in self.nodes and grip is not None and len(grip):
             self.nodes["hand"].app.grip_mn = float(grip[-1]) * MN_PER_N
             self.nodes["hand"].app.publish_actual()

@@ -14,6 +14,7 @@ import grasplink.simulators.effects  # noqa: F401  (registers every effect)
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import EMG, REGISTRY, SKIN, Context, Effect, Endpoint, build_graph
 from grasplink.simulators.params import Params, SceneError
 
@@ -164,14 +165,14 @@ def node_endpoints(nodes: dict[str, NodeSpec]) -> list[Endpoint]:
     endpoints = []
     if "belt" in nodes:
         endpoints.append(
-            Endpoint("belt", reads=("belt.velocity_mrad_s",), writes=("belt.command_mrad_s",))
+            Endpoint("belt", reads=(sig.BELT_VELOCITY_MRAD_S,), writes=(sig.BELT_COMMAND_MRAD_S,))
         )
     if "hand" in nodes:
-        endpoints.append(Endpoint("hand", reads=("hand.grip_n",), writes=("hand.target_n",)))
+        endpoints.append(Endpoint("hand", reads=(sig.HAND_GRIP_N,), writes=(sig.HAND_TARGET_N,)))
     if "skin" in nodes:
-        endpoints.append(Endpoint("skin", reads=("skin.force_n",), domain=SKIN))
+        endpoints.append(Endpoint("skin", reads=(sig.SKIN_FORCE_N,), domain=SKIN))
     if "emg" in nodes:
-        endpoints.append(Endpoint("emg", reads=("emg.raw_uv",), domain=EMG))
+        endpoints.append(Endpoint("emg", reads=(sig.EMG_RAW_UV,), domain=EMG))
     return endpoints
 
 

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from scipy.signal import lfilter
 
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
 from grasplink.simulators.effects.kinematics import INTERPOLATIONS, US_PER_S, Profile
 from grasplink.simulators.params import Params
@@ -84,8 +85,8 @@ class HandActuator(Effect):
 
     kind = "hand.actuator"
     domain = PHYSICS
-    inputs = ("hand.target_n",)
-    outputs = ("hand.grip_n", "hand.crushed")
+    inputs = (sig.HAND_TARGET_N,)
+    outputs = (sig.HAND_GRIP_N, sig.HAND_CRUSHED)
     summary = "hand grip follows its command with a first-order lag; latches a crush"
 
     def __init__(self, params: Params, ctx: Context):
@@ -98,10 +99,10 @@ class HandActuator(Effect):
         self.latch = CrushLatch(params.number("crush_limit_n", None, low=0.0, low_open=True))
 
     def step(self, io: Io) -> None:
-        target = np.clip(io.get("hand.target_n"), 0.0, self.max_force_n)
+        target = np.clip(io.get(sig.HAND_TARGET_N), 0.0, self.max_force_n)
         grip = self.lag.step(io.times_us, target)
-        io.put("hand.grip_n", grip)
-        io.put("hand.crushed", self.latch.step(grip))
+        io.put(sig.HAND_GRIP_N, grip)
+        io.put(sig.HAND_CRUSHED, self.latch.step(grip))
 
 
 @register
@@ -114,7 +115,7 @@ class ScriptedGrip(Effect):
 
     kind = "grip.scripted"
     domain = PHYSICS
-    outputs = ("hand.grip_n",)
+    outputs = (sig.HAND_GRIP_N,)
     summary = "grip force from a scripted [t_s, N] profile"
 
     def __init__(self, params: Params, ctx: Context):
@@ -124,7 +125,7 @@ class ScriptedGrip(Effect):
         self.profile = Profile(params, "grip_n", interpolation, pairs)
 
     def step(self, io: Io) -> None:
-        io.put("hand.grip_n", self.profile.value(io.times_us))
+        io.put(sig.HAND_GRIP_N, self.profile.value(io.times_us))
 
 
 @register
@@ -138,7 +139,7 @@ class ScriptedLoad(Effect):
 
     kind = "load.scripted"
     domain = PHYSICS
-    outputs = ("load.force_n",)
+    outputs = (sig.LOAD_FORCE_N,)
     summary = "tangential load from a [t_s, N] profile or a constant weight mass_kg*g"
 
     def __init__(self, params: Params, ctx: Context):
@@ -159,9 +160,9 @@ class ScriptedLoad(Effect):
 
     def step(self, io: Io) -> None:
         if self.profile is None:
-            io.put("load.force_n", np.full(len(io), self.weight_n))
+            io.put(sig.LOAD_FORCE_N, np.full(len(io), self.weight_n))
         else:
-            io.put("load.force_n", self.profile.value(io.times_us))
+            io.put(sig.LOAD_FORCE_N, self.profile.value(io.times_us))
 
 
 @register
@@ -180,8 +181,8 @@ class BeltMotor(Effect):
 
     kind = "belt.motor"
     domain = PHYSICS
-    inputs = ("belt.command_mrad_s",)
-    outputs = ("belt.velocity_mrad_s", "belt.tap_hz", "belt.surface_mm_s")
+    inputs = (sig.BELT_COMMAND_MRAD_S,)
+    outputs = (sig.BELT_VELOCITY_MRAD_S, sig.BELT_TAP_HZ, sig.BELT_SURFACE_MM_S)
     summary = "belt DC motor: first-order speed; + taps the force belt, - runs the slip belt"
 
     def __init__(self, params: Params, ctx: Context):
@@ -192,8 +193,8 @@ class BeltMotor(Effect):
         self.lag = FirstOrderLag(tau)
 
     def step(self, io: Io) -> None:
-        velocity = self.lag.step(io.times_us, io.get("belt.command_mrad_s"))
+        velocity = self.lag.step(io.times_us, io.get(sig.BELT_COMMAND_MRAD_S))
         rad_s = velocity / 1000.0
-        io.put("belt.velocity_mrad_s", velocity)
-        io.put("belt.tap_hz", np.where(rad_s > 0, self.nubs * rad_s / (2 * math.pi), 0.0))
-        io.put("belt.surface_mm_s", np.where(rad_s < 0, -rad_s * self.radius_mm, 0.0))
+        io.put(sig.BELT_VELOCITY_MRAD_S, velocity)
+        io.put(sig.BELT_TAP_HZ, np.where(rad_s > 0, self.nubs * rad_s / (2 * math.pi), 0.0))
+        io.put(sig.BELT_SURFACE_MM_S, np.where(rad_s < 0, -rad_s * self.radius_mm, 0.0))

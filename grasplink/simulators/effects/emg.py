@@ -51,10 +51,11 @@ from typing import ClassVar
 import numpy as np
 from scipy import signal
 
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import EMG, Context, Effect, Io, register
 from grasplink.simulators.params import Params
 
-LEVEL, RAW = "wearer.level", "emg.raw_uv"
+LEVEL, RAW = sig.WEARER_LEVEL, sig.EMG_RAW_UV
 LEVELS = 4  # e1..e4 between e_min and e_max
 TOP_LEVEL = LEVELS + 1  # e5, above e_max
 FATIGUE_SCALES = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)  # spectral compression bank

@@ -25,11 +25,12 @@ import math
 
 import numpy as np
 
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
 from grasplink.simulators.params import Params
 
 US_PER_S = 1_000_000
-POSITION, SPEED, SLIPPING = "object.position_mm", "object.speed_mm_s", "object.slipping"
+POSITION, SPEED, SLIPPING = sig.OBJECT_POSITION_MM, sig.OBJECT_SPEED_MM_S, sig.OBJECT_SLIPPING
 OBJECT_OUTPUTS = (POSITION, SPEED, SLIPPING)
 MU_SKIN = 0.7813  # SPEC ch. 4.3: friction coefficient object/silicone skin
 INTERPOLATIONS = ("linear", "step")
@@ -175,7 +176,7 @@ class CoulombObject(Effect):
 
     kind = "object.coulomb"
     domain = PHYSICS
-    inputs = ("hand.grip_n", "load.force_n")
+    inputs = (sig.HAND_GRIP_N, sig.LOAD_FORCE_N)
     outputs = OBJECT_OUTPUTS
     summary = "object held by Coulomb friction (static/kinetic) between grip and load"
 
@@ -202,8 +203,8 @@ class CoulombObject(Effect):
         if n == 0:
             put_object(io, np.zeros(0), np.zeros(0))
             return
-        grip = np.maximum(io.get("hand.grip_n"), 0.0)
-        load = io.get("load.force_n")
+        grip = np.maximum(io.get(sig.HAND_GRIP_N), 0.0)
+        load = io.get(sig.LOAD_FORCE_N)
         previous = times[0] if self.last_us is None else self.last_us
         dt_s = np.diff(times, prepend=previous) / US_PER_S
         static_n = self.surfaces * self.mu_static * grip
@@ -419,8 +420,8 @@ class SlipTask(Effect):
 
     kind = "object.slip_task"
     domain = PHYSICS
-    inputs = ("wearer.level",)
-    outputs = (*OBJECT_OUTPUTS, "hand.crushed")
+    inputs = (sig.WEARER_LEVEL,)
+    outputs = (*OBJECT_OUTPUTS, sig.HAND_CRUSHED)
     summary = "thesis ch. 2.3.3 slip-stopping task: contraction levels slow/stop/crush the object"
 
     def __init__(self, params: Params, ctx: Context):
@@ -469,7 +470,7 @@ class SlipTask(Effect):
         times = io.times_us
         n = len(times)
         phases = times // self.period_us
-        levels = np.clip(np.rint(io.get("wearer.level")), 0, 5).astype(np.int64)
+        levels = np.clip(np.rint(io.get(sig.WEARER_LEVEL)), 0, 5).astype(np.int64)
         position = np.empty(n)
         speed = np.empty(n)
         crushed = np.empty(n)
@@ -486,7 +487,7 @@ class SlipTask(Effect):
             start = int(k)
         self._fill(times, position, speed, crushed, start, n)
         put_object(io, position, speed)
-        io.put("hand.crushed", crushed)
+        io.put(sig.HAND_CRUSHED, crushed)
 
     def _fill(self, times, position, speed, crushed, start: int, stop: int) -> None:
         v = self._speed()

@@ -28,11 +28,12 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy import linalg, signal
 
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import EMG, SKIN, Context, Effect, Io, register
 from grasplink.simulators.params import Params
 
 DOMAIN_OF_PREFIX = {"skin": SKIN, "emg": EMG}
-DEFAULT_SIGNAL = "skin.force_n"
+DEFAULT_SIGNAL = sig.SKIN_FORCE_N
 
 _VARIANTS: dict[tuple[type, str], type] = {}
 

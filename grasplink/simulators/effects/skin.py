@@ -41,12 +41,13 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import SKIN, Context, Effect, Io, register
 from grasplink.simulators.params import Params
 
-FORCE = "skin.force_n"
-GRIP, LOAD = "hand.grip_n", "load.force_n"
-POSITION, SPEED, SLIPPING = "object.position_mm", "object.speed_mm_s", "object.slipping"
+FORCE = sig.SKIN_FORCE_N
+GRIP, LOAD = sig.HAND_GRIP_N, sig.LOAD_FORCE_N
+POSITION, SPEED, SLIPPING = sig.OBJECT_POSITION_MM, sig.OBJECT_SPEED_MM_S, sig.OBJECT_SLIPPING
 
 MU_THESIS = 0.7813  # friction coefficient object/silicone (ch. 4.3)
 RIDGE_ANGLE_DEG = 60.0  # equilateral ridge section (ch. 4.2)

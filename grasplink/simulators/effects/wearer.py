@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
 from grasplink.simulators.effects.kinematics import Profile
 from grasplink.simulators.params import Params
@@ -20,7 +21,7 @@ class WearerScript(Effect):
 
     kind = "wearer.script"
     domain = PHYSICS
-    outputs = ("wearer.level",)
+    outputs = (sig.WEARER_LEVEL,)
     summary = "scripted contraction level e0..e5 (step-wise [t_s, level] points)"
 
     def __init__(self, params: Params, ctx: Context):
@@ -29,4 +30,4 @@ class WearerScript(Effect):
         self.profile = Profile(params, "levels", "step", pairs)
 
     def step(self, io: Io) -> None:
-        io.put("wearer.level", self.profile.value(io.times_us))
+        io.put(sig.WEARER_LEVEL, self.profile.value(io.times_us))
