@@ -1,8 +1,19 @@
-"""User-facing errors.
+"""User-facing errors: the one hierarchy every package raises from.
 
 Every error a user can cause (a bad file, a bad option, an unreachable hub)
-is a `GrasplinkError` whose message names the problem; the CLI prints it and
-exits non-zero without a traceback.
+is a `GrasplinkError` whose message names the problem; the CLI prints it on
+one line and exits 1 without a traceback. Keeping every class here lets any
+layer raise or catch them without importing another layer::
+
+    GrasplinkError
+    ├── EdsError         a malformed or inconsistent EDS (file, section, key)
+    ├── ConfigError      an invalid option or configuration value
+    │   └── SceneError   a scene file value (file, key, what was expected)
+    ├── RecordingError   a recording that cannot be read (file, line or key)
+    └── BusError         a bus that cannot be opened or reached
+
+Protocol-level and private control-flow exceptions are not user errors and
+stay beside their code (see docs/architecture.md, "Errors").
 """
 
 from __future__ import annotations
@@ -27,6 +38,22 @@ class EdsError(GrasplinkError):
 
 class ConfigError(GrasplinkError):
     """An invalid option or configuration value."""
+
+
+class SceneError(ConfigError):
+    """An invalid scene-file value; names the file, the key and what was expected.
+
+    A ConfigError because a scene is configuration: code that refuses bad
+    configuration in general catches scene mistakes too.
+    """
+
+    def __init__(self, source: str, key: str, problem: str):
+        self.source, self.key, self.problem = source, key, problem
+        super().__init__(f"{source}: {key}: {problem}" if key else f"{source}: {problem}")
+
+
+class RecordingError(GrasplinkError):
+    """A recording file that cannot be read; the message names file and line, key or value."""
 
 
 class BusError(GrasplinkError):

@@ -14,14 +14,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from grasplink.errors import GrasplinkError
-
-
-class SceneError(GrasplinkError):
-    def __init__(self, source: str, key: str, problem: str):
-        self.source, self.key, self.problem = source, key, problem
-        super().__init__(f"{source}: {key}: {problem}" if key else f"{source}: {problem}")
-
+from grasplink.errors import SceneError  # defined with every user error; importable from here too
 
 _MISSING = object()
 

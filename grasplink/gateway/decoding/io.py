@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grasplink.errors import ConfigError, GrasplinkError
+from grasplink.errors import ConfigError, RecordingError
 
 CSV_HEADER = ("t_s", "force_n")
 CAN_EXTENSIONS = (".asc", ".blf", ".log")
@@ -36,10 +36,6 @@ DEFAULT_SKIN_NODE_ID = 0x10
 SAMPLE_SLOTS, PACKET_SEQUENCE = 0x2100, 0x2101
 SAMPLE_RATE, SAMPLES_PER_PDO, CALIBRATION = 0x2120, 0x2121, 0x2130
 TPDO1_COMM, TPDO1_MAP = 0x1800, 0x1A00
-
-
-class RecordingError(GrasplinkError):
-    """A recording file that cannot be read; the message names file and line, key or value."""
 
 
 @dataclass
