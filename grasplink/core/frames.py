@@ -14,6 +14,18 @@ SDO_RX_BASE = 0x600  # client -> server
 HEARTBEAT_BASE = 0x700
 NODE_ID_MASK = 0x7F
 
+# CAN-IDs no PDO, SYNC or EMCY may use (CiA 301 7.3.5, "restricted CAN-IDs").
+RESTRICTED_CAN_IDS = (
+    (0x000, 0x000),
+    (0x001, 0x07F),
+    (0x101, 0x180),
+    (0x581, 0x5FF),
+    (0x601, 0x67F),
+    (0x6E0, 0x6FF),
+    (0x701, 0x77F),
+    (0x780, 0x7FF),
+)
+
 # Function code (CAN-ID without the node-ID) -> the service it carries, as an analyser names it.
 FUNCTION_NAMES = {
     NMT_COB_ID: "NMT",
@@ -32,6 +44,11 @@ def function_of(can_id: int) -> tuple[str, int]:
     if can_id == SYNC_COB_ID_DEFAULT:
         return "SYNC", 0
     return FUNCTION_NAMES.get(base, f"0x{base:03X}"), node_id
+
+
+def is_restricted_can_id(can_id: int) -> bool:
+    """Whether CiA 301 reserves `can_id` for NMT, SDO, heartbeat or future use."""
+    return any(lo <= can_id <= hi for lo, hi in RESTRICTED_CAN_IDS)
 
 
 def node_cob_ids(node_id: int) -> tuple[int, ...]:

@@ -17,7 +17,7 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from grasplink.core.frames import Frame
+from grasplink.core.frames import Frame, is_restricted_can_id
 from grasplink.devices import emcy as em
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.store import ObjectStore, Value
@@ -34,22 +34,6 @@ TYPE_EVENT_MANUFACTURER = 254
 TYPE_EVENT_PROFILE = 255
 # Dummy objects (CiA 301 7.4.7.1): index -> size in bits.
 DUMMY_BITS = {0x0002: 8, 0x0003: 16, 0x0004: 32, 0x0005: 8, 0x0006: 16, 0x0007: 32}
-
-# CAN-IDs no PDO, SYNC or EMCY may use (CiA 301 7.3.5, "restricted CAN-IDs").
-_RESTRICTED = (
-    (0x000, 0x000),
-    (0x001, 0x07F),
-    (0x101, 0x180),
-    (0x581, 0x5FF),
-    (0x601, 0x67F),
-    (0x6E0, 0x6FF),
-    (0x701, 0x77F),
-    (0x780, 0x7FF),
-)
-
-
-def is_restricted_can_id(can_id: int) -> bool:
-    return any(lo <= can_id <= hi for lo, hi in _RESTRICTED)
 
 
 @dataclass(frozen=True, slots=True)
