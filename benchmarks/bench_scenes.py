@@ -5,7 +5,8 @@ Writes docs/benchmarks/scenes.md:
 1. every hand-written scene and one generated slip scene per speed: simulated
    seconds per wall second (best of N runs, virtual time, no recording);
 2. CPU per effect and for the network (nodes + bus) in ms per simulated
-   second, from the engine's own accounting (`Simulation(measure=True)`);
+   second, from the engine's own accounting (`Simulation(measure=True)`, built with the
+   scene's controller by `grasplink.controllers.simulation`);
 3. the headline target: headline_slip runs >= 50x faster than real time.
 
 Run: `make bench` or `.venv/bin/python benchmarks/bench_scenes.py [--quick]`.
@@ -17,7 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from grasplink.simulators.engine import Simulation
+from grasplink.controllers import simulation
 from grasplink.simulators.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,7 +43,7 @@ def speed(path: Path, repeats: int) -> tuple[float, float, float]:
     best_wall = best_cpu = float("inf")
     duration = 0.0
     for _ in range(repeats):
-        sim = Simulation(load_scene(path))
+        sim = simulation(load_scene(path))
         sim.run()
         duration = sim.scene.duration_s
         best_wall = min(best_wall, sim.wall_s)
@@ -54,7 +55,7 @@ def effect_costs(path: Path, repeats: int) -> dict[str, float]:
     """ms of CPU per simulated second, per effect and for the network (median of runs)."""
     runs: list[dict[str, float]] = []
     for _ in range(repeats):
-        sim = Simulation(load_scene(path), measure=True)
+        sim = simulation(load_scene(path), measure=True)
         sim.run()
         runs.append({k: 1e3 * v / sim.scene.duration_s for k, v in sim.cost_s.items()})
     return {k: sorted(r[k] for r in runs)[len(runs) // 2] for k in runs[0]}

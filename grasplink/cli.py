@@ -233,13 +233,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from grasplink.controllers import build_controllers
     from grasplink.simulators.engine import Simulation
     from grasplink.simulators.recording import Recorder
     from grasplink.simulators.scene import load_scene
 
     scene = load_scene(args.scene)
+    controllers = build_controllers(scene)  # validates [controller] before any file is written
     out = args.out or Path("out") / args.scene.stem
-    sim = Simulation(scene, Recorder(out))
+    sim = Simulation(scene, Recorder(out), controllers=controllers)
     realtime = args.realtime or scene.clock == "realtime"
     summary = sim.run(realtime=realtime)
     states = ", ".join(f"{k} {v['state'].lower()}" for k, v in summary["nodes"].items())

@@ -44,17 +44,24 @@ class BeltApp(DriveApp):
         obj.BELT_QUICK_STOP_DECELERATION,
     )
 
-    def __init__(self) -> None:
+    def __init__(self, *, external_motor: bool = False) -> None:
+        """`external_motor`: the actual velocity is measured (`measure_velocity`), as from a
+        real motor's encoder or a motor simulator; otherwise the motor follows the ramp exactly.
+        """
         super().__init__()
         self.setpoint_mrad_s = 0.0  # the profile ramp's output: what the motor is asked for
         self._demand = 0.0
         self.velocity_mrad_s = 0.0  # actual motor velocity
-        # True when a simulator (scene effect belt.motor) owns velocity_mrad_s.
-        self.simulated_motor = False
+        self.external_motor = external_motor
+
+    def measure_velocity(self, velocity_mrad_s: float) -> None:
+        """The external motor's actual velocity: publish it."""
+        self.velocity_mrad_s = velocity_mrad_s
+        self.publish_actual()
 
     def on_reset(self, t_us: int) -> None:
         self.setpoint_mrad_s = 0.0
-        if not self.simulated_motor:
+        if not self.external_motor:
             self.velocity_mrad_s = 0.0
         super().on_reset(t_us)
         self._publish_display()
@@ -87,7 +94,7 @@ class BeltApp(DriveApp):
             step = rate * dt_s
             setpoint += max(-step, min(step, demand - setpoint))
         self.setpoint_mrad_s = setpoint
-        if not self.simulated_motor:
+        if not self.external_motor:
             self.velocity_mrad_s = setpoint
 
     def report(self) -> None:
@@ -102,7 +109,7 @@ class BeltApp(DriveApp):
         return (
             self.setpoint_mrad_s == self._demand
             and self.drive.state != DriveState.QUICK_STOP_ACTIVE
-            and (self.simulated_motor or self.velocity_mrad_s == self.setpoint_mrad_s)
+            and (self.external_motor or self.velocity_mrad_s == self.setpoint_mrad_s)
         )
 
     def _publish_display(self) -> None:

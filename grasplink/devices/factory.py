@@ -27,9 +27,15 @@ def make_app(kind: str, source: SampleSource | None = None) -> DeviceApp:
 
 
 def build_node(
-    kind: str, node_id: int | None = None, source: SampleSource | None = None
+    kind: str,
+    node_id: int | None = None,
+    source: SampleSource | None = None,
+    app: DeviceApp | None = None,
 ) -> DeviceNode:
-    """A ready-to-start node of `kind` at `node_id` (default from objects.DEFAULT_NODE_IDS)."""
-    app = make_app(kind, source)
+    """A ready-to-start node of `kind` at `node_id` (default from objects.DEFAULT_NODE_IDS).
+
+    `app` replaces the default application of `kind` (e.g. a drive with an external motor).
+    """
+    app = app or make_app(kind, source)
     node_id = obj.DEFAULT_NODE_IDS[kind] if node_id is None else node_id
     return DeviceNode(load_profile(kind, node_id), node_id, app)

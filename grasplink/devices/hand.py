@@ -22,19 +22,27 @@ class HandApp(DriveApp):
         obj.HAND_GRIP_RATE_MN_S,
     )
 
-    def __init__(self) -> None:
+    def __init__(self, *, external_actuator: bool = False, initial_grip_mn: float = 0.0) -> None:
+        """`external_actuator`: the actual grip is measured (`measure_grip`), as from a real
+        force sensor or an actuator simulator; `initial_grip_mn`: the grip the hand boots
+        holding (an object already in the hand).
+        """
         super().__init__()
         self.setpoint_mn = 0.0  # the rate-limited grip command
         self._demand = 0.0
-        self.grip_mn = 0.0  # actual grip force
-        # True when a simulator (scene effect hand.actuator) owns grip_mn.
-        self.simulated_actuator = False
+        self.grip_mn = initial_grip_mn  # actual grip force
+        self.external_actuator = external_actuator
         self.holding = False
 
+    def measure_grip(self, grip_mn: float) -> None:
+        """The external actuator's actual grip: publish it."""
+        self.grip_mn = grip_mn
+        self.publish_actual()
+
     def on_reset(self, t_us: int) -> None:
-        # A reset does not open the hand: a simulated (real) actuator keeps its grip
+        # A reset does not open the hand: an external (real) actuator keeps its grip
         # and the drive holds it until commanded otherwise.
-        if self.simulated_actuator:
+        if self.external_actuator:
             self.setpoint_mn = self.grip_mn
         else:
             self.setpoint_mn = self.grip_mn = 0.0
@@ -69,7 +77,7 @@ class HandApp(DriveApp):
         self._demand = demand
         step = int(self.store.get(obj.HAND_GRIP_RATE_MN_S)) * dt_s
         self.setpoint_mn += max(-step, min(step, demand - self.setpoint_mn))
-        if not self.simulated_actuator:
+        if not self.external_actuator:
             self.grip_mn = self.setpoint_mn
 
     def report(self) -> None:
@@ -79,5 +87,5 @@ class HandApp(DriveApp):
 
     def settled(self) -> bool:
         return self.setpoint_mn == self._demand and (
-            self.simulated_actuator or self.grip_mn == self.setpoint_mn
+            self.external_actuator or self.grip_mn == self.setpoint_mn
         )

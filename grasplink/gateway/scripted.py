@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import bisect
 import struct
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from grasplink.core.frames import RPDO_BASES, Frame
 from grasplink.core.nmt import NmtState
+from grasplink.core.params import Params
 from grasplink.gateway.master import NmtMaster
+from grasplink.profiles import object_limits
+from grasplink.profiles import objects as obj
 
 COMMAND_PERIOD_US = 50_000
 ENABLE_SEQUENCE = (0x06, 0x07, 0x0F)  # shutdown, switch on, enable operation
@@ -49,6 +52,33 @@ class ScriptedMaster(NmtMaster):
         self._next_command_us: int | None = None
         self._started_us = 0
         self._enable_steps: dict[int, int] = {}
+
+    @classmethod
+    def from_scene(cls, options: Params, node_ids: Mapping[str, int]) -> ScriptedMaster:
+        """A scene's `[controller] type = "scripted"`: step profiles for the belt and the hand.
+
+        Profile values are bounded by what the commanded object accepts (its EDS limits), so
+        a scene can never ask for a command its RPDO cannot carry.
+        """
+        profiles: dict[str, Profile | None] = {"belt_mrad_s": None, "hand_grip_n": None}
+        targets = {
+            "belt_mrad_s": ("belt", obj.BELT_TARGET_VELOCITY_MRAD_S, 1.0),
+            "hand_grip_n": ("hand", obj.HAND_TARGET_GRIP_MN, 1000.0),
+        }
+        for key, (kind, index, per_unit) in targets.items():
+            if not options.has(key):
+                continue
+            if kind not in node_ids:
+                raise options.error(key, f"commands a {kind}, but the scene has no [nodes.{kind}]")
+            low, high = object_limits(kind, index)
+            profiles[key] = options.pairs(key, low=low / per_unit, high=high / per_unit)
+        options.finish()
+        return cls(
+            belt_id=node_ids.get("belt"),
+            hand_id=node_ids.get("hand"),
+            belt_mrad_s=profiles["belt_mrad_s"],
+            hand_grip_n=profiles["hand_grip_n"],
+        )
 
     def start(self, t_us: int) -> list[Frame]:
         self._started_us = t_us

@@ -21,7 +21,7 @@ from grasplink.profiles.eds import validate_eds
 if TYPE_CHECKING:
     import canopen
 
-__all__ = ["DEVICE_KINDS", "eds_path", "load_profile", "validate_eds"]
+__all__ = ["DEVICE_KINDS", "eds_path", "load_profile", "object_limits", "validate_eds"]
 
 DEVICE_KINDS: tuple[str, ...] = ("skin", "belt", "emg", "hand")
 _PROFILE_DIR = Path(__file__).resolve().parent
@@ -50,6 +50,20 @@ def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictio
         return import_od(str(path), node_id=node_id)
     except Exception as exc:  # canopen raises bare KeyError/ValueError/configparser errors
         raise EdsError(str(path), None, None, f"canopen cannot import it: {exc!r}") from exc
+
+
+def object_limits(kind: str, index: int, subindex: int = 0) -> tuple[int, int]:
+    """(low, high) a shipped profile's object accepts: its EDS limits, else its type's range."""
+    from grasplink.profiles.eds import _types
+    from grasplink.profiles.objects import DEFAULT_NODE_IDS
+
+    entry = load_profile(kind, DEFAULT_NODE_IDS[kind])[index]
+    if hasattr(entry, "subindices") and not hasattr(entry, "data_type"):
+        entry = entry[subindex]
+    dtype = _types()[entry.data_type]
+    low = entry.min if entry.min is not None else dtype.low
+    high = entry.max if entry.max is not None else dtype.high
+    return int(low), int(high)
 
 
 def _resolve(kind_or_path: str | Path) -> Path:

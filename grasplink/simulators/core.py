@@ -22,8 +22,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from grasplink.core.params import Params, SceneError
 from grasplink.simulators import signals as sig
-from grasplink.simulators.params import Params, SceneError
 
 PHYSICS, SKIN, EMG = "physics", "skin", "emg"
 DOMAINS = (PHYSICS, SKIN, EMG)  # the order domains step in: physics feeds the sensors

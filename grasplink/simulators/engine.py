@@ -12,51 +12,20 @@ paces each chunk to the wall clock (same code, same results).
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from grasplink.bus.faults import FaultyLink
 from grasplink.bus.lockstep import LockstepNetwork
-from grasplink.devices.factory import build_node
+from grasplink.core.protocol import SansIoDevice
 from grasplink.devices.node import DeviceNode
 from grasplink.devices.sampling import SampleClock
-from grasplink.gateway.scripted import ScriptedMaster
-from grasplink.profiles import objects as obj
-from grasplink.profiles.layouts import PRESET_CODES, spacings_um
-from grasplink.simulators import signals as sig
-from grasplink.simulators.core import DOMAINS, EMG, PHYSICS, SKIN, Io
+from grasplink.simulators.bindings import NodeBinding, bind
+from grasplink.simulators.core import DOMAINS, PHYSICS, Io
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import Scene
-
-RING_SECONDS = 2.0
-MN_PER_N = 1000.0
-
-
-class SceneSource:
-    """A node's SampleSource fed by a sensor domain: a bounded ring of recent samples."""
-
-    def __init__(self, rate_hz: int):
-        self.period_us = -(-1_000_000 // rate_hz)
-        self.capacity = max(16, int(rate_hz * RING_SECONDS))
-        self.times_us = np.zeros(0, dtype=np.int64)
-        self.values = np.zeros(0)
-
-    def append(self, times_us: np.ndarray, values: np.ndarray) -> None:
-        self.times_us = np.concatenate([self.times_us, times_us])[-self.capacity :]
-        self.values = np.concatenate([self.values, values])[-self.capacity :]
-
-    def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
-        index = np.arange(start_index, start_index + count, dtype=np.int64)
-        times = t0_us + index * 1_000_000 // rate_hz
-        if not len(self.times_us):
-            return np.zeros(count)
-        # A node reset mid-scene restarts its clock off the scene's grid; its last
-        # sample may then fall less than one period after the last scene sample
-        # (held). Further ahead would be an engine bug.
-        if times[-1] >= self.times_us[-1] + self.period_us:
-            raise RuntimeError("a node sampled ahead of the simulation")
-        return np.interp(times, self.times_us, self.values)
 
 
 @dataclass
@@ -70,9 +39,21 @@ class DomainState:
 
 
 class Simulation:
-    """A scene ready to run. `measure=True` accounts CPU time per effect and for the network."""
+    """A scene ready to run. `measure=True` accounts CPU time per effect and for the network.
 
-    def __init__(self, scene: Scene, recorder: Recorder | None = None, *, measure: bool = False):
+    `controllers` are the sans-IO participants besides the scene's nodes (the NMT master,
+    the gateway, extra devices): the caller builds them (see `grasplink.controllers`), the
+    engine only puts them on the bus first, in the order given.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        recorder: Recorder | None = None,
+        *,
+        controllers: Sequence[SansIoDevice] = (),
+        measure: bool = False,
+    ):
         self.scene = scene
         self.recorder = recorder
         self.measure = measure
@@ -81,22 +62,17 @@ class Simulation:
         # effect steps, frames on the bus.
         self.samples: dict[str, int] = {}
         self.effect_steps = 0
-        self.nodes: dict[str, DeviceNode] = {}
+        self.controllers = list(controllers)
         self.domain_of = scene.domain_of
         self.effects = {d: [e for e in scene.ordered if e.domain == d] for d in DOMAINS}
         self._endpoints_by_domain = {
             d: [e for e in scene.endpoints if e.domain == d] for d in DOMAINS
         }
-        self.sources: dict[str, SceneSource] = {}
         produced = {name for e in scene.effects for name in e.outputs}
-        for kind, signal, domain in (
-            ("skin", sig.SKIN_FORCE_N, SKIN),
-            ("emg", sig.EMG_RAW_UV, EMG),
-        ):
-            if kind in scene.nodes and signal in produced:
-                self.sources[kind] = SceneSource(scene.rate_hz(domain))
-        self._build_nodes(produced)
-        self.master = self._build_master()
+        self.bindings: dict[str, NodeBinding] = {
+            kind: bind(spec, scene, produced) for kind, spec in scene.nodes.items()
+        }
+        self.nodes: dict[str, DeviceNode] = {k: b.node for k, b in self.bindings.items()}
         link = None
         if scene.bus is not None:
             b = scene.bus
@@ -107,8 +83,7 @@ class Simulation:
                 drop_probability=b.drop_probability,
                 error_frames_per_s=b.error_frames_per_s,
             )
-        devices = ([self.master] if self.master else []) + list(self.nodes.values())
-        self.network = LockstepNetwork(devices, link)
+        self.network = LockstepNetwork([*self.controllers, *self.nodes.values()], link)
         self.domains: dict[str, DomainState] = {}
         for domain in DOMAINS:
             signals = sorted({n for n, d in self.domain_of.items() if d == domain})
@@ -132,58 +107,6 @@ class Simulation:
             ]
         )
         self.t_us = 0
-
-    # -- construction --------------------------------------------------------------
-    def _build_nodes(self, produced: set[str]) -> None:
-        for kind, spec in self.scene.nodes.items():
-            node = build_node(kind, spec.node_id, self.sources.get(kind))
-            self._configure(node, spec)
-            self.nodes[kind] = node
-        if "belt" in self.nodes:
-            self.nodes["belt"].app.simulated_motor = sig.BELT_VELOCITY_MRAD_S in produced
-        if "hand" in self.nodes:
-            hand = self.nodes["hand"].app
-            hand.simulated_actuator = sig.HAND_GRIP_N in produced
-            # A scene may start with the object already held: the node boots holding it.
-            initial_n = next(
-                (
-                    getattr(e, "initial_n", 0.0)
-                    for e in self.scene.effects
-                    if e.kind == "hand.actuator"
-                ),
-                0.0,
-            )
-            hand.grip_mn = initial_n * MN_PER_N
-
-    def _configure(self, node: DeviceNode, spec) -> None:
-        """Scene settings become the node's stored parameters (they survive its resets)."""
-        nvm = node.store.nvm
-        if spec.kind == "skin":
-            nvm[(obj.SKIN_SAMPLE_RATE_HZ, 0)] = spec.sample_rate_hz
-            nvm[(obj.SKIN_SAMPLES_PER_PDO, 0)] = spec.samples_per_pdo
-            layout = self.scene.layout_mm or ()
-            preset = next(
-                (code for code, name in PRESET_CODES.items() if name == self.scene.layout_name), 0
-            )
-            nvm[(obj.SKIN_LAYOUT_PRESET, 0)] = preset
-            if not preset and layout:
-                nvm[(obj.SKIN_RIDGE_SPACING_UM, 0)] = len(layout)
-                for sub, um in enumerate(spacings_um(layout), start=1):
-                    nvm[(obj.SKIN_RIDGE_SPACING_UM, sub)] = um
-        elif spec.kind == "emg":
-            nvm[(obj.EMG_SAMPLE_RATE_HZ, 0)] = spec.sample_rate_hz
-
-    def _build_master(self) -> ScriptedMaster | None:
-        gateway = self.scene.gateway
-        if not gateway.enabled:
-            return None
-        ids = {k: n.node_id for k, n in self.nodes.items()}
-        return ScriptedMaster(
-            belt_id=ids.get("belt"),
-            hand_id=ids.get("hand"),
-            belt_mrad_s=gateway.belt_mrad_s,
-            hand_grip_n=gateway.hand_grip_n,
-        )
 
     # -- running ---------------------------------------------------------------------
     def run(self, *, realtime: bool = False) -> dict:
@@ -236,7 +159,8 @@ class Simulation:
         state.values = {}
         for endpoint in self._endpoints_by_domain[state.name]:
             for name in endpoint.writes:
-                state.values[name] = np.full(len(times), self._command(name))
+                command = self.bindings[endpoint.node].command_value()
+                state.values[name] = np.full(len(times), command)
         io = Io(
             times,
             lambda name, at, s=state: self._read(s, name, at),
@@ -252,10 +176,10 @@ class Simulation:
                     self._charge(effect.kind, t0)
                 else:
                     effect.step(io)
-        for kind, source in self.sources.items():
-            signal = sig.SKIN_FORCE_N if kind == "skin" else sig.EMG_RAW_UV
-            if self.domain_of.get(signal) == state.name and signal in state.values:
-                source.append(times, state.values[signal])
+        for binding in self.bindings.values():
+            sensor = binding.sensor
+            if sensor and self.domain_of.get(sensor[0]) == state.name and sensor[0] in state.values:
+                binding.feed_sensor(times, state.values[sensor[0]])
         if self.recorder is not None:
             self.recorder.write_chunk(
                 state.name,
@@ -276,32 +200,15 @@ class Simulation:
         return np.interp(at_us, times, values)
 
     # -- node coupling ------------------------------------------------------------------
-    def _command(self, name: str) -> float:
-        """A node's actuator command, held over the chunk (zero-order hold).
-
-        Without power the belt motor stops; the hand's gear holds its grip.
-        """
-        if name == sig.BELT_COMMAND_MRAD_S:
-            belt = self.nodes["belt"]
-            return float(belt.app.setpoint_mrad_s) if belt.powered else 0.0
-        if name == sig.HAND_TARGET_N:
-            hand = self.nodes["hand"]
-            mn = hand.app.setpoint_mn if hand.powered else hand.app.grip_mn
-            return float(mn) / MN_PER_N
-        raise KeyError(name)
-
     def _read_actuators(self) -> None:
+        """Each node with a simulated actuator hears its actual value at the chunk end."""
         physics = self.domains.get(PHYSICS)
         if physics is None:
             return
-        velocity = physics.values.get(sig.BELT_VELOCITY_MRAD_S)
-        if "belt" in self.nodes and velocity is not None and len(velocity):
-            self.nodes["belt"].app.velocity_mrad_s = float(velocity[-1])
-            self.nodes["belt"].app.publish_actual()
-        grip = physics.values.get(sig.HAND_GRIP_N)
-        if "hand" in self.nodes and grip is not None and len(grip):
-            self.nodes["hand"].app.grip_mn = float(grip[-1]) * MN_PER_N
-            self.nodes["hand"].app.publish_actual()
+        for binding in self.bindings.values():
+            actual = physics.values.get(binding.actual) if binding.actual else None
+            if actual is not None and len(actual):
+                binding.report_actual(float(actual[-1]))
 
     def _run_network(self, t_end_us: int) -> None:
         """Run the bus to just before t_end, applying power events at their exact time."""
@@ -330,7 +237,7 @@ class Simulation:
             "nodes": {
                 k: {"node_id": n.node_id, "state": n.state.name} for k, n in self.nodes.items()
             },
-            "gateway": scene.gateway.enabled,
+            "controller": scene.controller.name,
             "effects": [e.kind for e in scene.effects],
             "bus_faults": vars(scene.bus) | {"power_loss": [vars(p) for p in scene.bus.power_loss]}
             if scene.bus

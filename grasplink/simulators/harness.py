@@ -10,8 +10,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from grasplink.core.params import Params
 from grasplink.simulators.core import Context, Effect, Io
-from grasplink.simulators.params import Params
 
 US_PER_S = 1_000_000
 

@@ -11,17 +11,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import grasplink.simulators.effects  # noqa: F401  (registers every effect)
+from grasplink.core.params import Params, SceneError
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
-from grasplink.simulators import signals as sig
-from grasplink.simulators.core import EMG, REGISTRY, SKIN, Context, Effect, Endpoint, build_graph
-from grasplink.simulators.params import Params, SceneError
+from grasplink.simulators.bindings import BINDINGS, DEFAULT_RATES_HZ
+from grasplink.simulators.core import REGISTRY, Context, Effect, Endpoint, build_graph
 
 US_PER_S = 1_000_000
-NODE_KINDS = ("skin", "emg", "belt", "hand")
+NODE_KINDS = tuple(BINDINGS)
 CLOCKS = ("virtual", "realtime")
-DEFAULT_RATES_HZ = {"skin": 400, "emg": 1500}
+DEFAULT_CONTROLLER = "scripted"  # the NMT master that starts the nodes (see grasplink.controllers)
+NO_CONTROLLER = "none"
 MAX_DURATION_S = 7 * 24 * 3600.0
 DEFAULT_LAYOUT = "alpha0.1"  # the skin node's EDS default (thesis best skin)
 
@@ -36,10 +37,20 @@ class NodeSpec:
 
 
 @dataclass
-class GatewaySpec:
-    enabled: bool = True
-    belt_mrad_s: tuple[tuple[float, float], ...] | None = None
-    hand_grip_n: tuple[tuple[float, float], ...] | None = None
+class ControllerSpec:
+    """The scene's `[controller]`: which sans-IO controller masters the network, and its options.
+
+    The simulators do not know controllers; the caller (CLI) builds one by name through
+    `grasplink.controllers` and validates `options` then, before anything runs.
+    """
+
+    name: str | None  # None: no controller (nodes stay PRE-OPERATIONAL)
+    options: dict
+    source: str
+    key: str = "controller"
+
+    def params(self) -> Params:
+        return Params(dict(self.options), self.source, self.key)
 
 
 @dataclass
@@ -71,7 +82,7 @@ class Scene:
     layout_mm: tuple[float, ...] | None
     layout_name: str | None
     nodes: dict[str, NodeSpec]
-    gateway: GatewaySpec
+    controller: ControllerSpec
     effects: list[Effect]  # as written in the scene
     bus: BusFaults | None
     context: Context
@@ -126,7 +137,7 @@ def parse_scene(data: dict, source: str) -> Scene:
     if layout_text is None and "skin" in nodes:
         layout_text = DEFAULT_LAYOUT  # a skin node always has a layout
     layout_mm, layout_name = _parse_layout(layout_text, source)
-    gateway = _parse_gateway(top.table_of("gateway", {}), nodes)
+    controller = _parse_controller(top.table_of("controller", {}))
     rates = {
         "physics": physics_rate_hz,
         "skin": (nodes["skin"].sample_rate_hz if "skin" in nodes else None)
@@ -150,7 +161,7 @@ def parse_scene(data: dict, source: str) -> Scene:
         layout_mm,
         layout_name,
         nodes,
-        gateway,
+        controller,
         effects,
         bus,
         context,
@@ -162,18 +173,7 @@ def parse_scene(data: dict, source: str) -> Scene:
 
 def node_endpoints(nodes: dict[str, NodeSpec]) -> list[Endpoint]:
     """Signals the nodes read (sensors, actual values) and write (actuator commands)."""
-    endpoints = []
-    if "belt" in nodes:
-        endpoints.append(
-            Endpoint("belt", reads=(sig.BELT_VELOCITY_MRAD_S,), writes=(sig.BELT_COMMAND_MRAD_S,))
-        )
-    if "hand" in nodes:
-        endpoints.append(Endpoint("hand", reads=(sig.HAND_GRIP_N,), writes=(sig.HAND_TARGET_N,)))
-    if "skin" in nodes:
-        endpoints.append(Endpoint("skin", reads=(sig.SKIN_FORCE_N,), domain=SKIN))
-    if "emg" in nodes:
-        endpoints.append(Endpoint("emg", reads=(sig.EMG_RAW_UV,), domain=EMG))
-    return endpoints
+    return [BINDINGS[kind].endpoint() for kind in nodes]
 
 
 def _parse_nodes(table: Params) -> dict[str, NodeSpec]:
@@ -188,16 +188,7 @@ def _parse_nodes(table: Params) -> dict[str, NodeSpec]:
             other = used_ids.get(spec.node_id, "gateway")
             raise p.error("node_id", f"0x{spec.node_id:02X} is already used by {other}")
         used_ids[spec.node_id] = kind
-        if kind == "skin":
-            spec.sample_rate_hz = p.integer(
-                "sample_rate_hz", DEFAULT_RATES_HZ["skin"], low=80, high=1000
-            )
-            spec.samples_per_pdo = p.integer("samples_per_pdo", 3, low=1, high=3)
-            spec.layout = p.string("layout", None)
-        elif kind == "emg":
-            spec.sample_rate_hz = p.integer(
-                "sample_rate_hz", DEFAULT_RATES_HZ["emg"], low=500, high=4000
-            )
+        BINDINGS[kind].parse_options(p, spec)
         p.finish()
         nodes[kind] = spec
     return nodes
@@ -217,18 +208,10 @@ def _parse_layout(text, source: str) -> tuple[tuple[float, ...] | None, str | No
     return spacings, text if text in LAYOUTS_MM else None
 
 
-def _parse_gateway(p: Params, nodes: dict[str, NodeSpec]) -> GatewaySpec:
-    spec = GatewaySpec(enabled=p.boolean("enabled", True))
-    if p.has("belt_mrad_s"):
-        if "belt" not in nodes:
-            raise p.error("belt_mrad_s", "commands a belt, but the scene has no [nodes.belt]")
-        spec.belt_mrad_s = p.pairs("belt_mrad_s")
-    if p.has("hand_grip_n"):
-        if "hand" not in nodes:
-            raise p.error("hand_grip_n", "commands a hand, but the scene has no [nodes.hand]")
-        spec.hand_grip_n = p.pairs("hand_grip_n")
-    p.finish()
-    return spec
+def _parse_controller(p: Params) -> ControllerSpec:
+    name = p.string("type", DEFAULT_CONTROLLER)
+    options = {k: v for k, v in p.table.items() if k != "type"}
+    return ControllerSpec(None if name == NO_CONTROLLER else name, options, p.source, p.prefix)
 
 
 def _parse_effects(items, source: str, context: Context) -> tuple[list[Effect], BusFaults | None]:

@@ -8,6 +8,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from grasplink.core.params import SceneError
 from grasplink.simulators.core import REGISTRY, Io
 from grasplink.simulators.effects.actuators import (
     BeltMotor,
@@ -23,7 +24,6 @@ from grasplink.simulators.effects.kinematics import (
 )
 from grasplink.simulators.effects.wearer import WearerScript
 from grasplink.simulators.harness import context, make, run, sample_times_us
-from grasplink.simulators.params import SceneError
 
 LAYOUT_MM = (10.0, 20.0, 30.0)  # ridges at 0, 10, 30, 60 mm
 RIDGES_MM = (0.0, 10.0, 30.0, 60.0)

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from grasplink.cli import main as cli_main
+from grasplink.controllers import simulation
+from grasplink.core.params import SceneError
 from grasplink.devices.emg import EmgApp
 from grasplink.simulators.effects.emg import SurfaceEmg
-from grasplink.simulators.engine import Simulation
-from grasplink.simulators.params import SceneError
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import load_scene, parse_scene
 
@@ -31,7 +31,7 @@ def scene_text(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
 
 
 def record(path: Path, out: Path) -> dict:
-    return Simulation(load_scene(path), Recorder(out)).run()
+    return simulation(load_scene(path), Recorder(out)).run()
 
 
 def read_columns(path: Path) -> dict[str, np.ndarray]:
@@ -134,7 +134,7 @@ def test_a_scene_without_emg_creates_no_emg_node_and_runs_no_emg_code(tmp_path, 
     calls = []
     monkeypatch.setattr(EmgApp, "advance", lambda *a: calls.append("node") or [])
     monkeypatch.setattr(SurfaceEmg, "step", lambda *a: calls.append("effect"))
-    sim = Simulation(load_scene(scene_text(tmp_path, SLIP.format(seed=1, extra=""))))
+    sim = simulation(load_scene(scene_text(tmp_path, SLIP.format(seed=1, extra=""))))
     sim.run()
     assert "emg" not in sim.nodes
     assert "emg" not in sim.domains and "emg" not in sim.samples
@@ -142,9 +142,9 @@ def test_a_scene_without_emg_creates_no_emg_node_and_runs_no_emg_code(tmp_path, 
 
 
 def test_a_minimal_scene_does_measurably_less_work_than_a_full_one():
-    boot = Simulation(load_scene(ROOT / "scenes" / "boot.toml"))
+    boot = simulation(load_scene(ROOT / "scenes" / "boot.toml"))
     boot.run()
-    full = Simulation(load_scene(ROOT / "scenes" / "headline_slip.toml"))
+    full = simulation(load_scene(ROOT / "scenes" / "headline_slip.toml"))
     full.run()
     assert boot.effect_steps == 0 and sum(boot.samples.values()) <= boot.samples.get("physics", 0)
     assert full.effect_steps > 0 and full.samples["skin"] > 0
@@ -152,7 +152,7 @@ def test_a_minimal_scene_does_measurably_less_work_than_a_full_one():
 
 
 def test_measuring_accounts_each_requested_effect_and_the_network():
-    sim = Simulation(load_scene(ROOT / "scenes" / "headline_slip.toml"), measure=True)
+    sim = simulation(load_scene(ROOT / "scenes" / "headline_slip.toml"), measure=True)
     sim.run()
     assert set(sim.cost_s) == {e.kind for e in sim.scene.effects} | {"network (nodes + bus)"}
     assert all(v >= 0 for v in sim.cost_s.values())
@@ -169,7 +169,7 @@ def test_belt_levels_scene_shows_the_chapter_8_surface_speeds(tmp_path):
 
 
 def test_belt_node_reports_the_simulated_motor(tmp_path):
-    sim = Simulation(load_scene(ROOT / "scenes" / "belt_levels_ch8.toml"), Recorder(tmp_path))
+    sim = simulation(load_scene(ROOT / "scenes" / "belt_levels_ch8.toml"), Recorder(tmp_path))
     sim.run()
     frames = [
         m
@@ -251,7 +251,7 @@ def test_hours_of_simulated_time_keep_the_clock_exact():
         },
         "long.toml",
     )
-    sim = Simulation(scene)
+    sim = simulation(scene)
     sim.run()
     physics = sim.domains["physics"]
     assert physics.times_us[-1] == 2 * 3600 * 1_000_000
@@ -319,10 +319,10 @@ def test_realtime_clock_paces_the_same_scene_to_the_wall_clock(tmp_path):
     path = scene_text(
         tmp_path, SLIP.format(seed=4, extra="").replace("duration_s = 1.5", "duration_s = 0.6")
     )
-    virtual = Simulation(load_scene(path), Recorder(tmp_path / "v"))
+    virtual = simulation(load_scene(path), Recorder(tmp_path / "v"))
     virtual.run()
     t0 = time.monotonic()
-    paced = Simulation(load_scene(path), Recorder(tmp_path / "r"))
+    paced = simulation(load_scene(path), Recorder(tmp_path / "r"))
     paced.run(realtime=True)
     assert time.monotonic() - t0 >= 0.6
     assert (tmp_path / "v" / "skin.csv").read_text() == (tmp_path / "r" / "skin.csv").read_text()

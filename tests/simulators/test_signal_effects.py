@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
+from grasplink.core.params import SceneError
 from grasplink.simulators import harness
 from grasplink.simulators.core import EMG, SKIN, Endpoint, build_graph
 from grasplink.simulators.effects import emg, noise, skin
-from grasplink.simulators.params import SceneError
 
 SKIN_HZ, EMG_HZ = 400, 1500
 ALPHA_01 = (19.0, 12.0, 5.0, 8.0, 4.0, 3.0, 33.0)  # table 5.1, alpha = 0.1

@@ -18,10 +18,10 @@ import math
 import numpy as np
 from scipy.signal import lfilter
 
+from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
 from grasplink.simulators.effects.kinematics import INTERPOLATIONS, US_PER_S, Profile
-from grasplink.simulators.params import Params
 
 G_M_S2 = 9.81
 

@@ -51,9 +51,9 @@ from typing import ClassVar
 import numpy as np
 from scipy import signal
 
+from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import EMG, Context, Effect, Io, register
-from grasplink.simulators.params import Params
 
 LEVEL, RAW = sig.WEARER_LEVEL, sig.EMG_RAW_UV
 LEVELS = 4  # e1..e4 between e_min and e_max

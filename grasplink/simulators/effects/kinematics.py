@@ -25,9 +25,9 @@ import math
 
 import numpy as np
 
+from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
-from grasplink.simulators.params import Params
 
 US_PER_S = 1_000_000
 POSITION, SPEED, SLIPPING = sig.OBJECT_POSITION_MM, sig.OBJECT_SPEED_MM_S, sig.OBJECT_SLIPPING

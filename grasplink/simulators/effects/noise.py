@@ -28,9 +28,9 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy import linalg, signal
 
+from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import EMG, SKIN, Context, Effect, Io, register
-from grasplink.simulators.params import Params
 
 DOMAIN_OF_PREFIX = {"skin": SKIN, "emg": EMG}
 DEFAULT_SIGNAL = sig.SKIN_FORCE_N

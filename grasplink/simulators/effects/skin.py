@@ -41,9 +41,9 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
+from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import SKIN, Context, Effect, Io, register
-from grasplink.simulators.params import Params
 
 FORCE = sig.SKIN_FORCE_N
 GRIP, LOAD = sig.HAND_GRIP_N, sig.LOAD_FORCE_N

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
+from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
 from grasplink.simulators.effects.kinematics import Profile
-from grasplink.simulators.params import Params
 
 LEVELS = 5  # e0 (below e_min) .. e5 (above e_max), thesis ch. 2.3.3
 

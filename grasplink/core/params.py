@@ -1,4 +1,4 @@
-"""Reading scene parameters with errors that name the file, the key and what was expected.
+"""Reading configuration tables (scene files, controller options) with errors naming file and key.
 
 Every scene value passes through `Params`, which knows where it came from
 (`scenes/slip.toml`, `effects[2].speed_mm_s`) so a mistake is reported as

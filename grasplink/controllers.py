@@ -1,0 +1,72 @@
+"""Sans-IO controllers a scene can name, built by name where the layers meet.
+
+A scene says `[controller] type = "scripted"` (the default) with the
+controller's options beside it; the simulators never import a controller,
+the caller builds it here and hands it to the engine. Modules are imported
+on first use, so a controller whose module is missing fails only when asked
+for, naming it. A controller class offers
+`from_scene(options: Params, node_ids: Mapping[str, int])` and reads (and
+finishes) its options, so a misspelt option is an error naming the key.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+from grasplink.core.protocol import SansIoDevice
+from grasplink.errors import ConfigError
+
+if TYPE_CHECKING:
+    from grasplink.simulators.engine import Simulation
+    from grasplink.simulators.recording import Recorder
+    from grasplink.simulators.scene import Scene
+
+#: name -> "module:Class"
+CONTROLLERS: dict[str, str] = {
+    "scripted": "grasplink.gateway.scripted:ScriptedMaster",
+}
+
+
+def controller_class(name: str) -> type:
+    """The class registered under `name` (imported now); ConfigError if unknown or missing."""
+    if name not in CONTROLLERS:
+        known = ", ".join([*CONTROLLERS, "none"])
+        raise ConfigError(f"unknown controller {name!r}; valid controllers: {known}")
+    module_name, _, class_name = CONTROLLERS[name].partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        if exc.name is not None and module_name.startswith(exc.name):
+            raise ConfigError(
+                f"controller {name!r} is not available: module {module_name} is not installed"
+            ) from None
+        raise
+    cls = getattr(module, class_name, None)
+    if cls is None:
+        raise ConfigError(
+            f"controller {name!r} is not available: {module_name} has no class {class_name}"
+        )
+    return cls
+
+
+def build_controllers(scene: Scene) -> list[SansIoDevice]:
+    """The participants a scene's `[controller]` asks for (none for `type = "none"`)."""
+    spec = scene.controller
+    if spec.name is None:
+        if spec.options:
+            raise spec.params().error(next(iter(spec.options)), 'no options with type = "none"')
+        return []
+    try:
+        cls = controller_class(spec.name)
+    except ConfigError as exc:
+        raise spec.params().error("type", str(exc)) from None
+    node_ids = {kind: node.node_id for kind, node in scene.nodes.items()}
+    return [cls.from_scene(spec.params(), node_ids)]
+
+
+def simulation(scene: Scene, recorder: Recorder | None = None, **options) -> Simulation:
+    """A ready `Simulation` of `scene` with the controllers its `[controller]` names."""
+    from grasplink.simulators.engine import Simulation
+
+    return Simulation(scene, recorder, controllers=build_controllers(scene), **options)
