@@ -237,21 +237,36 @@ def cmd_run(args: argparse.Namespace) -> int:
     from grasplink.simulators.engine import Simulation
     from grasplink.simulators.recording import Recorder
     from grasplink.simulators.scene import load_scene
+    from grasplink.terminal import ProgressBar, StopSignals
 
     scene = load_scene(args.scene)
     controllers = build_controllers(scene)  # validates [controller] before any file is written
     out = args.out or Path("out") / args.scene.stem
     sim = Simulation(scene, Recorder(out), controllers=controllers)
     realtime = args.realtime or scene.clock == "realtime"
-    summary = sim.run(realtime=realtime)
+    progress = ProgressBar(scene.name)
+    with StopSignals() as stop:
+        try:
+            summary = sim.run(realtime=realtime, progress=progress, should_stop=stop)
+        finally:
+            progress.close()
     states = ", ".join(f"{k} {v['state'].lower()}" for k, v in summary["nodes"].items())
-    speed = scene.duration_s / max(sim.wall_s, 1e-9)
+    simulated_s = summary["simulated_s"]
+    speed = simulated_s / max(sim.wall_s, 1e-9)
     print(
-        f"{scene.name}: {scene.duration_s:g} s simulated in {sim.wall_s:.2f} s "
+        f"{scene.name}: {simulated_s:g} s simulated in {sim.wall_s:.2f} s "
         f"({speed:.0f}x real time{', paced' if realtime else ''})"
     )
     print(f"  nodes: {states or 'none'}; effects: {', '.join(summary['effects']) or 'none'}")
     print(f"  wrote {out}/ ({', '.join(sorted(p.name for p in out.iterdir()))})")
+    if not summary["complete"]:
+        name = stop.received.name if stop.received else "a stop request"
+        print(
+            f"grasplink: stopped by {name} at {simulated_s:g} of {scene.duration_s:g} s; "
+            f"{out}/ holds a partial recording (summary.json: complete = false)",
+            file=sys.stderr,
+        )
+        return stop.exit_code or EXIT_ERROR
     return 0
 
 

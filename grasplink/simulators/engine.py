@@ -12,7 +12,7 @@ paces each chunk to the wall clock (same code, same results).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -109,15 +109,30 @@ class Simulation:
         self.t_us = 0
 
     # -- running ---------------------------------------------------------------------
-    def run(self, *, realtime: bool = False) -> dict:
-        """Run the whole scene; returns the summary (also written by the recorder)."""
+    def run(
+        self,
+        *,
+        realtime: bool = False,
+        progress: Callable[[int, int], None] | None = None,
+        should_stop: Callable[[], bool] | None = None,
+    ) -> dict:
+        """Run the scene; returns the summary (also written by the recorder).
+
+        `progress(t_us, duration_us)` is called after every chunk. When `should_stop()`
+        turns true the run ends after the current chunk: every file is complete up to
+        that time and the summary says `"complete": false` with the time reached.
+        """
         wall0 = time.monotonic()
         cpu0 = time.process_time()
         self.network.start()
         duration_us = self.scene.duration_us
         while self.t_us < duration_us:
+            if should_stop is not None and should_stop():
+                break
             t_end = min(self.t_us + self.scene.chunk_us, duration_us)
             self.step(t_end)
+            if progress is not None:
+                progress(self.t_us, duration_us)
             if realtime:
                 delay = wall0 + t_end / 1e6 - time.monotonic()
                 if delay > 0:
@@ -231,6 +246,8 @@ class Simulation:
             "description": scene.description,
             "seed": scene.seed,
             "duration_s": scene.duration_s,
+            "simulated_s": self.t_us / 1e6,
+            "complete": self.t_us >= scene.duration_us,
             "clock": scene.clock,
             "rates_hz": {d: scene.rate_hz(d) for d in self.domains},
             "layout": scene.layout_name or (list(scene.layout_mm) if scene.layout_mm else None),

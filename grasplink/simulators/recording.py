@@ -104,7 +104,7 @@ class Recorder:
         for stream in self._streams.values():
             stream.close()
         self._asc.stop()
-        duration_s = summary.get("duration_s") or 1.0
+        duration_s = summary.get("simulated_s", summary.get("duration_s")) or 1.0
         summary = {
             **summary,
             "files": {d: DOMAIN_FILES[d] for d in self._streams} | {"can": "can.asc"},
