@@ -85,12 +85,6 @@ def wait_for(condition: Callable[[], bool], timeout: float = TIMEOUT_S) -> None:
         time.sleep(0.005)
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 def child_env() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
@@ -310,6 +304,7 @@ def test_hub_relays_between_clients(hub: CanHub, closing) -> None:
     assert a.recv(timeout=0.05) is None  # the sender does not hear itself
 
 
+@pytest.mark.slow
 def test_hub_stop_disconnects_clients() -> None:
     running = CanHub("127.0.0.1", 0).start()
     client = open_bus(running.url)
@@ -329,8 +324,8 @@ def test_hub_stop_disconnects_clients() -> None:
         open_bus(running.url)
 
 
-def test_unreachable_hub_says_how_to_start_one() -> None:
-    port = free_port()
+def test_unreachable_hub_says_how_to_start_one(refused_port: int) -> None:
+    port = refused_port
     with pytest.raises(BusError) as info:
         open_bus(f"remote:ws://127.0.0.1:{port}/")
     assert str(info.value) == (
@@ -338,6 +333,7 @@ def test_unreachable_hub_says_how_to_start_one() -> None:
     )
 
 
+@pytest.mark.slow
 def test_silent_listener_is_not_a_hub() -> None:
     with socket.socket() as listener:
         listener.bind(("127.0.0.1", 0))
@@ -398,6 +394,7 @@ def test_hub_carries_frames_across_processes(hub: CanHub, closing) -> None:
     assert "child got reply" in out
 
 
+@pytest.mark.slow
 def test_run_hub_process_serves_and_stops_on_sigterm(closing, tmp_path: Path) -> None:
     code = "from grasplink.bus.hub import run_hub; run_hub('127.0.0.1', 0)"
     with (tmp_path / "stderr.txt").open("w+") as err:
@@ -517,6 +514,7 @@ class Faulty:
         return 0
 
 
+@pytest.mark.slow
 def test_runner_boot_periodic_local_and_external_delivery(closing) -> None:
     url = unique_virtual_url()
     bus, outside = closing(open_bus(url)), closing(open_bus(url))
@@ -554,6 +552,7 @@ def test_runner_boot_periodic_local_and_external_delivery(closing) -> None:
     assert stats.device_errors == stats.send_errors == stats.bus_errors == 0
 
 
+@pytest.mark.slow
 def test_runner_submit_injects_frames(closing) -> None:
     url = unique_virtual_url()
     bus, outside = closing(open_bus(url)), closing(open_bus(url))
@@ -579,6 +578,7 @@ def test_runner_submit_queue_is_bounded(closing) -> None:
     assert runner.stats.dropped == 2
 
 
+@pytest.mark.slow
 def test_runner_survives_faulty_device_and_counts_ignored_frames(closing, caplog) -> None:
     url = unique_virtual_url()
     bus, outside = closing(open_bus(url)), closing(open_bus(url))
@@ -599,6 +599,7 @@ def test_runner_survives_faulty_device_and_counts_ignored_frames(closing, caplog
     assert stats.device_errors < 50
 
 
+@pytest.mark.slow
 def test_runner_stop_joins_thread_and_is_idempotent(closing) -> None:
     bus = closing(open_bus(unique_virtual_url()))
     runner = NodeRunner(bus, [Ticker(1)]).start()
@@ -613,6 +614,7 @@ def test_runner_stop_joins_thread_and_is_idempotent(closing) -> None:
         runner.start()
 
 
+@pytest.mark.slow
 def test_runner_uses_injected_clock(closing) -> None:
     url = unique_virtual_url()
     bus, outside = closing(open_bus(url)), closing(open_bus(url))
@@ -635,6 +637,7 @@ def test_runner_over_hub_between_processes_style_clients(hub: CanHub, closing) -
         assert Frame(0x585, b"\x2f") in recv_until(outside, has(0x585))
 
 
+@pytest.mark.slow
 def test_runner_outlives_its_hub_without_spinning(closing) -> None:
     running = CanHub("127.0.0.1", 0).start()
     try:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import socket
 import subprocess
 import sys
 import time
@@ -31,12 +30,6 @@ def run_cli(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
     )
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def assert_clean_error(result: subprocess.CompletedProcess, *needles: str) -> None:
     assert result.returncode != 0
     assert "Traceback" not in result.stderr
@@ -44,6 +37,7 @@ def assert_clean_error(result: subprocess.CompletedProcess, *needles: str) -> No
         assert needle in result.stderr, result.stderr
 
 
+@pytest.mark.slow
 def test_demo_boots_four_nodes_and_exchanges_pdos_in_both_directions():
     lines: list[str] = []
     figures = run_demo(1.5, out=lines.append)
@@ -55,27 +49,32 @@ def test_demo_boots_four_nodes_and_exchanges_pdos_in_both_directions():
     assert any(line.startswith("bus load:") for line in lines)
 
 
+@pytest.mark.slow
 def test_unknown_node_type_lists_the_valid_ones():
     result = run_cli("node", "elbow")
     assert_clean_error(result, "invalid choice", "skin", "hand")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("node_id", ["0", "128", "0x80", "ten"])
 def test_node_id_outside_1_127_is_refused(node_id):
     assert_clean_error(run_cli("node", "skin", "--node-id", node_id), "node-ID")
 
 
+@pytest.mark.slow
 def test_unknown_bus_interface_lists_the_available_ones():
     result = run_cli("node", "skin", "--bus", "nosuchcan:0", "--duration", "1")
     assert_clean_error(result, "unknown CAN interface 'nosuchcan'", "virtual", "socketcan")
 
 
-def test_unreachable_hub_names_the_fix():
-    port = free_port()
+@pytest.mark.slow
+def test_unreachable_hub_names_the_fix(refused_port):
+    port = refused_port
     result = run_cli("node", "belt", "--bus", f"remote:ws://127.0.0.1:{port}/", "--duration", "1")
     assert_clean_error(result, "no CAN hub", f"grasplink bus hub --port {port}")
 
 
+@pytest.mark.slow
 def test_invalid_eds_names_file_section_and_key(tmp_path):
     bad = tmp_path / "bad.eds"
     text = eds_path("belt").read_text().replace("HighLimit=8000", "HighLimit=7000", 1)
@@ -84,6 +83,7 @@ def test_invalid_eds_names_file_section_and_key(tmp_path):
     assert_clean_error(result, "bad.eds", "[", "DefaultValue")
 
 
+@pytest.mark.slow
 def test_profiles_check_accepts_the_shipped_eds_files():
     result = run_cli("profiles", "check", *(str(eds_path(k)) for k in ("skin", "belt")))
     assert result.returncode == 0, result.stderr

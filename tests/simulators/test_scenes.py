@@ -312,6 +312,7 @@ def test_every_shipped_scene_runs_and_plots(tmp_path, scene, capsys):
     assert all(node["state"] == "OPERATIONAL" for node in summary["nodes"].values())
 
 
+@pytest.mark.slow
 def test_realtime_clock_paces_the_same_scene_to_the_wall_clock(tmp_path):
     """Same code, same result: only the pacing differs."""
     import time
