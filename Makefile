@@ -8,7 +8,7 @@ SYSTEM_PACKAGES := mosquitto mbpoll
 STAMP_PY := $(VENV)/.stamp-install
 STAMP_SYS := $(VENV)/.stamp-system
 
-.PHONY: demo test lint format docs bench clean setup system
+.PHONY: demo test test-fast check lint format docs bench clean setup system
 
 setup: $(STAMP_PY) $(STAMP_SYS)
 
@@ -41,15 +41,32 @@ demo: setup
 	$(VENV)/bin/grasplink run $(HEADLINE) --out out/headline
 	$(VENV)/bin/grasplink plot out/headline
 
-test: setup
-	$(VENV)/bin/ruff check grasplink tests benchmarks
-	$(PY) -m pytest -q
+# Everything ruff checks and formats.
+LINT_PATHS := grasplink tests benchmarks scenes
+# pytest-xdist workers: one per core (`make test PYTEST_WORKERS=0` runs serially).
+PYTEST_WORKERS ?= auto
+PYTEST := $(PY) -m pytest -q -n $(PYTEST_WORKERS)
+
+# The whole suite: static checks first, then every test (wall-clock `slow` ones too).
+test: check
+	$(PYTEST)
+
+# Quick feedback while editing: the same checks, tests marked `slow` left out
+# (threads, sleeps, subprocesses, the hub, --realtime; see tests/conftest.py).
+test-fast: check
+	$(PYTEST) -m "not slow"
+
+# Static checks, in order. Type checking joins here once the re-layering settles:
+# add mypy to the dev extras and a `typecheck: setup` target running
+# `$(VENV)/bin/mypy grasplink`, then make this line `check: lint typecheck`.
+check: lint
 
 lint: setup
-	$(VENV)/bin/ruff check grasplink tests benchmarks
+	$(VENV)/bin/ruff check $(LINT_PATHS)
+	$(VENV)/bin/ruff format --check $(LINT_PATHS)
 
 format: setup
-	$(VENV)/bin/ruff format grasplink tests benchmarks
+	$(VENV)/bin/ruff format $(LINT_PATHS)
 
 docs: setup
 	$(VENV)/bin/grasplink profiles doc --out docs/profiles.md
