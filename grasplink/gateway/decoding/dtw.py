@@ -32,15 +32,11 @@ extrapolated in between; 100 ms doubles the cost, and only helps when the
 speed varies), `window_s` (up to 5 s from 0.25 s before the slip's first
 pulse). `warp_refine=False` keeps the search alone.
 
-Measured (synth, alpha0.1 + fibonacci, both directions, thesis noise, 400
-Hz; errors after the third contact): 10-120 mm/s speed error median 1.7 %,
-p90 5.4 %, position median 0.6 mm, p90 1.5 mm; off the search grid (13, 33,
-77 mm/s) 1.3 % / 4.1 %, 0.4 / 1.1 mm; with speed dips and tip contacts
-(20-60 mm/s) 4.1 % / 33 % (hop 100 ms: 4.0 % / 24 %), 0.5 / 1.9 mm. About
-45 us CPU per sample at hop 200 ms (the search dominates). On
-constant-speed signals the search alone (`warp_refine=False`) is a little
-more accurate (0.6 % / 3.9 %); the warping pays off where the speed varies
-(median 4.0 % against 4.9 % with dips).
+Accuracy and CPU per sample, per setting (speed grid, hop; the search
+dominates the cost), with speed dips and tip contacts too:
+docs/benchmarks/decoding.md (rows `dtw`). On constant-speed signals the
+search alone (`warp_refine=False`) is a little more accurate; the warping
+pays off where the speed varies.
 
 Slip flag and windows as the MMSE decoder (`mmse.WindowDecoder`).
 Confidence: how much better than a straight line the path explains the

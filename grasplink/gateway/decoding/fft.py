@@ -32,12 +32,11 @@ both ways) and the position. The speed is reported as a magnitude
 None. On a non-uniform layout the decoder still runs with the mean spacing
 as D, but the answer is a guess: confidence at most `nonuniform_confidence`
 (0.25). Confidence within the cap: 1 - on_ratio / (line-to-noise ratio).
-Cost: one FFT of `nfft` points per update (default every 10 ms), ~12 us
-CPU per sample at 400 Hz. Measured on uniform4 (synth, forward, thesis
-noise): speed magnitude error p90 < 2 % at 20-60 mm/s, 9 % at 10 mm/s; the
-flag comes after ~1-2 periods at low speed but only once the train fills a
-good part of the window at high speed (~0.5 s). No false slip on the static
-grip-step scenes.
+Cost: one FFT of `nfft` points per update (default every 10 ms). Accuracy
+(the uniform4 layout is its home ground) and CPU per sample:
+docs/benchmarks/decoding.md (rows `fft`). The flag comes after a period or
+two at low speed, but at high speed only once the train fills a good part
+of the window.
 """
 
 from __future__ import annotations

@@ -39,13 +39,10 @@ answer (the other direction, or a position more than `distinct_mm` away)
 has less than twice the best's error, and x0.3 when the best speed is an
 end of the searched range (the truth may lie beyond).
 
-Measured (synth, alpha0.1 + fibonacci, both directions, thesis noise, 400
-Hz; errors after the third contact): on the speed grid (10-120 mm/s) speed
-error median 0 %, p90 0 %, position median 0.0 mm, p90 0.2 mm - the
-reference comes from the same simulator; off the grid (13, 33, 77 mm/s)
-median 15 %, p90 250 %, position p90 54 mm: a warp off by half a step
-misaligns a long window, and a wrong direction can win. ~110 us CPU per
-sample (hop 50 ms).
+Accuracy and CPU per sample: docs/benchmarks/decoding.md (rows `mmse`). On
+the speed grid it is near exact (the reference comes from the same
+simulator); off the grid it fails badly: a warp off by half a step
+misaligns a long window, and a wrong direction can win.
 """
 
 from __future__ import annotations

@@ -37,14 +37,12 @@ Additions the thesis leaves open, kept minimal:
 * Speeds outside [`v_min`, `v_max`] mm/s are not plausible matches (they
   come from grip changes or drift, not ridges).
 
-Measured (synth, alpha0.1 + fibonacci, 10-120 mm/s, both directions, thesis
-noise, 400 Hz; after the third contact): speed error median 1.8 %, but p90
-~200 % and no answer on 39 % of the updates; position median 0.3 mm. The
+Accuracy and CPU per sample: docs/benchmarks/decoding.md (rows `ratio`): a
+good median but a large p90 and many updates without an answer. The
 faithful triple match has no notion of a missed ridge: in the simulated
 signal a small spacing after a large one (3 mm after 33 mm) puts a pulse
 lower than the previous pulse's decay, so it never shows, and the triple
 spanning it matches a wrong ratio (with low confidence) or nothing.
-Forward alpha0.1 at 20-90 mm/s: p90 < 5 %. ~2 us CPU per sample.
 """
 
 from __future__ import annotations
