@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import random
 import struct
 
 import pytest
@@ -504,3 +505,29 @@ def test_reading_a_dummy_type_answers_its_length_in_bits():
     net, _ = network("belt")
     assert read_uint(net, BELT, 0x0003) == 16
     assert read_uint(net, BELT, 0x0007) == 32
+
+
+def _jittered_run(device, until_us: int, seed: int) -> list[tuple[int, Frame]]:
+    """Call `advance` 0-3 ms after each deadline, as a busy real-time runner does."""
+    rng = random.Random(seed)
+    out: list[tuple[int, Frame]] = []
+    while (deadline := device.next_deadline_us()) is not None and deadline < until_us:
+        t_us = min(deadline + rng.randrange(0, 3 * MS), until_us - 1)
+        out += [(t_us, f) for f in device.advance(t_us)]
+    return out
+
+
+def test_periodic_event_timer_tpdo_keeps_its_grid_under_late_advance_calls():
+    skin = build_node("skin")
+    skin.start(0)
+    # The slowest sampling the EDS allows keeps the test fast; TPDO2 does not depend on it.
+    request = struct.pack("<BHBH2x", 0x2B, obj.SKIN_SAMPLE_RATE_HZ, 0, 80)
+    assert skin.receive(Frame(0x610, request), 0)[0].data[0] == 0x60
+    operational_us = 1234
+    sent = [(operational_us, f) for f in skin.receive(Frame(0x000, b"\x01\x10"), operational_us)]
+    hour_us = 3600 * 1000 * MS
+    sent += _jittered_run(skin, operational_us + hour_us, seed=11)
+    times = [t for t, f in sent if f.can_id == 0x290]  # TPDO2: static force, 20 ms timer only
+    assert len(times) / 3600 == 50.000
+    grid = [operational_us + k * 20 * MS for k in range(len(times))]
+    assert all(0 <= t - g < 3 * MS for t, g in zip(times, grid, strict=True))

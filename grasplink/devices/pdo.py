@@ -4,7 +4,10 @@ TPDO transmission types: 0 (acyclic synchronous: on the SYNC after an
 event), 1-240 (every n-th SYNC, honouring the SYNC start value), 254/255
 (event-driven, limited by the inhibit time and repeated by the event
 timer; the event is an application trigger for 254 and any change of a
-mapped value for 255). RPDO types 0-240 apply
+mapped value for 255). The event timer elapsing is itself an event (CiA 301
+7.2.2): it runs on a fixed grid from when it was (re)started, so late
+`advance` calls never push later transmissions back; a transmission caused
+by another event restarts it. RPDO types 0-240 apply
 their data at the next SYNC, 254/255 at once. Mapping and communication
 parameters are checked as they are written, with the abort codes CiA 301
 names; the mapping procedure (invalidate the PDO, sub-index 0 = 0, write
@@ -59,9 +62,11 @@ class _Pdo:
     transmit: bool
     comm_index: int
     map_index: int
-    pending: bool = False
+    pending: bool = False  # an event (trigger, mapped value changed, OPERATIONAL) waits
+    timer_due: bool = False  # the event timer elapsed; a transmission is owed
     last_tx_us: int | None = None
-    timer_origin_us: int = 0
+    timer_origin_us: int = 0  # when the event timer was last (re)started
+    timer_next_us: int | None = None  # its next expiry on the grid; None: origin + period
     sync_count: int = 0
     sync_started: bool = False
     buffered: bytes | None = None  # RPDO data waiting for SYNC
@@ -175,7 +180,8 @@ class PdoEngine:
             pdo.sync_started = False
             pdo.last_rx_us = None
             pdo.last_tx_us = None
-            pdo.timer_origin_us = t_us
+            pdo.timer_due = False
+            self._restart_timer(pdo, t_us)
             # Entering OPERATIONAL publishes every event-driven TPDO once, so a
             # master sees current values without waiting for a change.
             pdo.pending = (
@@ -209,8 +215,13 @@ class PdoEngine:
         frames: list[Frame] = []
         for pdo in self._event_tpdos:
             timer = self.event_timer_us(pdo)
-            if timer and t_us >= self._timer_deadline(pdo, timer):
-                pdo.pending = True
+            if timer:
+                deadline = self._timer_deadline(pdo, timer)
+                if t_us >= deadline:
+                    pdo.timer_due = True
+                    # Next expiry on the grid; periods missed entirely are skipped, not
+                    # sent in a burst (the timer elapsed once, as far as CiA 301 goes).
+                    pdo.timer_next_us = deadline + ((t_us - deadline) // timer + 1) * timer
             frames += self._flush(pdo, t_us)
         for pdo in self.rpdos:
             self._check_rpdo_deadline(pdo, t_us)
@@ -221,7 +232,7 @@ class PdoEngine:
             return None
         deadlines = []
         for pdo in self._event_tpdos:
-            if pdo.pending:
+            if pdo.pending or pdo.timer_due:
                 deadlines.append(self._inhibit_end(pdo))
             timer = self.event_timer_us(pdo)
             if timer:
@@ -326,11 +337,19 @@ class PdoEngine:
         return 0 if pdo.last_tx_us is None else pdo.last_tx_us + self.inhibit_us(pdo)
 
     def _timer_deadline(self, pdo: _Pdo, timer_us: int) -> int:
-        origin = pdo.timer_origin_us if pdo.last_tx_us is None else pdo.last_tx_us
-        return origin + timer_us
+        if pdo.timer_next_us is None:
+            return pdo.timer_origin_us + timer_us
+        return pdo.timer_next_us
+
+    @staticmethod
+    def _restart_timer(pdo: _Pdo, t_us: int) -> None:
+        pdo.timer_origin_us = t_us
+        pdo.timer_next_us = None
 
     def _flush(self, pdo: _Pdo, t_us: int) -> list[Frame]:
-        if not pdo.pending or not self.is_valid(pdo) or t_us < self._inhibit_end(pdo):
+        if not (pdo.pending or pdo.timer_due):
+            return []
+        if not self.is_valid(pdo) or t_us < self._inhibit_end(pdo):
             return []
         return [self._build(pdo, t_us)]
 
@@ -339,7 +358,12 @@ class PdoEngine:
             data = pdo.packer.pack(*(self.store.get(e.index, e.subindex) for e in pdo.mapping))
         else:
             data = b"".join(self.store.encode(e.index, e.subindex) for e in pdo.mapping)
+        if not pdo.timer_due or pdo.pending:
+            # Sent for another reason than the timer alone (an event, a remote request):
+            # the event timer counts again from this transmission.
+            self._restart_timer(pdo, t_us)
         pdo.pending = False
+        pdo.timer_due = False
         pdo.last_tx_us = t_us
         return Frame(self.cob_id(pdo) & CAN_ID_MASK, data)
 
@@ -358,10 +382,11 @@ class PdoEngine:
         self.reload()
         if index == pdo.comm_index:
             pdo.pending = False
+            pdo.timer_due = False
             pdo.sync_count = 0
             pdo.sync_started = False
             pdo.last_tx_us = None
-            pdo.timer_origin_us = self.now_us
+            self._restart_timer(pdo, self.now_us)
 
     # -- SDO-side checks -----------------------------------------------------------
     def _validate_comm(self, index: int, subindex: int, value: Value) -> None:
