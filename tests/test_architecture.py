@@ -332,3 +332,58 @@ def test_cob_id_check_sees_code_but_not_docs_or_od_offsets() -> None:
         "x.py:2: 0x580 in `SDO = 0x580 + node_id  # from 0x600`",
         "x.py:5: 0x180 in `TPDO1 = 0x180`",
     ]
+
+
+# -- one error hierarchy ------------------------------------------------------------------
+
+
+def error_classes_outside_errors_py(where: str, source: str, user_errors: set[str]) -> list[str]:
+    """`file:line: class X(Base)` for each class that derives from a user error."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ClassDef):
+            bases = {
+                b.attr if isinstance(b, ast.Attribute) else getattr(b, "id", "") for b in node.bases
+            }
+            if bases & user_errors:
+                found.append(
+                    f"{where}:{node.lineno}: class {node.name}({', '.join(sorted(bases))})"
+                )
+    return found
+
+
+def test_every_user_error_class_is_defined_in_errors_py() -> None:
+    from grasplink import errors
+
+    user_errors = {
+        name
+        for name, value in vars(errors).items()
+        if isinstance(value, type) and issubclass(value, errors.GrasplinkError)
+    }
+    found = []
+    for path in python_files():
+        where = str(path.relative_to(ROOT))
+        if where != "grasplink/errors.py":
+            found += error_classes_outside_errors_py(where, path.read_text("utf-8"), user_errors)
+    assert not found, "define user errors in grasplink/errors.py:\n" + "\n".join(found)
+
+
+def test_error_class_check_sees_direct_and_qualified_bases() -> None:
+    source = (
+        "class A(GrasplinkError): pass\n"
+        "class B(errors.ConfigError): pass\n"
+        "class C(Exception): pass\n"
+    )
+    assert error_classes_outside_errors_py("x.py", source, {"GrasplinkError", "ConfigError"}) == [
+        "x.py:1: class A(GrasplinkError)",
+        "x.py:2: class B(ConfigError)",
+    ]
+
+
+def test_scene_mistakes_are_configuration_errors() -> None:
+    from grasplink.errors import ConfigError, GrasplinkError, RecordingError, SceneError
+
+    error = SceneError("scenes/slip.toml", "effects[2].speed_mm_s", "expected a number >= 0")
+    assert isinstance(error, ConfigError)
+    assert str(error) == "scenes/slip.toml: effects[2].speed_mm_s: expected a number >= 0"
+    assert issubclass(RecordingError, GrasplinkError)
