@@ -58,3 +58,7 @@ class RecordingError(GrasplinkError):
 
 class BusError(GrasplinkError):
     """A bus that cannot be opened or reached."""
+
+
+class PdoError(GrasplinkError):
+    """A PDO that cannot be packed or unpacked through its mapping (length, range, type)."""

@@ -9,15 +9,15 @@ enable sequence first. Profiles are step functions of time since start.
 from __future__ import annotations
 
 import bisect
-import struct
 from collections.abc import Mapping, Sequence
 
-from grasplink.core.frames import RPDO_BASES, Frame
+from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
 from grasplink.core.params import Params
 from grasplink.gateway.master import NmtMaster
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
+from grasplink.profiles.pdo_codec import PdoCodec
 
 COMMAND_PERIOD_US = 50_000
 ENABLE_SEQUENCE = (0x06, 0x07, 0x0F)  # shutdown, switch on, enable operation
@@ -52,6 +52,11 @@ class ScriptedMaster(NmtMaster):
         self._next_command_us: int | None = None
         self._started_us = 0
         self._enable_steps: dict[int, int] = {}
+        self._codecs = {
+            node_id: PdoCodec(kind, node_id)
+            for kind, node_id in (("belt", belt_id), ("hand", hand_id))
+            if node_id is not None
+        }
 
     @classmethod
     def from_scene(cls, options: Params, node_ids: Mapping[str, int]) -> ScriptedMaster:
@@ -98,26 +103,23 @@ class ScriptedMaster(NmtMaster):
         return min((d for d in deadlines if d is not None), default=None)
 
     def commands(self, t_s: float) -> list[Frame]:
+        """RPDO1 to each commanded drive, packed through its EDS mapping."""
         frames = []
         belt = step_value(self.belt_profile, t_s)
-        if belt is not None and self._operational(self.belt_id):
-            frames.append(
-                Frame(
-                    RPDO_BASES[0] + self.belt_id,
-                    struct.pack("<Hi", self._controlword(self.belt_id), round(belt)),
-                )
-            )
+        if belt is not None and self.belt_id is not None and self._operational(self.belt_id):
+            target = (obj.BELT_TARGET_VELOCITY_MRAD_S, 0)
+            frames.append(self._rpdo1(self.belt_id, target, round(belt)))
         grip_n = step_value(self.hand_profile, t_s)
-        if grip_n is not None and self._operational(self.hand_id):
-            frames.append(
-                Frame(
-                    RPDO_BASES[0] + self.hand_id,
-                    struct.pack(
-                        "<HI", self._controlword(self.hand_id), max(0, round(grip_n * 1000))
-                    ),
-                )
-            )
+        if grip_n is not None and self.hand_id is not None and self._operational(self.hand_id):
+            target = (obj.HAND_TARGET_GRIP_MN, 0)
+            frames.append(self._rpdo1(self.hand_id, target, max(0, round(grip_n * 1000))))
         return frames
+
+    def _rpdo1(self, node_id: int, target: tuple[int, int], value: int) -> Frame:
+        codec = self._codecs[node_id]
+        values = {(obj.CONTROLWORD, 0): self._controlword(node_id), target: value}
+        can_id, data = codec.encode(1, values)
+        return Frame(can_id, data)
 
     def on_node_restart(self, node_id: int) -> None:
         # A rebooted drive is back in SWITCH ON DISABLED: walk the enable sequence again.

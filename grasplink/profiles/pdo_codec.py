@@ -1,0 +1,118 @@
+"""Pack and unpack a node's PDOs through its object dictionary's PDO mapping.
+
+Process data is never laid out by hand: the EDS says which objects a PDO
+maps, in which order and with which data type, and python-canopen's PDO
+maps (read from the dictionary, on a detached `canopen.Network` that never
+touches a bus) do the bit packing. A frame whose length does not match its
+mapping, or a value outside the mapped object's limits, is refused with an
+error naming the PDO and the object, so a caller can drop and count it.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import canopen
+from canopen.pdo.base import PdoMap
+
+from grasplink.errors import PdoError
+from grasplink.profiles import load_profile
+
+# canopen logs a warning before it refuses an out-of-range value; we raise our own error.
+logging.getLogger("canopen.objectdictionary").setLevel(logging.ERROR)
+logging.getLogger("canopen.variable").setLevel(logging.ERROR)
+
+INTEGER_TYPES = frozenset(canopen.objectdictionary.INTEGER_TYPES)
+Key = tuple[int, int]  # (index, subindex) of a mapped object
+
+
+@dataclass(frozen=True)
+class MappedObject:
+    index: int
+    subindex: int
+    name: str
+    low: int | float | None
+    high: int | float | None
+
+    @property
+    def key(self) -> Key:
+        return (self.index, self.subindex)
+
+
+class PdoCodec:
+    """All PDOs of one node (`kind` or an EDS path at `node_id`), by CAN-ID and by number."""
+
+    def __init__(self, kind_or_path: str | Path, node_id: int):
+        self.node_id = node_id
+        od = load_profile(kind_or_path, node_id)
+        network = canopen.Network()  # never connected: only holds the PDO maps' subscriptions
+        self._node = canopen.RemoteNode(node_id, od)
+        network.add_node(self._node)
+        self._node.tpdo.read(from_od=True)
+        self._node.rpdo.read(from_od=True)
+        self._tpdo_by_can_id = {
+            m.cob_id: m for m in self._node.tpdo.map.values() if m.enabled and len(m.map)
+        }
+
+    # -- receive (TPDOs the node sends) ---------------------------------------------------
+    def tpdo_can_ids(self) -> frozenset[int]:
+        return frozenset(self._tpdo_by_can_id)
+
+    def decode(self, can_id: int, data: bytes) -> dict[Key, int | float]:
+        """The mapped values of a TPDO frame; PdoError for a frame that does not fit its map."""
+        pdo = self._tpdo_by_can_id.get(can_id)
+        if pdo is None:
+            raise PdoError(f"0x{can_id:03X} is no TPDO of node 0x{self.node_id:02X}")
+        expected = (pdo.length + 7) // 8
+        if len(data) != expected:
+            raise PdoError(f"{pdo.name}: {len(data)} bytes, its mapping needs {expected}")
+        pdo.data = bytearray(data)
+        return {(v.od.index, v.od.subindex): v.raw for v in pdo.map}
+
+    # -- transmit (RPDOs the node receives) -----------------------------------------------
+    def rpdo(self, number: int) -> PdoMap:
+        try:
+            pdo = self._node.rpdo[number]
+        except KeyError:
+            raise PdoError(f"node 0x{self.node_id:02X} has no RPDO{number}") from None
+        if not pdo.enabled or not len(pdo.map):
+            raise PdoError(f"RPDO{number} of node 0x{self.node_id:02X} is not mapped")
+        return pdo
+
+    def rpdo_objects(self, number: int) -> list[MappedObject]:
+        return [
+            MappedObject(v.od.index, v.od.subindex, v.od.name, v.od.min, v.od.max)
+            for v in self.rpdo(number).map
+        ]
+
+    def encode(self, number: int, values: Mapping[Key, int | float]) -> tuple[int, bytes]:
+        """(CAN-ID, payload) of RPDO `number` carrying `values`; every mapped object is required.
+
+        A value outside the object's EDS limits or its data type is a PdoError: a command the
+        node would refuse (or that would wrap) is never put on the bus.
+        """
+        pdo = self.rpdo(number)
+        given = dict(values)
+        for var in pdo.map:
+            key = (var.od.index, var.od.subindex)
+            if key not in given:
+                raise PdoError(f"{pdo.name}: no value for {var.od.name} (0x{key[0]:04X}:{key[1]})")
+            value = given.pop(key)
+            if isinstance(value, float) and var.od.data_type in INTEGER_TYPES:
+                if not value.is_integer():
+                    raise PdoError(f"{pdo.name}: {var.od.name} = {value!r} is not an integer")
+                value = int(value)
+            low, high = var.od.min, var.od.max
+            if (low is not None and value < low) or (high is not None and value > high):
+                raise PdoError(f"{pdo.name}: {var.od.name} = {value} is outside {low}..{high}")
+            try:
+                var.raw = value
+            except (ValueError, OverflowError, TypeError) as exc:
+                raise PdoError(f"{pdo.name}: {var.od.name} = {value!r}: {exc}") from None
+        if given:
+            extra = ", ".join(f"0x{i:04X}:{s}" for i, s in given)
+            raise PdoError(f"{pdo.name} maps no {extra}")
+        return pdo.cob_id, bytes(pdo.data[: (pdo.length + 7) // 8])
