@@ -7,6 +7,7 @@ hub bound to 127.0.0.1 on an ephemeral port, stopped by each test.
 from __future__ import annotations
 
 import errno
+import inspect
 import os
 import queue
 import re
@@ -28,6 +29,7 @@ import pytest
 from grasplink.bus import url as bus_url
 from grasplink.bus.hub import CanHub
 from grasplink.bus.load import BusLoadMeter, frame_bits_worst_case, frame_time_us
+from grasplink.bus.options import accepted_options
 from grasplink.bus.runner import NodeRunner
 from grasplink.bus.url import (
     BusSpec,
@@ -128,27 +130,41 @@ def closing() -> Iterator[Callable[[can.BusABC], can.BusABC]]:
         ("socketcan:vcan0", BusSpec("socketcan", "vcan0")),
         (" SocketCAN:can0 ", BusSpec("socketcan", "can0")),
         (
-            "socketcan:can0?bitrate=1000000&fd=false&receive_own_messages=TRUE&state=ACTIVE",
+            "socketcan:can0?fd=false&receive_own_messages=TRUE&local_loopback=true",
             BusSpec(
                 "socketcan",
                 "can0",
-                {
-                    "bitrate": 1_000_000,
-                    "fd": False,
-                    "receive_own_messages": True,
-                    "state": "ACTIVE",
-                },
+                {"fd": False, "receive_own_messages": True, "local_loopback": True},
             ),
         ),
         (
-            "serial:/dev/ttyUSB0?baudrate=115200&timeout=0.25&mask=0x7F0&offset=-3",
+            "virtual:x?rx_queue_size=0x10&preserve_timestamps=false",
+            BusSpec("virtual", "x", {"rx_queue_size": 16, "preserve_timestamps": False}),
+        ),
+        (
+            "remote:127.0.0.1:5000?connect_timeout=2&receive_own_messages=false",
             BusSpec(
-                "serial",
-                "/dev/ttyUSB0",
-                {"baudrate": 115200, "timeout": 0.25, "mask": 0x7F0, "offset": -3},
+                "remote",
+                "ws://127.0.0.1:5000/",
+                {"connect_timeout": 2.0, "receive_own_messages": False},
+            ),
+        ),
+        (
+            "serial:/dev/ttyUSB0?baudrate=115200&timeout=1&rtscts=false",
+            BusSpec(
+                "serial", "/dev/ttyUSB0", {"baudrate": 115200, "timeout": 1.0, "rtscts": False}
             ),
         ),
         ("pcan:PCAN_USBBUS1?bitrate=500000", BusSpec("pcan", "PCAN_USBBUS1", {"bitrate": 500000})),
+        (  # an enum option; a keyword python-can documents but takes through **kwargs
+            "pcan:PCAN_USBBUS1?state=passive&f_clock_mhz=80",
+            BusSpec("pcan", "PCAN_USBBUS1", {"state": can.BusState.PASSIVE, "f_clock_mhz": 80}),
+        ),
+        (  # a text option keeps its leading zeros
+            "usb2can:ED000100?serial=0012&bitrate=1000000",
+            BusSpec("usb2can", "ED000100", {"serial": "0012", "bitrate": 1_000_000}),
+        ),
+        ("kvaser:0?bitrate=1000000&sjw=1", BusSpec("kvaser", "0", {"bitrate": 10**6, "sjw": 1})),
     ],
 )
 def test_parse_bus_url_good(url: str, spec: BusSpec) -> None:
@@ -177,6 +193,37 @@ def test_parse_bus_url_good(url: str, spec: BusSpec) -> None:
         ("socketcan:vcan0?bitrate=1&bitrate=2", ["option 'bitrate' is given twice"]),
         ("socketcan:vcan0?channel=vcan1", ["'channel' cannot be an option"]),
         ("socketcan:vcan0?bit-rate=1", ["'bit-rate' is not a valid name"]),
+        (
+            "virtual:x?foo=1",
+            [
+                "unknown option 'foo' for the virtual interface",
+                "accepted options: preserve_timestamps, receive_own_messages, rx_queue_size",
+            ],
+        ),
+        ("virtual:x?rx_queue_size=-1", ["'rx_queue_size' must be an integer >= 0, got '-1'"]),
+        ("virtual:x?rx_queue_size=1.5", ["'rx_queue_size' must be an integer"]),
+        ("virtual:x?receive_own_messages=1", ["'receive_own_messages' must be true or false"]),
+        ("virtual:x?bitrate=500000", ["unknown option 'bitrate'", "a virtual bus has no bitrate"]),
+        (
+            "remote:127.0.0.1?connect_timeout=0",
+            ["'connect_timeout' must be a number > 0", "accepted options: connect_timeout, "],
+        ),
+        ("remote:127.0.0.1?connect_timeout=soon", ["'connect_timeout' must be a number"]),
+        ("remote:127.0.0.1?timeout=3", ["unknown option 'timeout' for the remote interface"]),
+        (
+            "socketcan:can0?bitrate=1000000",
+            ["unknown option 'bitrate'", "ip link set CHANNEL type can bitrate", "accepted"],
+        ),
+        ("socketcan:can0?fd=yes", ["'fd' must be true or false, got 'yes'"]),
+        (
+            "serial:/dev/ttyUSB0?mask=0x7F0",
+            ["unknown option 'mask'", "accepted options: baudrate, rtscts, timeout"],
+        ),
+        ("serial:/dev/ttyUSB0?baudrate=fast", ["'baudrate' must be an integer, got 'fast'"]),
+        ("pcan:PCAN_USBBUS1?state=on", ["'state' must be ACTIVE or PASSIVE or ERROR"]),
+        ("kvaser:0?bitrat=1000000", ["unknown option 'bitrat'", "bitrate, "]),
+        ("slcan:/dev/ttyACM0?can_filters=1", ["unknown option 'can_filters'"]),
+        ("virtual:x?ignore_config=true", ["'ignore_config' cannot be an option"]),
     ],
 )
 def test_parse_bus_url_bad(url: str, expected: list[str]) -> None:
@@ -184,6 +231,25 @@ def test_parse_bus_url_bad(url: str, expected: list[str]) -> None:
         parse_bus_url(url)
     for text in expected:
         assert text in str(info.value)
+
+
+def test_every_python_can_interface_has_known_options() -> None:
+    # Read from each bus class's source; a python-can upgrade that broke this would
+    # silently turn the option check off.
+    for interface in bus_url.valid_interfaces():
+        assert accepted_options(interface) is not None, interface
+
+
+def test_introspected_options_are_the_bus_class_parameters() -> None:
+    from can.interfaces.serial.serial_can import SerialBus
+
+    named = set(inspect.signature(SerialBus.__init__).parameters) - {"self", "channel", "kwargs"}
+    assert set(accepted_options("serial")) == named
+
+
+def test_open_bus_refuses_an_unknown_option_before_opening() -> None:
+    with pytest.raises(BusError, match="unknown option 'foo'"):
+        open_bus(unique_virtual_url() + "?foo=1")
 
 
 def test_unknown_interface_lists_valid_ones_but_not_multicast() -> None:

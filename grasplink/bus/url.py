@@ -9,9 +9,10 @@ Forms (``INTERFACE:CHANNEL[?key=value&...]``):
 * ``socketcan:vcan0`` / ``socketcan:can0`` - Linux SocketCAN.
 * any other python-can interface, e.g. ``pcan:PCAN_USBBUS1?bitrate=1000000``.
 
-Query options are passed to the python-can bus as keyword arguments; values
-that look like integers become ``int`` (``0x..`` is hex), floats ``float``,
-``true``/``false`` ``bool``, anything else stays a string.
+Query options are passed to the python-can bus as keyword arguments. Each is
+checked against the options the interface accepts, and converted to the
+type it takes (`grasplink.bus.options`); an unknown option or a bad value is
+a `BusError` naming it and listing the accepted ones.
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import base64
 import contextlib
 import errno
 import os
-import re
 import socket
 import time
 from dataclasses import dataclass, field
@@ -34,6 +34,7 @@ from can_remote.client import DEFAULT_SSL_CONTEXT, RemoteBus, RemoteClientProtoc
 from can_remote.protocol import RemoteError
 from can_remote.websocket import WebSocket, WebsocketClosed, get_accept_key
 
+from grasplink.bus.options import convert_options, format_value
 from grasplink.core.frames import Frame
 from grasplink.errors import BusError
 
@@ -42,13 +43,9 @@ DEFAULT_BUS_URL = "virtual:grasplink"
 URL_FORMS = (
     "expected INTERFACE:CHANNEL[?key=value&...], e.g. virtual:grasplink, "
     f"remote:ws://127.0.0.1:{DEFAULT_HUB_PORT}/, socketcan:vcan0 or "
-    "socketcan:can0?bitrate=1000000"
+    "pcan:PCAN_USBBUS1?bitrate=1000000"
 )
 HUB_CONNECT_TIMEOUT_S = 5.0
-
-_INT_RE = re.compile(r"[+-]?\d+")
-_HEX_RE = re.compile(r"0[xX][0-9a-fA-F]+")
-_FLOAT_RE = re.compile(r"[+-]?(\d+\.\d*|\.\d+)([eE][+-]?\d+)?")
 
 
 @dataclass(frozen=True)
@@ -64,29 +61,11 @@ class BusSpec:
         """The canonical URL string (round-trips through `parse_bus_url`)."""
         text = f"{self.interface}:{self.channel}"
         if self.options:
-            text += "?" + urlencode({k: _format_option(v) for k, v in self.options.items()})
+            text += "?" + urlencode({k: format_value(v) for k, v in self.options.items()})
         return text
 
     def __str__(self) -> str:
         return self.url
-
-
-def _format_option(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return str(value)
-
-
-def _convert_option(value: str) -> Any:
-    if _INT_RE.fullmatch(value):
-        return int(value, 10)
-    if _HEX_RE.fullmatch(value):
-        return int(value, 16)
-    if _FLOAT_RE.fullmatch(value):
-        return float(value)
-    if value.lower() in ("true", "false"):
-        return value.lower() == "true"
-    return value
 
 
 def valid_interfaces() -> list[str]:
@@ -122,7 +101,7 @@ def parse_bus_url(url: str) -> BusSpec:
     channel = channel.strip()
     if not channel:
         raise BusError(f"bus URL {url!r} names no channel; {URL_FORMS}")
-    options: dict[str, Any] = {}
+    pairs: list[tuple[str, str]] = []
     if query:
         try:
             pairs = parse_qsl(query, keep_blank_values=True, strict_parsing=True)
@@ -131,18 +110,7 @@ def parse_bus_url(url: str) -> BusSpec:
                 f"malformed options {query!r} in bus URL {url!r}: {exc}; "
                 "expected ?key=value&key=value"
             ) from None
-        for key, value in pairs:
-            if not key.isidentifier():
-                raise BusError(f"bus URL {url!r}: option name {key!r} is not a valid name")
-            if value == "":
-                raise BusError(f"bus URL {url!r}: option {key!r} has no value")
-            if key in options:
-                raise BusError(f"bus URL {url!r}: option {key!r} is given twice")
-            if key in ("interface", "bustype", "channel"):
-                raise BusError(
-                    f"bus URL {url!r}: {key!r} cannot be an option; it is part of INTERFACE:CHANNEL"
-                )
-            options[key] = _convert_option(value)
+    options = convert_options(interface, url, pairs)
     if interface == "remote":
         channel = _normalise_hub_address(channel, url)
     return BusSpec(interface, channel, options)
