@@ -10,7 +10,8 @@ layer raise or catch them without importing another layer::
     ├── ConfigError      an invalid option or configuration value
     │   └── SceneError   a scene file value (file, key, what was expected)
     ├── RecordingError   a recording that cannot be read (file, line or key)
-    └── BusError         a bus that cannot be opened or reached
+    ├── BusError         a bus that cannot be opened or reached
+    └── PdoError         a PDO that does not fit its mapping (length, range, type)
 
 Protocol-level and private control-flow exceptions are not user errors and
 stay beside their code (see docs/architecture.md, "Errors").
