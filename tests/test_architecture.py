@@ -387,3 +387,18 @@ def test_scene_mistakes_are_configuration_errors() -> None:
     assert isinstance(error, ConfigError)
     assert str(error) == "scenes/slip.toml: effects[2].speed_mm_s: expected a number >= 0"
     assert issubclass(RecordingError, GrasplinkError)
+
+
+def test_docs_list_every_user_error() -> None:
+    from grasplink import errors
+
+    doc = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    section = doc.split("## Errors", 1)[1].split("\n## ", 1)[0]
+    missing = [
+        name
+        for name, value in vars(errors).items()
+        if isinstance(value, type)
+        and issubclass(value, errors.GrasplinkError)
+        and not re.search(rf"\b{name}\b", section)
+    ]
+    assert not missing, f"docs/architecture.md, 'Errors' does not list {missing}"
