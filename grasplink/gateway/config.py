@@ -1,0 +1,227 @@
+"""The gateway's configuration: which nodes it masters and how, validated before the bus is touched.
+
+Every key has a default, so `grasplink gateway` runs with no file; a file
+(TOML) overrides what it names, and a mistake is a ConfigError naming the
+file and the key (`gw.toml: nodes.emg.window_ms: expected a number 150..250,
+got 90`). Values that become node parameters are checked against the node's
+EDS limits here, so provisioning never meets an SDO abort for a value the
+file could have caught.
+"""
+
+from __future__ import annotations
+
+import itertools
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from grasplink.core.params import Params
+from grasplink.errors import ConfigError
+from grasplink.profiles import object_limits
+from grasplink.profiles import objects as obj
+from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
+
+KINDS = ("skin", "emg", "belt", "hand")
+# The thesis's EMG control window is "rectified and integrated" over 150-250 ms (ch. 2.3).
+EMG_WINDOW_MS = (150, 250)
+FEEDBACK_MODES = ("off", "slip_occurrence", "slip_speed", "force", "force_and_slip")
+GRIP_MODES = ("levels", "proportional")
+
+
+@dataclass
+class NodeConfig:
+    kind: str
+    node_id: int
+    heartbeat_ms: int = 100
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class SkinConfig(NodeConfig):
+    layout: str = "alpha0.1"
+    layout_mm: tuple[float, ...] = ()
+    sample_rate_hz: int = 400
+    samples_per_pdo: int = 3
+    decoder: str = "tracker"
+
+
+@dataclass
+class EmgConfig(NodeConfig):
+    sample_rate_hz: int = 1500
+    window_ms: int = 200
+    envelope_period_ms: int = 10
+    e_min_uv: float = 50.0
+    e_max_uv: float = 500.0
+    grip_mode: str = "levels"
+    # Grip force [N] the wearer asks for at levels e0..e5 (e5 = crush: the hand's limit caps it).
+    grip_levels_n: tuple[float, ...] = (0.0, 2.0, 4.0, 6.0, 8.0, 40.0)
+    grip_max_n: float = 20.0  # proportional mode: grip at e_max
+
+
+@dataclass
+class HandConfig(NodeConfig):
+    crush_limit_n: float = 40.0
+    grip_rate_n_s: float = 50.0
+
+
+@dataclass
+class FeedbackConfig:
+    mode: str = "force_and_slip"
+    options: dict[str, Any] = field(default_factory=dict)  # passed to the feedback controller
+
+
+@dataclass
+class ReflexConfig:
+    enabled: bool = True
+    threshold_mm_s: float = 45.0
+    options: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class GatewayConfig:
+    source: str = "<defaults>"
+    node_id: int = obj.GATEWAY_NODE_ID
+    heartbeat_ms: int = 100
+    # A node's heartbeat is lost after this many of its periods (the master's consumer time).
+    consumer_factor: float = 3.0
+    sdo_timeout_ms: int = 500
+    status_period_s: float = 5.0
+    nodes: dict[str, NodeConfig] = field(default_factory=dict)
+    feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
+    reflex: ReflexConfig = field(default_factory=ReflexConfig)
+
+    def node(self, kind: str) -> NodeConfig | None:
+        return self.nodes.get(kind)
+
+
+def load_config(path: str | Path | None) -> GatewayConfig:
+    """The configuration in `path` over the defaults (defaults alone for None)."""
+    if path is None:
+        return parse_config({}, "<defaults>")
+    source = str(path)
+    try:
+        with open(path, "rb") as handle:
+            data = tomllib.load(handle)
+    except FileNotFoundError:
+        raise ConfigError(f"{source}: no such configuration file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"{source}: cannot read: {exc.strerror}") from None
+    return parse_config(data, source)
+
+
+def parse_config(data: dict, source: str) -> GatewayConfig:
+    top = Params(data, source)
+    config = GatewayConfig(source=source)
+    gw = top.table_of("gateway", {})
+    config.node_id = gw.integer("node_id", obj.GATEWAY_NODE_ID, low=1, high=127)
+    config.heartbeat_ms = gw.integer("heartbeat_ms", 100, low=10, high=10_000)
+    config.consumer_factor = gw.number("consumer_factor", 3.0, low=1.5, high=20.0)
+    config.sdo_timeout_ms = gw.integer("sdo_timeout_ms", 500, low=10, high=10_000)
+    config.status_period_s = gw.number("status_period_s", 5.0, low=0.1, high=3600.0)
+    gw.finish()
+    nodes = top.table_of("nodes", {})
+    unknown = set(nodes.table) - set(KINDS)
+    if unknown:
+        name = sorted(unknown)[0]
+        raise nodes.error(name, f"unknown node type; expected one of {', '.join(KINDS)}")
+    # Every kind is mastered unless its table says `enabled = false`.
+    used = {config.node_id: "gateway"}
+    for kind in KINDS:
+        p = nodes.table_of(kind, {})
+        if not p.boolean("enabled", True):
+            p.finish()
+            continue
+        node = _PARSERS[kind](p, kind)
+        if node.node_id in used:
+            raise p.error(
+                "node_id", f"0x{node.node_id:02X} is already used by {used[node.node_id]}"
+            )
+        used[node.node_id] = kind
+        p.finish()
+        config.nodes[kind] = node
+    feedback = top.table_of("feedback", {})
+    config.feedback.mode = feedback.string("mode", "force_and_slip", choices=FEEDBACK_MODES)
+    config.feedback.options = {k: v for k, v in feedback.table.items() if k != "mode"}
+    reflex = top.table_of("reflex", {})
+    config.reflex.enabled = reflex.boolean("enabled", True)
+    config.reflex.threshold_mm_s = reflex.number("threshold_mm_s", 45.0, low=1.0, high=1000.0)
+    config.reflex.options = {
+        k: v for k, v in reflex.table.items() if k not in ("enabled", "threshold_mm_s")
+    }
+    top.finish()
+    return config
+
+
+def _common(p: Params, kind: str) -> dict[str, Any]:
+    return {
+        "kind": kind,
+        "node_id": p.integer("node_id", obj.DEFAULT_NODE_IDS[kind], low=1, high=127),
+        "heartbeat_ms": p.integer("heartbeat_ms", 100, low=10, high=10_000),
+    }
+
+
+def _limits(p: Params, name: str, kind: str, index: int, sub: int = 0, **kw: Any) -> int:
+    low, high = object_limits(kind, index, sub)
+    return p.integer(name, low=low, high=high, **kw)
+
+
+def _skin(p: Params, kind: str) -> SkinConfig:
+    layout = p.string("layout", "alpha0.1")
+    try:
+        layout_mm = parse_layout(layout)
+    except ConfigError as exc:
+        raise p.error("layout", str(exc)) from None
+    if layout not in LAYOUTS_MM and len(layout_mm) > 40:
+        raise p.error("layout", f"{len(layout_mm)} spacings; the skin node holds at most 40")
+    return SkinConfig(
+        **_common(p, kind),
+        layout=layout,
+        layout_mm=tuple(layout_mm),
+        sample_rate_hz=_limits(p, "sample_rate_hz", kind, obj.SKIN_SAMPLE_RATE_HZ, default=400),
+        samples_per_pdo=_limits(p, "samples_per_pdo", kind, obj.SKIN_SAMPLES_PER_PDO, default=3),
+        decoder=p.string("decoder", "tracker"),
+    )
+
+
+def _emg(p: Params, kind: str) -> EmgConfig:
+    e_min = p.number("e_min_uv", 50.0, low=0.0, high=65535.0)
+    e_max = p.number("e_max_uv", 500.0, low=0.0, high=65535.0)
+    if not e_max > e_min:
+        raise p.error("e_max_uv", f"must be above e_min_uv ({e_min:g} uV), got {e_max:g}")
+    levels = p.numbers("grip_levels_n", [0.0, 2.0, 4.0, 6.0, 8.0, 40.0], low=0.0, high=100.0)
+    if len(levels) != 6 or any(b < a for a, b in itertools.pairwise(levels)):
+        raise p.error("grip_levels_n", "expected 6 non-decreasing forces, for levels e0..e5")
+    low, high = EMG_WINDOW_MS
+    return EmgConfig(
+        **_common(p, kind),
+        sample_rate_hz=_limits(p, "sample_rate_hz", kind, obj.EMG_SAMPLE_RATE_HZ, default=1500),
+        window_ms=p.integer("window_ms", 200, low=low, high=high),
+        envelope_period_ms=_limits(
+            p, "envelope_period_ms", kind, obj.EMG_ENVELOPE_PERIOD_MS, default=10
+        ),
+        e_min_uv=e_min,
+        e_max_uv=e_max,
+        grip_mode=p.string("grip_mode", "levels", choices=GRIP_MODES),
+        grip_levels_n=tuple(levels),
+        grip_max_n=p.number("grip_max_n", 20.0, low=0.0, high=100.0),
+    )
+
+
+def _belt(p: Params, kind: str) -> NodeConfig:
+    return NodeConfig(**_common(p, kind))
+
+
+def _hand(p: Params, kind: str) -> HandConfig:
+    low, high = object_limits(kind, obj.HAND_CRUSH_LIMIT_MN)
+    rate_low, rate_high = object_limits(kind, obj.HAND_GRIP_RATE_MN_S)
+    return HandConfig(
+        **_common(p, kind),
+        crush_limit_n=p.number("crush_limit_n", 40.0, low=low / 1000, high=high / 1000),
+        grip_rate_n_s=p.number("grip_rate_n_s", 50.0, low=rate_low / 1000, high=rate_high / 1000),
+    )
+
+
+_PARSERS = {"skin": _skin, "emg": _emg, "belt": _belt, "hand": _hand}

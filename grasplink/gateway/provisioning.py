@@ -1,0 +1,144 @@
+"""What the gateway writes to a node over SDO before starting it.
+
+A node that boots (or reboots) comes up with its defaults overlaid by
+whatever its NVM holds; the gateway makes it match the configuration before
+any process data flows: heartbeat producer and consumer times, the PDO
+mappings the gateway decodes with (the EDS defaults, re-asserted with the
+CiA 301 mapping procedure), and the application parameters (skin layout and
+sample rate, EMG window and calibration, hand crush limit and grip rate).
+Values are encoded through the node's object dictionary (python-canopen's
+types), never by hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import canopen
+from canopen.objectdictionary import ODArray, ODRecord, ODVariable
+
+from grasplink.gateway.config import EmgConfig, GatewayConfig, HandConfig, NodeConfig, SkinConfig
+from grasplink.profiles import load_profile
+from grasplink.profiles import objects as obj
+from grasplink.profiles.layouts import PRESET_CODES, spacings_um
+
+COB_ID_INVALID = 0x80000000
+PDO_COMM_RANGES = ((0x1400, 0x1600), (0x1800, 0x1A00))  # RPDO, TPDO communication objects
+MAPPING_OFFSET = 0x200
+
+
+@dataclass(frozen=True)
+class SdoWrite:
+    index: int
+    subindex: int
+    data: bytes
+    what: str
+
+
+class Provisioner:
+    """The SDO writes that configure one node, from its profile and the gateway config."""
+
+    def __init__(self, node: NodeConfig, config: GatewayConfig):
+        self.node = node
+        self.config = config
+        self.od: canopen.ObjectDictionary = load_profile(node.kind, node.node_id)
+
+    def writes(self) -> list[SdoWrite]:
+        out = self._heartbeats()
+        out += self._pdo_mappings()
+        out += self._application()
+        return out
+
+    # -- helpers -----------------------------------------------------------------------
+    def _entry(self, index: int, subindex: int = 0) -> ODVariable:
+        entry = self.od[index]
+        if isinstance(entry, ODArray | ODRecord):
+            return entry[subindex]
+        return entry
+
+    def _write(self, index: int, subindex: int, value: int | float, what: str) -> SdoWrite:
+        var = self._entry(index, subindex)
+        if var.data_type in canopen.objectdictionary.INTEGER_TYPES:
+            value = round(value)
+        return SdoWrite(index, subindex, var.encode_raw(value), what)
+
+    # -- what is written -------------------------------------------------------------------
+    def _heartbeats(self) -> list[SdoWrite]:
+        consumer_ms = max(
+            round(self.config.heartbeat_ms * self.config.consumer_factor),
+            self.config.heartbeat_ms + 1,
+        )
+        return [
+            self._write(obj.HEARTBEAT_PRODUCER_MS, 0, self.node.heartbeat_ms, "heartbeat time"),
+            self._write(
+                obj.HEARTBEAT_CONSUMER,
+                1,
+                (self.config.node_id << 16) | consumer_ms,
+                "watch the gateway's heartbeat",
+            ),
+        ]
+
+    def _pdo_mappings(self) -> list[SdoWrite]:
+        """Every PDO the profile defines, set back to its EDS mapping (CiA 301 7.5.2.36)."""
+        out: list[SdoWrite] = []
+        for low, high in PDO_COMM_RANGES:
+            for comm in (i for i in sorted(self.od.indices) if low <= i < high):
+                mapping = comm + MAPPING_OFFSET
+                if mapping not in self.od:
+                    continue
+                cob_id = int(self._entry(comm, 1).default)
+                count = int(self._entry(mapping, 0).default)
+                label = f"PDO 0x{comm:04X}"
+                out.append(self._write(comm, 1, cob_id | COB_ID_INVALID, f"{label} off"))
+                out.append(self._write(mapping, 0, 0, f"{label} mapping cleared"))
+                for sub in range(1, count + 1):
+                    entry = int(self._entry(mapping, sub).default)
+                    out.append(self._write(mapping, sub, entry, f"{label} maps 0x{entry:08X}"))
+                out.append(self._write(mapping, 0, count, f"{label} {count} objects"))
+                for sub, what in ((2, "transmission type"), (5, "event timer")):
+                    if sub in self.od[comm]:
+                        value = int(self._entry(comm, sub).default)
+                        out.append(self._write(comm, sub, value, f"{label} {what}"))
+                out.append(self._write(comm, 1, cob_id, f"{label} on"))
+        return out
+
+    def _application(self) -> list[SdoWrite]:
+        node = self.node
+        if isinstance(node, SkinConfig):
+            return self._skin(node)
+        if isinstance(node, EmgConfig):
+            return [
+                self._write(obj.EMG_SAMPLE_RATE_HZ, 0, node.sample_rate_hz, "EMG sample rate"),
+                self._write(obj.EMG_WINDOW_MS, 0, node.window_ms, "EMG envelope window"),
+                self._write(
+                    obj.EMG_ENVELOPE_PERIOD_MS, 0, node.envelope_period_ms, "EMG envelope period"
+                ),
+                *self._calibration(node),
+            ]
+        if isinstance(node, HandConfig):
+            return [
+                self._write(obj.HAND_CRUSH_LIMIT_MN, 0, node.crush_limit_n * 1000, "crush limit"),
+                self._write(obj.HAND_GRIP_RATE_MN_S, 0, node.grip_rate_n_s * 1000, "grip rate"),
+            ]
+        return []
+
+    def _skin(self, node: SkinConfig) -> list[SdoWrite]:
+        out = [
+            self._write(obj.SKIN_SAMPLE_RATE_HZ, 0, node.sample_rate_hz, "skin sample rate"),
+            self._write(obj.SKIN_SAMPLES_PER_PDO, 0, node.samples_per_pdo, "samples per TPDO"),
+        ]
+        preset = next((c for c, name in PRESET_CODES.items() if name == node.layout), 0)
+        out.append(self._write(obj.SKIN_LAYOUT_PRESET, 0, preset, f"layout {node.layout}"))
+        if not preset:
+            spacings = spacings_um(node.layout_mm)
+            out.append(self._write(obj.SKIN_RIDGE_SPACING_UM, 0, len(spacings), "ridge count"))
+            for sub, um in enumerate(spacings, start=1):
+                out.append(self._write(obj.SKIN_RIDGE_SPACING_UM, sub, um, f"spacing {sub}"))
+        return out
+
+    def _calibration(self, node: EmgConfig) -> list[SdoWrite]:
+        """e_min and e_max in the order that keeps e_min < e_max true after each write."""
+        e_min = self._write(obj.EMG_CALIBRATION, 1, node.e_min_uv, "EMG e_min")
+        e_max = self._write(obj.EMG_CALIBRATION, 2, node.e_max_uv, "EMG e_max")
+        stored_max = float(self._entry(obj.EMG_CALIBRATION, 2).default)
+        return [e_min, e_max] if node.e_min_uv < stored_max else [e_max, e_min]
