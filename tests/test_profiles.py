@@ -206,9 +206,13 @@ def test_load_profile_wraps_canopen_errors(monkeypatch: pytest.MonkeyPatch) -> N
 # --- validator ---------------------------------------------------------------
 def _edit(kind: str, section: str, key: str, value: str | None) -> str:
     """The shipped EDS text with one key of one section replaced (None: dropped)."""
+    return _edit_text(eds_path(kind).read_text(encoding="ascii"), section, key, value)
+
+
+def _edit_text(text: str, section: str, key: str, value: str | None) -> str:
     out: list[str] = []
     current = None
-    for line in eds_path(kind).read_text(encoding="ascii").splitlines():
+    for line in text.splitlines():
         if line.startswith("["):
             current = line[1:-1]
         elif current == section and line.startswith(key + "="):
@@ -327,6 +331,71 @@ def test_validator_reports_non_ascii(tmp_path: Path) -> None:
 def test_validator_reports_unreadable_file(tmp_path: Path) -> None:
     with pytest.raises(EdsError, match=r"missing\.eds.*cannot read"):
         validate_eds(tmp_path / "missing.eds")
+
+
+@pytest.mark.parametrize(
+    ("kind", "section"),
+    [
+        ("skin", "1017"),  # producer heartbeat: 0 would switch the heartbeat off
+        ("belt", "1016sub1"),  # consumer of the gateway: 0 would stop monitoring it
+        ("skin", "1000"),  # mandatory: device type
+        ("emg", "1001"),  # mandatory: error register
+        ("hand", "1018sub1"),  # mandatory: vendor-ID
+        ("skin", "1800sub2"),  # TPDO transmission type: 0 would make it synchronous
+        ("belt", "1A00sub0"),  # number of mapped objects
+        ("skin", "2120"),  # application parameter: a sample rate of 0 Hz
+        ("belt", "605A"),  # quick stop option code (the safe state's ramp)
+        ("hand", "2403"),  # a const the application reads
+    ],
+)
+def test_validator_requires_default_on_entries_the_device_configures_itself_from(
+    tmp_path: Path, kind: str, section: str
+) -> None:
+    err = _error(tmp_path, _edit(kind, section, "DefaultValue", None), f"{kind}.eds")
+    assert (err.section, err.key) == (section, "DefaultValue")
+    assert f"{kind}.eds [{section}] DefaultValue: required key is missing" in str(err)
+
+
+def test_validator_treats_an_empty_numeric_default_as_missing(tmp_path: Path) -> None:
+    err = _error(tmp_path, _edit("skin", "1017", "DefaultValue", ""), "skin.eds")
+    assert (err.section, err.key) == ("1017", "DefaultValue")
+    assert "is empty" in str(err)
+
+
+def test_validator_accepts_process_data_without_default(tmp_path: Path) -> None:
+    # PDO-mappable application entries are produced by the application or written by an RPDO.
+    path = tmp_path / "belt.eds"
+    text = _edit("belt", "606C", "DefaultValue", None)
+    path.write_text(_edit_text(text, "60FF", "DefaultValue", None), encoding="ascii")
+    validate_eds(path)
+    assert load_profile(path, 0x20)[0x606C].default is None
+
+
+def test_load_profile_refuses_a_missing_heartbeat_default_like_the_validator(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "skin.eds"
+    path.write_text(_edit("skin", "1017", "DefaultValue", None), encoding="ascii")
+    with pytest.raises(EdsError) as info:
+        load_profile(path, 0x10)
+    assert (info.value.path, info.value.section, info.value.key) == (
+        str(path),
+        "1017",
+        "DefaultValue",
+    )
+
+
+def test_profiles_check_names_a_missing_default_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from grasplink.cli import main
+
+    path = tmp_path / "skin.eds"
+    path.write_text(_edit("skin", "1017", "DefaultValue", None), encoding="ascii")
+    assert main(["profiles", "check", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"{path} [1017] DefaultValue: required key is missing" in err
 
 
 # --- ridge layouts -------------------------------------------------------------

@@ -6,6 +6,28 @@ crashes with a bare KeyError/NoOptionError on a missing [Comments] line or
 development tool, not a run-time dependency. So every EDS (shipped or given
 by a user) goes through `validate_eds` first, and every problem surfaces as
 an `EdsError` naming file, section and key.
+
+CiA 306 makes DefaultValue optional, and canopen leaves a missing one as
+None, which the device store turns into 0. For most process data that is
+harmless (the application publishes it, an RPDO writes it), but for the
+entries the device configures itself from it silently changes behaviour:
+1017h = 0 switches the heartbeat off, 1016h = 0 stops monitoring, 1800h:02 = 0
+makes a TPDO synchronous, a sample rate of 0 Hz. So a DefaultValue is required
+(`_default_required`) on every readable entry of
+
+- the mandatory objects 1000h, 1001h, 1018h (device type, error register,
+  identity: what a master checks before it trusts a node);
+- the communication area 1000h-1FFFh (heartbeat 1016h/1017h, SYNC 1005h,
+  EMCY 1014h/1015h, 1029h, SDO and PDO parameters): the runtime reloads these
+  at every reset communication and 0 is a meaningful setting for nearly all;
+- the application area when the entry is not PDO-mappable: a parameter or
+  constant (sample rates, limits, quick-stop option, sub-index 0 counts) that
+  the application reads at reset rather than produces.
+
+Write-only entries have no value to read, and PDO-mappable application
+entries are process data, so those may omit it. An empty DefaultValue on a
+numeric entry counts as missing (canopen drops it the same way); an empty
+string or byte string is a value.
 """
 
 from __future__ import annotations
@@ -78,6 +100,8 @@ DATA_TYPES: dict[int, DataType] = _types()
 ACCESS_TYPES = ("ro", "wo", "rw", "rwr", "rww", "const")
 OBJECT_TYPES = {0x2: "DOMAIN", 0x7: "VAR", 0x8: "ARRAY", 0x9: "RECORD"}
 OBJECT_LISTS = ("MandatoryObjects", "OptionalObjects", "ManufacturerObjects")
+MANDATORY_OBJECTS = (0x1000, 0x1001, 0x1018)
+COMMUNICATION_AREA = range(0x1000, 0x2000)
 REQUIRED_SECTIONS = ("FileInfo", "DeviceInfo", "DummyUsage", "Comments", *OBJECT_LISTS)
 _OTHER_SECTIONS = {"DeviceComissioning"}
 _INT_KEYS_DEVICEINFO = (
@@ -142,6 +166,19 @@ def parse_int(text: str) -> tuple[int, bool]:
     if not _NUMBER_RE.match(text):
         raise ValueError("not an integer")
     return int(text, 0), relative
+
+
+def _default_required(index: int, access: str, mappable: bool) -> str | None:
+    """Why an entry must carry a DefaultValue, or None when it may omit it (module docstring)."""
+    if access == "wo":
+        return None
+    if index in MANDATORY_OBJECTS:
+        return "a mandatory object (CiA 301) needs a value"
+    if index in COMMUNICATION_AREA:
+        return "the device sets up its communication from this entry at every reset"
+    if not mappable:
+        return "the application reads this parameter at reset"
+    return None
 
 
 def validate_eds(path: str | Path) -> None:
@@ -272,7 +309,7 @@ class _Checker:
 
     def _check_list_membership(self, section: str, key: str, index: int) -> None:
         if section == "MandatoryObjects":
-            ok = index in (0x1000, 0x1001, 0x1018)
+            ok = index in MANDATORY_OBJECTS
         elif section == "ManufacturerObjects":
             ok = 0x2000 <= index < 0x6000
         else:
@@ -351,6 +388,7 @@ class _Checker:
         if mapping not in ("0", "1"):
             self.fail(section, "PDOMapping", f"{mapping!r} must be 0 or 1")
         dtype = DATA_TYPES[code]
+        self._check_default_present(section, dtype, access.lower(), mapping == "1")
         if dtype.kind == "int":
             self._check_int_values(section, dtype)
         elif dtype.kind == "float":
@@ -366,6 +404,23 @@ class _Checker:
                 bytes.fromhex(raw)
             except ValueError:
                 self.fail(section, "DefaultValue", f"{raw!r} is not a hex byte string")
+
+    def _check_default_present(
+        self, section: str, dtype: DataType, access: str, mappable: bool
+    ) -> None:
+        reason = _default_required(int(section[:4], 16), access, mappable)
+        if reason is None:
+            return
+        raw = self.cfg.get(section, "DefaultValue", fallback=None)
+        if raw is None:
+            problem = "required key is missing"
+        elif not raw.strip() and dtype.kind in ("int", "float", "time"):
+            problem = "is empty"
+        else:
+            return
+        self.fail(
+            section, "DefaultValue", f"{problem}: {reason}; without it the node starts with 0"
+        )
 
     def _check_int_values(self, section: str, dtype: DataType) -> None:
         low = self._value(section, "LowLimit", dtype)
