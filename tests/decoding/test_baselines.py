@@ -1,6 +1,6 @@
 """The thesis' decoders (fft, ratio, mmse) and the live DTW: streaming and accuracy.
 
-Signals come from `decoding.synth` (the simulator's effects, with ground
+Signals come from `simulators.synth` (the simulator's effects, with ground
 truth). Accuracy is judged where the thesis says a layout can answer: while
 the object slips, after the third ridge contact.
 """
@@ -12,10 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from grasplink.gateway.decoding import synth
+from grasplink.evaluation.decoders import make_decoder, reference_slips
 from grasplink.gateway.decoding.base import SlipEstimate
-from grasplink.gateway.decoding.registry import DECODERS, available, make_decoder
+from grasplink.gateway.decoding.registry import DECODERS, available
 from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
 
 BASELINES = ("fft", "ratio", "mmse", "dtw")
 POSITIONAL = ("ratio", "mmse", "dtw")  # decoders that tell direction and position
@@ -184,12 +185,10 @@ def test_mmse_search_is_the_thesis_brute_force():
     rec = synth.slip_recording(LAYOUTS_MM["alpha0.1"], 30.0, seed=17)
     search = ReferenceSearch(
         rec.layout_mm,
-        rec.fs_hz,
         np.array([15.0, 30.0, 45.0]),
         window_s=1.0,
-        v_ref=20.0,
+        references=reference_slips(rec.layout_mm, rec.fs_hz, speed_mm_s=20.0, seed=1),
         resolution_mm=0.5,
-        seed=1,
     )
     window = (rec.t_s > 1.0) & (rec.t_s <= 2.0)
     warped = search.warp(rec.t_s[window], rec.force_n[window])

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from grasplink.gateway.decoding import evaluate as ev
-from grasplink.gateway.decoding.bench import COST_BUDGET_US, recommend
+from grasplink.evaluation import scoring as ev
+from grasplink.evaluation.decoding_bench import COST_BUDGET_US, recommend
 from grasplink.gateway.decoding.registry import DEFAULT_DECODER, make_decoder
-from grasplink.gateway.decoding.synth import slip_recording
 from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators.synth import slip_recording
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "benchmarks" / "decoding.json"
 

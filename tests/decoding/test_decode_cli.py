@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from grasplink.cli import main
-from grasplink.gateway.decoding import io, registry, synth
+from grasplink.gateway.decoding import io, registry
 from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
 
 ROOT = Path(__file__).resolve().parents[2]
 FIELDS = {"t_s", "slip", "speed_mm_s", "position_mm", "force_n", "confidence"}

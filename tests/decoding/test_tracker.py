@@ -1,6 +1,6 @@
 """TrackerDecoder ("tracker") and its contact detector: streaming, accuracy, robustness.
 
-Signals come from `decoding.synth` with ground truth. Accuracy is judged as
+Signals come from `simulators.synth` with ground truth. Accuracy is judged as
 the targets state it: over the updates where the object slips, after its
 third ridge contact, aggregated over the recordings of a group. The full
 grid (all layouts, more speeds) is the decoding benchmark's job.
@@ -13,11 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from grasplink.gateway.decoding import synth
 from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.gateway.decoding.contacts import ContactDetector
 from grasplink.gateway.decoding.tracker import TrackerDecoder
 from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
 
 ALPHA = LAYOUTS_MM["alpha0.1"]
 FIB = LAYOUTS_MM["fibonacci"]

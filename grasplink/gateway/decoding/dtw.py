@@ -6,7 +6,8 @@ as too slow. This decoder makes it cheap by warping only around an
 alignment it already has:
 
 1. Coarse alignment: the MMSE search (`mmse.ReferenceSearch`, same window,
-   references and z-normalised MSE) over a geometric speed grid (ratio
+   references - `references=`, supplied by the caller as for mmse - and
+   z-normalised MSE) over a geometric speed grid (ratio
    `speed_ratio` 1.1 from `v_low` 5 to `v_high` 250 mm/s, 43 speeds) on a
    0.5 mm reference grid, then a finer one (steps of speed_ratio^(1/4),
    +-3 steps) around each direction's best: speed v0, direction, offset.
@@ -50,19 +51,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import ClassVar
 
 import numpy as np
 
 from grasplink.errors import ConfigError
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S
 from grasplink.gateway.decoding.mmse import (
-    REFERENCE_SEED,
-    V_REF,
     Candidate,
     ReferenceSearch,
+    ReferenceSlip,
     WindowDecoder,
     edge_factor,
     explained,
+    require_references,
     rivalry,
     warp_window,
 )
@@ -142,6 +144,7 @@ def _znorm(a: np.ndarray) -> np.ndarray:
 
 class DtwDecoder(WindowDecoder):
     name = "dtw"
+    needs_references: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -150,20 +153,20 @@ class DtwDecoder(WindowDecoder):
         *,
         update_period_s: float = DEFAULT_UPDATE_S,
         window_s: float = 5.0,
+        references: Sequence[ReferenceSlip] | None = None,
         resolution_mm: float = 0.5,
         band_mm: float = 1.0,
         min_mm: float = 15.0,
         v_low: float = 5.0,
         v_high: float = 250.0,
         speed_ratio: float = 1.1,
-        v_ref: float = V_REF,
         hop_s: float = 0.2,
         min_correlation: float = 0.5,
         distinct_mm: float = 10.0,
-        reference_seed: int = REFERENCE_SEED,
         warp_refine: bool = True,
         **front,
     ):
+        require_references(self.name, references)
         super().__init__(
             layout_mm,
             fs_hz,
@@ -192,12 +195,10 @@ class DtwDecoder(WindowDecoder):
         self._fine = speed_ratio ** (np.arange(-3, 4) / 4.0)
         self.searcher = ReferenceSearch(
             self.geometry.spacings_mm,
-            self.fs_hz,
             coarse_speeds(v_low, v_high, speed_ratio),
             window_s=window_s,
-            v_ref=v_ref,
+            references=references,
             resolution_mm=resolution_mm,
-            seed=reference_seed,
         )
 
     def match(self, t: np.ndarray, x: np.ndarray) -> tuple[float, float | None, float] | None:

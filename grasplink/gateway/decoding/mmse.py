@@ -1,10 +1,13 @@
 """The thesis' MMSE decoder (ch. 5.4.3): match the live window against a reference.
 
 A reference signal r recorded at a known speed v_ref over the whole skin
-(here: `synth.slip_recording` at `v_ref` = 20 mm/s, noise-free, fixed seed,
-at the decoder's sample rate; once per direction, so both directions can
-be told apart) is kept as a function of the leading edge's position (its
-ground truth) on a grid of `resolution_mm` (0.25 mm), padded before the skin
+(`ReferenceSlip`, one per direction so both directions can be told apart;
+the caller supplies them as `references=` - the gateway records nothing and
+simulates nothing: `grasplink.evaluation.decoders.reference_slips` makes the
+thesis-like pair, a noise-free simulated slip at 20 mm/s at the decoder's
+sample rate, for `grasplink decode` and the benchmark) is kept as a function
+of the leading edge's position (its ground truth) on a grid of
+`resolution_mm` (0.25 mm), padded before the skin
 with the reference's resting level and after it with its last value, so a
 window may hang over either end. For each candidate speed v in [`v_lower`,
 `v_upper`] step `v_step` (5-150 mm/s step 5, the thesis' grid) the live
@@ -50,6 +53,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -63,42 +67,71 @@ from grasplink.gateway.decoding.filters import (
 )
 
 FLAT_N = 1e-4  # a segment with a std below this (N) is flat: it z-normalises to zeros
-REFERENCE_SEED = 20240  # fixed: the reference is the same every time
-V_REF = 20.0
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceSlip:
+    """A slip over the whole skin at a known constant speed: what the window matchers match.
+
+    The decoder's caller records (or simulates) one per direction and hands
+    them over, so the gateway itself needs neither a simulator nor a
+    recording session. Samples are those taken while the object slipped.
+    """
+
+    speed_mm_s: float  # signed: + from the first ridge towards the last
+    position_mm: np.ndarray  # the leading edge at each sample (mm from the first ridge)
+    force_n: np.ndarray  # the sensor's force at those samples
+    rest_force_n: float  # the force before the slip started
+
+    def __post_init__(self) -> None:
+        x = np.asarray(self.position_mm, dtype=np.float64)
+        f = np.asarray(self.force_n, dtype=np.float64)
+        if not (math.isfinite(self.speed_mm_s) and self.speed_mm_s != 0):
+            raise ConfigError(f"reference slip: speed must be non-zero, got {self.speed_mm_s}")
+        if x.ndim != 1 or x.shape != f.shape or len(x) < 2:
+            raise ConfigError(
+                "reference slip: position_mm and force_n must be 1-D, of equal length, "
+                f"with >= 2 samples (got shapes {x.shape} and {f.shape})"
+            )
+        if not (np.isfinite(x).all() and np.isfinite(f).all() and math.isfinite(self.rest_force_n)):
+            raise ConfigError("reference slip: every position and force must be a finite number")
+        if np.ptp(x) <= 0:
+            raise ConfigError("reference slip: the object does not move")
+        object.__setattr__(self, "position_mm", x)
+        object.__setattr__(self, "force_n", f)
+
+    @property
+    def direction(self) -> int:
+        return 1 if self.speed_mm_s > 0 else -1
+
+
+def require_references(name: str, references: Sequence[ReferenceSlip] | None) -> None:
+    """A window matcher without references cannot run: say what it needs."""
+    if not references:
+        raise ConfigError(
+            f"decoder {name!r} needs reference slips (references=[forward, reverse]): "
+            "a slip over the whole skin at a known speed in each direction; "
+            "grasplink decode and the decoding benchmark simulate them"
+        )
+    for ref in references:
+        if not isinstance(ref, ReferenceSlip):
+            raise ConfigError(
+                f"decoder {name!r}: references must be ReferenceSlip, got {type(ref).__name__}"
+            )
 
 
 class Reference:
-    """A noise-free slip over the whole skin, as force against leading-edge position.
+    """A reference slip on the search grid, as force against leading-edge position.
 
     `values[j]` is the force with the edge at `start_mm + direction * (j - pad)
     * resolution_mm`; `pad` grid points before (the resting level before the
     slip) and after (the last value) the travel.
     """
 
-    def __init__(
-        self,
-        layout_mm: Sequence[float],
-        fs_hz: float,
-        direction: int,
-        *,
-        v_ref: float,
-        resolution_mm: float,
-        pad: int,
-        seed: int = REFERENCE_SEED,
-    ):
-        from grasplink.gateway.decoding import synth
-
-        rec = synth.slip_recording(
-            tuple(float(s) for s in layout_mm),
-            v_ref,
-            fs_hz=max(1, round(fs_hz)),
-            reverse=direction < 0,
-            noise_scale=0.0,
-            seed=seed,
-        )
-        moving = rec.speed_mm_s != 0
-        x = rec.position_mm[moving]
-        f = rec.force_n[moving]
+    def __init__(self, slip: ReferenceSlip, *, resolution_mm: float, pad: int):
+        direction = slip.direction
+        x = slip.position_mm
+        f = slip.force_n
         along = direction * x  # increasing along the travel
         order = np.argsort(along, kind="stable")
         along, f = along[order], f[order]
@@ -110,7 +143,9 @@ class Reference:
         self.pad = pad
         # Before the slip the reference is at rest: the window's pre-slip part matches
         # the recording's resting level, whatever the simulator makes of it.
-        self.values = np.concatenate([np.full(pad, rec.force_n[0]), core, np.full(pad, core[-1])])
+        self.values = np.concatenate(
+            [np.full(pad, float(slip.rest_force_n)), core, np.full(pad, core[-1])]
+        )
 
     def position(self, end_index: int | np.ndarray) -> float | np.ndarray:
         """Edge position for a window ending at padded index `end_index`."""
@@ -272,13 +307,11 @@ class ReferenceSearch:
     def __init__(
         self,
         layout_mm: Sequence[float],
-        fs_hz: float,
         speeds: np.ndarray,
         *,
         window_s: float,
-        v_ref: float,
+        references: Sequence[ReferenceSlip],
         resolution_mm: float,
-        seed: int,
         end_margin_mm: float = 30.0,
     ):
         self.speeds = np.asarray(speeds, dtype=np.float64)
@@ -290,18 +323,10 @@ class ReferenceSearch:
         )
         self.max_len = math.floor(longest_mm / resolution_mm) + 1
         self.references = [
-            Reference(
-                layout_mm,
-                fs_hz,
-                d,
-                v_ref=v_ref,
-                resolution_mm=self.resolution_mm,
-                pad=self.max_len,
-                seed=seed,
-            )
-            for d in (1, -1)
+            Reference(slip, resolution_mm=self.resolution_mm, pad=self.max_len)
+            for slip in references
         ]
-        n = len(self.references[0].values)
+        n = max(len(ref.values) for ref in self.references)
         self.nfft = 1 << math.ceil(math.log2(n))
         self._spectra = []
         self._sums = []
@@ -453,6 +478,7 @@ def rivalry(candidates: list[Candidate], distinct_mm: float) -> float:
 
 class MmseDecoder(WindowDecoder):
     name = "mmse"
+    needs_references: ClassVar[bool] = True
 
     def __init__(
         self,
@@ -461,7 +487,7 @@ class MmseDecoder(WindowDecoder):
         *,
         update_period_s: float = DEFAULT_UPDATE_S,
         window_s: float = 5.0,
-        v_ref: float = V_REF,
+        references: Sequence[ReferenceSlip] | None = None,
         v_lower: float = 5.0,
         v_upper: float = 150.0,
         v_step: float = 5.0,
@@ -469,9 +495,9 @@ class MmseDecoder(WindowDecoder):
         hop_s: float = 0.05,
         min_correlation: float = 0.5,
         distinct_mm: float = 10.0,
-        reference_seed: int = REFERENCE_SEED,
         **front,
     ):
+        require_references(self.name, references)
         super().__init__(
             layout_mm,
             fs_hz,
@@ -490,12 +516,10 @@ class MmseDecoder(WindowDecoder):
         self.distinct_mm = float(distinct_mm)
         self.searcher = ReferenceSearch(
             self.geometry.spacings_mm,
-            self.fs_hz,
             np.arange(v_lower, v_upper + 1e-9 * v_upper, v_step),
             window_s=window_s,
-            v_ref=v_ref,
+            references=references,
             resolution_mm=resolution_mm,
-            seed=reference_seed,
         )
 
     def match(self, t: np.ndarray, x: np.ndarray) -> tuple[float, float | None, float] | None:

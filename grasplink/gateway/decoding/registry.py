@@ -2,6 +2,8 @@
 
 Decoder modules are imported on first use, so a decoder whose module is
 missing (or broken) fails only when it is asked for, with an error naming it.
+The window matchers (mmse, dtw) also need `references=` (reference slips
+the caller records or simulates; `needs_references(name)` tells which).
 """
 
 from __future__ import annotations
@@ -53,6 +55,11 @@ def available(name: str) -> bool:
     except ConfigError:
         return False
     return True
+
+
+def needs_references(name: str) -> bool:
+    """Whether the decoder matches against reference slips the caller must supply."""
+    return bool(getattr(decoder_class(name), "needs_references", False))
 
 
 def make_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, **settings) -> Decoder:

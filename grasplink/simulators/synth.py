@@ -1,9 +1,12 @@
 """Skin signals with ground truth, made by the same effects scenes use.
 
-Decoder tests and the decoding benchmark draw their signals here, so they
-exercise exactly the physics a scene would (thesis ch. 4.3 FSR model, ch.
-5.3.1 ridge pulses, ch. 5.5.1 speed dips, noise and drift), at any sample
-rate, without running nodes or a bus. Every effect only when asked for.
+Decoder tests, the decoding benchmark and the reference slips of the
+reference-matching decoders (`grasplink.evaluation.decoders`) draw their
+signals here, so they exercise exactly the physics a scene would (thesis ch.
+4.3 FSR model, ch. 5.3.1 ridge pulses, ch. 5.5.1 speed dips, noise and
+drift), at any sample rate, without running nodes or a bus (the signal as the
+skin node sends it over CAN: `grasplink.evaluation.scenes`). Every effect only
+when asked for.
 """
 
 from __future__ import annotations

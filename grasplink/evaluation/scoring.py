@@ -8,6 +8,9 @@ Definitions (the benchmark states them too):
 - Speed error: |v_est - v_true| / |v_true| (a wrong sign counts in full);
   position error: |x_est - x_true| in mm. A scored update without an
   estimate counts as *missing* and is excluded from the error statistics.
+- Wrong sign: share of the scored updates with a speed estimate whose sign
+  is opposite the truth's (the direction decoded the wrong way round; an
+  estimate of 0 is a 100 % speed error, not a wrong sign).
 - NRMSD (thesis table 5.2): RMS error divided by the range of the true
   values over the scored updates of a recording set.
 - Detection: slip flagged - time of the first update with slip=True after
@@ -29,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grasplink.gateway.decoding.base import Decoder, SlipEstimate
-from grasplink.gateway.decoding.synth import SkinRecording
+from grasplink.simulators.synth import SkinRecording
 
 CHUNK = 256  # samples per feed(): the streaming path, as a gateway would call it
 GOOD_SPEED = 0.10
@@ -44,6 +47,7 @@ class RecordingScore:
     position_true: np.ndarray
     scored: int
     missing: int
+    wrong_sign: int  # scored updates with a speed estimate of the opposite sign
     slip_flag_delay_intervals: float | None  # None: never flagged
     first_good_s: float | None  # time after onset of the first estimate within 10 %
     physical_limit_s: float | None  # time after onset of the third contact
@@ -85,7 +89,7 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
     if not estimates:
         empty = np.zeros(0)
         return RecordingScore(
-            empty, empty, empty, empty, empty, 0, 0, None, None, None, 0, 0, cpu_us, len(rec.t_s)
+            empty, empty, empty, empty, empty, 0, 0, 0, None, None, None, 0, 0, cpu_us, len(rec.t_s)
         )
     t_upd = np.array([e.t_s for e in estimates])
     slipping = np.interp(t_upd, rec.t_s, rec.slipping) > 0.5
@@ -121,6 +125,7 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
         position_true=x_true[have_x],
         scored=int(scored_mask.sum()),
         missing=int((scored_mask & ~np.isfinite(v_est)).sum()),
+        wrong_sign=int((v_est[have_v] * v_true[have_v] < 0).sum()),
         slip_flag_delay_intervals=slip_delay,
         first_good_s=first_good,
         physical_limit_s=(third - onset) if third is not None and onset is not None else None,
@@ -140,3 +145,58 @@ def nrmsd(errors: np.ndarray, truth: np.ndarray) -> float | None:
     if len(errors) == 0 or np.ptp(truth) == 0:
         return None
     return float(np.sqrt(np.mean(errors**2)) / np.ptp(truth))
+
+
+def summarise(scores: list[RecordingScore]) -> dict:
+    """The figures of a set of recordings, errors pooled over all their scored updates."""
+    rel = np.concatenate([s.speed_rel_err for s in scores]) if scores else np.zeros(0)
+    abs_err = np.concatenate([s.speed_abs_err for s in scores]) if scores else np.zeros(0)
+    v_true = np.concatenate([s.speed_true for s in scores]) if scores else np.zeros(0)
+    pos = np.concatenate([s.position_err_mm for s in scores]) if scores else np.zeros(0)
+    pos_true = np.concatenate([s.position_true for s in scores]) if scores else np.zeros(0)
+    scored = sum(s.scored for s in scores)
+    delays = [
+        s.slip_flag_delay_intervals for s in scores if s.slip_flag_delay_intervals is not None
+    ]
+    ratios = [
+        s.first_good_s / s.physical_limit_s
+        for s in scores
+        if s.first_good_s is not None and s.physical_limit_s
+    ]
+    never = sum(1 for s in scores if s.physical_limit_s and s.first_good_s is None)
+    samples = sum(s.samples for s in scores)
+    return {
+        "speed_median_pct": _pct(rel, 50),
+        "speed_p90_pct": _pct(rel, 90),
+        "speed_nrmsd": nrmsd(abs_err, v_true),
+        "wrong_sign_pct": 100.0 * sum(s.wrong_sign for s in scores) / len(rel)
+        if len(rel)
+        else None,
+        "position_median_mm": _q(pos, 50),
+        "position_p90_mm": _q(pos, 90),
+        "position_nrmsd": nrmsd(pos, pos_true),
+        "missing_pct": 100.0 * sum(s.missing for s in scores) / scored if scored else None,
+        "slip_flag_intervals": float(np.median(delays)) if delays else None,
+        "slip_never_flagged": sum(
+            1 for s in scores if s.slip_flag_delay_intervals is None and s.physical_limit_s
+        ),
+        "first_good_ratio": float(np.median(ratios)) if ratios else None,
+        "never_good": never,
+        "cpu_us_per_sample": sum(s.cpu_us_per_sample * s.samples for s in scores) / samples
+        if samples
+        else None,
+    }
+
+
+def wrong_sign_share(score: RecordingScore) -> float | None:
+    """Share (0..1) of one recording's speed estimates with the wrong sign; None if none."""
+    estimated = len(score.speed_rel_err)
+    return score.wrong_sign / estimated if estimated else None
+
+
+def _pct(values: np.ndarray, q: float) -> float | None:
+    return float(100 * np.percentile(values, q)) if len(values) else None
+
+
+def _q(values: np.ndarray, q: float) -> float | None:
+    return float(np.percentile(values, q)) if len(values) else None
