@@ -142,14 +142,27 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="benchmarks that write their figures into docs/")
     bench_sub = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
     bench_decode = bench_sub.add_parser(
-        "decode", help="every skin decoder over simulated scenes: accuracy against cost"
+        "decode",
+        help="every skin decoder over simulated signals and over the slip scenes' CAN logs: "
+        "accuracy against cost",
     )
-    bench_decode.add_argument("--quick", action="store_true", help="reduced grid (smoke test)")
+    bench_decode.add_argument(
+        "--quick", action="store_true", help="reduced synthetic grid (smoke test, < 2 min)"
+    )
     bench_decode.add_argument(
         "--out",
         type=Path,
         default=None,
-        help="folder for decoding.md/.json/.png (default docs/benchmarks)",
+        metavar="DIR",
+        help="folder for decoding.md/.json/_pareto.png (default: docs/benchmarks/ of the "
+        "grasplink checkout the current folder is in)",
+    )
+    bench_decode.add_argument(
+        "--scenes",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="folder with the slip scenes for the CAN path (default: scenes/ of that checkout)",
     )
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
@@ -284,6 +297,7 @@ DECODE_CHUNK = 4096  # samples per feed(): streams like a gateway would, prints 
 def cmd_decode(args: argparse.Namespace) -> int:
     import json
 
+    from grasplink.evaluation.decoders import make_decoder
     from grasplink.gateway.decoding import io, registry
     from grasplink.profiles.layouts import parse_layout
 
@@ -297,7 +311,8 @@ def cmd_decode(args: argparse.Namespace) -> int:
     else:
         t, force = io.read_recording(args.file)
         fs = args.fs or io.infer_rate(t, str(args.file))
-    decoder = registry.make_decoder(name, layout, fs)
+    # the evaluation layer supplies the reference slips mmse and dtw match against
+    decoder = make_decoder(name, layout, fs)
     out = sys.stdout
     for start in range(0, len(t), DECODE_CHUNK):
         for estimate in decoder.feed(
@@ -324,10 +339,12 @@ def cmd_profiles(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from grasplink.gateway.decoding import bench
+    from grasplink.controllers import build_controllers
+    from grasplink.evaluation.decoding_bench import run_benchmark
 
-    out = args.out or bench.DOCS
-    results = bench.run(args.quick, out)
+    results, out = run_benchmark(
+        quick=args.quick, out=args.out, scenes_dir=args.scenes, controllers_for=build_controllers
+    )
     print(f"recommended default decoder: {results['recommended_default']}; wrote {out}/decoding.md")
     return 0
 
