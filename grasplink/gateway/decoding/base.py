@@ -4,15 +4,34 @@ A decoder is a sans-IO object fed timestamped FSR samples (`feed`) that
 returns estimates on a fixed time grid (`update_period_s`, default 10 ms,
 aligned to multiples of the period), so feeding a recording in chunks or in
 one piece gives the same estimates. Unknown values are None, never NaN.
-Bad samples (NaN, Inf, time not increasing) are rejected and counted; they
-never reach the decoder's state.
+
+The input guard (`Decoder.feed`) keeps out what a decoder cannot use, and
+counts it in `decoder.stats`:
+
+* NaN/Inf samples, forces beyond the largest full scale a skin node can be
+  calibrated to (`SkinLimits.max_force_n`) and times too large for float64
+  to resolve a thousandth of a sample period are rejected (`rejected_*`);
+* a sample less than `MIN_STEP_PERIODS` sample periods after the previous
+  accepted one (time going backwards, repeated, or 1e-12 s later) is a
+  timing error: rejected, counted, never decoded;
+* a step longer than `GAP_PERIODS` sample periods is a gap: the decoder is
+  reset (`Decoder.reset`, by default to the state it had before its first
+  sample) and the update grid restarts at the first sample after it, so no
+  update falls inside a gap and work and memory follow the number of
+  samples, never the time span.
+
+Layout and sample rate are bounded by what the skin node can hold (its EDS:
+spacings 0x2140, rate 0x2120), so an absurd value is a `ConfigError` naming
+the bound rather than a numpy error deep inside a decoder.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cache
 from typing import ClassVar
 
 import numpy as np
@@ -20,6 +39,17 @@ import numpy as np
 from grasplink.errors import ConfigError
 
 DEFAULT_UPDATE_S = 0.01
+UPDATE_PERIOD_RANGE_S = (0.001, 10.0)  # at most one update per sample at 1 kHz
+
+#: A step longer than this many sample periods is a gap (the decoder resets). Two
+#: lost CAN packets of three samples (a step of 7 periods) are bridged; at the
+#: skin node's 400 Hz a gap is anything over 20 ms.
+GAP_PERIODS = 8.0
+#: A sample closer than this many periods to the previous accepted one is a timing
+#: error (dropped): jitter of +-30 % of a period stays well clear of it.
+MIN_STEP_PERIODS = 0.25
+#: Times must resolve this fraction of a sample period in float64.
+TIME_RESOLUTION_PERIODS = 1e-3
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,15 +80,84 @@ def _clean(value: float | None) -> float | None:
     return round(float(value), 4)
 
 
+@dataclass(frozen=True)
+class SkinLimits:
+    """What the skin node's object dictionary can hold: the decoders' input bounds."""
+
+    spacing_mm: tuple[float, float]  # 0x2140:01.. limits (µm in the EDS)
+    max_spacings: int  # 0x2140:00 high limit
+    rate_hz: tuple[float, float]  # 0x2120 limits
+    max_force_n: float  # 0x2130:02 (full-scale force) high limit
+
+
+@cache
+def skin_limits() -> SkinLimits:
+    """Read once from the shipped skin EDS."""
+    from grasplink.profiles import object_limits
+    from grasplink.profiles.objects import (
+        SKIN_FSR_CALIBRATION,
+        SKIN_RIDGE_SPACING_UM,
+        SKIN_SAMPLE_RATE_HZ,
+    )
+
+    low_um, high_um = object_limits("skin", SKIN_RIDGE_SPACING_UM, 1)
+    _, count = object_limits("skin", SKIN_RIDGE_SPACING_UM, 0)
+    low_hz, high_hz = object_limits("skin", SKIN_SAMPLE_RATE_HZ)
+    _, full_scale_mn = object_limits("skin", SKIN_FSR_CALIBRATION, 2)
+    return SkinLimits(
+        (low_um / 1000.0, high_um / 1000.0),
+        count,
+        (float(low_hz), float(high_hz)),
+        full_scale_mn / 1000.0,
+    )
+
+
+def check_sample_rate(fs_hz: float) -> float:
+    """The rate as a float, or ConfigError: the skin node samples at 0x2120's range."""
+    low, high = skin_limits().rate_hz
+    try:
+        fs = float(fs_hz)
+    except (TypeError, ValueError):
+        raise ConfigError(f"sample rate {fs_hz!r} is not a number of Hz") from None
+    if not (math.isfinite(fs) and fs > 0):
+        raise ConfigError(f"sample rate must be a positive number of Hz, got {fs_hz}")
+    if not low <= fs <= high:
+        raise ConfigError(
+            f"sample rate {fs:g} Hz is outside {low:g}-{high:g} Hz, the range the skin "
+            "node samples at (0x2120) and the decoders are designed for"
+        )
+    return fs
+
+
 class SkinGeometry:
-    """Ridge positions of a layout: ridge i at x_i = sum of the first i spacings."""
+    """Ridge positions of a layout: ridge i at x_i = sum of the first i spacings.
+
+    Spacings must fit the skin node's 0x2140 (count and µm limits of its EDS).
+    """
 
     def __init__(self, spacings_mm: Sequence[float]):
-        spacings = np.asarray(spacings_mm, dtype=np.float64)
+        try:
+            spacings = np.asarray(spacings_mm, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ConfigError(f"ridge spacings must be numbers (mm), got {spacings_mm!r}") from None
         if spacings.ndim != 1 or len(spacings) == 0:
             raise ConfigError("a skin layout needs at least one spacing")
         if not np.all(np.isfinite(spacings)) or np.any(spacings <= 0):
             raise ConfigError(f"ridge spacings must be finite and > 0 mm, got {list(spacings)}")
+        limits = skin_limits()
+        if len(spacings) > limits.max_spacings:
+            raise ConfigError(
+                f"a skin layout of {len(spacings)} spacings does not fit the skin node, "
+                f"which holds at most {limits.max_spacings} (0x2140)"
+            )
+        low, high = limits.spacing_mm
+        outside = np.nonzero((spacings < low) | (spacings > high))[0]
+        if len(outside):
+            k = int(outside[0])
+            raise ConfigError(
+                f"ridge spacing #{k + 1} is {spacings[k]:g} mm; the skin node holds "
+                f"spacings of {low:g}-{high:g} mm (0x2140, in µm)"
+            )
         self.spacings_mm = spacings
         self.ridges_mm = np.concatenate([[0.0], np.cumsum(spacings)])
         self.length_mm = float(self.ridges_mm[-1])
@@ -70,33 +169,51 @@ class SkinGeometry:
 
 @dataclass
 class InputStats:
+    """What the input guard let through and what it kept out, and why."""
+
     accepted: int = 0
-    rejected_nonfinite: int = 0
-    rejected_time: int = 0  # not after the previous sample
-    gaps: int = 0  # jumps longer than GAP_PERIODS sample periods
+    rejected_nonfinite: int = 0  # NaN or Inf time or force
+    rejected_range: int = 0  # force beyond +-max_force_n, or time beyond float64 resolution
+    rejected_time: int = 0  # under MIN_STEP_PERIODS after the previous accepted sample
+    gaps: int = 0  # steps longer than GAP_PERIODS sample periods (each reset the decoder)
+    longest_gap_s: float = 0.0
+
+    @property
+    def received(self) -> int:
+        return self.accepted + self.rejected
+
+    @property
+    def rejected(self) -> int:
+        return self.rejected_nonfinite + self.rejected_range + self.rejected_time
 
 
-GAP_PERIODS = 3.0
+# attributes of the base class itself, which a reset keeps
+_BASE_STATE = frozenset({"stats", "_last_t", "_next_update", "_pristine"})
 
 
 class Decoder:
-    """Base class: input guard, update grid, static force; subclasses decode slip."""
+    """Base class: input guard, gaps, update grid; subclasses decode slip."""
 
     name: ClassVar[str] = "base"
 
     def __init__(
         self, layout_mm: Sequence[float], fs_hz: float, *, update_period_s: float = DEFAULT_UPDATE_S
     ):
-        if not (math.isfinite(fs_hz) and fs_hz > 0):
-            raise ConfigError(f"sample rate must be a positive number of Hz, got {fs_hz}")
-        if not (math.isfinite(update_period_s) and update_period_s > 0):
-            raise ConfigError(f"update period must be > 0 s, got {update_period_s}")
+        fs = check_sample_rate(fs_hz)
+        low, high = UPDATE_PERIOD_RANGE_S
+        if not (math.isfinite(update_period_s) and low <= update_period_s <= high):
+            raise ConfigError(f"update period must be {low:g}-{high:g} s, got {update_period_s}")
         self.geometry = SkinGeometry(layout_mm)
-        self.fs_hz = float(fs_hz)
+        self.fs_hz = fs
         self.update_period_s = float(update_period_s)
+        self.gap_s = GAP_PERIODS / fs
+        self.min_step_s = MIN_STEP_PERIODS / fs
+        self.max_time_s = TIME_RESOLUTION_PERIODS / fs / np.finfo(np.float64).eps
+        self.max_force_n = skin_limits().max_force_n
         self.stats = InputStats()
         self._last_t: float | None = None
         self._next_update: int | None = None  # index of the next update on the grid
+        self._pristine: dict | None = None  # state before the first sample (for reset)
 
     def feed(self, t_s: np.ndarray, force_n: np.ndarray) -> list[SlipEstimate]:
         """Take samples (any chunking) and return the updates that fell due."""
@@ -104,37 +221,84 @@ class Decoder:
         x = np.asarray(force_n, dtype=np.float64).ravel()
         if t.shape != x.shape:
             raise ValueError(f"{len(t)} times for {len(x)} samples")
+        if self._pristine is None:
+            self._pristine = self._state_copy(vars(self))
+        previous = self._last_t
         t, x = self._guard(t, x)
         if not len(t):
             return []
-        return self.process(t, x)
+        steps = np.diff(t, prepend=-np.inf if previous is None else previous)
+        out: list[SlipEstimate] = []
+        start = 0
+        for cut in np.nonzero(steps > self.gap_s)[0].tolist():
+            if cut > start:
+                out += self.process(t[start:cut], x[start:cut])
+            self.stats.gaps += 1
+            self.stats.longest_gap_s = max(self.stats.longest_gap_s, float(steps[cut]))
+            self._next_update = None  # the grid restarts at the first sample after the gap
+            self.reset()
+            start = cut
+        out += self.process(t[start:], x[start:])
+        return out
+
+    def reset(self) -> None:
+        """Forget the signal: called at a gap, before the first sample after it.
+
+        By default every attribute returns to its value before the first sample
+        (input statistics and the time of the last sample stay). A subclass may
+        override it to keep what a gap does not invalidate; it must forget every
+        contact, hypothesis, filter state and buffered sample.
+        """
+        if self._pristine is None:
+            return
+        state = self._state_copy(self._pristine)
+        for key in [k for k in vars(self) if k not in _BASE_STATE and k not in state]:
+            delattr(self, key)
+        vars(self).update(state)
+
+    def _state_copy(self, state: dict) -> dict:
+        """A deep copy of the subclass's attributes; references to the decoder stay to it."""
+        own = {k: v for k, v in state.items() if k not in _BASE_STATE}
+        return copy.deepcopy(own, {id(self): self})
 
     def _guard(self, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        stats = self.stats
         finite = np.isfinite(t) & np.isfinite(x)
-        self.stats.rejected_nonfinite += int(np.count_nonzero(~finite))
+        stats.rejected_nonfinite += int(np.count_nonzero(~finite))
         t, x = t[finite], x[finite]
+        usable = (np.abs(x) <= self.max_force_n) & (np.abs(t) <= self.max_time_s)
+        stats.rejected_range += int(np.count_nonzero(~usable))
+        t, x = t[usable], x[usable]
         if not len(t):
             return t, x
-        previous = -np.inf if self._last_t is None else self._last_t
-        running = np.maximum.accumulate(np.concatenate([[previous], t]))[:-1]
-        increasing = t > running
-        self.stats.rejected_time += int(np.count_nonzero(~increasing))
-        t, x = t[increasing], x[increasing]
+        keep = self._spaced(t)
+        stats.rejected_time += int(np.count_nonzero(~keep))
+        t, x = t[keep], x[keep]
         if len(t):
-            steps = np.diff(np.concatenate([[previous], t]))
-            self.stats.gaps += int(
-                np.count_nonzero(steps[np.isfinite(steps)] > GAP_PERIODS / self.fs_hz)
-            )
             self._last_t = float(t[-1])
-            self.stats.accepted += len(t)
+            stats.accepted += len(t)
         return t, x
+
+    def _spaced(self, t: np.ndarray) -> np.ndarray:
+        """Which samples come at least `min_step_s` after the previous accepted one."""
+        previous = -np.inf if self._last_t is None else self._last_t
+        if np.all(np.diff(t, prepend=previous) >= self.min_step_s):
+            return np.ones(len(t), dtype=bool)  # the usual case, without a loop
+        keep = np.zeros(len(t), dtype=bool)
+        for k, tk in enumerate(t.tolist()):
+            if tk - previous >= self.min_step_s:
+                keep[k] = True
+                previous = tk
+        return keep
 
     def update_points(self, t: np.ndarray) -> list[tuple[int, float]]:
         """Updates due within this chunk: (samples of the chunk at or before it, update time).
 
-        Updates fall on multiples of the update period, from the first sample on;
-        an update at time g reflects every sample with t <= g. The grid does not
-        depend on how the input is chunked.
+        Updates fall on multiples of the update period, from the first sample on
+        (and from the first sample after each gap); an update at time g reflects
+        every sample with t <= g. The grid does not depend on how the input is
+        chunked, and `feed` never hands a gap to `process`, so the grid spans at
+        most GAP_PERIODS sample periods per sample.
         """
         period = self.update_period_s
         if self._next_update is None:
@@ -148,7 +312,7 @@ class Decoder:
         return list(zip(counts.tolist(), grid.tolist(), strict=True))
 
     def process(self, t: np.ndarray, x: np.ndarray) -> list[SlipEstimate]:
-        """Decode accepted samples (finite, strictly increasing, after earlier ones)."""
+        """Decode accepted samples (finite, in range, spaced, no gap among them)."""
         raise NotImplementedError
 
 
@@ -157,21 +321,21 @@ class StaticForce:
 
     The corner (default 2 Hz) sits below the ridge-contact rates of a slip
     (v/D >= ~2 Hz for the thesis speeds), so pulses average out and grip
-    steps come through within a few hundred ms. Starts settled on the first sample.
+    steps come through within a few hundred ms. Starts settled on the first
+    sample. Runs on `filters.SosFilter`, the decoders' one streaming filter.
     """
 
     def __init__(self, fs_hz: float, corner_hz: float = 2.0):
-        from scipy.signal import butter, sosfilt_zi
+        from scipy.signal import butter
+
+        from grasplink.gateway.decoding.filters import SosFilter
 
         corner = min(corner_hz, 0.45 * fs_hz)
-        self._sos = butter(2, corner, fs=fs_hz, output="sos")
-        self._zi_unit = sosfilt_zi(self._sos)
-        self._zi: np.ndarray | None = None
+        self._filter = SosFilter(butter(2, corner, fs=fs_hz, output="sos"))
+
+    @property
+    def sos(self) -> np.ndarray:
+        return self._filter.sos
 
     def filter(self, x: np.ndarray) -> np.ndarray:
-        from scipy.signal import sosfilt
-
-        if self._zi is None:
-            self._zi = self._zi_unit * x[0]
-        y, self._zi = sosfilt(self._sos, x, zi=self._zi)
-        return y
+        return self._filter(x)

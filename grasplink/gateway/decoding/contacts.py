@@ -8,8 +8,8 @@ kink is also what survives when pulses merge at high speed (a new pulse
 starting on the decay of the previous one) and it is blind to the slow
 trends of the signal (drift, the object covering more of the sensor).
 
-Detector (all filters are FIR, run by lfilter's sample-by-sample loop with
-carried state, so chunking cannot change a single bit):
+Detector (all filters are FIR, run as `filters.SosFilter` - sample by sample
+with carried state, so chunking cannot change a single bit):
 
 * a bank of *hinge* filters, one per scale w (5, 10, 20, 40, 80 ms by
   default): h_w(n) = slope of x over [n, n + w] minus slope over [n - w, n]
@@ -45,14 +45,12 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy.signal import lfilter, lfilter_zi
+
+from grasplink.gateway.decoding.filters import SosFilter
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
 MEDIAN_TO_STD = 1.0 / 0.6745
-# FIR taps run through lfilter with a = [1, 0]: its sample-by-sample loop (the
-# plain FIR path convolves, and then chunking changes the rounding)
-_IIR_ONE = np.array([1.0, 0.0])
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
 
 
@@ -80,8 +78,7 @@ class PulseCheck(NamedTuple):
 @dataclass
 class _Channel:
     width: int  # w, samples
-    b: np.ndarray  # LS slope kernel over w + 1 samples, as lfilter taps
-    zi: np.ndarray | None = None
+    slope: SosFilter  # LS slope over the last w + 1 samples (FIR)
     after: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slopes not yet paired
     next_n: int = 0  # next hinge centre to compute
     hinge: list = field(default_factory=list)  # (hinge, after) of block 0 awaiting its noise
@@ -115,7 +112,7 @@ def _hinge_gain(width: int) -> float:
 
 
 def _slope_taps(width: int) -> np.ndarray:
-    """lfilter taps whose output at m is the LS slope of x[m - w .. m] (N/sample)."""
+    """FIR taps whose output at m is the LS slope of x[m - w .. m] (N/sample)."""
     k = np.arange(width + 1, dtype=np.float64) - width / 2.0
     kernel = k / float(np.sum(k * k))  # applied to x[n + 0 .. n + w]
     return kernel[::-1].copy()
@@ -145,7 +142,7 @@ class ContactDetector:
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
-        self.channels = [_Channel(w, _slope_taps(w)) for w in widths]
+        self.channels = [_Channel(w, SosFilter.fir(_slope_taps(w))) for w in widths]
         self.noise_blocks = int(noise_blocks)
         self.history_blocks = max(self.noise_blocks, round(history_s / block_s))
         self.threshold = float(threshold)
@@ -160,8 +157,7 @@ class ContactDetector:
         self.min_rise = max(1, round(0.005 * self.fs_hz))
         half = max(0, round(level_s * self.fs_hz / 2.0))
         self.level_half = half
-        self._level_b = np.full(2 * half + 1, 1.0 / (2 * half + 1))
-        self._level_zi: np.ndarray | None = None
+        self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
         self._n = 0  # samples received
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
         self._keep = keep
@@ -204,10 +200,7 @@ class ContactDetector:
 
     def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int, candidates: list) -> None:
         w = ch.width
-        a = _IIR_ONE
-        if ch.zi is None:  # as if the first sample had been held before: slopes start at 0
-            ch.zi = lfilter_zi(ch.b, a) * x[0]
-        y, ch.zi = lfilter(ch.b, a, x, zi=ch.zi)
+        y = ch.slope(x)  # settled: as if the first sample had been held before (slopes 0)
         # y[m] is the slope over [m - w, m], i.e. "after" of centre n = m - w; `after`
         # holds the slopes of centres ch.next_n - w, ...; hinge(n) = after(n) - after(n - w).
         after = np.concatenate([ch.after, y]) if len(ch.after) else y
@@ -370,10 +363,7 @@ class ContactDetector:
 
     # ------------------------------------------------------------------ pulse checks
     def _run_level(self, x: np.ndarray) -> None:
-        a = _IIR_ONE
-        if self._level_zi is None:
-            self._level_zi = lfilter_zi(self._level_b, a) * x[0]
-        y, self._level_zi = lfilter(self._level_b, a, x, zi=self._level_zi)
+        y = self._level_filter(x)
         # y[m] is the mean of x[m - 2h .. m]: the level centred on m - h.
         self._level = np.concatenate([self._level, y])
 

@@ -1,8 +1,10 @@
 """Streaming signal blocks shared by the skin decoders, all chunk-invariant.
 
-* `SosFilter` -- a Butterworth filter in second-order sections with carried
-  state, starting settled on the first sample (a DC offset of +50 N gives
-  no start-up transient). Second-order sections, not a transfer function:
+* `SosFilter` -- the one streaming filter every decoder uses (band-passes,
+  the static-force low-pass, the contact detector's FIR kernels): second-order
+  sections with carried state, starting settled on the first sample (a DC
+  offset of +50 N gives no start-up transient). Second-order sections, not a
+  transfer function:
   a 4th-order 0.3-3 Hz band-pass at 1 kHz has poles within ~1e-3 of z = 1,
   and the (b, a) polynomial form loses them to rounding (see
   `transfer_function_is_unstable` and tests/decoding/test_stability.py).
@@ -65,24 +67,70 @@ def transfer_function_is_unstable(b: np.ndarray, a: np.ndarray) -> bool:
 
 
 class SosFilter:
-    """`sosfilt` with carried state; starts settled on the first sample it sees."""
+    """The decoders' one streaming filter: second-order sections with carried state.
+
+    IIR designs (Butterworth band-pass, the static-force low-pass) and FIR
+    kernels (`SosFilter.fir`: the contact detector's slope and level
+    kernels) run through the same direct-form II transposed recursion,
+    sample by sample, so feeding a signal in pieces gives bit-identical
+    output to feeding it at once. The filter starts settled on the first
+    sample it sees (a DC offset of +50 N gives no start-up transient);
+    `reset` forgets the state (after a gap).
+
+    Small pieces (a CAN frame brings 1-3 samples) run the recursion in
+    Python - scipy's `sosfilt` costs ~20 us per call in argument checks,
+    more than the arithmetic - with exactly sosfilt's operations in
+    sosfilt's order, so the two paths give the same bits.
+    """
+
+    PYTHON_WORK = 24  # samples x sections up to which the Python loop is the cheaper path
 
     def __init__(self, sos: np.ndarray):
-        self.sos = np.asarray(sos, dtype=np.float64)
+        self.sos = np.ascontiguousarray(np.atleast_2d(np.asarray(sos, dtype=np.float64)))
+        if self.sos.ndim != 2 or self.sos.shape[1] != 6 or not len(self.sos):
+            raise ValueError(f"sos must have shape (sections, 6), got {self.sos.shape}")
+        self._rows = [tuple(float(c) for c in row) for row in self.sos]
         self._zi_unit = signal.sosfilt_zi(self.sos)
         self._zi: np.ndarray | None = None
+
+    @classmethod
+    def fir(cls, taps: np.ndarray) -> SosFilter:
+        """An FIR filter (y[n] = sum taps[k] x[n - k]) as zero-pole second-order sections."""
+        taps = np.asarray(taps, dtype=np.float64)
+        if taps.ndim != 1 or not len(taps):
+            raise ValueError("FIR taps must be a non-empty 1-D array")
+        if len(taps) == 1:
+            return cls(np.array([[taps[0], 0.0, 0.0, 1.0, 0.0, 0.0]]))
+        return cls(signal.tf2sos(taps, np.concatenate([[1.0], np.zeros(len(taps) - 1)])))
+
+    @property
+    def sections(self) -> int:
+        return len(self._rows)
 
     def reset(self) -> None:
         """Forget the state; the next sample settles the filter again (after a gap)."""
         self._zi = None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
         if not len(x):
             return np.zeros(0)
         if self._zi is None:
             self._zi = self._zi_unit * x[0]
-        y, self._zi = signal.sosfilt(self.sos, x, zi=self._zi)
-        return y
+        if len(x) * len(self._rows) > self.PYTHON_WORK:
+            y, self._zi = signal.sosfilt(self.sos, x, zi=self._zi)
+            return y
+        state = self._zi.tolist()
+        out = []
+        for value in x.tolist():
+            for (b0, b1, b2, _, a1, a2), z in zip(self._rows, state, strict=True):
+                y = b0 * value + z[0]
+                z[0] = b1 * value - a1 * y + z[1]
+                z[1] = b2 * value - a2 * y
+                value = y
+            out.append(value)
+        self._zi = np.array(state)
+        return np.array(out)
 
 
 @dataclass(frozen=True, slots=True)

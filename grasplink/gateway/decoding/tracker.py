@@ -234,9 +234,7 @@ class TrackerDecoder(Decoder):
         # a contact is known this late: the detector's own delay, then the block's end
         self._max_latency = (self.detector.lag + self._block) / self.fs_hz
         self._min_latency = (2.0 * self.detector.channels[0].width + self._block / 2) / self.fs_hz
-        self._static = StaticForce(fs_hz)  # its design (2nd-order Butterworth at 2 Hz)
-        self._sos = [tuple(float(c) for c in row) for row in self._static._sos]
-        self._zi: list[list[float]] | None = None
+        self._static = StaticForce(fs_hz)
         self._n_in = 0  # samples taken by the detector
         self._n_seen = 0  # samples accepted
         self._pending_t = np.zeros(0)
@@ -260,7 +258,7 @@ class TrackerDecoder(Decoder):
 
     # ------------------------------------------------------------------ streaming
     def process(self, t: np.ndarray, x: np.ndarray) -> list[SlipEstimate]:
-        force = self._filter_force(x)
+        force = self._static.filter(x)
         points = self.update_points(t)
         base = self._n_seen
         self._n_seen += len(t)
@@ -269,29 +267,10 @@ class TrackerDecoder(Decoder):
         out: list[SlipEstimate] = []
         for count, g in points:
             if count > 0:
-                self._force = force[count - 1]
+                self._force = float(force[count - 1])
             self._run_detector(base + count)
             out.append(self._report(g))
-        self._force = force[-1]
-        return out
-
-    def _filter_force(self, x: np.ndarray) -> list[float]:
-        """base.StaticForce's low-pass, run sample by sample (cheap for the few samples a
-        CAN frame brings; the same arithmetic whatever the chunking)."""
-        sos = self._sos
-        if self._zi is None:
-            self._zi = [
-                [float(z) * float(x[0]) for z in section] for section in self._static._zi_unit
-            ]
-        zi = self._zi
-        out = []
-        for value in x.tolist():
-            for (b0, b1, b2, _, a1, a2), z in zip(sos, zi, strict=True):
-                y = b0 * value + z[0]
-                z[0] = b1 * value - a1 * y + z[1]
-                z[1] = b2 * value - a2 * y
-                value = y
-            out.append(value)
+        self._force = float(force[-1])
         return out
 
     def _run_detector(self, received: int) -> None:
