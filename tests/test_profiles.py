@@ -427,13 +427,14 @@ def test_parse_layout_accepts_names_and_spacings(text: str, expected: tuple[floa
         ("", "empty"),
         ("   ", "empty"),
         ("alpha0.2", "valid names: alpha0.1, alpha0.3"),
-        ("4,0,5", "'0' must be > 0"),
-        ("4,-3", "'-3' must be > 0"),
+        ("4,0,5", "'0' must be 0.1..1000 mm"),
+        ("4,-3", "'-3' must be 0.1..1000 mm"),
         ("4,nan", "'nan' is not a finite"),
         ("4,inf", "'inf' is not a finite"),
         ("4,x,5", "'x' is not a number"),
         ("4,,5", "#2 is empty"),
-        ("0", "must be > 0"),
+        ("0", "must be 0.1..1000 mm"),
+        ("1e300,1", "'1e300' must be 0.1..1000 mm"),
     ],
 )
 def test_parse_layout_rejects_bad_input_naming_the_value(text: str, message: str) -> None:

@@ -120,3 +120,24 @@ class DriveStateMachine:
         if internal_limit:
             word |= SW_INTERNAL_LIMIT
         return word
+
+
+# Statusword -> state (CiA 402, table "state coding"): (mask, value) per state.
+_STATE_CODING: tuple[tuple[int, int, DriveState], ...] = (
+    (0x4F, 0x00, DriveState.NOT_READY_TO_SWITCH_ON),
+    (0x4F, 0x40, DriveState.SWITCH_ON_DISABLED),
+    (0x6F, 0x21, DriveState.READY_TO_SWITCH_ON),
+    (0x6F, 0x23, DriveState.SWITCHED_ON),
+    (0x6F, 0x27, DriveState.OPERATION_ENABLED),
+    (0x6F, 0x07, DriveState.QUICK_STOP_ACTIVE),
+    (0x4F, 0x0F, DriveState.FAULT_REACTION_ACTIVE),
+    (0x4F, 0x08, DriveState.FAULT),
+)
+
+
+def state_of(statusword: int) -> DriveState | None:
+    """The drive state a statusword reports (None for a coding CiA 402 does not define)."""
+    for mask, value, state in _STATE_CODING:
+        if statusword & mask == value:
+            return state
+    return None

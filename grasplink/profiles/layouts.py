@@ -36,6 +36,10 @@ CUSTOM_PRESET = 0
 MAX_NODE_SPACINGS = 40
 
 
+MIN_SPACING_MM = 0.1
+MAX_SPACING_MM = 1000.0
+
+
 def parse_layout(text: str) -> tuple[float, ...]:
     """Turn a layout name or "19,12,5" (mm) into spacings in mm.
 
@@ -82,6 +86,9 @@ def _parse_spacing(item: str, position: int) -> float:
         raise ConfigError(f"ridge spacing #{position} {item!r} is not a number (mm)") from None
     if not math.isfinite(value):
         raise ConfigError(f"ridge spacing #{position} {item!r} is not a finite number")
-    if value <= 0:
-        raise ConfigError(f"ridge spacing #{position} {item!r} must be > 0 mm")
+    if not MIN_SPACING_MM <= value <= MAX_SPACING_MM:
+        raise ConfigError(
+            f"ridge spacing #{position} {item!r} must be {MIN_SPACING_MM:g}..{MAX_SPACING_MM:g} mm "
+            "(a ridge is wider than 0.1 mm; a fingertip or palm skin is far shorter than 1 m)"
+        )
     return value
