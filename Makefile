@@ -74,6 +74,7 @@ docs: setup
 bench: setup
 	$(PY) benchmarks/bench_network.py
 	$(PY) benchmarks/bench_scenes.py
+	$(PY) benchmarks/bench_decoding.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
