@@ -23,8 +23,8 @@ from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import PRESET_CODES, spacings_um
 
 COB_ID_INVALID = 0x80000000
-PDO_COMM_RANGES = ((0x1400, 0x1600), (0x1800, 0x1A00))  # RPDO, TPDO communication objects
-MAPPING_OFFSET = 0x200
+# (first communication object, first mapping object) of the RPDOs and of the TPDOs
+PDO_OBJECTS = ((obj.RPDO_COMM, obj.RPDO_MAP), (obj.TPDO_COMM, obj.TPDO_MAP))
 
 
 @dataclass(frozen=True)
@@ -81,9 +81,9 @@ class Provisioner:
     def _pdo_mappings(self) -> list[SdoWrite]:
         """Every PDO the profile defines, set back to its EDS mapping (CiA 301 7.5.2.36)."""
         out: list[SdoWrite] = []
-        for low, high in PDO_COMM_RANGES:
-            for comm in (i for i in sorted(self.od.indices) if low <= i < high):
-                mapping = comm + MAPPING_OFFSET
+        for comm_base, map_base in PDO_OBJECTS:
+            for comm in (i for i in sorted(self.od.indices) if comm_base <= i < map_base):
+                mapping = map_base + (comm - comm_base)
                 if mapping not in self.od:
                     continue
                 cob_id = int(self._entry(comm, 1).default)
