@@ -32,7 +32,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="reduced synthetic grid (< 2 min)")
     parser.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/")
-    parser.add_argument("--scenes", type=Path, default=None, help="default: scenes/")
+    parser.add_argument(
+        "--scenes", type=Path, default=None, help="default: scenes/ of the checkout"
+    )
     args = parser.parse_args(argv)
     try:
         results, out = run_benchmark(

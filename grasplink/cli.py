@@ -162,7 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         default=None,
         metavar="DIR",
-        help="folder with the slip scenes for the CAN path (default: scenes/ of that checkout)",
+        help="folder with the slip scenes for the CAN path (default: scenes/ of that "
+        "checkout, else of the checkout grasplink is installed from in editable mode)",
     )
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")

@@ -22,9 +22,11 @@ import os
 import tempfile
 import time
 import tomllib
+import urllib.parse
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from importlib import metadata
 from pathlib import Path
 
 from grasplink.errors import ConfigError
@@ -110,8 +112,38 @@ def default_out_dir(cwd: Path | None = None) -> Path:
 
 
 def default_scenes_dir(cwd: Path | None = None) -> Path:
-    """scenes/ of the checkout the current folder is in; ConfigError asks for --scenes."""
-    return _checkout("the shipped scenes", "--scenes DIR", cwd) / "scenes"
+    """scenes/ of the checkout the current folder is in, else of the editable install's.
+
+    ConfigError asks for --scenes when neither is a grasplink checkout.
+    """
+    start = (cwd or Path.cwd()).resolve()
+    root = find_checkout(start) or editable_checkout()
+    if root is None:
+        raise ConfigError(
+            f"no grasplink source checkout at or above {start}, nor an editable install, "
+            "to take the shipped scenes from; give --scenes DIR"
+        )
+    return root / "scenes"
+
+
+def editable_checkout() -> Path | None:
+    """The source checkout grasplink is installed from in editable mode (pip's direct_url.json).
+
+    Every grasplink distribution on the path is asked: a checkout's own
+    grasplink.egg-info (no direct_url.json) may come first.
+    """
+    for dist in metadata.distributions(name=PROJECT):
+        try:
+            info = json.loads(dist.read_text("direct_url.json") or "{}")
+        except ValueError:
+            continue
+        url = urllib.parse.urlparse(str(info.get("url", "")))
+        if not info.get("dir_info", {}).get("editable") or url.scheme != "file":
+            continue
+        root = Path(urllib.parse.unquote(url.path))
+        if find_checkout(root) == root:
+            return root
+    return None
 
 
 def slip_scenes(folder: Path) -> list[Path]:
