@@ -54,6 +54,7 @@ def positive_hz(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S
     from grasplink.bus.url import DEFAULT_BUS_URL, DEFAULT_HUB_PORT
     from grasplink.profiles import DEVICE_KINDS
 
@@ -78,6 +79,14 @@ def build_parser() -> argparse.ArgumentParser:
         type=positive_seconds,
         default=None,
         help="stop after this many seconds (default: run until Ctrl-C)",
+    )
+    node.add_argument(
+        "--reconnect-timeout",
+        type=reconnect_seconds,
+        default=DEFAULT_RECONNECT_TIMEOUT_S,
+        metavar="S",
+        help="when the bus is lost, retry with back-off for this long, then exit 1 "
+        f"(default {DEFAULT_RECONNECT_TIMEOUT_S:g}; 0: one attempt)",
     )
 
     bus = sub.add_parser("bus", help="bus tools")
@@ -177,10 +186,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def reconnect_seconds(text: str) -> float:
+    """--reconnect-timeout: seconds >= 0 (0: a single attempt, then give up)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"reconnect timeout must be >= 0 seconds, got {text}")
+    return value
+
+
 def cmd_node(args: argparse.Namespace) -> int:
     from grasplink.bus import NodeRunner, open_bus
     from grasplink.core.frames import HEARTBEAT_BASE
     from grasplink.devices.factory import build_node
+    from grasplink.errors import BusError
 
     node = build_node(args.kind, args.node_id)
     bus = open_bus(args.bus)
@@ -189,12 +210,22 @@ def cmd_node(args: argparse.Namespace) -> int:
         stop = threading.Event()
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, lambda *_: stop.set())
-        with NodeRunner(bus, [node]) as runner:
+        # A lost bus is reopened from the same URL with back-off; the node keeps its
+        # state meanwhile, like a CAN node whose bus comes back (docs/buses.md).
+        with NodeRunner(
+            bus,
+            [node],
+            name=f"{args.kind} node 0x{node.node_id:02X}",
+            reopen=lambda: open_bus(args.bus),
+            reconnect_timeout_s=args.reconnect_timeout,
+        ) as runner:
             print(f"{args.kind} node 0x{node.node_id:02X} running on {args.bus}", flush=True)
             deadline = None if args.duration is None else time.monotonic() + args.duration
             heartbeat_id = HEARTBEAT_BASE + node.node_id
             try:
                 while not stop.wait(0.1):
+                    if runner.failure is not None:
+                        raise runner.failure
                     if runner.stats.rx_by_cob_id[heartbeat_id]:
                         raise ConfigError(
                             f"another node with node-ID 0x{node.node_id:02X} "
@@ -204,6 +235,9 @@ def cmd_node(args: argparse.Namespace) -> int:
                         break
             except KeyboardInterrupt:
                 pass
+            down_s = runner.outage_s
+            if down_s is not None:
+                raise BusError(f"stopped while {args.bus} was down ({down_s:.1f} s)")
             stats = runner.stats
         print(f"stopped: {stats.frames_tx} frames sent, {stats.frames_rx} received", flush=True)
     finally:

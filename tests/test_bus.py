@@ -30,6 +30,7 @@ from grasplink.bus import url as bus_url
 from grasplink.bus.hub import CanHub
 from grasplink.bus.load import BusLoadMeter, frame_bits_worst_case, frame_time_us
 from grasplink.bus.options import accepted_options
+from grasplink.bus.reconnect import Backoff
 from grasplink.bus.runner import NodeRunner
 from grasplink.bus.url import (
     BusSpec,
@@ -704,7 +705,7 @@ def test_runner_over_hub_between_processes_style_clients(hub: CanHub, closing) -
 
 
 @pytest.mark.slow
-def test_runner_outlives_its_hub_without_spinning(closing) -> None:
+def test_runner_without_reopen_gives_up_when_its_hub_connection_closes(closing) -> None:
     running = CanHub("127.0.0.1", 0).start()
     try:
         bus = closing(open_bus(running.url))
@@ -712,14 +713,146 @@ def test_runner_outlives_its_hub_without_spinning(closing) -> None:
         with NodeRunner(bus, [ticker]) as runner:
             wait_for(lambda: len(ticker.fired) >= 2)
             running.stop()
-            wait_for(lambda: runner.stats.bus_errors >= 1 and runner.stats.send_errors >= 1)
-            errors_before, fired_before = runner.stats.bus_errors, len(ticker.fired)
-            time.sleep(0.2)
-            assert runner.running
-            assert runner.stats.bus_errors - errors_before < 100  # paced, not a hot loop
-            assert len(ticker.fired) > fired_before  # timers keep running
+            wait_for(lambda: not runner.running)
+            assert isinstance(runner.failure, BusError)
+            assert str(runner.failure).startswith(f"lost the bus ws://127.0.0.1:{running.port}/")
+            assert "cannot reopen it" in str(runner.failure)
     finally:
         running.stop()
+
+
+class FlakyBus:
+    """A virtual bus whose receive fails while `broken` is set (a controller gone bus-off)."""
+
+    def __init__(self, url: str) -> None:
+        self.inner = open_bus(url)
+        self.channel = url
+        self.broken = threading.Event()
+        self.recv_calls = 0
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        self.recv_calls += 1
+        if self.broken.is_set():
+            raise can.CanOperationError("bus-off")
+        return self.inner.recv(timeout)
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.inner.send(msg, timeout)
+
+    def shutdown(self) -> None:
+        self.inner.shutdown()
+
+
+def test_runner_retries_a_failing_bus_with_back_off_and_resumes(closing, caplog) -> None:
+    url = unique_virtual_url()
+    flaky = FlakyBus(url)
+    outside = closing(open_bus(url))
+    ticker = Ticker(1, period_us=10_000)
+    try:
+        with NodeRunner(flaky, [ticker], first_retry_s=0.05) as runner:
+            recv_until(outside, has(0x181))
+            flaky.broken.set()
+            wait_for(lambda: runner.outage_s is not None)
+            calls = flaky.recv_calls
+            time.sleep(0.5)  # attempts at 0.05, +0.1, +0.2 s: three reads, not a poll loop
+            assert 2 <= flaky.recv_calls - calls <= 4
+            assert runner.stats.offline_drops > 0  # ticks went on, their frames were dropped
+            flaky.broken.clear()
+            wait_for(lambda: runner.outage_s is None)
+            fired = len(ticker.fired)
+            frames = recv_until(outside, lambda fs: any(f.can_id == 0x181 for f in fs[1:]))
+            assert int.from_bytes(frames[-1].data, "little") > fired - 2  # its count went on
+            assert runner.stats.reconnects == 1 and runner.failure is None
+    finally:
+        flaky.shutdown()
+    messages = [r.getMessage() for r in caplog.records]
+    assert sum("lost the bus" in m for m in messages) == 1
+    assert any("reconnect attempt 1 failed (bus-off); next attempt in 0.1 s" in m for m in messages)
+    assert any("back after" in m and "kept their state" in m for m in messages)
+
+
+@pytest.mark.slow
+def test_runner_reconnects_to_a_hub_restarted_on_the_same_port(closing, caplog) -> None:
+    first = CanHub("127.0.0.1", 0).start()
+    port = first.port
+    second: CanHub | None = None
+    try:
+        bus = closing(open_bus(first.url))
+        ticker = Ticker(1, period_us=200_000)
+        runner = NodeRunner(bus, [ticker], reopen=lambda: open_bus(first.url), first_retry_s=0.05)
+        with runner:
+            wait_for(lambda: len(ticker.fired) >= 1)
+            first.stop()
+            wait_for(lambda: runner.stats.bus_errors >= 1)
+            time.sleep(0.2)
+            cpu_before, wall_before = time.process_time(), time.monotonic()
+            time.sleep(1.0)
+            cpu_share = (time.process_time() - cpu_before) / (time.monotonic() - wall_before)
+            assert cpu_share < 0.05  # asleep between attempts, not polling a dead socket
+            assert runner.running and runner.outage_s is not None
+            second = CanHub("127.0.0.1", port).start()
+            outside = closing(open_bus(second.url))
+            frames = recv_until(outside, has(0x181), timeout=10)
+            assert runner.stats.reconnects == 1 and runner.failure is None
+            assert 0x701 not in {f.can_id for f in frames}  # no second boot-up: state kept
+            assert int.from_bytes(frames[-1].data, "little") >= 5  # its tick count went on
+    finally:
+        first.stop()
+        if second is not None:
+            second.stop()
+    messages = [r.getMessage() for r in caplog.records]
+    assert sum("lost the bus" in m for m in messages) == 1
+    assert any(
+        re.search(r"reconnect attempt \d+ failed \(no CAN hub at .*next attempt in", m)
+        for m in messages
+    )
+
+
+@pytest.mark.slow
+def test_runner_gives_up_after_the_reconnect_timeout(closing) -> None:
+    running = CanHub("127.0.0.1", 0).start()
+    try:
+        bus = closing(open_bus(running.url))
+        runner = NodeRunner(
+            bus, [Ticker(1)], reopen=lambda: open_bus(running.url), reconnect_timeout_s=0.5
+        )
+        with runner:
+            stopping = time.monotonic()  # the connection is lost after this
+            running.stop()
+            wait_for(lambda: not runner.running)
+            assert 0.5 <= time.monotonic() - stopping <= 3.0
+    finally:
+        running.stop()
+    assert isinstance(runner.failure, BusError)
+    text = str(runner.failure)
+    assert "could not get it back within 0.5 s" in text
+    assert "no CAN hub at" in text and "\n" not in text
+
+
+def test_backoff_doubles_up_to_its_cap_and_ends_on_the_deadline() -> None:
+    backoff = Backoff(lost_at_us=1_000, timeout_us=20_000_000)
+    assert backoff.next_attempt_us == 101_000
+    delays, t_us = [], backoff.next_attempt_us
+    while (delay := backoff.failed(t_us)) is not None:
+        delays.append(delay)
+        t_us = backoff.next_attempt_us
+    assert delays == [
+        200_000,
+        400_000,
+        800_000,
+        1_600_000,
+        3_200_000,
+        5_000_000,
+        5_000_000,
+        3_700_000,
+    ]  # the last attempt exactly at the deadline
+    assert t_us == backoff.deadline_us == 20_001_000 and backoff.attempts == 9
+
+
+def test_backoff_with_zero_timeout_makes_one_attempt() -> None:
+    backoff = Backoff(lost_at_us=5, timeout_us=0)
+    assert backoff.due(5)
+    assert backoff.failed(5) is None
 
 
 # -- bus load -------------------------------------------------------------------------

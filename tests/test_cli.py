@@ -2,16 +2,22 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import queue
+import re
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
+import can
 import canopen
 import pytest
 
 from grasplink.bus import CanHub
+from grasplink.core.nmt import NmtState
 from grasplink.demo import run_demo
 from grasplink.profiles import eds_path
 
@@ -155,3 +161,166 @@ def test_second_node_with_the_same_id_refuses_to_start(hub):
     finally:
         first.terminate()
         first.wait(10)
+
+
+# -- a node whose hub goes away ----------------------------------------------------------
+
+
+class _Lines:
+    """A process's output lines, read by a thread so a test can wait without blocking."""
+
+    def __init__(self, stream) -> None:
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.seen: list[str] = []
+        self._thread = threading.Thread(
+            target=lambda: [self.lines.put(line) for line in stream], daemon=True
+        )
+        self._thread.start()
+
+    def wait_for(self, pattern: str, timeout_s: float = 15) -> re.Match:
+        deadline = time.monotonic() + timeout_s
+        for line in self.seen:
+            if found := re.search(pattern, line):
+                return found
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                line = self.lines.get(timeout=left)
+            except queue.Empty:
+                break
+            self.seen.append(line)
+            if found := re.search(pattern, line):
+                return found
+        raise AssertionError(f"no line matching {pattern!r} in {self.seen}")
+
+
+def _spawn(*args: str) -> tuple[subprocess.Popen, _Lines, _Lines]:
+    proc = subprocess.Popen(
+        [*GRASPLINK, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    return proc, _Lines(proc.stdout), _Lines(proc.stderr)
+
+
+def _hub_process(port: int = 0) -> tuple[subprocess.Popen, int]:
+    proc, out, _ = _spawn("bus", "hub", "--port", str(port))
+    found = out.wait_for(r"listening on 127\.0\.0\.1:(\d+)")
+    return proc, int(found.group(1))
+
+
+def _end(*procs: subprocess.Popen) -> None:
+    for proc in procs:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(10)
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _wait_heartbeat(bus, node_id: int, timeout_s: float = 10) -> bytes:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        msg = bus.recv(0.2)
+        if msg is not None and msg.arbitration_id == 0x700 + node_id:
+            return bytes(msg.data)
+    raise AssertionError(f"no heartbeat from node 0x{node_id:02X}")
+
+
+@pytest.mark.slow
+def test_node_reconnects_to_a_hub_restarted_on_the_same_port_and_keeps_its_state():
+    hub, port = _hub_process()
+    url = f"remote:ws://127.0.0.1:{port}/"
+    node, out, err = _spawn("node", "skin", "--bus", url, "--duration", "60")
+    restarted = None
+    try:
+        out.wait_for("running on")
+        with closing_bus(url) as master:
+            master.send(can.Message(arbitration_id=0x000, data=[0x01, 0x10], is_extended_id=False))
+            while _wait_heartbeat(master, 0x10) != bytes([NmtState.OPERATIONAL]):
+                pass
+        hub.kill()  # no goodbye: the node finds a dead socket
+        hub.wait(10)
+        err.wait_for(r"lost the bus ws://127\.0\.0\.1:\d+/ .*; reconnecting for up to 60 s")
+        err.wait_for(r"reconnect attempt 2 failed \(no CAN hub at .*\); next attempt in 0\.4 s")
+        cpu_before, wall_before = _cpu_s(node.pid), time.monotonic()
+        time.sleep(2)
+        cpu_share = (_cpu_s(node.pid) - cpu_before) / (time.monotonic() - wall_before)
+        assert cpu_share < 0.25, f"{cpu_share:.0%} of a core while the hub is down"
+        restarted, _ = _hub_process(port)
+        err.wait_for(r"back after [\d.]+ s and \d+ failed attempt\(s\); the devices kept", 15)
+        with closing_bus(url) as watcher:  # still OPERATIONAL: no reboot, no boot-up
+            assert _wait_heartbeat(watcher, 0x10) == bytes([NmtState.OPERATIONAL])
+        node.terminate()
+        assert node.wait(10) == 0
+        out.wait_for(r"stopped: \d+ frames sent")
+    finally:
+        _end(node, hub, *([restarted] if restarted else []))
+    assert not any("Traceback" in line for line in err.seen)
+
+
+@pytest.mark.slow
+def test_node_gives_up_when_the_hub_stays_away_and_exits_1():
+    hub, port = _hub_process()
+    url = f"remote:ws://127.0.0.1:{port}/"
+    node, out, err = _spawn("node", "belt", "--bus", url, "--reconnect-timeout", "1")
+    try:
+        out.wait_for("running on")
+        hub.kill()
+        hub.wait(10)
+        killed = time.monotonic()
+        assert node.wait(15) == 1
+        assert 1.0 <= time.monotonic() - killed <= 8
+        found = err.wait_for(r"^grasplink: error: lost the bus .* within 1 s \(\d+ attempts; last")
+        assert found.string == err.seen[-1]  # one line, the last
+    finally:
+        _end(node, hub)
+
+
+@pytest.mark.slow
+def test_node_stopped_while_its_hub_is_down_exits_1():
+    hub, port = _hub_process()
+    url = f"remote:ws://127.0.0.1:{port}/"
+    node, out, err = _spawn("node", "emg", "--bus", url)
+    try:
+        out.wait_for("running on")
+        hub.kill()
+        hub.wait(10)
+        err.wait_for("reconnect attempt 1 failed")
+        node.terminate()
+        assert node.wait(10) == 1
+        err.wait_for(rf"^grasplink: error: stopped while {re.escape(url)} was down \([\d.]+ s\)")
+    finally:
+        _end(node, hub)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("-1", "reconnect timeout must be >= 0 seconds, got -1"),
+        ("inf", "reconnect timeout must be >= 0 seconds, got inf"),
+        ("soon", "'soon' is not a number of seconds"),
+    ],
+)
+def test_reconnect_timeout_must_be_seconds_from_zero(value, message):
+    result = run_cli("node", "skin", "--reconnect-timeout", value)
+    assert result.returncode == 2
+    assert f"argument --reconnect-timeout: {message}" in result.stderr, result.stderr
+
+
+@contextlib.contextmanager
+def closing_bus(url: str):
+    from grasplink.bus import open_bus
+
+    bus = open_bus(url)
+    try:
+        yield bus
+    finally:
+        bus.shutdown()

@@ -6,6 +6,7 @@ from grasplink.bus.runner import NodeRunner, RunnerStats
 from grasplink.bus.url import (
     DEFAULT_BUS_URL,
     DEFAULT_HUB_PORT,
+    BusDisconnected,
     BusSpec,
     frame_to_message,
     message_to_frame,
@@ -17,6 +18,7 @@ from grasplink.bus.url import (
 __all__ = [
     "DEFAULT_BUS_URL",
     "DEFAULT_HUB_PORT",
+    "BusDisconnected",
     "BusLoadMeter",
     "BusSpec",
     "CanHub",

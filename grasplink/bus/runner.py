@@ -13,9 +13,11 @@ from dataclasses import dataclass, field
 
 import can
 
-from grasplink.bus.url import frame_to_message, message_to_frame
+from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S, FIRST_DELAY_US, Backoff
+from grasplink.bus.url import BusDisconnected, frame_to_message, message_to_frame
 from grasplink.core.frames import Frame
 from grasplink.core.protocol import SansIoDevice
+from grasplink.errors import BusError
 
 logger = logging.getLogger(__name__)
 
@@ -42,6 +44,8 @@ class RunnerStats:
     send_errors: int = 0
     bus_errors: int = 0  # bus.recv() failures
     device_errors: int = 0  # exceptions raised by a device
+    offline_drops: int = 0  # frames not sent because the bus was down
+    reconnects: int = 0  # outages that ended with the bus back
 
 
 class NodeRunner:
@@ -57,6 +61,21 @@ class NodeRunner:
     The bus should not echo own frames (``receive_own_messages=False``);
     echoes that python-can marks as such (``is_rx=False``) are ignored.
     The caller owns the bus: `stop` does not shut it down.
+
+    A bus that fails is an outage, logged once. The devices keep running on
+    their own timers, as a node's firmware does while its CAN controller is
+    cut off; what they send meanwhile is dropped, not queued (stale data
+    would flood the bus when it returns). The runner retries with bounded
+    exponential back-off (`bus.reconnect.Backoff`), logging each attempt
+    and the delay to the next: a bus handle that is gone for good
+    (`BusDisconnected`, a closed hub connection) is replaced by ``reopen()``,
+    any other failing bus is simply read again. When the bus is back the
+    devices carry on with the state they have (no reboot, like a CAN node
+    whose bus returns); after ``reconnect_timeout_s`` without it, or at once
+    for a dead handle with no ``reopen``, the thread ends and `failure`
+    holds a `BusError` saying why. While the bus is down the thread sleeps
+    until the next device deadline or attempt: it never polls a dead bus.
+    Buses ``reopen`` returned are the runner's, shut down by `stop`.
     """
 
     def __init__(
@@ -69,9 +88,14 @@ class NodeRunner:
         submit_queue_size: int = 256,
         cascade_limit: int = 1000,
         name: str = "grasplink-node-runner",
+        reopen: Callable[[], can.BusABC] | None = None,
+        reconnect_timeout_s: float = DEFAULT_RECONNECT_TIMEOUT_S,
+        first_retry_s: float = FIRST_DELAY_US / 1e6,
     ) -> None:
         if not devices:
             raise ValueError("NodeRunner needs at least one device")
+        if not 0 <= reconnect_timeout_s < float("inf") or not first_retry_s > 0:
+            raise ValueError("reconnect_timeout_s must be >= 0 and first_retry_s > 0")
         self.bus = bus
         self.devices = list(devices)
         self._clock = clock_us or monotonic_us
@@ -84,9 +108,16 @@ class NodeRunner:
         self._stop = threading.Event()
         self._booted = threading.Event()
         self._thread: threading.Thread | None = None
-        self._bus_failing = False
         self._send_failing = False
         self._backoff_until: dict[int, int] = {}  # id(device) -> µs; after it raised
+        self._reopen = reopen
+        self._reconnect_timeout_us = round(reconnect_timeout_s * 1e6)
+        self._first_retry_us = max(1, round(first_retry_s * 1e6))
+        self._outage: Backoff | None = None  # set while the bus is down
+        self._bus_dead = False  # the current handle is gone for good: only reopen() helps
+        self._last_bus_error = ""
+        self._owned: can.BusABC | None = None  # the bus reopen() gave us, ours to shut down
+        self.failure: BusError | None = None  # why the runner gave up on its bus
 
     # -- control (any thread) -------------------------------------------------
 
@@ -107,10 +138,20 @@ class NodeRunner:
             thread.join(timeout)
             if thread.is_alive():
                 logger.warning("%s did not stop within %.1f s", self._name, timeout)
+                return
+        owned, self._owned = self._owned, None
+        if owned is not None:
+            owned.shutdown()
 
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def outage_s(self) -> float | None:
+        """Seconds the bus has been down, or None while it works."""
+        outage = self._outage
+        return None if outage is None else outage.down_us(self._clock()) / 1e6
 
     def submit(self, frame: Frame, *, to_bus: bool = True) -> bool:
         """Inject a frame from another thread, as if a local tool transmitted it.
@@ -152,7 +193,7 @@ class NodeRunner:
             self._dispatch(boot, now)
         finally:
             self._booted.set()
-        while not self._stop.is_set():
+        while not self._stop.is_set() and self.failure is None:
             try:
                 self._step()
             except Exception:  # never let one bad cycle kill the node
@@ -161,6 +202,12 @@ class NodeRunner:
 
     def _step(self) -> None:
         now = self._clock()
+        outage = self._outage
+        if outage is not None and self._bus_dead and outage.due(now):
+            self._reopen_bus(outage, now)
+            if self.failure is not None:
+                return
+            now = self._clock()
         wait_s = self._max_wait_s
         if not self._submitted.empty():
             wait_s = 0.0
@@ -168,7 +215,12 @@ class NodeRunner:
             deadline = self._earliest_deadline()
             if deadline is not None:
                 wait_s = min(wait_s, max(0, deadline - now) / 1e6)
-        msg = self._recv(wait_s)
+        outage = self._outage
+        if outage is None or (not self._bus_dead and outage.due(now)):
+            msg = self._recv(wait_s)
+        else:  # the bus is down: sleep until a device deadline or the next attempt
+            self._stop.wait(min(wait_s, max(0, outage.next_attempt_us - now) / 1e6))
+            msg = None
         now = self._clock()
         work: list[tuple[Frame, SansIoDevice | None, bool]] = []
         if msg is not None:
@@ -217,13 +269,91 @@ class NodeRunner:
         except Exception as exc:
             with self._lock:
                 self._stats.bus_errors += 1
-            if not self._bus_failing:
-                logger.error("%s: receiving from %s failed: %s", self._name, self.bus, exc)
-            self._bus_failing = True
-            self._stop.wait(max(wait_s, 0.001))  # a dead bus must not spin the CPU
+            self._bus_failed(exc)
             return None
-        self._bus_failing = False
+        if self._outage is not None:
+            self._bus_back(self._outage, self._clock())
         return msg
+
+    # -- outages ---------------------------------------------------------------------
+
+    def _bus_label(self) -> str:
+        return str(getattr(self.bus, "channel", "") or self.bus)
+
+    def _bus_failed(self, exc: Exception) -> None:
+        """A receive or send failed: start an outage, or count a failed attempt."""
+        now = self._clock()
+        self._bus_dead = self._bus_dead or isinstance(exc, BusDisconnected)
+        self._last_bus_error = str(exc) or type(exc).__name__
+        if self._bus_dead and self._reopen is None:
+            self._give_up(
+                f"lost the bus {self._bus_label()} ({self._last_bus_error}) and cannot reopen it"
+            )
+            return
+        if self._outage is None:
+            self._outage = Backoff(now, self._reconnect_timeout_us, self._first_retry_us)
+            how = "reconnecting" if self._bus_dead else "retrying"
+            logger.error(
+                "%s: lost the bus %s (%s); %s for up to %g s",
+                self._name,
+                self._bus_label(),
+                self._last_bus_error,
+                how,
+                self._reconnect_timeout_us / 1e6,
+            )
+            return
+        self._attempt_failed(self._outage, now)
+
+    def _attempt_failed(self, outage: Backoff, now: int) -> None:
+        delay_us = outage.failed(now)
+        if delay_us is None:
+            self._give_up(
+                f"lost the bus {self._bus_label()} and could not get it back within "
+                f"{self._reconnect_timeout_us / 1e6:g} s ({outage.attempts} attempts; "
+                f"last: {self._last_bus_error})"
+            )
+            return
+        logger.warning(
+            "%s: reconnect attempt %d failed (%s); next attempt in %.1f s",
+            self._name,
+            outage.attempts,
+            self._last_bus_error,
+            delay_us / 1e6,
+        )
+
+    def _reopen_bus(self, outage: Backoff, now: int) -> None:
+        assert self._reopen is not None
+        try:
+            bus = self._reopen()
+        except Exception as exc:
+            self._last_bus_error = str(exc) or type(exc).__name__
+            self._attempt_failed(outage, now)
+            return
+        old, self.bus = self.bus, bus
+        if self._owned is old:
+            try:
+                old.shutdown()
+            except Exception:
+                logger.debug("%s: shutting down the lost bus failed", self._name, exc_info=True)
+        self._owned = bus
+        self._bus_dead = False
+        self._bus_back(outage, self._clock())
+
+    def _bus_back(self, outage: Backoff, now: int) -> None:
+        self._outage = None
+        with self._lock:
+            self._stats.reconnects += 1
+        logger.warning(
+            "%s: bus %s back after %.1f s and %d failed attempt(s); the devices kept their state",
+            self._name,
+            self._bus_label(),
+            outage.down_us(now) / 1e6,
+            outage.attempts,
+        )
+
+    def _give_up(self, why: str) -> None:
+        self.failure = BusError(why)
+        logger.info("%s: giving up: %s", self._name, why)
 
     def _dispatch(self, work: Iterable[tuple[Frame, SansIoDevice | None, bool]], now: int) -> None:
         """Send frames and deliver them locally; replies join the same work list."""
@@ -251,8 +381,17 @@ class NodeRunner:
                     )
 
     def _send(self, frame: Frame) -> None:
+        if self._outage is not None or self.failure is not None:
+            with self._lock:
+                self._stats.offline_drops += 1
+            return
         try:
             self.bus.send(frame_to_message(frame))
+        except BusDisconnected as exc:
+            with self._lock:
+                self._stats.send_errors += 1
+            self._bus_failed(exc)
+            return
         except Exception as exc:
             with self._lock:
                 self._stats.send_errors += 1

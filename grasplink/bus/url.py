@@ -273,13 +273,20 @@ class _HubUnreachable(Exception):
         self.refused = isinstance(cause, ConnectionRefusedError)
 
 
+class BusDisconnected(can.CanOperationError):
+    """The bus handle is gone for good (e.g. its hub connection closed): only reopening helps."""
+
+
 class HubClientBus(RemoteBus):
     """A client of a CAN hub (python-can-remote's `RemoteBus`, made robust).
 
-    Connecting times out instead of hanging, and once the hub goes away
-    ``recv``/``send`` raise `can.CanOperationError` (the stock client leaks
-    websocket/socket exceptions) and ``shutdown`` finishes in bounded time
-    (the stock one can spin or raise when the connection is already gone).
+    Connecting times out instead of hanging. python-can-remote 0.3.0 reports
+    a hub that went away as a leaked ``WebsocketClosed`` (1006 when the socket
+    just closed, the hub's code when it said goodbye), then ``ValueError`` or
+    ``OSError`` from the dead socket; here ``recv``/``send`` raise
+    `BusDisconnected` instead, and ``shutdown`` finishes in bounded time (the
+    stock one can spin or raise when the connection is already gone). The
+    handle never recovers: reconnecting means opening a new one.
     """
 
     def __init__(
@@ -313,19 +320,15 @@ class HubClientBus(RemoteBus):
         try:
             return super().recv(timeout)
         except (WebsocketClosed, OSError, ValueError) as exc:
-            raise can.CanOperationError(
-                f"connection to CAN hub {self.channel} closed ({exc})"
-            ) from exc
+            raise BusDisconnected(f"connection to CAN hub {self.channel} closed ({exc})") from exc
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if self.remote_protocol._ws.closed:
-            raise can.CanOperationError(f"connection to CAN hub {self.channel} is closed")
+            raise BusDisconnected(f"connection to CAN hub {self.channel} is closed")
         try:
             super().send(msg, timeout)
-        except OSError as exc:
-            raise can.CanOperationError(
-                f"connection to CAN hub {self.channel} closed ({exc})"
-            ) from exc
+        except (OSError, ValueError) as exc:
+            raise BusDisconnected(f"connection to CAN hub {self.channel} closed ({exc})") from exc
 
     def shutdown(self) -> None:
         if self._is_shutdown:
