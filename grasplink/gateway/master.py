@@ -4,19 +4,77 @@ On start it resets communication on every node so nodes already running
 boot again, then starts each node when its boot-up arrives - or when a
 heartbeat shows a node back in PRE-OPERATIONAL, since a boot-up frame can
 be lost like any other. It produces its own heartbeat (the nodes' 1016h
-consumers watch it) and tracks every node's state from their heartbeats,
-flagging a node as lost when its heartbeat is overdue.
+consumers watch it) and consumes every node's heartbeat and EMCY.
+
+Two rules keep a node's safe state from being undone by the master:
+
+- **Consumer fault**: a node whose heartbeat consumer timed out (EMCY 8130h)
+  has quick-stopped and, by its 1029h, usually dropped to PRE-OPERATIONAL.
+  While that EMCY is active the master does not start it again (nor does a
+  controller command it); when the node's error-reset EMCY (0000h) or an
+  error register without the communication bit says the fault is gone, the
+  master starts it, and the drive walks its enable sequence afresh.
+- **Lost node**: a node whose heartbeat is overdue (`LOST_AFTER_PERIODS`
+  periods since it was last heard) is lost and gets no commands until it
+  boots again. A lost node that reappears without a boot-up is in an unknown
+  state: it is sent NMT reset communication (as a CiA 302 master boots a
+  slave that comes back) and counts as booted once its boot-up - or, if that
+  is lost, a PRE-OPERATIONAL heartbeat - arrives. A lost node in a consumer
+  fault is reset only once the fault clears: the reset would wipe the fault.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from grasplink.core.frames import HEARTBEAT_BASE, NMT_COB_ID, Frame
+from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, NODE_ID_MASK, Frame
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.profiles import objects as obj
 
 LOST_AFTER_PERIODS = 3
+
+# CiA 301 EMCY error codes the master acts on.
+EMCY_ERROR_RESET = 0x0000  # "error reset or no error"
+EMCY_HEARTBEAT_ERROR = 0x8130  # "life guard error or heartbeat error": a consumer timed out
+# Errors that hold a node in its safe state: it is not restarted while one is active.
+HOLD_CODES = frozenset({EMCY_HEARTBEAT_ERROR})
+ACTIVE_EMCY_LIMIT = 16  # distinct active error codes remembered per node
+
+# Error register (1001h) bits, and the bit each class of error code sets (CiA 301 7.5.2.2).
+REG_CURRENT, REG_VOLTAGE, REG_TEMPERATURE = 0x02, 0x04, 0x08
+REG_COMMUNICATION, REG_MANUFACTURER = 0x10, 0x80
+
+
+def register_bit_of(code: int) -> int | None:
+    """The error-register bit an error code's class sets; None if only the generic bit."""
+    if 0x2000 <= code < 0x3000:
+        return REG_CURRENT
+    if 0x3000 <= code < 0x4000:
+        return REG_VOLTAGE
+    if 0x4000 <= code < 0x5000:
+        return REG_TEMPERATURE
+    if 0x8100 <= code < 0x8300:  # communication (81xxh) and protocol (82xxh) errors
+        return REG_COMMUNICATION
+    if code >= 0xFF00:
+        return REG_MANUFACTURER
+    return None
+
+
+@dataclass(frozen=True, slots=True)
+class Emcy:
+    """One EMCY as CiA 301 frames it: error code, error register, manufacturer bytes."""
+
+    code: int
+    register: int
+    manufacturer: bytes
+    t_us: int
+
+    @classmethod
+    def parse(cls, data: bytes, t_us: int) -> Emcy | None:
+        """None for a frame that is not an 8-byte EMCY."""
+        if len(data) != 8:
+            return None
+        return cls(int.from_bytes(data[:2], "little"), data[2], bytes(data[3:]), t_us)
 
 
 @dataclass(slots=True)
@@ -24,9 +82,46 @@ class NodeStatus:
     node_id: int
     state: NmtState | None = None
     boots: int = 0
-    last_heartbeat_us: int | None = None
+    last_heartbeat_us: int | None = None  # last heartbeat (not boot-up): intervals
+    last_seen_us: int | None = None  # last heartbeat or boot-up: loss detection
     heartbeat_intervals_us: list[int] = field(default_factory=list)
-    lost: bool = False
+    lost: bool = False  # heartbeat overdue: no commands until it boots again
+    reset_sent: bool = False  # lost node reappeared: reset communication sent, boot awaited
+    error_register: int = 0  # from its latest EMCY
+    active_emcy: dict[int, Emcy] = field(default_factory=dict)  # error code -> latest EMCY
+
+    @property
+    def in_consumer_fault(self) -> bool:
+        """An active EMCY holds the node in its safe state (heartbeat consumer timed out)."""
+        return any(code in HOLD_CODES for code in self.active_emcy)
+
+    def on_emcy(self, emcy: Emcy) -> None:
+        """Update the active errors from one EMCY (it carries the node's current 1001h)."""
+        self.error_register = emcy.register
+        if emcy.register == 0:
+            self.active_emcy.clear()  # no error left, whatever the code says
+        else:
+            # A class bit gone from the register means that class's errors are gone,
+            # also when the node sent no error reset for each (CiA 301 allows that).
+            for code in list(self.active_emcy):
+                bit = register_bit_of(code)
+                if bit is not None and not emcy.register & bit:
+                    del self.active_emcy[code]
+        if emcy.code == EMCY_ERROR_RESET:
+            return
+        self.active_emcy.pop(emcy.code, None)
+        self.active_emcy[emcy.code] = emcy
+        if len(self.active_emcy) > ACTIVE_EMCY_LIMIT:
+            oldest = next(c for c in self.active_emcy if c not in HOLD_CODES)
+            del self.active_emcy[oldest]
+
+    def on_boot(self) -> None:
+        """A boot resets the node's error state and makes a lost node known again."""
+        self.boots += 1
+        self.state = NmtState.PRE_OPERATIONAL
+        self.lost = self.reset_sent = False
+        self.error_register = 0
+        self.active_emcy.clear()
 
 
 class NmtMaster:
@@ -56,33 +151,75 @@ class NmtMaster:
         ]
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
-        node_id = frame.can_id - HEARTBEAT_BASE
-        if (
-            not (1 <= node_id <= 127)
-            or frame.rtr
-            or len(frame.data) != 1
-            or (node_id == self.node_id)
-        ):
+        if frame.rtr:
             return []
+        base, node_id = frame.can_id & ~NODE_ID_MASK, frame.can_id & NODE_ID_MASK
+        if not (1 <= node_id <= 127) or node_id == self.node_id:
+            return []
+        if base == HEARTBEAT_BASE and len(frame.data) == 1:
+            return self._on_heartbeat(node_id, frame.data[0], t_us)
+        if base == EMCY_BASE:
+            emcy = Emcy.parse(frame.data, t_us)
+            return self._on_emcy(node_id, emcy) if emcy is not None else []
+        return []
+
+    def _on_heartbeat(self, node_id: int, state: int, t_us: int) -> list[Frame]:
         status = self.nodes.setdefault(node_id, NodeStatus(node_id))
-        state = frame.data[0]
-        if status.last_heartbeat_us is not None and state != NmtState.INITIALISING:
+        status.last_seen_us = t_us
+        if state == NmtState.INITIALISING:
+            status.last_heartbeat_us = None
+            status.on_boot()
+            return self._start(node_id) if self.autostart else []
+        if status.last_heartbeat_us is not None:
             intervals = status.heartbeat_intervals_us
             intervals.append(t_us - status.last_heartbeat_us)
             del intervals[: -self.interval_history]
-        status.last_heartbeat_us = None if state == NmtState.INITIALISING else t_us
-        status.lost = False
-        if state == NmtState.INITIALISING:
-            status.boots += 1
-            status.state = NmtState.PRE_OPERATIONAL
-            return self._start(node_id) if self.autostart else []
+        status.last_heartbeat_us = t_us
         try:
             status.state = NmtState(state)
         except ValueError:
             status.state = None
-        if self.autostart and status.state == NmtState.PRE_OPERATIONAL:
+        if status.lost:
+            if status.reset_sent and status.state == NmtState.PRE_OPERATIONAL:
+                status.on_boot()  # it did reset; its boot-up was lost on the way
+            else:
+                return self._reboot_lost(node_id)
+        if (
+            self.autostart
+            and status.state == NmtState.PRE_OPERATIONAL
+            and not status.in_consumer_fault
+        ):
             return self._start(node_id)
         return []
+
+    def _on_emcy(self, node_id: int, emcy: Emcy) -> list[Frame]:
+        status = self.nodes.setdefault(node_id, NodeStatus(node_id))
+        held = status.in_consumer_fault
+        status.on_emcy(emcy)
+        if held and not status.in_consumer_fault:
+            return self._fault_cleared(node_id)
+        return []
+
+    def _fault_cleared(self, node_id: int) -> list[Frame]:
+        """The consumer fault is gone: bring the node back the way it left."""
+        status = self.nodes[node_id]
+        if status.lost:
+            return self._reboot_lost(node_id)
+        if not self.autostart:
+            return []
+        if status.state == NmtState.PRE_OPERATIONAL:
+            return self._start(node_id)
+        if status.state == NmtState.OPERATIONAL:  # 1029h:01 = 1 kept it OPERATIONAL
+            self.on_node_restart(node_id)  # its drive quick-stopped: enable it afresh
+        return []
+
+    def _reboot_lost(self, node_id: int) -> list[Frame]:
+        """A lost node is back without a boot-up: reset it (once), unless that wipes a fault."""
+        status = self.nodes[node_id]
+        if status.reset_sent or status.in_consumer_fault:
+            return []
+        status.reset_sent = True
+        return [self.command(NmtCommand.RESET_COMMUNICATION, node_id)]
 
     def _start(self, node_id: int) -> list[Frame]:
         """Start a node that (re)entered PRE-OPERATIONAL."""
@@ -90,7 +227,21 @@ class NmtMaster:
         return [self.command(NmtCommand.START, node_id)]
 
     def on_node_restart(self, node_id: int) -> None:
-        """Hook: a node booted or fell back to PRE-OPERATIONAL and is being started."""
+        """Hook: a node booted, fell back to PRE-OPERATIONAL or left a consumer fault, and
+        is being started: whatever it drives must be enabled again."""
+
+    def commandable(self, node_id: int | None) -> bool:
+        """Whether a controller may send the node process data (RPDOs) now.
+
+        OPERATIONAL, not lost, and not held in its safe state by a consumer fault.
+        """
+        status = self.nodes.get(node_id) if node_id is not None else None
+        return (
+            status is not None
+            and status.state == NmtState.OPERATIONAL
+            and not status.lost
+            and not status.in_consumer_fault
+        )
 
     def advance(self, t_us: int) -> list[Frame]:
         frames = []
@@ -99,14 +250,21 @@ class NmtMaster:
             self._next_beat_us += self.heartbeat_us * (
                 1 + (t_us - self._next_beat_us) // self.heartbeat_us
             )
-        limit = self.node_heartbeat_us * LOST_AFTER_PERIODS
         for status in self.nodes.values():
-            if status.last_heartbeat_us is not None and t_us - status.last_heartbeat_us > limit:
+            deadline = self._lost_deadline_us(status)
+            if deadline is not None and t_us >= deadline:
                 status.lost = True
         return frames
 
     def next_deadline_us(self) -> int | None:
-        return self._next_beat_us
+        deadlines = [self._next_beat_us, *map(self._lost_deadline_us, self.nodes.values())]
+        return min((d for d in deadlines if d is not None), default=None)
+
+    def _lost_deadline_us(self, status: NodeStatus) -> int | None:
+        """When the node counts as lost if nothing is heard from it (None: lost already)."""
+        if status.lost or status.last_seen_us is None:
+            return None
+        return status.last_seen_us + self.node_heartbeat_us * LOST_AFTER_PERIODS + 1
 
     # -- commands ------------------------------------------------------------------
     @staticmethod

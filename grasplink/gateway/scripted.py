@@ -4,6 +4,8 @@ It is the NMT master plus a stand-in controller: every command period it
 sends RPDO1 to the belt (controlword, target velocity mrad/s) and to the
 hand (controlword, target grip mN), walking each drive through the CiA 402
 enable sequence first. Profiles are step functions of time since start.
+Only a drive the master may command gets RPDOs (`NmtMaster.commandable`):
+OPERATIONAL, its heartbeat not lost, not held by a consumer fault.
 """
 
 from __future__ import annotations
@@ -12,7 +14,6 @@ import bisect
 from collections.abc import Mapping, Sequence
 
 from grasplink.core.frames import Frame
-from grasplink.core.nmt import NmtState
 from grasplink.core.params import Params
 from grasplink.gateway.master import NmtMaster
 from grasplink.profiles import object_limits
@@ -106,11 +107,11 @@ class ScriptedMaster(NmtMaster):
         """RPDO1 to each commanded drive, packed through its EDS mapping."""
         frames = []
         belt = step_value(self.belt_profile, t_s)
-        if belt is not None and self.belt_id is not None and self._operational(self.belt_id):
+        if belt is not None and self.belt_id is not None and self.commandable(self.belt_id):
             target = (obj.BELT_TARGET_VELOCITY_MRAD_S, 0)
             frames.append(self._rpdo1(self.belt_id, target, round(belt)))
         grip_n = step_value(self.hand_profile, t_s)
-        if grip_n is not None and self.hand_id is not None and self._operational(self.hand_id):
+        if grip_n is not None and self.hand_id is not None and self.commandable(self.hand_id):
             target = (obj.HAND_TARGET_GRIP_MN, 0)
             frames.append(self._rpdo1(self.hand_id, target, max(0, round(grip_n * 1000))))
         return frames
@@ -122,7 +123,8 @@ class ScriptedMaster(NmtMaster):
         return Frame(can_id, data)
 
     def on_node_restart(self, node_id: int) -> None:
-        # A rebooted drive is back in SWITCH ON DISABLED: walk the enable sequence again.
+        # A rebooted or quick-stopped drive is in SWITCH ON DISABLED: walk the enable
+        # sequence again.
         self._enable_steps.pop(node_id, None)
 
     def _controlword(self, node_id: int) -> int:
@@ -130,7 +132,3 @@ class ScriptedMaster(NmtMaster):
         step = self._enable_steps.get(node_id, 0)
         self._enable_steps[node_id] = step + 1
         return ENABLE_SEQUENCE[min(step, len(ENABLE_SEQUENCE) - 1)]
-
-    def _operational(self, node_id: int | None) -> bool:
-        status = self.nodes.get(node_id) if node_id is not None else None
-        return status is not None and status.state == NmtState.OPERATIONAL
