@@ -119,23 +119,25 @@ def build_parser() -> argparse.ArgumentParser:
     decode.add_argument(
         "file",
         type=Path,
-        help="CSV (header t_s,force_n), NPZ (t_s, force_n) or a CAN log of "
-        "the skin node (.asc, .blf, .log)",
+        help="CSV (header t_s,force_n or t_s,skin.force_n), NPZ (t_s, force_n), a CAN log "
+        "of the skin node (.asc, .blf, .log) or a folder written by `grasplink run`",
     )
     decode.add_argument(
         "--skin",
-        required=True,
+        default=None,
         metavar="LAYOUT",
         help="ridge layout: a name (alpha0.1, fibonacci, uniform4, ...) or "
-        "comma-separated spacings in mm",
+        "comma-separated spacings in mm, 0.5-200 mm each, at most 40 (the skin node's "
+        "0x2140); default for a run folder: the layout in its summary.json",
     )
     decode.add_argument(
         "--fs",
         type=positive_hz,
         default=None,
         metavar="HZ",
-        help="sample rate (default: from the median time step of a CSV/NPZ; "
-        "the EDS default, 400 Hz, for a CAN log)",
+        help="sample rate, 80-1000 Hz (the skin node's 0x2120) (default: from a run "
+        "folder's summary.json or the median time step of a CSV/NPZ; the EDS default, "
+        "400 Hz, for a CAN log)",
     )
     decode.add_argument(
         "--decoder",
@@ -330,31 +332,64 @@ DECODE_CHUNK = 4096  # samples per feed(): streams like a gateway would, prints 
 
 
 def cmd_decode(args: argparse.Namespace) -> int:
+    """Decode a recording; what the input lost goes to stderr, JSON lines to stdout.
+
+    Exits 1 when less than base.MIN_USABLE_SHARE of the input was usable (skin
+    frames of a CAN log, or samples the decoder's input guard accepted).
+    """
     import json
 
     from grasplink.evaluation.decoders import make_decoder
     from grasplink.gateway.decoding import io, registry
+    from grasplink.gateway.decoding.base import SkinGeometry, check_sample_rate
     from grasplink.profiles.layouts import parse_layout
 
-    layout = parse_layout(args.skin)
+    layout = None if args.skin is None else parse_layout(args.skin)
+    if layout is not None:
+        SkinGeometry(layout)  # a layout the skin node cannot hold fails before reading
+    fs = None if args.fs is None else check_sample_rate(args.fs)
     name = args.decoder or registry.DEFAULT_DECODER
     registry.decoder_class(name)  # an unknown or missing decoder fails before reading
-    suffix = args.file.suffix.lower()
-    if suffix in io.CAN_EXTENSIONS:
-        t, force, stats = io.read_can_log(args.file, node_id=args.node_id, fs_hz=args.fs)
+    source = str(args.file)
+    if args.file.is_dir():
+        run = io.read_run_folder(args.file)
+        t, force, source = run.t_s, run.force_n, str(run.source)
+        if layout is None:
+            if run.layout is None:
+                raise ConfigError(f"{args.file}: its summary names no skin layout; give --skin")
+            layout = parse_layout(run.layout) if isinstance(run.layout, str) else run.layout
+        if fs is None:
+            fs = run.rate_hz if run.rate_hz is not None else io.infer_rate(t, source)
+    elif layout is None:
+        raise ConfigError("--skin LAYOUT is required unless FILE is a `grasplink run` folder")
+    elif args.file.suffix.lower() in io.CAN_EXTENSIONS:
+        t, force, stats = io.read_can_log(args.file, node_id=args.node_id, fs_hz=fs)
+        print(f"grasplink: {stats.summary(source)}", file=sys.stderr, flush=True)
+        stats.check_usable(source)
         fs = stats.rate_hz
     else:
         t, force = io.read_recording(args.file)
-        fs = args.fs or io.infer_rate(t, str(args.file))
+        fs = fs if fs is not None else io.infer_rate(t, source)
+    fs = check_sample_rate(fs)
     # the evaluation layer supplies the reference slips mmse and dtw match against
     decoder = make_decoder(name, layout, fs)
     out = sys.stdout
-    for start in range(0, len(t), DECODE_CHUNK):
-        for estimate in decoder.feed(
-            t[start : start + DECODE_CHUNK], force[start : start + DECODE_CHUNK]
-        ):
-            out.write(json.dumps(estimate.as_dict()) + "\n")
-        out.flush()
+    try:
+        for start in range(0, len(t), DECODE_CHUNK):
+            for estimate in decoder.feed(
+                t[start : start + DECODE_CHUNK], force[start : start + DECODE_CHUNK]
+            ):
+                out.write(json.dumps(estimate.as_dict()) + "\n")
+            out.flush()
+    except BrokenPipeError:  # the reader (e.g. `| head`) has all it wanted
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), out.fileno())
+        return 0
+    report = decoder.input_report()
+    if report is not None:
+        print(f"grasplink: {source}: {report}", file=sys.stderr, flush=True)
+    decoder.check_usable(source)
     return 0
 
 

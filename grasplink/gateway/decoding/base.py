@@ -36,7 +36,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from grasplink.errors import ConfigError
+from grasplink.errors import ConfigError, RecordingError
 
 DEFAULT_UPDATE_S = 0.01
 UPDATE_PERIOD_RANGE_S = (0.001, 10.0)  # at most one update per sample at 1 kHz
@@ -50,6 +50,10 @@ GAP_PERIODS = 8.0
 MIN_STEP_PERIODS = 0.25
 #: Times must resolve this fraction of a sample period in float64.
 TIME_RESOLUTION_PERIODS = 1e-3
+#: `grasplink decode` exits 1 when less than this share of the input could be used
+#: (samples the guard accepted; skin frames of a CAN log): the output would describe
+#: whatever happened to survive, not the recording.
+MIN_USABLE_SHARE = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -227,7 +231,7 @@ class Decoder:
         t, x = self._guard(t, x)
         if not len(t):
             return []
-        steps = np.diff(t, prepend=-np.inf if previous is None else previous)
+        steps = np.diff(t, prepend=t[0] if previous is None else previous)  # first: no gap
         out: list[SlipEstimate] = []
         start = 0
         for cut in np.nonzero(steps > self.gap_s)[0].tolist():
@@ -240,6 +244,46 @@ class Decoder:
             start = cut
         out += self.process(t[start:], x[start:])
         return out
+
+    def input_report(self) -> str | None:
+        """One line on what the guard kept out and the gaps it saw; None if nothing."""
+        s = self.stats
+        if not (s.rejected or s.gaps):
+            return None
+        parts = [f"{s.received} samples, {s.accepted} decoded"]
+        reasons = [
+            (s.rejected_nonfinite, "NaN/Inf"),
+            (
+                s.rejected_range,
+                f"out of range (|force| over {self.max_force_n:g} N, the largest skin full "
+                f"scale, or |time| over {self.max_time_s:.3g} s)",
+            ),
+            (
+                s.rejected_time,
+                f"timing errors (under {MIN_STEP_PERIODS:g} sample periods after the "
+                "previous sample, or going back)",
+            ),
+        ]
+        if s.rejected:
+            parts.append(
+                f"rejected {s.rejected}: " + ", ".join(f"{n} {why}" for n, why in reasons if n)
+            )
+        if s.gaps:
+            parts.append(
+                f"{s.gaps} gap(s) over {GAP_PERIODS:g} sample periods ({self.gap_s * 1e3:g} ms; "
+                f"longest {s.longest_gap_s:.6g} s) reset the decoder, no updates inside"
+            )
+        return "decoder input: " + "; ".join(parts)
+
+    def check_usable(self, source: str) -> None:
+        """RecordingError when less than MIN_USABLE_SHARE of the samples fed were accepted."""
+        s = self.stats
+        if s.received and s.accepted < MIN_USABLE_SHARE * s.received:
+            raise RecordingError(
+                f"{source}: only {s.accepted} of {s.received} samples usable "
+                f"({s.accepted / s.received:.0%}, below {MIN_USABLE_SHARE:.0%}); "
+                "see the decoder input line above"
+            )
 
     def reset(self) -> None:
         """Forget the signal: called at a gap, before the first sample after it.

@@ -291,7 +291,8 @@ class PulseFrontEnd:
     the peak (hysteresis) threshold max(`threshold_n`, `threshold_sigmas` x band-passed noise
     sigma), `static_corner_hz` for the grip force (base.StaticForce).
 
-    Gaps (a step longer than `gap_periods` sample periods) restart the
+    Gaps (a step longer than `gap_periods` sample periods, by default
+    base.GAP_PERIODS like every decoder's input guard) restart the
     filters settled on the first sample after the gap and clear the peak
     detector's tail; the noise estimate keeps its history. Work is split at
     gaps and at noise-estimate block boundaries so the threshold in force
@@ -309,9 +310,9 @@ class PulseFrontEnd:
         static_corner_hz: float = 2.0,
         noise_block_s: float = 0.5,
         noise_from: str = "white",
-        gap_periods: float = 3.0,
+        gap_periods: float | None = None,
     ):
-        from grasplink.gateway.decoding.base import StaticForce
+        from grasplink.gateway.decoding.base import GAP_PERIODS, StaticForce
 
         self.fs_hz = float(fs_hz)
         self._static_factory = lambda: StaticForce(self.fs_hz, static_corner_hz)
@@ -328,7 +329,7 @@ class PulseFrontEnd:
         )
         self.threshold_n = float(threshold_n)
         self.threshold_sigmas = float(threshold_sigmas)
-        self.gap_s = gap_periods / self.fs_hz
+        self.gap_s = (GAP_PERIODS if gap_periods is None else gap_periods) / self.fs_hz
         self._last_t: float | None = None
         self.gaps = 0
 

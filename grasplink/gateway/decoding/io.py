@@ -1,20 +1,34 @@
 """Skin recordings from files: (t_s, force_n) float64 arrays for the decoders.
 
-* CSV with the header ``t_s,force_n`` (spaces around names and values
-  tolerated), one sample a line, time strictly increasing.
-* NPZ with the arrays ``t_s`` and ``force_n`` (equal length, 1-D).
+* CSV with the header ``t_s,force_n`` or ``t_s,skin.force_n`` (the skin.csv
+  `grasplink run` writes), spaces around names and values tolerated, one
+  sample a line, time strictly increasing.
+* NPZ with the arrays ``t_s`` and ``force_n`` (equal length, 1-D, real
+  numbers: integer or floating point; complex, boolean, date or text arrays
+  are refused rather than silently converted).
+* A folder written by `grasplink run`: its skin.csv, with the layout and the
+  sample rate from its summary.json (`read_run_folder`).
 * CAN logs of the skin node (``.asc``, ``.blf``, ``.log`` candump, read by
   python-can's LogReader): TPDO1 frames decoded through the skin EDS - the
   COB-ID (0x1800:01), the mapping (0x1A00: three U16 sample slots 0x2100 and
   the U8 packet sequence 0x2101), samples per PDO (0x2121), sample rate
   (0x2120) and the FSR calibration defaults (0x2130: resolution, full scale
   in mN, zero offset), force_mN = (counts - zero) x full_scale_mN /
-  (2^bits - 1 - zero). A packet's last sample is at its frame's timestamp,
-  the samples before it 1/fs apart. Lost packets show as gaps in the
-  sequence number (counted; the time stamps skip them anyway); a packet
-  repeating the previous sequence number is a re-publish (skipped), as is a
-  packet whose samples would overlap the next packet's (the node publishes
-  its current, not new, samples on entering OPERATIONAL).
+  (2^bits - 1 - zero). A packet's last sample is at its frame's time stamp,
+  the samples before it 1/fs apart.
+
+What a CAN log loses is counted in `CanStats` (`CanStats.summary()` is the
+line `grasplink decode` prints): frames of the wrong length; frames that
+repeat a sequence number already seen (a re-publish) or whose samples would
+overlap the next packet's (the node publishes its current, not new, samples
+on entering OPERATIONAL); frames arriving more than `REORDER_PACKETS`
+packets late; frames whose time stamp puts all their samples before the
+previous packet's; packets missing from the sequence numbers. A frame up to
+`REORDER_PACKETS` packets late is put back in place by its sequence number:
+the frames held meanwhile are released in sequence order and take the held
+time stamps in increasing order (the bus delivered them in those slots).
+A log where fewer than `MIN_USABLE_SHARE` of the skin frames are usable is
+refused by `CanStats.check_usable`.
 
 Every problem is a `RecordingError` naming the file and the line, key or
 value, so `grasplink decode` can print one line and exit 1.
@@ -22,38 +36,109 @@ value, so `grasplink decode` can print one line and exit 1.
 
 from __future__ import annotations
 
+import heapq
+import json
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from grasplink.errors import ConfigError, RecordingError
+from grasplink.gateway.decoding.base import MIN_USABLE_SHARE, check_sample_rate
 
 CSV_HEADER = ("t_s", "force_n")
+#: The force column of a CSV: ours, or the skin.csv of `grasplink run`
+#: (simulators.signals.SKIN_FORCE_N; a test ties the two).
+FORCE_COLUMNS = ("force_n", "skin.force_n")
 CAN_EXTENSIONS = (".asc", ".blf", ".log")
+RUN_SUMMARY = "summary.json"
 DEFAULT_SKIN_NODE_ID = 0x10
 SAMPLE_SLOTS, PACKET_SEQUENCE = 0x2100, 0x2101
 SAMPLE_RATE, SAMPLES_PER_PDO, CALIBRATION = 0x2120, 0x2121, 0x2130
 TPDO1_COMM, TPDO1_MAP = 0x1800, 0x1A00
+#: How late (in packets) a frame may arrive and still be put back in place: 8 packets
+#: are 60 ms at 400 Hz, far more than any reordering of a CAN bus or adapter queue.
+REORDER_PACKETS = 8
+SEQUENCE_MODULUS = 256  # the U8 packet sequence (0x2101) wraps
+REAL_KINDS = "iuf"  # numpy kinds of a real number: signed, unsigned, floating point
 
 
 @dataclass
 class CanStats:
+    """What a CAN log held and what became of the skin's TPDO1 frames.
+
+    frames = packets + malformed + republished + out_of_order + behind.
+    """
+
     frames: int = 0  # skin TPDO1 frames seen
-    packets: int = 0  # packets decoded
-    lost_packets: int = 0  # from sequence-number gaps
-    republished: int = 0  # skipped: repeated sequence or overlapping the next packet
-    malformed: int = 0  # wrong data length
+    packets: int = 0  # of them, used: at least one sample decoded
+    malformed: int = 0  # dropped: wrong data length
+    republished: int = 0  # dropped: repeated sequence number, or stale samples
+    out_of_order: int = 0  # dropped: more than REORDER_PACKETS packets late
+    behind: int = 0  # dropped: every sample before the previous packet's (time stamps)
+    reordered: int = 0  # used, put back in place by their sequence number
+    lost_packets: int = 0  # sequence numbers never seen (the frames are not in the log)
+    samples_behind: int = 0  # samples dropped because time went back (all frames)
+    frames_read: int = 0  # every frame in the log
+    other_frames: int = 0  # frames of other CAN-IDs, remote and error frames
     rate_hz: float = 0.0  # the sample rate the times were built with
+    cob_id: int = 0
     other_ids: set[int] = field(default_factory=set)
+
+    @property
+    def dropped(self) -> int:
+        return self.malformed + self.republished + self.out_of_order + self.behind
+
+    @property
+    def usable_share(self) -> float:
+        return self.packets / self.frames if self.frames else 0.0
+
+    def reasons(self) -> str:
+        parts = [
+            (self.malformed, "wrong data length"),
+            (self.republished, "repeated sequence number or stale re-publish"),
+            (self.out_of_order, f"more than {REORDER_PACKETS} packets late"),
+            (self.behind, "time stamp before the previous packet's samples"),
+        ]
+        return ", ".join(f"{n} {why}" for n, why in parts if n) or "none"
+
+    def summary(self, source: str) -> str:
+        """One line: frames read, used, dropped by reason, lost, reordered, other IDs."""
+        ids = sorted(self.other_ids)
+        shown = ", ".join(f"0x{i:03X}" for i in ids[:8]) + (", ..." if len(ids) > 8 else "")
+        text = (
+            f"{source}: {self.frames_read} frames read; skin TPDO1 (0x{self.cob_id:03X}): "
+            f"{self.frames} frames, {self.packets} used ({self.usable_share:.0%}), "
+            f"{self.dropped} dropped ({self.reasons()})"
+        )
+        if self.reordered:
+            text += f"; {self.reordered} put back in order by sequence number"
+        text += f"; {self.lost_packets} packets missing from the sequence numbers"
+        if self.samples_behind:
+            text += f"; {self.samples_behind} samples dropped where time went back"
+        if self.other_frames:
+            text += f"; {self.other_frames} frames of other CAN-IDs ({shown or 'remote/error'})"
+        return text
+
+    def check_usable(self, source: str) -> None:
+        """RecordingError when fewer than MIN_USABLE_SHARE of the skin frames were used."""
+        if self.usable_share < MIN_USABLE_SHARE:
+            raise RecordingError(
+                f"{source}: only {self.packets} of {self.frames} skin TPDO1 frames usable "
+                f"({self.usable_share:.0%}, below {MIN_USABLE_SHARE:.0%}): {self.reasons()}"
+            )
 
 
 def read_recording(
     path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID, fs_hz: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Read any supported recording by its extension."""
+    """Read any supported recording by its extension (a folder: `read_run_folder`)."""
     p = Path(path)
+    if p.is_dir():
+        run = read_run_folder(p)
+        return run.t_s, run.force_n
     suffix = p.suffix.lower()
     if suffix == ".npz":
         return read_npz(p)
@@ -79,7 +164,7 @@ def _open_text(path: Path) -> list[str]:
 
 
 def read_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """CSV with header exactly ``t_s,force_n``; every value finite, time increasing."""
+    """CSV with header ``t_s,force_n`` (or ``t_s,skin.force_n``); values finite, time increasing."""
     p = Path(path)
     lines = _open_text(p)
     numbered = [(n, line) for n, line in enumerate(lines, start=1) if line.strip()]
@@ -87,9 +172,10 @@ def read_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise RecordingError(f"{p}: empty file; expected a header 't_s,force_n' and samples")
     header_line, header = numbered[0]
     names = tuple(name.strip() for name in header.split(","))
-    if names != CSV_HEADER:
+    if len(names) != 2 or names[0] != CSV_HEADER[0] or names[1] not in FORCE_COLUMNS:
         raise RecordingError(
-            f"{p}:{header_line}: header must be 't_s,force_n', found {header.strip()!r}"
+            f"{p}:{header_line}: header must be 't_s,force_n' (or 't_s,skin.force_n'), "
+            f"found {header.strip()!r}"
         )
     rows = numbered[1:]
     if not rows:
@@ -124,17 +210,21 @@ def _number(text: str) -> float | None:
 
 
 def read_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
-    """NPZ with 1-D arrays ``t_s`` and ``force_n`` of equal length, finite, time increasing."""
+    """NPZ with 1-D real arrays ``t_s`` and ``force_n`` of equal length, finite, time increasing."""
     p = Path(path)
     try:
         archive = np.load(p, allow_pickle=False)
     except FileNotFoundError:
         raise RecordingError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise RecordingError(f"{p}: is a directory, not a recording") from None
+    except EOFError:
+        raise RecordingError(f"{p}: empty file, not an .npz archive") from None
     except (OSError, ValueError) as exc:
         raise RecordingError(f"{p}: not a readable .npz archive ({exc})") from None
+    if not hasattr(archive, "files"):  # np.load read a lone .npy array
+        raise RecordingError(f"{p}: a single array, not an .npz archive with t_s and force_n")
     with archive:
-        if not hasattr(archive, "files"):
-            raise RecordingError(f"{p}: a single array, not an .npz archive with t_s and force_n")
         missing = [key for key in CSV_HEADER if key not in archive.files]
         if missing:
             raise RecordingError(
@@ -142,13 +232,19 @@ def read_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
                 f"{', '.join(archive.files) or 'none'}"
             )
         try:
-            t = np.asarray(archive["t_s"], dtype=np.float64)
-            force = np.asarray(archive["force_n"], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
+            raw = {key: archive[key] for key in CSV_HEADER}
+        except (OSError, ValueError) as exc:
             raise RecordingError(f"{p}: t_s and force_n must be numeric arrays ({exc})") from None
-    for name, a in (("t_s", t), ("force_n", force)):
+    for name, a in raw.items():
+        if a.dtype.kind not in REAL_KINDS:
+            raise RecordingError(
+                f"{p}: {name} holds {_kind_name(a.dtype)} ({a.dtype}); "
+                "a recording must be real numbers (integer or floating point)"
+            )
         if a.ndim != 1:
             raise RecordingError(f"{p}: {name} must be 1-D, has shape {a.shape}")
+    t = raw["t_s"].astype(np.float64)
+    force = raw["force_n"].astype(np.float64)
     if len(t) != len(force):
         raise RecordingError(f"{p}: t_s has {len(t)} values, force_n {len(force)}")
     if not len(t):
@@ -169,6 +265,20 @@ def read_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return t, force
 
 
+def _kind_name(dtype: np.dtype) -> str:
+    names = {
+        "c": "complex numbers",
+        "b": "booleans",
+        "M": "dates",
+        "m": "time differences",
+        "U": "text",
+        "S": "bytes",
+        "O": "Python objects",
+        "V": "records",
+    }
+    return names.get(dtype.kind, "non-numbers")
+
+
 def infer_rate(t: np.ndarray, source: str) -> float:
     """Sample rate from the median time step; refuses what has no sensible one."""
     if len(t) < 2:
@@ -179,9 +289,62 @@ def infer_rate(t: np.ndarray, source: str) -> float:
             f"{source}: the median time step is {step:g} s; cannot infer "
             "the sample rate (give --fs)"
         )
-    return 1.0 / step
+    rate = 1.0 / step
+    try:
+        return check_sample_rate(rate)
+    except ConfigError as exc:
+        raise RecordingError(
+            f"{source}: the median time step {step:g} s gives {exc}; give --fs"
+        ) from None
 
 
+# -- a folder written by `grasplink run` ---------------------------------------------------
+@dataclass(frozen=True)
+class RunRecording:
+    """The skin signal of a `grasplink run` folder, with what its summary says about it."""
+
+    t_s: np.ndarray
+    force_n: np.ndarray
+    layout: str | tuple[float, ...] | None  # a layout name, spacings in mm, or unknown
+    rate_hz: float | None
+    source: Path  # the CSV read
+
+
+def read_run_folder(folder: str | Path) -> RunRecording:
+    """skin.csv of a run folder, the layout and skin rate from its summary.json."""
+    folder = Path(folder)
+    summary_path = folder / RUN_SUMMARY
+    try:
+        summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise RecordingError(
+            f"{folder}: a folder, but not one written by `grasplink run` (no {RUN_SUMMARY})"
+        ) from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RecordingError(f"{summary_path}: not a readable run summary ({exc})") from None
+    if not isinstance(summary, dict):
+        raise RecordingError(f"{summary_path}: not a run summary (a JSON object)")
+    files = summary.get("files")
+    name = files.get("skin") if isinstance(files, dict) else None
+    if not isinstance(name, str) or not name or Path(name).name != name:
+        raise RecordingError(f"{summary_path}: files.skin names no skin recording in the folder")
+    layout = summary.get("layout")
+    if isinstance(layout, list):
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in layout):
+            raise RecordingError(f"{summary_path}: layout {layout!r} is not spacings in mm")
+        layout = tuple(float(v) for v in layout)
+    elif layout is not None and not isinstance(layout, str):
+        raise RecordingError(f"{summary_path}: layout {layout!r} is not a name or spacings")
+    rates = summary.get("rates_hz")
+    rate = rates.get("skin") if isinstance(rates, dict) else None
+    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, int | float)):
+        raise RecordingError(f"{summary_path}: rates_hz.skin {rate!r} is not a number of Hz")
+    source = folder / name
+    t, force = read_csv(source)
+    return RunRecording(t, force, layout, None if rate is None else float(rate), source)
+
+
+# -- CAN logs ----------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class SkinPdo:
     """Where TPDO1 keeps what, from the EDS."""
@@ -255,6 +418,9 @@ def skin_pdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinPdo:
     )
 
 
+Packet = tuple[float, int | None, list[int]]  # (frame time stamp, sequence number, counts)
+
+
 def read_can_log(
     path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID, fs_hz: float | None = None
 ) -> tuple[np.ndarray, np.ndarray, CanStats]:
@@ -265,17 +431,18 @@ def read_can_log(
     if not p.is_file():
         raise RecordingError(f"{p}: no such file")
     pdo = skin_pdo(node_id)
-    rate = float(fs_hz) if fs_hz is not None else pdo.rate_hz
-    if not (math.isfinite(rate) and rate > 0):
-        raise ConfigError(f"sample rate must be a positive number of Hz, got {fs_hz}")
-    stats = CanStats(rate_hz=rate)
-    packets: list[tuple[float, int | None, list[int]]] = []
+    rate = check_sample_rate(pdo.rate_hz if fs_hz is None else fs_hz)
+    stats = CanStats(rate_hz=rate, cob_id=pdo.cob_id)
+    packets: list[Packet] = []
     try:
         reader = can.LogReader(str(p))
         for msg in reader:
+            stats.frames_read += 1
             if msg.is_error_frame or msg.is_remote_frame:
+                stats.other_frames += 1
                 continue
             if msg.arbitration_id != pdo.cob_id or msg.is_extended_id:
+                stats.other_frames += 1
                 stats.other_ids.add(msg.arbitration_id)
                 continue
             stats.frames += 1
@@ -287,7 +454,7 @@ def read_can_log(
             seq = None
             if pdo.sequence is not None:
                 o, s = pdo.sequence
-                seq = int.from_bytes(data[o : o + s], "little")
+                seq = int.from_bytes(data[o : o + s], "little") % SEQUENCE_MODULUS
             packets.append((float(msg.timestamp), seq, counts))
     except RecordingError:
         raise
@@ -295,41 +462,97 @@ def read_can_log(
         raise RecordingError(
             f"{p}: cannot read as a CAN log ({type(exc).__name__}: {exc})"
         ) from None
-    if not packets:
+    if not stats.frames:
         seen = ", ".join(f"0x{i:03X}" for i in sorted(stats.other_ids)[:12]) or "none"
         raise RecordingError(
             f"{p}: no skin TPDO1 frames (COB-ID 0x{pdo.cob_id:03X}, node-ID "
             f"0x{node_id:02X}, {pdo.length} data bytes); CAN-IDs seen: {seen}"
         )
-    t, counts = _assemble(packets, pdo, rate, stats)
+    t, counts = _assemble(_in_sequence(packets, stats), pdo, rate, stats)
     if not len(t):
-        raise RecordingError(f"{p}: no usable skin samples")
+        raise RecordingError(f"{p}: no usable skin samples: {stats.reasons()}")
     return t, pdo.to_newton(counts), stats
 
 
-def _assemble(packets, pdo: SkinPdo, rate: float, stats: CanStats) -> tuple[np.ndarray, np.ndarray]:
+def _in_sequence(packets: list[Packet], stats: CanStats) -> list[Packet]:
+    """Packets in sequence order, through a reorder window of REORDER_PACKETS packets.
+
+    Sequence numbers are unwrapped against the newest one seen (a step of
+    -128..127). A packet is held until one REORDER_PACKETS newer arrives;
+    held packets leave in sequence order, taking the held time stamps in
+    increasing order. Repeats of a held or recently released number are
+    re-publishes; a packet older than the last released one is too late.
+    Without a sequence number in the mapping, the log order stands.
+    """
+    if packets and packets[0][1] is None:
+        return packets
+    out: list[Packet] = []
+    held: dict[int, list[int]] = {}
+    stamps: list[float] = []  # min-heap of the held packets' time stamps
+    recent: deque[int] = deque(maxlen=SEQUENCE_MODULUS)  # numbers released lately
+    newest: int | None = None
+    first: int | None = None  # the first number released
+    last: int | None = None  # the last number released
+
+    def release() -> None:
+        nonlocal first, last
+        n = min(held)
+        if last is not None:
+            stats.lost_packets += n - last - 1
+        first = n if first is None else first
+        last = n
+        recent.append(n)
+        out.append((heapq.heappop(stamps), n, held.pop(n)))
+
+    for stamp, seq, counts in packets:
+        assert seq is not None  # a mapping either has a sequence number or not
+        if newest is None:
+            n = seq
+        else:
+            n = newest + (seq - newest + SEQUENCE_MODULUS // 2) % SEQUENCE_MODULUS
+            n -= SEQUENCE_MODULUS // 2
+        if n in held or n in recent:
+            stats.republished += 1
+            continue
+        if last is not None and n < last:
+            stats.out_of_order += 1
+            if first is not None and n > first:
+                stats.lost_packets -= 1  # counted missing when the numbers skipped it
+            continue
+        if newest is not None and n < newest:
+            stats.reordered += 1
+        newest = n if newest is None else max(newest, n)
+        held[n] = counts
+        heapq.heappush(stamps, stamp)
+        while held and min(held) <= newest - REORDER_PACKETS:
+            release()
+    while held:
+        release()
+    return out
+
+
+def _assemble(
+    packets: list[Packet], pdo: SkinPdo, rate: float, stats: CanStats
+) -> tuple[np.ndarray, np.ndarray]:
     per = pdo.samples_per_pdo
     period = 1.0 / rate
-    kept: list[tuple[float, int | None, list[int]]] = []
-    for stamp, seq, counts in packets:
-        if kept and seq is not None and seq == kept[-1][1]:
-            stats.republished += 1  # the same packet again (published on a state change)
-            continue
-        if kept and stamp - kept[-1][0] < (per - 0.5) * period:
+    kept: list[Packet] = []
+    for packet in packets:
+        if kept and packet[0] - kept[-1][0] < (per - 0.5) * period:
             # the previous packet's samples would overlap these: it was a re-publish of
             # stale slot values (as on entering OPERATIONAL), not `per` new samples
             stats.republished += 1
             kept.pop()
-        if kept and seq is not None and kept[-1][1] is not None:
-            gap = (seq - kept[-1][1]) % 256
-            stats.lost_packets += max(0, gap - 1)
-        kept.append((stamp, seq, counts))
-    stats.packets = len(kept)
+        kept.append(packet)
+    if not kept:
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
     offsets = (np.arange(per) - (per - 1)) * period
     t = (np.array([k[0] for k in kept])[:, None] + offsets[None, :]).ravel()
     counts = np.array([k[2] for k in kept], dtype=np.int64).ravel()
-    increasing = np.concatenate([[True], np.diff(t) > 0])
-    if not increasing.all():  # time-stamp jitter: drop what would go back in time
-        keep = t > np.maximum.accumulate(np.concatenate([[-np.inf], t[:-1]]))
-        t, counts = t[keep], counts[keep]
-    return t, counts
+    # time-stamp jitter or disorder: drop what would go back in time
+    keep = t > np.maximum.accumulate(np.concatenate([[-np.inf], t[:-1]]))
+    stats.samples_behind += int(np.count_nonzero(~keep))
+    used = keep.reshape(len(kept), per).any(axis=1)
+    stats.packets = int(np.count_nonzero(used))
+    stats.behind += len(kept) - stats.packets
+    return t[keep], counts[keep]
