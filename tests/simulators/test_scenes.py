@@ -300,6 +300,68 @@ def test_zero_length_spacing_is_rejected(tmp_path):
         load_scene(path)
 
 
+# -- safe states under power loss ------------------------------------------------------------
+POWER_LOSS = """
+[scene]
+seed = 1
+duration_s = 4.0
+
+[nodes.skin]
+[nodes.belt]
+
+[controller]
+type = "scripted"
+belt_mrad_s = [[0.2, 5000]]
+
+[[effects]]
+type = "belt.motor"
+
+[[effects]]
+type = "bus.faults"
+power_loss = [{{ node = "{node}", at_s = 1.0, restore_s = 2.5 }}]
+"""
+
+
+def can_frames(out: Path, can_id: int) -> list[tuple[float, bytes]]:
+    return [
+        (m.timestamp, bytes(m.data))
+        for m in can.ASCReader(str(out / "can.asc"))
+        if m.arbitration_id == can_id and not m.is_error_frame
+    ]
+
+
+def test_belt_watching_a_powered_off_skin_turns_again_only_after_the_skin_returns(tmp_path):
+    sim = simulation(
+        load_scene(scene_text(tmp_path, POWER_LOSS.format(node="skin"))), Recorder(tmp_path)
+    )
+    skin_id = sim.nodes["skin"].node_id
+    sim.nodes["belt"].store.nvm[(0x1016, 2)] = (skin_id << 16) | 300  # consumer of the skin
+    sim.run()
+    truth = read_columns(tmp_path / "truth.csv")
+    t_s, velocity = truth["t_s"], truth["belt.velocity_mrad_s"]
+    assert velocity[(t_s > 0.9) & (t_s < 1.0)].min() > 4900
+    # Quick stop once the skin's heartbeat is 300 ms overdue; no motion until it is back.
+    turning_again_s = t_s[(t_s > 1.5) & (velocity > 50)][0]
+    assert turning_again_s > 2.5
+    assert turning_again_s < 2.5 + 0.25  # error reset -> NMT start -> enable sequence
+    assert velocity[t_s > 3.5].min() > 4900
+    states = [(t, data[0]) for t, data in can_frames(tmp_path, 0x700 + sim.nodes["belt"].node_id)]
+    assert all(state == 0x7F for t, state in states if 1.35 < t < 2.5)
+
+
+def test_powered_off_belt_gets_no_rpdos_until_it_boots_again(tmp_path):
+    sim = simulation(
+        load_scene(scene_text(tmp_path, POWER_LOSS.format(node="belt"))), Recorder(tmp_path)
+    )
+    belt_id = sim.nodes["belt"].node_id
+    sim.run()
+    beats = [t for t, _ in can_frames(tmp_path, 0x700 + belt_id)]
+    lost_s = max(t for t in beats if t <= 1.0) + 0.3  # three 100 ms heartbeat periods
+    rpdos = [t for t, _ in can_frames(tmp_path, 0x200 + belt_id)]
+    assert not [t for t in rpdos if lost_s < t < 2.5]
+    assert [t for t in rpdos if t > 2.5]
+
+
 # -- every shipped scene runs and plots -------------------------------------------------------
 @pytest.mark.parametrize("scene", SCENES, ids=[s.stem for s in SCENES])
 def test_every_shipped_scene_runs_and_plots(tmp_path, scene, capsys):
