@@ -721,6 +721,11 @@ def test_runner_without_reopen_gives_up_when_its_hub_connection_closes(closing) 
         running.stop()
 
 
+def tick_of(frame: Frame) -> int:
+    """The tick count a `Ticker` frame carries (-1 for other frames)."""
+    return int.from_bytes(frame.data, "little") if frame.can_id == 0x181 else -1
+
+
 class FlakyBus:
     """A virtual bus whose receive fails while `broken` is set (a controller gone bus-off)."""
 
@@ -743,6 +748,7 @@ class FlakyBus:
         self.inner.shutdown()
 
 
+@pytest.mark.slow
 def test_runner_retries_a_failing_bus_with_back_off_and_resumes(closing, caplog) -> None:
     url = unique_virtual_url()
     flaky = FlakyBus(url)
@@ -753,15 +759,13 @@ def test_runner_retries_a_failing_bus_with_back_off_and_resumes(closing, caplog)
             recv_until(outside, has(0x181))
             flaky.broken.set()
             wait_for(lambda: runner.outage_s is not None)
-            calls = flaky.recv_calls
+            calls, ticks_at_loss = flaky.recv_calls, len(ticker.fired)
             time.sleep(0.5)  # attempts at 0.05, +0.1, +0.2 s: three reads, not a poll loop
             assert 2 <= flaky.recv_calls - calls <= 4
             assert runner.stats.offline_drops > 0  # ticks went on, their frames were dropped
             flaky.broken.clear()
             wait_for(lambda: runner.outage_s is None)
-            fired = len(ticker.fired)
-            frames = recv_until(outside, lambda fs: any(f.can_id == 0x181 for f in fs[1:]))
-            assert int.from_bytes(frames[-1].data, "little") > fired - 2  # its count went on
+            recv_until(outside, lambda fs: any(tick_of(f) > ticks_at_loss + 20 for f in fs))
             assert runner.stats.reconnects == 1 and runner.failure is None
     finally:
         flaky.shutdown()
@@ -782,6 +786,7 @@ def test_runner_reconnects_to_a_hub_restarted_on_the_same_port(closing, caplog) 
         runner = NodeRunner(bus, [ticker], reopen=lambda: open_bus(first.url), first_retry_s=0.05)
         with runner:
             wait_for(lambda: len(ticker.fired) >= 1)
+            ticks_at_loss = len(ticker.fired)
             first.stop()
             wait_for(lambda: runner.stats.bus_errors >= 1)
             time.sleep(0.2)
@@ -795,7 +800,7 @@ def test_runner_reconnects_to_a_hub_restarted_on_the_same_port(closing, caplog) 
             frames = recv_until(outside, has(0x181), timeout=10)
             assert runner.stats.reconnects == 1 and runner.failure is None
             assert 0x701 not in {f.can_id for f in frames}  # no second boot-up: state kept
-            assert int.from_bytes(frames[-1].data, "little") >= 5  # its tick count went on
+            assert tick_of(frames[-1]) > ticks_at_loss + 4  # its count went on while down
     finally:
         first.stop()
         if second is not None:
