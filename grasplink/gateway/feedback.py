@@ -265,7 +265,7 @@ class FeedbackController:
             deadlines.append(ended + cfg.force_return_us)
         if self._shown.pending:
             deadlines.append(self._shown.since_us + cfg.level_dwell_us)
-        if self._force_known_us is not None:
+        if self._force_known_us is not None and self._shown.channel == "force":
             deadlines.append(self._force_known_us + cfg.stale_us)
         now = self._clock.now_us
         future = [d for d in deadlines if d is not None and (now is None or d > now)]

@@ -15,6 +15,7 @@ dithering across a boundary by less than the band never changes the level.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -181,7 +182,7 @@ def _validate(table: LevelTable) -> None:
     h = table.hysteresis
     if not math.isfinite(h) or h < 0:
         raise ConfigError(f"{name}: hysteresis must be a finite number >= 0 {unit}, got {h}")
-    gaps = [b - a for a, b in zip(table.starts, table.starts[1:], strict=False)]
+    gaps = [b - a for a, b in itertools.pairwise(table.starts)]
     if gaps and h >= min(gaps):
         k = gaps.index(min(gaps)) + 2
         raise ConfigError(
