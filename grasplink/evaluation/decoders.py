@@ -10,13 +10,11 @@ and caches it per (layout, rate).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from functools import lru_cache
 
-from grasplink.errors import ConfigError
 from grasplink.gateway.decoding import registry
-from grasplink.gateway.decoding.base import Decoder, SkinGeometry
+from grasplink.gateway.decoding.base import Decoder, SkinGeometry, check_sample_rate
 from grasplink.gateway.decoding.mmse import ReferenceSlip
 from grasplink.simulators import synth
 
@@ -66,7 +64,6 @@ def make_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, **settings
     """
     if registry.needs_references(name) and "references" not in settings:
         SkinGeometry(layout_mm)  # a bad layout or rate fails as the decoder would say it
-        if not (math.isfinite(fs_hz) and fs_hz > 0):
-            raise ConfigError(f"sample rate must be a positive number of Hz, got {fs_hz}")
+        check_sample_rate(fs_hz)
         settings["references"] = reference_slips(layout_mm, fs_hz)
     return registry.make_decoder(name, layout_mm, fs_hz, **settings)
