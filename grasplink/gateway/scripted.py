@@ -3,7 +3,10 @@
 It is the NMT master plus a stand-in controller: every command period it
 sends RPDO1 to the belt (controlword, target velocity mrad/s) and to the
 hand (controlword, target grip mN), walking each drive through the CiA 402
-enable sequence first. Profiles are step functions of time since start.
+enable sequence from the statusword its TPDOs report (`drives.DriveHandshake`),
+so a drive still quick-stopping when it is started again is brought out of
+that state rather than sent an enable it ignores. Profiles are step
+functions of time since start.
 Only a drive the master may command gets RPDOs (`NmtMaster.commandable`):
 OPERATIONAL, its heartbeat not lost, not held by a consumer fault.
 """
@@ -15,13 +18,15 @@ from collections.abc import Mapping, Sequence
 
 from grasplink.core.frames import Frame
 from grasplink.core.params import Params
+from grasplink.errors import PdoError
+from grasplink.gateway.drives import DriveHandshake
 from grasplink.gateway.master import NmtMaster
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import PdoCodec
 
 COMMAND_PERIOD_US = 50_000
-ENABLE_SEQUENCE = (0x06, 0x07, 0x0F)  # shutdown, switch on, enable operation
+STATUSWORD_KEY = (obj.STATUSWORD, 0)
 
 Profile = Sequence[tuple[float, float]]  # (t_s, value), step-wise
 
@@ -52,12 +57,18 @@ class ScriptedMaster(NmtMaster):
         self.command_period_us = command_period_us
         self._next_command_us: int | None = None
         self._started_us = 0
-        self._enable_steps: dict[int, int] = {}
         self._codecs = {
             node_id: PdoCodec(kind, node_id)
             for kind, node_id in (("belt", belt_id), ("hand", hand_id))
             if node_id is not None
         }
+        self._handshakes = {node_id: DriveHandshake() for node_id in self._codecs}
+        self._tpdo_node = {
+            can_id: node_id
+            for node_id, codec in self._codecs.items()
+            for can_id in codec.tpdo_can_ids()
+        }
+        self.tpdos_dropped = 0  # drive TPDOs that did not fit their mapping
 
     @classmethod
     def from_scene(cls, options: Params, node_ids: Mapping[str, int]) -> ScriptedMaster:
@@ -92,6 +103,19 @@ class ScriptedMaster(NmtMaster):
             self._next_command_us = t_us + self.command_period_us
         return super().start(t_us)
 
+    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
+        node_id = self._tpdo_node.get(frame.can_id)
+        if node_id is None or frame.rtr:
+            return super().receive(frame, t_us)
+        try:
+            values = self._codecs[node_id].decode(frame.can_id, bytes(frame.data))
+        except PdoError:
+            self.tpdos_dropped += 1
+            return []
+        if STATUSWORD_KEY in values:
+            self._handshakes[node_id].on_statusword(int(values[STATUSWORD_KEY]))
+        return []
+
     def advance(self, t_us: int) -> list[Frame]:
         frames = super().advance(t_us)
         if self._next_command_us is not None and t_us >= self._next_command_us:
@@ -123,12 +147,10 @@ class ScriptedMaster(NmtMaster):
         return Frame(can_id, data)
 
     def on_node_restart(self, node_id: int) -> None:
-        # A rebooted or quick-stopped drive is in SWITCH ON DISABLED: walk the enable
-        # sequence again.
-        self._enable_steps.pop(node_id, None)
+        # Rebooted or back from a fault: forget the drive state until its statusword says.
+        if node_id in self._handshakes:
+            self._handshakes[node_id].reset()
 
     def _controlword(self, node_id: int) -> int:
-        """Walk the CiA 402 enable sequence once per drive, then hold 'enable operation'."""
-        step = self._enable_steps.get(node_id, 0)
-        self._enable_steps[node_id] = step + 1
-        return ENABLE_SEQUENCE[min(step, len(ENABLE_SEQUENCE) - 1)]
+        """The controlword that moves the drive one step towards OPERATION ENABLED."""
+        return self._handshakes[node_id].controlword()

@@ -318,7 +318,7 @@ type = "belt.motor"
 
 [[effects]]
 type = "bus.faults"
-power_loss = [{{ node = "{node}", at_s = 1.0, restore_s = 2.5 }}]
+power_loss = [{{ node = "{node}", at_s = 1.0, restore_s = {restore_s} }}]
 """
 
 
@@ -332,7 +332,8 @@ def can_frames(out: Path, can_id: int) -> list[tuple[float, bytes]]:
 
 def test_belt_watching_a_powered_off_skin_turns_again_only_after_the_skin_returns(tmp_path):
     sim = simulation(
-        load_scene(scene_text(tmp_path, POWER_LOSS.format(node="skin"))), Recorder(tmp_path)
+        load_scene(scene_text(tmp_path, POWER_LOSS.format(node="skin", restore_s=2.5))),
+        Recorder(tmp_path),
     )
     skin_id = sim.nodes["skin"].node_id
     sim.nodes["belt"].store.nvm[(0x1016, 2)] = (skin_id << 16) | 300  # consumer of the skin
@@ -349,9 +350,25 @@ def test_belt_watching_a_powered_off_skin_turns_again_only_after_the_skin_return
     assert all(state == 0x7F for t, state in states if 1.35 < t < 2.5)
 
 
+def test_belt_turns_again_after_a_skin_outage_shorter_than_its_quick_stop(tmp_path):
+    # The skin is back at 1.35 s while the belt motor is still spinning down (quick stop
+    # active): the master must take the drive out of quick stop, not send enables it ignores.
+    sim = simulation(
+        load_scene(scene_text(tmp_path, POWER_LOSS.format(node="skin", restore_s=1.35))),
+        Recorder(tmp_path),
+    )
+    sim.nodes["belt"].store.nvm[(0x1016, 2)] = (sim.nodes["skin"].node_id << 16) | 300
+    sim.run()
+    truth = read_columns(tmp_path / "truth.csv")
+    t_s, velocity = truth["t_s"], truth["belt.velocity_mrad_s"]
+    assert velocity[(t_s > 1.3) & (t_s < 1.6)].min() < 50  # it did stop
+    assert velocity[t_s > 2.5].min() > 4900
+
+
 def test_powered_off_belt_gets_no_rpdos_until_it_boots_again(tmp_path):
     sim = simulation(
-        load_scene(scene_text(tmp_path, POWER_LOSS.format(node="belt"))), Recorder(tmp_path)
+        load_scene(scene_text(tmp_path, POWER_LOSS.format(node="belt", restore_s=2.5))),
+        Recorder(tmp_path),
     )
     belt_id = sim.nodes["belt"].node_id
     sim.run()
