@@ -249,13 +249,16 @@ def cmd_node(args: argparse.Namespace) -> int:
 
 def _refuse_if_node_id_taken(bus, node_id: int, url: str) -> None:
     """Listen before booting: a heartbeat, EMCY or TPDO with our node-ID means a clash."""
-    from grasplink.bus.url import message_to_frame
+    from grasplink.bus.url import BusDisconnected, message_to_frame
     from grasplink.core.frames import node_cob_ids
 
     ours = set(node_cob_ids(node_id))
     deadline = time.monotonic() + PROBE_S
     while (left := deadline - time.monotonic()) > 0:
-        msg = bus.recv(left)
+        try:
+            msg = bus.recv(left)
+        except BusDisconnected:
+            return  # the hub went away meanwhile: the runner reconnects, and listens again
         frame = message_to_frame(msg) if msg is not None else None
         if frame is not None and frame.can_id in ours:
             raise ConfigError(

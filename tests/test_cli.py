@@ -16,7 +16,7 @@ import can
 import canopen
 import pytest
 
-from grasplink.bus import CanHub
+from grasplink.bus import BusDisconnected, CanHub
 from grasplink.core.nmt import NmtState
 from grasplink.demo import run_demo
 from grasplink.profiles import eds_path
@@ -324,3 +324,16 @@ def closing_bus(url: str):
         yield bus
     finally:
         bus.shutdown()
+
+
+class _DeadHubBus:
+    """A hub client whose connection closed: every receive says so."""
+
+    def recv(self, timeout: float | None = None):
+        raise BusDisconnected("connection to CAN hub ws://127.0.0.1:1/ closed")
+
+
+def test_node_id_probe_leaves_a_hub_lost_meanwhile_to_the_runner():
+    from grasplink.cli import _refuse_if_node_id_taken
+
+    _refuse_if_node_id_taken(_DeadHubBus(), 0x10, "remote:ws://127.0.0.1:1/")  # no exception
