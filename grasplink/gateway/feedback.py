@@ -103,7 +103,7 @@ class FeedbackConfig:
 
     force_table: LevelTable = field(default_factory=force_table)
     slip_table: LevelTable = field(default_factory=slip_table)
-    occurrence_velocity_mrad_s: int = 3700  # slip belt speed for "slip" (level 2 of 4)
+    occurrence_velocity_mrad_s: int = 4500  # "slip": the median of the four slip levels
     slip_on_us: int = 0  # slip reported this long before it is shown
     slip_off_us: int = 250_000  # no slip report this long before the slip is over
     force_return_us: int = 1_000_000  # force-and-slip: belt still this long after a slip

@@ -99,7 +99,7 @@ class LevelTable:
 
 
 def force_table(
-    entries: Sequence[tuple[float, int]] = DEFAULT_FORCE_ENTRIES,
+    entries: Sequence[Sequence[float]] = DEFAULT_FORCE_ENTRIES,
     *,
     hysteresis_n: float = DEFAULT_FORCE_HYSTERESIS_N,
 ) -> LevelTable:
@@ -108,7 +108,7 @@ def force_table(
 
 
 def slip_table(
-    entries: Sequence[tuple[float, int]] = DEFAULT_SLIP_ENTRIES,
+    entries: Sequence[Sequence[float]] = DEFAULT_SLIP_ENTRIES,
     *,
     hysteresis_mm_s: float = DEFAULT_SLIP_HYSTERESIS_MM_S,
 ) -> LevelTable:
@@ -118,7 +118,7 @@ def slip_table(
 
 
 def _build(
-    name: str, belt: Belt, unit: str, entries: Sequence[tuple[float, int]], hysteresis: float
+    name: str, belt: Belt, unit: str, entries: Sequence[Sequence[float]], hysteresis: float
 ) -> LevelTable:
     if isinstance(entries, str | bytes) or not isinstance(entries, Sequence):
         raise ConfigError(f"{name}: expected a list of [start {unit}, velocity mrad/s] entries")

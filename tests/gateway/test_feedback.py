@@ -22,7 +22,7 @@ from grasplink.gateway.percept import Percept
 
 MS = 1000
 PERIOD_US = 10 * MS  # decoder update period
-OCCURRENCE = -3700
+OCCURRENCE = -4500
 
 
 def percept(
@@ -413,3 +413,8 @@ def test_cleaning_a_percept_makes_unusable_numbers_unknown():
     p = Percept(0, math.nan, True, math.inf, math.nan).clean()
     assert (p.grip_force_n, p.slip_speed_mm_s, p.confidence) == (None, None, 0.0)
     assert Percept(0, 1.0, False, None, 7.0).clean().confidence == 1.0
+
+
+def test_the_default_occurrence_speed_is_none_of_the_slip_speed_levels():
+    config = FeedbackConfig()
+    assert config.occurrence_velocity_mrad_s not in config.slip_table.velocities_mrad_s
