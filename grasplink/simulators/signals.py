@@ -34,6 +34,7 @@ BELT_TAP_HZ = "belt.tap_hz"
 BELT_SURFACE_MM_S = "belt.surface_mm_s"
 # Wearer.
 WEARER_LEVEL = "wearer.level"
+WEARER_PERCEIVED = "wearer.perceived_level"
 # Sensors (skin and EMG domains).
 SKIN_FORCE_N = "skin.force_n"
 EMG_RAW_UV = "emg.raw_uv"
@@ -53,6 +54,11 @@ CATALOGUE: dict[str, Signal] = {
         Signal(BELT_TAP_HZ, "Hz", "force-belt tap frequency on the wearer's skin"),
         Signal(BELT_SURFACE_MM_S, "mm/s", "slip-belt surface speed on the wearer's skin"),
         Signal(WEARER_LEVEL, "level 0..5", "wearer's contraction level e0..e5 (thesis ch. 2.3)"),
+        Signal(
+            WEARER_PERCEIVED,
+            "level, signed",
+            "belt level the wearer last identified: +k force belt, -k slip belt, 0 nothing",
+        ),
         Signal(SKIN_FORCE_N, "N", "force the skin's FSR reads"),
         Signal(EMG_RAW_UV, "uV", "surface EMG at the electrode"),
     )
