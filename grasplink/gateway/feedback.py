@@ -221,7 +221,6 @@ class FeedbackController:
         self._force_known_us: int | None = None  # last percept with a usable grip force
         self._speed_mm_s: float | None = None  # |speed| last known in this slip
         self._shown = _Shown()
-        self._slipping_shown = False
 
     # --- inputs -----------------------------------------------------------------
 
