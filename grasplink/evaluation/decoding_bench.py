@@ -72,7 +72,7 @@ SETTINGS: dict[str, list[tuple[str, dict]]] = {
     "mmse": [("window 5 s", {}), ("window 2 s", {"window_s": 2.0})],
 }
 SLOW = {"mmse"}
-# The CAN path: every shipped slip scene, in a quick run too (~15 s on 2 workers).
+# The CAN path: every shipped slip scene, in a quick run too (~15 s on 2 idle cores).
 SLIP_SCENES = ("slip_*.toml", "headline_slip.toml")
 MAX_WORKERS = 2
 MOSTLY_WRONG = 0.5  # a scene whose speed estimates have the wrong sign more often than this
@@ -95,20 +95,16 @@ def find_checkout(start: Path) -> Path | None:
     return None
 
 
-def _checkout(what: str, option: str, cwd: Path | None) -> Path:
+def default_out_dir(cwd: Path | None = None) -> Path:
+    """docs/benchmarks/ of the checkout the current folder is in; ConfigError asks for --out."""
     start = (cwd or Path.cwd()).resolve()
     root = find_checkout(start)
     if root is None:
         raise ConfigError(
             f"no grasplink source checkout at or above {start} (a pyproject.toml naming "
-            f"project grasplink) to hold {what}; give {option}"
+            "project grasplink) to hold docs/benchmarks/; give --out DIR"
         )
-    return root
-
-
-def default_out_dir(cwd: Path | None = None) -> Path:
-    """docs/benchmarks/ of the checkout the current folder is in; ConfigError asks for --out."""
-    return _checkout("docs/benchmarks/", "--out DIR", cwd) / "docs" / "benchmarks"
+    return root / "docs" / "benchmarks"
 
 
 def default_scenes_dir(cwd: Path | None = None) -> Path:
@@ -600,8 +596,8 @@ def render_can_path(can: dict) -> list[str]:
         "LAYOUT` does. *skin.csv*: the same runs' float signal as the node sampled it. Each",
         "decoder at its default settings, scored as above; *wrong sign*: share of the",
         "speed estimates whose direction is wrong; *mostly wrong*: scenes where that share",
-        f"exceeds {100 * MOSTLY_WRONG:.0f} %. µs/sample measured in {can['workers']} worker",
-        "processes at once.",
+        f"exceeds {100 * MOSTLY_WRONG:.0f} %. µs/sample measured in {can['workers']} "
+        "worker processes at once.",
         "",
         f"{len(can['scenes'])} scenes decoded ({asymmetric} on asymmetric layouts, "
         f"{len(can['symmetric_scenes'])} on symmetric uniform4, whose direction no decoder "
