@@ -41,6 +41,16 @@ def test_window_matcher_without_reference_slips_is_a_config_error(name):
         registry.make_decoder(name, LAYOUTS_MM["alpha0.1"], 400)
 
 
+@pytest.mark.parametrize("name", WINDOW_MATCHERS)
+def test_reference_slips_may_come_as_any_iterable_of_reference_slips(name):
+    layout = LAYOUTS_MM["alpha0.1"]
+    slips = reference_slips(layout, 400)
+    decoder = registry.make_decoder(name, layout, 400, references=(s for s in slips))
+    assert [r.direction for r in decoder.searcher.references] == [1, -1]
+    with pytest.raises(ConfigError, match="references must be ReferenceSlip, got tuple"):
+        registry.make_decoder(name, layout, 400, references=[(20.0, [0.0, 1.0], [0.0, 1.0])])
+
+
 def test_only_the_window_matchers_need_reference_slips():
     assert {n for n in registry.DECODERS if registry.needs_references(n)} == set(WINDOW_MATCHERS)
 

@@ -166,7 +166,7 @@ class DtwDecoder(WindowDecoder):
         warp_refine: bool = True,
         **front,
     ):
-        require_references(self.name, references)
+        references = require_references(self.name, references)
         super().__init__(
             layout_mm,
             fs_hz,

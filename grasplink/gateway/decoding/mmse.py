@@ -7,9 +7,9 @@ simulates nothing: `grasplink.evaluation.decoders.reference_slips` makes the
 thesis-like pair, a noise-free simulated slip at 20 mm/s at the decoder's
 sample rate, for `grasplink decode` and the benchmark) is kept as a function
 of the leading edge's position (its ground truth) on a grid of
-`resolution_mm` (0.25 mm), padded before the skin
-with the reference's resting level and after it with its last value, so a
-window may hang over either end. For each candidate speed v in [`v_lower`,
+`resolution_mm` (0.25 mm), padded before the skin with the reference's
+resting level and after it with its last value, so a window may hang over
+either end. For each candidate speed v in [`v_lower`,
 `v_upper`] step `v_step` (5-150 mm/s step 5, the thesis' grid) the live
 window s - from 0.25 s before the slip's first pulse to now, 1 to
 `window_s` (5) seconds, the thesis' "from the time of initial slippage to
@@ -105,19 +105,25 @@ class ReferenceSlip:
         return 1 if self.speed_mm_s > 0 else -1
 
 
-def require_references(name: str, references: Sequence[ReferenceSlip] | None) -> None:
-    """A window matcher without references cannot run: say what it needs."""
-    if not references:
+def require_references(
+    name: str, references: ReferenceSlip | Sequence[ReferenceSlip] | None
+) -> tuple[ReferenceSlip, ...]:
+    """The references as a tuple; a window matcher without any cannot run: say what it needs."""
+    if isinstance(references, ReferenceSlip):
+        references = (references,)
+    refs = tuple(references or ())
+    if not refs:
         raise ConfigError(
             f"decoder {name!r} needs reference slips (references=[forward, reverse]): "
             "a slip over the whole skin at a known speed in each direction; "
             "grasplink decode and the decoding benchmark simulate them"
         )
-    for ref in references:
+    for ref in refs:
         if not isinstance(ref, ReferenceSlip):
             raise ConfigError(
                 f"decoder {name!r}: references must be ReferenceSlip, got {type(ref).__name__}"
             )
+    return refs
 
 
 class Reference:
@@ -497,7 +503,7 @@ class MmseDecoder(WindowDecoder):
         distinct_mm: float = 10.0,
         **front,
     ):
-        require_references(self.name, references)
+        references = require_references(self.name, references)
         super().__init__(
             layout_mm,
             fs_hz,
