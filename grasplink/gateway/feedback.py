@@ -46,14 +46,25 @@ class FeedbackMode(StrEnum):
     GRIP_FORCE = "grip_force"
     FORCE_AND_SLIP = "force_and_slip"
 
+    @property
+    def code(self) -> int:
+        """A stable number for register interfaces (Modbus): 0 off … 4 force and slip."""
+        return list(FeedbackMode).index(self)
+
     @classmethod
-    def parse(cls, value: FeedbackMode | str) -> FeedbackMode:
-        """A mode from its name (as MQTT or Modbus will send it); ConfigError if unknown."""
-        try:
-            return cls(value)
-        except ValueError:
-            names = ", ".join(m.value for m in cls)
-            raise ConfigError(f"unknown feedback mode {value!r}; modes: {names}") from None
+    def parse(cls, value: FeedbackMode | str | int) -> FeedbackMode:
+        """A mode from its name (MQTT) or code (Modbus); ConfigError if unknown."""
+        modes = list(cls)
+        if isinstance(value, int) and not isinstance(value, bool):
+            if 0 <= value < len(modes):
+                return modes[value]
+        elif isinstance(value, str):
+            try:
+                return cls(value)
+            except ValueError:
+                pass
+        names = ", ".join(f"{m.code} {m.value}" for m in modes)
+        raise ConfigError(f"unknown feedback mode {value!r}; modes: {names}")
 
 
 class Reason(StrEnum):
@@ -208,7 +219,7 @@ class FeedbackController:
         self,
         config: FeedbackConfig | None = None,
         *,
-        mode: FeedbackMode | str = FeedbackMode.FORCE_AND_SLIP,
+        mode: FeedbackMode | str | int = FeedbackMode.FORCE_AND_SLIP,
         max_velocity_mrad_s: int = obj.FORCE_BELT_MAX_MRAD_S,
     ):
         self.config = config or FeedbackConfig()
@@ -244,7 +255,7 @@ class FeedbackController:
         """Time passes without a percept: holds expire, stale readings are dropped."""
         return self._evaluate(self._clock.tick(t_us))
 
-    def set_mode(self, mode: FeedbackMode | str, t_us: int) -> FeedbackOutput:
+    def set_mode(self, mode: FeedbackMode | str | int, t_us: int) -> FeedbackOutput:
         """Change mode at run time; the new mode's display starts at once."""
         self.mode = FeedbackMode.parse(mode)
         self._shown = _Shown()

@@ -350,11 +350,18 @@ def test_a_mode_change_does_not_wait_for_the_level_dwell():
     assert c.set_mode("grip_force", 30 * MS).belt.velocity_mrad_s == 6500
 
 
-def test_an_unknown_mode_is_a_config_error_naming_the_modes():
+@pytest.mark.parametrize("bad", ["vibrate", 5, -1, True, 2.0])
+def test_an_unknown_mode_is_a_config_error_naming_the_modes(bad):
     c = FeedbackController()
-    with pytest.raises(ConfigError, match=r"unknown feedback mode 'vibrate'.*slip_speed"):
-        c.set_mode("vibrate", 0)
+    with pytest.raises(ConfigError, match=r"unknown feedback mode .*2 slip_speed"):
+        c.set_mode(bad, 0)
     assert c.mode == FeedbackMode.FORCE_AND_SLIP
+
+
+def test_a_mode_can_be_given_by_its_register_code():
+    assert [m.code for m in FeedbackMode] == [0, 1, 2, 3, 4]
+    assert FeedbackMode.parse(2) == FeedbackMode.SLIP_SPEED
+    assert FeedbackController(mode=0).mode == FeedbackMode.OFF
 
 
 def test_time_running_backwards_is_refused():
