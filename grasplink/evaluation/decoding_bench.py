@@ -78,6 +78,16 @@ MAX_WORKERS = 2
 MOSTLY_WRONG = 0.5  # a scene whose speed estimates have the wrong sign more often than this
 PATHS = ("can", "csv")
 PATH_LABELS = {"can": "CAN (can.asc)", "csv": "skin.csv"}
+# What the CAN logs held and lost (io.CanStats), summed over the scenes.
+CAN_COUNTS = (
+    "frames",
+    "packets",
+    "lost_packets",
+    "republished",
+    "malformed",
+    "out_of_order",
+    "behind",
+)
 
 
 def find_checkout(start: Path) -> Path | None:
@@ -336,12 +346,7 @@ def scene_job(path: str, controllers_for: sc.ControllerFactory, decoders: dict) 
         "scene": signals.name,
         "symmetric": signals.layout_mm == signals.layout_mm[::-1],
         "scores": scores,
-        "can_stats": {
-            "packets": stats.packets,
-            "lost_packets": stats.lost_packets,
-            "republished": stats.republished,
-            "malformed": stats.malformed,
-        },
+        "can_stats": {key: getattr(stats, key) for key in CAN_COUNTS},
     }
 
 
@@ -373,10 +378,7 @@ def can_path(
         "symmetric_scenes": [d["scene"] for d in ran if d["symmetric"]],
         "groups": {},
         "per_scene": {},
-        "can_stats": {
-            key: sum(d["can_stats"][key] for d in ran)
-            for key in ("packets", "lost_packets", "republished", "malformed")
-        },
+        "can_stats": {key: sum(d["can_stats"][key] for d in ran) for key in CAN_COUNTS},
         "workers": workers,
     }
     for group, members in groups.items():
@@ -601,9 +603,11 @@ def render_can_path(can: dict) -> list[str]:
         "",
         f"{len(can['scenes'])} scenes decoded ({asymmetric} on asymmetric layouts, "
         f"{len(can['symmetric_scenes'])} on symmetric uniform4, whose direction no decoder "
-        f"can observe); skipped: {skipped}. CAN logs: {stats['packets']} packets decoded, "
-        f"{stats['lost_packets']} lost, {stats['republished']} re-publishes skipped, "
-        f"{stats['malformed']} malformed.",
+        f"can observe); skipped: {skipped}. CAN logs: {stats['frames']} skin TPDO1 frames, "
+        f"{stats['packets']} used, {stats['republished']} re-publishes skipped, "
+        f"{stats['malformed']} malformed, {stats['out_of_order']} too late, "
+        f"{stats['behind']} behind in time; "
+        f"{stats['lost_packets']} packets lost.",
         "",
     ]
     titles = {

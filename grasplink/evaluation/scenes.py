@@ -5,10 +5,12 @@ controller (exactly as `grasplink run` does) into a folder, then reads the
 skin signal twice:
 
 - *CAN*: the skin node's TPDO1 frames from `can.asc`, through the gateway's
-  CAN-log reader (`gateway.decoding.io.read_can_log`, what `grasplink decode
-  R/can.asc --skin LAYOUT` reads): quantised by the node's 12-bit ADC, three
-  samples per PDO, stamped with the node's own timing;
-- *CSV*: the float signal the node sampled, from `skin.csv`.
+  CAN-log reader (`gateway.decoding.io.read_can_log` and its usability
+  check, what `grasplink decode R/can.asc --skin LAYOUT` reads): quantised
+  by the node's 12-bit ADC, three samples per PDO, stamped with the node's
+  own timing;
+- *CSV*: the float signal the node sampled, from `skin.csv` through the same
+  module's CSV reader (what `grasplink decode R/skin.csv` reads).
 
 Each comes with the ground truth at its own sample times (object position,
 speed and slip state from `truth.csv`, slip state as a step) and the ridge
@@ -26,7 +28,7 @@ import numpy as np
 
 from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import RecordingError
-from grasplink.gateway.decoding.io import CanStats, read_can_log
+from grasplink.gateway.decoding.io import CanStats, read_can_log, read_csv
 from grasplink.simulators import signals as sig
 from grasplink.simulators.effects.skin import RidgeContacts
 from grasplink.simulators.engine import Simulation
@@ -79,17 +81,15 @@ def record_scene(
         (sig.OBJECT_POSITION_MM, sig.OBJECT_SPEED_MM_S, sig.OBJECT_SLIPPING),
     )
     spec = scene.nodes["skin"]
-    t_can, f_can, stats = read_can_log(
-        out / "can.asc", node_id=spec.node_id, fs_hz=spec.sample_rate_hz
-    )
-    skin = read_columns(out / DOMAIN_FILES["skin"], (sig.SKIN_FORCE_N,))
+    log = out / "can.asc"
+    t_can, f_can, stats = read_can_log(log, node_id=spec.node_id, fs_hz=spec.sample_rate_hz)
+    stats.check_usable(str(log))
+    t_csv, f_csv = read_csv(out / DOMAIN_FILES["skin"])
     return SceneSignals(
         name=Path(path).stem,
         layout_mm=layout,
         can=with_truth(t_can, f_can, truth, contacts, layout, stats.rate_hz),
-        csv=with_truth(
-            skin["t_s"], skin[sig.SKIN_FORCE_N], truth, contacts, layout, scene.rate_hz("skin")
-        ),
+        csv=with_truth(t_csv, f_csv, truth, contacts, layout, scene.rate_hz("skin")),
         can_stats=stats,
     )
 
