@@ -50,7 +50,7 @@ from grasplink.gateway.decoding.base import MIN_USABLE_SHARE, check_sample_rate
 
 CSV_HEADER = ("t_s", "force_n")
 #: The force column of a CSV: ours, or the skin.csv of `grasplink run`
-#: (simulators.signals.SKIN_FORCE_N; a test ties the two).
+#: (the recorder's SKIN_FORCE_N signal name; a test ties the two).
 FORCE_COLUMNS = ("force_n", "skin.force_n")
 CAN_EXTENSIONS = (".asc", ".blf", ".log")
 RUN_SUMMARY = "summary.json"
