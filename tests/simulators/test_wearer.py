@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from grasplink.controllers import simulation
 from grasplink.core.params import SceneError
 from grasplink.simulators.core import REGISTRY
 from grasplink.simulators.effects.actuators import BeltMotor
@@ -18,6 +20,8 @@ from grasplink.simulators.effects.wearer import (
     WearerVirtual,
 )
 from grasplink.simulators.harness import context, make, run, sample_times_us
+from grasplink.simulators.recording import Recorder
+from grasplink.simulators.scene import load_scene
 
 TAP, SURFACE = "belt.tap_hz", "belt.surface_mm_s"
 LEVEL, PERCEIVED = "wearer.level", "wearer.perceived_level"
@@ -486,3 +490,25 @@ def test_the_force_levels_follow_the_nub_count():
 def test_bad_parameters_name_the_key(params, key):
     with pytest.raises(SceneError, match=rf"effect\.{key}"):
         wearer(**params)
+
+
+# ---------------------------------------------------------------- the shipped demo scene
+
+
+def test_the_demo_scene_wearer_contracts_against_slip_and_relaxes_under_high_force(tmp_path):
+    scene = Path(__file__).resolve().parents[2] / "scenes" / "wearer_demo.toml"
+    simulation(load_scene(scene), Recorder(tmp_path)).run()
+    data = np.genfromtxt(tmp_path / "truth.csv", delimiter=",", names=True)
+    times_us = np.round(data["t_s"] * 1e6)
+    level, perceived = data["wearerlevel"], data["wearerperceived_level"]
+    assert [v for _, v in steps(times_us, perceived)] == [2.0, -2.0, -4.0, 4.0, 0.0]
+    landed = steps(times_us, level)
+    assert [v for _, v in landed] == [2.0, 3.0, 4.0, 3.0, 2.0, 1.0]
+    slip_shown_s = data["t_s"][np.argmax(data["beltsurface_mm_s"] >= 25.0)]
+    assert 1.51 <= landed[0][0] - slip_shown_s <= 1.75 + 0.001
+    assert np.allclose(np.diff([t for t, _ in landed[3:]]), 3.0)  # relaxing under a high force
+    emg = np.genfromtxt(tmp_path / "emg.csv", delimiter=",", names=True)
+    rectified = np.abs(emg["emgraw_uv"])
+    at_rest = rectified[(emg["t_s"] > 0.5) & (emg["t_s"] < 3.5)].mean()
+    at_e4 = rectified[(emg["t_s"] > 9.0) & (emg["t_s"] < 13.0)].mean()
+    assert at_e4 > 10 * at_rest  # the EMG node measures the wearer's contraction
