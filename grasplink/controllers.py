@@ -5,14 +5,16 @@ controller's options beside it; the simulators never import a controller,
 the caller builds it here and hands it to the engine. Modules are imported
 on first use, so a controller whose module is missing fails only when asked
 for, naming it. A controller class offers
-`from_scene(options: Params, node_ids: Mapping[str, int])` and reads (and
-finishes) its options, so a misspelt option is an error naming the key.
+`from_scene(options: Params, nodes: Mapping[str, Mapping[str, Any]])` — the
+scene's nodes by kind with `node_id` and their settings (`layout`,
+`sample_rate_hz`, ...) — and reads (and finishes) its options, so a
+misspelt option is an error naming the key.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import ConfigError
@@ -25,6 +27,7 @@ if TYPE_CHECKING:
 #: name -> "module:Class"
 CONTROLLERS: dict[str, str] = {
     "scripted": "grasplink.gateway.scripted:ScriptedMaster",
+    "gateway": "grasplink.gateway.service:Gateway",
 }
 
 
@@ -61,8 +64,19 @@ def build_controllers(scene: Scene) -> list[SansIoDevice]:
         cls = controller_class(spec.name)
     except ConfigError as exc:
         raise spec.params().error("type", str(exc)) from None
-    node_ids = {kind: node.node_id for kind, node in scene.nodes.items()}
-    return [cls.from_scene(spec.params(), node_ids)]
+    return [cls.from_scene(spec.params(), scene_nodes(scene))]
+
+
+def scene_nodes(scene: Scene) -> dict[str, dict[str, Any]]:
+    """The scene's nodes as plain settings; the skin's layout as text (name or spacings)."""
+    layout = scene.layout_name or ",".join(f"{s:g}" for s in scene.layout_mm or ())
+    nodes = {}
+    for kind, spec in scene.nodes.items():
+        settings = {k: v for k, v in vars(spec).items() if v is not None and k != "kind"}
+        if kind == "skin" and layout:
+            settings["layout"] = layout
+        nodes[kind] = settings
+    return nodes
 
 
 def simulation(scene: Scene, recorder: Recorder | None = None, **options) -> Simulation:

@@ -48,7 +48,7 @@ class HandApp(DriveApp):
             self.setpoint_mn = self.grip_mn = 0.0
         self.holding = False
         super().on_reset(t_us)
-        self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, 0)
+        self.store.set(obj.HAND_ACTUAL_GRIP_MN, 0, round(self.grip_mn))  # what it holds
 
     def on_state(self, state: NmtState, t_us: int) -> None:
         if state == NmtState.OPERATIONAL:

@@ -18,6 +18,16 @@ from typing import Any
 
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError
+from grasplink.gateway.feedback import FeedbackConfig, FeedbackMode
+from grasplink.gateway.levels import (
+    DEFAULT_FORCE_ENTRIES,
+    DEFAULT_FORCE_HYSTERESIS_N,
+    DEFAULT_SLIP_ENTRIES,
+    DEFAULT_SLIP_HYSTERESIS_MM_S,
+    force_table,
+    slip_table,
+)
+from grasplink.gateway.reflex import ReflexConfig
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
@@ -25,7 +35,8 @@ from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 KINDS = ("skin", "emg", "belt", "hand")
 # The thesis's EMG control window is "rectified and integrated" over 150-250 ms (ch. 2.3).
 EMG_WINDOW_MS = (150, 250)
-FEEDBACK_MODES = ("off", "slip_occurrence", "slip_speed", "force", "force_and_slip")
+FEEDBACK_MODES = tuple(m.value for m in FeedbackMode)
+US_PER_MS = 1000
 GRIP_MODES = ("levels", "proportional")
 
 
@@ -66,16 +77,9 @@ class HandConfig(NodeConfig):
 
 
 @dataclass
-class FeedbackConfig:
-    mode: str = "force_and_slip"
-    options: dict[str, Any] = field(default_factory=dict)  # passed to the feedback controller
-
-
-@dataclass
-class ReflexConfig:
-    enabled: bool = True
-    threshold_mm_s: float = 45.0
-    options: dict[str, Any] = field(default_factory=dict)
+class FeedbackSettings:
+    mode: FeedbackMode = FeedbackMode.FORCE_AND_SLIP
+    controller: FeedbackConfig = field(default_factory=FeedbackConfig)
 
 
 @dataclass
@@ -88,7 +92,7 @@ class GatewayConfig:
     sdo_timeout_ms: int = 500
     status_period_s: float = 5.0
     nodes: dict[str, NodeConfig] = field(default_factory=dict)
-    feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
+    feedback: FeedbackSettings = field(default_factory=FeedbackSettings)
     reflex: ReflexConfig = field(default_factory=ReflexConfig)
 
     def node(self, kind: str) -> NodeConfig | None:
@@ -112,8 +116,10 @@ def load_config(path: str | Path | None) -> GatewayConfig:
     return parse_config(data, source)
 
 
-def parse_config(data: dict, source: str) -> GatewayConfig:
-    top = Params(data, source)
+def parse_config(data: dict, source: str, prefix: str = "") -> GatewayConfig:
+    """A configuration from TOML data; `prefix` names where the table sits (a scene's
+    `controller`) so errors point at the right key."""
+    top = Params(data, source, prefix)
     config = GatewayConfig(source=source)
     gw = top.table_of("gateway", {})
     config.node_id = gw.integer("node_id", obj.GATEWAY_NODE_ID, low=1, high=127)
@@ -142,17 +148,85 @@ def parse_config(data: dict, source: str) -> GatewayConfig:
         used[node.node_id] = kind
         p.finish()
         config.nodes[kind] = node
-    feedback = top.table_of("feedback", {})
-    config.feedback.mode = feedback.string("mode", "force_and_slip", choices=FEEDBACK_MODES)
-    config.feedback.options = {k: v for k, v in feedback.table.items() if k != "mode"}
-    reflex = top.table_of("reflex", {})
-    config.reflex.enabled = reflex.boolean("enabled", True)
-    config.reflex.threshold_mm_s = reflex.number("threshold_mm_s", 45.0, low=1.0, high=1000.0)
-    config.reflex.options = {
-        k: v for k, v in reflex.table.items() if k not in ("enabled", "threshold_mm_s")
-    }
+    config.feedback = _feedback(top.table_of("feedback", {}))
+    hand = config.nodes.get("hand")
+    crush_n = hand.crush_limit_n if isinstance(hand, HandConfig) else 40.0
+    config.reflex = _reflex(top.table_of("reflex", {}), crush_n)
     top.finish()
     return config
+
+
+def _checked(p: Params, name: str, build: Any) -> Any:
+    """Build a controller part; its own ConfigError is reported at the table's key."""
+    try:
+        return build()
+    except ConfigError as exc:
+        raise p.error(name, str(exc)) from None
+
+
+def _feedback(p: Params) -> FeedbackSettings:
+    mode = FeedbackMode(p.string("mode", FeedbackMode.FORCE_AND_SLIP.value, choices=FEEDBACK_MODES))
+    defaults = FeedbackConfig()
+    force = p.raw("force_table", [list(e) for e in DEFAULT_FORCE_ENTRIES])
+    slip = p.raw("slip_table", [list(e) for e in DEFAULT_SLIP_ENTRIES])
+    force_h = p.number("force_hysteresis_n", DEFAULT_FORCE_HYSTERESIS_N, low=0.0)
+    slip_h = p.number("slip_hysteresis_mm_s", DEFAULT_SLIP_HYSTERESIS_MM_S, low=0.0)
+    tables = {
+        "force_table": _checked(p, "force_table", lambda: force_table(force, hysteresis_n=force_h)),
+        "slip_table": _checked(p, "slip_table", lambda: slip_table(slip, hysteresis_mm_s=slip_h)),
+    }
+    timing = {
+        f"{name}_us": round(
+            p.number(
+                f"{name}_ms",
+                getattr(defaults, f"{name}_us") / US_PER_MS,
+                low=0.0,
+                low_open=name in ("slip_off", "stale"),  # zero would drop every slip report
+                high=60e3,
+            )
+            * US_PER_MS
+        )
+        for name in ("slip_on", "slip_off", "force_return", "level_dwell", "stale")
+    }
+    occurrence = p.integer(
+        "occurrence_velocity_mrad_s",
+        defaults.occurrence_velocity_mrad_s,
+        low=obj.SLIP_BELT_MIN_MRAD_S,
+        high=obj.SLIP_BELT_MAX_MRAD_S,
+    )
+    confidence = p.number("min_speed_confidence", defaults.min_speed_confidence, low=0, high=1)
+    controller = _checked(
+        p,
+        "mode",
+        lambda: FeedbackConfig(
+            **tables,
+            **timing,
+            occurrence_velocity_mrad_s=occurrence,
+            min_speed_confidence=confidence,
+        ),
+    )
+    p.finish()
+    return FeedbackSettings(mode, controller)
+
+
+def _reflex(p: Params, crush_limit_n: float) -> ReflexConfig:
+    d = ReflexConfig()
+    threshold = p.number("threshold_mm_s", d.threshold_mm_s, low=1.0, high=1000.0)
+    values = {
+        "enabled": p.boolean("enabled", d.enabled),
+        "threshold_mm_s": threshold,
+        "hysteresis_mm_s": p.number(
+            "hysteresis_mm_s", min(d.hysteresis_mm_s, threshold / 2), low=0.0, high=threshold * 0.99
+        ),
+        "gain_n_per_mm_s": p.number("gain_n_per_mm_s", d.gain_n_per_mm_s, low=0.0, low_open=True),
+        "hold_us": round(p.number("hold_ms", d.hold_us / US_PER_MS, low=0.0, high=60e3) * 1000),
+        "release_rate_n_s": p.number("release_rate_n_s", d.release_rate_n_s, low=0, low_open=True),
+        "min_confidence": p.number("min_confidence", d.min_confidence, low=0.0, high=1.0),
+        "crush_limit_n": crush_limit_n,
+    }
+    reflex = _checked(p, "threshold_mm_s", lambda: ReflexConfig(**values))
+    p.finish()
+    return reflex
 
 
 def _common(p: Params, kind: str) -> dict[str, Any]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 from grasplink.core.frames import Frame
 from grasplink.core.params import Params
@@ -71,7 +72,7 @@ class ScriptedMaster(NmtMaster):
         self.tpdos_dropped = 0  # drive TPDOs that did not fit their mapping
 
     @classmethod
-    def from_scene(cls, options: Params, node_ids: Mapping[str, int]) -> ScriptedMaster:
+    def from_scene(cls, options: Params, nodes: Mapping[str, Mapping[str, Any]]) -> ScriptedMaster:
         """A scene's `[controller] type = "scripted"`: step profiles for the belt and the hand.
 
         Profile values are bounded by what the commanded object accepts (its EDS limits), so
@@ -85,14 +86,14 @@ class ScriptedMaster(NmtMaster):
         for key, (kind, index, per_unit) in targets.items():
             if not options.has(key):
                 continue
-            if kind not in node_ids:
+            if kind not in nodes:
                 raise options.error(key, f"commands a {kind}, but the scene has no [nodes.{kind}]")
             low, high = object_limits(kind, index)
             profiles[key] = options.pairs(key, low=low / per_unit, high=high / per_unit)
         options.finish()
         return cls(
-            belt_id=node_ids.get("belt"),
-            hand_id=node_ids.get("hand"),
+            belt_id=nodes["belt"]["node_id"] if "belt" in nodes else None,
+            hand_id=nodes["hand"]["node_id"] if "hand" in nodes else None,
             belt_mrad_s=profiles["belt_mrad_s"],
             hand_grip_n=profiles["hand_grip_n"],
         )

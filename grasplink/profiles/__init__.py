@@ -12,6 +12,7 @@ almost everything and should stay cheap.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -52,8 +53,12 @@ def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictio
         raise EdsError(str(path), None, None, f"canopen cannot import it: {exc!r}") from exc
 
 
+@functools.lru_cache(maxsize=256)
 def object_limits(kind: str, index: int, subindex: int = 0) -> tuple[int, int]:
-    """(low, high) a shipped profile's object accepts: its EDS limits, else its type's range."""
+    """(low, high) a shipped profile's object accepts: its EDS limits, else its type's range.
+
+    Cached: the shipped profiles do not change while a process runs.
+    """
     from grasplink.profiles.eds import _types
     from grasplink.profiles.objects import DEFAULT_NODE_IDS
 

@@ -1,0 +1,477 @@
+"""The gateway as one sans-IO participant: master the network, decode, close the loop.
+
+`Gateway` is what an integrator deploys, and what a scene puts in the loop
+(`[controller] type = "gateway"`): the same object runs on a live bus
+(`grasplink gateway`, wrapped by a real-time runner) and in virtual time.
+
+- **Network master**: NMT master and heartbeat producer (`NmtMaster`); each
+  configured node that boots is provisioned over SDO (`provisioning.py`,
+  one sans-IO `SdoClient` per node, never inside a frame callback's return
+  path blocking anything) and started when every write succeeded; a node
+  that reboots is provisioned again.
+- **Decoding**: TPDOs are unpacked through the node's EDS mapping
+  (`PdoCodec`); frames that do not fit are dropped and counted. Skin samples
+  get their node-clock times from the packet sequence (`SampleStream`) and
+  feed the configured skin decoder; EMG envelopes become intent (`EmgIntentDecoder`).
+- **Control**: every skin decoder update drives the feedback controller
+  (belt) and the hybrid reflex, whose grip joins the wearer's EMG grip in
+  the arbiter (hand). Commands go out as RPDOs packed through the mapping,
+  clamped to the profile's limits with an alarm.
+- **Degraded states**: a node whose heartbeat is lost (one consumer time),
+  or that leaves OPERATIONAL, puts the loop in a defined state: belt stopped,
+  hand holding its last grip, an alarm raised; it recovers when the node
+  is back.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from grasplink.core.frames import EMCY_BASE, Frame, function_of
+from grasplink.core.nmt import NmtState
+from grasplink.core.params import Params
+from grasplink.errors import PdoError
+from grasplink.gateway.config import (
+    KINDS,
+    EmgConfig,
+    GatewayConfig,
+    NodeConfig,
+    SkinConfig,
+    parse_config,
+)
+from grasplink.gateway.decoding.base import SlipEstimate
+from grasplink.gateway.decoding.registry import make_decoder
+from grasplink.gateway.drives import DriveHandshake
+from grasplink.gateway.emg import EmgCalibration, EmgIntent, EmgIntentDecoder
+from grasplink.gateway.feedback import FeedbackController, FeedbackOutput
+from grasplink.gateway.master import NmtMaster
+from grasplink.gateway.percept import Percept
+from grasplink.gateway.provisioning import Provisioner, SdoWrite
+from grasplink.gateway.reflex import GripArbiter, GripCommand
+from grasplink.gateway.sdo_client import SdoClient, Transfer
+from grasplink.gateway.streams import SampleStream
+from grasplink.profiles import load_profile, object_limits
+from grasplink.profiles import objects as obj
+from grasplink.profiles.pdo_codec import Key, PdoCodec
+
+COMMAND_REFRESH_US = 100_000  # RPDOs repeat at least this often (drive handshake, deadlines)
+PROVISION_RETRY_US = 2_000_000
+MN_PER_N = 1000.0
+ADC_BITS, FULL_SCALE_MN, ZERO_COUNTS = 1, 2, 3  # 2130h sub-indices
+
+SAMPLE_SLOT_KEYS = tuple((obj.SKIN_SAMPLE_SLOTS, sub) for sub in (1, 2, 3))
+SEQUENCE_KEY = (obj.SKIN_PACKET_SEQUENCE, 0)
+STATIC_FORCE_KEY = (obj.SKIN_STATIC_FORCE_MN, 0)
+ENVELOPE_KEY = (obj.EMG_ENVELOPE_UV, 0)
+STATUSWORD_KEY = (obj.STATUSWORD, 0)
+CONTROLWORD_KEY = (obj.CONTROLWORD, 0)
+
+
+@dataclass
+class NodeLink:
+    """What the gateway keeps per configured node."""
+
+    config: NodeConfig
+    codec: PdoCodec
+    sdo: SdoClient
+    phase: str = "absent"  # absent, provisioning, starting, operational, failed, lost
+    provisioning: list[tuple[SdoWrite, Transfer]] = field(default_factory=list)
+    retry_at_us: int | None = None
+    failure: str = ""
+    pdos_rx: int = 0
+    pdos_dropped: Counter[str] = field(default_factory=Counter)
+    emcy: list[tuple[int, int]] = field(default_factory=list)  # (t_us, error code), bounded
+    values: dict[Key, int | float] = field(default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        return self.config.kind
+
+    @property
+    def node_id(self) -> int:
+        return self.config.node_id
+
+
+class Gateway(NmtMaster):
+    """See module docstring."""
+
+    def __init__(self, config: GatewayConfig):
+        skin_hb = [n.heartbeat_ms for n in config.nodes.values()] or [100]
+        super().__init__(
+            config.node_id,
+            heartbeat_ms=config.heartbeat_ms,
+            node_heartbeat_ms=max(skin_hb),
+        )
+        self.config = config
+        self.links: dict[int, NodeLink] = {}
+        self.by_kind: dict[str, NodeLink] = {}
+        for node in config.nodes.values():
+            link = NodeLink(
+                node,
+                PdoCodec(node.kind, node.node_id),
+                SdoClient(node.node_id, timeout_us=config.sdo_timeout_ms * 1000),
+            )
+            self.links[node.node_id] = link
+            self.by_kind[node.kind] = link
+        self.alarms: dict[str, str] = {}
+        self.frames_dropped: Counter[str] = Counter()
+        self._skin_setup()
+        self._emg_setup()
+        self.feedback = FeedbackController(config.feedback.controller, mode=config.feedback.mode)
+        self.arbiter = GripArbiter(config.reflex)
+        self.drives = {k: DriveHandshake() for k in ("belt", "hand") if k in self.by_kind}
+        self.belt_output: FeedbackOutput | None = None
+        self.grip_command: GripCommand | None = None
+        self.hand_grip_n: float | None = None  # actual, from the hand's TPDO
+        self.last_estimate: SlipEstimate | None = None
+        self.last_intent: EmgIntent | None = None
+        self.counters: Counter[str] = Counter()
+        self._next_refresh_us: int | None = None
+        self._sent: dict[int, bytes] = {}
+        self._held_grip_mn: int | None = None
+        # Until the wearer's grip is known (EMG, or without EMG the hand's own grip) the
+        # hand is only commanded by the reflex: it keeps what it holds.
+        self._voluntary_known = False
+        self.now_us = 0
+
+    @classmethod
+    def from_scene(cls, options: Params, nodes: Mapping[str, Mapping[str, Any]]) -> Gateway:
+        """A scene's `[controller] type = "gateway"`: the gateway configuration format
+        (`[controller.feedback]`, `[controller.reflex]`, `[controller.nodes.emg]`, ...) with
+        the scene's nodes, IDs and skin settings filled in (nodes not in the scene are off)."""
+        data = copy.deepcopy(options.table)
+        tables = data.setdefault("nodes", {})
+        if not isinstance(tables, dict):
+            raise options.error("nodes", "expected a table of node settings")
+        for kind in KINDS:
+            table = tables.setdefault(kind, {})
+            if not isinstance(table, dict):
+                raise options.error(f"nodes.{kind}", "expected a table")
+            if kind not in nodes:
+                table["enabled"] = False
+                continue
+            scene_settings = nodes[kind]
+            for key in ("node_id", "sample_rate_hz", "samples_per_pdo", "layout"):
+                if key in scene_settings:
+                    if key in table and table[key] != scene_settings[key]:
+                        raise options.error(
+                            f"nodes.{kind}.{key}", "is set by the scene's [nodes] table"
+                        )
+                    table[key] = scene_settings[key]
+        return cls(parse_config(data, options.source, options.prefix))
+
+    # -- construction helpers --------------------------------------------------------------
+    def _skin_setup(self) -> None:
+        link = self.by_kind.get("skin")
+        self.skin_stream: SampleStream | None = None
+        self.decoder = None
+        if link is None:
+            return
+        skin = link.config
+        assert isinstance(skin, SkinConfig)
+        self.skin_stream = SampleStream(skin.sample_rate_hz, skin.samples_per_pdo)
+        self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
+        od = load_profile("skin", skin.node_id)
+        cal = od[obj.SKIN_FSR_CALIBRATION]
+        bits = int(cal[ADC_BITS].default)
+        self._skin_zero = int(cal[ZERO_COUNTS].default)
+        full = (1 << bits) - 1
+        self._skin_n_per_count = int(cal[FULL_SCALE_MN].default) / (full - self._skin_zero) / 1e3
+
+    def _emg_setup(self) -> None:
+        link = self.by_kind.get("emg")
+        self.emg_decoder: EmgIntentDecoder | None = None
+        if link is None:
+            return
+        emg = link.config
+        assert isinstance(emg, EmgConfig)
+        self.emg_decoder = EmgIntentDecoder(
+            EmgCalibration(emg.e_min_uv, emg.e_max_uv),
+            mode=emg.grip_mode,
+            grip_levels_n=emg.grip_levels_n,
+            grip_max_n=emg.grip_max_n,
+        )
+
+    # -- SansIoDevice ----------------------------------------------------------------------
+    def start(self, t_us: int) -> list[Frame]:
+        self.now_us = t_us
+        self._next_refresh_us = t_us + COMMAND_REFRESH_US
+        return super().start(t_us)
+
+    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
+        self.now_us = t_us
+        function, node_id = function_of(frame.can_id)
+        link = self.links.get(node_id)
+        if function == "heartbeat":
+            return super().receive(frame, t_us) + self._after_heartbeat(link, t_us)
+        if link is None:
+            return []
+        if function == "SDO tx":
+            return link.sdo.receive(frame, t_us) + self._check_provisioning(link, t_us)
+        if function == "EMCY" and frame.can_id == EMCY_BASE + node_id:
+            return self._on_emcy(link, frame, t_us)
+        if function.startswith("TPDO"):
+            return self._on_tpdo(link, frame, t_us)
+        return []
+
+    def advance(self, t_us: int) -> list[Frame]:
+        self.now_us = t_us
+        frames = super().advance(t_us)
+        for link in self.links.values():
+            frames += link.sdo.advance(t_us)
+            frames += self._check_provisioning(link, t_us)
+            if link.retry_at_us is not None and t_us >= link.retry_at_us:
+                link.retry_at_us = None
+                frames += self._provision(link, t_us)
+            status = self.nodes.get(link.node_id)
+            if status is not None and status.lost and link.phase != "lost":
+                frames += self._lose(link, "heartbeat lost", t_us)
+        deadline = self._control_deadline()
+        if deadline is not None and t_us >= deadline:
+            self._advance_control(t_us)
+            frames += self._commands(t_us)
+        if self._next_refresh_us is not None and t_us >= self._next_refresh_us:
+            self._next_refresh_us += COMMAND_REFRESH_US * (
+                1 + (t_us - self._next_refresh_us) // COMMAND_REFRESH_US
+            )
+            frames += self._commands(t_us, refresh=True)
+        return frames
+
+    def next_deadline_us(self) -> int | None:
+        candidates = [super().next_deadline_us(), self._next_refresh_us, self._control_deadline()]
+        for link in self.links.values():
+            candidates += [link.sdo.next_deadline_us(), link.retry_at_us]
+        # Heartbeat loss is noticed when advance() runs; make sure it does.
+        limit = self.node_heartbeat_us * 3
+        for status in self.nodes.values():
+            if status.last_heartbeat_us is not None and not status.lost:
+                candidates.append(status.last_heartbeat_us + limit + 1)
+        return min((c for c in candidates if c is not None), default=None)
+
+    # -- network management ------------------------------------------------------------------
+    def _start(self, node_id: int) -> list[Frame]:
+        """A node booted or fell back to PRE-OPERATIONAL: provision it, then start it."""
+        link = self.links.get(node_id)
+        if link is None:
+            return super()._start(node_id)
+        self.on_node_restart(node_id)
+        return self._provision(link, self.now_us)
+
+    def on_node_restart(self, node_id: int) -> None:
+        link = self.links.get(node_id)
+        if link is None:
+            return
+        if link.kind in self.drives:
+            self.drives[link.kind].reset()
+        if link.kind == "skin" and self.skin_stream is not None:
+            self.skin_stream.reset()
+
+    def _provision(self, link: NodeLink, t_us: int) -> list[Frame]:
+        link.sdo.cancel()
+        link.phase = "provisioning"
+        writes = Provisioner(link.config, self.config).writes()
+        link.provisioning = [(w, link.sdo.download(w.index, w.subindex, w.data)) for w in writes]
+        return link.sdo.advance(t_us)
+
+    def _check_provisioning(self, link: NodeLink, t_us: int) -> list[Frame]:
+        if link.phase != "provisioning" or not link.provisioning:
+            return []
+        failed = next(((w, t) for w, t in link.provisioning if t.done and not t.ok), None)
+        if failed is not None:
+            write, transfer = failed
+            link.sdo.cancel()
+            link.provisioning = []
+            link.phase = "failed"
+            link.failure = f"{write.what}: {transfer.describe()}"
+            self.alarms[f"{link.kind}.provisioning"] = link.failure
+            link.retry_at_us = t_us + PROVISION_RETRY_US
+            return []
+        if all(t.ok for _, t in link.provisioning):
+            link.provisioning = []
+            link.phase = "starting"
+            self.alarms.pop(f"{link.kind}.provisioning", None)
+            return [self.command_start(link.node_id)]
+        return []
+
+    def command_start(self, node_id: int) -> Frame:
+        from grasplink.core.nmt import NmtCommand
+
+        return self.command(NmtCommand.START, node_id)
+
+    def _after_heartbeat(self, link: NodeLink | None, t_us: int) -> list[Frame]:
+        if link is None:
+            return []
+        status = self.nodes.get(link.node_id)
+        if status is None or status.state is None:
+            return []
+        if status.state == NmtState.OPERATIONAL:
+            if link.phase != "operational":
+                link.phase = "operational"
+                self.alarms.pop(f"{link.kind}.lost", None)
+                return self._commands(t_us, refresh=True)
+            return []
+        if link.phase == "operational":
+            return self._lose(link, f"left OPERATIONAL ({status.state.name})", t_us)
+        return []
+
+    def _lose(self, link: NodeLink, why: str, t_us: int) -> list[Frame]:
+        """The degraded state for a node gone: belt stopped, hand holding, alarm raised."""
+        link.phase = "lost" if "heartbeat" in why else "absent"
+        link.sdo.cancel()
+        self.alarms[f"{link.kind}.lost"] = why
+        if link.kind == "skin" and self.skin_stream is not None:
+            self.skin_stream.reset()
+        return self._commands(t_us, refresh=True)
+
+    def _on_emcy(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
+        if len(frame.data) != 8:
+            link.pdos_dropped["emcy length"] += 1
+            return []
+        code = int.from_bytes(frame.data[:2], "little")
+        link.emcy.append((t_us, code))
+        del link.emcy[:-32]
+        key = f"{link.kind}.emcy"
+        if code == 0:
+            self.alarms.pop(key, None)
+        else:
+            self.alarms[key] = f"EMCY 0x{code:04X} register 0x{frame.data[2]:02X}"
+        return []
+
+    # -- process data ----------------------------------------------------------------------
+    def _on_tpdo(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
+        try:
+            values = link.codec.decode(frame.can_id, frame.data)
+        except PdoError:
+            link.pdos_dropped["does not fit its mapping"] += 1
+            return []
+        link.pdos_rx += 1
+        link.values.update(values)
+        if link.kind == "skin":
+            return self._on_skin(values, t_us)
+        if link.kind == "emg" and ENVELOPE_KEY in values:
+            return self._on_emg(float(values[ENVELOPE_KEY]), t_us)
+        if link.kind in self.drives and STATUSWORD_KEY in values:
+            self.drives[link.kind].on_statusword(int(values[STATUSWORD_KEY]))
+            if link.kind == "hand" and (obj.HAND_ACTUAL_GRIP_MN, 0) in values:
+                self.hand_grip_n = float(values[(obj.HAND_ACTUAL_GRIP_MN, 0)]) / MN_PER_N
+                if self.emg_decoder is None and not self._voluntary_known:
+                    # No EMG: the wearer's grip is whatever the hand holds when we start.
+                    self._voluntary_known = True
+                    self.grip_command = self.arbiter.set_voluntary(t_us, self.hand_grip_n)
+        return []
+
+    def _on_skin(self, values: dict[Key, int | float], t_us: int) -> list[Frame]:
+        if self.skin_stream is None or self.decoder is None:
+            return []
+        slots = [values[k] for k in SAMPLE_SLOT_KEYS if k in values]
+        if not slots:
+            return []
+        sequence = int(values[SEQUENCE_KEY]) if SEQUENCE_KEY in values else None
+        counts = np.asarray(slots, dtype=np.float64)
+        force_n = (counts - self._skin_zero) * self._skin_n_per_count
+        t_s, force_n = self.skin_stream.feed(t_us, sequence, force_n)
+        if not len(t_s):
+            return []
+        estimates = self.decoder.feed(t_s, force_n)
+        if not estimates:
+            return []
+        self.last_estimate = estimates[-1]
+        for estimate in estimates:
+            self._control(estimate, t_us)
+        return self._commands(t_us)
+
+    def _on_emg(self, envelope_uv: float, t_us: int) -> list[Frame]:
+        if self.emg_decoder is None:
+            return []
+        intent = self.emg_decoder.update(t_us, envelope_uv)
+        if intent is None:
+            return []
+        self.last_intent = intent
+        self._voluntary_known = True
+        self.grip_command = self.arbiter.set_voluntary(t_us, intent.grip_n)
+        return self._commands(t_us)
+
+    # -- control ---------------------------------------------------------------------------
+    def _control(self, estimate: SlipEstimate, t_us: int) -> None:
+        """One decoder update through the feedback controller and the reflex.
+
+        The percept is stamped with the gateway's clock (the time the samples arrived), so
+        controller time never runs backwards whatever the decoder's grid does.
+        """
+        percept = replace(Percept.from_estimate(estimate), t_us=t_us)
+        self.counters["percepts"] += 1
+        self.belt_output = self.feedback.update(percept)
+        self.grip_command = self.arbiter.update(percept)
+
+    def _control_deadline(self) -> int | None:
+        deadlines = (self.feedback.next_deadline_us(), self.arbiter.next_deadline_us())
+        return min((d for d in deadlines if d is not None), default=None)
+
+    def _advance_control(self, t_us: int) -> None:
+        self.belt_output = self.feedback.advance(t_us)
+        self.grip_command = self.arbiter.advance(t_us)
+
+    def set_feedback_mode(self, mode: str, t_us: int) -> list[Frame]:
+        """A run-time command (MQTT, Modbus): ConfigError for an unknown mode."""
+        self.belt_output = self.feedback.set_mode(mode, max(t_us, self.now_us))
+        return self._commands(t_us)
+
+    def _commands(self, t_us: int, *, refresh: bool = False) -> list[Frame]:
+        """RPDOs to the belt and the hand: when a command changed, or as a periodic refresh."""
+        frames = []
+        belt = self.by_kind.get("belt")
+        if belt is not None and belt.phase == "operational":
+            velocity = self._belt_velocity()
+            frames += self._rpdo(belt, (obj.BELT_TARGET_VELOCITY_MRAD_S, 0), velocity, refresh)
+        hand = self.by_kind.get("hand")
+        if hand is not None and hand.phase == "operational":
+            grip_mn = self._hand_grip_mn()
+            if grip_mn is not None:
+                frames += self._rpdo(hand, (obj.HAND_TARGET_GRIP_MN, 0), grip_mn, refresh)
+        return frames
+
+    def _sensing_lost(self) -> list[str]:
+        return [
+            k
+            for k in ("skin", "emg")
+            if k in self.by_kind and self.by_kind[k].phase != "operational"
+        ]
+
+    def _belt_velocity(self) -> int:
+        """The belt stops whenever the skin cannot be trusted (lost, not running)."""
+        if "skin" in self._sensing_lost() or self.belt_output is None:
+            return 0
+        return self.belt_output.belt.velocity_mrad_s
+
+    def _hand_grip_mn(self) -> int | None:
+        """The grip to command; held (last value sent) while a sensing node is lost."""
+        command = self.grip_command
+        if command is None or not (self._voluntary_known or command.reflex_active):
+            return None
+        if self._sensing_lost():
+            return self._held_grip_mn
+        self._held_grip_mn = self.grip_command.target_grip_mn
+        return self._held_grip_mn
+
+    def _rpdo(self, link: NodeLink, target: Key, value: int, refresh: bool) -> list[Frame]:
+        low, high = object_limits(link.kind, target[0], target[1])
+        if not low <= value <= high:
+            self.alarms[f"{link.kind}.clamped"] = f"command {value} clamped to {low}..{high}"
+            value = min(high, max(low, value))
+        controlword = self.drives[link.kind].controlword()
+        can_id, data = link.codec.encode(1, {CONTROLWORD_KEY: controlword, target: value})
+        if not refresh and self._sent.get(can_id) == data:
+            return []
+        self._sent[can_id] = data
+        return [Frame(can_id, data)]
+
+
+def _finite(value: float | None) -> float | None:
+    return value if value is not None and math.isfinite(value) else None
