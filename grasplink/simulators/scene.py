@@ -102,13 +102,26 @@ def load_scene(path: str | Path) -> Scene:
     source = str(path)
     try:
         with open(path, "rb") as handle:
-            data = tomllib.load(handle)
+            raw = handle.read()
     except FileNotFoundError:
         raise SceneError(source, "", "no such scene file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(source, "", f"not valid TOML: {exc}") from None
     except OSError as exc:
         raise SceneError(source, "", f"cannot read: {exc.strerror}") from None
+    try:
+        # TOML is UTF-8; decoding here (not in tomllib.load) turns a binary file into a
+        # SceneError naming the line, instead of tomllib's bare UnicodeDecodeError.
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise SceneError(
+            source,
+            "",
+            f"not a TOML text file: byte 0x{raw[exc.start]:02X} on line {line} is not UTF-8",
+        ) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(source, "", f"not valid TOML: {exc}") from None
     return parse_scene(data, source)
 
 

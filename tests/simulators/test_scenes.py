@@ -300,6 +300,24 @@ def test_zero_length_spacing_is_rejected(tmp_path):
         load_scene(path)
 
 
+@pytest.mark.parametrize(
+    ("data", "needle"),
+    [
+        (b"\x89PNG\r\n\x1a\n\x00\xff binary", "byte 0x89 on line 1 is not UTF-8"),
+        (b'[scene]\nduration_s = 1\nname = "caf\xe9"\n', "byte 0xE9 on line 3 is not UTF-8"),
+    ],
+)
+def test_binary_scene_file_is_one_line_scene_error(tmp_path, capsys, data, needle):
+    path = tmp_path / "binary.toml"
+    path.write_bytes(data)
+    with pytest.raises(SceneError, match=needle):
+        load_scene(path)
+    assert cli_main(["run", str(path), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err
+    assert err == f"grasplink: error: {path}: not a TOML text file: {needle}\n"
+    assert not (tmp_path / "out").exists()
+
+
 # -- safe states under power loss ------------------------------------------------------------
 POWER_LOSS = """
 [scene]
