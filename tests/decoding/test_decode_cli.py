@@ -169,6 +169,40 @@ def test_npz_errors(tmp_path, capsys):
     assert_error(capsys, fake, "--skin", "alpha0.1", "--decoder", "ratio", contains=["fake.npz"])
 
 
+def test_npz_of_non_real_or_no_archive_is_refused(tmp_path, capsys):
+    """Complex values lost their imaginary part, booleans and dates became numbers."""
+    t = np.arange(10) / 400.0
+    cases = {
+        "complex.npz": (dict(t_s=t, force_n=t + 1j * t), ["force_n", "complex numbers"]),
+        "bools.npz": (dict(t_s=t, force_n=t > 0.01), ["force_n", "booleans"]),
+        "dates.npz": (
+            dict(t_s=np.arange(10).astype("datetime64[s]"), force_n=t),
+            ["t_s", "dates"],
+        ),
+        "text.npz": (dict(t_s=t.astype(str), force_n=t), ["t_s", "text"]),
+    }
+    for name, (arrays, expected) in cases.items():
+        path = tmp_path / name
+        np.savez(path, **arrays)
+        assert_error(
+            capsys,
+            path,
+            "--skin",
+            "alpha0.1",
+            contains=[name, *expected, "must be real numbers"],
+        )
+    empty = tmp_path / "empty.npz"
+    empty.write_bytes(b"")
+    assert_error(capsys, empty, "--skin", "alpha0.1", contains=["empty.npz", "empty file"])
+    nothing = tmp_path / "nothing.npz"
+    np.savez(nothing)
+    assert_error(capsys, nothing, "--skin", "alpha0.1", contains=["missing array(s)", "none"])
+    lone = tmp_path / "lone.npz"
+    with lone.open("wb") as handle:
+        np.save(handle, t)
+    assert_error(capsys, lone, "--skin", "alpha0.1", contains=["lone.npz", "single array"])
+
+
 def test_option_errors(tmp_path, capsys, recording):
     path = write_csv(tmp_path / "rec.csv", recording.t_s[:100], recording.force_n[:100])
     assert_error(
@@ -309,3 +343,111 @@ def test_can_log_of_a_scene_matches_the_simulated_signal(tmp_path, capsys):
     rc, lines, _ = decode(capsys, out / "can.asc", "--skin", "alpha0.1", "--decoder", "ratio")
     assert rc == 0 and all(set(d) == FIELDS for d in lines)
     assert abs(len(lines) - 350) <= 2 and any(d["slip"] for d in lines)
+
+
+# -- absurd options, hostile samples, a run's own files ------------------------------------------
+def test_absurd_layouts_and_rates_are_one_line_errors(tmp_path, capsys, recording):
+    path = write_csv(tmp_path / "rec.csv", recording.t_s[:100], recording.force_n[:100])
+    cases = [
+        (["--skin", "1e300,1"], ["spacing #1"]),
+        (["--skin", "5,0.2"], ["spacing #2", "0.5-200 mm", "0x2140"]),
+        (["--skin", ",".join(["2"] * 41)], ["41 spacings", "at most 40"]),
+        (["--skin", "nan,1"], ["spacing #1", "nan"]),
+        (["--skin", "alpha0.1", "--fs", "1e300"], ["1e+300 Hz", "80-1000 Hz", "0x2120"]),
+        (["--skin", "alpha0.1", "--fs", "50"], ["50 Hz", "80-1000 Hz"]),
+        (["--skin", "alpha0.1", "--fs", "2000"], ["2000 Hz"]),
+    ]
+    for options, expected in cases:
+        assert_error(capsys, path, *options, "--decoder", "ratio", contains=expected)
+    for fs in ("0", "-5", "nan", "inf"):
+        with pytest.raises(SystemExit):
+            main(["decode", str(path), "--skin", "alpha0.1", "--fs", fs])
+        assert "positive number of Hz" in capsys.readouterr().err
+    assert_error(capsys, path, "--decoder", "ratio", contains=["--skin LAYOUT is required"])
+
+
+def test_inferred_rate_outside_the_skin_range_is_a_one_line_error(tmp_path, capsys):
+    path = tmp_path / "pico.npz"
+    np.savez(path, t_s=np.arange(800) * 1e-12, force_n=np.ones(800))
+    assert_error(
+        capsys,
+        path,
+        "--skin",
+        "alpha0.1",
+        contains=["pico.npz", "median time step 1e-12 s", "80-1000 Hz", "give --fs"],
+    )
+
+
+def test_out_of_range_samples_are_reported_never_null_at_confidence(tmp_path, capsys, recording):
+    x = recording.force_n.copy()
+    x[100::50] = 1e308
+    x[125::50] = -1e308
+    path = tmp_path / "huge.npz"
+    np.savez(path, t_s=recording.t_s, force_n=x)
+    rc, lines, err = decode(capsys, path, "--skin", "alpha0.1")
+    assert rc == 0
+    bad = len(x[100::50]) + len(x[125::50])
+    assert err.count("\n") == 1 and f"rejected {bad}: {bad} out of range" in err
+    assert lines and all(d["force_n"] is not None for d in lines)  # was null at confidence 1
+
+
+def test_time_gap_is_reported_and_has_no_updates(tmp_path, capsys, recording):
+    t = recording.t_s.copy()
+    half = len(t) // 2
+    t[half:] += 1e6
+    path = write_csv(tmp_path / "gap.csv", t, recording.force_n)
+    rc, lines, err = decode(capsys, path, "--skin", "alpha0.1", "--decoder", "ratio")
+    assert rc == 0
+    assert not [d for d in lines if t[half - 1] < d["t_s"] < t[half]]
+    assert abs(len(lines) - recording.t_s[-1] / 0.01) <= 3
+    assert "1 gap(s) over 8 sample periods (20 ms; longest 1e+06 s)" in err
+
+
+def test_mostly_unusable_samples_exit_1_after_the_report(tmp_path, capsys, recording):
+    n = len(recording.t_s)
+    t = np.sort(np.concatenate([recording.t_s, recording.t_s[:-1] + 1e-12]))
+    x = np.resize(recording.force_n, len(t))
+    path = tmp_path / "jitter.npz"
+    np.savez(path, t_s=t, force_n=x)
+    rc, _, err = decode(capsys, path, "--skin", "alpha0.1", "--fs", "400", "--decoder", "ratio")
+    assert rc == 0 and f"{n - 1} timing errors" in err  # half of them: just enough
+    t3 = np.sort(np.concatenate([t, recording.t_s[:-1] + 2e-12]))
+    np.savez(path, t_s=t3, force_n=np.resize(recording.force_n, len(t3)))
+    rc, _, err = decode(capsys, path, "--skin", "alpha0.1", "--fs", "400", "--decoder", "ratio")
+    assert rc == 1
+    last = err.splitlines()[-1]
+    assert last.startswith("grasplink: error: ") and f"only {n} of {len(t3)} samples usable" in last
+
+
+@pytest.fixture(scope="module")
+def run_folder(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    scene = ROOT / "scenes" / "slip_alpha0.1_20mm_s_forward.toml"
+    assert main(["run", str(scene), "--out", str(out)]) == 0
+    return out
+
+
+def test_skin_csv_of_a_run_and_the_run_folder_decode(run_folder, capsys):
+    from grasplink.simulators import signals
+
+    assert signals.SKIN_FORCE_N in io.FORCE_COLUMNS  # the column `grasplink run` writes
+    capsys.readouterr()
+    rc, from_csv, err = decode(
+        capsys, run_folder / "skin.csv", "--skin", "alpha0.1", "--decoder", "ratio"
+    )
+    assert rc == 0 and not err and from_csv and any(d["slip"] for d in from_csv)
+    rc, from_folder, _ = decode(capsys, run_folder, "--decoder", "ratio")
+    assert rc == 0 and from_folder == from_csv  # layout and rate from summary.json
+    rc, other, _ = decode(capsys, run_folder, "--skin", "fibonacci", "--decoder", "ratio")
+    assert rc == 0 and other != from_csv  # --skin overrides the summary
+
+
+def test_folders_that_are_not_runs_are_one_line_errors(tmp_path, capsys):
+    assert_error(capsys, tmp_path, "--decoder", "ratio", contains=["no summary.json"])
+    (tmp_path / "summary.json").write_text('{"files": {"skin": "../x.csv"}}')
+    assert_error(capsys, tmp_path, "--decoder", "ratio", contains=["files.skin"])
+    (tmp_path / "summary.json").write_text("{not json")
+    assert_error(capsys, tmp_path, "--decoder", "ratio", contains=["summary.json"])
+    (tmp_path / "summary.json").write_text('{"files": {"skin": "skin.csv"}}')
+    (tmp_path / "skin.csv").write_text("t_s,skin.force_n\n0,1\n0.0025,1\n0.005,1\n")
+    assert_error(capsys, tmp_path, "--decoder", "ratio", contains=["names no skin layout"])
