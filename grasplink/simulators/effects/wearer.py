@@ -277,12 +277,8 @@ class WearerVirtual(Effect):
 
         # Every draw comes from the effect's generator, one stream per purpose: each stream is
         # consumed in event order (cues, perceptions, contractions), never per sample.
-        reaction, perception, execution = ctx.rng(self.kind).spawn(3)
-        self._rng_reaction, self._rng_perception, self._rng_execution = (
-            reaction,
-            perception,
-            execution,
-        )
+        streams = ctx.rng(self.kind).spawn(3)
+        self._rng_reaction, self._rng_perception, self._rng_execution = streams
 
         # Display debouncing: the candidate display key and when it began.
         self._candidate_key = 0
@@ -366,7 +362,9 @@ class WearerVirtual(Effect):
                 self._candidate_done = True
         return found
 
-    def _queue_cue(self, now_us: int, onset_us: int, key: int, reaction_belt: int, position: float):
+    def _queue_cue(
+        self, now_us: int, onset_us: int, key: int, reaction_belt: int, position: float
+    ) -> None:
         low_s, high_s = self.reaction_s[reaction_belt]
         reaction_us = round((low_s + (high_s - low_s) * self._rng_reaction.random()) * US_PER_S)
         self.counts["cues"] += 1
@@ -438,10 +436,8 @@ class WearerVirtual(Effect):
         if target > 0:
             offset = self.scatter_offsets[_draw(self.scatter, self._rng_execution.random())]
             produced = int(np.clip(target + offset, 0, LEVELS))
-        self._landing = (
-            now_us + self.motor_delay_us,
-            produced,
-        )  # a newer aim replaces a pending one
+        # A newer aim replaces a contraction that has not landed yet.
+        self._landing = (now_us + self.motor_delay_us, produced)
 
     # -- stepping ----------------------------------------------------------------------
     def step(self, io: Io) -> None:
