@@ -89,6 +89,37 @@ def build_parser() -> argparse.ArgumentParser:
         f"(default {DEFAULT_RECONNECT_TIMEOUT_S:g}; 0: one attempt)",
     )
 
+    gateway = sub.add_parser(
+        "gateway", help="master the network, decode skin and EMG, close the feedback loop"
+    )
+    gateway.add_argument(
+        "--bus",
+        default=DEFAULT_BUS_URL,
+        help=f"bus URL (default {DEFAULT_BUS_URL}; see docs/buses.md)",
+    )
+    gateway.add_argument(
+        "--config", type=Path, default=None, help="gateway TOML (default: built-in defaults)"
+    )
+    gateway.add_argument(
+        "--with-nodes",
+        action="store_true",
+        help="also run the four device nodes in this process (a self-contained embedded bus)",
+    )
+    gateway.add_argument(
+        "--duration",
+        type=positive_seconds,
+        default=None,
+        help="stop after this many seconds (default: run until Ctrl-C)",
+    )
+    gateway.add_argument(
+        "--reconnect-timeout",
+        type=reconnect_seconds,
+        default=DEFAULT_RECONNECT_TIMEOUT_S,
+        metavar="S",
+        help="retry a lost bus for this long, then exit 1 "
+        f"(default {DEFAULT_RECONNECT_TIMEOUT_S:g})",
+    )
+
     bus = sub.add_parser("bus", help="bus tools")
     bus_sub = bus.add_subparsers(dest="bus_command", required=True, metavar="BUS_COMMAND")
     hub = bus_sub.add_parser("hub", help="run a loopback CAN hub for several processes")
@@ -422,7 +453,48 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_gateway(args: argparse.Namespace) -> int:
+    from grasplink.gateway.config import load_config
+    from grasplink.gateway.live import LiveGateway
+    from grasplink.terminal import StopSignals
+
+    config = load_config(args.config)  # a bad file fails here, before the bus is touched
+    deadline = None if args.duration is None else time.monotonic() + args.duration
+    with (
+        StopSignals() as stop,
+        LiveGateway(
+            args.bus,
+            config,
+            with_nodes=args.with_nodes,
+            reconnect_timeout_s=args.reconnect_timeout,
+        ) as live,
+    ):
+        kinds = ", ".join(f"{k} 0x{n.node_id:02X}" for k, n in config.nodes.items())
+        reflex = config.reflex
+        print(
+            f"gateway 0x{config.node_id:02X} on {args.bus} ({config.source}): "
+            f"{kinds}; feedback {config.feedback.mode.value}, "
+            f"reflex {f'above {reflex.threshold_mm_s:g} mm/s' if reflex.enabled else 'off'}",
+            flush=True,
+        )
+        next_status = time.monotonic() + min(1.0, config.status_period_s)
+        while not stop():
+            if live.failure is not None:
+                raise live.failure
+            now = time.monotonic()
+            if deadline is not None and now >= deadline:
+                break
+            if now >= next_status:
+                print(live.status_line(), flush=True)
+                next_status = now + config.status_period_s
+            time.sleep(0.05)
+        final = live.status_line()
+    print(f"stopped: {final}", flush=True)
+    return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
+
+
 COMMANDS = {
+    "gateway": cmd_gateway,
     "node": cmd_node,
     "bus": cmd_bus,
     "demo": cmd_demo,

@@ -214,9 +214,13 @@ class NmtMaster:
         return []
 
     def _reboot_lost(self, node_id: int) -> list[Frame]:
-        """A lost node is back without a boot-up: reset it (once), unless that wipes a fault."""
+        """A lost node is back without a boot-up: reset it, unless that would wipe a fault.
+
+        Called again at each of its heartbeats until it shows the reset took (the NMT frame
+        can be lost like any other).
+        """
         status = self.nodes[node_id]
-        if status.reset_sent or status.in_consumer_fault:
+        if status.in_consumer_fault or not self.autostart:
             return []
         status.reset_sent = True
         return [self.command(NmtCommand.RESET_COMMUNICATION, node_id)]

@@ -89,6 +89,7 @@ class SdoClient:
         self._queue: deque[Transfer] = deque()
         self._current: Transfer | None = None
         self._deadline_us: int | None = None
+        self.stale_responses = 0
 
     # -- queueing ---------------------------------------------------------------------
     def download(self, index: int, subindex: int, data: bytes) -> Transfer:
@@ -154,6 +155,9 @@ class SdoClient:
             return self._finish(Phase.FAILED)
         try:
             reply = (self._on_upload if transfer.upload else self._on_download)(transfer, data)
+        except _StaleResponse:
+            self.stale_responses += 1  # answers a transfer cancelled before: not ours
+            return []
         except _ProtocolError as exc:
             return self._abort(exc.code, f": {exc}")
         if reply is None:
@@ -225,9 +229,10 @@ class SdoClient:
 
     @staticmethod
     def _check_mux(t: Transfer, data: bytes) -> None:
+        """An initiate response for another object answers an earlier, cancelled request."""
         _, index, subindex = _MUX.unpack_from(data)
         if (index, subindex) != (t.index, t.subindex):
-            raise _ProtocolError(AbortCode.GENERAL, f"response for 0x{index:04X}:{subindex:02X}")
+            raise _StaleResponse
 
     def _send(self, payload: bytes, t_us: int) -> list[Frame]:
         self._deadline_us = t_us + self.timeout_us
@@ -247,6 +252,10 @@ class SdoClient:
         self._current = None
         self._deadline_us = None
         return []
+
+
+class _StaleResponse(Exception):
+    pass
 
 
 class _ProtocolError(Exception):

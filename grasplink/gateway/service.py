@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import copy
 import math
-from collections import Counter
+import time
+from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -61,7 +62,9 @@ from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import Key, PdoCodec
 
+LATENCY_HISTORY = 2000
 COMMAND_REFRESH_US = 100_000  # RPDOs repeat at least this often (drive handshake, deadlines)
+SNAPSHOT_PERIOD_US = 50_000  # 20 Hz, the default telemetry rate
 PROVISION_RETRY_US = 2_000_000
 MN_PER_N = 1000.0
 ADC_BITS, FULL_SCALE_MN, ZERO_COUNTS = 1, 2, 3  # 2130h sub-indices
@@ -84,6 +87,7 @@ class NodeLink:
     phase: str = "absent"  # absent, provisioning, starting, operational, failed, lost
     provisioning: list[tuple[SdoWrite, Transfer]] = field(default_factory=list)
     retry_at_us: int | None = None
+    boots_seen: int = -1  # the master's boot count when provisioning last began
     failure: str = ""
     pdos_rx: int = 0
     pdos_dropped: Counter[str] = field(default_factory=Counter)
@@ -133,7 +137,14 @@ class Gateway(NmtMaster):
         self.last_estimate: SlipEstimate | None = None
         self.last_intent: EmgIntent | None = None
         self.counters: Counter[str] = Counter()
+        # Processing time from a skin TPDO to the RPDOs it causes, recent history only.
+        self.loop_latency_us: deque[float] = deque(maxlen=LATENCY_HISTORY)
         self._next_refresh_us: int | None = None
+        # The latest snapshot, replaced whole every SNAPSHOT_PERIOD_US on the gateway's own
+        # thread, so other threads (status line, telemetry) read it without locks.
+        self.latest: dict[str, Any] | None = None
+        self._next_snapshot_us: int | None = None
+        self._started_us = 0
         self._sent: dict[int, bytes] = {}
         self._held_grip_mn: int | None = None
         # Until the wearer's grip is known (EMG, or without EMG the hand's own grip) the
@@ -203,6 +214,8 @@ class Gateway(NmtMaster):
     def start(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
         self._next_refresh_us = t_us + COMMAND_REFRESH_US
+        self._next_snapshot_us = t_us
+        self._started_us = t_us
         return super().start(t_us)
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
@@ -216,9 +229,13 @@ class Gateway(NmtMaster):
         if function == "SDO tx":
             return link.sdo.receive(frame, t_us) + self._check_provisioning(link, t_us)
         if function == "EMCY" and frame.can_id == EMCY_BASE + node_id:
-            return self._on_emcy(link, frame, t_us)
+            return super().receive(frame, t_us) + self._emcy_alarm(link, frame, t_us)
         if function.startswith("TPDO"):
-            return self._on_tpdo(link, frame, t_us)
+            started_ns = time.perf_counter_ns()
+            frames = self._on_tpdo(link, frame, t_us)
+            if frames and link.kind == "skin":
+                self.loop_latency_us.append((time.perf_counter_ns() - started_ns) / 1000)
+            return frames
         return []
 
     def advance(self, t_us: int) -> list[Frame]:
@@ -242,10 +259,18 @@ class Gateway(NmtMaster):
                 1 + (t_us - self._next_refresh_us) // COMMAND_REFRESH_US
             )
             frames += self._commands(t_us, refresh=True)
+        if self._next_snapshot_us is not None and t_us >= self._next_snapshot_us:
+            self._next_snapshot_us = t_us + SNAPSHOT_PERIOD_US
+            self.latest = self.snapshot()
         return frames
 
     def next_deadline_us(self) -> int | None:
-        candidates = [super().next_deadline_us(), self._next_refresh_us, self._control_deadline()]
+        candidates = [
+            super().next_deadline_us(),
+            self._next_refresh_us,
+            self._control_deadline(),
+            self._next_snapshot_us,
+        ]
         for link in self.links.values():
             candidates += [link.sdo.next_deadline_us(), link.retry_at_us]
         # Heartbeat loss is noticed when advance() runs; make sure it does.
@@ -257,10 +282,21 @@ class Gateway(NmtMaster):
 
     # -- network management ------------------------------------------------------------------
     def _start(self, node_id: int) -> list[Frame]:
-        """A node booted or fell back to PRE-OPERATIONAL: provision it, then start it."""
+        """A node booted or is PRE-OPERATIONAL: provision it, then start it.
+
+        A PRE-OPERATIONAL heartbeat while its provisioning runs (or waits for a retry) is
+        the node waiting for us; one after START was sent means START was lost.
+        """
         link = self.links.get(node_id)
         if link is None:
             return super()._start(node_id)
+        boots = self.nodes[node_id].boots
+        if boots == link.boots_seen:
+            if link.phase in ("provisioning", "failed"):
+                return []
+            if link.phase == "starting":
+                return [self.command_start(node_id)]
+        link.boots_seen = boots
         self.on_node_restart(node_id)
         return self._provision(link, self.now_us)
 
@@ -330,7 +366,7 @@ class Gateway(NmtMaster):
             self.skin_stream.reset()
         return self._commands(t_us, refresh=True)
 
-    def _on_emcy(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
+    def _emcy_alarm(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
         if len(frame.data) != 8:
             link.pdos_dropped["emcy length"] += 1
             return []
@@ -397,6 +433,66 @@ class Gateway(NmtMaster):
         self._voluntary_known = True
         self.grip_command = self.arbiter.set_voluntary(t_us, intent.grip_n)
         return self._commands(t_us)
+
+    # -- what the gateway knows, for status lines, telemetry and registers -------------------
+    def snapshot(self) -> dict[str, Any]:
+        """Everything a telemetry consumer wants, as plain JSON-ready values with units."""
+        nodes = {}
+        for link in self.links.values():
+            status = self.nodes.get(link.node_id)
+            nodes[link.kind] = {
+                "node_id": link.node_id,
+                "phase": link.phase,
+                "nmt_state": status.state.name if status and status.state else None,
+                "boots": status.boots if status else 0,
+                "pdos_rx": link.pdos_rx,
+                "pdos_dropped": sum(link.pdos_dropped.values()),
+                "last_emcy": f"0x{link.emcy[-1][1]:04X}" if link.emcy else None,
+                "failure": link.failure or None,
+            }
+        if self.skin_stream is not None and "skin" in nodes:
+            nodes["skin"]["lost_packets"] = self.skin_stream.stats.lost_packets
+        est = self.last_estimate
+        belt = self.belt_output.belt if self.belt_output else None
+        grip = self.grip_command
+        intent = self.last_intent
+        latencies = sorted(self.loop_latency_us)
+        return {
+            "uptime_s": (self.now_us - self._started_us) / 1e6,
+            "nodes": nodes,
+            "skin": {
+                "slip": est.slip if est else None,
+                "slip_speed_mm_s": _finite(est.speed_mm_s) if est else None,
+                "position_mm": _finite(est.position_mm) if est else None,
+                "grip_force_n": _finite(est.force_n) if est else None,
+                "confidence": est.confidence if est else None,
+            },
+            "emg": {
+                "envelope_uv": intent.envelope_uv if intent else None,
+                "level": intent.level if intent else None,
+                "grip_intent_n": intent.grip_n if intent else None,
+                "saturated": intent.saturated if intent else None,
+            },
+            "belt": {
+                "mode": self.feedback.mode.value,
+                "belt": belt.belt.value if belt else "none",
+                "level": belt.level if belt else None,
+                "velocity_mrad_s": self._belt_velocity(),
+                "reason": belt.reason.value if belt else None,
+            },
+            "hand": {
+                "grip_n": self.hand_grip_n,
+                "setpoint_n": grip.grip_n if grip else None,
+                "reflex": grip.reflex.value if grip else "idle",
+                "source": grip.source.value if grip else None,
+            },
+            "loop": {
+                "latency_p50_us": _percentile(latencies, 0.5),
+                "latency_p99_us": _percentile(latencies, 0.99),
+                "percepts": self.counters["percepts"],
+            },
+            "alarms": dict(self.alarms),
+        }
 
     # -- control ---------------------------------------------------------------------------
     def _control(self, estimate: SlipEstimate, t_us: int) -> None:
@@ -475,3 +571,9 @@ class Gateway(NmtMaster):
 
 def _finite(value: float | None) -> float | None:
     return value if value is not None and math.isfinite(value) else None
+
+
+def _percentile(ordered: list[float], share: float) -> float | None:
+    if not ordered:
+        return None
+    return ordered[min(len(ordered) - 1, int(share * len(ordered)))]

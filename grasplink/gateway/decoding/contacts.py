@@ -46,7 +46,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from grasplink.gateway.decoding.filters import SosFilter
+from grasplink.gateway.decoding.filters import SosFilter, lattice_median, on_rail, resolution
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
@@ -81,15 +81,17 @@ class _Channel:
     slope: SosFilter  # LS slope over the last w + 1 samples (FIR)
     after: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slopes not yet paired
     next_n: int = 0  # next hinge centre to compute
-    hinge: list = field(default_factory=list)  # (hinge, after) of block 0 awaiting its noise
+    waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
     noise_by_block: dict = field(default_factory=dict)
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # z by centre, from z_start
     zh: np.ndarray = field(default_factory=lambda: np.zeros(0))  # hinge (N/sample), same index
     za: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slope after, same index
+    zready: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # known at
     z_start: int = 0  # global centre index of z[0]
     next_test: int = 0  # next centre to test for a local maximum
     block_abs: list = field(default_factory=list)  # |h| of the block being filled
     block_noise: dict = field(default_factory=dict)  # completed block -> robust noise
+    done: int = 0  # blocks completed
 
 
 @dataclass
@@ -159,6 +161,10 @@ class ContactDetector:
         self.level_half = half
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
         self._n = 0  # samples received
+        self._raw = np.zeros(0)  # samples of the raw block being filled
+        self._raw_blocks = 0  # raw blocks completed
+        self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
+        self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
         self._keep = keep
         self._t = np.zeros(0)  # recent sample times
@@ -179,6 +185,7 @@ class ContactDetector:
         n0 = self._n
         self._n += len(x)
         self._t = np.concatenate([self._t, t])
+        self._raw_stats(x)
         candidates: list[tuple[int, int, int, float, float, float]] = []
         for ci, ch in enumerate(self.channels):
             self._run_channel(ci, ch, x, n0, candidates)
@@ -192,11 +199,25 @@ class ContactDetector:
             - max(self.noise_blocks, self.history_blocks)
             - 2
         )
-        for ch in self.channels:
-            for cache in (ch.block_noise, ch.noise_by_block):
-                for b in [b for b in cache if b < oldest]:
-                    del cache[b]
+        for cache in [self._censored, self._floor] + [
+            c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
+        ]:
+            for b in [b for b in cache if b < oldest]:
+                del cache[b]
         return events, checks
+
+    def _raw_stats(self, x: np.ndarray) -> None:
+        """Per block of raw samples: on a rail (noise cut off)? quantisation floor?"""
+        raw = np.concatenate([self._raw, x])
+        B = self.block
+        full = len(raw) // B
+        for k in range(full):
+            block = raw[k * B : (k + 1) * B]
+            b = self._raw_blocks + k
+            self._censored[b] = on_rail(block)
+            self._floor[b] = resolution(block) / math.sqrt(12.0)
+        self._raw_blocks += full
+        self._raw = raw[full * B :].copy()
 
     def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int, candidates: list) -> None:
         w = ch.width
@@ -221,8 +242,12 @@ class ContactDetector:
     ) -> None:
         """Noise per block of centres; z for every centre whose noise is known.
 
-        Centres of block b > 0 use the noise of the blocks before it; block 0
-        waits for its own noise (detections there are decided late).
+        Centres of a block use the noise of the blocks before it. Where none
+        of those showed its noise (the first block, or a stretch on a rail)
+        they wait for the first block that does - decided late, but judged
+        against noise that was seen; after `noise_blocks` blocks of waiting
+        the oldest are dropped undetected (bounded memory; a signal on a rail
+        has no contacts to find).
         """
         B = self.block
         pos = 0
@@ -232,35 +257,75 @@ class ContactDetector:
             end = min(len(hinge), pos + (block + 1) * B - n)
             seg_h, seg_a = hinge[pos:end], slope_after[pos:end]
             ch.block_abs.append(np.abs(seg_h))
-            if block == 0:
-                ch.hinge.append((seg_h, seg_a))
+            noise = None if ch.waiting else self._noise(ch, block)
+            if noise is None:
+                ch.waiting.append((block, seg_h, seg_a))
             else:
-                self._append_z(ch, seg_h, seg_a, self._noise(ch, block))
+                self._append_z(ch, seg_h, seg_a, noise, n + ch.width)
             n += end - pos
             pos = end
-            if n % B == 0:  # block complete
+            if n % B == 0:  # block complete: its noise, and perhaps the waiting blocks'
                 values = np.concatenate(ch.block_abs)
                 ch.block_abs = []
-                k = len(values) // 2
-                ch.block_noise[block] = float(np.partition(values, k)[k]) * MEDIAN_TO_STD
-                if block == 0:
-                    noise = self._noise(ch, 0)
-                    for seg_h, seg_a in ch.hinge:
-                        self._append_z(ch, seg_h, seg_a, noise)
-                    ch.hinge = []
+                ch.block_noise[block] = lattice_median(values, floor=0.0) * MEDIAN_TO_STD
+                ch.done = block + 1
+                self._release(ch, n - 1 + ch.width)
+
+    def _release(self, ch: _Channel, ready: int) -> None:
+        """z for the waiting blocks whose noise is now known (sample `ready` told it)."""
+        while ch.waiting:
+            block = ch.waiting[0][0]
+            noise = self._noise(ch, block)
+            if noise is None:
+                if ch.done - block <= self.noise_blocks:
+                    return
+                noise = math.inf  # waited too long: nothing detected there
+            while ch.waiting and ch.waiting[0][0] == block:
+                _, seg_h, seg_a = ch.waiting.pop(0)
+                self._append_z(ch, seg_h, seg_a, noise, ready)
 
     @staticmethod
-    def _append_z(ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float) -> None:
+    def _append_z(
+        ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
+    ) -> None:
         ch.z = np.concatenate([ch.z, seg_h / noise])
         ch.zh = np.concatenate([ch.zh, seg_h])
         ch.za = np.concatenate([ch.za, seg_a])
+        ch.zready = np.concatenate([ch.zready, np.full(len(seg_h), ready, dtype=np.int64)])
 
-    def _noise(self, ch: _Channel, block: int) -> float:
-        """Noise of the hinge for centres of `block` (only earlier blocks are used).
+    def _white(self, block: int) -> tuple[float, int] | None:
+        """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
 
-        The larger of: the white noise seen by the finest scale (the median of
-        its last `noise_blocks` blocks) times this scale's gain, and the median
-        of this scale's own blocks over the last `history_s` - coloured noise
+        The median of the finest scale's noise over the last `noise_blocks`
+        blocks that showed their noise (not on a rail), each at least its
+        quantisation floor (ADC step / sqrt(12)). None if none did: then the
+        first later block that does (the block itself, at the start) - or
+        None while there is none yet.
+        """
+        fine = self.channels[0]
+        gain = _hinge_gain(fine.width)
+
+        def seen(b: int) -> float | None:
+            if b not in fine.block_noise or self._censored.get(b, True):
+                return None
+            return max(fine.block_noise[b] / gain, self._floor.get(b, 0.0))
+
+        values = [v for b in range(max(0, block - self.noise_blocks), block) if (v := seen(b))]
+        if values:
+            values.sort()
+            return values[(len(values) - 1) // 2], len(values)
+        for b in range(block, fine.done):
+            v = seen(b)
+            if v is not None:
+                return v, 1
+        return None
+
+    def _noise(self, ch: _Channel, block: int) -> float | None:
+        """Noise of the hinge for centres of `block` (None: not known yet).
+
+        The larger of: the white noise seen by the finest scale (`_white`)
+        times this scale's gain, and the median of this scale's own blocks
+        over the last `history_s` (those not on a rail) - coloured noise
         that the white estimate misses; the long history keeps a slip over
         dense ridges (which keeps the long scales busy) from hiding its own
         pulses for a while.
@@ -268,17 +333,22 @@ class ContactDetector:
         cached = ch.noise_by_block.get(block)
         if cached is not None:
             return cached
-        fine = self.channels[0]
-        blocks = range(max(0, block - self.noise_blocks), block) if block else range(1)
-        values = sorted(fine.block_noise[b] for b in blocks)
-        white = max(values[(len(values) - 1) // 2] / _hinge_gain(fine.width), NOISE_FLOOR_N)
-        noise = white * _hinge_gain(ch.width)
-        if ch is not fine:
-            history = range(max(0, block - self.history_blocks), block) if block else range(1)
-            own = sorted(ch.block_noise[b] for b in history)
-            noise = max(noise, own[(len(own) - 1) // 2])
+        white = self._white(block)
+        if white is None:
+            return None
+        sigma, known = white
+        noise = max(sigma, NOISE_FLOOR_N) * _hinge_gain(ch.width)
+        if ch is not self.channels[0]:
+            history = range(max(0, block - self.history_blocks), block)
+            own = sorted(
+                ch.block_noise[b]
+                for b in history
+                if b in ch.block_noise and not self._censored.get(b, True)
+            )
+            if own:
+                noise = max(noise, own[(len(own) - 1) // 2])
         # few blocks yet: the estimate is itself noisy, be more careful
-        noise *= 1.0 + STARTUP_MARGIN * (self.noise_blocks - len(blocks)) / self.noise_blocks
+        noise *= 1.0 + STARTUP_MARGIN * max(0, self.noise_blocks - known) / self.noise_blocks
         ch.noise_by_block[block] = noise
         return noise
 
@@ -306,7 +376,8 @@ class ContactDetector:
             if rising < needed * jump:
                 continue
             n_at, delta, placed = self._refine(ci, n)
-            emit = max(n + 2 * w, self.block - 1 + w)
+            # decided once z is known over +-w (late where the noise had to be waited for)
+            emit = max(n + 2 * w, int(ch.zready[i - w : i + w + 1].max()))
             candidates.append((emit, w, n_at, delta, float(z[i]), float(jump), placed))
 
     def _refine(self, ci: int, n: int) -> tuple[int, float, int]:
@@ -386,7 +457,8 @@ class ContactDetector:
             trend = 0.0
             if base is not None and earlier is not None:  # rising trend before the onset
                 trend = max(0.0, (base - earlier) / self.trend_n)
-            white = self._noise(fine, ev.index // self.block) / _hinge_gain(fine.width)
+            fine_noise = self._noise(fine, ev.index // self.block)
+            white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
             noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
             self._watches.append(
                 _Watch(
@@ -466,4 +538,5 @@ class ContactDetector:
             if len(ch.z) > 2 * keep:
                 cut = len(ch.z) - keep
                 ch.z, ch.zh, ch.za = ch.z[cut:], ch.zh[cut:], ch.za[cut:]
+                ch.zready = ch.zready[cut:]
                 ch.z_start += cut

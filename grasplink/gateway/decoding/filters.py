@@ -264,11 +264,81 @@ class NoiseEstimator:
 
 
 def mad_sigma(x: np.ndarray) -> float:
-    """Robust sigma of a sample: 1.4826 median |x - median(x)|."""
+    """Robust sigma of a sample: 1.4826 x the median |x - median(x)| (`lattice_median`)."""
     x = np.asarray(x, dtype=np.float64)
     if not len(x):
         return 0.0
-    return MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
+    return MAD_TO_SIGMA * lattice_median(np.abs(x - np.median(x)), floor=0.0)
+
+
+def lattice_median(values: np.ndarray, floor: float | None = None) -> float:
+    """The median, kept continuous where the values sit on a lattice (quantised input).
+
+    An ADC's samples, and any fixed combination of a few of them (first
+    differences, a short slope kernel), take values on a lattice. Their
+    plain median jumps from one lattice point to the next: with white noise
+    of about one ADC step, the median |difference| sits on half a step or
+    one step, so a noise estimate from it is ~30 % low or high, and on a
+    nearly flat stretch it is 0. Here the values tied with the median are
+    taken as spread evenly over their lattice cell (as wide as the gap to
+    the nearest other value; not below `floor`, e.g. 0 for absolute
+    values) and the median is interpolated within it - the median of
+    grouped data. Continuous data (no ties) gives the plain median.
+    """
+    v = np.sort(np.asarray(values, dtype=np.float64).ravel())
+    n = len(v)
+    if not n:
+        return 0.0
+    m = float(np.median(v))
+    tol = 1e-9 * max(abs(float(v[0])), abs(float(v[-1])))
+    lo = int(np.searchsorted(v, m - tol, side="left"))
+    hi = int(np.searchsorted(v, m + tol, side="right"))
+    ties = hi - lo
+    gaps = ([m - float(v[lo - 1])] if lo > 0 else []) + ([float(v[hi]) - m] if hi < n else [])
+    if ties <= 1 or not gaps:  # continuous data, or every value the same (no spread to see)
+        return m
+    width = min(gaps)
+    cell_lo, cell_hi = m - 0.5 * width, m + 0.5 * width
+    if floor is not None:
+        cell_lo = max(cell_lo, floor)
+    return cell_lo + (0.5 * n - lo) / ties * (cell_hi - cell_lo)
+
+
+RAIL_SHARE = 0.2  # share of a block's samples at one extreme value that makes it a rail
+
+
+def on_rail(x: np.ndarray) -> bool:
+    """Whether a block of samples sits on a range limit (sensor saturation, ADC rail at 0).
+
+    A rail shows as a pile-up: at least `RAIL_SHARE` of the samples exactly
+    at the block's minimum (or maximum), and at least twice as many as at
+    any other single value. Noise there is cut off, so the block's spread
+    says nothing about the noise: a noise estimate from it would be near 0
+    and make every poke above the rail look significant. Free noise, even
+    quantised, thins out towards its extremes instead; a ramp across ADC
+    steps fills them about evenly.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    if len(x) < 2:
+        return False
+    values, counts = np.unique(x, return_counts=True)
+    if len(values) == 1:
+        return True  # constant: nothing of the noise shows
+    need = max(RAIL_SHARE * len(x), 2.0)
+    for end in (0, len(values) - 1):
+        others = np.delete(counts, end)
+        if counts[end] >= need and counts[end] >= 2 * others.max():
+            return True
+    return False
+
+
+def resolution(x: np.ndarray) -> float:
+    """The smallest non-zero step between consecutive samples: the ADC step on quantised
+    input (about 0 on continuous input). Its uniform rounding error, step / sqrt(12) per
+    sample, is noise no detector can see below."""
+    d = np.abs(np.diff(np.asarray(x, dtype=np.float64)))
+    d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(x))))] if len(d) else d
+    return float(d.min()) if len(d) else 0.0
 
 
 @dataclass

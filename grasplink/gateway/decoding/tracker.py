@@ -183,6 +183,11 @@ class TrackerDecoder(Decoder):
     AGREE_SPEED = 0.15
     CONF_POS_MM = 3.0  # the position's own sigma halves the confidence at this value
     CONF_CONTACTS = 2.0  # confidence grows as 1 - exp(-(contacts - 1) / this)
+    # a signed speed only when the best track has an interval ratio (three contacts) and
+    # explains the contacts at least 9 times better than the best one moving the other
+    # way (between the two, P(direction) >= 0.9)
+    DIRECTION_CONTACTS = 3
+    LOG_DIRECTION_ODDS = math.log(9.0)
 
     def __init__(
         self,
@@ -649,10 +654,16 @@ class TrackerDecoder(Decoder):
         # the agreement (confidence) is refreshed every REFRESH_S
         if self._cache is None or g >= self._cache[0]:
             self._cache = self._posterior(g)
-        _, chosen, p_slip, agree = self._cache
+        _, chosen, p_slip, agree, direction_odds = self._cache
         if chosen is None:
             return SlipEstimate(g, False, None, None, force, min(1.0, max(0.0, 1.0 - p_slip)))
         _, h, stopped, _, limit, _ = chosen
+        if not stopped and (
+            h.n < self.DIRECTION_CONTACTS or direction_odds < self.LOG_DIRECTION_ODDS
+        ):
+            # a slip, but its direction is not told yet (two contacts fit any alignment
+            # either way; a third may fit both): say so rather than guess a sign
+            return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)))
         s, speed, sigma = self._where(h, g, stopped, limit)
         # a posterior from few contacts is fragile (timing outliers, model errors)
         maturity = 1.0 - math.exp(-(h.n - 1) / self.CONF_CONTACTS)
@@ -667,11 +678,14 @@ class TrackerDecoder(Decoder):
         return s if h.direction > 0 else self.length - s
 
     def _posterior(self, g: float):
-        """(valid until, chosen entry or None, P(slip), agreement) at g.
+        """(valid until, chosen entry or None, P(slip), agreement, direction log odds) at g.
 
         entry = [score, track, stopped, evident, next ridge not reached, weight].
         Agreement: the share of the posterior that puts the edge within AGREE_MM of
         the chosen track's position (and, slipping, its speed within AGREE_SPEED).
+        Direction log odds: the chosen track's score over the best slipping track's moving
+        the other way (a generalised likelihood ratio: the best stories, not the whole
+        posterior, which many weak clutter stories of either direction dilute).
         """
         entries = []
         until = g + self.REFRESH_S
@@ -699,12 +713,14 @@ class TrackerDecoder(Decoder):
             e[5] = math.exp(e[0] - top)
             total += e[5]
         p_slip = 0.0
+        best_way = {1: -math.inf, -1: -math.inf}  # best slipping score per direction
         best_slip = best_stop = None
         for e in entries:
             if not e[3]:
                 continue
             if not e[2]:
                 p_slip += e[5] / total
+                best_way[e[1].direction] = max(best_way[e[1].direction], e[0])
                 if best_slip is None or e[0] > best_slip[0]:
                     best_slip = e
             elif best_stop is None or e[0] > best_stop[0]:
@@ -714,7 +730,7 @@ class TrackerDecoder(Decoder):
         elif best_stop is not None and best_stop[0] >= self._null:
             chosen = best_stop
         else:
-            return (until, None, p_slip, 0.0)
+            return (until, None, p_slip, 0.0, -math.inf)
         _, h, stopped, _, limit, _ = chosen
         x_ref = self._x(h, self._where(h, g, stopped, limit)[0])
         agree = 0.0
@@ -729,7 +745,10 @@ class TrackerDecoder(Decoder):
                 continue
             if abs(self._x(o, self._where(o, g, o_stopped, o_limit)[0]) - x_ref) <= self.AGREE_MM:
                 agree += w
-        return (until, chosen, p_slip, agree / total)
+        # the direction: how much better the best story moving this way explains the
+        # contacts than the best one moving the other way (log odds)
+        odds = best_way[h.direction] - best_way[-h.direction]
+        return (until, chosen, p_slip, agree / total, odds)
 
     def _evidence(self, h: _Track) -> tuple[bool, float]:
         """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?

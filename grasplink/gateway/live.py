@@ -1,0 +1,115 @@
+"""The gateway on a live bus: the sans-IO `Gateway` inside a real-time runner.
+
+`LiveGateway` opens the bus a URL names, runs the gateway on it (and, for
+the embedded bus, optionally the four device nodes beside it), reopens a
+lost bus with back-off, and offers the gateway's latest snapshot and a
+one-line status for whoever watches (the CLI, telemetry).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import can
+
+from grasplink.bus import NodeRunner, open_bus
+from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S
+from grasplink.devices.factory import build_node
+from grasplink.errors import BusError
+from grasplink.gateway.config import GatewayConfig
+from grasplink.gateway.service import Gateway
+
+
+class LiveGateway:
+    """Run a `Gateway` on `bus_url` in a background thread; a context manager."""
+
+    def __init__(
+        self,
+        bus_url: str,
+        config: GatewayConfig,
+        *,
+        with_nodes: bool = False,
+        reconnect_timeout_s: float = DEFAULT_RECONNECT_TIMEOUT_S,
+    ):
+        self.bus_url = bus_url
+        self.config = config
+        self.gateway = Gateway(config)
+        self.with_nodes = with_nodes
+        self.reconnect_timeout_s = reconnect_timeout_s
+        self._buses: list[can.BusABC] = []
+        self._runners: list[NodeRunner] = []
+
+    def __enter__(self) -> LiveGateway:
+        try:
+            self.start()
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def start(self) -> None:
+        bus = open_bus(self.bus_url)
+        self._buses.append(bus)
+        if self.with_nodes:
+            # The four device nodes on their own handle of the same bus, as if in other boxes.
+            nodes_bus = open_bus(self.bus_url)
+            self._buses.append(nodes_bus)
+            nodes = [build_node(n.kind, n.node_id) for n in self.config.nodes.values()]
+            self._runners.append(NodeRunner(nodes_bus, nodes, name="grasplink-nodes").start())
+        runner = NodeRunner(
+            bus,
+            [self.gateway],
+            name="grasplink-gateway",
+            reopen=lambda: open_bus(self.bus_url),
+            reconnect_timeout_s=self.reconnect_timeout_s,
+        )
+        self._runners.append(runner.start())
+
+    def stop(self) -> None:
+        for runner in reversed(self._runners):
+            runner.stop()
+        for bus in self._buses:
+            bus.shutdown()
+        self._runners.clear()
+        self._buses.clear()
+
+    @property
+    def failure(self) -> BusError | None:
+        return self._runners[-1].failure if self._runners else None
+
+    def snapshot(self) -> dict[str, Any] | None:
+        return self.gateway.latest
+
+    def status_line(self) -> str:
+        """Node states, decoded values and loop latency, for a log every few seconds."""
+        snap = self.gateway.latest
+        if snap is None:
+            return "gateway starting"
+        nodes = " ".join(
+            f"{kind}:{n['phase']}" + (f"/{n['pdos_dropped']}drop" if n["pdos_dropped"] else "")
+            for kind, n in snap["nodes"].items()
+        )
+        skin, belt, hand, loop = snap["skin"], snap["belt"], snap["hand"], snap["loop"]
+        slip = "-"
+        if skin["slip"]:
+            speed = skin["slip_speed_mm_s"]
+            slip = f"SLIP {speed:+.0f} mm/s" if speed is not None else "SLIP (speed ?)"
+        force = skin["grip_force_n"]
+        grip = hand["setpoint_n"]
+        latency = loop["latency_p99_us"]
+        parts = [
+            f"up {snap['uptime_s']:.1f} s",
+            nodes,
+            f"skin {force:.1f} N" if force is not None else "skin -",
+            slip,
+            f"belt {belt['belt']}{'' if belt['level'] is None else belt['level']}",
+            f"grip {grip:.1f} N" if grip is not None else "grip -",
+            f"reflex {hand['reflex']}",
+            f"loop p99 {latency:.0f} us" if latency is not None else "loop -",
+        ]
+        if snap["alarms"]:
+            parts.append("ALARMS " + "; ".join(f"{k}: {v}" for k, v in snap["alarms"].items()))
+        return " | ".join(parts)
