@@ -225,3 +225,40 @@ def test_node_that_boots_but_never_sends_a_heartbeat_is_lost():
     net.start()
     net.run_for(1000 * MS)
     assert master.nodes[belt.node_id].lost
+
+
+def _heartbeat(node_id: int, state: NmtState) -> Frame:
+    return Frame(0x700 + node_id, bytes([state]))
+
+
+def test_reset_of_a_returning_lost_node_is_repeated_until_it_takes():
+    master = NmtMaster()
+    master.start(0)
+    reset = NmtMaster.command(NmtCommand.RESET_COMMUNICATION, 0x20)
+    start = NmtMaster.command(NmtCommand.START, 0x20)
+    assert master.receive(_heartbeat(0x20, NmtState.INITIALISING), 1000) == [start]
+    master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 100 * MS)
+    master.advance(500 * MS)
+    assert master.nodes[0x20].lost
+    assert master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 600 * MS) == [reset]
+    # The reset was lost: the node still says OPERATIONAL, so it is sent again.
+    assert master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 700 * MS) == [reset]
+    assert not master.commandable(0x20)
+    # It reset, but its boot-up was lost: PRE-OPERATIONAL after the reset counts as booted.
+    assert master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 800 * MS) == [start]
+    assert not master.nodes[0x20].lost and master.nodes[0x20].boots == 2
+
+
+def test_lost_node_in_consumer_fault_is_reset_only_once_the_fault_clears():
+    master = NmtMaster()
+    master.start(0)
+    master.receive(_heartbeat(0x20, NmtState.INITIALISING), 1000)
+    master.receive(_emcy(0x20, 0x8130, 0x11), 2000)
+    master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 100 * MS)
+    master.advance(500 * MS)
+    assert master.nodes[0x20].lost
+    # A reset would wipe the fault (and the node's unarmed consumer would let it run).
+    assert master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 600 * MS) == []
+    assert master.receive(_emcy(0x20, 0x0000, 0x00), 650 * MS) == [
+        NmtMaster.command(NmtCommand.RESET_COMMUNICATION, 0x20)
+    ]
