@@ -1,0 +1,183 @@
+"""The gateway in the loop, in virtual time: provisioning, control on the bus, degraded states."""
+
+from __future__ import annotations
+
+import tomllib
+
+import pytest
+
+from grasplink import cli
+from grasplink.controllers import simulation
+from grasplink.core.frames import RPDO_BASES, TPDO_BASES, Frame
+from grasplink.devices.sdo_abort import AbortCode, SdoAbort
+from grasplink.errors import ConfigError
+from grasplink.profiles import objects as obj
+from grasplink.profiles.pdo_codec import PdoCodec
+from grasplink.simulators.scene import parse_scene
+
+SKIN, BELT, HAND = 0x10, 0x20, 0x40
+BELT_RPDO, HAND_RPDO = RPDO_BASES[0] + BELT, RPDO_BASES[0] + HAND
+
+SLIP_SCENE = """
+[scene]
+duration_s = {duration}
+chunk_ms = 10
+[nodes.skin]
+layout = "alpha0.1"
+[nodes.belt]
+[nodes.hand]
+[controller]
+type = "gateway"
+{controller}
+[[effects]]
+type = "hand.actuator"
+initial_n = 5.0
+[[effects]]
+type = "load.scripted"
+mass_kg = 0.2
+[[effects]]
+type = "object.scripted"
+speed_mm_s = [[0.0, 0.0], [0.5, 0.0], [0.6, 40.0]]
+start_mm = -8.0
+[[effects]]
+type = "skin.fsr"
+[[effects]]
+type = "skin.ridge_contacts"
+[[effects]]
+type = "noise.white"
+std = 0.02
+[[effects]]
+type = "belt.motor"
+{extra}
+"""
+
+
+def scene(duration: float = 2.5, controller: str = "", extra: str = ""):
+    text = SLIP_SCENE.format(duration=duration, controller=controller, extra=extra)
+    return parse_scene(tomllib.loads(text), "test.toml")
+
+
+def run(sc):
+    """Run a scene; returns (simulation, gateway, [(t_us, frame)] sent on the bus)."""
+    sim = simulation(sc)
+    frames: list[tuple[int, Frame]] = []
+    sim.network.taps.append(lambda t_us, frame, sender: frames.append((t_us, frame)))
+    sim.run()
+    return sim, sim.controllers[0], frames
+
+
+def belt_velocities(frames) -> list[tuple[int, int]]:
+    """(t_us, target velocity) of every belt RPDO1, unpacked as the belt's EDS maps it."""
+    rpdo = PdoCodec("belt", BELT).rpdo(1)
+    target = next(v for v in rpdo.map if v.od.index == obj.BELT_TARGET_VELOCITY_MRAD_S)
+    out = []
+    for t, f in frames:
+        if f.can_id == BELT_RPDO:
+            rpdo.data = bytearray(f.data)
+            out.append((t, int(target.raw)))
+    return out
+
+
+def test_gateway_provisions_and_starts_every_node_of_the_scene():
+    sim, gateway, _ = run(scene(duration=1.0))
+    assert {k: n.state.name for k, n in sim.nodes.items()} == dict.fromkeys(
+        ("skin", "belt", "hand"), "OPERATIONAL"
+    )
+    assert {link.kind: link.phase for link in gateway.links.values()} == dict.fromkeys(
+        ("skin", "belt", "hand"), "operational"
+    )
+    skin = sim.nodes["skin"].store
+    assert skin.get(obj.HEARTBEAT_CONSUMER, 1) >> 16 == gateway.node_id
+    assert gateway.alarms == {}
+
+
+def test_belt_rpdo_turns_the_slip_belt_once_the_object_slips():
+    _, gateway, frames = run(scene())
+    velocities = belt_velocities(frames)
+    onset_us = 750_000  # the leading edge reaches the first ridge
+    before = [v for t, v in velocities if t < onset_us]
+    after = [v for t, v in velocities if t > onset_us + 800_000]
+    assert before and all(v >= 0 for v in before), "no slip shown before the slip"
+    assert after and all(v < 0 for v in after), "the slip belt runs while it slips"
+    assert gateway.last_estimate is not None and gateway.last_estimate.slip
+
+
+def test_lost_skin_stops_the_belt_holds_the_hand_and_recovers():
+    power = (
+        '[[effects]]\ntype = "bus.faults"\n'
+        'power_loss = [{ node = "skin", at_s = 1.5, restore_s = 2.5 }]'
+    )
+    sim, gateway, frames = run(scene(duration=4.0, extra=power))
+    consumer_us = gateway.node_heartbeat_us * 3
+    velocities = belt_velocities(frames)
+    stopped = [t for t, v in velocities if t > 1_500_000 and v == 0]
+    assert stopped and stopped[0] <= 1_500_000 + consumer_us + 100_000
+    hand = [(t, f.data) for t, f in frames if f.can_id == HAND_RPDO]
+    during = {data[2:] for t, data in hand if 1_500_000 + consumer_us + 100_000 < t < 2_500_000}
+    assert len(during) <= 1, "the hand's grip command is held while the skin is lost"
+    assert gateway.by_kind["skin"].phase == "operational", "back after it boots again"
+    assert sim.nodes["skin"].state.name == "OPERATIONAL"
+    assert "skin.lost" not in gateway.alarms
+
+
+def test_garbage_tpdo_is_dropped_and_counted_never_decoded():
+    sc = scene(duration=1.0)
+    sim = simulation(sc)
+    gateway = sim.controllers[0]
+    sim.run()
+    before = gateway.by_kind["skin"].pdos_rx
+    for data in (b"", bytes(3), bytes(8)):
+        gateway.receive(Frame(TPDO_BASES[0] + SKIN, data), gateway.now_us)
+    link = gateway.by_kind["skin"]
+    assert sum(link.pdos_dropped.values()) == 3
+    assert link.pdos_rx == before
+
+
+def test_refused_provisioning_is_an_alarm_and_the_node_is_not_started():
+    sc = scene(duration=1.0)
+    sim = simulation(sc)
+
+    def refuse(index, subindex, value):
+        raise SdoAbort(AbortCode.HARDWARE_ERROR, "test")
+
+    sim.nodes["skin"].store.add_validator(obj.SKIN_SAMPLE_RATE_HZ, refuse)
+    gateway = sim.controllers[0]
+    sim.run()
+    assert gateway.by_kind["skin"].phase == "failed"
+    assert "HARDWARE_ERROR" in gateway.alarms["skin.provisioning"]
+    assert sim.nodes["skin"].state.name == "PRE_OPERATIONAL"
+    assert sim.nodes["belt"].state.name == "OPERATIONAL"
+
+
+def test_command_beyond_the_profile_is_clamped_with_an_alarm():
+    _, gateway, _ = run(scene(duration=0.5))
+    frames = gateway._rpdo(
+        gateway.by_kind["belt"], (obj.BELT_TARGET_VELOCITY_MRAD_S, 0), 99_999, True
+    )
+    assert int.from_bytes(frames[0].data[2:6], "little", signed=True) == 8000
+    assert "belt.clamped" in gateway.alarms
+
+
+@pytest.mark.parametrize(
+    ("controller", "key"),
+    [
+        ("[controller.feedback]\nmode = 'loud'", "controller.feedback.mode"),
+        ("[controller.nodes.skin]\nnode_id = 5", "controller.nodes.skin.node_id"),
+        ("[controller.reflex]\nthreshold_mm_s = -1", "controller.reflex.threshold_mm_s"),
+    ],
+)
+def test_bad_gateway_options_in_a_scene_name_the_key(controller, key):
+    from grasplink.controllers import build_controllers
+
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+        build_controllers(scene(controller=controller))
+
+
+def test_gateway_config_error_exits_before_the_bus_is_touched(tmp_path, capsys):
+    bad = tmp_path / "gw.toml"
+    bad.write_text("[feedback]\nmode = 'loud'\n")
+    # A bus URL that could not be opened: the config error must come first.
+    code = cli.main(["gateway", "--config", str(bad), "--bus", "remote:ws://127.0.0.1:1/"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "feedback.mode" in err and "127.0.0.1" not in err
