@@ -22,6 +22,9 @@ from grasplink.simulators import synth
 ALPHA = LAYOUTS_MM["alpha0.1"]
 FIB = LAYOUTS_MM["fibonacci"]
 SPEEDS = (10.0, 30.0, 60.0, 90.0, 120.0)
+# Scored updates (after the third contact) without a speed: the contact needs ~30-70 ms
+# to be decided, and a third contact that fits both directions waits for the next.
+MISSING_MAX = 0.15
 
 
 def decode(rec: synth.SkinRecording, chunk: int | None = 64, **settings) -> list[SlipEstimate]:
@@ -56,11 +59,13 @@ class Score:
         x = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
         contacts = rec.contact_times_s
         mask = slipping & (t >= contacts[2])
-        # no estimate where one is due counts as fully wrong
-        self.speed_rel = np.where(
-            np.isfinite(v[mask]), np.abs(v[mask] - v_true[mask]) / np.abs(v_true[mask]), 1.0
-        )
-        self.position_mm = np.where(np.isfinite(x[mask]), np.abs(x[mask] - x_true[mask]), 99.0)
+        # errors of the answers given; an update without one (direction not told yet) is
+        # *missing*, counted apart (the benchmark's definition) and bounded by the targets
+        answered = mask & np.isfinite(v)
+        self.speed_rel = np.abs(v[answered] - v_true[answered]) / np.abs(v_true[answered])
+        self.position_mm = np.abs(x[answered] - x_true[answered])
+        self.scored = int(mask.sum())
+        self.missing = int((mask & ~np.isfinite(v)).sum())
         onset = float(rec.t_s[np.nonzero(rec.slipping > 0.5)[0][0]])
         flagged = t[np.array([e.slip for e in estimates]) & (t >= onset)]
         self.flag_intervals = (
@@ -81,16 +86,18 @@ def aggregate(scores: list[Score]) -> dict[str, float]:
         "position_p90": float(np.percentile(position, 90)),
         "flag_intervals": float(np.median([s.flag_intervals for s in scores])),
         "first_good_ratio": float(np.median([s.first_good_ratio for s in scores])),
+        "missing": sum(s.missing for s in scores) / max(1, sum(s.scored for s in scores)),
     }
 
 
-def assert_targets(figures: dict[str, float]) -> None:
+def assert_targets(figures: dict[str, float], missing_max: float = MISSING_MAX) -> None:
     assert figures["speed_median"] <= 0.03, figures
     assert figures["speed_p90"] <= 0.10, figures
     assert figures["position_median"] <= 1.5, figures
     assert figures["position_p90"] <= 4.0, figures
     assert figures["flag_intervals"] <= 2.0, figures
     assert figures["first_good_ratio"] <= 1.2, figures
+    assert figures["missing"] <= missing_max, figures
 
 
 @pytest.fixture(scope="module")
@@ -277,7 +284,9 @@ def test_other_sample_rates(fs):
                 estimates = decode(rec, chunk=max(1, fs // 40))
                 assert_clean(estimates)
                 scores.append(Score(rec, estimates))
-    assert_targets(aggregate(scores))
+    # at 100 Hz the small pulse after a long spacing goes undetected more often (the
+    # reverse thesis skins start 33,3,4 and 13,3,8 mm), so the direction is told later
+    assert_targets(aggregate(scores), missing_max=0.2 if fs < 200 else MISSING_MAX)
 
 
 def test_nan_samples_rejected_without_poisoning():
@@ -313,3 +322,51 @@ def test_outputs_never_nan_on_hostile_input():
         for start in range(0, len(t), 13):
             estimates += decoder.feed(t[start : start + 13], x[start : start + 13])
         assert_clean(estimates)
+
+
+# -- direction: told, or not given ---------------------------------------------------------
+def signed_speeds(rec: synth.SkinRecording, estimates: list[SlipEstimate]):
+    """(speed given, truth) over the updates where the object slips."""
+    t = np.array([e.t_s for e in estimates])
+    v = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
+    slipping = np.interp(t, rec.t_s, rec.slipping) > 0.5
+    given = slipping & np.isfinite(v) & (v != 0)
+    return v[given], np.interp(t, rec.t_s, rec.speed_mm_s)[given]
+
+
+@pytest.mark.parametrize(
+    "layout,speed,reverse",
+    [
+        ("alpha0.7", 20.0, False),  # 7,64,13: two contacts, then 3 s of silence
+        ("alpha0.7", 60.0, True),
+        ("alpha0.3", 60.0, False),  # 4,3,48,29
+        ("alpha0.3", 120.0, True),
+    ],
+)
+def test_no_sign_before_the_contacts_tell_the_direction(layout, speed, reverse):
+    """Two contacts fit an alignment either way: no speed until an interval ratio decides."""
+    rec = synth.slip_recording(LAYOUTS_MM[layout], speed, reverse=reverse, seed=3)
+    estimates = decode(rec)
+    assert_clean(estimates)
+    given, truth = signed_speeds(rec, estimates)
+    assert len(given) >= 8  # the direction is told in the end
+    assert np.all(np.sign(given) == np.sign(truth))
+    assert np.median(np.abs(given - truth) / np.abs(truth)) <= 0.03
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_symmetric_skin_slip_flagged_but_no_signed_speed(reverse):
+    """uniform4: the direction is never observable, so no speed or position is claimed."""
+    rec = synth.slip_recording(LAYOUTS_MM["uniform4"], 60.0, reverse=reverse, seed=3)
+    estimates = decode(rec)
+    assert_clean(estimates)
+    t = np.array([e.t_s for e in estimates])
+    slipping = np.interp(t, rec.t_s, rec.slipping) > 0.5
+    flagged = np.array([e.slip for e in estimates])
+    contacts = rec.contact_times_s
+    during = slipping & (t >= contacts[1] + 0.05) & (t <= contacts[5])
+    assert flagged[during].mean() >= 0.8  # the slip itself is seen
+    assert all(
+        e.speed_mm_s in (None, 0.0) and (e.slip is False or e.position_mm is None)
+        for e in estimates
+    )

@@ -1,0 +1,129 @@
+"""The skin node's own signal: 12-bit ADC counts over CAN, and a sensor sitting on its rail.
+
+Issue 11: the default decoder gave the wrong slip direction on the skin
+node's CAN stream (the same run's float CSV decoded right) and ~400 mm/s
+speeds on the headline scene. Root cause: every noise estimate was a
+median, and a median of quantised values (or of a signal clipped at 0 N
+before the object reaches the sensor) sticks to a lattice point or to 0:
+thresholds fell to a fraction of the real noise and noise became "ridge
+contacts". These tests feed the decoders what the node sends.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grasplink.gateway.decoding import filters
+from grasplink.gateway.decoding.contacts import ContactDetector
+from grasplink.gateway.decoding.io import skin_pdo
+from grasplink.gateway.decoding.tracker import TrackerDecoder
+from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
+
+PDO = skin_pdo()
+ADC_STEP_N = PDO.full_scale_mn / ((1 << PDO.bits) - 1 - PDO.zero) / 1000.0  # ~0.024 N
+
+
+def adc(force_n: np.ndarray) -> np.ndarray:
+    """What the skin node's TPDO carries, back in newtons: whole counts, clipped at 0."""
+    counts = np.clip(np.round(force_n / ADC_STEP_N), 0, (1 << PDO.bits) - 1 - PDO.zero)
+    return counts * ADC_STEP_N
+
+
+def decode(layout, t: np.ndarray, x: np.ndarray, chunk: int = 3):
+    decoder = TrackerDecoder(layout, 400.0)
+    out = []
+    for start in range(0, len(t), chunk):  # as CAN frames bring them
+        out += decoder.feed(t[start : start + chunk], x[start : start + chunk])
+    return out
+
+
+def signs_and_errors(rec: synth.SkinRecording, estimates) -> tuple[int, int, float, int]:
+    """(signed speeds while slipping, of which wrong sign, median speed error, false slips)."""
+    t = np.array([e.t_s for e in estimates])
+    v = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
+    slipping = np.interp(t, rec.t_s, rec.slipping) > 0.5
+    truth = np.interp(t, rec.t_s, rec.speed_mm_s)
+    given = slipping & np.isfinite(v) & (v != 0)
+    wrong = int(np.count_nonzero(given & (np.sign(v) != np.sign(truth))))
+    error = float(np.median(np.abs(v[given] - truth[given]) / np.abs(truth[given])))
+    false = sum(1 for e, s in zip(estimates, slipping, strict=True) if e.slip and not s)
+    return int(given.sum()), wrong, error, false
+
+
+# -- the statistics ---------------------------------------------------------------------------
+@pytest.mark.parametrize("sigma_n", [0.02, 0.04])
+def test_noise_sigma_of_adc_counts_is_not_pinned_to_the_lattice(sigma_n):
+    """White noise of about one ADC step: the plain median |difference| sits on half a step
+    or a whole one (~20 % off on average, 0 or double per block); the lattice median does not."""
+    rng = np.random.default_rng(5)
+    truth = np.hypot(sigma_n, ADC_STEP_N / np.sqrt(12.0))  # what a detector sees
+    blocks = [adc(3.0 + rng.normal(0, sigma_n, 50)) for _ in range(400)]
+    ratios = [filters.mad_sigma(np.diff(b)) / np.sqrt(2.0) / truth for b in blocks]
+    assert abs(np.mean(ratios) - 1.0) < 0.08
+    assert np.std(ratios) < 0.2
+
+
+def test_lattice_median_is_the_median_on_continuous_data():
+    x = np.random.default_rng(1).normal(0, 1, 301)
+    assert filters.lattice_median(x) == np.median(x)
+    assert filters.lattice_median(np.full(10, 2.5)) == 2.5  # no spread: nothing to spread ties over
+
+
+def test_a_rail_is_told_from_quantised_noise_and_ramps():
+    rng = np.random.default_rng(2)
+    assert filters.on_rail(np.maximum(0.0, rng.normal(0.0, 0.02, 50)))  # clipped at 0 N
+    assert filters.on_rail(adc(rng.normal(-0.01, 0.02, 50)))  # ADC count 0
+    assert filters.on_rail(np.full(50, 1.5))
+    assert not filters.on_rail(adc(3.0 + rng.normal(0, 0.02, 50)))
+    assert not filters.on_rail(adc(np.linspace(2.0, 2.12, 50)))  # a slow ramp over 5 steps
+    assert not filters.on_rail(rng.normal(0, 0.02, 50))
+    assert filters.resolution(adc(3.0 + rng.normal(0, 0.05, 50))) == pytest.approx(ADC_STEP_N)
+
+
+# -- the decoder --------------------------------------------------------------------------------
+@pytest.mark.parametrize("layout", ["alpha0.1", "alpha0.5", "alpha0.9"])
+def test_reverse_slip_through_the_adc_keeps_its_sign(layout):
+    """The issue's case: 20 mm/s reverse; before the fix 11-55 % of speeds had the wrong
+    sign (median error 50-180 %) through the ADC and none from the float signal."""
+    rec = synth.slip_recording(LAYOUTS_MM[layout], 20.0, reverse=True, seed=1)
+    given, wrong, error, false = signs_and_errors(
+        rec, decode(rec.layout_mm, rec.t_s, adc(rec.force_n))
+    )
+    _, _, error_float, _ = signs_and_errors(rec, decode(rec.layout_mm, rec.t_s, rec.force_n))
+    assert given >= 50 and wrong == 0 and false == 0
+    assert error <= max(0.02, 2 * error_float)
+
+
+def test_adc_noise_alone_is_no_slip():
+    """A held object over CAN: white noise of about one ADC step (was 23 % false slip)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(8000) / 400.0
+    for layout in (LAYOUTS_MM["alpha0.1"], LAYOUTS_MM["fibonacci"]):
+        x = adc(5.0 + rng.normal(0, synth.NOISE_WHITE_N, len(t)))
+        estimates = decode(layout, t, x, chunk=3)
+        assert not any(e.slip for e in estimates)
+        events, _ = ContactDetector(400.0).feed(t, x)
+        assert len(events) <= 2  # a false contact every 10 s at most
+
+
+@pytest.mark.parametrize(
+    "speed,reverse,seed", [(40.0, False, 1), (25.0, True, 2), (40.0, False, 3)]
+)
+def test_sensor_on_its_rail_before_the_object_arrives(speed, reverse, seed):
+    """The headline scene's start: the FSR reads 0 N (noise clipped) until the object lands.
+
+    The clipped stretch shows no noise, so it says nothing about it; before the fix its
+    near-zero noise estimate turned every poke above the rail into a contact (speeds up to
+    ~380 mm/s, mostly the wrong way, and slips flagged on a resting object)."""
+    rec = synth.slip_recording(
+        LAYOUTS_MM["alpha0.1"], speed, reverse=reverse, dips=True, onset_s=1.0, seed=seed
+    )
+    x = rec.force_n.copy()
+    before = rec.t_s < 0.9  # the object lands 0.1 s before it slips
+    x[before] = np.maximum(0.0, np.random.default_rng(seed).normal(-0.01, 0.02, before.sum()))
+    for signal in (x, adc(x)):
+        given, wrong, error, false = signs_and_errors(rec, decode(rec.layout_mm, rec.t_s, signal))
+        assert given >= 100 and wrong == 0 and false == 0
+        assert error <= 0.05
