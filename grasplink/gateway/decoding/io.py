@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from grasplink.errors import ConfigError, RecordingError
-from grasplink.gateway.decoding.base import MIN_USABLE_SHARE, check_sample_rate
+from grasplink.gateway.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
 
 CSV_HEADER = ("t_s", "force_n")
 #: The force column of a CSV: ours, or the skin.csv of `grasplink run`
@@ -290,12 +290,13 @@ def infer_rate(t: np.ndarray, source: str) -> float:
             "the sample rate (give --fs)"
         )
     rate = 1.0 / step
-    try:
-        return check_sample_rate(rate)
-    except ConfigError as exc:
+    low, high = skin_limits().rate_hz
+    if not low <= rate <= high:
         raise RecordingError(
-            f"{source}: the median time step {step:g} s gives {exc}; give --fs"
-        ) from None
+            f"{source}: the median time step {step:g} s means {rate:g} Hz, outside the "
+            f"skin node's {low:g}-{high:g} Hz (0x2120); give --fs"
+        )
+    return rate
 
 
 # -- a folder written by `grasplink run` ---------------------------------------------------
