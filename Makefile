@@ -44,8 +44,10 @@ demo: setup
 # Everything ruff checks and formats.
 LINT_PATHS := grasplink tests benchmarks scenes
 # pytest-xdist workers: one per core (`make test PYTEST_WORKERS=0` runs serially).
+# worksteal: an idle worker takes queued tests from a busy one, so a few long
+# tests (scenes, subprocesses) do not leave the other core idle at the end.
 PYTEST_WORKERS ?= auto
-PYTEST := $(PY) -m pytest -q -n $(PYTEST_WORKERS)
+PYTEST := $(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist worksteal
 
 # The whole suite: static checks first, then every test (wall-clock `slow` ones too).
 test: check
