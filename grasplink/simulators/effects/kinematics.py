@@ -252,6 +252,60 @@ class CoulombObject(Effect):
 
 
 @register
+class PulledObject(Effect):
+    """An object pulled out of the grip at a set speed, held once the grip's friction wins.
+
+    The slips of the thesis's experiments (ch. 5.4) were made by pulling an
+    object at a set speed; the pull can exert at most `pull_n`. From
+    `start_s` on the object slides at `speed_mm_s` (magnitude; `direction`
+    gives the sign) whenever the pull exceeds the grip's friction capacity
+    `contact_surfaces`·µ·grip, and sticks (speed 0) while the grip holds it;
+    a grip that weakens again lets it slip again. So a slip is stopped by
+    raising the grip above pull_n / (surfaces·µ) — what the wearer (through
+    EMG) or the gateway's reflex has to achieve — and the slip speed is the
+    scene's to choose. Parameters: `speed_mm_s` (> 0, required), `pull_n`
+    (> 0, required), `start_s` (default 0), `mu` (default 0.7813, SPEC ch.
+    4.3), `contact_surfaces` (default 2), `start_mm` (default 0), `direction`.
+
+    Semi-implicit on the sample clock like `object.coulomb`: the sliding test
+    uses sample k's grip, x_k = x_{k-1} + v_k·dt_k summed sequentially from the
+    carried position, so chunked and one-shot stepping agree bit for bit.
+    """
+
+    kind = "object.pulled"
+    domain = PHYSICS
+    inputs = (sig.HAND_GRIP_N,)
+    outputs = OBJECT_OUTPUTS
+    summary = "object pulled at a set speed with a bounded force; held once grip friction wins"
+
+    def __init__(self, params: Params, ctx: Context):
+        super().__init__(params, ctx)
+        speed = params.number("speed_mm_s", low=0.0, low_open=True, high=10_000.0)
+        sign, _ = _direction_sign(params)
+        self.velocity_mm_s = sign * speed
+        self.pull_n = params.number("pull_n", low=0.0, low_open=True, high=10_000.0)
+        self.start_us = round(params.number("start_s", 0.0, low=0.0) * US_PER_S)
+        self.mu = params.number("mu", MU_SKIN, low=0.0, low_open=True, high=10.0)
+        self.surfaces = params.integer("contact_surfaces", 2, low=1, high=10)
+        self.position_mm = params.number("start_mm", 0.0)
+        self.last_us: int | None = None
+
+    def step(self, io: Io) -> None:
+        times = io.times_us
+        if not len(times):
+            put_object(io, np.zeros(0), np.zeros(0))
+            return
+        grip = np.maximum(io.get(sig.HAND_GRIP_N), 0.0)
+        sliding = (times >= self.start_us) & (self.pull_n > self.surfaces * self.mu * grip)
+        speed = np.where(sliding, self.velocity_mm_s, 0.0)
+        previous = times[0] if self.last_us is None else self.last_us
+        dt_s = np.diff(times, prepend=previous) / US_PER_S
+        position = np.cumsum(np.concatenate(([self.position_mm], speed * dt_s)))[1:]
+        self.position_mm, self.last_us = float(position[-1]), int(times[-1])
+        put_object(io, position, speed)
+
+
+@register
 class RidgeDips(Effect):
     """The real slip speed dips each time the leading edge crosses a ridge (ch. 5.4.2, 5.5.1).
 
