@@ -35,11 +35,12 @@ $(STAMP_PY): pyproject.toml | $(VENV)/bin/python
 	@touch $@
 
 HEADLINE := scenes/headline_slip.toml
+LOOP_HEADLINE := scenes/loop_headline.toml
 
 demo: setup
 	$(VENV)/bin/grasplink demo
-	$(VENV)/bin/grasplink run $(HEADLINE) --out out/headline
-	$(VENV)/bin/grasplink plot out/headline
+	$(VENV)/bin/grasplink run $(LOOP_HEADLINE) --out out/loop_headline
+	$(VENV)/bin/grasplink plot out/loop_headline
 
 # Everything ruff checks and formats.
 LINT_PATHS := grasplink tests benchmarks scenes

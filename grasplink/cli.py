@@ -355,10 +355,17 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from grasplink.simulators.plots import plot_recording
+    from grasplink.simulators.plots import plot_recording, read_summary
 
     for path in plot_recording(args.recording):
         print(f"wrote {path}")
+    if read_summary(args.recording / "summary.json").get("controller") == "gateway":
+        from grasplink.evaluation.loop_plot import describe_loop, plot_loop
+
+        print(f"wrote {plot_loop(args.recording)}")
+        print("what happened on the bus:")
+        for line in describe_loop(args.recording):
+            print(f"  {line}")
     return 0
 
 

@@ -55,6 +55,8 @@ class DeviceApp:
 
     services: AppServices
     store: ObjectStore
+    # TPDOs that stream samples: never re-sent on entering OPERATIONAL (stale samples).
+    streamed_tpdos: tuple[int, ...] = ()
 
     def attach(self, services: AppServices) -> None:
         self.services = services

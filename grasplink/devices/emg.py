@@ -40,6 +40,8 @@ def contraction_level(envelope_uv: float, e_min_uv: float, e_max_uv: float) -> i
 
 
 class EmgApp(DeviceApp):
+    streamed_tpdos = (TPDO_RAW,)
+
     def __init__(self, source: SampleSource | None = None):
         self.source = source or ConstantSource(0.0)
         self.clock: SampleClock | None = None

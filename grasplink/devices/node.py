@@ -77,6 +77,7 @@ class DeviceNode:
         self.store.add_listener(self._mark_stale)
         self.store.add_validator(obj.COB_ID_SYNC, self._validate_sync_cob_id)
         self.store.add_validator(obj.COB_ID_EMCY, self._validate_emcy_cob_id)
+        self.pdo.streamed_tpdos = frozenset(self.app.streamed_tpdos)
         self.app.attach(NodeServices(self))
 
     # -- SansIoDevice ------------------------------------------------------------

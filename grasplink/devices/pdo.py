@@ -93,6 +93,8 @@ class PdoEngine:
         self.on_rpdo = on_rpdo
         self.operational = False
         self.now_us = 0
+        # TPDOs carrying a sample stream (set by the application): sent only with new samples.
+        self.streamed_tpdos: frozenset[int] = frozenset()
         self.tpdos = self._discover(obj.TPDO_COMM, obj.TPDO_MAP, transmit=True)
         self.rpdos = self._discover(obj.RPDO_COMM, obj.RPDO_MAP, transmit=False)
         self._by_comm = {p.comm_index: p for p in self.tpdos + self.rpdos}
@@ -183,10 +185,12 @@ class PdoEngine:
             pdo.timer_due = False
             self._restart_timer(pdo, t_us)
             # Entering OPERATIONAL publishes every event-driven TPDO once, so a
-            # master sees current values without waiting for a change.
+            # master sees current values without waiting for a change - except the
+            # TPDOs that stream samples: old samples sent again would be read as new.
             pdo.pending = (
                 operational
                 and pdo.transmit
+                and pdo.number not in self.streamed_tpdos
                 and self.is_valid(pdo)
                 and (self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER)
             )

@@ -34,6 +34,8 @@ CAL_BITS, CAL_FULL_SCALE_MN, CAL_ZERO = 1, 2, 3
 
 
 class SkinApp(DeviceApp):
+    streamed_tpdos = (TPDO_SAMPLES,)
+
     def __init__(self, source: SampleSource | None = None):
         self.source = source or ConstantSource(0.0)
         self.clock: SampleClock | None = None

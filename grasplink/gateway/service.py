@@ -29,7 +29,7 @@ import copy
 import math
 import time
 from collections import Counter, deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -137,6 +137,8 @@ class Gateway(NmtMaster):
         self.last_estimate: SlipEstimate | None = None
         self.last_intent: EmgIntent | None = None
         self.counters: Counter[str] = Counter()
+        # Called with (t_us, estimate) for every skin decoder update (telemetry, replays).
+        self.estimate_listeners: list[Callable[[int, SlipEstimate], None]] = []
         # Processing time from a skin TPDO to the RPDOs it causes, recent history only.
         self.loop_latency_us: deque[float] = deque(maxlen=LATENCY_HISTORY)
         self._next_refresh_us: int | None = None
@@ -503,6 +505,8 @@ class Gateway(NmtMaster):
         """
         percept = replace(Percept.from_estimate(estimate), t_us=t_us)
         self.counters["percepts"] += 1
+        for listener in self.estimate_listeners:
+            listener(t_us, estimate)
         self.belt_output = self.feedback.update(percept)
         self.grip_command = self.arbiter.update(percept)
 
