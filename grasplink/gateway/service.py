@@ -30,15 +30,17 @@ import math
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Mapping
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from grasplink.core.frames import EMCY_BASE, Frame, function_of
-from grasplink.core.nmt import NmtState
+from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.core.params import Params
-from grasplink.errors import PdoError
+from grasplink.errors import ConfigError, PdoError
+from grasplink.gateway.commands import Command, CommandError, CommandResult, Inbox, parse_value
 from grasplink.gateway.config import (
     KINDS,
     EmgConfig,
@@ -50,7 +52,12 @@ from grasplink.gateway.config import (
 from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.gateway.decoding.registry import make_decoder
 from grasplink.gateway.drives import DriveHandshake
-from grasplink.gateway.emg import EmgCalibration, EmgIntent, EmgIntentDecoder
+from grasplink.gateway.emg import (
+    CalibrationRecorder,
+    EmgCalibration,
+    EmgIntent,
+    EmgIntentDecoder,
+)
 from grasplink.gateway.feedback import FeedbackController, FeedbackOutput
 from grasplink.gateway.master import NmtMaster
 from grasplink.gateway.percept import Percept
@@ -98,6 +105,10 @@ class NodeLink:
     def kind(self) -> str:
         return self.config.kind
 
+    def codec_od_entry(self, index: int, subindex: int = 0) -> Any:
+        """The node's object-dictionary entry (types for SDO values)."""
+        return self.codec.od_entry(index, subindex)
+
     @property
     def node_id(self) -> int:
         return self.config.node_id
@@ -137,6 +148,8 @@ class Gateway(NmtMaster):
         self.last_estimate: SlipEstimate | None = None
         self.last_intent: EmgIntent | None = None
         self.counters: Counter[str] = Counter()
+        self.inbox = Inbox()  # commands from MQTT/Modbus threads, executed in advance()
+        self.calibration = CalibrationRecorder()
         # Called with (t_us, estimate) for every skin decoder update (telemetry, replays).
         self.estimate_listeners: list[Callable[[int, SlipEstimate], None]] = []
         # Processing time from a skin TPDO to the RPDOs it causes, recent history only.
@@ -243,6 +256,10 @@ class Gateway(NmtMaster):
     def advance(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
         frames = super().advance(t_us)
+        for command, future in self.inbox.drain():
+            result, sent = self.execute(command, t_us)
+            frames += sent
+            future.set_result(result)
         for link in self.links.values():
             frames += link.sdo.advance(t_us)
             frames += self._check_provisioning(link, t_us)
@@ -268,6 +285,7 @@ class Gateway(NmtMaster):
 
     def next_deadline_us(self) -> int | None:
         candidates = [
+            self.now_us if self.inbox else None,
             super().next_deadline_us(),
             self._next_refresh_us,
             self._control_deadline(),
@@ -339,8 +357,6 @@ class Gateway(NmtMaster):
         return []
 
     def command_start(self, node_id: int) -> Frame:
-        from grasplink.core.nmt import NmtCommand
-
         return self.command(NmtCommand.START, node_id)
 
     def _after_heartbeat(self, link: NodeLink | None, t_us: int) -> list[Frame]:
@@ -432,6 +448,7 @@ class Gateway(NmtMaster):
         if intent is None:
             return []
         self.last_intent = intent
+        self.calibration.add(envelope_uv)
         self._voluntary_known = True
         self.grip_command = self.arbiter.set_voluntary(t_us, intent.grip_n)
         return self._commands(t_us)
@@ -518,10 +535,73 @@ class Gateway(NmtMaster):
         self.belt_output = self.feedback.advance(t_us)
         self.grip_command = self.arbiter.advance(t_us)
 
-    def set_feedback_mode(self, mode: str, t_us: int) -> list[Frame]:
-        """A run-time command (MQTT, Modbus): ConfigError for an unknown mode."""
-        self.belt_output = self.feedback.set_mode(mode, max(t_us, self.now_us))
-        return self._commands(t_us)
+    # -- run-time commands (MQTT, Modbus) ---------------------------------------------------
+    def post(self, command: Command) -> Future[CommandResult]:
+        """Thread-safe: queue a command for the gateway's thread (see commands.py)."""
+        return self.inbox.post(command)
+
+    def execute(self, command: Command, t_us: int) -> tuple[CommandResult, list[Frame]]:
+        """Validate and apply one command now; a refused command changes nothing."""
+        t_us = max(t_us, self.now_us)
+        try:
+            value = parse_value(command)
+            detail, frames = self._apply(command.name, value, t_us)
+        except (CommandError, ConfigError) as exc:
+            return CommandResult(command.name, False, str(exc)), []
+        self.counters[f"command.{command.name}"] += 1
+        return CommandResult(command.name, True, detail), frames
+
+    def _apply(self, name: str, value: Any, t_us: int) -> tuple[str, list[Frame]]:
+        if name == "feedback_mode":
+            self.belt_output = self.feedback.set_mode(value, t_us)
+            return f"feedback mode {value.value}", self._commands(t_us)
+        if name == "reflex_enabled":
+            self.grip_command = self.arbiter.set_reflex_enabled(value, t_us)
+            return f"reflex {'on' if value else 'off'}", self._commands(t_us)
+        if name == "reflex_threshold_mm_s":
+            reflex = self.arbiter.reflex
+            reflex.config = replace(
+                reflex.config,
+                threshold_mm_s=value,
+                hysteresis_mm_s=min(reflex.config.hysteresis_mm_s, value / 2),
+            )
+            return f"reflex threshold {value:g} mm/s", []
+        if name == "emg_calibration":
+            return self._calibrate(EmgCalibration(*value), t_us)
+        if name == "emg_calibrate":
+            return self._calibration_phase(value, t_us)
+        if name == "restart_node":
+            link = self.by_kind.get(value)
+            if link is None:
+                raise CommandError(f"restart_node: this gateway has no {value} node")
+            return f"reset node {value}", [self.command(NmtCommand.RESET_NODE, link.node_id)]
+        raise CommandError(f"unknown command {name!r}")
+
+    def _calibrate(self, calibration: EmgCalibration, t_us: int) -> tuple[str, list[Frame]]:
+        """New EMG calibration: used at once, and written to the EMG node (envelope levels)."""
+        link = self.by_kind.get("emg")
+        if link is None or self.emg_decoder is None:
+            raise CommandError("emg_calibration: this gateway has no EMG node")
+        old = self.emg_decoder.calibration
+        self.emg_decoder.calibration = calibration
+        pair = {1: calibration.e_min_uv, 2: calibration.e_max_uv}
+        order = (1, 2) if calibration.e_min_uv < old.e_max_uv else (2, 1)
+        for sub in order:
+            var = link.codec_od_entry(obj.EMG_CALIBRATION, sub)
+            link.sdo.download(obj.EMG_CALIBRATION, sub, var.encode_raw(round(pair[sub])))
+        detail = f"EMG calibration {calibration.e_min_uv:g}..{calibration.e_max_uv:g} uV"
+        return detail, link.sdo.advance(t_us)
+
+    def _calibration_phase(self, phase: str, t_us: int) -> tuple[str, list[Frame]]:
+        if self.emg_decoder is None:
+            raise CommandError("emg_calibrate: this gateway has no EMG node")
+        if phase in ("rest", "maximum"):
+            self.calibration.begin(phase)
+            return f"recording the {phase} phase", []
+        if phase == "cancel":
+            self.calibration = CalibrationRecorder()
+            return "calibration cancelled", []
+        return self._calibrate(self.calibration.result(), t_us)
 
     def _commands(self, t_us: int, *, refresh: bool = False) -> list[Frame]:
         """RPDOs to the belt and the hand: when a command changed, or as a periodic refresh."""

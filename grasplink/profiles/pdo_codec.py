@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import canopen
+from canopen.objectdictionary import ODVariable
 from canopen.pdo.base import PdoMap
 
 from grasplink.errors import PdoError
@@ -56,6 +57,11 @@ class PdoCodec:
         self._tpdo_by_can_id = {
             m.cob_id: m for m in self._node.tpdo.map.values() if m.enabled and len(m.map)
         }
+
+    def od_entry(self, index: int, subindex: int = 0) -> ODVariable:
+        """An object of the node's dictionary (its type encodes SDO values)."""
+        entry = self._node.object_dictionary[index]
+        return entry if isinstance(entry, ODVariable) else entry[subindex]
 
     # -- receive (TPDOs the node sends) ---------------------------------------------------
     def tpdo_can_ids(self) -> frozenset[int]:

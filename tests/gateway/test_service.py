@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tomllib
+from pathlib import Path
 
 import pytest
 
@@ -15,6 +16,7 @@ from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import PdoCodec
 from grasplink.simulators.scene import parse_scene
 
+ROOT = Path(__file__).resolve().parents[2]
 SKIN, BELT, HAND = 0x10, 0x20, 0x40
 BELT_RPDO, HAND_RPDO = RPDO_BASES[0] + BELT, RPDO_BASES[0] + HAND
 
@@ -181,3 +183,69 @@ def test_gateway_config_error_exits_before_the_bus_is_touched(tmp_path, capsys):
     assert code == 1
     err = capsys.readouterr().err
     assert "feedback.mode" in err and "127.0.0.1" not in err
+
+
+# -- run-time commands ----------------------------------------------------------------------
+
+
+def loop_gateway(duration: float = 1.0):
+    """A gateway after `duration` of the shipped closed-loop scene (EMG included)."""
+    from grasplink.simulators.scene import load_scene
+
+    sim = simulation(load_scene(ROOT / "scenes" / "loop_headline.toml"))
+    sim.network.start()
+    go_on(sim, duration)
+    return sim, sim.controllers[0]
+
+
+def go_on(sim, seconds: float) -> None:
+    """Advance a started simulation chunk by chunk (run() would boot it again)."""
+    end_us = sim.t_us + round(seconds * 1e6)
+    while sim.t_us < end_us:
+        sim.step(min(sim.t_us + sim.scene.chunk_us, end_us))
+
+
+def test_commands_are_applied_or_refused_with_the_reason():
+    from grasplink.gateway.commands import Command
+
+    _, gateway = loop_gateway()
+    ok, _ = gateway.execute(Command("feedback_mode", "slip_speed"), gateway.now_us)
+    assert ok.accepted and gateway.feedback.mode.value == "slip_speed"
+    ok, _ = gateway.execute(Command("feedback_mode", 0), gateway.now_us)
+    assert ok.accepted and gateway.feedback.mode.value == "off"
+    for bad in (
+        Command("feedback_mode", "loud"),
+        Command("reflex_threshold_mm_s", -3),
+        Command("reflex_threshold_mm_s", float("nan")),
+        Command("emg_calibration", {"e_min_uv": 500, "e_max_uv": 100}),
+        Command("restart_node", "arm"),
+        Command("self_destruct", True),
+    ):
+        before = (gateway.feedback.mode, gateway.arbiter.reflex.config)
+        result, frames = gateway.execute(bad, gateway.now_us)
+        assert not result.accepted and result.detail and frames == []
+        assert (gateway.feedback.mode, gateway.arbiter.reflex.config) == before
+
+
+def test_emg_calibration_command_reaches_the_node_over_sdo():
+    from grasplink.gateway.commands import Command
+
+    sim, gateway = loop_gateway()
+    future = gateway.post(Command("emg_calibration", {"e_min_uv": 80, "e_max_uv": 900}))
+    go_on(sim, 0.2)
+    assert future.result(timeout=0).accepted
+    store = sim.nodes["emg"].store
+    assert (store.get(obj.EMG_CALIBRATION, 1), store.get(obj.EMG_CALIBRATION, 2)) == (80, 900)
+    assert gateway.emg_decoder.calibration.e_max_uv == 900
+
+
+def test_posted_restart_resets_the_node_and_the_gateway_brings_it_back():
+    from grasplink.gateway.commands import Command
+
+    sim, gateway = loop_gateway()
+    boots = gateway.nodes[HAND].boots
+    future = gateway.post(Command("restart_node", "hand"))
+    go_on(sim, 0.5)
+    assert future.result(timeout=0).accepted
+    assert gateway.nodes[HAND].boots == boots + 1
+    assert gateway.by_kind["hand"].phase == "operational"

@@ -1,0 +1,118 @@
+"""Run-time commands to the gateway, from whatever surface carries them (MQTT, Modbus).
+
+A command is validated like any other input before anything changes, and
+answered with accepted/rejected and the reason; a rejected command changes
+nothing. Surfaces run in other threads: they `post` a command to the
+gateway's inbox and get a Future; the gateway executes it on its own thread
+at its next call (`Gateway.advance`), so its state is only ever touched by
+one thread.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+from concurrent.futures import Future
+from dataclasses import dataclass
+from typing import Any
+
+from grasplink.gateway.feedback import FeedbackMode
+
+INBOX_SIZE = 64  # commands waiting for the gateway's thread; more is a flood, refused
+MIN_THRESHOLD_MM_S, MAX_THRESHOLD_MM_S = 1.0, 1000.0
+CALIBRATION_PHASES = ("rest", "maximum", "finish", "cancel")
+NODE_KINDS = ("skin", "emg", "belt", "hand")
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """`name` and its `value`; see COMMANDS for what each takes."""
+
+    name: str
+    value: Any = None
+
+
+@dataclass(frozen=True, slots=True)
+class CommandResult:
+    command: str
+    accepted: bool
+    detail: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"command": self.command, "accepted": self.accepted, "detail": self.detail}
+
+
+#: name -> what its value must be (for docs and error messages)
+COMMANDS: dict[str, str] = {
+    "feedback_mode": "one of " + ", ".join(m.value for m in FeedbackMode) + " (or 0..4)",
+    "reflex_enabled": "true or false",
+    "reflex_threshold_mm_s": f"a number {MIN_THRESHOLD_MM_S:g}..{MAX_THRESHOLD_MM_S:g}",
+    "emg_calibration": "{e_min_uv, e_max_uv}, numbers with 0 <= e_min_uv < e_max_uv <= 65535",
+    "emg_calibrate": "one of " + ", ".join(CALIBRATION_PHASES),
+    "restart_node": "one of " + ", ".join(NODE_KINDS),
+}
+
+
+class CommandError(ValueError):
+    """A command that is refused; the message says why."""
+
+
+def parse_value(command: Command) -> Any:
+    """The command's value, checked; CommandError naming what was expected."""
+    name, value = command.name, command.value
+    if name not in COMMANDS:
+        raise CommandError(f"unknown command {name!r}; commands: {', '.join(COMMANDS)}")
+    expected = COMMANDS[name]
+    if name == "feedback_mode":
+        modes = list(FeedbackMode)
+        if isinstance(value, int) and not isinstance(value, bool) and 0 <= value < len(modes):
+            return modes[value]
+        if isinstance(value, str) and value in {m.value for m in modes}:
+            return FeedbackMode(value)
+    elif name == "reflex_enabled":
+        if isinstance(value, bool):
+            return value
+    elif name == "reflex_threshold_mm_s":
+        if _number(value) and MIN_THRESHOLD_MM_S <= value <= MAX_THRESHOLD_MM_S:
+            return float(value)
+    elif name == "emg_calibration":
+        if isinstance(value, dict) and set(value) == {"e_min_uv", "e_max_uv"}:
+            low, high = value["e_min_uv"], value["e_max_uv"]
+            if _number(low) and _number(high) and 0 <= low < high <= 65535:
+                return float(low), float(high)
+    elif name in ("emg_calibrate", "restart_node"):
+        choices = CALIBRATION_PHASES if name == "emg_calibrate" else NODE_KINDS
+        if value in choices:
+            return value
+    raise CommandError(f"{name}: expected {expected}, got {value!r}")
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+class Inbox:
+    """Commands posted from other threads, executed on the gateway's."""
+
+    def __init__(self, size: int = INBOX_SIZE):
+        self._queue: queue.Queue[tuple[Command, Future[CommandResult]]] = queue.Queue(size)
+
+    def post(self, command: Command) -> Future[CommandResult]:
+        """Queue a command; the Future resolves when the gateway has executed or refused it."""
+        future: Future[CommandResult] = Future()
+        try:
+            self._queue.put_nowait((command, future))
+        except queue.Full:
+            future.set_result(CommandResult(command.name, False, "too many commands waiting"))
+        return future
+
+    def drain(self) -> list[tuple[Command, Future[CommandResult]]]:
+        items = []
+        while True:
+            try:
+                items.append(self._queue.get_nowait())
+            except queue.Empty:
+                return items
+
+    def __bool__(self) -> bool:
+        return not self._queue.empty()
