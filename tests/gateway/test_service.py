@@ -5,6 +5,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from grasplink import cli
@@ -249,3 +250,21 @@ def test_posted_restart_resets_the_node_and_the_gateway_brings_it_back():
     assert future.result(timeout=0).accepted
     assert gateway.nodes[HAND].boots == boots + 1
     assert gateway.by_kind["hand"].phase == "operational"
+
+
+def test_loop_headline_recording_shows_the_loop_on_the_bus(tmp_path):
+    """The shipped closed-loop scene: belt and hand RPDOs react to the slip, the object held."""
+    from grasplink.evaluation.loop_plot import describe_loop, read_loop
+
+    out = tmp_path / "loop"
+    assert cli.main(["run", str(ROOT / "scenes" / "loop_headline.toml"), "--out", str(out)]) == 0
+    trace = read_loop(out)
+    onset = float(trace.truth["t_s"][np.argmax(trace.truth["object.slipping"] > 0)])
+    assert np.all(trace.belt_target_mrad_s[trace.belt_t_s < onset] >= 0)
+    assert np.any(trace.belt_target_mrad_s[trace.belt_t_s > onset] < 0), "slip belt runs"
+    grip_before = trace.hand_target_n[trace.hand_t_s < onset]
+    assert np.max(trace.hand_target_n[trace.hand_t_s > onset]) > np.max(grip_before) + 1
+    position = trace.truth["object.position_mm"]
+    assert position[-1] < 84.0, "held before it crossed the skin"
+    assert trace.truth["object.slipping"][-1] == 0
+    assert any("held" in line for line in describe_loop(out))
