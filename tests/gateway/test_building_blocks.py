@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
@@ -187,3 +188,14 @@ def test_handshake_walks_the_drive_to_operation_enabled_from_its_statusword():
     assert drive.state is DriveState.QUICK_STOP_ACTIVE and drive.controlword() == 0x00
     drive.on_statusword(0x0208)
     assert drive.controlword() == 0x80
+
+
+def test_configuration_reference_in_the_docs_is_the_defaults():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "gateway.md").read_text()
+    block = text.split("```toml\n", 1)[1].split("```", 1)[0]
+    documented = parse_config(tomllib.loads(block), "docs/gateway.md")
+    defaults = load_config(None)
+    documented.source = defaults.source
+    assert documented == defaults
