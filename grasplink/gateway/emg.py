@@ -30,6 +30,8 @@ ENVELOPE_FULL_SCALE_UV = 65535  # U16 envelope object: a reading here is saturat
 CALIBRATION_SAMPLES = 6000  # envelope updates kept per phase (60 s at 100 Hz)
 REST_PERCENTILE = 95.0  # e_min sits above almost all of rest
 MIN_SPREAD_UV = 1.0  # below this a phase is flat: no signal (electrode off?)
+FLAT_UV = 0.5  # an envelope below this is no signal: resting muscle still reads a few uV
+FAULT_AFTER_US = 500_000  # flat or saturated this long: the EMG cannot be trusted
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,8 @@ class EmgIntentDecoder:
         self.grip_max_n = float(grip_max_n)
         self.saturated_updates = 0
         self.rejected_updates = 0
+        self._faulty_since_us: int | None = None  # flat or saturated since then
+        self.last_flat = False
 
     def update(self, t_us: int, envelope_uv: float) -> EmgIntent | None:
         """One envelope reading; None (and counted) for a reading that is not a number."""
@@ -111,12 +115,26 @@ class EmgIntentDecoder:
             return None
         saturated = envelope_uv >= ENVELOPE_FULL_SCALE_UV
         self.saturated_updates += saturated
+        if saturated or envelope_uv < FLAT_UV:
+            if self._faulty_since_us is None:
+                self._faulty_since_us = t_us
+        else:
+            self._faulty_since_us = None
         level = self.calibration.level(envelope_uv)
         if self.mode == "levels":
             grip_n = self.grip_levels_n[level]
         else:
             grip_n = self.grip_max_n * self.calibration.share(envelope_uv)
+        self.last_flat = envelope_uv < FLAT_UV
         return EmgIntent(t_us, float(envelope_uv), level, grip_n, saturated)
+
+    def fault(self, t_us: int) -> str | None:
+        """Why the signal cannot be trusted now: flat (no muscle ever reads exactly nothing:
+        an electrode is off) or saturated for `FAULT_AFTER_US`; None while it looks alive."""
+        since = self._faulty_since_us
+        if since is None or t_us - since < FAULT_AFTER_US:
+            return None
+        return "EMG flat: electrode off?" if self.last_flat else "EMG saturated"
 
 
 class CalibrationRecorder:

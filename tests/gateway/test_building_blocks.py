@@ -199,3 +199,16 @@ def test_configuration_reference_in_the_docs_is_the_defaults():
     defaults = load_config(None)
     documented.source = defaults.source
     assert documented == defaults
+
+
+@pytest.mark.parametrize(("envelope", "why"), [(0.0, "flat"), (65535.0, "saturated")])
+def test_flat_or_saturated_emg_is_a_fault_after_half_a_second(envelope, why):
+    decoder = EmgIntentDecoder(EmgCalibration(50, 500))
+    decoder.update(0, 30.0)
+    assert decoder.fault(0) is None
+    for t_ms in range(0, 700, 10):
+        decoder.update(1_000_000 + t_ms * 1000, envelope)
+    assert decoder.fault(1_400_000) is None
+    assert why in decoder.fault(1_600_000)
+    decoder.update(1_700_000, 30.0)
+    assert decoder.fault(1_700_000) is None
