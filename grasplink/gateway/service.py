@@ -607,15 +607,19 @@ class Gateway(NmtMaster):
         """RPDOs to the belt and the hand: when a command changed, or as a periodic refresh."""
         frames = []
         belt = self.by_kind.get("belt")
-        if belt is not None and belt.phase == "operational":
+        if belt is not None and self._commandable(belt):
             velocity = self._belt_velocity()
             frames += self._rpdo(belt, (obj.BELT_TARGET_VELOCITY_MRAD_S, 0), velocity, refresh)
         hand = self.by_kind.get("hand")
-        if hand is not None and hand.phase == "operational":
+        if hand is not None and self._commandable(hand):
             grip_mn = self._hand_grip_mn()
             if grip_mn is not None:
                 frames += self._rpdo(hand, (obj.HAND_TARGET_GRIP_MN, 0), grip_mn, refresh)
         return frames
+
+    def _commandable(self, link: NodeLink) -> bool:
+        """Operational in our eyes and the master's: not lost, not held by a consumer fault."""
+        return link.phase == "operational" and self.commandable(link.node_id)
 
     def _sensing_lost(self) -> list[str]:
         return [
