@@ -13,10 +13,10 @@ misspelt option is an error naming the key.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING, Any
 
 from grasplink.core.protocol import SansIoDevice
+from grasplink.core.registry import load_class
 from grasplink.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -33,24 +33,7 @@ CONTROLLERS: dict[str, str] = {
 
 def controller_class(name: str) -> type:
     """The class registered under `name` (imported now); ConfigError if unknown or missing."""
-    if name not in CONTROLLERS:
-        known = ", ".join([*CONTROLLERS, "none"])
-        raise ConfigError(f"unknown controller {name!r}; valid controllers: {known}")
-    module_name, _, class_name = CONTROLLERS[name].partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name is not None and module_name.startswith(exc.name):
-            raise ConfigError(
-                f"controller {name!r} is not available: module {module_name} is not installed"
-            ) from None
-        raise
-    cls = getattr(module, class_name, None)
-    if cls is None:
-        raise ConfigError(
-            f"controller {name!r} is not available: {module_name} has no class {class_name}"
-        )
-    return cls
+    return load_class("controller", CONTROLLERS, name, also_valid=("none",))
 
 
 def build_controllers(scene: Scene) -> list[SansIoDevice]:

@@ -8,9 +8,9 @@ the caller records or simulates; `needs_references(name)` tells which).
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Sequence
 
+from grasplink.core.registry import load_class
 from grasplink.errors import ConfigError
 from grasplink.gateway.decoding.base import Decoder
 
@@ -29,23 +29,7 @@ DEFAULT_DECODER = "tracker"
 
 def decoder_class(name: str) -> type[Decoder]:
     """The class registered under `name` (imported now); ConfigError if unknown or missing."""
-    if name not in DECODERS:
-        raise ConfigError(f"unknown decoder {name!r}; valid decoders: {', '.join(DECODERS)}")
-    module_name, _, class_name = DECODERS[name].partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name is not None and module_name.startswith(exc.name):
-            raise ConfigError(
-                f"decoder {name!r} is not available: module {module_name} is not installed"
-            ) from None
-        raise
-    cls = getattr(module, class_name, None)
-    if cls is None:
-        raise ConfigError(
-            f"decoder {name!r} is not available: {module_name} has no class {class_name}"
-        )
-    return cls
+    return load_class("decoder", DECODERS, name)
 
 
 def available(name: str) -> bool:
