@@ -39,6 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
+from grasplink.errors import ConfigError
+
 MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
 
 
@@ -51,14 +53,6 @@ def bandpass_sos(low_hz: float, high_hz: float, fs_hz: float, order: int = 2) ->
     high = min(high_hz, 0.45 * fs_hz)
     low = min(low_hz, 0.5 * high)
     return signal.butter(order, [low, high], btype="bandpass", fs=fs_hz, output="sos")
-
-
-def noise_gain(sos: np.ndarray, n: int = 1 << 14) -> float:
-    """RMS gain of the filter for white noise: sqrt(sum h^2) of its impulse response."""
-    impulse = np.zeros(n)
-    impulse[0] = 1.0
-    h = signal.sosfilt(sos, impulse)
-    return float(np.sqrt(np.sum(h * h)))
 
 
 def transfer_function_is_unstable(b: np.ndarray, a: np.ndarray) -> bool:
@@ -219,24 +213,52 @@ class NoiseEstimator:
 
     Each complete block of `block` samples gives sigma_b = 1.4826 MAD of the
     block (`differences=False`: of the values, for a band-passed signal whose
-    pulses are sparse) or of its first differences divided by sqrt(2)
-    (`differences=True`: white noise only, immune to DC, drift and slow
-    pulses); the estimate is the median of the last `history` blocks.
-    Until the first block completes, `sigma` is None. Block boundaries count
-    from the last reset, so the estimate does not depend on chunking.
+    pulses are sparse; `running_centre=True`: about the median of the last
+    `history` block medians rather than the block's own, so slow noise (drift
+    the band lets through) counts while a steady offset (a ramp through a
+    high-pass) does not) or of its first differences divided by
+    sqrt(2) (`differences=True`: white noise only, immune to DC, drift and
+    slow pulses); the estimate is the median of the last `history` blocks.
+    MADs are `lattice_median`s (ADC steps do not pin them). A block whose
+    raw samples (`raw`, else the values themselves) sit on a rail
+    (`on_rail`) shows no noise and is left out; so is a block the caller
+    calls `busy` (signal in it, not only noise: censored as in a CFAR
+    detector) - unless `busy_limit` busy blocks come in a row: then the
+    change has lasted longer than any slip and is the noise now. Until a
+    block counts, `sigma` is None.
+    Block boundaries count from the last reset, so the estimate does not
+    depend on chunking.
     """
 
-    def __init__(self, block: int = 200, history: int = 8, *, differences: bool = True):
+    def __init__(
+        self,
+        block: int = 200,
+        history: int = 8,
+        *,
+        differences: bool = True,
+        running_centre: bool = False,
+        busy_limit: int | None = None,
+    ):
         self.block = max(8, int(block))
+        self.busy_limit = busy_limit
         self.differences = differences
+        self.running_centre = running_centre
+        self._centres: list[float] = []  # recent block medians (running_centre)
         self.history = max(1, int(history))
         self._blocks: list[float] = []
+        self._busy_blocks: list[float] = []  # the last busy blocks of a run (left out so far)
+        self._busy_run = 0  # busy blocks in a row
         self.reset()
 
     def reset(self, keep_history: bool = True) -> None:
         self._pending = np.zeros(0)  # samples of the block being filled
+        self._pending_raw = np.zeros(0)
+        self._pending_busy = False
+        self._pending_settling = False
         if not keep_history:
             self._blocks = []
+            self._busy_blocks = []
+            self._busy_run = 0
 
     @property
     def room(self) -> int:
@@ -249,18 +271,52 @@ class NoiseEstimator:
             return None
         return float(np.median(self._blocks))
 
-    def __call__(self, x: np.ndarray) -> None:
+    @property
+    def centre(self) -> float:
+        """What the spread is measured about (`running_centre`; else 0)."""
+        return float(np.median(self._centres)) if self._centres else 0.0
+
+    def __call__(
+        self,
+        x: np.ndarray,
+        raw: np.ndarray | None = None,
+        busy: bool = False,
+        settling: bool = False,
+    ) -> None:
+        """Take samples; `busy`: the caller saw signal in them; `settling`: a filter's
+        start-up transient is in them (not noise: the block is left out)."""
         pending = np.concatenate([self._pending, x])
+        pending_raw = np.concatenate([self._pending_raw, x if raw is None else raw])
+        self._pending_busy |= bool(busy)
+        self._pending_settling |= bool(settling)
         full = len(pending) // self.block
         for b in range(full):
             chunk = pending[b * self.block : (b + 1) * self.block]
+            busy_block, self._pending_busy = self._pending_busy, False
+            settling_block, self._pending_settling = self._pending_settling, False
+            if settling_block or on_rail(pending_raw[b * self.block : (b + 1) * self.block]):
+                continue
             if self.differences:
-                self._blocks.append(mad_sigma(np.diff(chunk)) / math.sqrt(2.0))
+                sigma = mad_sigma(np.diff(chunk)) / math.sqrt(2.0)
+            elif self.running_centre:
+                self._centres = [*self._centres, float(np.median(chunk))][-self.history :]
+                centre = float(np.median(self._centres))
+                sigma = MAD_TO_SIGMA * lattice_median(np.abs(chunk - centre), floor=0.0)
             else:
-                self._blocks.append(mad_sigma(chunk))
-            if len(self._blocks) > self.history:
-                self._blocks.pop(0)
+                sigma = mad_sigma(chunk)
+            if busy_block:
+                self._busy_run += 1
+                self._busy_blocks = [*self._busy_blocks, sigma][-self.history :]
+                if self.busy_limit is None or self._busy_run < self.busy_limit:
+                    continue
+                self._blocks = list(self._busy_blocks)  # it has lasted: the new noise
+            else:
+                self._busy_run = 0
+                self._busy_blocks = []
+                self._blocks.append(sigma)
+            del self._blocks[: -self.history]
         self._pending = pending[full * self.block :].copy()
+        self._pending_raw = pending_raw[full * self.block :].copy()
 
 
 def mad_sigma(x: np.ndarray) -> float:
@@ -341,6 +397,28 @@ def resolution(x: np.ndarray) -> float:
     return float(d.min()) if len(d) else 0.0
 
 
+def peak_threshold(
+    sigma: float, step_sigma: float, fs_hz: float, false_peaks_per_s: float
+) -> float:
+    """The hysteresis that zero-mean Gaussian noise tops `false_peaks_per_s` times a second.
+
+    `sigma` is the noise's standard deviation, `step_sigma` that of its
+    sample-to-sample steps. Rice's formula: a stationary Gaussian sequence
+    crosses the level u upwards nu0 exp(-u^2 / (2 sigma^2)) times a second,
+    nu0 = fs arccos(rho) / (2 pi) its zero up-crossings, rho = 1 - step^2 /
+    (2 sigma^2) its lag-one correlation. A noise peak that rises h above a
+    trough and falls h again spans h, so it takes the noise above +h/2 or
+    below -h/2: at most 2 nu(h/2) such peaks a second. Hence
+    h = 2 sigma sqrt(2 ln(2 nu0 / rate)), a bound: white noise through the
+    0.5-30 Hz band-pass tops it 3-4 times less often than asked.
+    """
+    if not sigma > 0:
+        return 0.0
+    rho = min(1.0, max(-1.0, 1.0 - step_sigma**2 / (2.0 * sigma**2)))
+    nu0 = fs_hz * math.acos(rho) / (2.0 * math.pi)
+    return 2.0 * sigma * math.sqrt(2.0 * math.log(max(2.0 * nu0 / false_peaks_per_s, math.e)))
+
+
 @dataclass
 class Segment:
     """Samples between two gaps (or chunk/update boundaries), after the front end."""
@@ -358,8 +436,23 @@ class PulseFrontEnd:
 
     Parameters: `band_hz` (low, high) of the Butterworth band-pass (order
     `order` per edge, i.e. the thesis' 2nd-order design gives 4 poles),
-    the peak (hysteresis) threshold max(`threshold_n`, `threshold_sigmas` x band-passed noise
-    sigma), `static_corner_hz` for the grip force (base.StaticForce).
+    `static_corner_hz` for the grip force (base.StaticForce), and the peak
+    (hysteresis) threshold: max(`threshold_n`, the height that the measured
+    band-passed noise reaches `false_peaks_per_min` times a minute) - see
+    `peak_threshold`. The noise is measured on the band-passed signal
+    itself (about its running centre: white noise and the drift the band lets
+    through alike)
+    and on its sample-to-sample steps (how fast it wiggles), per block of
+    `noise_block_s`, the median over `noise_history` blocks, leaving out
+    blocks where the sensor sits on a rail and blocks where the signal
+    reached the threshold (ridge pulses; see `NoiseEstimator`) unless that
+    lasts `lasting_s`, longer than a slip across the skin, and blocks in the
+    band-pass's start-up transient (3 time constants of its high-pass edge
+    after a start or a gap: a trend at the start rings through it). Until
+    the band-passed noise is known, the threshold comes from the
+    sample-to-sample steps alone (white noise, as the band-pass shapes it);
+    before any block, no peak is reported: a threshold without a noise
+    measurement would be a guess.
 
     Gaps (a step longer than `gap_periods` sample periods, by default
     base.GAP_PERIODS like every decoder's input guard) restart the
@@ -376,10 +469,11 @@ class PulseFrontEnd:
         band_hz: tuple[float, float] = (0.5, 30.0),
         order: int = 1,
         threshold_n: float = 0.05,
-        threshold_sigmas: float = 6.0,
+        false_peaks_per_min: float = 1.0,
         static_corner_hz: float = 2.0,
-        noise_block_s: float = 0.5,
-        noise_from: str = "white",
+        noise_block_s: float = 0.25,
+        noise_history: int = 16,
+        lasting_s: float = 30.0,
         gap_periods: float | None = None,
     ):
         from grasplink.gateway.decoding.base import GAP_PERIODS, StaticForce
@@ -387,35 +481,49 @@ class PulseFrontEnd:
         self.fs_hz = float(fs_hz)
         self._static_factory = lambda: StaticForce(self.fs_hz, static_corner_hz)
         self.sos = bandpass_sos(band_hz[0], band_hz[1], self.fs_hz, order)
-        self.band_gain = noise_gain(self.sos)
         self.bandpass = SosFilter(self.sos)
         self.static = self._static_factory()
         self.peaks = PeakDetector()
-        if noise_from not in ("band", "white"):
-            raise ValueError(f"noise_from must be 'band' or 'white', got {noise_from!r}")
-        self.noise_from = noise_from
+        if not (math.isfinite(false_peaks_per_min) and false_peaks_per_min > 0):
+            raise ConfigError(
+                f"false_peaks_per_min must be a positive number, got {false_peaks_per_min}"
+            )
+        block = max(8, round(noise_block_s * self.fs_hz))
+        limit = max(noise_history, round(lasting_s * self.fs_hz / block))
         self.noise = NoiseEstimator(
-            max(8, round(noise_block_s * self.fs_hz)), differences=noise_from == "white"
+            block, noise_history, differences=False, running_centre=True, busy_limit=limit
         )
+        self.steps = NoiseEstimator(block, noise_history, differences=True, busy_limit=limit)
+        impulse = signal.sosfilt(self.sos, np.eye(1, 1 << 14).ravel())
+        self._white_rho = float(impulse[1:] @ impulse[:-1] / (impulse @ impulse))
+        slowest = float(np.max(np.abs(signal.sos2zpk(self.sos)[1])))  # pole nearest z = 1
+        self._settle = round(3.0 / max(-math.log(slowest), 1e-9))  # 3 time constants, samples
+        self._settled_in = self._settle
         self.threshold_n = float(threshold_n)
-        self.threshold_sigmas = float(threshold_sigmas)
+        self.false_peaks_per_s = float(false_peaks_per_min) / 60.0
         self.gap_s = (GAP_PERIODS if gap_periods is None else gap_periods) / self.fs_hz
         self._last_t: float | None = None
         self.gaps = 0
 
     @property
     def threshold(self) -> float:
-        sigma = self.noise.sigma
-        if sigma is None:
-            return self.threshold_n
-        gain = self.band_gain if self.noise_from == "white" else 1.0
-        return max(self.threshold_n, self.threshold_sigmas * sigma * gain)
+        sigma, step = self.noise.sigma, self.steps.sigma
+        if step is None:
+            return math.inf  # the noise is not known yet
+        step *= math.sqrt(2.0)
+        if sigma is None:  # white noise through the band-pass: its steps tell its spread
+            sigma = step / math.sqrt(2.0 * (1.0 - self._white_rho))
+        return max(
+            self.threshold_n, peak_threshold(sigma, step, self.fs_hz, self.false_peaks_per_s)
+        )
 
     def restart(self) -> None:
         self.bandpass.reset()
         self.static = self._static_factory()
         self.peaks.reset()
         self.noise.reset(keep_history=True)
+        self.steps.reset(keep_history=True)
+        self._settled_in = self._settle
 
     def __call__(self, t: np.ndarray, x: np.ndarray) -> list[Segment]:
         """Run samples (finite, increasing) through; one Segment per piece between gaps."""
@@ -445,8 +553,15 @@ class PulseFrontEnd:
         start = 0
         while start < len(t):
             stop = min(len(t), start + self.noise.room)
-            peaks += self.peaks(t[start:stop], y[start:stop], self.threshold)
-            self.noise(x[start:stop] if self.noise_from == "white" else y[start:stop])
+            threshold = self.threshold
+            peaks += self.peaks(t[start:stop], y[start:stop], threshold)
+            # a block where the band-passed signal reached the threshold holds signal:
+            # the noise is measured around it, not on it
+            busy = bool(np.max(np.abs(y[start:stop] - self.noise.centre)) >= threshold)
+            settling = self._settled_in > 0
+            self._settled_in = max(0, self._settled_in - (stop - start))
+            self.noise(y[start:stop], x[start:stop], busy, settling)
+            self.steps(y[start:stop], x[start:stop], busy)
             start = stop
         return Segment(t, x, y, force, peaks, after_gap)
 

@@ -185,7 +185,7 @@ class WindowDecoder(Decoder):
         pair_s: float = 1.5,
         hold_factor: float = 1.5,
         threshold_n: float = 0.05,
-        threshold_sigmas: float = 6.0,
+        false_peaks_per_min: float = 1.0,
     ):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         if not window_s > 0:
@@ -198,7 +198,7 @@ class WindowDecoder(Decoder):
         self.hop = max(1, round(hop_s / self.update_period_s))
         self.min_samples = max(4, round(min_fill * self.min_window_s * self.fs_hz))
         self.front = PulseFrontEnd(
-            self.fs_hz, threshold_n=threshold_n, threshold_sigmas=threshold_sigmas
+            self.fs_hz, threshold_n=threshold_n, false_peaks_per_min=false_peaks_per_min
         )
         self.activity = PeakActivity(
             self.geometry.spacings_mm, pair_s=pair_s, hold_factor=hold_factor

@@ -3,8 +3,8 @@
 Pipeline, as in the thesis: a 2nd-order Butterworth band-pass (one pole pair
 per edge, default 0.5-30 Hz) -> peak detection with a threshold (a peak must
 protrude `threshold` above its surroundings on both sides; the threshold is
-max(`threshold_n`, `threshold_sigmas` x the band-passed white-noise sigma,
-estimated by MAD) -> for the last three peaks
+max(`threshold_n`, the height the measured band-passed noise reaches
+`false_peaks_per_min` times a minute: `filters.peak_threshold`) -> for the last three peaks
 phi = (PK_k - PK_{k-1}) / (PK_{k-1} - PK_{k-2}) -> match phi against
 delta_i = D_i / D_{i-1} within `ratio_tol` (on a log scale: |ln phi - ln delta| <
 ratio_tol) -> position: the ridge the edge reached at PK_k; speed
@@ -87,7 +87,7 @@ class RatioDecoder(Decoder):
         band_hz: tuple[float, float] = (0.5, 30.0),
         order: int = 1,
         threshold_n: float = 0.05,
-        threshold_sigmas: float = 6.0,
+        false_peaks_per_min: float = 1.0,
         ratio_tol: float = 0.2,
         v_min: float = 4.0,
         v_max: float = 400.0,
@@ -108,7 +108,7 @@ class RatioDecoder(Decoder):
             band_hz=band_hz,
             order=order,
             threshold_n=threshold_n,
-            threshold_sigmas=threshold_sigmas,
+            false_peaks_per_min=false_peaks_per_min,
         )
         self.lag = PeakLag(self.front.sos, self.fs_hz, ridge_side_mm)
         self.ratio_tol = float(ratio_tol)
