@@ -31,7 +31,7 @@ CONTROLLERS: dict[str, str] = {
 }
 
 
-def controller_class(name: str) -> type:
+def controller_class(name: str) -> Any:
     """The class registered under `name` (imported now); ConfigError if unknown or missing."""
     return load_class("controller", CONTROLLERS, name, also_valid=("none",))
 

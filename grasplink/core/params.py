@@ -12,7 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, overload
 
 from grasplink.errors import SceneError  # defined with every user error; importable from here too
 
@@ -47,6 +47,28 @@ class Params:
             raise self.error(name, "is required")
         return default
 
+    @overload
+    def number(
+        self,
+        name: str,
+        default: float = ...,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+    ) -> float: ...
+
+    @overload
+    def number(
+        self,
+        name: str,
+        default: None,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        low_open: bool = False,
+    ) -> float | None: ...
+
     def number(
         self,
         name: str,
@@ -55,7 +77,8 @@ class Params:
         low: float | None = None,
         high: float | None = None,
         low_open: bool = False,
-    ) -> float:
+    ) -> float | None:
+        """A number within bounds; None only when absent and the default is None."""
         value = self._get(name, default)
         if value is None:
             return value
@@ -75,9 +98,20 @@ class Params:
             raise self.error(name, f"expected true or false, got {_describe(value)}")
         return value
 
+    @overload
+    def string(
+        self, name: str, default: str = ..., *, choices: Sequence[str] | None = None
+    ) -> str: ...
+
+    @overload
+    def string(
+        self, name: str, default: None, *, choices: Sequence[str] | None = None
+    ) -> str | None: ...
+
     def string(
         self, name: str, default: Any = _MISSING, *, choices: Sequence[str] | None = None
-    ) -> str:
+    ) -> str | None:
+        """A string (one of `choices`); None only when absent and the default is None."""
         value = self._get(name, default)
         if value is None and default is None:
             return None  # optional and absent

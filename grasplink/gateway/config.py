@@ -212,7 +212,7 @@ def _feedback(p: Params) -> FeedbackSettings:
 def _reflex(p: Params, crush_limit_n: float) -> ReflexConfig:
     d = ReflexConfig()
     threshold = p.number("threshold_mm_s", d.threshold_mm_s, low=1.0, high=1000.0)
-    values = {
+    values: dict[str, Any] = {
         "enabled": p.boolean("enabled", d.enabled),
         "threshold_mm_s": threshold,
         "hysteresis_mm_s": p.number(

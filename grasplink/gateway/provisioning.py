@@ -15,10 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import canopen
-from canopen.objectdictionary import ODArray, ODRecord, ODVariable
+from canopen.objectdictionary import ODVariable
 
 from grasplink.gateway.config import EmgConfig, GatewayConfig, HandConfig, NodeConfig, SkinConfig
-from grasplink.profiles import load_profile
+from grasplink.profiles import load_profile, od_default, od_variable
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import PRESET_CODES, spacings_um
 
@@ -51,10 +51,10 @@ class Provisioner:
 
     # -- helpers -----------------------------------------------------------------------
     def _entry(self, index: int, subindex: int = 0) -> ODVariable:
-        entry = self.od[index]
-        if isinstance(entry, ODArray | ODRecord):
-            return entry[subindex]
-        return entry
+        return od_variable(self.od, index, subindex)
+
+    def _default(self, index: int, subindex: int = 0) -> int:
+        return od_default(self.od, index, subindex)
 
     def _write(self, index: int, subindex: int, value: int | float, what: str) -> SdoWrite:
         var = self._entry(index, subindex)
@@ -86,18 +86,18 @@ class Provisioner:
                 mapping = map_base + (comm - comm_base)
                 if mapping not in self.od:
                     continue
-                cob_id = int(self._entry(comm, 1).default)
-                count = int(self._entry(mapping, 0).default)
+                cob_id = self._default(comm, 1)
+                count = self._default(mapping, 0)
                 label = f"PDO 0x{comm:04X}"
                 out.append(self._write(comm, 1, cob_id | COB_ID_INVALID, f"{label} off"))
                 out.append(self._write(mapping, 0, 0, f"{label} mapping cleared"))
                 for sub in range(1, count + 1):
-                    entry = int(self._entry(mapping, sub).default)
+                    entry = self._default(mapping, sub)
                     out.append(self._write(mapping, sub, entry, f"{label} maps 0x{entry:08X}"))
                 out.append(self._write(mapping, 0, count, f"{label} {count} objects"))
                 for sub, what in ((2, "transmission type"), (5, "event timer")):
-                    if sub in self.od[comm]:
-                        value = int(self._entry(comm, sub).default)
+                    if sub in self.od[comm]:  # type: ignore[operator]  # a RECORD here
+                        value = self._default(comm, sub)
                         out.append(self._write(comm, sub, value, f"{label} {what}"))
                 out.append(self._write(comm, 1, cob_id, f"{label} on"))
         return out
@@ -140,5 +140,5 @@ class Provisioner:
         """e_min and e_max in the order that keeps e_min < e_max true after each write."""
         e_min = self._write(obj.EMG_CALIBRATION, 1, node.e_min_uv, "EMG e_min")
         e_max = self._write(obj.EMG_CALIBRATION, 2, node.e_max_uv, "EMG e_max")
-        stored_max = float(self._entry(obj.EMG_CALIBRATION, 2).default)
+        stored_max = float(self._default(obj.EMG_CALIBRATION, 2))
         return [e_min, e_max] if node.e_min_uv < stored_max else [e_max, e_min]

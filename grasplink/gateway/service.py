@@ -65,7 +65,7 @@ from grasplink.gateway.provisioning import Provisioner, SdoWrite
 from grasplink.gateway.reflex import GripArbiter, GripCommand
 from grasplink.gateway.sdo_client import SdoClient, Transfer
 from grasplink.gateway.streams import SampleStream
-from grasplink.profiles import load_profile, object_limits
+from grasplink.profiles import load_profile, object_limits, od_default
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import Key, PdoCodec
 
@@ -205,11 +205,11 @@ class Gateway(NmtMaster):
         self.skin_stream = SampleStream(skin.sample_rate_hz, skin.samples_per_pdo)
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
         od = load_profile("skin", skin.node_id)
-        cal = od[obj.SKIN_FSR_CALIBRATION]
-        bits = int(cal[ADC_BITS].default)
-        self._skin_zero = int(cal[ZERO_COUNTS].default)
+        bits = od_default(od, obj.SKIN_FSR_CALIBRATION, ADC_BITS)
+        self._skin_zero = od_default(od, obj.SKIN_FSR_CALIBRATION, ZERO_COUNTS)
+        full_scale_mn = od_default(od, obj.SKIN_FSR_CALIBRATION, FULL_SCALE_MN)
         full = (1 << bits) - 1
-        self._skin_n_per_count = int(cal[FULL_SCALE_MN].default) / (full - self._skin_zero) / 1e3
+        self._skin_n_per_count = full_scale_mn / (full - self._skin_zero) / 1e3
 
     def _emg_setup(self) -> None:
         link = self.by_kind.get("emg")
@@ -641,7 +641,7 @@ class Gateway(NmtMaster):
             return None
         if self._sensing_lost():
             return self._held_grip_mn
-        self._held_grip_mn = self.grip_command.target_grip_mn
+        self._held_grip_mn = command.target_grip_mn
         return self._held_grip_mn
 
     def _rpdo(self, link: NodeLink, target: Key, value: int, refresh: bool) -> list[Frame]:

@@ -77,7 +77,7 @@ class SampleStream:
         if self._anchor_us is None:
             self._next_index = 0
             self._anchor_us = t_us - (len(values) - 1) * period_us
-        index = self._next_index + np.arange(len(values))
+        indices = self._next_index + np.arange(len(values))
         self._next_index += len(values)
         self.stats.samples += len(values)
-        return (self._anchor_us + index * period_us) / 1e6, values
+        return (self._anchor_us + indices * period_us) / 1e6, values

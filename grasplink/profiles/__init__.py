@@ -21,6 +21,7 @@ from grasplink.profiles.eds import validate_eds
 
 if TYPE_CHECKING:
     import canopen
+    from canopen.objectdictionary import ODVariable
 
 __all__ = ["DEVICE_KINDS", "eds_path", "load_profile", "object_limits", "validate_eds"]
 
@@ -53,6 +54,24 @@ def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictio
         raise EdsError(str(path), None, None, f"canopen cannot import it: {exc!r}") from exc
 
 
+def od_variable(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> ODVariable:
+    """The variable at index:subindex (a plain VAR's own entry when it has no sub-indices)."""
+    from canopen.objectdictionary import ODArray, ODRecord
+
+    entry = od[index]
+    if isinstance(entry, ODArray | ODRecord):
+        return entry[subindex]
+    return entry
+
+
+def od_default(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> int:
+    """An integer entry's default; the loader guarantees one (EdsError otherwise)."""
+    value = od_variable(od, index, subindex).default
+    if value is None:
+        raise EdsError("<profile>", f"{index:04X}sub{subindex}", "DefaultValue", "is missing")
+    return int(value)
+
+
 @functools.lru_cache(maxsize=256)
 def object_limits(kind: str, index: int, subindex: int = 0) -> tuple[int, int]:
     """(low, high) a shipped profile's object accepts: its EDS limits, else its type's range.
@@ -62,10 +81,8 @@ def object_limits(kind: str, index: int, subindex: int = 0) -> tuple[int, int]:
     from grasplink.profiles.eds import _types
     from grasplink.profiles.objects import DEFAULT_NODE_IDS
 
-    entry = load_profile(kind, DEFAULT_NODE_IDS[kind])[index]
-    if hasattr(entry, "subindices") and not hasattr(entry, "data_type"):
-        entry = entry[subindex]
-    dtype = _types()[entry.data_type]
+    entry = od_variable(load_profile(kind, DEFAULT_NODE_IDS[kind]), index, subindex)
+    dtype = _types()[int(entry.data_type or 0)]
     low = entry.min if entry.min is not None else dtype.low
     high = entry.max if entry.max is not None else dtype.high
     return int(low), int(high)

@@ -54,8 +54,9 @@ class PdoCodec:
         network.add_node(self._node)
         self._node.tpdo.read(from_od=True)
         self._node.rpdo.read(from_od=True)
+        tpdos = self._node.tpdo.map.values() if self._node.tpdo.map is not None else ()
         self._tpdo_by_can_id = {
-            m.cob_id: m for m in self._node.tpdo.map.values() if m.enabled and len(m.map)
+            m.cob_id: m for m in tpdos if m.cob_id is not None and m.enabled and len(m.map)
         }
 
     def od_entry(self, index: int, subindex: int = 0) -> ODVariable:
@@ -121,4 +122,6 @@ class PdoCodec:
         if given:
             extra = ", ".join(f"0x{i:04X}:{s}" for i, s in given)
             raise PdoError(f"{pdo.name} maps no {extra}")
+        if pdo.cob_id is None:
+            raise PdoError(f"{pdo.name} has no COB-ID")
         return pdo.cob_id, bytes(pdo.data[: (pdo.length + 7) // 8])

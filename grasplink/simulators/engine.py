@@ -176,11 +176,14 @@ class Simulation:
             for name in endpoint.writes:
                 command = self.bindings[endpoint.node].command_value()
                 state.values[name] = np.full(len(times), command)
-        io = Io(
-            times,
-            lambda name, at, s=state: self._read(s, name, at),
-            lambda name, values, s=state: s.values.__setitem__(name, values),
-        )
+
+        def read(name: str, at_us: np.ndarray, s: DomainState = state) -> np.ndarray:
+            return self._read(s, name, at_us)
+
+        def write(name: str, values: np.ndarray, s: DomainState = state) -> None:
+            s.values[name] = values
+
+        io = Io(times, read, write)
         if len(times):
             self.samples[state.name] = self.samples.get(state.name, 0) + len(times)
             for effect in self.effects[state.name]:
