@@ -62,7 +62,7 @@ def test_python_path_and_sosfilt_path_agree_bit_for_bit():
 
 
 @pytest.mark.parametrize("width", [2, 4, 8, 16, 32])
-def test_fir_kernels_as_sections(width):
+def test_fir_kernels(width):
     k = np.arange(width + 1, dtype=np.float64) - width / 2.0
     taps = (k / np.sum(k * k))[::-1]  # the contact detector's LS slope kernel
     x = np.random.default_rng(width).normal(7.0, 0.5, 800)

@@ -63,39 +63,48 @@ def transfer_function_is_unstable(b: np.ndarray, a: np.ndarray) -> bool:
 class SosFilter:
     """The decoders' one streaming filter: second-order sections with carried state.
 
-    IIR designs (Butterworth band-pass, the static-force low-pass) and FIR
+    IIR designs (Butterworth band-pass, the static-force low-pass) run as a
+    cascade of second-order sections (direct form II transposed); FIR
     kernels (`SosFilter.fir`: the contact detector's slope and level
-    kernels) run through the same direct-form II transposed recursion,
-    sample by sample, so feeding a signal in pieces gives bit-identical
-    output to feeding it at once. The filter starts settled on the first
-    sample it sees (a DC offset of +50 N gives no start-up transient);
-    `reset` forgets the state (after a gap).
+    kernels) are the all-zero case, run as one direct-form II transposed
+    filter with a = 1 (scipy's `lfilter` sample loop: a 33-tap kernel needs
+    no factoring into 16 sections). Either way the state is carried and the
+    work is done sample by sample, so feeding a signal in pieces gives
+    bit-identical output to feeding it at once. The filter starts settled
+    on the first sample it sees (a DC offset of +50 N gives no start-up
+    transient); `reset` forgets the state (after a gap).
 
-    Small pieces (a CAN frame brings 1-3 samples) run the recursion in
-    Python - scipy's `sosfilt` costs ~20 us per call in argument checks,
-    more than the arithmetic - with exactly sosfilt's operations in
-    sosfilt's order, so the two paths give the same bits.
+    Small pieces of an IIR cascade (a CAN frame brings 1-3 samples) run the
+    recursion in Python - scipy's `sosfilt` costs ~20 us per call in
+    argument checks, more than the arithmetic - with exactly sosfilt's
+    operations in sosfilt's order, so the two paths give the same bits.
     """
 
     PYTHON_WORK = 24  # samples x sections up to which the Python loop is the cheaper path
 
-    def __init__(self, sos: np.ndarray):
+    def __init__(self, sos: np.ndarray, *, fir_taps: np.ndarray | None = None):
         self.sos = np.ascontiguousarray(np.atleast_2d(np.asarray(sos, dtype=np.float64)))
         if self.sos.ndim != 2 or self.sos.shape[1] != 6 or not len(self.sos):
             raise ValueError(f"sos must have shape (sections, 6), got {self.sos.shape}")
         self._rows = [tuple(float(c) for c in row) for row in self.sos]
-        self._zi_unit = signal.sosfilt_zi(self.sos)
+        self._fir = fir_taps
+        if fir_taps is None:
+            self._zi_unit = signal.sosfilt_zi(self.sos)
+        else:  # a = [1, 0]: lfilter's sample loop (a = [1] would convolve, chunk-dependent)
+            self._a = np.array([1.0, 0.0])
+            self._zi_unit = signal.lfilter_zi(fir_taps, self._a)
         self._zi: np.ndarray | None = None
 
     @classmethod
     def fir(cls, taps: np.ndarray) -> SosFilter:
-        """An FIR filter (y[n] = sum taps[k] x[n - k]) as zero-pole second-order sections."""
+        """An FIR filter: y[n] = sum taps[k] x[n - k]."""
         taps = np.asarray(taps, dtype=np.float64)
         if taps.ndim != 1 or not len(taps):
             raise ValueError("FIR taps must be a non-empty 1-D array")
         if len(taps) == 1:
             return cls(np.array([[taps[0], 0.0, 0.0, 1.0, 0.0, 0.0]]))
-        return cls(signal.tf2sos(taps, np.concatenate([[1.0], np.zeros(len(taps) - 1)])))
+        sos = signal.tf2sos(taps, np.concatenate([[1.0], np.zeros(len(taps) - 1)]))
+        return cls(sos, fir_taps=taps.copy())
 
     @property
     def sections(self) -> int:
@@ -111,6 +120,9 @@ class SosFilter:
             return np.zeros(0)
         if self._zi is None:
             self._zi = self._zi_unit * x[0]
+        if self._fir is not None:
+            y, self._zi = signal.lfilter(self._fir, self._a, x, zi=self._zi)
+            return y
         if len(x) * len(self._rows) > self.PYTHON_WORK:
             y, self._zi = signal.sosfilt(self.sos, x, zi=self._zi)
             return y
