@@ -4,11 +4,11 @@
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-SYSTEM_PACKAGES := mosquitto mbpoll
+SYSTEM_PACKAGES := mosquitto mosquitto-clients mbpoll
 STAMP_PY := $(VENV)/.stamp-install
 STAMP_SYS := $(VENV)/.stamp-system
 
-.PHONY: demo test test-fast check lint format docs bench clean setup system
+.PHONY: demo test test-fast check lint format docs bench clean setup system proto
 
 setup: $(STAMP_PY) $(STAMP_SYS)
 
@@ -70,6 +70,12 @@ lint: setup
 
 format: setup
 	$(VENV)/bin/ruff format $(LINT_PATHS)
+
+# The Sparkplug B payload classes, generated from the committed schema (grpcio-tools' protoc;
+# the protobuf runtime pinned in pyproject.toml matches its generator's version).
+SPARKPLUG := grasplink/gateway/telemetry
+proto: setup
+	cd $(SPARKPLUG) && ../../../$(PY) -m grpc_tools.protoc -I. --python_out=. sparkplug_b.proto
 
 docs: setup
 	$(VENV)/bin/grasplink profiles doc --out docs/profiles.md
