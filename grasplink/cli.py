@@ -207,6 +207,29 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder with the slip scenes for the CAN path (default: scenes/ of that "
         "checkout, else of the checkout grasplink is installed from in editable mode)",
     )
+    bench_loop = bench_sub.add_parser(
+        "loop",
+        help="the closed loop in silico, trial by trial: slips stopped per feedback mode, "
+        "with and without the reflex",
+    )
+    bench_loop.add_argument(
+        "--quick", action="store_true", help="reduced grid: 3 speeds, 1 seed (< 2 min)"
+    )
+    bench_loop.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="folder for loop.md/.json/.png (default: docs/benchmarks/ of the grasplink "
+        "checkout the current folder is in)",
+    )
+    bench_loop.add_argument(
+        "--workers",
+        type=int,
+        default=2,
+        metavar="N",
+        help="trials run in N processes at once (default 2, at most the cores)",
+    )
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
     prof_sub = profiles.add_subparsers(
@@ -453,10 +476,25 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from grasplink.controllers import build_controllers
     from grasplink.evaluation.decoding_bench import run_benchmark
 
+    if args.bench_command == "loop":
+        return cmd_bench_loop(args)
+
     results, out = run_benchmark(
         quick=args.quick, out=args.out, scenes_dir=args.scenes, controllers_for=build_controllers
     )
     print(f"recommended default decoder: {results['recommended_default']}; wrote {out}/decoding.md")
+    return 0
+
+
+def cmd_bench_loop(args: argparse.Namespace) -> int:
+    from grasplink.controllers import build_controllers
+    from grasplink.evaluation.loop import console_table, report_to
+
+    results, out = report_to(
+        quick=args.quick, out=args.out, controllers_for=build_controllers, workers=args.workers
+    )
+    print(console_table(results))
+    print(f"wrote {out}/loop.md, loop.json, loop.png")
     return 0
 
 
