@@ -21,7 +21,17 @@ with carried state, so chunking cannot change a single bit):
   finest scale's white noise times the scale's gain, or - if larger, for
   coloured noise - the scale's own median |h| over the last 10 s, with a
   floor and a margin while few blocks are known), so thresholds are in noise
-  units and pulse amplitudes do not matter;
+  units and pulse amplitudes do not matter. What the node sends is
+  quantised (12-bit ADC, ~0.024 N) and clipped at 0 N while nothing presses
+  the sensor, and a plain median of such values sticks to a lattice point
+  or to 0 - thresholds then fall to a fraction of the noise and noise
+  becomes contacts (issue 11: the wrong slip direction through CAN,
+  ~400 mm/s on the headline scene). So the medians are lattice medians
+  (`filters.lattice_median`), the white noise is never taken below the
+  ADC step's rounding noise (step / sqrt(12)), and blocks where the signal
+  sits on a rail (`filters.on_rail`) do not count: they show no noise.
+  Blocks with no such estimate before them wait for the first block that
+  has one (bounded: after `noise_blocks` blocks they are dropped);
 * a contact candidate is a local maximum of z_w = h_w / noise_w over +-w
   above `threshold`, after which the force rises (the end of a grip release
   is a kink too, but flat after); its time is refined coarse to fine (the

@@ -43,6 +43,12 @@ Design (a small multiple-hypothesis tracker):
   that agree with that position (within 3 mm) and speed (within 15 %),
   discounted by the position's own uncertainty - ambiguous layouts split
   the mass and so give low confidence rather than a confident wrong answer.
+* The direction must be told by the contacts, not by the priors: speed
+  and position are given only when the best track has three contacts (an
+  interval ratio; two contacts fit some alignment either way) and explains
+  the contacts at least 9 times better than the best track moving the
+  other way. Until then a slip is reported with speed and position None
+  (confidence P(slip)); on a symmetric skin that is always the case.
 
 Contacts are decided with a delay (longest detector scale), sometimes out of
 time order; the tracker keeps snapshots of its last few steps and replays
