@@ -84,6 +84,7 @@ bench: setup
 	$(PY) benchmarks/bench_network.py
 	$(PY) benchmarks/bench_scenes.py
 	$(PY) benchmarks/bench_decoding.py
+	$(PY) benchmarks/bench_loop.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
