@@ -1,0 +1,969 @@
+"""The Modbus register map: plain data and pure encode/decode functions, no IO.
+
+Built once from the gateway's snapshot layout and the node profiles: a register
+that carries a profile object's value (grip forces, belt velocity, EMG
+envelope and level, calibration) takes its word type, raw unit and limits
+from that object in the EDS, so the map cannot disagree with the nodes. Node
+blocks are generated per node kind the gateway masters.
+
+- **Input registers** (function 04): read-only state, encoded from
+  `Gateway.latest` (the 20 Hz snapshot). Contiguous from address 0 and small
+  enough (`MAX_READ`) for one request to read the whole map.
+- **Holding registers** (03, 06, 16, 23): the run-time commands of
+  `gateway/commands.py`. A write must cover exactly one command group (one
+  register, or the e_min/e_max pair): values are range-checked here first
+  (`ILLEGAL_VALUE`), addresses and groups too (`ILLEGAL_ADDRESS`), so a
+  refused write posts nothing.
+
+Conventions (docs/modbus.md): 32-bit values take two registers, high word
+first; signed values are two's complement; engineering value = raw × scale;
+an unknown value reads as the type's sentinel (0xFFFF, 0x8000, 0xFFFFFFFF,
+0x80000000) and a known value saturates one step short of it; counters wrap.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any
+
+from grasplink.core.nmt import NmtState
+from grasplink.gateway.commands import (
+    CALIBRATION_PHASES,
+    MAX_THRESHOLD_MM_S,
+    MIN_THRESHOLD_MM_S,
+    NODE_KINDS,
+    Command,
+)
+from grasplink.gateway.config import KINDS
+from grasplink.gateway.feedback import FeedbackMode, Reason
+from grasplink.gateway.levels import Belt
+from grasplink.gateway.reflex import GripSource, ReflexState
+from grasplink.profiles import load_profile, object_limits
+from grasplink.profiles import objects as obj
+
+#: Bumped whenever an address, type or scale changes; readable at input register 0.
+MAP_VERSION = 1
+#: Registers one read (function 03/04) may ask for, by the Modbus specification.
+MAX_READ = 125
+#: Node phases as the gateway names them (service.NodeLink.phase), in code order.
+PHASES = ("absent", "provisioning", "starting", "operational", "failed", "lost")
+#: Alarm categories per node (the gateway's alarm keys are "KIND.CATEGORY").
+ALARM_CATEGORIES = ("lost", "provisioning", "emcy", "clamped")
+OTHER_ALARM_BIT = 31
+_UNIT_RE = re.compile(r"\[([^\]]+)\]\s*$")
+# Raw unit (the EDS's) -> engineering unit (the snapshot's): scale.
+_UNIT_SCALES = {("mN", "N"): 0.001}
+
+
+class ExceptionCode(IntEnum):
+    """Modbus exception codes the server answers with."""
+
+    ILLEGAL_FUNCTION = 0x01
+    ILLEGAL_ADDRESS = 0x02
+    ILLEGAL_VALUE = 0x03
+    DEVICE_FAILURE = 0x04
+    DEVICE_BUSY = 0x06
+
+
+class RegisterError(Exception):
+    """A request the map refuses; carries the Modbus exception code and why (sans-IO)."""
+
+    def __init__(self, code: ExceptionCode, message: str):
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass(frozen=True, slots=True)
+class WordType:
+    """u16, i16, u32 or i32: how many registers, signed or not, and the sentinel."""
+
+    name: str
+    words: int
+    signed: bool
+
+    @property
+    def bits(self) -> int:
+        return 16 * self.words
+
+    @property
+    def sentinel(self) -> int:
+        """The raw word pattern of an unknown value: the most negative, or all ones."""
+        return 1 << (self.bits - 1) if self.signed else (1 << self.bits) - 1
+
+    @property
+    def low(self) -> int:
+        return -(1 << (self.bits - 1)) + 1 if self.signed else 0
+
+    @property
+    def high(self) -> int:
+        return (1 << (self.bits - 1)) - 1 if self.signed else (1 << self.bits) - 2
+
+
+U16 = WordType("u16", 1, False)
+I16 = WordType("i16", 1, True)
+U32 = WordType("u32", 2, False)
+I32 = WordType("i32", 2, True)
+
+# CiA 301 data type codes (python-canopen's) -> the register type that carries them.
+_EDS_TYPES = {1: U16, 2: I16, 3: I16, 4: I32, 5: U16, 6: U16, 7: U32}
+
+
+@dataclass(frozen=True, slots=True)
+class ProfileSource:
+    """The EDS object a register carries: type, raw unit and limits come from it."""
+
+    kind: str
+    index: int
+    subindex: int
+    name: str
+    raw_unit: str
+    type: WordType
+    low: int
+    high: int
+
+    def __str__(self) -> str:
+        return f"{self.kind} {self.index:04X}h:{self.subindex:02X} {self.name}"
+
+
+@functools.lru_cache(maxsize=64)
+def profile_source(kind: str, index: int, subindex: int = 0) -> ProfileSource:
+    """The shipped profile's object `kind index:subindex` as a register source."""
+    entry = load_profile(kind, obj.DEFAULT_NODE_IDS[kind])[index]
+    if not hasattr(entry, "data_type"):
+        entry = entry[subindex]
+    unit = _UNIT_RE.search(entry.name)
+    low, high = object_limits(kind, index, subindex)
+    return ProfileSource(
+        kind,
+        index,
+        subindex,
+        _UNIT_RE.sub("", entry.name).strip(),
+        unit.group(1) if unit else "",
+        _EDS_TYPES[entry.data_type],
+        low,
+        high,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Register:
+    """One value in the map, at `address` (0-based PDU address) and the next for 32 bits.
+
+    Engineering value = raw × `scale`, in `unit`. `codes`: an enumeration (name ->
+    code); `bits`: a bit field (bit i means `bits[i]`); `counter`: wraps modulo 2^bits
+    and has no sentinel. `path` locates the value in the snapshot (input) or the
+    settings (holding); `derive` computes it instead when it is not one value there.
+    Holding registers accept raw values `low..high` (or the codes).
+    """
+
+    name: str
+    address: int
+    type: WordType
+    description: str
+    unit: str = ""
+    scale: float = 1.0
+    section: str = ""
+    path: tuple[str, ...] = ()
+    derive: Callable[[Mapping[str, Any]], Any] | None = None
+    source: str = ""  # where the value comes from, for the docs
+    profile: ProfileSource | None = None
+    codes: Mapping[str, int] | None = None
+    bits: tuple[str, ...] = ()
+    counter: bool = False
+    low: int | None = None
+    high: int | None = None
+    default: int | None = None  # raw value read while the value is absent (else the sentinel)
+
+    @property
+    def words(self) -> int:
+        return self.type.words
+
+    @property
+    def end(self) -> int:
+        """One past the last address."""
+        return self.address + self.type.words
+
+    @property
+    def has_sentinel(self) -> bool:
+        return not self.counter and self.default is None
+
+    def value_of(self, data: Mapping[str, Any] | None) -> Any:
+        """The engineering value in a snapshot or settings mapping (None if absent)."""
+        if data is None:
+            return None
+        if self.derive is not None:
+            return self.derive(data)
+        return _lookup(data, self.path)
+
+    def to_raw(self, value: Any) -> int | None:
+        """Engineering value -> raw integer (saturated, or wrapped for counters);
+        None when unknown (None, NaN, a name not in the codes)."""
+        if value is None:
+            return None
+        if self.codes is not None and isinstance(value, str):
+            return self.codes.get(value)
+        if isinstance(value, bool):
+            return int(value)
+        if not isinstance(value, int | float) or not math.isfinite(value):
+            return None
+        raw = round(value / self.scale) if self.scale != 1 else round(value)
+        if self.counter:
+            return raw % (1 << self.type.bits)
+        return min(self.type.high, max(self.type.low, raw))
+
+    def encode(self, value: Any) -> list[int]:
+        """Engineering value -> register words (high word first)."""
+        raw = self.to_raw(value)
+        if raw is None:
+            # Absent: the default if it has one, a counter reads 0, anything else is unknown.
+            raw = self.default if self.default is not None else (0 if self.counter else None)
+        return to_words(self.type, raw)
+
+    def decode(self, words: Sequence[int]) -> int | None:
+        """Register words -> raw integer; None for the sentinel."""
+        return from_words(self.type, words, sentinel=self.has_sentinel)
+
+    def engineering(self, words: Sequence[int]) -> float | int | None:
+        """Register words -> engineering value (raw × scale); None for the sentinel."""
+        raw = self.decode(words)
+        if raw is None or self.scale == 1:
+            return raw
+        return raw * self.scale
+
+
+def to_words(word_type: WordType, raw: int | None) -> list[int]:
+    """Raw integer -> words, two's complement, high word first; None -> the sentinel."""
+    pattern = word_type.sentinel if raw is None else raw & ((1 << word_type.bits) - 1)
+    if word_type.words == 1:
+        return [pattern]
+    return [pattern >> 16, pattern & 0xFFFF]
+
+
+def from_words(word_type: WordType, words: Sequence[int], *, sentinel: bool = True) -> int | None:
+    """Words (high first) -> raw integer; None for the sentinel pattern."""
+    if len(words) != word_type.words or any(not 0 <= w <= 0xFFFF for w in words):
+        raise ValueError(f"{word_type.name} takes {word_type.words} words of 0..0xFFFF")
+    pattern = 0
+    for word in words:
+        pattern = pattern << 16 | word
+    if sentinel and pattern == word_type.sentinel:
+        return None
+    if word_type.signed and pattern >= 1 << (word_type.bits - 1):
+        pattern -= 1 << word_type.bits
+    return pattern
+
+
+@dataclass(frozen=True, slots=True)
+class CommandGroup:
+    """Holding registers written together as one command (`gateway/commands.py`)."""
+
+    command: str
+    registers: tuple[Register, ...]
+    build: Callable[[tuple[int, ...]], Any]  # checked raw values -> the command's value
+    description: str
+
+    @property
+    def address(self) -> int:
+        return self.registers[0].address
+
+    @property
+    def end(self) -> int:
+        return self.registers[-1].end
+
+
+@dataclass(frozen=True)
+class RegisterMap:
+    """Input registers, holding registers and the command groups over the holding ones."""
+
+    inputs: tuple[Register, ...]
+    holding: tuple[Register, ...]
+    groups: tuple[CommandGroup, ...]
+    _by_name: dict[str, Register] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        for table in (self.inputs, self.holding):
+            _check_contiguous(table)
+        for register in self.inputs + self.holding:
+            if register.name in self._by_name:
+                raise ValueError(f"register name {register.name} used twice")
+            self._by_name[register.name] = register
+        if self.input_count > MAX_READ or self.holding_count > MAX_READ:
+            raise ValueError(f"a table longer than {MAX_READ} registers cannot be read at once")
+
+    def __getitem__(self, name: str) -> Register:
+        return self._by_name[name]
+
+    @property
+    def input_count(self) -> int:
+        return self.inputs[-1].end if self.inputs else 0
+
+    @property
+    def holding_count(self) -> int:
+        return self.holding[-1].end if self.holding else 0
+
+    def encode_inputs(self, snapshot: Mapping[str, Any] | None) -> list[int]:
+        """The whole input table for one snapshot (None: before the first one)."""
+        words: list[int] = []
+        for register in self.inputs:
+            words += register.encode(register.value_of(snapshot))
+        return words
+
+    def encode_holding(self, settings: Mapping[str, Any] | None) -> list[int]:
+        """The whole holding table for the gateway's current settings."""
+        words: list[int] = []
+        for register in self.holding:
+            words += register.encode(register.value_of(settings))
+        return words
+
+    def read(self, table: list[int], address: int, count: int) -> list[int]:
+        """`count` words from `address` of an encoded table; ILLEGAL_ADDRESS outside it."""
+        if not 1 <= count <= MAX_READ:
+            raise RegisterError(ExceptionCode.ILLEGAL_VALUE, f"count {count} outside 1..125")
+        if address < 0 or address + count > len(table):
+            raise RegisterError(
+                ExceptionCode.ILLEGAL_ADDRESS,
+                f"registers {address}..{address + count - 1} outside 0..{len(table) - 1}",
+            )
+        return table[address : address + count]
+
+    def command_for_write(self, address: int, words: Sequence[int]) -> Command:
+        """The command a holding-register write asks for, every value checked.
+
+        ILLEGAL_ADDRESS: not exactly one command group (an address outside the table, a
+        write starting inside a group or covering part of one, or several groups).
+        ILLEGAL_VALUE: a value outside its range or codes, or e_min >= e_max.
+        """
+        end = address + len(words)
+        group = next((g for g in self.groups if g.address == address), None)
+        if group is None or end != group.end:
+            span = f"{address}..{end - 1}" if len(words) > 1 else str(address)
+            raise RegisterError(
+                ExceptionCode.ILLEGAL_ADDRESS,
+                f"holding registers {span} are not one command; commands: "
+                + ", ".join(f"{g.command} {_span(g)}" for g in self.groups),
+            )
+        raws = []
+        offset = 0
+        for register in group.registers:
+            chunk = words[offset : offset + register.words]
+            offset += register.words
+            raw = from_words(register.type, chunk, sentinel=False)
+            if not _accepts(register, raw):
+                raise RegisterError(
+                    ExceptionCode.ILLEGAL_VALUE,
+                    f"{register.name}: {_describe_raw(register, chunk)} outside "
+                    f"{_accepted(register)}",
+                )
+            raws.append(raw)
+        try:
+            value = group.build(tuple(raws))
+        except ValueError as exc:
+            raise RegisterError(ExceptionCode.ILLEGAL_VALUE, f"{group.command}: {exc}") from None
+        return Command(group.command, value)
+
+
+def _span(group: CommandGroup) -> str:
+    return (
+        str(group.address)
+        if group.end - group.address == 1
+        else (f"{group.address}..{group.end - 1}")
+    )
+
+
+def _accepts(register: Register, raw: int) -> bool:
+    if register.codes is not None:
+        return raw in register.codes.values()
+    low = register.type.low if register.low is None else register.low
+    high = register.type.high if register.high is None else register.high
+    return low <= raw <= high
+
+
+def _accepted(register: Register) -> str:
+    if register.codes is not None:
+        return "codes " + ", ".join(f"{c} {n}" for n, c in register.codes.items())
+    return f"{register.low}..{register.high}"
+
+
+def _describe_raw(register: Register, words: Sequence[int]) -> str:
+    return " ".join(f"0x{w:04X}" for w in words) if register.words > 1 else str(words[0])
+
+
+def _check_contiguous(table: tuple[Register, ...]) -> None:
+    expected = 0
+    for register in table:
+        if register.address != expected:
+            raise ValueError(f"{register.name} at {register.address}, expected {expected}")
+        expected = register.end
+
+
+def _lookup(data: Any, path: tuple[str, ...]) -> Any:
+    for key in path:
+        if not isinstance(data, Mapping) or key not in data:
+            return None
+        data = data[key]
+    return data
+
+
+# -- derived values ------------------------------------------------------------------------
+def _node_bits(test: Callable[[Mapping[str, Any]], bool]) -> Callable[[Mapping[str, Any]], int]:
+    def derive(snapshot: Mapping[str, Any]) -> int:
+        nodes = snapshot.get("nodes") or {}
+        return sum(1 << i for i, kind in enumerate(KINDS) if kind in nodes and test(nodes[kind]))
+
+    return derive
+
+
+def _live(node: Mapping[str, Any]) -> bool:
+    return node.get("nmt_state") is not None and node.get("phase") != "lost"
+
+
+def alarm_bit(key: str) -> int:
+    """The bit of the `alarms` register an alarm key ("belt.lost") sets."""
+    kind, _, category = key.partition(".")
+    if kind in KINDS and category in ALARM_CATEGORIES:
+        return KINDS.index(kind) * len(ALARM_CATEGORIES) + ALARM_CATEGORIES.index(category)
+    return OTHER_ALARM_BIT
+
+
+def _alarms(snapshot: Mapping[str, Any]) -> int:
+    return functools.reduce(
+        lambda bits, key: bits | 1 << alarm_bit(key), snapshot.get("alarms") or {}, 0
+    )
+
+
+def _alarm_count(snapshot: Mapping[str, Any]) -> int:
+    return len(snapshot.get("alarms") or {})
+
+
+def _emcy_code(kind: str) -> Callable[[Mapping[str, Any]], int | None]:
+    def derive(snapshot: Mapping[str, Any]) -> int | None:
+        node = (snapshot.get("nodes") or {}).get(kind)
+        if node is None:
+            return None
+        text = node.get("last_emcy")
+        return int(text, 16) if isinstance(text, str) else 0
+
+    return derive
+
+
+def _uptime_ms(snapshot: Mapping[str, Any]) -> float | None:
+    uptime = snapshot.get("uptime_s")
+    return None if uptime is None else uptime * 1000
+
+
+def _map_version(_: Mapping[str, Any]) -> int:
+    return MAP_VERSION
+
+
+# -- building the map ----------------------------------------------------------------------
+class _Table:
+    """Allocates consecutive addresses in declaration order."""
+
+    def __init__(self) -> None:
+        self.registers: list[Register] = []
+        self.section = ""
+
+    def add(self, name: str, word_type: WordType | None, description: str, **kw: Any) -> Register:
+        profile: ProfileSource | None = kw.get("profile")
+        if word_type is None:
+            assert profile is not None
+            word_type = profile.type
+            if "unit" in kw and kw["unit"] != profile.raw_unit:
+                kw["scale"] = _UNIT_SCALES[(profile.raw_unit, kw["unit"])]
+            kw.setdefault("unit", profile.raw_unit)
+        address = self.registers[-1].end if self.registers else 0
+        register = Register(name, address, word_type, description, section=self.section, **kw)
+        self.registers.append(register)
+        return register
+
+
+def _codes(names: Sequence[str], start: int = 0) -> dict[str, int]:
+    return {name: start + i for i, name in enumerate(names)}
+
+
+FEEDBACK_CODES = {m.value: m.code for m in FeedbackMode}
+BELT_CODES = _codes([b.value for b in Belt])  # none, force, slip: as the belt's 2302h
+REASON_CODES = _codes([r.value for r in Reason])
+REFLEX_CODES = _codes([s.value for s in ReflexState])
+SOURCE_CODES = _codes([s.value for s in GripSource])
+PHASE_CODES = _codes(PHASES)
+NMT_CODES = {s.name: s.value for s in NmtState}
+CALIBRATE_CODES = _codes(CALIBRATION_PHASES, start=1)
+RESTART_CODES = _codes(NODE_KINDS, start=1)
+BOOL_CODES = {"false": 0, "true": 1}
+THRESHOLD_SCALE = 0.1
+
+
+def _inputs() -> tuple[Register, ...]:
+    t = _Table()
+    node_bits = tuple(f"{kind}" for kind in KINDS)
+    t.section = "gateway"
+    t.add(
+        "map_version",
+        U16,
+        "register map layout version",
+        derive=_map_version,
+        source=f"constant {MAP_VERSION}",
+    )
+    t.add(
+        "uptime_ms",
+        U32,
+        "time since the gateway started; changes with every snapshot "
+        "(20 Hz), so a value that stops changing means a stalled gateway",
+        unit="ms",
+        derive=_uptime_ms,
+        counter=True,
+        source="snapshot uptime_s × 1000",
+    )
+    t.add(
+        "nodes_configured",
+        U16,
+        "nodes the gateway masters (its configuration)",
+        derive=_node_bits(lambda n: True),
+        bits=node_bits,
+        source="snapshot nodes",
+    )
+    t.add(
+        "nodes_live",
+        U16,
+        "live list: the node's heartbeat is heard and not overdue",
+        derive=_node_bits(_live),
+        bits=node_bits,
+        source="snapshot nodes.KIND: nmt_state known and phase not lost",
+    )
+    t.add(
+        "nodes_operational",
+        U16,
+        "the node is provisioned and OPERATIONAL",
+        derive=_node_bits(lambda n: n.get("phase") == "operational"),
+        bits=node_bits,
+        source="snapshot nodes.KIND.phase == operational",
+    )
+    alarm_bits = [""] * 32
+    for kind in KINDS:
+        for category in ALARM_CATEGORIES:
+            alarm_bits[alarm_bit(f"{kind}.{category}")] = f"{kind}.{category}"
+    alarm_bits[OTHER_ALARM_BIT] = "any other alarm"
+    t.add(
+        "alarms",
+        U32,
+        "active alarms, one bit per alarm key (docs/gateway.md, degraded "
+        "states); the text of each is in the MQTT status",
+        derive=_alarms,
+        bits=tuple(alarm_bits),
+        source="snapshot alarms",
+    )
+    t.add(
+        "alarm_count", U16, "number of active alarms", derive=_alarm_count, source="snapshot alarms"
+    )
+    for kind in KINDS:
+        t.section = f"nodes.{kind}"
+        base = ("nodes", kind)
+        t.add(
+            f"nodes.{kind}.node_id",
+            U16,
+            f"{kind} node-ID; 0 when not configured",
+            path=(*base, "node_id"),
+            default=0,
+            source=f"snapshot nodes.{kind}.node_id",
+        )
+        t.add(
+            f"nodes.{kind}.nmt_state",
+            U16,
+            "NMT state from its last heartbeat (CANopen state byte)",
+            path=(*base, "nmt_state"),
+            codes=NMT_CODES,
+            source=f"snapshot nodes.{kind}.nmt_state",
+        )
+        t.add(
+            f"nodes.{kind}.phase",
+            U16,
+            "what the gateway is doing with the node",
+            path=(*base, "phase"),
+            codes=PHASE_CODES,
+            source=f"snapshot nodes.{kind}.phase",
+        )
+        t.add(
+            f"nodes.{kind}.boots",
+            U16,
+            "boot-ups seen",
+            path=(*base, "boots"),
+            counter=True,
+            source=f"snapshot nodes.{kind}.boots",
+        )
+        t.add(
+            f"nodes.{kind}.pdos_rx",
+            U32,
+            "TPDOs received and decoded",
+            path=(*base, "pdos_rx"),
+            counter=True,
+            source=f"snapshot nodes.{kind}.pdos_rx",
+        )
+        t.add(
+            f"nodes.{kind}.pdos_dropped",
+            U32,
+            "TPDOs dropped (did not fit the mapping)",
+            path=(*base, "pdos_dropped"),
+            counter=True,
+            source=f"snapshot nodes.{kind}.pdos_dropped",
+        )
+        t.add(
+            f"nodes.{kind}.last_emcy_code",
+            U16,
+            "error code of its last EMCY (0: none "
+            "since the gateway started; 0x0000 is also error reset)",
+            derive=_emcy_code(kind),
+            source=f"snapshot nodes.{kind}.last_emcy",
+        )
+
+    t.section = "skin"
+    t.add(
+        "skin.grip_force_n",
+        None,
+        "grip force decoded from the skin",
+        unit="N",
+        path=("skin", "grip_force_n"),
+        profile=profile_source("skin", obj.SKIN_STATIC_FORCE_MN),
+        source="snapshot skin.grip_force_n",
+    )
+    t.add(
+        "skin.slip",
+        U16,
+        "the decoder reports slip (0 no, 1 yes)",
+        path=("skin", "slip"),
+        source="snapshot skin.slip",
+    )
+    t.add(
+        "skin.slip_speed_mm_s",
+        I16,
+        "signed slip speed (sentinel: slip of unknown speed, or no slip)",
+        unit="mm/s",
+        scale=0.1,
+        path=("skin", "slip_speed_mm_s"),
+        source="snapshot skin.slip_speed_mm_s",
+    )
+    t.add(
+        "skin.position_mm",
+        I32,
+        "object position along the skin",
+        unit="mm",
+        scale=0.001,
+        path=("skin", "position_mm"),
+        source="snapshot skin.position_mm",
+    )
+    t.add(
+        "skin.confidence",
+        U16,
+        "decoder confidence 0..1",
+        scale=0.001,
+        path=("skin", "confidence"),
+        source="snapshot skin.confidence",
+    )
+    t.add(
+        "skin.lost_packets",
+        U32,
+        "skin sample packets lost (sequence gaps)",
+        path=("nodes", "skin", "lost_packets"),
+        counter=True,
+        source="snapshot nodes.skin.lost_packets",
+    )
+
+    t.section = "emg"
+    t.add(
+        "emg.envelope_uv",
+        None,
+        "EMG envelope the intent was decoded from",
+        path=("emg", "envelope_uv"),
+        profile=profile_source("emg", obj.EMG_ENVELOPE_UV),
+        source="snapshot emg.envelope_uv",
+    )
+    t.add(
+        "emg.level",
+        None,
+        "contraction level e0..e5 (through the gateway's calibration)",
+        path=("emg", "level"),
+        profile=profile_source("emg", obj.EMG_LEVEL),
+        source="snapshot emg.level",
+    )
+    t.add(
+        "emg.grip_intent_n",
+        None,
+        "grip the wearer asks for",
+        unit="N",
+        path=("emg", "grip_intent_n"),
+        profile=profile_source("hand", obj.HAND_TARGET_GRIP_MN),
+        source="snapshot emg.grip_intent_n",
+    )
+    t.add(
+        "emg.saturated",
+        U16,
+        "the envelope is saturated (0 no, 1 yes)",
+        path=("emg", "saturated"),
+        source="snapshot emg.saturated",
+    )
+
+    t.section = "belt"
+    t.add(
+        "belt.mode",
+        U16,
+        "feedback mode",
+        path=("belt", "mode"),
+        codes=FEEDBACK_CODES,
+        source="snapshot belt.mode",
+    )
+    t.add(
+        "belt.belt",
+        None,
+        "which belt the motor turns",
+        path=("belt", "belt"),
+        codes=BELT_CODES,
+        profile=profile_source("belt", obj.BELT_ACTIVE),
+        source="snapshot belt.belt",
+    )
+    t.add(
+        "belt.level",
+        U16,
+        "display level shown, 1..n (0: none, stopped or a slip of "
+        "unknown speed at the occurrence speed)",
+        path=("belt", "level"),
+        default=0,
+        source="snapshot belt.level",
+    )
+    t.add(
+        "belt.velocity_mrad_s",
+        None,
+        "belt velocity commanded (> 0 force belt, < 0 slip belt, 0 stopped)",
+        path=("belt", "velocity_mrad_s"),
+        profile=profile_source("belt", obj.BELT_TARGET_VELOCITY_MRAD_S),
+        source="snapshot belt.velocity_mrad_s",
+    )
+    t.add(
+        "belt.reason",
+        U16,
+        "why the belt does what it does",
+        path=("belt", "reason"),
+        codes=REASON_CODES,
+        source="snapshot belt.reason",
+    )
+
+    t.section = "hand"
+    t.add(
+        "hand.grip_n",
+        None,
+        "grip force the hand reports",
+        unit="N",
+        path=("hand", "grip_n"),
+        profile=profile_source("hand", obj.HAND_ACTUAL_GRIP_MN),
+        source="snapshot hand.grip_n",
+    )
+    t.add(
+        "hand.setpoint_n",
+        None,
+        "grip force commanded",
+        unit="N",
+        path=("hand", "setpoint_n"),
+        profile=profile_source("hand", obj.HAND_TARGET_GRIP_MN),
+        source="snapshot hand.setpoint_n",
+    )
+    t.add(
+        "hand.reflex",
+        U16,
+        "grip reflex state",
+        path=("hand", "reflex"),
+        codes=REFLEX_CODES,
+        source="snapshot hand.reflex",
+    )
+    t.add(
+        "hand.source",
+        U16,
+        "where the commanded grip comes from",
+        path=("hand", "source"),
+        codes=SOURCE_CODES,
+        source="snapshot hand.source",
+    )
+
+    t.section = "loop"
+    t.add(
+        "loop.latency_p50_us",
+        U32,
+        "gateway processing time from a skin TPDO to the RPDOs it causes, median of recent",
+        unit="us",
+        path=("loop", "latency_p50_us"),
+        source="snapshot loop.latency_p50_us",
+    )
+    t.add(
+        "loop.latency_p99_us",
+        U32,
+        "the same, 99th percentile",
+        unit="us",
+        path=("loop", "latency_p99_us"),
+        source="snapshot loop.latency_p99_us",
+    )
+    t.add(
+        "loop.percepts",
+        U32,
+        "skin decoder updates the loop acted on",
+        path=("loop", "percepts"),
+        counter=True,
+        source="snapshot loop.percepts",
+    )
+    return tuple(t.registers)
+
+
+def _threshold(raws: tuple[int, ...]) -> float:
+    return round(raws[0] * THRESHOLD_SCALE, 1)
+
+
+def _calibration(raws: tuple[int, ...]) -> dict[str, float]:
+    e_min, e_max = raws
+    if not e_min < e_max:
+        raise ValueError(f"e_min ({e_min} uV) must be below e_max ({e_max} uV)")
+    return {"e_min_uv": float(e_min), "e_max_uv": float(e_max)}
+
+
+def _holding() -> tuple[tuple[Register, ...], tuple[CommandGroup, ...]]:
+    t = _Table()
+    t.section = "commands"
+    groups = []
+    mode = t.add(
+        "feedback_mode",
+        U16,
+        "feedback mode",
+        path=("feedback_mode",),
+        codes=FEEDBACK_CODES,
+        source="gateway feedback controller mode",
+    )
+    groups.append(
+        CommandGroup("feedback_mode", (mode,), lambda r: r[0], "switch the belt's feedback mode")
+    )
+    reflex = t.add(
+        "reflex_enabled",
+        U16,
+        "grip reflex on (1) or off (0)",
+        path=("reflex_enabled",),
+        codes=BOOL_CODES,
+        source="gateway reflex",
+    )
+    groups.append(
+        CommandGroup(
+            "reflex_enabled",
+            (reflex,),
+            lambda r: bool(r[0]),
+            "switch the reflex; off while acting releases at the release rate",
+        )
+    )
+    low = round(MIN_THRESHOLD_MM_S / THRESHOLD_SCALE)
+    high = round(MAX_THRESHOLD_MM_S / THRESHOLD_SCALE)
+    threshold = t.add(
+        "reflex_threshold_mm_s",
+        U16,
+        "slip speed above which the reflex acts",
+        unit="mm/s",
+        scale=THRESHOLD_SCALE,
+        low=low,
+        high=high,
+        path=("reflex_threshold_mm_s",),
+        source="gateway reflex configuration",
+    )
+    groups.append(
+        CommandGroup(
+            "reflex_threshold_mm_s",
+            (threshold,),
+            _threshold,
+            "set the reflex threshold (its hysteresis is kept below half of it)",
+        )
+    )
+    pair = []
+    for sub, name in ((1, "e_min"), (2, "e_max")):
+        profile = profile_source("emg", obj.EMG_CALIBRATION, sub)
+        # One short of the sentinel, so what is written reads back unchanged.
+        high = min(profile.high, profile.type.high)
+        pair.append(
+            t.add(
+                f"emg_{name}_uv",
+                None,
+                f"EMG calibration {name}",
+                low=profile.low,
+                high=high,
+                path=(f"emg_{name}_uv",),
+                profile=profile,
+                source="gateway EMG calibration",
+            )
+        )
+    groups.append(
+        CommandGroup(
+            "emg_calibration",
+            tuple(pair),
+            _calibration,
+            "set the EMG calibration: used at once and written to the EMG node (2220h) over SDO",
+        )
+    )
+    phase = t.add(
+        "emg_calibrate",
+        U16,
+        "EMG calibration phase (reads the last one asked for, 0 none)",
+        path=("emg_calibrate",),
+        codes=CALIBRATE_CODES,
+        default=0,
+        source="last accepted write",
+    )
+    groups.append(
+        CommandGroup(
+            "emg_calibrate",
+            (phase,),
+            lambda r: CALIBRATION_PHASES[r[0] - 1],
+            "record the rest or maximum phase, finish (derive e_min/e_max) or cancel",
+        )
+    )
+    restart = t.add(
+        "restart_node",
+        U16,
+        "NMT reset of one node (reads the last one asked for, 0 none)",
+        path=("restart_node",),
+        codes=RESTART_CODES,
+        default=0,
+        source="last accepted write",
+    )
+    groups.append(
+        CommandGroup(
+            "restart_node",
+            (restart,),
+            lambda r: NODE_KINDS[r[0] - 1],
+            "reset the node; the gateway provisions and starts it again",
+        )
+    )
+    return tuple(t.registers), tuple(groups)
+
+
+@functools.lru_cache(maxsize=1)
+def register_map() -> RegisterMap:
+    """The map (built once: the shipped profiles do not change while a process runs)."""
+    holding, groups = _holding()
+    return RegisterMap(_inputs(), holding, groups)
+
+
+def settings_of(gateway: Any, last_actions: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The gateway's current settings for the holding registers.
+
+    Read from another thread without locks: each is one attribute holding an
+    immutable value (enum, bool, frozen dataclass) that the gateway's thread
+    replaces whole, so a write is visible as soon as its CommandResult arrives.
+    """
+    reflex = gateway.arbiter.reflex
+    settings: dict[str, Any] = {
+        "feedback_mode": gateway.feedback.mode.value,
+        "reflex_enabled": reflex.enabled,
+        "reflex_threshold_mm_s": reflex.config.threshold_mm_s,
+    }
+    decoder = gateway.emg_decoder
+    if decoder is not None:
+        calibration = decoder.calibration
+        settings["emg_e_min_uv"] = calibration.e_min_uv
+        settings["emg_e_max_uv"] = calibration.e_max_uv
+    settings.update(last_actions or {})
+    return settings

@@ -1,0 +1,296 @@
+"""The Modbus server: pymodbus at the edge of the register map, in its own thread and loop.
+
+Nothing here touches the gateway's state or blocks its thread. Reads encode
+`Gateway.latest` (the snapshot the gateway replaces whole at 20 Hz, read
+without locks) and the gateway's current settings (`registers.settings_of`).
+A write becomes one `Command` (`RegisterMap.command_for_write` checks address
+and value first: a refused write posts nothing) posted to the gateway's inbox;
+the reply waits, at most `command_timeout_s`, for the `CommandResult`:
+
+- accepted: the normal reply;
+- rejected by the gateway (no such node, a calibration it cannot use):
+  exception 03 ILLEGAL DATA VALUE, and nothing changed;
+- inbox full: 06 SERVER DEVICE BUSY, nothing changed, try again;
+- no result in time: 04 SERVER DEVICE FAILURE; the command stays queued
+  and may still be applied: read the holding registers back.
+
+pymodbus 3.16's `SimDevice` carries the tables and calls `_action` before
+every access; the action fills the registers read, or vetoes a write with an
+exception code.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import errno
+import logging
+import os
+import socket
+import threading
+from collections import Counter
+from concurrent.futures import Future
+from typing import Any
+
+from pymodbus import FramerType
+from pymodbus.constants import ExcCodes
+from pymodbus.pdu import ModbusPDU
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from grasplink.errors import BusError
+from grasplink.gateway.commands import CommandResult
+from grasplink.gateway.modbus.registers import (
+    RegisterError,
+    RegisterMap,
+    register_map,
+    settings_of,
+)
+from grasplink.gateway.modbus.url import ModbusUrl, parse_modbus_url
+from grasplink.gateway.service import Gateway
+
+logger = logging.getLogger(__name__)
+# pymodbus logs what it does (a failed listen as a warning); without a handler of the
+# application's, Python would print it beside our one-line error.
+logging.getLogger("pymodbus").addHandler(logging.NullHandler())
+
+COMMAND_TIMEOUT_S = 0.5  # the gateway's runner wakes at least every 20 ms
+START_TIMEOUT_S = 5.0
+READ_INPUTS, READ_HOLDING = 4, 3
+WRITE_FUNCTIONS = frozenset({6, 16, 23})
+REGISTER_FUNCTIONS = frozenset({3, 4, 6, 16, 23})
+
+
+class ModbusServer:
+    """Serve a gateway's register map over Modbus TCP or RTU; a context manager.
+
+    `start()` returns once the server listens (or raises a BusError saying why it
+    cannot: port in use, no permission, no such serial device); `stop()` closes it.
+    `address` is where it listens (the port actually bound, for `tcp://...:0`).
+    """
+
+    def __init__(
+        self,
+        gateway: Gateway,
+        url: str | ModbusUrl,
+        *,
+        command_timeout_s: float = COMMAND_TIMEOUT_S,
+        register_map_: RegisterMap | None = None,
+    ):
+        self.gateway = gateway
+        self.url = parse_modbus_url(url) if isinstance(url, str) else url
+        self.map = register_map_ or register_map()
+        self.command_timeout_s = command_timeout_s
+        self.stats: Counter[str] = Counter()  # requests, exceptions, commands; this thread only
+        self.address: ModbusUrl = self.url
+        self.last_result: CommandResult | None = None
+        self._last_actions: dict[str, str] = {}  # action registers read back what was asked
+        self._cached: tuple[Any, list[int]] | None = None  # (snapshot, its encoded table)
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stopping: asyncio.Event | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+
+    # -- control (any thread) ------------------------------------------------------------
+    def start(self, timeout: float = START_TIMEOUT_S) -> ModbusServer:
+        if self._thread is not None:
+            raise RuntimeError("ModbusServer can only be started once")
+        self._thread = threading.Thread(target=self._run, name="grasplink-modbus", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout):
+            self.stop()
+            raise BusError(f"modbus: {self.url} did not start within {timeout:g} s")
+        if self._error is not None:
+            self._thread.join(timeout)
+            raise self._error
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Close the listener and every connection (idempotent)."""
+        loop, stopping = self._loop, self._stopping
+        if loop is not None and stopping is not None and not loop.is_closed():
+            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                loop.call_soon_threadsafe(stopping.set)
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+
+    def __enter__(self) -> ModbusServer:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    @property
+    def native_id(self) -> int | None:
+        """The server thread's OS id (per-thread CPU in benchmarks)."""
+        return self._thread.native_id if self._thread is not None else None
+
+    def describe(self) -> str:
+        """One line for the CLI: where, and what the tables hold."""
+        units = "every unit id" if self.address.unit is None else f"unit {self.address.unit}"
+        return (
+            f"modbus {self.address} ({units}): input registers 0..{self.map.input_count - 1}, "
+            f"holding registers 0..{self.map.holding_count - 1} (docs/modbus.md)"
+        )
+
+    # -- the server thread ---------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            asyncio.run(self._serve())
+        except BaseException as exc:  # never leave start() waiting
+            if self._ready.is_set():
+                logger.exception("modbus: %s stopped", self.address)
+            else:
+                self._error = exc
+        finally:
+            self._ready.set()
+
+    async def _serve(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stopping = asyncio.Event()
+        server = self._make_server()
+        try:
+            await server.serve_forever(background=True)
+        except RuntimeError:  # pymodbus logs the OSError and says only "could not listen"
+            self._error = self._listen_error()
+            await server.shutdown()
+            return
+        if self.url.scheme == "tcp" and server.transport is not None:
+            host, port = server.transport.sockets[0].getsockname()[:2]
+            self.address = ModbusUrl("tcp", host=host, port=port)
+        self._ready.set()
+        try:
+            await self._stopping.wait()
+        finally:
+            await server.shutdown()
+
+    def _make_server(self) -> ModbusTcpServer | ModbusSerialServer:
+        url = self.url
+        device = SimDevice(
+            id=url.unit or 0,  # 0: every unit id (TCP)
+            simdata=(
+                [SimData(0, datatype=DataType.BITS)],  # coils, discrete inputs: refused in
+                [SimData(0, datatype=DataType.BITS)],  # _action with ILLEGAL FUNCTION
+                [SimData(0, count=self.map.holding_count, datatype=DataType.REGISTERS)],
+                [
+                    SimData(
+                        0,
+                        count=self.map.input_count,
+                        datatype=DataType.REGISTERS,
+                        readonly=True,
+                    )
+                ],
+            ),
+            action=self._action,
+        )
+        if url.scheme == "tcp":
+            return ModbusTcpServer(device, address=(url.host, url.port), trace_pdu=self._trace)
+        return ModbusSerialServer(
+            device,
+            framer=FramerType.RTU,
+            port=url.device,
+            baudrate=url.baud,
+            parity=url.parity,
+            stopbits=url.stopbits,
+            bytesize=8,
+            trace_pdu=self._trace,
+        )
+
+    def _listen_error(self) -> BusError:
+        """Why listening failed, found by trying what pymodbus tried (it only logs it)."""
+        url = self.url
+        if url.scheme == "rtu":
+            if not os.path.exists(url.device):
+                return BusError(f"modbus: no serial device {url.device}")
+            try:
+                import serial
+
+                serial.Serial(url.device, exclusive=True).close()
+            except (OSError, ValueError) as exc:
+                return BusError(f"modbus: cannot open {url.device}: {exc}")
+            return BusError(f"modbus: cannot open {url.device}")
+        try:
+            socket.create_server((url.host, url.port)).close()
+        except OSError as exc:
+            hint = ""
+            if exc.errno == errno.EADDRINUSE:
+                hint = "; is another server running? choose another port"
+            elif exc.errno == errno.EACCES and url.port < 1024:
+                hint = "; ports below 1024 need privileges, use e.g. tcp://127.0.0.1:1502"
+            return BusError(f"modbus: cannot listen on {url}: {exc.strerror or exc}{hint}")
+        return BusError(f"modbus: cannot listen on {url}")
+
+    def _trace(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU | None:
+        """On a serial line, stay silent for other units' requests (and broadcasts)."""
+        if sending:
+            if pdu.function_code & 0x80:
+                self.stats["exceptions"] += 1
+            return pdu
+        self.stats["requests"] += 1
+        if self.url.unit is not None and pdu.dev_id != self.url.unit:
+            self.stats["other units"] += 1
+            return None  # pymodbus then neither executes nor answers it
+        return pdu
+
+    async def _action(
+        self,
+        function_code: int,
+        start_address: int,
+        address: int,
+        count: int,
+        registers: list[int],
+        values: list[int] | list[bool] | None,
+    ) -> ExcCodes | None:
+        """Called by pymodbus before each access: fill what is read, check what is written."""
+        if function_code not in REGISTER_FUNCTIONS:
+            return ExcCodes.ILLEGAL_FUNCTION
+        offset = address - start_address
+        try:
+            if values is not None:
+                return await self._write(address, [int(v) for v in values])
+            if function_code == 6:
+                return None  # the echo of a single write: the registers hold what was written
+            if function_code == READ_INPUTS:
+                table = self._inputs()
+            else:
+                table = self.map.encode_holding(settings_of(self.gateway, self._last_actions))
+            registers[offset : offset + count] = self.map.read(table, address, count)
+        except RegisterError as exc:
+            logger.debug("modbus: %s", exc)
+            return ExcCodes(exc.code)
+        return None
+
+    def _inputs(self) -> list[int]:
+        """The encoded input table, once per snapshot (a poller at any rate costs the same)."""
+        snapshot = self.gateway.latest
+        cached = self._cached
+        if cached is not None and cached[0] is snapshot:
+            return cached[1]
+        table = self.map.encode_inputs(snapshot)
+        self._cached = (snapshot, table)
+        return table
+
+    async def _write(self, address: int, words: list[int]) -> ExcCodes | None:
+        command = self.map.command_for_write(address, words)  # RegisterError: nothing posted
+        self.stats["commands"] += 1
+        future: Future[CommandResult] = self.gateway.post(command)
+        try:
+            result = await asyncio.wait_for(
+                asyncio.shield(asyncio.wrap_future(future)), self.command_timeout_s
+            )
+        except TimeoutError:
+            logger.warning(
+                "modbus: %s got no result within %.1f s", command.name, self.command_timeout_s
+            )
+            return ExcCodes.DEVICE_FAILURE
+        self.last_result = result
+        if result.accepted:
+            if command.name in ("emg_calibrate", "restart_node"):
+                self._last_actions[command.name] = command.value
+            return None
+        logger.info("modbus: %s refused: %s", command.name, result.detail)
+        if result.detail == "too many commands waiting":
+            return ExcCodes.DEVICE_BUSY
+        return ExcCodes.ILLEGAL_VALUE
