@@ -12,7 +12,9 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
+from typing import Any
 
 from grasplink.errors import ConfigError, GrasplinkError
 
@@ -118,6 +120,18 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="S",
         help="retry a lost bus for this long, then exit 1 "
         f"(default {DEFAULT_RECONNECT_TIMEOUT_S:g})",
+    )
+    gateway.add_argument(
+        "--modbus",
+        metavar="URL",
+        default=None,
+        help="also serve the register map over Modbus: tcp://127.0.0.1:1502 or "
+        "rtu:///dev/ttyUSB0?baud=115200&parity=N&unit=1 (see docs/modbus.md)",
+    )
+    gateway.add_argument(
+        "--print-register-map",
+        action="store_true",
+        help="print the Modbus register map (docs/modbus.md) and exit",
     )
 
     bus = sub.add_parser("bus", help="bus tools")
@@ -239,7 +253,79 @@ def build_parser() -> argparse.ArgumentParser:
     doc.add_argument("--out", type=Path, default=Path("docs/profiles.md"))
     check = prof_sub.add_parser("check", help="validate EDS files")
     check.add_argument("files", nargs="+", type=Path)
+    dbc = prof_sub.add_parser(
+        "dbc", help="every node's PDO map (and NMT, heartbeat, EMCY, SDO) as a DBC file"
+    )
+    dbc.add_argument("--out", type=Path, default=None, help="DBC file (default: stdout)")
+    dbc.add_argument(
+        "--node-id",
+        dest="node_ids",
+        type=kind_node_id_arg,
+        action="append",
+        default=[],
+        metavar="KIND=ID",
+        help="node-ID of a node kind (skin, emg, belt, hand, gateway), e.g. skin=0x11; "
+        "repeatable (default: the profiles' node-IDs and the gateway's 1)",
+    )
+    _add_log_commands(sub, DEFAULT_BUS_URL)
     return parser
+
+
+def _add_log_commands(sub: argparse._SubParsersAction, default_bus: str) -> None:
+    """`record` and `replay`: CAN logs in the formats analysers read (docs/can_tools.md)."""
+    record = sub.add_parser("record", help="record a bus to a CAN log (.asc, .blf, .log)")
+    record.add_argument("out", type=Path, metavar="OUT", help="OUT.asc, OUT.blf or OUT.log")
+    record.add_argument("--bus", default=default_bus, help=f"bus URL (default {default_bus})")
+    record.add_argument(
+        "--duration",
+        type=positive_seconds,
+        default=None,
+        help="stop after this many seconds (default: until Ctrl-C or SIGTERM)",
+    )
+    record.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
+    replay = sub.add_parser("replay", help="replay a CAN log onto a bus at its timestamps")
+    replay.add_argument("log", type=Path, metavar="LOG", help="a .asc, .blf or .log file")
+    replay.add_argument("--bus", default=default_bus, help=f"bus URL (default {default_bus})")
+    replay.add_argument(
+        "--speed",
+        type=speed_factor,
+        default=1.0,
+        metavar="X",
+        help="time factor: 2 plays twice as fast (default 1; a gateway decodes a replay "
+        "exactly as live only at 1)",
+    )
+    replay.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
+    replay.add_argument(
+        "--nodes-only",
+        action="store_true",
+        help="send only what device nodes sent (TPDOs, EMCY, SDO responses, heartbeats), "
+        "never NMT, SYNC, SDO requests or RPDOs that would command nodes on the bus",
+    )
+    replay.add_argument(
+        "--master-id",
+        type=node_id_arg,
+        default=None,
+        help="with --nodes-only: the master whose heartbeat and EMCY are left out "
+        "(default: the gateway's, 1)",
+    )
+
+
+def kind_node_id_arg(text: str) -> tuple[str, int]:
+    """KIND=ID for `profiles dbc --node-id`."""
+    kind, sep, value = text.partition("=")
+    if not sep or not kind.strip():
+        raise argparse.ArgumentTypeError(f"expected KIND=ID, e.g. skin=0x11, got {text!r}")
+    return kind.strip(), node_id_arg(value.strip())
+
+
+def speed_factor(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"speed {text!r} is not a number") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"speed must be a positive factor, got {text}")
+    return value
 
 
 def reconnect_seconds(text: str) -> float:
@@ -458,6 +544,8 @@ def cmd_decode(args: argparse.Namespace) -> int:
 
 
 def cmd_profiles(args: argparse.Namespace) -> int:
+    if args.profiles_command == "dbc":
+        return cmd_profiles_dbc(args)
     if args.profiles_command == "doc":
         from grasplink.profiles.docgen import write_profiles_doc
 
@@ -503,7 +591,17 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     from grasplink.gateway.live import LiveGateway
     from grasplink.terminal import StopSignals
 
+    if args.print_register_map:
+        from grasplink.gateway.modbus.docgen import render_modbus_markdown
+
+        sys.stdout.write(render_modbus_markdown())
+        return 0
     config = load_config(args.config)  # a bad file fails here, before the bus is touched
+    modbus_url = None
+    if args.modbus is not None:
+        from grasplink.gateway.modbus.url import parse_modbus_url
+
+        modbus_url = parse_modbus_url(args.modbus)  # a bad URL too
     deadline = None if args.duration is None else time.monotonic() + args.duration
     with (
         StopSignals() as stop,
@@ -513,7 +611,10 @@ def cmd_gateway(args: argparse.Namespace) -> int:
             with_nodes=args.with_nodes,
             reconnect_timeout_s=args.reconnect_timeout,
         ) as live,
+        _modbus_server(live.gateway, modbus_url) as modbus,
     ):
+        if modbus is not None:
+            print(modbus.describe(), flush=True)
         kinds = ", ".join(f"{k} 0x{n.node_id:02X}" for k, n in config.nodes.items())
         reflex = config.reflex
         print(
@@ -538,7 +639,100 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
 
 
+def _modbus_server(gateway: object, url: object) -> AbstractContextManager[Any]:
+    """The gateway's Modbus server for `url` (a ModbusUrl), or a context of None without one."""
+    if url is None:
+        return nullcontext()
+    from grasplink.gateway.modbus.server import ModbusServer
+
+    return ModbusServer(gateway, url)  # type: ignore[arg-type]
+
+
+def cmd_profiles_dbc(args: argparse.Namespace) -> int:
+    from grasplink.profiles.dbc import dbc_text, write_dbc
+
+    overrides = dict(args.node_ids)
+    if args.out is None:
+        sys.stdout.write(dbc_text(overrides))
+        return 0
+    write_dbc(args.out, overrides)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from grasplink.bus import open_bus
+    from grasplink.bus.logs import check_record_path, record_bus
+    from grasplink.terminal import StopSignals
+
+    name = check_record_path(args.out, force=args.force)  # before the bus is touched
+    with StopSignals() as stop:
+        bus = open_bus(args.bus)
+        try:
+            until = f"for {args.duration:g} s" if args.duration else "until Ctrl-C"
+            print(f"recording {args.bus} to {args.out} ({name}) {until}", flush=True)
+            stats = record_bus(
+                bus,
+                args.out,
+                duration_s=args.duration,
+                should_stop=stop,
+                force=args.force,
+                bus_name=args.bus,
+            )
+        finally:
+            bus.shutdown()
+    errors = f", {stats.error_frames} error frames" if stats.error_frames else ""
+    print(f"wrote {args.out}: {stats.frames} frames{errors} in {stats.wall_s:.1f} s", flush=True)
+    return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from grasplink.bus import open_bus
+    from grasplink.bus.logs import (
+        ReplaySchedule,
+        from_nodes_only,
+        read_log,
+        replay_to_bus,
+        scan_log,
+    )
+    from grasplink.profiles.objects import GATEWAY_NODE_ID
+    from grasplink.terminal import StopSignals
+
+    summary = scan_log(args.log)  # a malformed or empty log fails before the bus is touched
+    master_id = GATEWAY_NODE_ID if args.master_id is None else args.master_id
+    keep = from_nodes_only(master_id) if args.nodes_only else None
+    schedule = ReplaySchedule(speed=args.speed, loop=args.loop, keep=keep)
+    with StopSignals() as stop:
+        bus = open_bus(args.bus)
+        try:
+            print(
+                f"replaying {args.log} ({summary.frames} frames over {summary.span_s:.1f} s) "
+                f"onto {args.bus} at speed {args.speed:g}{', looping' if args.loop else ''}",
+                flush=True,
+            )
+            stats = replay_to_bus(
+                bus, schedule.timeline(lambda: read_log(args.log)), should_stop=stop
+            )
+        finally:
+            bus.shutdown()
+    skipped = []
+    if summary.error_frames:
+        skipped.append(f"{summary.error_frames} error frames")
+    if keep is not None:
+        skipped.append("frames a master sent (--nodes-only)")
+    print(
+        f"sent {stats.frames_sent} frames in {stats.wall_s:.1f} s"
+        + (f" ({stats.passes} passes)" if args.loop else "")
+        + f"; latest frame {1000 * stats.max_late_s:.1f} ms behind its time"
+        + (f"; left out {', '.join(skipped)}" if skipped else ""),
+        flush=True,
+    )
+    return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
+
+
 COMMANDS = {
+    "record": cmd_record,
+    "replay": cmd_replay,
     "gateway": cmd_gateway,
     "node": cmd_node,
     "bus": cmd_bus,

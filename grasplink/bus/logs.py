@@ -21,6 +21,7 @@ complete (an ASC end marker, a BLF header with its object count).
 from __future__ import annotations
 
 import copy
+import struct
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -94,9 +95,9 @@ def read_log(path: Path) -> Iterator[can.Message]:
         raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except Exception as exc:  # python-can's readers raise ValueError, struct.error, BLFParseError
         where = f"after {count} frames" if count else "at its start"
+        what = f"corrupt or truncated ({exc})" if isinstance(exc, struct.error) else repr(exc)
         raise RecordingError(
-            f"{path}: not a readable {LOG_FORMATS[path.suffix.lower()]} log ({where}): "
-            f"{type(exc).__name__}: {exc}"
+            f"{path}: not a readable {LOG_FORMATS[path.suffix.lower()]} log ({where}): {what}"
         ) from None
 
 

@@ -43,7 +43,6 @@ from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.objects import DEFAULT_NODE_IDS
 
 MASTER = "gateway"
-DEFAULT_MASTER_NODE_ID = 1  # the gateway's default node-ID (gateway.config, [gateway] node_id)
 NODE_NAMES = {"skin": "Skin", "emg": "EMG", "belt": "Belt", "hand": "Hand", MASTER: "Gateway"}
 DBC_NAME_MAX = 32  # longer names need a DBC long-name attribute some analysers ignore
 _UNIT_RE = re.compile(r"\s*\[([^\]]+)\]\s*$")
@@ -193,7 +192,7 @@ def _pdo_signal(od: ODVariable, offset: int, length: int, taken: set[str]) -> Pd
 
 def node_ids_with(overrides: Mapping[str, int] | None = None) -> dict[str, int]:
     """The profile's default node-IDs (and the gateway's), with `overrides` by kind."""
-    ids = dict(DEFAULT_NODE_IDS) | {MASTER: DEFAULT_MASTER_NODE_ID}
+    ids = dict(DEFAULT_NODE_IDS) | {MASTER: obj.GATEWAY_NODE_ID}
     for kind, node_id in (overrides or {}).items():
         if kind not in ids:
             valid = ", ".join([*DEVICE_KINDS, MASTER])
