@@ -11,6 +11,7 @@ layer raise or catch them without importing another layer::
     │   └── SceneError   a scene file value (file, key, what was expected)
     ├── RecordingError   a recording that cannot be read (file, line or key)
     ├── BusError         a bus that cannot be opened or reached
+    ├── BrokerError      an MQTT broker that cannot be reached or refuses the connection
     └── PdoError         a PDO that does not fit its mapping (length, range, type)
 
 Protocol-level and private control-flow exceptions are not user errors and
@@ -59,6 +60,10 @@ class RecordingError(GrasplinkError):
 
 class BusError(GrasplinkError):
     """A bus that cannot be opened or reached."""
+
+
+class BrokerError(GrasplinkError):
+    """An MQTT broker (telemetry) that cannot be reached, or refuses us (credentials, TLS)."""
 
 
 class PdoError(GrasplinkError):

@@ -1,0 +1,196 @@
+"""The JSON topic tree `grasplink/<gateway-id>/…` (sans-IO; see docs/telemetry.md).
+
+| topic | retained | when |
+|---|---|---|
+| `status` | yes | `{"online": true}` on connect; the Will, and a clean stop, say false |
+| `health` | yes | every `health_period_ms`, and at once when the live node list changes |
+| `alarms` | yes | on change |
+| `controls` | yes | on change (feedback mode, reflex, EMG calibration) |
+| `node/<kind>/state` | yes | on change (phase, NMT state, boots, EMCY, failure) |
+| `node/<kind>/values` | no | every publish tick: the latest decoded values |
+| `cmd/<name>` | — | in: `{"value": …, "id": …}` (id optional, echoed) |
+| `reply/<name>` | no | out: `{"id", "command", "accepted", "detail"}` |
+
+Every payload carries `ts_ms`, when the snapshot it reports was made (wall
+clock, ms since the epoch), so a message replayed after an outage still says
+when its values held. Every message is QoS 1: a consumer with a persistent
+session misses nothing the broker accepted.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from typing import Any
+
+from grasplink.gateway.commands import Command, CommandResult
+from grasplink.gateway.telemetry.buffer import Message, Sample
+from grasplink.gateway.telemetry.protocol import (
+    LIVE_PHASE,
+    STATE_FIELDS,
+    CommandRequest,
+    Incoming,
+    controls_view,
+    dumps,
+    live_nodes,
+    node_values,
+)
+
+ROOT = "grasplink"
+HEALTH_PERIOD_MS = 1000
+QOS = 1
+MAX_REQUEST_ID_CHARS = 64
+
+
+class JsonTree:
+    """Snapshots in, JSON messages out; commands in, replies out."""
+
+    name = "json"
+
+    def __init__(self, gateway_id: str, *, health_period_ms: int = HEALTH_PERIOD_MS):
+        self.gateway_id = gateway_id
+        self.base = f"{ROOT}/{gateway_id}"
+        self.health_period_ms = health_period_ms
+        self._published: dict[str, dict[str, Any]] = {}  # retained topic -> body (no ts)
+        self._latest: Sample | None = None
+        self._extra: dict[str, Any] = {}
+        self._live: list[str] | None = None
+        self._last_health_ms: int | None = None
+        self._times_lost: Counter[str] = Counter()
+        self._was_live: set[str] = set()
+
+    # -- connection ------------------------------------------------------------------------
+    def will(self, t_ms: int) -> Message:
+        body = {"online": False, "gateway_id": self.gateway_id, "reason": "connection lost"}
+        return Message(f"{self.base}/status", dumps(body), QOS, True)
+
+    def subscriptions(self) -> list[str]:
+        return [f"{self.base}/cmd/+"]
+
+    def on_connect(self, t_ms: int) -> tuple[list[Message], list[Message]]:
+        """Online first; then, behind whatever was buffered, the current retained state
+        (so a state change the buffer bound pushed out is still right on the broker)."""
+        status = {"ts_ms": t_ms, "online": True, "gateway_id": self.gateway_id}
+        first = [Message(f"{self.base}/status", dumps(status), QOS, True)]
+        after = []
+        if self._latest is not None:
+            ts = self._latest.ts_ms
+            after = [self._retained(topic, body, ts) for topic, body in self._published.items()]
+            after.append(self._health(self._latest, ts))
+        return first, after
+
+    def goodbye(self, t_ms: int) -> list[Message]:
+        body = {"ts_ms": t_ms, "online": False, "gateway_id": self.gateway_id, "reason": "stopped"}
+        return [Message(f"{self.base}/status", dumps(body), QOS, True)]
+
+    def finalize(self, message: Message) -> Message | None:
+        return message
+
+    # -- snapshots -------------------------------------------------------------------------
+    def update(self, batch: list[Sample], extra: dict[str, Any]) -> list[Message]:
+        """State changes for every snapshot of the batch; values and health for the latest."""
+        self._extra = extra
+        out: list[Message] = []
+        for sample in batch:
+            out += self._changes(sample)
+        if not batch:
+            return out
+        latest = batch[-1]
+        self._latest = latest
+        snap = latest.snapshot
+        for kind in snap["nodes"]:
+            body = {"ts_ms": latest.ts_ms, **node_values(snap, kind)}
+            out.append(Message(f"{self.base}/node/{kind}/values", dumps(body), QOS, False))
+        live = live_nodes(snap)
+        due = (
+            self._last_health_ms is None
+            or latest.ts_ms - self._last_health_ms >= self.health_period_ms
+        )
+        if due or live != self._live:
+            out.append(self._health(latest, latest.ts_ms))
+        return out
+
+    def _changes(self, sample: Sample) -> list[Message]:
+        snap, ts = sample.snapshot, sample.ts_ms
+        out = []
+        for kind, node in snap["nodes"].items():
+            live = node["phase"] == LIVE_PHASE
+            if kind in self._was_live and not live:
+                self._times_lost[kind] += 1
+            (self._was_live.add if live else self._was_live.discard)(kind)
+            body = {key: node.get(key) for key in STATE_FIELDS}
+            body["live"] = live
+            body["times_lost"] = self._times_lost[kind]
+            out += self._if_changed(f"{self.base}/node/{kind}/state", body, ts)
+        alarms = snap["alarms"]
+        out += self._if_changed(
+            f"{self.base}/alarms", {"count": len(alarms), "alarms": dict(alarms)}, ts
+        )
+        out += self._if_changed(f"{self.base}/controls", controls_view(snap, self._extra), ts)
+        return out
+
+    def _if_changed(self, topic: str, body: dict[str, Any], ts_ms: int) -> list[Message]:
+        if self._published.get(topic) == body:
+            return []
+        self._published[topic] = body
+        return [self._retained(topic, body, ts_ms)]
+
+    def _retained(self, topic: str, body: dict[str, Any], ts_ms: int) -> Message:
+        return Message(topic, dumps({"ts_ms": ts_ms, **body}), QOS, True)
+
+    def _health(self, sample: Sample, ts_ms: int) -> Message:
+        snap = sample.snapshot
+        live = live_nodes(snap)
+        self._live = live
+        self._last_health_ms = sample.ts_ms
+        loss = {}
+        for kind, node in snap["nodes"].items():
+            loss[kind] = {
+                "pdos_dropped": node.get("pdos_dropped", 0),
+                "times_lost": self._times_lost[kind],
+            }
+            if "lost_packets" in node:
+                loss[kind]["lost_packets"] = node["lost_packets"]
+        loop = snap["loop"]
+        body = {
+            "ts_ms": ts_ms,
+            "uptime_s": snap["uptime_s"],
+            "nodes_live": live,
+            "nodes_down": [kind for kind in snap["nodes"] if kind not in live],
+            "loss": loss,
+            "pdos_rx": {kind: node.get("pdos_rx", 0) for kind, node in snap["nodes"].items()},
+            "loop_latency_p50_us": loop["latency_p50_us"],
+            "loop_latency_p99_us": loop["latency_p99_us"],
+            "percepts": loop["percepts"],
+            "alarm_count": len(snap["alarms"]),
+            "telemetry": dict(self._extra.get("telemetry", {})),
+        }
+        return Message(f"{self.base}/health", dumps(body), QOS, True)
+
+    # -- commands --------------------------------------------------------------------------
+    def receive(self, topic: str, payload: bytes, retain: bool, t_ms: int) -> Incoming:
+        prefix = f"{self.base}/cmd/"
+        if not topic.startswith(prefix) or "/" in topic[len(prefix) :]:
+            return Incoming()
+        name = topic[len(prefix) :]
+        try:
+            body = json.loads(payload)
+        except (ValueError, UnicodeDecodeError):
+            return Incoming([CommandRequest(name, refused="payload is not JSON")])
+        request_id = body.get("id") if isinstance(body, dict) else None
+        if not isinstance(request_id, str | int) or isinstance(request_id, bool):
+            request_id = None
+        elif len(str(request_id)) > MAX_REQUEST_ID_CHARS:
+            request_id = str(request_id)[:MAX_REQUEST_ID_CHARS]
+        context = request_id
+        if retain:
+            refused = "retained commands are not executed (publish with retain off)"
+            return Incoming([CommandRequest(name, refused=refused, context=context)])
+        if not isinstance(body, dict) or "value" not in body:
+            refused = 'expected a JSON object {"value": ..., "id": ...} (id optional)'
+            return Incoming([CommandRequest(name, refused=refused, context=context)])
+        return Incoming([CommandRequest(name, Command(name, body["value"]), context=context)])
+
+    def reply(self, request: CommandRequest, result: CommandResult, t_ms: int) -> list[Message]:
+        body = {"ts_ms": t_ms, "id": request.context, **result.as_dict()}
+        return [Message(f"{self.base}/reply/{request.name}", dumps(body), QOS, False)]

@@ -1,0 +1,122 @@
+"""What the two telemetry protocols share: the sans-IO interface the MQTT edge drives,
+command requests, and how a gateway snapshot reads (live nodes, value fields, controls).
+
+A protocol object is fed snapshots (`update`) and broker events (`on_connect`,
+`receive`) and returns `Message`s; it never touches a socket, so the JSON tree
+and the Sparkplug session are tested without a broker. The edge
+(`transport.py`) calls, per connection::
+
+    will = proto.will(t_ms)                    # before each CONNECT (Sparkplug: bdSeq)
+    first, after = proto.on_connect(t_ms)      # first: sent at once; after: behind the buffer
+    outbox.extend(proto.update(batch, extra))  # every publish tick
+    message = proto.finalize(message)          # just before it is sent (None: skip it)
+    incoming = proto.receive(topic, payload, retain, t_ms)   # a command topic
+    outbox.extend(proto.reply(request, result, t_ms))
+    goodbye = proto.goodbye(t_ms)              # a clean stop, before DISCONNECT
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from grasplink.gateway.commands import Command, CommandResult
+from grasplink.gateway.telemetry.buffer import Message, Sample
+
+LIVE_PHASE = "operational"  # a node is live (a Sparkplug device born) only while operational
+
+#: per node kind: the snapshot section and its decoded values (units in the names)
+VALUE_FIELDS: dict[str, tuple[str, ...]] = {
+    "skin": ("grip_force_n", "slip", "slip_speed_mm_s", "position_mm", "confidence"),
+    "emg": ("envelope_uv", "level", "grip_intent_n", "saturated"),
+    "belt": ("mode", "belt", "level", "velocity_mrad_s", "reason"),
+    "hand": ("grip_n", "setpoint_n", "reflex", "source"),
+}
+#: node state fields of `snapshot["nodes"][kind]` that are published on change
+STATE_FIELDS = ("node_id", "phase", "nmt_state", "boots", "last_emcy", "failure")
+#: settable gateway values, as `extra["controls"]` carries them (feedback mode: the snapshot's)
+CONTROL_KEYS = (
+    "reflex_enabled",
+    "reflex_threshold_mm_s",
+    "emg_e_min_uv",
+    "emg_e_max_uv",
+)
+
+
+@dataclass
+class CommandRequest:
+    """A command read from a topic; `refused` set: answered at once, never posted."""
+
+    name: str
+    command: Command | None = None
+    refused: str = ""
+    context: Any = None  # what the protocol needs to answer it (JSON: the request id)
+
+
+@dataclass
+class Incoming:
+    """What one received message asks for: commands, and messages to send at once."""
+
+    requests: list[CommandRequest] = field(default_factory=list)
+    messages: list[Message] = field(default_factory=list)
+
+
+class TelemetryProtocol(Protocol):
+    name: str
+
+    def will(self, t_ms: int) -> Message: ...
+    def subscriptions(self) -> list[str]: ...
+    def on_connect(self, t_ms: int) -> tuple[list[Message], list[Message]]: ...
+    def update(self, batch: list[Sample], extra: dict[str, Any]) -> list[Message]: ...
+    def finalize(self, message: Message) -> Message | None: ...
+    def goodbye(self, t_ms: int) -> list[Message]: ...
+    def receive(self, topic: str, payload: bytes, retain: bool, t_ms: int) -> Incoming: ...
+    def reply(self, request: CommandRequest, result: CommandResult, t_ms: int) -> list[Message]: ...
+
+
+def live_nodes(snapshot: dict[str, Any]) -> list[str]:
+    return [kind for kind, node in snapshot["nodes"].items() if node["phase"] == LIVE_PHASE]
+
+
+def node_values(snapshot: dict[str, Any], kind: str) -> dict[str, Any]:
+    section = snapshot.get(kind, {})
+    return {key: section.get(key) for key in VALUE_FIELDS[kind]}
+
+
+def controls_view(snapshot: dict[str, Any] | None, extra: dict[str, Any]) -> dict[str, Any]:
+    controls = dict(extra.get("controls", {}))
+    controls["feedback_mode"] = snapshot["belt"]["mode"] if snapshot else None
+    return controls
+
+
+def apply_result(controls: dict[str, Any], command: Command, result: CommandResult) -> None:
+    """Track a settable value once the gateway accepted its command (for births and topics)."""
+    if not result.accepted:
+        return
+    if command.name in ("reflex_enabled", "reflex_threshold_mm_s"):
+        controls[command.name] = (
+            bool(command.value) if command.name == "reflex_enabled" else float(command.value)
+        )
+    elif command.name == "emg_calibration":
+        controls["emg_e_min_uv"] = float(command.value["e_min_uv"])
+        controls["emg_e_max_uv"] = float(command.value["e_max_uv"])
+
+
+def dumps(obj: Any) -> bytes:
+    """Compact JSON; a non-finite number (never expected from a snapshot) becomes null."""
+    try:
+        return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+    except ValueError:
+        return json.dumps(_finite(obj), separators=(",", ":")).encode()
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    return obj

@@ -1,0 +1,504 @@
+"""The MQTT edge: aiomqtt in its own thread and event loop, never on the gateway's thread.
+
+`TelemetryPublisher` reads `gateway.latest` (a dict replaced whole at 20 Hz, so
+reading it needs no lock), stamps each new snapshot with the wall-clock time it
+was made, and queues it (`SnapshotQueue`: bounded, drop-oldest, counted). At
+most `rate_hz` times a second the queued snapshots go through each protocol
+(JSON tree, Sparkplug session) into that connection's `Outbox`, the bounded
+store-and-forward buffer a sender drains while the broker is there. A lost
+broker is retried with back-off; on its return the buffer is replayed in order
+and what the bound dropped is logged and published (health, Telemetry/ metrics).
+Commands read from the broker are posted to the gateway (`gateway.post`), their
+results answered by the protocol that received them.
+
+One connection per protocol: each has its own Will (JSON `status` offline,
+Sparkplug NDEATH), which MQTT allows only one of per connection.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import random
+import ssl
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from concurrent.futures import Future
+from typing import Any, Protocol
+
+import aiomqtt
+
+from grasplink.errors import BrokerError
+from grasplink.gateway.commands import Command, CommandResult
+from grasplink.gateway.service import SNAPSHOT_PERIOD_US
+from grasplink.gateway.telemetry.buffer import Message, Outbox, Sample, SnapshotQueue
+from grasplink.gateway.telemetry.json_tree import JsonTree
+from grasplink.gateway.telemetry.protocol import (
+    CommandRequest,
+    TelemetryProtocol,
+    apply_result,
+)
+from grasplink.gateway.telemetry.sparkplug import SparkplugSession
+from grasplink.gateway.telemetry.url import BrokerUrl
+
+DEFAULT_RATE_HZ = 20.0
+CONNECT_TIMEOUT_S = 5.0
+COMMAND_TIMEOUT_S = 2.0  # the gateway answers at its next advance(), normally within 100 ms
+BACKOFF_MIN_S, BACKOFF_MAX_S = 0.5, 10.0
+WINDOW = 64  # messages published before waiting for the broker's acknowledgements
+FLUSH_S = 2.0  # a clean stop sends what is buffered for at most this long
+POLL_S = 0.002  # looking for the next snapshot once it is due
+SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
+
+Log = Callable[[str], None]
+
+
+class GatewayLike(Protocol):
+    """What telemetry needs of a gateway (`grasplink.gateway.service.Gateway`)."""
+
+    latest: dict[str, Any] | None
+
+    def post(self, command: Command) -> Future[CommandResult]: ...
+
+
+def now_ms() -> int:
+    return time.time_ns() // 1_000_000
+
+
+class SnapshotClock:
+    """When a snapshot was made, on the wall clock, from its `uptime_s`.
+
+    The gateway's clock and ours are both monotonic: the smallest `seen - uptime`
+    so far is the gateway's start to within the quickest poll's delay, so stamps
+    do not carry the polling delay. A jump of more than `RESTART_S` is a new gateway.
+    """
+
+    RESTART_S = 0.5
+
+    def __init__(self) -> None:
+        self.origin_s: float | None = None
+
+    def stamp_ms(self, uptime_s: float, seen_mono_s: float, wall_minus_mono_s: float) -> int:
+        origin = seen_mono_s - uptime_s
+        if self.origin_s is None or origin < self.origin_s or origin - self.origin_s > 0.5:
+            self.origin_s = origin
+        return round((self.origin_s + uptime_s + wall_minus_mono_s) * 1000)
+
+
+class MqttLink:
+    """One broker connection for one protocol: connect, reconnect, send, receive."""
+
+    def __init__(
+        self,
+        protocol: TelemetryProtocol,
+        url: BrokerUrl,
+        client_id: str,
+        tls: ssl.SSLContext | None,
+        log: Log,
+        execute: Callable[[Command], Awaitable[CommandResult]],
+        *,
+        backoff_s: tuple[float, float] = (BACKOFF_MIN_S, BACKOFF_MAX_S),
+    ):
+        self.protocol = protocol
+        self.url = url
+        self.client_id = client_id
+        self.tls = tls
+        self.log = log
+        self.execute = execute
+        self.backoff_s = backoff_s
+        self.outbox = Outbox(url.buffer_bytes)
+        self.connected = False
+        self.connections = 0
+        self.sent = 0
+        self.down_since: float | None = None
+        self.last_error = ""
+        self.first: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self.stopping = asyncio.Event()
+        self._wake = asyncio.Event()
+        self._answers: set[asyncio.Task[None]] = set()
+
+    def push(self, messages: list[Message]) -> None:
+        if messages:
+            self.outbox.extend(messages)
+            self._wake.set()
+
+    def stop(self) -> None:
+        self.stopping.set()
+        self._wake.set()
+
+    async def run(self) -> None:
+        """Connect until stopped; the first failure ends it (a start-up error)."""
+        low, high = self.backoff_s
+        delay = low
+        while not self.stopping.is_set():
+            will = self.protocol.will(now_ms())
+            client = aiomqtt.Client(
+                self.url.host,
+                self.url.port,
+                username=self.url.username,
+                password=self.url.password,
+                identifier=self.client_id,
+                will=aiomqtt.Will(will.topic, will.payload, will.qos, will.retain),
+                keepalive=self.url.keepalive_s,
+                tls_context=self.tls,
+                timeout=CONNECT_TIMEOUT_S,
+                clean_session=True,
+                max_inflight_messages=WINDOW,
+            )
+            client.pending_calls_threshold = 4 * WINDOW
+            try:
+                async with client:
+                    self._up()
+                    delay = low
+                    await self._session(client)
+            except aiomqtt.MqttError as exc:
+                self.last_error = str(exc) or type(exc).__name__
+            finally:
+                self._down()
+            if not self.first.done():
+                self.first.set_exception(BrokerError(self._refusal()))
+                return
+            if self.stopping.is_set():
+                break
+            self.log(
+                f"telemetry {self.protocol.name}: lost {self.url.display} ({self.last_error}); "
+                f"buffering up to {self.outbox.max_bytes // 1024} KiB, retrying in {delay:.1f} s"
+            )
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.stopping.wait(), delay * random.uniform(0.8, 1.0))
+            delay = min(high, delay * 2)
+        if self.outbox:
+            self.log(
+                f"telemetry {self.protocol.name}: stopped with {len(self.outbox)} messages unsent"
+            )
+
+    def _refusal(self) -> str:
+        error = self.last_error
+        if "code:" in error or "Not authorized" in error or "not authorised" in error:
+            return f"MQTT broker {self.url.display} refused the connection: {error}"
+        return f"cannot reach MQTT broker {self.url.display}: {error}"
+
+    def _up(self) -> None:
+        self.connected = True
+        self.connections += 1
+        if not self.first.done():
+            self.first.set_result(None)
+            return
+        outage = time.monotonic() - self.down_since if self.down_since else 0.0
+        dropped, dropped_bytes = self.outbox.drops_since_report()
+        line = (
+            f"telemetry {self.protocol.name}: back on {self.url.display} after {outage:.1f} s; "
+            f"replaying {len(self.outbox)} messages ({self.outbox.bytes / 1024:.0f} KiB)"
+        )
+        if dropped:
+            line += (
+                f"; dropped the {dropped} oldest ({dropped_bytes / 1024:.0f} KiB) over the "
+                f"{self.outbox.max_bytes // 1024} KiB bound"
+            )
+        self.log(line)
+
+    def _down(self) -> None:
+        if self.connected:
+            self.down_since = time.monotonic()
+        self.connected = False
+
+    async def _session(self, client: aiomqtt.Client) -> None:
+        for topic in self.protocol.subscriptions():
+            await client.subscribe(topic, qos=1)
+        first, after = self.protocol.on_connect(now_ms())
+        await self._publish(client, first)
+        self.push(after)
+        receiver = asyncio.create_task(self._receive(client))
+        try:
+            await self._send(client, receiver)
+            if self.stopping.is_set():
+                await self._publish(client, self.protocol.goodbye(now_ms()))
+        finally:
+            receiver.cancel()
+            await asyncio.gather(receiver, return_exceptions=True)
+
+    async def _send(self, client: aiomqtt.Client, receiver: asyncio.Task[None]) -> None:
+        flush_until: float | None = None
+        while True:
+            if receiver.done():
+                raise aiomqtt.MqttError(self._receiver_error(receiver))
+            if self.stopping.is_set() and flush_until is None:
+                flush_until = time.monotonic() + FLUSH_S
+            if not self.outbox or (flush_until is not None and time.monotonic() > flush_until):
+                if self.stopping.is_set():
+                    return
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            await self._publish(client, self.outbox.take(WINDOW))
+
+    @staticmethod
+    def _receiver_error(receiver: asyncio.Task[None]) -> str:
+        if receiver.cancelled():
+            return "receiver cancelled"
+        exc = receiver.exception()
+        cause = exc.__cause__ if exc is not None and exc.__cause__ is not None else exc
+        return str(cause) if cause is not None else "connection closed"
+
+    async def _publish(self, client: aiomqtt.Client, messages: list[Message]) -> None:
+        """Publish in order, pipelined; what the broker did not take goes back in front."""
+        pending: list[tuple[Message, asyncio.Future[None]]] = []
+        for message in messages:
+            final = self.protocol.finalize(message)
+            if final is None:
+                continue
+            publish = client.publish(final.topic, final.payload, final.qos, final.retain)
+            pending.append((message, asyncio.ensure_future(publish)))
+        failed: list[Message] = []
+        try:
+            await asyncio.gather(*(task for _, task in pending), return_exceptions=True)
+        finally:
+            for message, task in pending:
+                if not task.done():
+                    task.cancel()
+                if not task.done() or task.cancelled() or task.exception() is not None:
+                    failed.append(message)
+            self.sent += len(pending) - len(failed)
+            if failed:
+                self.outbox.requeue(failed)
+        if failed:
+            raise aiomqtt.MqttError(f"{len(failed)} publications not acknowledged")
+
+    async def _receive(self, client: aiomqtt.Client) -> None:
+        try:
+            async for message in client.messages:
+                payload = message.payload
+                if not isinstance(payload, bytes | bytearray):
+                    payload = b"" if payload is None else str(payload).encode()
+                incoming = self.protocol.receive(
+                    message.topic.value, bytes(payload), bool(message.retain), now_ms()
+                )
+                self.push(incoming.messages)
+                for request in incoming.requests:
+                    task = asyncio.create_task(self._answer(request))
+                    self._answers.add(task)
+                    task.add_done_callback(self._answers.discard)
+        finally:
+            self._wake.set()
+
+    async def _answer(self, request: CommandRequest) -> None:
+        if request.command is None:
+            result = CommandResult(request.name, False, request.refused)
+        else:
+            result = await self.execute(request.command)
+        self.push(self.protocol.reply(request, result, now_ms()))
+
+
+class TelemetryPublisher:
+    """The gateway's telemetry over MQTT, in a background thread; a context manager."""
+
+    def __init__(
+        self,
+        gateway: GatewayLike,
+        url: BrokerUrl,
+        gateway_id: str,
+        *,
+        tls: ssl.SSLContext | None = None,
+        rate_hz: float = DEFAULT_RATE_HZ,
+        controls: dict[str, Any] | None = None,
+        log: Log | None = None,
+        json_tree: bool = True,
+        sparkplug: bool = True,
+        backoff_s: tuple[float, float] = (BACKOFF_MIN_S, BACKOFF_MAX_S),
+    ):
+        if not rate_hz > 0:
+            raise ValueError("rate_hz must be positive")
+        self.gateway = gateway
+        self.url = url
+        self.gateway_id = gateway_id
+        self.tls = tls
+        self.period_s = 1.0 / rate_hz
+        self.controls = dict(controls or {})
+        self.log: Log = log or (lambda line: None)
+        self.protocols: list[TelemetryProtocol] = []
+        if json_tree:
+            self.protocols.append(JsonTree(gateway_id))
+        if sparkplug:
+            self.protocols.append(SparkplugSession(url.group, gateway_id))
+        self.backoff_s = backoff_s
+        self.queue = SnapshotQueue()
+        self.clock = SnapshotClock()
+        self.links: list[MqttLink] = []
+        self.published_snapshots = 0
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._ready = threading.Event()
+        self._start_error: BaseException | None = None
+
+    @classmethod
+    def controls_of(cls, config: Any) -> dict[str, Any]:
+        """The settable values a gateway starts with (`GatewayConfig`)."""
+        controls: dict[str, Any] = {
+            "reflex_enabled": config.reflex.enabled,
+            "reflex_threshold_mm_s": config.reflex.threshold_mm_s,
+        }
+        emg = config.nodes.get("emg")
+        if emg is not None:
+            controls["emg_e_min_uv"] = emg.e_min_uv
+            controls["emg_e_max_uv"] = emg.e_max_uv
+        return controls
+
+    # -- life cycle (any thread) -----------------------------------------------------------
+    def __enter__(self) -> TelemetryPublisher:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def start(self) -> TelemetryPublisher:
+        """Connect every protocol's link; BrokerError if the broker is not there or refuses."""
+        self._thread = threading.Thread(
+            target=lambda: asyncio.run(self._main()), name="grasplink-telemetry", daemon=True
+        )
+        self._thread.start()
+        self._ready.wait()
+        if self._start_error is not None:
+            self._thread.join()
+            raise self._start_error
+        return self
+
+    def stop(self, timeout_s: float = FLUSH_S + 3.0) -> None:
+        loop, stop = self._loop, self._stop
+        if loop is not None and stop is not None and not loop.is_closed():
+            with contextlib.suppress(RuntimeError):  # the loop has just closed
+                loop.call_soon_threadsafe(stop.set)
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+
+    # -- what it did -----------------------------------------------------------------------
+    def stats(self) -> dict[str, Any]:
+        return {
+            "snapshots_dropped": self.queue.dropped,
+            "published_snapshots": self.published_snapshots,
+            "links": {
+                link.protocol.name: {
+                    "connected": link.connected,
+                    "connections": link.connections,
+                    "sent": link.sent,
+                    "buffered_messages": len(link.outbox),
+                    "buffered_bytes": link.outbox.bytes,
+                    "dropped_messages": link.outbox.dropped_messages,
+                    "dropped_bytes": link.outbox.dropped_bytes,
+                }
+                for link in self.links
+            },
+        }
+
+    def status_line(self) -> str:
+        parts = []
+        for link in self.links:
+            state = "up" if link.connected else "DOWN"
+            part = f"{link.protocol.name} {state} {link.sent} sent"
+            if link.outbox:
+                part += f", {len(link.outbox)} buffered"
+            if link.outbox.dropped_messages:
+                part += f", {link.outbox.dropped_messages} dropped"
+            parts.append(part)
+        return f"telemetry {self.url.display}: " + "; ".join(parts)
+
+    # -- the telemetry thread --------------------------------------------------------------
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        client_ids = {p.name: f"grasplink-{self.gateway_id}-{p.name}" for p in self.protocols}
+        try:
+            self.links = [
+                MqttLink(
+                    protocol,
+                    self.url,
+                    client_ids.get(protocol.name, protocol.name),
+                    self.tls,
+                    self.log,
+                    self._execute,
+                    backoff_s=self.backoff_s,
+                )
+                for protocol in self.protocols
+            ]
+            runs = [asyncio.create_task(link.run()) for link in self.links]
+            results = await asyncio.gather(
+                *(link.first for link in self.links), return_exceptions=True
+            )
+            errors = [r for r in results if isinstance(r, BaseException)]
+            if errors:
+                self._start_error = errors[0]
+                for link in self.links:
+                    link.stop()
+                await asyncio.gather(*runs, return_exceptions=True)
+                return
+            self._ready.set()
+            pump = asyncio.create_task(self._pump())
+            await self._stop.wait()
+            pump.cancel()
+            await asyncio.gather(pump, return_exceptions=True)
+            self._publish(time.monotonic())  # the last snapshots still go out
+            for link in self.links:
+                link.stop()
+            await asyncio.gather(*runs, return_exceptions=True)
+        except BaseException as exc:  # a bug: never leave start() waiting
+            self._start_error = self._start_error or exc
+            raise
+        finally:
+            self._ready.set()
+
+    async def _pump(self) -> None:
+        """Poll for new snapshots (just after each is due) and publish at most at the rate."""
+        last: dict[str, Any] | None = None
+        seen_at = -1.0
+        next_publish = 0.0
+        while True:
+            now = time.monotonic()
+            snapshot = self.gateway.latest
+            if snapshot is not None and snapshot is not last:
+                last, seen_at = snapshot, now
+                wall_minus_mono = time.time() - now
+                ts_ms = self.clock.stamp_ms(snapshot["uptime_s"], now, wall_minus_mono)
+                self.queue.put(Sample(ts_ms, snapshot))
+            if len(self.queue) and now >= next_publish:
+                self._publish(now)
+                next_publish = now + self.period_s
+            # Next look: shortly before the next snapshot is due, then every POLL_S.
+            due = seen_at + SNAPSHOT_PERIOD_S - 2 * POLL_S
+            wake = due if due > now else now + (POLL_S if now - seen_at < 1.0 else 0.02)
+            if len(self.queue):
+                wake = min(wake, next_publish)
+            await asyncio.sleep(max(0.0005, wake - time.monotonic()))
+
+    def _publish(self, now: float) -> None:
+        batch = self.queue.drain()
+        if not batch:
+            return
+        self.published_snapshots += len(batch)
+        for link in self.links:
+            extra = {"controls": self.controls, "telemetry": self._telemetry(link)}
+            link.push(link.protocol.update(batch, extra))
+
+    def _telemetry(self, link: MqttLink) -> dict[str, Any]:
+        stats = {
+            "snapshots_dropped": self.queue.dropped,
+            "buffer_dropped_messages": link.outbox.dropped_messages,
+            "buffer_dropped_bytes": link.outbox.dropped_bytes,
+            "buffer_bound_bytes": link.outbox.max_bytes,
+            "connections": link.connections,
+        }
+        if isinstance(link.protocol, SparkplugSession):
+            stats["historical_dropped"] = link.protocol.historical_dropped
+        return stats
+
+    async def _execute(self, command: Command) -> CommandResult:
+        """Post to the gateway's thread and wait (never cancelling its Future)."""
+        future = asyncio.wrap_future(self.gateway.post(command))
+        done, _ = await asyncio.wait({future}, timeout=COMMAND_TIMEOUT_S)
+        if not done:
+            return CommandResult(
+                command.name, False, f"the gateway did not answer within {COMMAND_TIMEOUT_S:g} s"
+            )
+        result = future.result()
+        apply_result(self.controls, command, result)
+        return result
