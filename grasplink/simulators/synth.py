@@ -111,6 +111,65 @@ def static_recording(
     )
 
 
+def scripted_recording(
+    layout_mm: tuple[float, ...],
+    speed_mm_s: list[list[float]],
+    *,
+    start_mm: float,
+    duration_s: float,
+    fs_hz: int = 400,
+    object_length_mm: float = OBJECT_LENGTH_MM,
+    grip_n: list[list[float]] | None = None,
+    grip_interpolation: str = "step",
+    white_n: float = NOISE_WHITE_N,
+    drift_n: float = NOISE_DRIFT_N,
+    drift_corner_hz: float = DRIFT_CORNER_HZ,
+    full_scale_n: float | None = None,
+    dips: bool = False,
+    tips: float = 0.0,
+    seed: int = 1,
+) -> SkinRecording:
+    """A slip that changes speed, stops, restarts or reverses: any signed speed profile.
+
+    `speed_mm_s` is `object.scripted`'s [[t_s, mm/s], ...] (signed, linear
+    between points) and `start_mm` the leading edge at t = 0. The object
+    (`object_length_mm`) leads with the edge its motion points to, so a
+    reversal hands the contacts to the other edge (`object_length_mm` of
+    `object.scripted`). `grip_n` (default 5 N) may step during the slip;
+    `full_scale_n` clips the FSR (`skin.saturation`); noise in N.
+    """
+    physics = [
+        (
+            kinematics.ScriptedObject,
+            {
+                "speed_mm_s": [list(p) for p in speed_mm_s],
+                "start_mm": start_mm,
+                "object_length_mm": object_length_mm,
+            },
+        ),
+    ]
+    if dips:
+        physics.append((kinematics.RidgeDips, {}))
+    moving = [v for _, v in speed_mm_s if v != 0]
+    return _record(
+        layout_mm,
+        fs_hz,
+        duration_s,
+        seed,
+        physics,
+        grip_n=[list(p) for p in grip_n] if grip_n is not None else [[0.0, 5.0]],
+        grip_interpolation=grip_interpolation,
+        noise_scale=1.0,
+        tips=tips,
+        reverse=bool(moving) and moving[0] < 0,
+        object_length_mm=object_length_mm,
+        white_n=white_n,
+        drift_n=drift_n,
+        drift_corner_hz=drift_corner_hz,
+        full_scale_n=full_scale_n,
+    )
+
+
 def _record(
     layout_mm,
     fs_hz,
@@ -123,6 +182,11 @@ def _record(
     tips,
     grip_interpolation: str = "step",
     reverse: bool = False,
+    object_length_mm: float = OBJECT_LENGTH_MM,
+    white_n: float | None = None,
+    drift_n: float | None = None,
+    drift_corner_hz: float = DRIFT_CORNER_HZ,
+    full_scale_n: float | None = None,
 ) -> SkinRecording:
     ctx = harness.context(seed=seed, rate_hz=fs_hz, layout_mm=tuple(layout_mm))
     effects = [harness.make(cls, ctx, **params) for cls, params in physics]
@@ -132,19 +196,21 @@ def _record(
         harness.make(
             skin.FsrForce,
             ctx,
-            object_length_mm=OBJECT_LENGTH_MM,
+            object_length_mm=object_length_mm,
             direction="reverse" if reverse else "forward",
         ),
     ]
     contacts = harness.make(skin.RidgeContacts, ctx, tip_probability=tips)
     effects.append(contacts)
-    if noise_scale > 0:
+    white = NOISE_WHITE_N * noise_scale if white_n is None else white_n
+    drift = NOISE_DRIFT_N * noise_scale if drift_n is None else drift_n
+    if white > 0 or drift > 0:  # an effect with std 0 draws nothing: as if absent
         effects += [
-            harness.make(noise.WhiteNoise, ctx, std=NOISE_WHITE_N * noise_scale),
-            harness.make(
-                noise.Drift, ctx, std=NOISE_DRIFT_N * noise_scale, corner_hz=DRIFT_CORNER_HZ
-            ),
+            harness.make(noise.WhiteNoise, ctx, std=white),
+            harness.make(noise.Drift, ctx, std=drift, corner_hz=drift_corner_hz),
         ]
+    if full_scale_n is not None:
+        effects.append(harness.make(skin.Saturation, ctx, full_scale_n=full_scale_n))
     times = harness.sample_times_us(fs_hz, duration_s)
     out = harness.run(effects, times, chunk=4096)
     true_contacts = np.array([c.time_s for c in contacts.contacts if not c.tip])

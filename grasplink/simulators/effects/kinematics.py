@@ -28,6 +28,7 @@ import numpy as np
 from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
+from grasplink.simulators.effects.skin import JUMP_SLACK, JUMP_TOLERANCE_MM
 
 US_PER_S = 1_000_000
 POSITION, SPEED, SLIPPING = sig.OBJECT_POSITION_MM, sig.OBJECT_SPEED_MM_S, sig.OBJECT_SLIPPING
@@ -121,10 +122,18 @@ class ScriptedObject(Effect):
     - `interpolation`: "linear" (default) or "step".
     - `direction`: "forward" (+) or "reverse" (-); optional.
     - `start_mm`: leading-edge position at t = 0 (default 0).
+    - `object_length_mm`: optional (> 0). Without it one edge is integrated
+      continuously, whatever the sign of the motion. With it the reported
+      position is the edge the object leads with: at a reversal (the sign of
+      the last non-zero speed changes) it jumps by the length to the other
+      edge, so `skin.fsr`'s coverage stays continuous and the contacts after
+      a reversal come from the edge that now leads. Before the first motion
+      the object leads in the direction of the profile's first non-zero
+      speed, and `start_mm` is that edge.
 
     The position is the closed-form integral of the profile evaluated at each
     sample time: no per-sample accumulation, hence no drift and no dependence
-    on chunking.
+    on chunking (the leading side is the one state carried between chunks).
     """
 
     kind = "object.scripted"
@@ -147,11 +156,37 @@ class ScriptedObject(Effect):
                     )
         self.profile = Profile(params, "speed_mm_s", interpolation, pairs)
         self.start_mm = params.number("start_mm", 0.0)
+        self.length_mm = params.number("object_length_mm", None, low=0.0, low_open=True)
+        moving = self.sign * self.profile.values[self.profile.values != 0]
+        self.forward = not (len(moving) and moving[0] < 0)  # the side the object leads with
+        # start_mm is the edge leading at first; leading the other way, the other edge leads:
+        # the rear edge is `length_mm` behind the front one
+        self.other_edge_mm = -(self.length_mm or 0.0) if self.forward else self.length_mm or 0.0
+        self.forward_at_start = self.forward
 
     def step(self, io: Io) -> None:
         speed = self.sign * self.profile.value(io.times_us)
-        position = self.start_mm + self.sign * self.profile.integral(io.times_us)
+        travel = self.sign * self.profile.integral(io.times_us)
+        if self.length_mm is None:
+            put_object(io, self.start_mm + travel, speed)
+            return
+        forward = leading_forward(speed, self.forward)
+        if len(forward):
+            self.forward = bool(forward[-1])
+        shift = np.where(forward == self.forward_at_start, 0.0, self.other_edge_mm)
+        position = self.start_mm + travel + shift
         put_object(io, position, speed)
+
+
+def leading_forward(speed_mm_s: np.ndarray, last_forward: bool) -> np.ndarray:
+    """Per sample: does the object lead forward (its last non-zero speed > 0)?
+
+    The rule `skin.fsr` uses for the edge it reads, so an effect reporting
+    the leading edge agrees with the sensor about which edge that is.
+    """
+    index = np.where(speed_mm_s != 0, np.arange(len(speed_mm_s)), -1)
+    last = np.maximum.accumulate(index) if len(index) else index
+    return np.where(last >= 0, speed_mm_s[np.maximum(last, 0)] > 0, last_forward)
 
 
 @register
@@ -330,6 +365,10 @@ class RidgeDips(Effect):
     ridge r (at x_r = cumsum([0, *layout])[r]) is crossed when the number of
     ridges at or behind the edge changes; each crossing counts once and
     starts its dip at the sample where it is detected (≤ one sample late).
+    A jump of the input edge (`object.scripted` with `object_length_mm`
+    switching edges at a reversal: a step longer than 4·max|v|·dt + 1e-6 mm,
+    the test `skin.ridge_contacts` uses) passes ridges without touching them,
+    so it starts no dips.
     Needs the skin layout.
     """
 
@@ -360,6 +399,7 @@ class RidgeDips(Effect):
         self.offset_mm = 0.0
         self.last_us: int | None = None
         self.last_p0_mm = 0.0
+        self.last_v0_mm_s = 0.0
         self.behind = 0  # ridges at or behind the (modified) leading edge
 
     def _dips(self, times_us: np.ndarray, previous_us: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -392,10 +432,15 @@ class RidgeDips(Effect):
             return
         if self.last_us is None:
             self.last_us, self.last_p0_mm = int(times[0]), float(p0[0])
+            self.last_v0_mm_s = float(v0[0])
             self.behind = int(np.searchsorted(self.ridges_mm, p0[0], side="right"))
         previous_us = np.concatenate(([self.last_us], times[:-1]))
         moved = np.diff(p0, prepend=self.last_p0_mm)
         moved_abs, moved_sign = np.abs(moved), np.sign(moved)
+        fastest = np.maximum(np.abs(v0), np.abs(np.concatenate(([self.last_v0_mm_s], v0[:-1]))))
+        jumps = (
+            moved_abs > JUMP_SLACK * fastest * (times - previous_us) / US_PER_S + JUMP_TOLERANCE_MM
+        )
         position = np.empty(n)
         dip = np.empty(n)
         i, window = 0, self.WINDOW
@@ -422,6 +467,8 @@ class RidgeDips(Effect):
                 if now > self.behind
                 else range(self.behind - 1, now - 1, -1)
             )
+            if jumps[k]:  # the reported edge jumped to the other edge: no ridge was touched
+                crossed = range(0)
             for _ in crossed:  # a new dip starts at full depth at the detecting sample
                 depth = float(self.rng.uniform(self.depth_low, self.depth_high))
                 depth = min(depth, abs(float(v0[k])))
@@ -432,6 +479,7 @@ class RidgeDips(Effect):
             window = self.WINDOW
         speed = np.sign(v0) * np.maximum(np.abs(v0) - dip, 0.0)
         self.last_us, self.last_p0_mm = int(times[-1]), float(p0[-1])
+        self.last_v0_mm_s = float(v0[-1])
         self._forget(self.last_us)
         put_object(io, position, speed)
 
