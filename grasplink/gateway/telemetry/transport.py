@@ -182,8 +182,7 @@ class MqttLink:
     def _up(self) -> None:
         self.connected = True
         self.connections += 1
-        if not self.first.done():
-            self.first.set_result(None)
+        if self.connections == 1:
             return
         outage = time.monotonic() - self.down_since if self.down_since else 0.0
         dropped, dropped_bytes = self.outbox.drops_since_report()
@@ -209,6 +208,8 @@ class MqttLink:
         first, after = self.protocol.on_connect(now_ms())
         await self._publish(client, first)
         self.push(after)
+        if not self.first.done():  # start() returns (and snapshots flow) once births are out
+            self.first.set_result(None)
         receiver = asyncio.create_task(self._receive(client))
         try:
             await self._send(client, receiver)
