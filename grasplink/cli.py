@@ -11,7 +11,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import Any
@@ -120,6 +120,34 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="S",
         help="retry a lost bus for this long, then exit 1 "
         f"(default {DEFAULT_RECONNECT_TIMEOUT_S:g})",
+    )
+    gateway.add_argument(
+        "--mqtt",
+        default=None,
+        metavar="URL",
+        help="publish telemetry (JSON topic tree and Sparkplug B) to this broker: "
+        "mqtt://[user[:password]@]host[:port] or mqtts://... (see docs/telemetry.md)",
+    )
+    gateway.add_argument(
+        "--mqtt-id",
+        default=None,
+        metavar="ID",
+        help="the gateway's telemetry ID: topics grasplink/ID/..., Sparkplug edge node ID "
+        "(default gateway)",
+    )
+    gateway.add_argument(
+        "--mqtt-ca",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="CA certificate (PEM) to trust for an mqtts:// broker (default: the system's)",
+    )
+    gateway.add_argument(
+        "--mqtt-rate-hz",
+        type=positive_hz,
+        default=None,
+        metavar="HZ",
+        help="publish telemetry values at most this often (default 20: every snapshot)",
     )
     gateway.add_argument(
         "--modbus",
@@ -602,6 +630,7 @@ def cmd_gateway(args: argparse.Namespace) -> int:
         from grasplink.gateway.modbus.url import parse_modbus_url
 
         modbus_url = parse_modbus_url(args.modbus)  # a bad URL too
+    telemetry = telemetry_options(args)  # and bad --mqtt options
     deadline = None if args.duration is None else time.monotonic() + args.duration
     with (
         StopSignals() as stop,
@@ -612,6 +641,7 @@ def cmd_gateway(args: argparse.Namespace) -> int:
             reconnect_timeout_s=args.reconnect_timeout,
         ) as live,
         _modbus_server(live.gateway, modbus_url) as modbus,
+        telemetry(live.gateway, config) as publisher,
     ):
         if modbus is not None:
             print(modbus.describe(), flush=True)
@@ -632,6 +662,8 @@ def cmd_gateway(args: argparse.Namespace) -> int:
                 break
             if now >= next_status:
                 print(live.status_line(), flush=True)
+                if publisher is not None:
+                    print(publisher.status_line(), flush=True)
                 next_status = now + config.status_period_s
             time.sleep(0.05)
         final = live.status_line()
@@ -646,6 +678,46 @@ def _modbus_server(gateway: object, url: object) -> AbstractContextManager[Any]:
     from grasplink.gateway.modbus.server import ModbusServer
 
     return ModbusServer(gateway, url)  # type: ignore[arg-type]
+
+
+def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContextManager[Any]]:
+    """The --mqtt options, checked before the bus or broker is touched; returns what starts
+    the publisher for a gateway (a context of None without --mqtt)."""
+    if args.mqtt is None:
+        given = [f for f in ("mqtt_id", "mqtt_ca", "mqtt_rate_hz") if getattr(args, f) is not None]
+        if given:
+            raise ConfigError(f"--{given[0].replace('_', '-')} needs --mqtt URL")
+        return lambda gateway, config: nullcontext()
+    from grasplink.gateway.telemetry import (
+        DEFAULT_RATE_HZ,
+        TelemetryPublisher,
+        check_id,
+        parse_broker_url,
+        tls_context,
+    )
+
+    url = parse_broker_url(args.mqtt)
+    gateway_id = check_id(args.mqtt_id or "gateway")
+    tls = tls_context(url, args.mqtt_ca)
+    rate_hz = args.mqtt_rate_hz or DEFAULT_RATE_HZ
+
+    def start(gateway: Any, config: Any) -> TelemetryPublisher:
+        print(
+            f"telemetry to {url.display}: grasplink/{gateway_id}/..., "
+            f"spBv1.0/{url.group}/+/{gateway_id}, at most {rate_hz:g} Hz",
+            flush=True,
+        )
+        return TelemetryPublisher(
+            gateway,
+            url,
+            gateway_id,
+            tls=tls,
+            rate_hz=rate_hz,
+            controls=TelemetryPublisher.controls_of(config),
+            log=lambda line: print(line, flush=True),
+        )
+
+    return start
 
 
 def cmd_profiles_dbc(args: argparse.Namespace) -> int:
