@@ -269,8 +269,7 @@ def loop_run(tmp_path_factory):
 
 def _replay_in_virtual_time(log: Path, scene, *, keep=None, origin_us: int = 0) -> tuple:
     gateway = build_controllers(scene)[0]  # a fresh gateway, configured as the live one
-    updates: list = []
-    gateway.estimate_listeners.append(lambda t_us, estimate: updates.append((t_us, estimate)))
+    updates = _listen(gateway)
     player = LogPlayer(ReplaySchedule(keep=keep).timeline(lambda: read_log(log)))
     network = LockstepNetwork([gateway, player])
     network.t_us = origin_us
@@ -278,6 +277,24 @@ def _replay_in_virtual_time(log: Path, scene, *, keep=None, origin_us: int = 0) 
     network.run_until(origin_us + round((RUN_S + 1) * 1e6))
     assert player.finished
     return gateway, updates
+
+
+class _Updates(list):
+    """Skin decoder updates (t_us, estimate) and where the gateway's sample grid lay."""
+
+    anchor_us: float | None = None
+
+
+def _listen(gateway: Gateway) -> _Updates:
+    updates = _Updates()
+
+    def listener(t_us: int, estimate) -> None:
+        if not updates:  # the stream forgets its grid when the skin is lost at the end
+            updates.anchor_us = gateway.skin_stream._anchor_us
+        updates.append((t_us, estimate))
+
+    gateway.estimate_listeners.append(listener)
+    return updates
 
 
 def test_a_replayed_log_decodes_exactly_as_live_in_virtual_time(loop_run):
@@ -342,10 +359,7 @@ def test_grasplink_replay_in_real_time_decodes_as_live_through_the_hub(loop_run,
             assert "recording" in recorder.stdout.readline()
             with LiveGateway(hub.url, config) as live_gateway:
                 gateway = live_gateway.gateway
-                updates: list = []
-                gateway.estimate_listeners.append(
-                    lambda t_us, e, updates=updates: updates.append((t_us, e))
-                )
+                updates = _listen(gateway)
                 replay = subprocess.run(
                     [*GRASPLINK, "replay", str(skin_log), "--bus", hub.url],
                     capture_output=True,
@@ -371,9 +385,8 @@ def test_grasplink_replay_in_real_time_decodes_as_live_through_the_hub(loop_run,
         if stream.resyncs or stream.lost_packets:
             misses.append(replay.stdout.strip().splitlines()[-1])
             continue
-        anchor_us = gateway.skin_stream._anchor_us  # where the real-time sample grid lies
-        probe, _ = _replay_in_virtual_time(skin_log, scene)
-        shift_us = round(anchor_us - probe.skin_stream._anchor_us)
+        _, probe = _replay_in_virtual_time(skin_log, scene)
+        shift_us = round(updates.anchor_us - probe.anchor_us)  # to the real-time sample grid
         _, expected = _replay_in_virtual_time(skin_log, scene, origin_us=shift_us)
         assert [e for _, e in updates] == [e for _, e in expected]
         assert len(updates) > 250
