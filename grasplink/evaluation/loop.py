@@ -262,6 +262,7 @@ class Outcome:
     i_emg: float | None = None  # mean EMG intensity over the same span (see `i_emg`)
     belt_latency_s: float | None = None  # first belt RPDO after onset changing the display
     belt_first_mrad_s: float | None = None  # its target velocity
+    slip_belt_latency_s: float | None = None  # first slip-belt RPDO (velocity < 0) after onset
     reflex_latency_s: float | None = None  # first hand RPDO after onset above voluntary grip
 
 
@@ -331,6 +332,9 @@ def outcome(
     env_t, env = envelope
     effort = i_emg(env[env_t >= onset_s], calibration)
     belt_latency, belt_first = first_change(*belt, onset_s)
+    belt_t, belt_v = belt
+    slip_belt = np.flatnonzero((belt_t >= onset_s) & (belt_v < 0))
+    slip_belt_latency = float(belt_t[slip_belt[0]] - onset_s) if len(slip_belt) else None
     hand_t, hand_n = hand
     raised = np.flatnonzero(
         (hand_t >= onset_s) & np.isfinite(voluntary_n) & (hand_n > voluntary_n + 0.5 / MN_PER_N)
@@ -351,6 +355,7 @@ def outcome(
         i_emg=effort,
         belt_latency_s=None if belt_latency is None else belt_latency - onset_s,
         belt_first_mrad_s=belt_first,
+        slip_belt_latency_s=slip_belt_latency,
         reflex_latency_s=reflex_latency,
     )
 
@@ -528,6 +533,7 @@ def summarise(rows: Sequence[dict]) -> dict:
         if stopped_pct is None or not effort
         else stopped_pct / 100.0 / effort,
         "belt_latency_median_s": _median([r["belt_latency_s"] for r in rows]),
+        "slip_belt_latency_median_s": _median([r.get("slip_belt_latency_s") for r in rows]),
         "reflex_pct": _pct([r["reflex_latency_s"] is not None for r in rows]),
         "reflex_latency_median_s": _median([r["reflex_latency_s"] for r in rows]),
     }
@@ -745,7 +751,8 @@ def render(results: dict) -> str:
         "*I_EMG*: thesis eq. 2.1, the mean of (e − e_min)/(e_max − e_min) over the EMG node's",
         "envelope TPDOs from the onset on, with the gateway's calibration (e1 at rest ≈ 0.13),",
         "and *success/effort* = stopped share / I_EMG (the thesis's success-to-EMG-intensity",
-        "ratio); *belt*: first belt RPDO after onset changing the display; *reflex*: share",
+        "ratio); *belt*: first belt RPDO after onset changing the display (*slip belt*: the",
+        "first one running the slip belt), median latency; *reflex*: share",
         "of trials with a hand RPDO after onset above the grip the wearer's EMG asked for",
         "(the EMG TPDOs replayed through the gateway's calibration) and its median latency.",
         "Belt and hand RPDOs and EMG TPDOs are unpacked through the nodes' EDS mappings.",
@@ -762,9 +769,9 @@ def render(results: dict) -> str:
         "## Per feedback mode and reflex, all speeds",
         "",
         "| mode, reflex | trials | stopped % | first stop % | re-slip % | dropped % | crushed "
-        "| distance mm | time to stop s | grip N | I_EMG | success/effort | belt s | reflex % "
-        "| reflex s |",
-        "|---|" + "---:|" * 14,
+        "| distance mm | time to stop s | grip N | I_EMG | success/effort | belt s | slip belt s "
+        "| reflex % | reflex s |",
+        "|---|" + "---:|" * 15,
     ]
     for key, s in rows.items():
         lines.append(
@@ -773,7 +780,8 @@ def render(results: dict) -> str:
             f"{_f(s['slip_distance_median_mm'])} | {_f(s['time_to_stop_median_s'], 2)} | "
             f"{_f(s['grip_mean_n'])} | {_f(s['i_emg'], 2)} | "
             f"{_f(s['success_to_effort'], 2)} | {_f(s['belt_latency_median_s'], 2)} | "
-            f"{_f(s['reflex_pct'], 0)} | {_f(s['reflex_latency_median_s'], 2)} |"
+            f"{_f(s['slip_belt_latency_median_s'], 2)} | {_f(s['reflex_pct'], 0)} | "
+            f"{_f(s['reflex_latency_median_s'], 2)} |"
         )
     lines += [
         "",
