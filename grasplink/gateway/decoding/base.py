@@ -377,9 +377,5 @@ class StaticForce:
         corner = min(corner_hz, 0.45 * fs_hz)
         self._filter = SosFilter(butter(2, corner, fs=fs_hz, output="sos"))
 
-    @property
-    def sos(self) -> np.ndarray:
-        return self._filter.sos
-
     def filter(self, x: np.ndarray) -> np.ndarray:
         return self._filter(x)
