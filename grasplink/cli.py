@@ -770,6 +770,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from grasplink.profiles.objects import GATEWAY_NODE_ID
     from grasplink.terminal import StopSignals
 
+    if args.master_id is not None and not args.nodes_only:
+        raise ConfigError("--master-id only applies with --nodes-only")
     summary = scan_log(args.log)  # a malformed or empty log fails before the bus is touched
     master_id = GATEWAY_NODE_ID if args.master_id is None else args.master_id
     keep = from_nodes_only(master_id) if args.nodes_only else None

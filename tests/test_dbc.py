@@ -26,6 +26,7 @@ from grasplink.profiles import objects as obj
 from grasplink.profiles.dbc import (
     EMCY_CODES,
     MASTER,
+    NODE_NAMES,
     build_database,
     dbc_text,
     node_ids_with,
@@ -115,12 +116,14 @@ def test_signals_sit_where_the_eds_mapping_puts_them(dbc_file):
         for pdo in pdo_messages(kind, DEFAULT_NODE_IDS[kind]):
             message = db.get_message_by_frame_id(pdo.can_id)
             assert message.length == pdo.length_bytes
-            sender = "Gateway" if pdo.direction == "RPDO" else message.senders[0]
+            node, gateway = NODE_NAMES[kind], NODE_NAMES[MASTER]
+            sender, receiver = (node, gateway) if pdo.direction == "TPDO" else (gateway, node)
             assert message.senders == [sender]
             for s in pdo.signals:
                 signal = message.get_signal_by_name(s.name)
                 assert (signal.start, signal.length) == (s.start_bit, s.length_bits)
                 assert signal.byte_order == "little_endian"
+                assert signal.receivers == [receiver]
                 assert f"{s.index:04X}h:{s.subindex:02X}" in signal.comment
 
 
@@ -206,3 +209,12 @@ def test_stdout_without_out(capsys):
     text = capsys.readouterr().out
     db = cantools.database.load_string(text, database_format="dbc")
     assert db.get_message_by_name("Skin_TPDO1").frame_id == TPDO_BASES[0] + 0x10
+
+
+def test_the_gateway_in_the_dbc_is_the_gateway_at_its_defaults():
+    from grasplink.gateway.config import load_config
+
+    config = load_config(None)
+    heartbeat = build_database().get_message_by_name("Gateway_Heartbeat")
+    assert heartbeat.frame_id == HEARTBEAT_BASE + config.node_id
+    assert heartbeat.cycle_time == config.heartbeat_ms

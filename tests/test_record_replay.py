@@ -227,6 +227,11 @@ def test_replay_reports_a_malformed_log_on_one_line(tmp_path, capsys, name, cont
     assert err.count("\n") == 1 and needle in err, err
 
 
+def test_master_id_without_nodes_only_is_refused(tmp_path, capsys):
+    assert main(["replay", str(tmp_path / "a.asc"), "--master-id", "2"]) == 1
+    assert "--master-id only applies with --nodes-only" in capsys.readouterr().err
+
+
 def test_replay_of_a_missing_file_names_it(tmp_path):
     with pytest.raises(RecordingError, match="no such file"):
         scan_log(tmp_path / "gone.asc")

@@ -43,6 +43,7 @@ from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.objects import DEFAULT_NODE_IDS
 
 MASTER = "gateway"
+GATEWAY_HEARTBEAT_MS = 100  # the gateway's default heartbeat ([gateway] heartbeat_ms)
 NODE_NAMES = {"skin": "Skin", "emg": "EMG", "belt": "Belt", "hand": "Hand", MASTER: "Gateway"}
 DBC_NAME_MAX = 32  # longer names need a DBC long-name attribute some analysers ignore
 _UNIT_RE = re.compile(r"\s*\[([^\]]+)\]\s*$")
@@ -216,7 +217,7 @@ def build_database(overrides: Mapping[str, int] | None = None) -> Database:
     nodes += [
         Node(NODE_NAMES[k], comment=f"{k} node, node-ID 0x{ids[k]:02X} ({k}.eds)") for k in kinds
     ]
-    messages = [_nmt(ids), _sync(), _heartbeat(MASTER, ids[MASTER], 100, kinds)]
+    messages = [_nmt(ids), _sync(), _heartbeat(MASTER, ids[MASTER], GATEWAY_HEARTBEAT_MS, kinds)]
     for kind in kinds:
         node_id = ids[kind]
         messages += [_pdo_message(m) for m in pdo_messages(kind, node_id)]
