@@ -79,6 +79,7 @@ proto: setup
 
 docs: setup
 	$(VENV)/bin/grasplink profiles doc --out docs/profiles.md
+	$(VENV)/bin/grasplink gateway --print-register-map > docs/modbus.md
 
 bench: setup
 	$(PY) benchmarks/bench_network.py

@@ -553,7 +553,7 @@ def _inputs() -> tuple[Register, ...]:
         "alarms",
         U32,
         "active alarms, one bit per alarm key (docs/gateway.md, degraded "
-        "states); the text of each is in the MQTT status",
+        "states); their text is in the gateway's status line and snapshot",
         derive=_alarms,
         bits=tuple(alarm_bits),
         source="snapshot alarms",

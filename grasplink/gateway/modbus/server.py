@@ -219,7 +219,8 @@ class ModbusServer:
                 hint = "; is another server running? choose another port"
             elif exc.errno == errno.EACCES and url.port < 1024:
                 hint = "; ports below 1024 need privileges, use e.g. tcp://127.0.0.1:1502"
-            return BusError(f"modbus: cannot listen on {url}: {exc.strerror or exc}{hint}")
+            why = os.strerror(exc.errno) if exc.errno else str(exc)
+            return BusError(f"modbus: cannot listen on {url}: {why}{hint}")
         return BusError(f"modbus: cannot listen on {url}")
 
     def _trace(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU | None:

@@ -1,0 +1,315 @@
+"""docs/modbus.md, generated from the register map (`grasplink gateway --print-register-map`).
+
+The map is the source of truth; a test checks the committed file equals this
+output, so the document cannot drift from what the server serves.
+"""
+
+from __future__ import annotations
+
+from grasplink.gateway.config import KINDS
+from grasplink.gateway.modbus.registers import (
+    MAP_VERSION,
+    MAX_READ,
+    ExceptionCode,
+    Register,
+    RegisterMap,
+    WordType,
+    register_map,
+)
+from grasplink.gateway.modbus.url import DEFAULT_BAUD, DEFAULT_TCP_PORT
+
+TYPES = (
+    ("u16", "one register, 0..65535", "0xFFFF", "0..65534"),
+    ("i16", "one register, two's complement", "0x8000 (-32768)", "-32767..32767"),
+    ("u32", "two registers, high word first", "0xFFFF 0xFFFF", "0..4294967294"),
+    ("i32", "two registers, high word first, two's complement", "0x8000 0x0000", "±2147483647"),
+)
+
+
+def render_modbus_markdown(rmap: RegisterMap | None = None) -> str:
+    """The whole document for `rmap` (default: the gateway's map)."""
+    rmap = rmap or register_map()
+    out = [
+        "# Modbus register map",
+        "",
+        "<!-- Generated file: edit grasplink/gateway/modbus/registers.py, then run "
+        "`grasplink gateway --print-register-map > docs/modbus.md` or `make docs`. -->",
+        "",
+        "Generated from `grasplink/gateway/modbus/registers.py` (map version "
+        f"{MAP_VERSION}); do not edit by hand. Registers that carry a node's object take "
+        "their type, raw unit and limits from that object in the node's EDS "
+        "(docs/profiles.md), named in the *source* column.",
+        "",
+        *_connection(rmap),
+        *_conventions(),
+        "## Input registers (function 04, read-only)",
+        "",
+        f"Addresses 0..{rmap.input_count - 1}: one read of {rmap.input_count} registers "
+        "returns the whole map. Values come from the gateway's snapshot (replaced every "
+        "50 ms), so two reads within 50 ms may return the same values; `uptime_ms` changes "
+        "with every snapshot.",
+        "",
+    ]
+    section = None
+    for register in rmap.inputs:
+        if register.section != section:
+            section = register.section
+            out += ["", f"### {section}", "", *_table_head()]
+        out.append(_row(register))
+    out += ["", *_enumerations(rmap)]
+    out += _holding(rmap)
+    out += _examples(rmap)
+    return "\n".join(out).rstrip() + "\n"
+
+
+def _connection(rmap: RegisterMap) -> list[str]:
+    return [
+        "## Connecting",
+        "",
+        "```sh",
+        "grasplink gateway --modbus tcp://127.0.0.1:1502            # Modbus TCP",
+        "grasplink gateway --modbus 'rtu:///dev/ttyUSB0?baud=115200&parity=N&unit=1'",
+        "grasplink gateway --with-nodes --modbus tcp://127.0.0.1:1502   # self-contained",
+        "```",
+        "",
+        "| URL | meaning |",
+        "|---|---|",
+        "| `tcp://HOST:PORT` | Modbus TCP server on HOST (default 127.0.0.1: only this "
+        "machine), PORT (default "
+        f"{DEFAULT_TCP_PORT}; ports below 1024 need privileges). Every interface only when "
+        "asked: `tcp://0.0.0.0:1502`. Answers every unit id. Port 0: any free port, printed "
+        "at start. |",
+        "| `rtu://DEVICE?baud=B&parity=P&stopbits=S&unit=U` | Modbus RTU on a serial "
+        f"line (pyserial): baud default {DEFAULT_BAUD}, parity N, E (default) or O, stop "
+        "bits 1 (default) or 2, unit 1..247 (default 1). Requests for other units and "
+        "broadcasts (unit 0) get no answer and change nothing: a prosthesis setting is "
+        "never changed by a broadcast. |",
+        "",
+        "The server runs in its own thread and event loop; it reads the gateway's "
+        "snapshot without locks and hands writes to the gateway's thread as commands, so "
+        "a slow or misbehaving Modbus client never delays the feedback loop. A port in "
+        "use, a missing serial device or a bad URL stops `grasplink gateway` at start "
+        "with a one-line error.",
+        "",
+        "Function codes: 03 read holding registers, 04 read input registers, 06 write "
+        "single register, 16 write multiple registers, 23 read/write multiple registers. "
+        "Coil and discrete-input functions (01, 02, 05, 15) answer exception 01.",
+        "",
+        "| exception | when |",
+        "|---|---|",
+        f"| {ExceptionCode.ILLEGAL_FUNCTION:02X} ILLEGAL FUNCTION | coils and discrete "
+        "inputs: there are none |",
+        f"| {ExceptionCode.ILLEGAL_ADDRESS:02X} ILLEGAL DATA ADDRESS | a read beyond the "
+        "table; a write to an input register, or to holding registers that are not exactly "
+        "one command (part of a pair, several commands, beyond the table). Nothing is "
+        "applied. |",
+        f"| {ExceptionCode.ILLEGAL_VALUE:02X} ILLEGAL DATA VALUE | a written value outside "
+        "its range or codes, e_min not below e_max, or a command the gateway refuses "
+        "(no such node, calibration it cannot use). Nothing is applied. |",
+        f"| {ExceptionCode.DEVICE_FAILURE:02X} SERVER DEVICE FAILURE | the gateway did not "
+        "answer the command within 0.5 s. The command stays queued and may still be "
+        "applied: read the holding registers back. |",
+        f"| {ExceptionCode.DEVICE_BUSY:02X} SERVER DEVICE BUSY | too many commands are "
+        "waiting for the gateway; nothing applied, try again. |",
+        "",
+        f"A read may ask for up to {MAX_READ} registers.",
+        "",
+    ]
+
+
+def _conventions() -> list[str]:
+    lines = [
+        "## Conventions",
+        "",
+        "- **Addresses** are PDU addresses, counted from 0, as on the wire and in "
+        "pymodbus. In 1-based reference notation input register *a* is 3x(*a*+1) "
+        "(30001 + *a*) and holding register *a* is 4x(*a*+1) (40001 + *a*); mbpoll counts "
+        "from 1 unless given `-0`.",
+        "- **Scaling**: engineering value = raw × scale, in the unit given (raw 415 of a "
+        "0.1 mm/s register is 41.5 mm/s). Names carry the engineering unit.",
+        "- **32-bit values** take two consecutive registers, **high word first** (big-endian "
+        'word order, "ABCD"; mbpoll `-B`, pymodbus `word_order="big"`). Read both in one '
+        "request: the snapshot cannot change between them then.",
+        "- **Signed values** are two's complement.",
+        "- **Unknown** (never measured, node not configured, no estimate) reads as the "
+        "type's sentinel; a known value beyond the type's range saturates one step short of "
+        "it. Registers marked *counter* wrap modulo 2^16 or 2^32 and have no sentinel (0 "
+        "when unknown); registers with a *default* read it instead of the sentinel.",
+        "- **Enumerations** read a code, listed under *Codes*; an unknown state reads the "
+        "sentinel. **Bit fields**: bit 0 is the least significant.",
+        "",
+        "| type | layout | sentinel (unknown) | known values |",
+        "|---|---|---|---|",
+    ]
+    lines += [
+        f"| {name} | {layout} | `{sentinel}` | {known} |" for name, layout, sentinel, known in TYPES
+    ]
+    return [*lines, ""]
+
+
+def _table_head() -> list[str]:
+    return [
+        "| address | name | type | unit | scale | meaning | source |",
+        "|---|---|---|---|---|---|---|",
+    ]
+
+
+def _addresses(register: Register) -> str:
+    if register.words == 1:
+        return str(register.address)
+    return f"{register.address}–{register.end - 1}"
+
+
+def _meaning(register: Register) -> str:
+    text = register.description
+    notes = []
+    if register.codes is not None:
+        notes.append(
+            "codes: " + ", ".join(f"{code} {name}" for name, code in register.codes.items())
+        )
+    if register.bits:
+        notes.append("bits: " + ", ".join(f"{i} {m}" for i, m in enumerate(register.bits) if m))
+    if register.counter:
+        notes.append("counter")
+    if register.default is not None:
+        notes.append(f"default {register.default}")
+    return "; ".join([text, *notes])
+
+
+def _scale(register: Register) -> str:
+    return f"{register.scale:g}"
+
+
+def _source(register: Register) -> str:
+    if register.profile is not None:
+        unit = f" [{register.profile.raw_unit}]" if register.profile.raw_unit else ""
+        return f"{register.source}; type from EDS {register.profile}{unit}"
+    return register.source
+
+
+def _row(register: Register) -> str:
+    return (
+        f"| {_addresses(register)} | `{register.name}` | {_type(register.type)} | "
+        f"{register.unit} | {_scale(register)} | {_meaning(register)} | {_source(register)} |"
+    )
+
+
+def _type(word_type: WordType) -> str:
+    return word_type.name
+
+
+def _enumerations(rmap: RegisterMap) -> list[str]:
+    lines = ["### Codes", ""]
+    seen: set[tuple[tuple[str, int], ...]] = set()
+    for register in rmap.inputs + rmap.holding:
+        if register.codes is None:
+            continue
+        key = tuple(register.codes.items())
+        if key in seen:
+            continue
+        seen.add(key)
+        users = [
+            f"`{r.name}`"
+            for r in rmap.inputs + rmap.holding
+            if r.codes is not None and tuple(r.codes.items()) == key
+        ]
+        if len(users) > 3:
+            users = [*users[:2], f"… ({len(users)} registers)"]
+        lines += [
+            f"{', '.join(users)}:",
+            "",
+            "| code | meaning |",
+            "|---|---|",
+            *(f"| {code} | {name} |" for name, code in register.codes.items()),
+            "",
+        ]
+    lines += [
+        "Node bits (`nodes_configured`, `nodes_live`, `nodes_operational`): "
+        + ", ".join(f"bit {i} {kind}" for i, kind in enumerate(KINDS))
+        + ". A node is *live* while its heartbeat is heard (any NMT state) and not "
+        "overdue; *operational* once the gateway provisioned it and it runs.",
+        "",
+    ]
+    return lines
+
+
+def _holding(rmap: RegisterMap) -> list[str]:
+    out = [
+        "## Holding registers (functions 03, 06, 16, 23): commands",
+        "",
+        f"Addresses 0..{rmap.holding_count - 1}. Reading returns the gateway's current "
+        "setting (not a snapshot: a write is visible as soon as it is answered). Writing "
+        "sends the command of `grasplink/gateway/commands.py` (the same commands MQTT "
+        "carries) to the gateway's thread and answers once the gateway has executed it. "
+        "**A write must cover exactly one command**: one register, or both registers of "
+        "the EMG calibration pair in one function 16 write; anything else is exception 02. "
+        "Every value is checked before anything is sent (exception 03), and the gateway "
+        "checks again; a refused write changes nothing.",
+        "",
+        "| address | name | type | unit | scale | accepted raw values | reads | source |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for register in rmap.holding:
+        if register.codes is not None:
+            accepted = ", ".join(f"{c} {n}" for n, c in register.codes.items())
+        else:
+            accepted = f"{register.low}..{register.high}"
+            if register.scale != 1:
+                low = register.low * register.scale
+                high = register.high * register.scale
+                accepted += f" ({low:g}..{high:g} {register.unit})"
+        reads = register.description
+        if register.default is None:
+            reads += " (sentinel: no such node)" if register.profile else ""
+        out.append(
+            f"| {_addresses(register)} | `{register.name}` | {register.type.name} | "
+            f"{register.unit} | {_scale(register)} | {accepted} | {reads} | "
+            f"{_source(register)} |"
+        )
+    out += ["", "### Commands", "", "| write | command | what it does |", "|---|---|---|"]
+    for group in rmap.groups:
+        if len(group.registers) == 1:
+            how = f"06 or 16 at {group.address}"
+        else:
+            how = (
+                f"16 at {group.address}, count {group.end - group.address} ("
+                + ", ".join(f"`{r.name}`" for r in group.registers)
+                + ")"
+            )
+        out.append(f"| {how} | `{group.command}` | {group.description} |")
+    out += [
+        "",
+        "The EMG calibration needs e_min < e_max, both in the EDS range of 2220h; it "
+        "applies at once and is written to the EMG node in the order that keeps e_min < "
+        "e_max after each SDO write. `emg_calibrate` and `restart_node` are actions: they "
+        "read back the last one accepted (0: none yet).",
+        "",
+    ]
+    return out
+
+
+def _examples(rmap: RegisterMap) -> list[str]:
+    uptime = rmap["uptime_ms"]
+    speed = rmap["skin.slip_speed_mm_s"]
+    mode = rmap["feedback_mode"]
+    threshold = rmap["reflex_threshold_mm_s"]
+    pair = rmap["emg_e_min_uv"]
+    return [
+        "## Examples (mbpoll)",
+        "",
+        "```sh",
+        f"mbpoll -0 -1 -t 3 -r 0 -c {rmap.input_count} -p 1502 127.0.0.1      # the whole "
+        "input map",
+        f"mbpoll -0 -1 -t 3:int -B -r {uptime.address} -p 1502 127.0.0.1        # uptime_ms "
+        "(u32, high word first)",
+        f"mbpoll -0 -1 -t 3 -r {speed.address} -p 1502 127.0.0.1 # slip speed, raw × 0.1 "
+        "mm/s (mbpoll adds the signed reading in brackets)",
+        f"mbpoll -0 -1 -t 4 -r {mode.address} -p 1502 127.0.0.1 2         # feedback mode 2 "
+        "(slip_speed)",
+        f"mbpoll -0 -1 -t 4 -r {threshold.address} -p 1502 127.0.0.1 400       # reflex "
+        "threshold 40.0 mm/s",
+        f"mbpoll -0 -1 -t 4 -r {pair.address} -p 1502 127.0.0.1 80 450    # EMG calibration "
+        "80..450 uV (one write of both)",
+        "```",
+        "",
+    ]
