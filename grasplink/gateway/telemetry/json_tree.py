@@ -60,7 +60,7 @@ class JsonTree:
         self._was_live: set[str] = set()
 
     # -- connection ------------------------------------------------------------------------
-    def will(self, t_ms: int) -> Message:
+    def will(self, t_ms: int, *, new_connect: bool = True) -> Message:
         body = {"online": False, "gateway_id": self.gateway_id, "reason": "connection lost"}
         return Message(f"{self.base}/status", dumps(body), QOS, True)
 

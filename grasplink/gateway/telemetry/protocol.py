@@ -6,7 +6,7 @@ A protocol object is fed snapshots (`update`) and broker events (`on_connect`,
 and the Sparkplug session are tested without a broker. The edge
 (`transport.py`) calls, per connection::
 
-    will = proto.will(t_ms)                    # before each CONNECT (Sparkplug: bdSeq)
+    will = proto.will(t_ms, new_connect=…)     # before each attempt (Sparkplug: bdSeq)
     first, after = proto.on_connect(t_ms)      # first: sent at once; after: behind the buffer
     outbox.extend(proto.update(batch, extra))  # every publish tick
     message = proto.finalize(message)          # just before it is sent (None: skip it)
@@ -66,7 +66,7 @@ class Incoming:
 class TelemetryProtocol(Protocol):
     name: str
 
-    def will(self, t_ms: int) -> Message: ...
+    def will(self, t_ms: int, *, new_connect: bool = True) -> Message: ...
     def subscriptions(self) -> list[str]: ...
     def on_connect(self, t_ms: int) -> tuple[list[Message], list[Message]]: ...
     def update(self, batch: list[Sample], extra: dict[str, Any]) -> list[Message]: ...

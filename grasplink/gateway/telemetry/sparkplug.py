@@ -239,9 +239,12 @@ class SparkplugSession:
         return [self.topic("NCMD"), self.topic("DCMD", "+")]
 
     # -- connection ------------------------------------------------------------------------
-    def will(self, t_ms: int) -> Message:
-        """Before each CONNECT: the next bdSeq, and the NDEATH that carries it."""
-        self.bdseq = (self.bdseq + 1) % 256
+    def will(self, t_ms: int, *, new_connect: bool = True) -> Message:
+        """Before each connection attempt: the NDEATH to register as the Will. bdSeq moves
+        on by one per CONNECT packet, so not after an attempt that never sent one
+        (`new_connect` False: the broker was unreachable)."""
+        if new_connect or self.bdseq < 0:
+            self.bdseq = (self.bdseq + 1) % 256
         return self._ndeath(t_ms)
 
     def on_connect(self, t_ms: int) -> tuple[list[Message], list[Message]]:

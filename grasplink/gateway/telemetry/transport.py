@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import random
 import ssl
 import threading
@@ -51,7 +52,12 @@ FLUSH_S = 2.0  # a clean stop sends what is buffered for at most this long
 POLL_S = 0.002  # looking for the next snapshot once it is due
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
 
+RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) still goes at once
 Log = Callable[[str], None]
+# paho's own messages (socket errors on a lost broker) stay out of the terminal: the links
+# log what matters in one line; an application that configures logging still gets them.
+MQTT_LOGGER = logging.getLogger("grasplink.telemetry.mqtt")
+MQTT_LOGGER.addHandler(logging.NullHandler())
 
 
 class GatewayLike(Protocol):
@@ -131,8 +137,9 @@ class MqttLink:
         """Connect until stopped; the first failure ends it (a start-up error)."""
         low, high = self.backoff_s
         delay = low
+        connect_sent = True
         while not self.stopping.is_set():
-            will = self.protocol.will(now_ms())
+            will = self.protocol.will(now_ms(), new_connect=connect_sent)
             client = aiomqtt.Client(
                 self.url.host,
                 self.url.port,
@@ -143,17 +150,27 @@ class MqttLink:
                 keepalive=self.url.keepalive_s,
                 tls_context=self.tls,
                 timeout=CONNECT_TIMEOUT_S,
+                logger=MQTT_LOGGER,
                 clean_session=True,
                 max_inflight_messages=WINDOW,
             )
             client.pending_calls_threshold = 4 * WINDOW
+            entered = False
             try:
                 async with client:
+                    entered = True
                     self._up()
                     delay = low
                     await self._session(client)
             except aiomqtt.MqttError as exc:
                 self.last_error = str(exc) or type(exc).__name__
+                # A refusal (CONNACK) or a CONNACK that never came followed a CONNECT; a
+                # refused TCP connection or a failed TLS handshake did not.
+                connect_sent = (
+                    entered or isinstance(exc, aiomqtt.MqttCodeError) or "timed out" in str(exc)
+                )
+            else:
+                connect_sent = True
             finally:
                 self._down()
             if not self.first.done():
@@ -449,10 +466,12 @@ class TelemetryPublisher:
             self._ready.set()
 
     async def _pump(self) -> None:
-        """Poll for new snapshots (just after each is due) and publish at most at the rate."""
+        """Poll for new snapshots (just after each is due) and publish at most at the rate
+        (a token bucket: at the default rate every snapshot goes out as soon as it is seen)."""
         last: dict[str, Any] | None = None
         seen_at = -1.0
-        next_publish = 0.0
+        credit, credit_at = RATE_BURST, time.monotonic()
+        rate_hz = 1.0 / self.period_s
         while True:
             now = time.monotonic()
             snapshot = self.gateway.latest
@@ -461,9 +480,12 @@ class TelemetryPublisher:
                 wall_minus_mono = time.time() - now
                 ts_ms = self.clock.stamp_ms(snapshot["uptime_s"], now, wall_minus_mono)
                 self.queue.put(Sample(ts_ms, snapshot))
-            if len(self.queue) and now >= next_publish:
+            credit = min(RATE_BURST, credit + (now - credit_at) * rate_hz)
+            credit_at = now
+            if len(self.queue) and credit >= 1.0:
                 self._publish(now)
-                next_publish = now + self.period_s
+                credit -= 1.0
+            next_publish = now + (1.0 - credit) / rate_hz
             # Next look: shortly before the next snapshot is due, then every POLL_S.
             due = seen_at + SNAPSHOT_PERIOD_S - 2 * POLL_S
             wake = due if due > now else now + (POLL_S if now - seen_at < 1.0 else 0.02)

@@ -1,0 +1,332 @@
+"""Telemetry through a real mosquitto: authentication and ACL, mosquitto_sub reading the
+JSON tree, a Sparkplug host reading births and data in order, commands, TLS, a broker
+restarted mid-run, the Will when the gateway dies."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from grasplink import cli
+from grasplink.errors import BrokerError
+from grasplink.gateway.telemetry import TelemetryPublisher, parse_broker_url, tls_context
+from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
+from grasplink.gateway.telemetry.sparkplug import BOOLEAN, STRING, metric_value, set_value
+from tests.telemetry.broker import (
+    PASSWORDS,
+    FakeGateway,
+    Mosquitto,
+    Recorder,
+    make_tls,
+)
+from tests.telemetry.host import SparkplugHost
+
+pytestmark = pytest.mark.slow
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def publisher(gateway, url: str, gateway_id: str = "gw", **options) -> TelemetryPublisher:
+    parsed = parse_broker_url(url)
+    tls = tls_context(parsed, options.pop("ca", None))
+    return TelemetryPublisher(gateway, parsed, gateway_id, tls=tls, **options)
+
+
+def json_of(message) -> dict:
+    return json.loads(message.payload)
+
+
+def test_clients_without_valid_credentials_are_refused(secured: Mosquitto, fake) -> None:
+    for url in (secured.url, secured.url_for("gateway", "wrong")):
+        with pytest.raises(BrokerError, match="refused the connection") as caught:
+            publisher(fake, url).start()
+        assert "\n" not in str(caught.value) and "wrong" not in str(caught.value)
+    anonymous = subprocess.run(
+        ["mosquitto_sub", "-p", str(secured.port), "-h", "127.0.0.1", "-t", "#", "-C", "1"],
+        capture_output=True,
+        timeout=10,
+    )
+    assert anonymous.returncode != 0
+
+
+def test_cli_reports_a_refused_broker_on_one_line(secured: Mosquitto, capsys) -> None:
+    code = cli.main(
+        [
+            *("gateway", "--bus", "virtual:telemetry-refused", "--with-nodes"),
+            *("--duration", "1", "--mqtt", secured.url_for("gateway", "nope")),
+        ]
+    )
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and err.count("\n") == 0 and "refused the connection" in err
+
+
+def test_a_client_without_write_rights_cannot_command(secured: Mosquitto, fake) -> None:
+    reader = Recorder(secured, ["grasplink/gw/reply/#"], user="reader")
+    operator = Recorder(secured, ["grasplink/gw/reply/#"], user="operator")
+    with publisher(fake, secured.url_for("gateway")):
+        reader.publish("grasplink/gw/cmd/feedback_mode", b'{"value": "off", "id": "r"}')
+        host = pb.Payload()
+        set_value(host.metrics.add(name="Control/feedback_mode"), STRING, "off")
+        reader.publish("spBv1.0/grasplink/NCMD/gw", host.SerializeToString())
+        time.sleep(0.5)
+        assert reader.taken() == [] and fake.real.feedback.mode.value == "force_and_slip"
+        operator.publish("grasplink/gw/cmd/feedback_mode", b'{"value": "off", "id": "o"}')
+        (reply,) = operator.wait_for(lambda m: True)
+        assert json_of(reply)["id"] == "o" and json_of(reply)["accepted"] is True
+        assert fake.real.feedback.mode.value == "off"
+        assert [json_of(m)["id"] for m in reader.taken()] == ["o"]  # readers see replies
+    reader.close()
+    operator.close()
+
+
+def test_mosquitto_sub_reads_the_json_tree(secured: Mosquitto, fake) -> None:
+    command = ["mosquitto_sub", "-h", "127.0.0.1", "-p", str(secured.port), "-v"]
+    command += ["-u", "reader", "-P", PASSWORDS["reader"], "-t", "grasplink/#", "-C", "40"]
+    with publisher(fake, secured.url_for("gateway")):
+        lines = subprocess.run(command, capture_output=True, text=True, timeout=15).stdout
+    messages = {}
+    for line in lines.splitlines():
+        topic, payload = line.split(" ", 1)
+        messages.setdefault(topic, []).append(json.loads(payload))
+    base = "grasplink/gw"
+    assert messages[f"{base}/status"][0]["online"] is True
+    for kind in ("skin", "emg", "belt", "hand"):
+        assert messages[f"{base}/node/{kind}/state"][0]["live"] is True
+    skin = messages[f"{base}/node/skin/values"]
+    assert {"ts_ms", "grip_force_n", "slip", "slip_speed_mm_s", "position_mm"} <= set(skin[0])
+    forces = [v["grip_force_n"] for v in skin]
+    assert forces == sorted(forces) and len(forces) >= 3
+    assert {"emg", "belt", "hand"} <= {t.split("/")[3] for t in messages if "/values" in t}
+    assert messages[f"{base}/alarms"][0] == {
+        "ts_ms": messages[f"{base}/alarms"][0]["ts_ms"],
+        "count": 0,
+        "alarms": {},
+    }
+    assert "loss" in messages[f"{base}/health"][0]
+
+
+def test_a_sparkplug_host_reads_births_and_data_in_order(broker: Mosquitto, fake) -> None:
+    recorder = Recorder(broker, ["spBv1.0/#"])
+    host = SparkplugHost("grasplink", "gw")
+    with publisher(fake, broker.url):
+        time.sleep(0.4)
+        fake.phases["belt"] = "lost"
+        time.sleep(0.3)
+        del fake.phases["belt"]
+        time.sleep(0.3)
+        rebirth = pb.Payload()
+        set_value(rebirth.metrics.add(name="Node Control/Rebirth"), BOOLEAN, True)
+        recorder.publish("spBv1.0/grasplink/NCMD/gw", rebirth.SerializeToString())
+        time.sleep(0.4)
+    time.sleep(0.2)
+    for message in recorder.taken():
+        host.feed(message.topic, message.payload)
+    recorder.close()
+    kinds = host.kinds()
+    assert kinds[0] == "NBIRTH" and host.messages[0].metrics()["bdSeq"] == 0
+    assert sorted(kinds[1:5]) == ["DBIRTH/belt", "DBIRTH/emg", "DBIRTH/hand", "DBIRTH/skin"]
+    death = kinds.index("DDEATH/belt")
+    assert "DBIRTH/belt" in kinds[death:]
+    assert kinds.count("NBIRTH") == 2 and kinds[-1] == "NDEATH"  # rebirth, then a clean stop
+    skin = [
+        metric_value(m)
+        for seen in host.messages
+        if seen.kind == "DDATA" and seen.device == "skin"
+        for m in seen.payload.metrics
+        if m.name == "grip_force_n"
+    ]
+    assert skin == sorted(skin) and len(skin) > 10
+    assert host.errors == []
+
+
+def test_commands_are_answered_accepted_or_rejected_with_the_reason(
+    broker: Mosquitto, fake
+) -> None:
+    recorder = Recorder(broker, ["grasplink/gw/reply/#", "spBv1.0/grasplink/NDATA/gw"])
+    with publisher(fake, broker.url, controls={"reflex_enabled": True}):
+        for topic, payload in (
+            ("feedback_mode", b'{"value": "slip_speed", "id": 1}'),
+            ("feedback_mode", b'{"value": "loud", "id": 2}'),
+            ("reflex_threshold_mm_s", b'{"value": 5000, "id": 3}'),
+            ("restart_node", b'{"value": "belt", "id": 4}'),
+            ("self_destruct", b'{"value": true, "id": 5}'),
+            ("feedback_mode", b"off"),
+        ):
+            recorder.publish(f"grasplink/gw/cmd/{topic}", payload)
+        ncmd = pb.Payload()
+        set_value(ncmd.metrics.add(name="Control/reflex_enabled"), BOOLEAN, False)
+        recorder.publish("spBv1.0/grasplink/NCMD/gw", ncmd.SerializeToString())
+        replies = recorder.wait_for(lambda m: "/reply/" in m.topic and json_of(m)["id"] is None)
+        assert replies
+        time.sleep(0.5)
+    answers = {json_of(m)["id"]: json_of(m) for m in recorder.taken() if "/reply/" in m.topic}
+    assert answers[1]["accepted"] is True and answers[1]["detail"] == "feedback mode slip_speed"
+    assert answers[2]["accepted"] is False and "expected one of off" in answers[2]["detail"]
+    assert answers[3]["accepted"] is False and "1..1000" in answers[3]["detail"]
+    assert answers[4] == {**answers[4], "accepted": True, "command": "restart_node"}
+    assert answers[5]["accepted"] is False and "unknown command" in answers[5]["detail"]
+    assert answers[None]["accepted"] is False and "not JSON" in answers[None]["detail"]
+    ndata = [
+        {m.name: metric_value(m) for m in pb.Payload.FromString(r.payload).metrics}
+        for r in recorder.taken()
+        if r.topic.endswith("NDATA/gw")
+    ]
+    reply = next(d for d in ndata if "Command Reply/command" in d)
+    assert reply == {
+        "Command Reply/command": "reflex_enabled",
+        "Command Reply/accepted": True,
+        "Command Reply/detail": "reflex off",
+    }
+    assert any(d.get("Control/reflex_enabled") is False for d in ndata)
+    assert any(d.get("Control/feedback_mode") == "slip_speed" for d in ndata)
+    assert not fake.real.arbiter.reflex.enabled
+    recorder.close()
+
+
+def test_tls_with_the_brokers_ca_and_refused_with_another(tmp_path: Path, fake) -> None:
+    tls = make_tls(tmp_path / "tls")
+    other = make_tls(tmp_path / "other", name="other")
+    server = Mosquitto(tmp_path / "broker", tls=tls).start()
+    try:
+        recorder = Recorder(server, ["grasplink/gw/status"])
+        with publisher(fake, server.url, ca=tls.ca):
+            online = recorder.wait_for(lambda m: json_of(m).get("online") is True)
+            assert online
+        recorder.close()
+        with pytest.raises(BrokerError, match=r"CERTIFICATE_VERIFY_FAILED|certificate verify"):
+            publisher(fake, server.url, ca=other.ca).start()
+    finally:
+        server.stop()
+
+
+def test_a_broker_restarted_mid_run_loses_nothing_within_the_buffer_bound(
+    tmp_path: Path, fake: FakeGateway
+) -> None:
+    server = Mosquitto(tmp_path / "broker", persistence=True).start()
+    lines: list[str] = []
+    topics = ["grasplink/gw/node/skin/values", "spBv1.0/#"]
+    recorder = Recorder(server, topics, client_id="historian", persistent=True)
+    try:
+        pub = publisher(fake, server.url, log=lines.append, backoff_s=(0.2, 0.5))
+        made = spy_on_skin_values(pub)
+        with pub:
+            time.sleep(0.8)
+            server.stop()  # SIGTERM: clients dropped, sessions saved
+            during = fake.count
+            time.sleep(1.5)
+            assert fake.count - during >= 20  # snapshots went on while the broker was away
+            server.start()
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline and not all(
+                link.connected and not link.outbox for link in pub.links
+            ):
+                time.sleep(0.05)
+            time.sleep(0.5)
+        time.sleep(0.3)
+    finally:
+        recorder.close()
+        server.stop()
+    assert any("lost mqtt://127.0.0.1" in line for line in lines)
+    back = [line for line in lines if "back on" in line and "replaying" in line]
+    assert len(back) == 2 and "dropped" not in " ".join(back)
+    values = [json.loads(m.payload) for m in recorder.taken() if "/values" in m.topic]
+    received = {v["grip_force_n"] for v in values}
+    assert len(made) >= 40 and set(made) <= received, "a value message was lost"
+    assert made[-1] - made[0] >= 40
+    host = SparkplugHost("grasplink", "gw")
+    for message in recorder.taken():
+        if message.topic.startswith("spBv1.0"):
+            host.feed(message.topic, message.payload)
+    births = [m for m in host.messages if m.kind == "NBIRTH"]
+    assert [b.metrics()["bdSeq"] for b in births] == [0, 1]
+    second = host.messages.index(births[1])
+    historical = [
+        m
+        for m in host.messages[second:]
+        if m.kind == "DDATA" and m.payload.metrics[0].is_historical
+    ]
+    assert len(historical) >= 20
+    assert [e for e in host.errors if "not born" in e] == []
+
+
+def test_a_small_buffer_drops_the_oldest_and_says_so(tmp_path: Path, fake: FakeGateway) -> None:
+    server = Mosquitto(tmp_path / "broker").start()
+    lines: list[str] = []
+    try:
+        url = server.url + "?buffer_kib=16"
+        with publisher(fake, url, log=lines.append, backoff_s=(0.2, 0.5)) as pub:
+            time.sleep(0.3)
+            server.stop()
+            time.sleep(2.0)
+            server.start()
+            recorder = Recorder(server, ["grasplink/gw/health"])
+            health = recorder.wait_for(
+                lambda m: json_of(m)["telemetry"]["buffer_dropped_messages"] > 0, timeout_s=8
+            )
+            recorder.close()
+            stats = pub.stats()["links"]["json"]
+    finally:
+        server.stop()
+    assert health and stats["dropped_messages"] > 0
+    (back,) = [line for line in lines if line.startswith("telemetry json: back on")]
+    assert "dropped the" in back and "oldest" in back and "16 KiB bound" in back
+
+
+def test_the_will_announces_the_gateway_dead_when_it_dies(broker: Mosquitto) -> None:
+    recorder = Recorder(broker, ["grasplink/live/status", "spBv1.0/grasplink/+/live"])
+    process = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "grasplink.cli", "gateway", "--with-nodes", "--bus"),
+            *("virtual:will", "--mqtt", broker.url + "?keepalive_s=2", "--mqtt-id", "live"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        cwd=ROOT,
+    )
+    try:
+        assert recorder.wait_for(lambda m: json_of_status(m) is True, timeout_s=15)
+        assert recorder.wait_for(lambda m: m.topic.endswith("NBIRTH/live"))
+        process.send_signal(signal.SIGKILL)
+        process.wait(5)
+        dead = recorder.wait_for(lambda m: json_of_status(m) is False, timeout_s=10)
+        ndeath = recorder.wait_for(lambda m: m.topic.endswith("NDEATH/live"), timeout_s=10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait(5)
+        recorder.close()
+    assert dead and json.loads(dead[0].payload)["reason"] == "connection lost"
+    (birth,) = [m for m in recorder.taken() if m.topic.endswith("NBIRTH/live")]
+    bdseq = {m.name: metric_value(m) for m in pb.Payload.FromString(birth.payload).metrics}
+    death = {m.name: metric_value(m) for m in pb.Payload.FromString(ndeath[0].payload).metrics}
+    assert death == {"bdSeq": bdseq["bdSeq"]} == {"bdSeq": 0}
+
+
+def spy_on_skin_values(pub: TelemetryPublisher) -> list[float]:
+    """The skin grip forces the JSON tree put in values messages, in order."""
+    tree = pub.protocols[0]
+    made: list[float] = []
+    update = tree.update
+
+    def recording(batch, extra):
+        messages = update(batch, extra)
+        made.extend(
+            json.loads(m.payload)["grip_force_n"]
+            for m in messages
+            if m.topic.endswith("skin/values")
+        )
+        return messages
+
+    tree.update = recording
+    return made
+
+
+def json_of_status(message) -> bool | None:
+    if not message.topic.endswith("/status"):
+        return None
+    return json.loads(message.payload).get("online")
