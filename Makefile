@@ -8,7 +8,7 @@ SYSTEM_PACKAGES := mosquitto mosquitto-clients mbpoll
 STAMP_PY := $(VENV)/.stamp-install
 STAMP_SYS := $(VENV)/.stamp-system
 
-.PHONY: demo test test-fast check lint format docs bench clean setup system proto
+.PHONY: demo test test-fast check lint format docs bench clean setup system proto telemetry-demo
 
 setup: $(STAMP_PY) $(STAMP_SYS)
 
@@ -41,6 +41,39 @@ demo: setup
 	$(VENV)/bin/grasplink demo
 	$(VENV)/bin/grasplink run $(LOOP_HEADLINE) --out out/loop_headline
 	$(VENV)/bin/grasplink plot out/loop_headline
+	$(MAKE) --no-print-directory telemetry-demo
+
+# The gateway live with telemetry on: a private mosquitto on a free 127.0.0.1 port (its
+# config under out/telemetry/, stopped at the end), the gateway on a loopback hub publishing
+# to it, the loop headline's CAN log replayed onto the hub as the nodes (--nodes-only: the
+# gateway masters what it hears), mosquitto_sub recording both topic trees; then the topics,
+# a few messages and the slip as telemetry carried it. Needs out/loop_headline (make demo).
+TELEMETRY_OUT := out/telemetry
+FREE_PORT := $(PY) -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'
+telemetry-demo: setup
+	@set -e; out=$(TELEMETRY_OUT); rm -rf $$out; mkdir -p $$out; \
+	mq=$$($(FREE_PORT)); hub=$$($(FREE_PORT)); pids=""; \
+	trap 'kill $$pids 2>/dev/null || true; wait 2>/dev/null || true' EXIT; \
+	printf 'listener %s 127.0.0.1\nallow_anonymous true\nuser %s\n' $$mq "$$(id -un)" > $$out/mosquitto.conf; \
+	mosquitto -c $$out/mosquitto.conf > $$out/mosquitto.log 2>&1 & pids="$$pids $$!"; \
+	$(VENV)/bin/grasplink bus hub --port $$hub > $$out/hub.log 2>&1 & pids="$$pids $$!"; \
+	sleep 1; \
+	mosquitto_sub -p $$mq -v -t 'grasplink/#' > $$out/json.txt & pids="$$pids $$!"; \
+	mosquitto_sub -p $$mq -t 'spBv1.0/#' -F '%t %l bytes' > $$out/sparkplug.txt & pids="$$pids $$!"; \
+	echo "== mosquitto on 127.0.0.1:$$mq, hub on 127.0.0.1:$$hub; gateway with --mqtt, the loop headline's nodes replayed"; \
+	$(VENV)/bin/grasplink gateway --bus remote:ws://127.0.0.1:$$hub/ --duration 12 \
+	  --mqtt mqtt://127.0.0.1:$$mq --mqtt-id demo & gw=$$!; \
+	sleep 2; \
+	$(VENV)/bin/grasplink replay out/loop_headline/can.asc --bus remote:ws://127.0.0.1:$$hub/ --nodes-only; \
+	wait $$gw; sleep 0.5; \
+	echo "== JSON topics (messages):"; cut -d' ' -f1 $$out/json.txt | sort | uniq -c; \
+	echo "== Sparkplug B topics (messages):"; cut -d' ' -f1 $$out/sparkplug.txt | sort | uniq -c; \
+	echo "== the first messages:"; head -n 6 $$out/json.txt | cut -c1-160; \
+	echo "== the slip as telemetry carried it (skin values, belt values):"; \
+	grep -m 3 '"slip":true' $$out/json.txt | cut -c1-200 || echo "(no slip decoded)"; \
+	grep -m 2 '"belt":"slip"' $$out/json.txt | cut -c1-200 || true; \
+	echo "== the end of the log: nodes lost, alarms retained:"; grep '/alarms ' $$out/json.txt | tail -n 1 | cut -c1-200; \
+	echo "all of it: $$out/json.txt, $$out/sparkplug.txt"
 
 # Everything ruff checks and formats.
 LINT_PATHS := grasplink tests benchmarks scenes
