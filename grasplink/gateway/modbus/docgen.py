@@ -100,9 +100,8 @@ def _connection(rmap: RegisterMap) -> list[str]:
         f"| {ExceptionCode.ILLEGAL_FUNCTION:02X} ILLEGAL FUNCTION | coils and discrete "
         "inputs: there are none |",
         f"| {ExceptionCode.ILLEGAL_ADDRESS:02X} ILLEGAL DATA ADDRESS | a read beyond the "
-        "table; a write to an input register, or to holding registers that are not exactly "
-        "one command (part of a pair, several commands, beyond the table). Nothing is "
-        "applied. |",
+        "table; a write to holding registers that are not exactly one command (part of "
+        "a pair, several commands, beyond the table). Nothing is applied. |",
         f"| {ExceptionCode.ILLEGAL_VALUE:02X} ILLEGAL DATA VALUE | a written value outside "
         "its range or codes, e_min not below e_max, or a command the gateway refuses "
         "(no such node, calibration it cannot use). Nothing is applied. |",

@@ -508,6 +508,7 @@ def _inputs() -> tuple[Register, ...]:
         U16,
         "register map layout version",
         derive=_map_version,
+        default=MAP_VERSION,  # known before the first snapshot too
         source=f"constant {MAP_VERSION}",
     )
     t.add(
