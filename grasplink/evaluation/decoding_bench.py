@@ -30,10 +30,11 @@ from importlib import metadata
 from pathlib import Path
 
 from grasplink.errors import ConfigError
+from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import scenes as sc
 from grasplink.evaluation import scoring as ev
 from grasplink.evaluation.decoders import make_decoder
-from grasplink.gateway.decoding.registry import DECODERS
+from grasplink.gateway.decoding.registry import DECODERS, DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import SkinRecording, slip_recording, static_recording
 
@@ -239,6 +240,9 @@ def run(
     results: dict = {"decoders": synthetic(quick, log), "targets": TARGETS, "quick": quick}
     results["recommended_default"] = recommend(results["decoders"])
     results["can_path"] = can_path(scene_paths, controllers_for, log)
+    results["nonstationary"] = ns.run(default_settings(), quick, log, workers=MAX_WORKERS)
+    # "no regression on the constant-speed table": against the run these files hold now
+    results["nonstationary"]["constant_before"] = previous_constant(out, quick)
     out.mkdir(parents=True, exist_ok=True)
     (out / "decoding.json").write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
     plot_pareto(results, out / "decoding_pareto.png")
@@ -259,6 +263,26 @@ def run_benchmark(
     scenes_dir = scenes_dir if scenes_dir is not None else default_scenes_dir()
     results = run(out, scenes_dir=scenes_dir, controllers_for=controllers_for, quick=quick, log=log)
     return results, out
+
+
+def default_target_figures(results: dict, name: str = DEFAULT_DECODER) -> dict | None:
+    """The target-set figures of `name` at its default settings in a results dict."""
+    for entry in results.get("decoders", {}).values():
+        if entry.get("decoder") == name and entry.get("default_settings", True):
+            return entry.get("target")
+    return None
+
+
+def previous_constant(out: Path, quick: bool) -> dict | None:
+    """The default decoder's target-set figures in the decoding.json `out` holds (same grid)."""
+    try:
+        before = json.loads((out / "decoding.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(before, dict) or before.get("quick") != quick:
+        return None
+    figures = default_target_figures(before)
+    return {k: figures.get(k) for k in ns.CONSTANT_FIGURES} if figures else None
 
 
 def synthetic(quick: bool, log: Callable[[str], None]) -> dict:
@@ -502,7 +526,8 @@ def render(results: dict) -> str:
         "every decoder is fed in 256-sample chunks as a gateway would. Definitions of every",
         "figure: `grasplink/evaluation/scoring.py`. *Target set*: alpha0.1 and fibonacci,",
         "11-118 mm/s, both directions, 400 Hz, thesis-like noise. The [CAN path](#can-path)",
-        "runs the shipped slip scenes through the skin node and decodes what went over the bus.",
+        "runs the shipped slip scenes through the skin node and decodes what went over the bus;",
+        "[non-stationary slips](#non-stationary-slips) speed up, stop, restart and reverse.",
         "",
         f"**Recommended default: `{results['recommended_default']}`** (at default settings, "
         f"lowest speed p90 % + position p90 mm on the target set within "
@@ -579,6 +604,11 @@ def render(results: dict) -> str:
     ]
     if "can_path" in results:
         lines += render_can_path(results["can_path"])
+    if "nonstationary" in results:
+        moving = results["nonstationary"]
+        lines += ns.render(
+            moving, DEFAULT_DECODER, moving.get("constant_before"), default_target_figures(results)
+        )
     return "\n".join(lines)
 
 
