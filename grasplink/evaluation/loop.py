@@ -33,10 +33,11 @@ import numpy as np
 
 from grasplink.core.frames import Frame
 from grasplink.core.protocol import SansIoDevice
-from grasplink.errors import ConfigError
+from grasplink.errors import ConfigError, PdoError
 from grasplink.gateway.config import EmgConfig, parse_config
 from grasplink.gateway.emg import EmgCalibration, EmgIntentDecoder
 from grasplink.gateway.feedback import FeedbackConfig
+from grasplink.gateway.levels import DEFAULT_FORCE_ENTRIES
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.profiles.pdo_codec import PdoCodec
@@ -72,12 +73,12 @@ SETTLE_S = 12.0
 THESIS_THRESHOLD_MM_S = 45.0  # ReflexConfig default: the human limit on an 80 mm skin
 MIN_REST_S = 0.1  # a rest shorter than this (a ridge dip touching 0 mm/s) is not a stop
 OCCURRENCE_MRAD_S = FeedbackConfig().occurrence_velocity_mrad_s  # a slip of unknown speed
+RELAX_FORCE_LEVEL = 3  # wearer.virtual's default: from this force level it relaxes
 PHYSICS_SIGNALS = (
     sig.OBJECT_POSITION_MM,
     sig.OBJECT_SLIPPING,
     sig.HAND_GRIP_N,
     sig.HAND_CRUSHED,
-    sig.WEARER_LEVEL,
 )
 
 
@@ -194,7 +195,10 @@ class BusLog:
     def tap(self, t_us: int, frame: Frame, sender: object) -> None:
         can_id = getattr(frame, "can_id", None)  # error frames carry none
         if can_id in self._emg_ids:
-            values = self._emg.decode(can_id, frame.data)
+            try:
+                values = self._emg.decode(can_id, frame.data)
+            except PdoError:
+                return  # the gateway drops it too
             envelope = values.get((obj.EMG_ENVELOPE_UV, 0))
             if envelope is not None:
                 self.envelope.add(t_us / US_PER_S, float(envelope))
@@ -255,6 +259,7 @@ class Outcome:
     end_s: float  # the last sample (a drop ends a trial early)
     onset_s: float | None = None  # first sample with object.slipping
     first_stop_s: float | None = None  # start of the first rest after onset (even if lost)
+    first_stop_mm: float | None = None  # where the leading edge was then
     stop_s: float | None = None  # start of the final rest (stopped trials)
     slip_distance_mm: float | None = None  # travel from onset to the final rest (stopped)
     time_to_stop_s: float | None = None  # stop_s - onset_s
@@ -263,6 +268,7 @@ class Outcome:
     belt_latency_s: float | None = None  # first belt RPDO after onset changing the display
     belt_first_mrad_s: float | None = None  # its target velocity
     slip_belt_latency_s: float | None = None  # first slip-belt RPDO (velocity < 0) after onset
+    force_belt_max_mrad_s: float | None = None  # fastest force-belt RPDO after onset
     reflex_latency_s: float | None = None  # first hand RPDO after onset above voluntary grip
 
 
@@ -321,6 +327,7 @@ def outcome(
     episodes = 1 + sum(1 for a, b in rests if b < len(t) - 1)
     stopped = not dropped and bool(rests) and rests[-1][1] == len(t) - 1
     first_stop_s = float(t[rests[0][0]]) if rests else None
+    first_stop_mm = float(position[rests[0][0]]) if rests else None
     stop_s = distance = time_to_stop = None
     if stopped:
         stop = rests[-1][0]
@@ -335,6 +342,8 @@ def outcome(
     belt_t, belt_v = belt
     slip_belt = np.flatnonzero((belt_t >= onset_s) & (belt_v < 0))
     slip_belt_latency = float(belt_t[slip_belt[0]] - onset_s) if len(slip_belt) else None
+    force_belt = belt_v[(belt_t >= onset_s) & (belt_v > 0)]
+    force_belt_max = float(np.max(force_belt)) if len(force_belt) else None
     hand_t, hand_n = hand
     raised = np.flatnonzero(
         (hand_t >= onset_s) & np.isfinite(voluntary_n) & (hand_n > voluntary_n + 0.5 / MN_PER_N)
@@ -348,6 +357,7 @@ def outcome(
         end_s=end_s,
         onset_s=onset_s,
         first_stop_s=first_stop_s,
+        first_stop_mm=first_stop_mm,
         stop_s=stop_s,
         slip_distance_mm=distance,
         time_to_stop_s=time_to_stop,
@@ -356,6 +366,7 @@ def outcome(
         belt_latency_s=None if belt_latency is None else belt_latency - onset_s,
         belt_first_mrad_s=belt_first,
         slip_belt_latency_s=slip_belt_latency,
+        force_belt_max_mrad_s=force_belt_max,
         reflex_latency_s=reflex_latency,
     )
 
@@ -387,8 +398,15 @@ def judge(scene: Scene, controllers_for: ControllerFactory) -> Outcome:
     A drop ends the run at once: nothing after it changes the outcome.
     """
     sim = Simulation(scene, None, controllers=list(controllers_for(scene)))
-    emg = parse_config(scene.controller.options, scene.controller.source).nodes["emg"]
-    assert isinstance(emg, EmgConfig)
+    if scene.controller.name != "gateway" or not {"skin", "emg", "belt", "hand"} <= set(
+        scene.nodes
+    ):
+        raise ConfigError(
+            f"{scene.path}: a closed-loop scene needs skin, emg, belt and hand nodes and "
+            '[controller] type = "gateway"'
+        )
+    emg = parse_config(scene.controller.options, scene.controller.source).nodes.get("emg")
+    assert isinstance(emg, EmgConfig)  # the scene has an EMG node, so the gateway has one
     bus = BusLog({kind: node.node_id for kind, node in scene.nodes.items()}, emg)
     sim.network.taps.append(bus.tap)
     skin_end_mm = float(sum(scene.layout_mm or ()))
@@ -588,8 +606,9 @@ def run_report(
     trials: Sequence[Trial] | None = None,
 ) -> dict:
     """Run the grid (or `trials`) and write loop.md, loop.json and loop.png into `out`."""
+    grid_name = ("quick" if quick else "full") + " grid" if trials is None else "as given"
     trials = grid(quick) if trials is None else list(trials)
-    log(f"closed-loop trials: {len(trials)} ({'quick' if quick else 'full'} grid)")
+    log(f"closed-loop trials: {len(trials)} ({grid_name})")
     rows = run_trials(trials, controllers_for, workers, log)
     results = {
         "quick": quick,
@@ -675,12 +694,42 @@ def verdict(figures: dict) -> dict:
 def mechanisms(rows: Sequence[dict]) -> dict:
     """Facts from the trials that explain the figures (see the report's Mechanisms)."""
     speed_rows = [r for r in rows if r["mode"] == "slip_speed" and r["belt_first_mrad_s"]]
-    shown_as_occurrence = [r for r in speed_rows if r["belt_first_mrad_s"] == -OCCURRENCE_MRAD_S]
+    force_rows = [r for r in rows if r["mode"] in ("grip_force", "force_and_slip")]
+    relax_mrad_s = DEFAULT_FORCE_ENTRIES[RELAX_FORCE_LEVEL - 1][1]
+    fast = [
+        r
+        for r in rows
+        if r["reflex"]
+        and r["threshold_mm_s"] == THESIS_THRESHOLD_MM_S
+        and speed_band(r["speed_mm_s"]) == "reflex"
+    ]
+    blind = [r for r in fast if r["mode"] in ("off", "grip_force")]
+    told = [r for r in fast if r["mode"] not in ("off", "grip_force")]
+    reslipped = [r for r in blind if r["slip_episodes"] > 1]
     return {
-        "slip_speed_first_shown_as_occurrence_pct": _pct(
-            [r in shown_as_occurrence for r in speed_rows]
-        ),
         "slip_speed_trials_with_display": len(speed_rows),
+        "slip_speed_first_shown_as_occurrence_pct": _pct(
+            [r["belt_first_mrad_s"] == -OCCURRENCE_MRAD_S for r in speed_rows]
+        ),
+        "force_trials": len(force_rows),
+        "force_display_at_relax_level_pct": _pct(
+            [(r.get("force_belt_max_mrad_s") or 0) >= relax_mrad_s for r in force_rows]
+        ),
+        "force_belt_max_median_mrad_s": _median(
+            [r.get("force_belt_max_mrad_s") for r in force_rows]
+        ),
+        "reflex_without_slip_display": {
+            "trials": len(blind),
+            "first_stop_pct": _pct([r["first_stop_s"] is not None for r in blind]),
+            "reslip_pct": _pct([r["slip_episodes"] > 1 for r in blind]),
+            "dropped_after_reslip_pct": _pct([r["dropped"] for r in reslipped]),
+            "first_stop_median_mm": _median([r.get("first_stop_mm") for r in blind]),
+        },
+        "reflex_with_slip_display": {
+            "trials": len(told),
+            "reslip_pct": _pct([r["slip_episodes"] > 1 for r in told]),
+            "stopped_pct": _pct([r["stopped"] for r in told]),
+        },
     }
 
 
@@ -904,15 +953,19 @@ def render_verdict(results: dict) -> list[str]:
             )
             + f".** Stopped at ≥ {g['threshold_mm_s']:g} mm/s without → with the reflex: "
             + "; ".join(parts)
-            + ". The reflex stops every fast slip it sees (first stop), but the stop lasts "
-            "only where the wearer is told the object slipped and takes over before the "
-            "reflex lets go (hand-back).",
+            + ". "
+            + _hand_back_sentence(results["mechanisms"]),
             "",
         ]
-    gap_rows = [(_row("force_and_slip", True), "thesis threshold")]
-    gap_rows.append((_row("force_and_slip", True, g["headline_threshold_mm_s"]), "loop_headline"))
+    gap_rows = (
+        (_row("force_and_slip", True), f"{g['threshold_mm_s']:g} mm/s"),
+        (
+            _row("force_and_slip", True, g["headline_threshold_mm_s"]),
+            f"loop_headline's {g['headline_threshold_mm_s']:g} mm/s",
+        ),
+    )
     gap = [
-        f"{label} {_f(bands[key]['gap']['stopped_pct'], 0)} %"
+        f"{_f(bands[key]['gap']['stopped_pct'], 0)} % with the threshold at {label}"
         for key, label in gap_rows
         if key in bands and bands[key]["gap"]["n"]
     ]
@@ -922,68 +975,106 @@ def render_verdict(results: dict) -> list[str]:
             f"thesis's {g['threshold_mm_s']:g} mm/s assumes an 80 mm skin and a reaction "
             "time only; this loop's wearer also waits for the decoder (second contact, "
             "19 mm in) and for EMG, motor and hand (~0.35 s), so it stops slips up to "
-            f"≈ {g['wearer_limit_mm_s']:.0f} mm/s. Slips in between are nobody's: force + "
-            "slip with the reflex stops "
-            + " against ".join(gap)
-            + f" of them with the threshold at {g['threshold_mm_s']:g} against "
-            f"{g['headline_threshold_mm_s']:g} mm/s. That is what loop_headline.toml's "
-            f"{g['headline_threshold_mm_s']:g} mm/s threshold is about: the threshold must "
-            "sit at the human limit of *this* loop, not at the thesis's figure.",
+            f"≈ {g['wearer_limit_mm_s']:.0f} mm/s. Of the slips in between, force + slip "
+            "with the reflex stops " + " and ".join(gap) + ". That is what loop_headline.toml's "
+            f"{g['headline_threshold_mm_s']:g} mm/s threshold is about: the reflex has to "
+            "start at the human limit of *this* loop, not at the thesis's figure.",
             "",
         ]
     crushes = sum(s["crushed"] for s in results["figures"]["rows"].values())
-    lines += [
-        f"**4. Crushes: {crushes}** in {g['trials']} trials. The wearer's top level asks for "
-        "20 N, below the 25 N crush limit, and the reflex adds 0.1 N per mm/s to the grip "
-        "the slip began with (at most 5 + 15 N at 150 mm/s); the thesis's crushes came from "
-        "an e5 contraction that meant crushing by definition (ch. 2.3.3), which this hand "
-        "model does not copy.",
-        "",
-    ]
+    why = (
+        "The wearer's top level asks for 20 N, below the 25 N crush limit, and the reflex "
+        "adds 0.1 N per mm/s to the grip the slip began with (at most 5 + 15 N at 150 mm/s "
+        "from e1); the thesis's crushes came from an e5 contraction that meant crushing by "
+        "definition (ch. 2.3.3), which this hand model does not copy."
+        if not crushes
+        else "See the tables for the rows."
+    )
+    lines += [f"**4. Crushes: {crushes}** in {g['trials']} trials. {why}", ""]
     return lines
+
+
+def _hand_back_sentence(m: dict) -> str:
+    """Whether the reflex's stop lasts with and without a slip display (hand-back)."""
+    blind, told = m["reflex_without_slip_display"], m["reflex_with_slip_display"]
+    if not blind["trials"] or not told["trials"]:
+        return ""
+    lost = blind["reslip_pct"] or 0.0
+    if lost > (told["reslip_pct"] or 0.0):
+        return (
+            f"The reflex's stop lasts where the wearer is told of the slip and takes over "
+            f"before the reflex lets go (hand-back): {_f(told['reslip_pct'], 0)} % re-slipped "
+            f"with a slip display, {_f(lost, 0)} % without one (none, grip force)."
+        )
+    return (
+        f"Re-slips after the reflex let go: {_f(told['reslip_pct'], 0)} % with a slip display, "
+        f"{_f(lost, 0)} % without one."
+    )
 
 
 def render_mechanisms(results: dict) -> list[str]:
     g = results["grid"]
     m = results["mechanisms"]
     rows = results["figures"]["rows"]
-    lines = ["## Mechanisms", ""]
-    lines += [
+    blind, told = m["reflex_without_slip_display"], m["reflex_with_slip_display"]
+    relax_n, relax_mrad_s = DEFAULT_FORCE_ENTRIES[RELAX_FORCE_LEVEL - 1]
+    grip_force = rows.get(_row("grip_force", False), {}).get("stopped_pct")
+    return [
+        "## Mechanisms",
+        "",
         "- **Why slip speed and slip occurrence tie.** (a) The decoder reports slip at the "
         "second ridge contact but a speed only from the third, and the gateway shows a slip "
         "of unknown speed as occurrence: "
-        f"{_f(m['slip_speed_first_shown_as_occurrence_pct'], 0)} % of the slip-speed trials "
-        f"with a display ({m['slip_speed_trials_with_display']}) began with the occurrence "
-        f"display ({OCCURRENCE_MRAD_S} mrad/s), so the wearer's first cue is the same in "
-        "both modes. (b) `wearer.virtual` reacts to any felt slip with at least one level "
-        "more than it holds (e1 → e2), whatever level it read, and `object.pulled` stops "
-        "at any grip above 5.76 N: e2 (8 N) stops the slip as surely as e4. What the "
-        "display says changes how hard the wearer squeezes (slip speed shows up to level 4 "
-        "and asks for e4), not whether or when the slip stops. In the thesis a contraction "
-        "level *slowed* the object by a set amount (ch. 2.3.3), so the right level "
-        "mattered. (c) The model draws the same reaction time (1.51–1.75 s) in both modes; "
-        "the thesis measured 1.51 s with occurrence and 1.75 s with speed feedback "
-        "(ch. 2.4.4), which would favour occurrence here, where only time matters.",
-        "- **Why force + slip equals slip speed.** While the object slips it *is* the "
-        "slip-speed display; the force it shows otherwise is the FSR's share of the grip "
-        "(≈ 1–4 N, force level ≤ 1), which never reaches the level at which the wearer "
-        "relaxes, so it changes nothing. Grip force alone never tells the wearer of a "
-        "slip: without the reflex it stopped "
-        f"{_f(rows.get(_row('grip_force', False), {}).get('stopped_pct'), 0)} %.",
-        "- **Why the reflex alone does not hold.** In the rows without a slip display (none, "
-        "grip force) the reflex stops the fast slip, holds 2 s, then releases at 2 N/s "
-        "back to the wearer's 5 N; below 5.76 N the object slides again. It slides where "
-        "the alpha0.1 skin has its last, 33 mm long spacing (51–84 mm): no ridge contact, "
-        "so the decoder cannot see the slip and nothing stops it. With a slip display the "
-        "wearer, who felt even a brief slip, contracts (≥ e2) during the hold, the reflex "
-        "hands back to a grip that holds, and the stop lasts.",
+        f"{_f(m['slip_speed_first_shown_as_occurrence_pct'], 0)} % of the "
+        f"{m['slip_speed_trials_with_display']} slip-speed trials with a display began with "
+        f"the occurrence display ({OCCURRENCE_MRAD_S} mrad/s), so the wearer's first cue is "
+        "mostly the same in both modes. (b) `wearer.virtual` answers any felt slip with at "
+        "least one level more than it holds (e1 → e2), whatever level it read, and "
+        "`object.pulled` stops at any grip above 5.76 N: e2 (8 N) stops the slip as surely "
+        "as e4. What the display says changes how hard the wearer squeezes (a fast slip "
+        "shown at slip level 4 asks for e4), not whether or when the slip stops. In the "
+        "thesis each contraction level *slowed* the object by a set amount (ch. 2.3.3), so "
+        "the right level mattered and a wrong one failed or crushed. (c) The model draws "
+        "the same reaction time (1.51–1.75 s) in both modes; the thesis measured 1.51 s "
+        "with occurrence and 1.75 s with slip-speed feedback (ch. 2.4.4), which would favour "
+        "occurrence here, where only time matters.",
+        "- **Why force + slip equals slip speed.** While the object slips the belt shows "
+        "slip speed; otherwise it shows the skin's static force, the FSR's share of the "
+        f"grip (median top command {_f(m['force_belt_max_median_mrad_s'], 0)} mrad/s over "
+        f"the {m['force_trials']} force-mode trials), which reached force level "
+        f"{RELAX_FORCE_LEVEL} ({relax_n:g} N, {relax_mrad_s} mrad/s), where the wearer "
+        f"starts relaxing, in {_f(m['force_display_at_relax_level_pct'], 0)} % of them: "
+        "the force display changes nothing the wearer does. Grip force alone never tells "
+        f"the wearer of a slip: without the reflex it stopped {_f(grip_force, 0)} %.",
+        _reflex_alone(blind, told),
         f"- **The wearer's limit is ≈ {g['wearer_limit_mm_s']:.0f} mm/s, not 45.** A slip is "
         "shown after the second contact (19 mm on alpha0.1), identified and answered "
         "1.51–1.75 s later, and the EMG window, motor delay and hand lag add ≈ 0.35 s, "
         "all within 84 + 8 mm of travel.",
         "",
     ]
-    return lines
+
+
+def _reflex_alone(blind: dict, told: dict) -> str:
+    head = (
+        f"Fast slips with the reflex but no slip display (none, grip force; {blind['trials']} "
+        f"trials): the reflex stopped {_f(blind['first_stop_pct'], 0)} % (leading edge at a "
+        f"median {_f(blind['first_stop_median_mm'], 0)} mm) and "
+        f"{_f(blind['reslip_pct'], 0)} % slid again"
+    )
+    if not blind["trials"] or not blind["reslip_pct"]:
+        return f"- **The reflex alone.** {head}."
+    return (
+        f"- **Why the reflex alone does not hold.** {head} "
+        f"({_f(blind['dropped_after_reslip_pct'], 0)} % of those were dropped): after the "
+        "2 s hold the reflex releases at 2 N/s back to the wearer's 5 N, and below 5.76 N "
+        "the pull wins again. Past 51 mm the alpha0.1 skin has one 33 mm spacing and then "
+        "its end: too few ridge contacts for the decoder to report the new slip in time. "
+        f"With a slip display ({told['trials']} trials) the wearer, who felt even the brief "
+        "slip, contracts (≥ e2) during the hold and the reflex hands back to a grip that "
+        f"holds: {_f(told['reslip_pct'], 0)} % re-slipped, {_f(told['stopped_pct'], 0)} % "
+        "stopped."
+    )
 
 
 def plot_report(results: dict, path: Path) -> None:

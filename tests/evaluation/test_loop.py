@@ -11,6 +11,7 @@ import pytest
 
 from grasplink.cli import main as cli_main
 from grasplink.controllers import build_controllers
+from grasplink.errors import ConfigError
 from grasplink.evaluation import loop
 from grasplink.gateway.emg import EmgCalibration
 from grasplink.simulators import signals as sig
@@ -35,7 +36,6 @@ def physics(
         sig.OBJECT_SLIPPING: (speed_mm_s != 0).astype(float),
         sig.HAND_GRIP_N: np.full(len(t), 5.0),
         sig.HAND_CRUSHED: crushed,
-        sig.WEARER_LEVEL: np.ones(len(t)),
     }
 
 
@@ -228,6 +228,11 @@ def test_shipped_loop_scene_is_the_template_with_its_own_speed_and_reflex(name):
     template = loop.scene_data(trial)
     assert data["effects"] == template["effects"]
     assert data["nodes"] == template["nodes"] | {"skin": {"layout": loop.LAYOUT}}
+
+
+def test_judging_a_scene_without_the_loop_names_what_it_lacks():
+    with pytest.raises(ConfigError, match="skin, emg, belt and hand nodes"):
+        loop.judge(load_scene(SCENES / "headline_slip.toml"), build_controllers)
 
 
 def test_slow_slip_scene_is_stopped_by_the_wearer_without_the_reflex():
