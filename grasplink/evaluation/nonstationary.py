@@ -33,7 +33,7 @@ from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import SkinRecording, scripted_recording
 
 # -- definitions (docs/decoding.md, "Non-stationary slips") ------------------------------
-V_MOVING_MM_S = 2.0  # below this the object is at rest (the thesis' slowest task speed 1.8)
+V_MOVING_MM_S = 1.0  # below this the object is at rest (slowest slip: the thesis task's 1.8 mm/s)
 V_DIRECTION_MM_S = 5.0  # the direction of a slower truth is not scored
 STOP_MIN_S = 0.15  # a standstill shorter than this is a turning point, not a stop
 CLEAR_WITHIN_S = 0.3  # the slip flag should clear this soon after the object stops
