@@ -56,14 +56,28 @@ def test_first_update_publishes_state_values_and_health_with_units_in_names() ->
 def test_state_and_alarms_are_published_only_when_they_change() -> None:
     tree = JsonTree("gw")
     tree.update([Sample(1000, snapshot(1.0))], EXTRA)
-    again = tree.update([Sample(1050, snapshot(1.05))], EXTRA)
-    assert {m.topic.rsplit("/", 1)[-1] for m in again} == {"values"}
+    assert tree.update([Sample(1050, snapshot(1.05))], EXTRA) == []
     lost = snapshot(1.1, nodes={"skin": {"phase": "lost"}}, alarms={"skin.lost": "heartbeat lost"})
     topics = by_topic(tree.update([Sample(1100, lost)], EXTRA))
     assert topics["grasplink/gw/alarms"]["alarms"] == {"skin.lost": "heartbeat lost"}
     assert topics["grasplink/gw/node/skin/state"]["live"] is False
     assert topics["grasplink/gw/node/skin/state"]["times_lost"] == 1
     assert topics["grasplink/gw/health"]["nodes_down"] == ["skin"]  # at once, not in a second
+
+
+def test_values_go_out_when_they_change_and_every_second_when_they_do_not() -> None:
+    tree = JsonTree("gw")
+    tree.update([Sample(1000, snapshot(1.0))], EXTRA)
+    changed = tree.update([Sample(1050, snapshot(1.05, skin={"grip_force_n": 2.0}))], EXTRA)
+    assert [m.topic for m in changed] == ["grasplink/gw/node/skin/values"]
+    assert tree.update([Sample(1900, snapshot(1.9, skin={"grip_force_n": 2.0}))], EXTRA) == []
+    refresh = tree.update([Sample(2000, snapshot(2.0, skin={"grip_force_n": 2.0}))], EXTRA)
+    assert {m.topic.split("/")[3] for m in refresh if m.topic.endswith("/values")} == {
+        "emg",
+        "belt",
+        "hand",
+    }  # skin's last went out at 1050: due at 2050
+    assert any(m.topic.endswith("/health") for m in refresh)
 
 
 def test_every_state_change_inside_a_batch_is_published_in_order() -> None:

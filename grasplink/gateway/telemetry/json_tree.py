@@ -7,7 +7,7 @@
 | `alarms` | yes | on change |
 | `controls` | yes | on change (feedback mode, reflex, EMG calibration) |
 | `node/<kind>/state` | yes | on change (phase, NMT state, boots, EMCY, failure) |
-| `node/<kind>/values` | no | every publish tick: the latest decoded values |
+| `node/<kind>/values` | no | latest decoded values, when one changed, else every second |
 | `cmd/<name>` | — | in: `{"value": …, "id": …}` (id optional, echoed) |
 | `reply/<name>` | no | out: `{"id", "command", "accepted", "detail"}` |
 
@@ -38,6 +38,7 @@ from grasplink.gateway.telemetry.protocol import (
 
 ROOT = "grasplink"
 HEALTH_PERIOD_MS = 1000
+VALUES_REFRESH_MS = 1000  # unchanged values are repeated this often (a consumer sees we live)
 QOS = 1
 MAX_REQUEST_ID_CHARS = 64
 
@@ -47,10 +48,18 @@ class JsonTree:
 
     name = "json"
 
-    def __init__(self, gateway_id: str, *, health_period_ms: int = HEALTH_PERIOD_MS):
+    def __init__(
+        self,
+        gateway_id: str,
+        *,
+        health_period_ms: int = HEALTH_PERIOD_MS,
+        values_refresh_ms: int = VALUES_REFRESH_MS,
+    ):
         self.gateway_id = gateway_id
         self.base = f"{ROOT}/{gateway_id}"
         self.health_period_ms = health_period_ms
+        self.values_refresh_ms = values_refresh_ms
+        self._values: dict[str, tuple[int, dict[str, Any]]] = {}  # kind -> (ts_ms, values)
         self._published: dict[str, dict[str, Any]] = {}  # retained topic -> body (no ts)
         self._latest: Sample | None = None
         self._extra: dict[str, Any] = {}
@@ -99,7 +108,12 @@ class JsonTree:
         self._latest = latest
         snap = latest.snapshot
         for kind in snap["nodes"]:
-            body = {"ts_ms": latest.ts_ms, **node_values(snap, kind)}
+            values = node_values(snap, kind)
+            last = self._values.get(kind)
+            if last and last[1] == values and latest.ts_ms - last[0] < self.values_refresh_ms:
+                continue
+            self._values[kind] = (latest.ts_ms, values)
+            body = {"ts_ms": latest.ts_ms, **values}
             out.append(Message(f"{self.base}/node/{kind}/values", dumps(body), QOS, False))
         live = live_nodes(snap)
         due = (
