@@ -241,6 +241,12 @@ def run(
     results["recommended_default"] = recommend(results["decoders"])
     results["can_path"] = can_path(scene_paths, controllers_for, log)
     results["nonstationary"] = ns.run(default_settings(), quick, log, workers=MAX_WORKERS)
+    started = time.monotonic()
+    moving_scenes = sorted(Path(scenes_dir).glob(ns.SCENES))
+    results["nonstationary"]["scenes"] = ns.scene_path(
+        moving_scenes, controllers_for, default_settings(), workers=MAX_WORKERS
+    )
+    log(f"non-stationary scenes: {len(moving_scenes)} in {time.monotonic() - started:.1f} s")
     # "no regression on the constant-speed table": against the run these files hold now
     results["nonstationary"]["constant_before"] = previous_constant(out, quick)
     out.mkdir(parents=True, exist_ok=True)

@@ -9,6 +9,7 @@ the decoders and not the benchmark.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -257,3 +258,16 @@ def test_the_constant_speed_baseline_is_the_last_run_of_the_same_grid(tmp_path):
     assert bench.previous_constant(tmp_path, quick=False)["speed_p90_pct"] == 4.2
     assert bench.previous_constant(tmp_path, quick=True) is None
     assert bench.previous_constant(tmp_path / "nowhere", quick=False) is None
+
+
+def test_a_shipped_scene_is_decoded_from_its_can_log_and_scored_like_a_signal():
+    from grasplink.controllers import build_controllers
+
+    path = bench.find_checkout(Path(__file__).parent) / "scenes" / "nonstationary_stick_slip.toml"
+    done = ns.scene_job(str(path), build_controllers, {"ratio": {}})
+    for kind in ("can", "csv"):
+        score = done["scores"]["ratio"][kind]
+        assert len(score.clear_s) == 3  # two stops mid-slip and one at the end
+        assert score.updates > 300 and set(score.cpu_us) == {3}
+    report = ns.scene_path([], build_controllers, {"ratio": {}})
+    assert ns.render_scenes(report, "ratio") == []
