@@ -123,11 +123,6 @@ class Signal:
     seed: int
     repeat: int = 0  # which of the seeds of this variant, layout and direction
 
-    @property
-    def key(self) -> str:
-        way = "reverse" if self.reverse else "forward"
-        return f"{self.category} | {self.variant} | {self.layout} {way} | seed {self.seed}"
-
     def make(self) -> Recorded:
         return make_signal(self)
 
