@@ -39,7 +39,7 @@ STOP_MIN_S = 0.15  # a standstill shorter than this is a turning point, not a st
 CLEAR_WITHIN_S = 0.3  # the slip flag should clear this soon after the object stops
 REST_SETTLED_S = 0.3  # flags later than this into a rest are false slips
 CONFIDENT = 0.8  # estimates this confident should point the right way
-CONFIDENCE_BINS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0 + 1e-9)
+CONFIDENCE_BINS = (0.0, 0.2, 0.4, 0.6, CONFIDENT, 1.0 + 1e-9)  # the last bin: confident
 OFF_SKIN_TOLERANCE_MM = 1.0
 CHUNKS = (3, 256)  # the skin node's TPDO1 (3 samples) and a batch reader's 256
 
