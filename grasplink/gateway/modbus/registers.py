@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -80,28 +81,34 @@ class RegisterError(Exception):
 
 @dataclass(frozen=True, slots=True)
 class WordType:
-    """u16, i16, u32 or i32: how many registers, signed or not, and the sentinel."""
+    """u16, i16, u32 or i32: how many registers, signed or not, and the sentinel.
+
+    `sentinel` is the word pattern of an unknown value (the most negative, or all ones);
+    `low..high` the known values, which stop one step short of it. Precomputed: the
+    encoder runs for every snapshot a client polls.
+    """
 
     name: str
     words: int
     signed: bool
+    bits: int = field(init=False)
+    mask: int = field(init=False)
+    sentinel: int = field(init=False)
+    low: int = field(init=False)
+    high: int = field(init=False)
 
-    @property
-    def bits(self) -> int:
-        return 16 * self.words
-
-    @property
-    def sentinel(self) -> int:
-        """The raw word pattern of an unknown value: the most negative, or all ones."""
-        return 1 << (self.bits - 1) if self.signed else (1 << self.bits) - 1
-
-    @property
-    def low(self) -> int:
-        return -(1 << (self.bits - 1)) + 1 if self.signed else 0
-
-    @property
-    def high(self) -> int:
-        return (1 << (self.bits - 1)) - 1 if self.signed else (1 << self.bits) - 2
+    def __post_init__(self) -> None:
+        bits = 16 * self.words
+        half = 1 << (bits - 1)
+        values = {
+            "bits": bits,
+            "mask": (1 << bits) - 1,
+            "sentinel": half if self.signed else (1 << bits) - 1,
+            "low": -half + 1 if self.signed else 0,
+            "high": half - 1 if self.signed else (1 << bits) - 2,
+        }
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
 
 
 U16 = WordType("u16", 1, False)
@@ -203,18 +210,25 @@ class Register:
     def to_raw(self, value: Any) -> int | None:
         """Engineering value -> raw integer (saturated, or wrapped for counters);
         None when unknown (None, NaN, a name not in the codes)."""
-        if value is None:
-            return None
-        if self.codes is not None and isinstance(value, str):
-            return self.codes.get(value)
-        if isinstance(value, bool):
+        kind = type(value)
+        if kind is float:
+            if not math.isfinite(value):
+                return None
+            raw = round(value / self.scale)
+        elif kind is int:
+            raw = value if self.scale == 1 else round(value / self.scale)
+        elif kind is bool:
             return int(value)
-        if not isinstance(value, int | float) or not math.isfinite(value):
+        elif kind is str:
+            return None if self.codes is None else self.codes.get(value)
+        elif isinstance(value, numbers.Real):  # numpy scalars and other numbers
+            return self.to_raw(float(value))
+        else:
             return None
-        raw = round(value / self.scale) if self.scale != 1 else round(value)
+        word_type = self.type
         if self.counter:
-            return raw % (1 << self.type.bits)
-        return min(self.type.high, max(self.type.low, raw))
+            return raw & word_type.mask
+        return word_type.high if raw > word_type.high else max(word_type.low, raw)
 
     def encode(self, value: Any) -> list[int]:
         """Engineering value -> register words (high word first)."""
@@ -238,7 +252,7 @@ class Register:
 
 def to_words(word_type: WordType, raw: int | None) -> list[int]:
     """Raw integer -> words, two's complement, high word first; None -> the sentinel."""
-    pattern = word_type.sentinel if raw is None else raw & ((1 << word_type.bits) - 1)
+    pattern = word_type.sentinel if raw is None else raw & word_type.mask
     if word_type.words == 1:
         return [pattern]
     return [pattern >> 16, pattern & 0xFFFF]
@@ -402,10 +416,11 @@ def _check_contiguous(table: tuple[Register, ...]) -> None:
 
 
 def _lookup(data: Any, path: tuple[str, ...]) -> Any:
-    for key in path:
-        if not isinstance(data, Mapping) or key not in data:
-            return None
-        data = data[key]
+    try:
+        for key in path:
+            data = data[key]
+    except (KeyError, TypeError, IndexError):  # absent, or a value where a table was expected
+        return None
     return data
 
 
