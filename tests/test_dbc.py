@@ -57,6 +57,7 @@ def recorded_run(tmp_path_factory) -> Path:
     return folder / "out" / "can.asc"
 
 
+@pytest.mark.slow
 def test_cantools_loads_the_dbc_and_cantools_dump_prints_every_message(dbc_file):
     db = cantools.database.load_file(str(dbc_file), database_format="dbc")
     names = {m.name for m in db.messages}
