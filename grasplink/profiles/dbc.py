@@ -19,6 +19,7 @@ from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import canopen
 import cantools
@@ -26,6 +27,7 @@ from canopen.objectdictionary import ODVariable
 from cantools.database.can import Database, Message, Node, Signal
 from cantools.database.can.formats.dbc.dbc_specifics import DbcSpecifics
 from cantools.database.conversion import BaseConversion
+from cantools.typechecking import Choices
 
 from grasplink.core.frames import (
     EMCY_BASE,
@@ -37,7 +39,7 @@ from grasplink.core.frames import (
 )
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.errors import ConfigError
-from grasplink.profiles import DEVICE_KINDS, load_profile
+from grasplink.profiles import DEVICE_KINDS, load_profile, od_default
 from grasplink.profiles import objects as obj
 from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.objects import DEFAULT_NODE_IDS
@@ -47,6 +49,7 @@ GATEWAY_HEARTBEAT_MS = 100  # the gateway's default heartbeat ([gateway] heartbe
 NODE_NAMES = {"skin": "Skin", "emg": "EMG", "belt": "Belt", "hand": "Hand", MASTER: "Gateway"}
 DBC_NAME_MAX = 32  # longer names need a DBC long-name attribute some analysers ignore
 _UNIT_RE = re.compile(r"\s*\[([^\]]+)\]\s*$")
+_Value = TypeVar("_Value", bound=int)  # an int or an IntEnum (NmtState, NmtCommand)
 
 # Enumerations the EDS cannot express (it has no value descriptions), from profiles.objects.
 OBJECT_CHOICES: dict[tuple[int, int], dict[int, str]] = {
@@ -143,7 +146,7 @@ def pdo_messages(kind: str, node_id: int) -> list[PdoMessage]:
     node.rpdo.read(from_od=True)
     messages = []
     for direction, maps in (("TPDO", node.tpdo), ("RPDO", node.rpdo)):
-        for number, pdo in sorted(maps.map.items()):
+        for number, pdo in sorted(maps.map.items() if maps.map is not None else ()):
             if not len(pdo.map):
                 continue
             signals: list[PdoSignal] = []
@@ -169,7 +172,8 @@ def pdo_messages(kind: str, node_id: int) -> list[PdoMessage]:
 
 
 def _pdo_signal(od: ODVariable, offset: int, length: int, taken: set[str]) -> PdoSignal:
-    dtype = DATA_TYPES[od.data_type]
+    data_type = od.data_type or 0
+    dtype = DATA_TYPES[data_type]
     name = dbc_name(od.name)
     suffix = 2
     while name in taken:
@@ -184,7 +188,7 @@ def _pdo_signal(od: ODVariable, offset: int, length: int, taken: set[str]) -> Pd
         object_name=od.name,
         start_bit=offset,
         length_bits=length,
-        data_type=od.data_type,
+        data_type=data_type,
         low=od.min if od.min is not None else dtype.low,
         high=od.max if od.max is not None else dtype.high,
         unit=unit.group(1) if unit else "",
@@ -222,7 +226,7 @@ def build_database(overrides: Mapping[str, int] | None = None) -> Database:
         node_id = ids[kind]
         messages += [_pdo_message(m) for m in pdo_messages(kind, node_id)]
         od = load_profile(kind, node_id)
-        heartbeat_ms = int(od[obj.HEARTBEAT_PRODUCER_MS].default)
+        heartbeat_ms = od_default(od, obj.HEARTBEAT_PRODUCER_MS)
         messages += [
             _heartbeat(kind, node_id, heartbeat_ms, [MASTER]),
             _emcy(kind, node_id),
@@ -239,7 +243,7 @@ def build_database(overrides: Mapping[str, int] | None = None) -> Database:
         (
             ("NmtState", _choices(NMT_STATE_NAMES)),
             ("NmtCommand", _choices(NMT_COMMAND_NAMES)),
-            ("EmcyErrorCode", dict(EMCY_CODES)),
+            ("EmcyErrorCode", _choices(EMCY_CODES)),
         )
     )
     return Database(
@@ -287,7 +291,10 @@ def _pdo_message(pdo: PdoMessage) -> Message:
                 byte_order="little_endian",
                 is_signed=dtype.signed,
                 conversion=BaseConversion.factory(
-                    scale=1, offset=0, choices=choices, is_float=dtype.kind == "float"
+                    scale=1,
+                    offset=0,
+                    choices=_choices(choices) if choices is not None else None,
+                    is_float=dtype.kind == "float",
                 ),
                 minimum=s.low,
                 maximum=s.high,
@@ -339,7 +346,7 @@ def _nmt(ids: Mapping[str, int]) -> Message:
                 "Command",
                 0,
                 8,
-                choices=_choices(NMT_COMMAND_NAMES),
+                choices=NMT_COMMAND_NAMES,
                 comment="NMT command",
                 receivers=nodes,
             ),
@@ -379,7 +386,7 @@ def _heartbeat(kind: str, node_id: int, period_ms: int, consumers: list[str]) ->
                 "State",
                 0,
                 7,
-                choices=_choices(NMT_STATE_NAMES),
+                choices=NMT_STATE_NAMES,
                 comment="NMT state; 0 is the boot-up message",
                 receivers=receivers,
             ),
@@ -468,7 +475,7 @@ def _field(
     start: int,
     length: int,
     *,
-    choices: Mapping[int, str] | None = None,
+    choices: Mapping[_Value, str] | None = None,
     comment: str,
     receivers: list[str],
 ) -> Signal:
@@ -478,7 +485,7 @@ def _field(
         length=length,
         byte_order="little_endian",
         is_signed=False,
-        conversion=BaseConversion.factory(choices=dict(choices) if choices else None),
+        conversion=BaseConversion.factory(choices=_choices(choices) if choices else None),
         minimum=0,
         maximum=(1 << length) - 1,
         comment=comment,
@@ -486,10 +493,14 @@ def _field(
     )
 
 
-def _choices(names: Mapping[int, str]) -> dict[int, str]:
-    return {int(value): text for value, text in names.items()}
+def _choices(names: Mapping[_Value, str]) -> Choices:
+    """A value table as cantools types it (an OrderedDict of plain ints)."""
+    return OrderedDict((int(value), text) for value, text in names.items())
 
 
 def load_dbc(path: Path) -> Database:
     """Read a DBC back with cantools (strict: overlapping signals are an error)."""
-    return cantools.database.load_file(str(path), database_format="dbc")
+    database = cantools.database.load_file(str(path), database_format="dbc")
+    if not isinstance(database, Database):  # only a .cdd is a diagnostics database
+        raise ConfigError(f"{path}: not a CAN database")
+    return database

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from canopen.objectdictionary import ObjectDictionary, ODArray, ODRecord, ODVariable
 
-from grasplink.profiles import DEVICE_KINDS, eds_path, load_profile
+from grasplink.profiles import DEVICE_KINDS, eds_path, load_profile, od_default, od_variable
 from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.objects import DEFAULT_NODE_IDS
 
@@ -55,16 +55,16 @@ def write_profiles_doc(path: str | Path) -> Path:
 def _device_section(kind: str) -> list[str]:
     node_id = DEFAULT_NODE_IDS[kind]
     od = load_profile(kind, node_id)
-    device_type = od[0x1000].default
+    device_type = od_default(od, 0x1000)
     profile = _PROFILES.get(device_type & 0xFFFF, f"profile {device_type & 0xFFFF}")
     out = [
-        f"## {kind}: {od[0x1008].default}",
+        f"## {kind}: {od_variable(od, 0x1008).default}",
         "",
         f"- EDS: `grasplink/profiles/{eds_path(kind).name}`",
         f"- Default node-ID: {node_id} (0x{node_id:02X})",
         f"- Device type (0x1000): 0x{device_type:08X}, {profile}, "
         f"additional information 0x{device_type >> 16:04X}",
-        f"- Product code (0x1018:02): {od[0x1018][2].default}",
+        f"- Product code (0x1018:02): {od_default(od, 0x1018, 2)}",
         f"- RPDOs: {od.device_information.nr_of_RXPDO}, TPDOs: {od.device_information.nr_of_TXPDO}",
         "",
         *(f"> {line}" if line else ">" for line in od.comments.splitlines()),
@@ -103,13 +103,14 @@ def _object_row(var: ODVariable) -> str:
     limits = ""
     if var.min is not None or var.max is not None:
         limits = f"{'' if var.min is None else var.min}..{'' if var.max is None else var.max}"
-    default = var.default_raw if var.default_raw is not None else ""
+    raw = _default_raw(var)
+    default = raw if raw is not None else ""
     if var.relative:
         default = f"{default} (= 0x{var.default:X})"
     cells = [
         f"{var.index:04X}:{var.subindex:02X}",
         var.name.replace("|", "\\|"),
-        DATA_TYPES[var.data_type].name,
+        DATA_TYPES[var.data_type or 0].name,
         var.access_type,
         "yes" if var.pdo_mappable else "no",
         f"`{default}`" if default != "" else "",
@@ -119,33 +120,43 @@ def _object_row(var: ODVariable) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
+def _default_raw(var: ODVariable) -> str | None:
+    """DefaultValue as the EDS writes it ($NODEID kept): canopen's EDS importer adds it."""
+    raw = getattr(var, "default_raw", None)
+    return None if raw is None else str(raw)
+
+
+def _subindices(od: ObjectDictionary, index: int) -> set[int]:
+    params = od[index]
+    return set(params.subindices) if isinstance(params, (ODArray, ODRecord)) else set()
+
+
 def _pdo_section(od: ObjectDictionary, label: str, comm: int, node_id: int) -> list[str]:
-    params = od[comm]
-    cob = params[1].default
+    cob = od_default(od, comm, 1)
     state = "invalid (disabled)" if cob & 0x80000000 else "valid"
     rtr = ", RTR not allowed" if cob & 0x40000000 else ""
-    ttype = params[2].default
+    ttype = od_default(od, comm, 2)
     ttext = _TRANSMISSION.get(ttype, "synchronous, cyclic" if 1 <= ttype <= 240 else "reserved")
     lines = [
         f"#### {label} (0x{comm:04X} / 0x{comm + 0x200:04X})",
         "",
-        f"- COB-ID: `{params[1].default_raw}` = 0x{cob:08X} at node-ID {node_id}: "
+        f"- COB-ID: `{_default_raw(od_variable(od, comm, 1))}` = 0x{cob:08X} at node-ID {node_id}: "
         f"CAN-ID 0x{cob & 0x7FF:03X}, {state}{rtr}",
         f"- Transmission type: {ttype} ({ttext})",
     ]
-    if 3 in params.subindices:
-        inhibit = params[3].default
+    subindices = _subindices(od, comm)
+    if 3 in subindices:
+        inhibit = od_default(od, comm, 3)
         lines.append(f"- Inhibit time: {inhibit} x 100 us = {inhibit / 10:g} ms")
-    if 5 in params.subindices:
+    if 5 in subindices:
         what = " (deadline monitoring)" if comm < 0x1800 else ""
-        lines.append(f"- Event timer{what}: {params[5].default} ms (0 = off)")
+        lines.append(f"- Event timer{what}: {od_default(od, comm, 5)} ms (0 = off)")
     lines += _mapping_lines(od, comm + 0x200)
     return [*lines, ""]
 
 
 def _mapping_lines(od: ObjectDictionary, map_index: int) -> list[str]:
-    mapping = od[map_index]
-    count = mapping[0].default
+    count = od_default(od, map_index, 0)
     if not count:
         return ["- Mapping: empty"]
     rows = [
@@ -157,11 +168,11 @@ def _mapping_lines(od: ObjectDictionary, map_index: int) -> list[str]:
     layout = []
     offset = 0
     for n in range(1, count + 1):
-        entry = mapping[n].default
+        entry = od_default(od, map_index, n)
         index, sub, length = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
         target = od.get_variable(index, sub)
         name = target.name if target is not None else f"dummy {DATA_TYPES[index].name}"
-        tname = DATA_TYPES[target.data_type if target is not None else index].name
+        tname = DATA_TYPES[(target.data_type or 0) if target is not None else index].name
         first, last = offset // 8, (offset + length - 1) // 8
         span = f"{first}" if first == last else f"{first}..{last}"
         rows.append(
