@@ -801,12 +801,14 @@ def memory_virtual(seconds: float, sample_s: float, bounded: bool = False) -> di
     net.start()
     series = []
     t = 0.0
-    busy0, n0 = 0, 0
+    busy0 = 0
     while t < seconds:
         net.run_for(round(sample_s * S))
         t += sample_s
-        n1 = len(gateway.tpdo_cpu_us)
-        window = gateway.tpdo_cpu_us[n0:n1]
+        window = gateway.tpdo_cpu_us[:]
+        # The meters' own lists would grow RSS: keep only this window's.
+        for meter in (gateway.tpdo_cpu_us, gateway.tpdo_wall_us, gateway.tpdo_at, gateway.caused):
+            meter.clear()
         series.append(
             {
                 "t_s": t,
@@ -817,7 +819,7 @@ def memory_virtual(seconds: float, sample_s: float, bounded: bool = False) -> di
                 "tpdo_cpu_max_us": max(window, default=float("nan")),
             }
         )
-        busy0, n0 = gateway.busy_ns, n1
+        busy0 = gateway.busy_ns
     return {"seconds": seconds, "bounded": bounded, "series": series}
 
 
@@ -1316,7 +1318,7 @@ def write_doc(figures: dict, path: Path) -> None:
     for c in capacity:
         if "error" in c:
             lines.append(
-                f"| {c['sets']} | | | | | | | | | | | | never operational: {c['error'][:120]} |"
+                f"| {c['sets']} |" + " |" * 12 + f" never operational: {c['error'][:120]} |"
             )
             continue
         lines.append(
