@@ -21,6 +21,7 @@ import asyncio
 import contextlib
 import logging
 import random
+import socket
 import ssl
 import threading
 import time
@@ -50,7 +51,8 @@ COMMAND_TIMEOUT_S = 2.0  # the gateway answers at its next advance(), normally w
 BACKOFF_MIN_S, BACKOFF_MAX_S = 0.5, 10.0
 WINDOW = 64  # messages published before waiting for the broker's acknowledgements
 FLUSH_S = 2.0  # a clean stop sends what is buffered for at most this long
-POLL_S = 0.002  # looking for the next snapshot once it is due
+STILL_DOWN_S = 30.0  # while the broker stays away, a reminder this often
+POLL_S = 0.001  # looking for the next snapshot once it is due
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
 
 RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) still goes at once
@@ -124,6 +126,7 @@ class MqttLink:
         self.stopping = asyncio.Event()
         self._wake = asyncio.Event()
         self._answers: set[asyncio.Task[None]] = set()
+        self._reported_down_at: float | None = None
         self._unacked: dict[int, int] = {}  # paho message ID -> index in the window
         self._acked = asyncio.Event()
 
@@ -154,6 +157,9 @@ class MqttLink:
                 tls_context=self.tls,
                 timeout=CONNECT_TIMEOUT_S,
                 logger=MQTT_LOGGER,
+                # Small messages in a row: without this, Nagle holds each behind the broker's
+                # delayed ACK (40 ms on Linux).
+                socket_options=((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),),
                 clean_session=True,
                 max_inflight_messages=WINDOW,
             )
@@ -182,10 +188,7 @@ class MqttLink:
                 return
             if self.stopping.is_set():
                 break
-            self.log(
-                f"telemetry {self.protocol.name}: lost {self.url.display} ({self.last_error}); "
-                f"buffering up to {self.outbox.max_bytes // 1024} KiB, retrying in {delay:.1f} s"
-            )
+            self._report_down(delay)
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.stopping.wait(), delay * random.uniform(0.8, 1.0))
             delay = min(high, delay * 2)
@@ -194,6 +197,25 @@ class MqttLink:
                 f"telemetry {self.protocol.name}: stopped with {len(self.outbox)} messages unsent"
             )
 
+    def _report_down(self, delay: float) -> None:
+        """One line when the broker goes, then one every STILL_DOWN_S while it stays away."""
+        now = time.monotonic()
+        if self._reported_down_at is None:
+            self.log(
+                f"telemetry {self.protocol.name}: lost {self.url.display} ({self.last_error}); "
+                f"buffering up to {self.outbox.max_bytes // 1024} KiB, retrying in {delay:.1f} s"
+            )
+        elif now - self._reported_down_at >= STILL_DOWN_S:
+            away = now - (self.down_since or now)
+            self.log(
+                f"telemetry {self.protocol.name}: {self.url.display} still away after "
+                f"{away:.0f} s ({self.last_error}); {len(self.outbox)} messages buffered "
+                f"({self.outbox.bytes / 1024:.0f} KiB)"
+            )
+        else:
+            return
+        self._reported_down_at = now
+
     def _refusal(self) -> str:
         error = self.last_error
         if "code:" in error or "Not authorized" in error or "not authorised" in error:
@@ -201,6 +223,7 @@ class MqttLink:
         return f"cannot reach MQTT broker {self.url.display}: {error}"
 
     def _up(self) -> None:
+        self._reported_down_at = None
         self.connected = True
         self.connections += 1
         if self.connections == 1:
@@ -517,7 +540,7 @@ class TelemetryPublisher:
                 credit -= 1.0
             next_publish = now + (1.0 - credit) / rate_hz
             # Next look: shortly before the next snapshot is due, then every POLL_S.
-            due = seen_at + SNAPSHOT_PERIOD_S - 2 * POLL_S
+            due = seen_at + SNAPSHOT_PERIOD_S - POLL_S / 2
             wake = due if due > now else now + (POLL_S if now - seen_at < 1.0 else 0.02)
             if len(self.queue):
                 wake = min(wake, next_publish)
