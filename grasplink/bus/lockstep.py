@@ -69,8 +69,7 @@ class LockstepNetwork:
         self._deadlines.clear()
         steps_at_t = 0
         while True:
-            due = [(self._deadline(i), i) for i in range(len(self.devices))]
-            due = [(t, i) for t, i in due if t is not None]
+            due = [(t, i) for i in range(len(self.devices)) if (t := self._deadline(i)) is not None]
             t_next = min((t for t, _ in due), default=None)
             t_next = _earliest(t_next, self._in_flight[0][0] if self._in_flight else None)
             t_error = self.link.next_error_us(self.t_us) if self.link else None
@@ -85,7 +84,7 @@ class LockstepNetwork:
             else:
                 steps_at_t = 0
             self.t_us = max(self.t_us, t_next)
-            if t_error is not None and t_error <= self.t_us:
+            if self.link is not None and t_error is not None and t_error <= self.t_us:
                 self.link.take_error()
                 for tap in self.taps:
                     tap(self.t_us, ErrorFrame(), None)

@@ -41,9 +41,10 @@ class DriveApp(DeviceApp):
         self.store.add_listener(self._on_change, self.inputs)
 
     def _validate_mode(self, index: int, subindex: int, value: Value) -> None:
-        if int(value) != self.supported_mode:
+        mode = int(value)
+        if mode != self.supported_mode:
             raise SdoAbort(
-                AbortCode.INVALID_VALUE, f"mode {value} not supported (only {self.supported_mode})"
+                AbortCode.INVALID_VALUE, f"mode {mode} not supported (only {self.supported_mode})"
             )
 
     @property

@@ -100,6 +100,8 @@ class EmgApp(DeviceApp):
 
     def _sample_until(self, t_us: int) -> list[Frame]:
         clock = self.clock
+        if clock is None:  # advance() samples only once the clock runs
+            return []
         count = min(clock.due_until(t_us) - clock.next_index, MAX_SAMPLES_PER_ADVANCE)
         if count <= 0:
             return []

@@ -77,11 +77,10 @@ class HeartbeatConsumer:
         for sub in self._subindices():
             node_id, time_ms = _split(int(self.store.get(obj.HEARTBEAT_CONSUMER, sub)))
             if node_id and time_ms:
-                previous = old.get(node_id)
-                keep = previous is not None and previous.timeout_us == time_ms * US_PER_MS
-                self._monitors[node_id] = (
-                    previous if keep else _Monitor(node_id, time_ms * US_PER_MS)
-                )
+                monitor = old.get(node_id)
+                if monitor is None or monitor.timeout_us != time_ms * US_PER_MS:
+                    monitor = _Monitor(node_id, time_ms * US_PER_MS)
+                self._monitors[node_id] = monitor
 
     def reset(self) -> None:
         """NMT reset node / communication: forget every monitor's state, so that

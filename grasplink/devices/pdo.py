@@ -164,6 +164,8 @@ class PdoEngine:
             if not self.store.has(entry.index, entry.subindex):
                 return None
             var = self.store.entry(entry.index, entry.subindex).var
+            if var.data_type is None:
+                return None
             layout = var.STRUCT_TYPES.get(var.data_type)
             if not isinstance(layout, struct.Struct):
                 return None
