@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from grasplink.gateway.config import KINDS
 from grasplink.gateway.modbus.registers import (
+    COMMAND_TIMEOUT_S,
     MAP_VERSION,
     MAX_READ,
     ExceptionCode,
@@ -106,7 +107,8 @@ def _connection(rmap: RegisterMap) -> list[str]:
         "its range or codes, e_min not below e_max, or a command the gateway refuses "
         "(no such node, calibration it cannot use). Nothing is applied. |",
         f"| {ExceptionCode.DEVICE_FAILURE:02X} SERVER DEVICE FAILURE | the gateway did not "
-        "answer the command within 0.5 s. The command stays queued and may still be "
+        f"answer the command within {COMMAND_TIMEOUT_S:g} s. The command stays queued and "
+        "may still be "
         "applied: read the holding registers back. |",
         f"| {ExceptionCode.DEVICE_BUSY:02X} SERVER DEVICE BUSY | too many commands are "
         "waiting for the gateway; nothing applied, try again. |",

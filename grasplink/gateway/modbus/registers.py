@@ -51,6 +51,8 @@ from grasplink.profiles import objects as obj
 MAP_VERSION = 1
 #: Registers one read (function 03/04) may ask for, by the Modbus specification.
 MAX_READ = 125
+#: How long a write waits for the gateway's CommandResult (its runner wakes every 20 ms).
+COMMAND_TIMEOUT_S = 0.5
 #: Node phases as the gateway names them (service.NodeLink.phase), in code order.
 PHASES = ("absent", "provisioning", "starting", "operational", "failed", "lost")
 #: Alarm categories per node (the gateway's alarm keys are "KIND.CATEGORY").

@@ -36,11 +36,13 @@ from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
 from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
 from grasplink.gateway.modbus.registers import (
+    COMMAND_TIMEOUT_S,
     RegisterError,
     RegisterMap,
     register_map,
@@ -54,7 +56,6 @@ logger = logging.getLogger(__name__)
 # application's, Python would print it beside our one-line error.
 logging.getLogger("pymodbus").addHandler(logging.NullHandler())
 
-COMMAND_TIMEOUT_S = 0.5  # the gateway's runner wakes at least every 20 ms
 START_TIMEOUT_S = 5.0
 READ_INPUTS, READ_HOLDING = 4, 3
 WRITE_FUNCTIONS = frozenset({6, 16, 23})
@@ -166,7 +167,7 @@ class ModbusServer:
         finally:
             await server.shutdown()
 
-    def _make_server(self) -> ModbusTcpServer | ModbusSerialServer:
+    def _make_server(self) -> _TcpServer | _SerialServer:
         url = self.url
         device = SimDevice(
             id=url.unit or 0,  # 0: every unit id (TCP)
@@ -186,8 +187,8 @@ class ModbusServer:
             action=self._action,
         )
         if url.scheme == "tcp":
-            return ModbusTcpServer(device, address=(url.host, url.port), trace_pdu=self._trace)
-        return ModbusSerialServer(
+            return _TcpServer(device, address=(url.host, url.port), trace_pdu=self._trace)
+        return _SerialServer(
             device,
             framer=FramerType.RTU,
             port=url.device,
@@ -295,3 +296,32 @@ class ModbusServer:
         if result.detail == "too many commands waiting":
             return ExcCodes.DEVICE_BUSY
         return ExcCodes.ILLEGAL_VALUE
+
+
+class _Handler(ServerRequestHandler):
+    """pymodbus's connection handler, scheduling each request as a task of its own loop.
+
+    pymodbus 3.16 hands every request to its loop with `run_coroutine_threadsafe` from
+    that loop's own thread: a concurrent Future, its lock and a self-pipe wake-up per
+    request, a quarter of the server's CPU at 10 Hz polling (docs/benchmarks/modbus.md).
+    A task does the same on the same loop.
+    """
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self._tasks: set[asyncio.Task[None]] = set()  # the loop keeps only weak references
+
+    def handle_later(self) -> None:
+        task = self.loop.create_task(self.handle_request())
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+
+class _TcpServer(ModbusTcpServer):
+    def callback_new_connection(self) -> _Handler:
+        return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+
+
+class _SerialServer(ModbusSerialServer):
+    def callback_new_connection(self) -> _Handler:
+        return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
