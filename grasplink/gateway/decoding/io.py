@@ -371,13 +371,12 @@ class SkinPdo:
 
 def skin_pdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinPdo:
     """Decode TPDO1's layout and the calibration defaults from the shipped skin EDS."""
-    from grasplink.profiles import load_profile
+    from grasplink.profiles import load_profile, od_default
 
     od = load_profile("skin", node_id)
 
-    def default(index: int, sub: int | None = None) -> int:
-        entry = od[index] if sub is None else od[index][sub]
-        return int(entry.default)
+    def default(index: int, sub: int = 0) -> int:
+        return od_default(od, index, sub)
 
     cob_id = default(TPDO1_COMM, 1) & 0x7FF
     count = default(TPDO1_MAP, 0)
@@ -469,10 +468,10 @@ def read_can_log(
             f"{p}: no skin TPDO1 frames (COB-ID 0x{pdo.cob_id:03X}, node-ID "
             f"0x{node_id:02X}, {pdo.length} data bytes); CAN-IDs seen: {seen}"
         )
-    t, counts = _assemble(_in_sequence(packets, stats), pdo, rate, stats)
+    t, samples = _assemble(_in_sequence(packets, stats), pdo, rate, stats)
     if not len(t):
         raise RecordingError(f"{p}: no usable skin samples: {stats.reasons()}")
-    return t, pdo.to_newton(counts), stats
+    return t, pdo.to_newton(samples), stats
 
 
 def _in_sequence(packets: list[Packet], stats: CanStats) -> list[Packet]:

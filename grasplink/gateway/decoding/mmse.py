@@ -312,7 +312,7 @@ class ReferenceSearch:
 
     def __init__(
         self,
-        layout_mm: Sequence[float],
+        layout_mm: Sequence[float] | np.ndarray,
         speeds: np.ndarray,
         *,
         window_s: float,

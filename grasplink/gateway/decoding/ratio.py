@@ -197,9 +197,9 @@ class RatioDecoder(Decoder):
                 chain = 1 + self._chains.get((j - direction, direction), 0)
                 chains[(j, direction)] = chain
                 ridge = j + 2 if direction > 0 else j
-                position = float(self.geometry.ridges_mm[ridge])
+                reached_mm = float(self.geometry.ridges_mm[ridge])
                 candidates.append(
-                    (chain, float(errors[j]), j, direction, direction * speed, position)
+                    (chain, float(errors[j]), j, direction, direction * speed, reached_mm)
                 )
         self._chains = chains
         if not candidates:
