@@ -114,6 +114,7 @@ class _Watch:
     peak: float = -math.inf
     early: float = -math.inf  # highest level in the first quarter of the watch
     history: np.ndarray = field(default_factory=lambda: np.zeros(0))  # running peak by sample
+    levels: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level by sample (hold)
     next_k: int = 0  # next level sample to examine
 
 
@@ -151,6 +152,8 @@ class ContactDetector:
         level_s: float = 0.01,
         trend_s: float = 0.1,
         decay_rises: float = 5.0,
+        step_rise_s: float = 0.02,
+        step_hold_s: float = 0.1,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -167,6 +170,9 @@ class ContactDetector:
         self.watch = max(8, round(watch_s * self.fs_hz))
         self.decay_rises = float(decay_rises)
         self.min_rise = max(1, round(0.005 * self.fs_hz))
+        # a sharp rise that stays: judged a step early (a stop, a grip change), see _advance
+        self.step_rise = max(1, round(step_rise_s * self.fs_hz))
+        self.step_hold = max(self.step_rise + 1, round(step_hold_s * self.fs_hz))
         half = max(0, round(level_s * self.fs_hz / 2.0))
         self.level_half = half
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
@@ -492,7 +498,11 @@ class ContactDetector:
         covering more of the sensor) is taken out. A pulse falls back by
         `drop_fraction` of its height within `decay_rises` times its rise time
         (to 90 % of its peak) after that (a grip step up and, later, down is no pulse); a step
-        stays level for the whole watch.
+        stays level for the whole watch. A *sharp* rise (to 90 % within `step_rise_s`)
+        that has not fallen back by `drop_fraction` `step_hold_s` after the onset is a
+        step already then: a ridge pulse that sharp is a fast one and has fallen back
+        by then (its peak comes after ~1.25 mm of travel), while the end of a slip
+        (the friction term of the FSR model, thesis ch. 4.3) or a grip change stays.
         A level that keeps rising (more of the object on the sensor) decides
         nothing.
         """
@@ -506,6 +516,9 @@ class ContactDetector:
             peak = np.maximum.accumulate(np.maximum(d, watch.peak))
             history = np.concatenate([watch.history, peak])  # running peak since the onset
             watch.history = history
+            hold = watch.index + self.step_hold
+            if watch.next_k <= hold:
+                watch.levels = np.concatenate([watch.levels, d[: hold - watch.next_k + 1]])
             # rise time: onset to the first sample at 90 % of the peak so far (a noisy
             # plateau keeps nudging the peak, not this)
             rise = np.searchsorted(history, 0.9 * peak)
@@ -517,6 +530,10 @@ class ContactDetector:
                 & (since <= (1.0 + self.decay_rises) * rise)
             )
             hit = np.flatnonzero(ok)
+            if len(hit) and k[hit[0]] <= hold:
+                return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
+            if watch.next_k <= hold <= end and self._is_step(watch):
+                return PulseCheck(watch.id, hold + h, False)
             if len(hit):
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             early = k <= watch.index + self.watch // 4
@@ -528,6 +545,17 @@ class ContactDetector:
             level = watch.peak <= 1.5 * watch.early
             return PulseCheck(watch.id, watch.index + self.watch + h, False if level else None)
         return None
+
+    def _is_step(self, watch: _Watch) -> bool:
+        """At step_hold after the onset: rose sharply (to 90 % of the peak within step_rise)
+        and has not fallen back by drop_fraction since."""
+        top = float(watch.history[self.step_hold])
+        if top < 6.0 * watch.noise:
+            return False
+        rise = int(np.searchsorted(watch.history[: self.step_hold + 1], 0.9 * top))
+        if rise > self.step_rise:
+            return False
+        return float(np.min(watch.levels[rise:])) >= (1.0 - self.drop_fraction) * top
 
     # ------------------------------------------------------------------ memory
     def _trim(self) -> None:

@@ -1,0 +1,975 @@
+"""TrackerDecoder ("tracker"): slip, speed and position by tracking ridge contacts.
+
+Physics: the leading edge of a slipping object makes one pulse each time it
+reaches a ridge; ridge i sits at x_i = cumsum([0, *spacings])[i]. The contact
+*times* are all that matter (amplitudes and shapes vary), and the contact
+sequence is a position measurement: contact k happened when the edge was at
+a ridge. Which ridge, and in which direction the object moves, is unknown
+and must be inferred from the timing pattern (thesis ch. 5.2: with constant
+speed, successive intervals are in the ratio of the spacings). Real slips
+speed up, slow down, stop, restart and reverse; the end of a slip shows in
+the static force too (thesis ch. 4.3: the FSR reads M = (1 - k mu) W + k P
+while slipping, W at rest, so the level steps when the object sticks).
+
+Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
+
+* `contacts.ContactDetector` turns the signal into contact onsets (sub-sample
+  times) and, later, tells whether each one fell back like a pulse or rose
+  and stayed (a *step*: sharp ones are told within 0.1 s).
+* A hypothesis (track) is a direction, the ridge of the last contact it
+  assigned and a Kalman filter on the distance travelled, the speed, the
+  acceleration and the distance each ridge's speed dip costs (ridge
+  positions are measurements at contact times). Its motion model is chosen
+  when its speed is first measured: *steady* (the acceleration held at 0,
+  the speed a slow random walk: ratios of intervals stay those of the
+  spacings, which tells the alignment) or *changing* (a constant
+  acceleration of unknown size with a slowly varying jerk: speeding up and
+  braking are followed). Each new contact branches every hypothesis: assign
+  it to the next ridge or a later one (missed contacts), call it spurious,
+  or - the object stopped unseen and went on - restart at the next ridge
+  with its speed unknown. A contact may also start a new track at any
+  ridge, either way (a slip starting, or reversing: after a reversal the
+  other edge leads, at a place no contact tells).
+* A contact judged a step branches a slipping track into "stopped there"
+  (position held, speed 0) and "a grip change, slipping on"; the next
+  contact (or its absence) decides. A stopped track restarts with a contact
+  at its next ridge, speed unknown until the one after.
+* Silence is evidence too: a track that expected a ridge well before now
+  and saw none either missed it or has stopped, whichever is likelier.
+  Samples on a rail (saturation) show no contacts: expected ones there are
+  not missed.
+* Output: posterior over hypotheses (plus "no slip": every contact is
+  clutter). Slip is flagged when slipping tracks with two or more contacts
+  (one of which fell back like a pulse, or four or more contacts) hold half
+  the mass. Speed and position come from the best such track, extrapolated
+  with its speed and acceleration. Its direction must be told by the
+  contacts: speed and position are given when the track has three contacts
+  and explains them better than the best track moving the other way by at
+  least `LOG_REPORT_ODDS`; the confidence grows with that margin (and with
+  how much of the posterior agrees), so an early answer is a low-confidence
+  one. On a symmetric skin both ways explain the contacts equally: no speed.
+
+Contacts are decided with a delay (longest detector scale), sometimes out of
+time order, and a step is told ~0.1 s after its onset; the tracker keeps
+snapshots of its last few steps and replays them, so results do not depend
+on how the input is chunked. Figures: docs/benchmarks/decoding.md.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.special import erf
+
+from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
+from grasplink.gateway.decoding.contacts import ContactDetector, ContactEvent, PulseCheck
+
+V_MIN_MM_S = 2.0
+V_MAX_MM_S = 400.0
+IDS = 6  # recent contact ids a track remembers (pulse evidence, merging)
+STEADY, CHANGING = 0, 1
+# pulse verdicts in the ring of recent contacts
+UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
+RING = 256
+
+
+class _Bank:
+    """The hypotheses as arrays (immutable once built: snapshots share them).
+
+    Per track: direction (+1/-1), the ridge (travel order) of its last contact,
+    ridge contacts assigned `n`, contacts since it last (re)started `run`
+    (1: speed unknown), motion model, time `t` of its last contact, Kalman state
+    X = (s, v, a, d) at t - s the edge's travel from the first ridge met, v the
+    speed without dips, a the acceleration, d the distance each ridge's dip
+    costs - and covariance P, dip memory m (the not yet recovered share of the
+    dips, in units of d), timing sigma of its last contact, score (log), the
+    ids of its last contacts, the id it started at, and `stop`: NaN while
+    slipping, else the time it stopped (X[:, 0] then holds where).
+    """
+
+    FIELDS = ("P", "X", "dirn", "first", "ids", "m", "model", "n", "ridge", "run", "score")
+    FIELDS += ("sig", "stop", "t")
+    __slots__ = (*FIELDS, "_sched")
+
+    def __init__(self, **fields):
+        for key in self.FIELDS:
+            setattr(self, key, fields[key])
+        self._sched = None
+
+    def __len__(self) -> int:
+        return len(self.score)
+
+    @classmethod
+    def empty(cls) -> _Bank:
+        return cls(
+            P=np.zeros((0, 4, 4)),
+            X=np.zeros((0, 4)),
+            dirn=np.zeros(0, np.int64),
+            first=np.zeros(0, np.int64),
+            ids=np.zeros((0, IDS), np.int64),
+            m=np.zeros(0),
+            model=np.zeros(0, np.int64),
+            n=np.zeros(0, np.int64),
+            ridge=np.zeros(0, np.int64),
+            run=np.zeros(0, np.int64),
+            score=np.zeros(0),
+            sig=np.zeros(0),
+            stop=np.zeros(0),
+            t=np.zeros(0),
+        )
+
+    def take(self, idx: np.ndarray) -> _Bank:
+        return _Bank(**{k: getattr(self, k)[idx] for k in self.FIELDS})
+
+    @staticmethod
+    def concat(banks: list[_Bank]) -> _Bank:
+        banks = [b for b in banks if len(b)]
+        if not banks:
+            return _Bank.empty()
+        if len(banks) == 1:
+            return banks[0]
+        return _Bank(**{k: np.concatenate([getattr(b, k) for b in banks]) for k in _Bank.FIELDS})
+
+    def replace(self, **fields) -> _Bank:
+        out = _Bank(**{k: fields.get(k, getattr(self, k)) for k in self.FIELDS})
+        return out
+
+
+class TrackerDecoder(Decoder):
+    """Contact tracker: hypotheses over (direction, ridge, motion); Kalman speed, acceleration."""
+
+    name = "tracker"
+
+    # model constants (see module doc); all times in s, distances in mm
+    P_DETECT_MAX = 0.9  # chance a ridge contact is detected, after a long spacing
+    P_DETECT_MIN = 0.5  # ... after a very short one (its pulse is small and merges)
+    LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
+    LOG_NEW_TRACK = math.log(0.01)  # slips starting (or reversing) per s
+    CLUTTER_PER_S = 0.05  # spurious contacts per s (detector false alarms, grip changes)
+    P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge)
+    RATE_WINDOW_S = 1.0  # contacts seen in this window set the rate of tip contacts
+    LOG_STOP = math.log(0.2)  # a slip stops before the next ridge (silence)
+    LOG_RESTART = math.log(0.05)  # a slip stopped unseen and restarted before this contact
+    RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
+    # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
+    STOP_STEP_PER_S = 1.0
+    GRIP_STEP_PER_S = 0.3
+    ROBUST_FLOOR = 0.05  # weight of the broad part of the contact-time likelihood
+    SIGMA_POS_MM = 0.3  # ridge-contact position noise (ridge compliance, speed dips)
+    SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
+    SPEED_WALK_MM = 10.0
+    LOG_CHANGING = math.log(0.3)  # prior of the changing-speed model at each (re)start
+    ACC_PRIOR = 1.0  # changing: acceleration sigma, in v^2 / ACC_MM
+    ACC_MM = 10.0
+    JERK = 0.3  # changing: acceleration change (sigma) per ACC_MM of travel, in v^2 / ACC_MM
+    ACC_FLOOR = 0.4  # predicted braking keeps at least sqrt(1 - 2 x this) of the speed
+    DIP_RECOVERY_S = 0.05  # the speed recovers from a ridge's dip within about this time
+    DIP_PRIOR_MM = 1.0  # prior sigma of the distance lost at each ridge (mean 0)
+    DIP_MAX_MM = 1.5
+    SPEED_INIT_REL = 0.1  # relative speed uncertainty from two contacts (besides timing)
+    LATE_REL = 0.15  # a contact may come this share of its interval late (speed changes)
+    LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
+    LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
+    SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
+    SPEED_PRIOR_LOG_SIGMA = 1.0
+    MAX_SKIP = 2  # missed contacts allowed between two detected ones
+    STRONG_Z = 60.0  # ridge contacts: strengths spread log-uniformly up to about this
+    STRENGTH_MIN, STRENGTH_MAX = math.log(0.1), math.log(3.0)
+    REFRESH_S = 0.2  # how often silence (and the agreement) is re-scored between contacts
+    NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out
+    MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts (far-off contact)
+    START_CONTACTS = 2  # a slip may start at any of the last this many contacts
+    PER_START = 4  # tracks kept per start contact, beyond the best max_hypotheses
+    DETECT_MM = 1.2  # travel after a contact before the detector has decided it
+    DETECT_BLOCK_S = 0.03  # the detector runs on whole blocks of this length (by default)
+    AGREE_MM = 3.0
+    AGREE_SPEED = 0.15
+    CONF_POS_MM = 3.0  # the position's own sigma halves the confidence at this value
+    CONF_CONTACTS = 2.0  # confidence grows as 1 - exp(-(contacts - 1) / this)
+    # the direction: a signed speed once the best track has an interval ratio (three
+    # contacts) and explains them this much better than the best one moving the other
+    # way; the confidence reaches 0.5 at CONF_DIRECTION_ODDS
+    DIRECTION_CONTACTS = 3
+    LOG_REPORT_ODDS = math.log(9.0)
+    LOG_CONF_ODDS = math.log(9.0)
+    CONF_ODDS_SCALE = 1.0
+    SCHEDULE = 3  # ridges ahead whose silence is scored
+
+    def __init__(
+        self,
+        layout_mm: Sequence[float],
+        fs_hz: float,
+        *,
+        update_period_s: float = DEFAULT_UPDATE_S,
+        max_hypotheses: int = 24,
+        history: int = 8,
+        detect_block_s: float | None = None,
+        detector: ContactDetector | None = None,
+    ):
+        super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
+        geometry = self.geometry
+        x = geometry.ridges_mm
+        self.length = geometry.length_mm
+        self.count = len(x)
+        spacings = geometry.spacings_mm
+        R = self.count
+        # travel-order ridge positions (index 0 = +1, 1 = -1) and the coast past the end
+        self._coast = float(np.max(spacings))  # how far past the last ridge a slip goes on
+        pos = np.stack([x, self.length - x[::-1]])
+        self._pos = np.concatenate([pos, pos[:, -1:] + self._coast], axis=1)  # + coast end
+        lead = self.length  # a slip may start anywhere up to a skin length before
+        before = np.stack(
+            [np.concatenate([[lead], spacings]), np.concatenate([[lead], spacings[::-1]])]
+        )
+        total = 2.0 * float(before[0].sum())
+        self._log_prior = np.log(before / total)  # (2, R): where a new track starts
+        pd = np.vectorize(self._detect_probability)(before)
+        self._pd = np.concatenate([pd, np.zeros((2, 1))], axis=1)  # the coast end: never seen
+        with np.errstate(divide="ignore"):
+            self._log_pd = np.log(self._pd)
+            self._log_miss = np.log1p(-self._pd)
+        self._log_miss[:, -1] = -np.inf  # past the coast: stopped
+        # per (direction, start ridge): log distance to each ridge ahead, and P(all missed
+        # from the next one up to it); rows padded with +inf / 1
+        self._ahead_log = np.full((2, R, R), np.inf)
+        self._ahead_missed = np.ones((2, R, R))
+        for di in range(2):
+            for r in range(R):
+                missed = 1.0
+                for j, k in enumerate(range(r + 1, R)):
+                    missed *= 1.0 - pd[di, k]
+                    self._ahead_log[di, r, j] = math.log(float(pos[di, k] - pos[di, r]))
+                    self._ahead_missed[di, r, j] = missed
+        self._erf_scale = 1.0 / (self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0))
+        self.max_hypotheses = int(max_hypotheses)
+        self.detector = detector or ContactDetector(fs_hz)
+        block_s = self.DETECT_BLOCK_S if detect_block_s is None else float(detect_block_s)
+        self._block = max(1, round(block_s * self.fs_hz))  # latency against CPU
+        # a contact is known this late: the detector's own delay, then the block's end
+        self._max_latency = (self.detector.lag + self._block) / self.fs_hz
+        self._min_latency = (2.0 * self.detector.channels[0].width + self._block / 2) / self.fs_hz
+        self._static = StaticForce(fs_hz)
+        self._n_in = 0  # samples taken by the detector
+        self._n_seen = 0  # samples accepted
+        self._pending_t = np.zeros(0)
+        self._pending_x = np.zeros(0)
+        self._items: list[tuple[int, int, int, object]] = []  # (emit, kind, id, item) queue
+        # tracker state
+        self._null = 0.0
+        self._tracks = _Bank.empty()
+        self._contacts: list[ContactEvent] = []  # processed, in time order (last `history`)
+        self._snapshots: list[tuple[float, _Bank]] = []  # state before each of them
+        self._history = int(history)
+        self._ring_id = np.full(RING, -1, np.int64)  # pulse verdicts of recent contacts
+        self._ring = np.zeros(RING, np.int64)
+        self._steps: set[int] = set()  # contacts told to be steps (replayed as such)
+        self._force: float | None = None
+        self._cache: tuple | None = None
+
+    def _detect_probability(self, spacing_before: float) -> float:
+        share = min(1.0, max(0.0, (spacing_before - 3.0) / 5.0))
+        return self.P_DETECT_MIN + (self.P_DETECT_MAX - self.P_DETECT_MIN) * share
+
+    # ------------------------------------------------------------------ streaming
+    def process(self, t: np.ndarray, x: np.ndarray) -> list[SlipEstimate]:
+        force = self._static.filter(x)
+        points = self.update_points(t)
+        base = self._n_seen
+        self._n_seen += len(t)
+        self._pending_t = np.concatenate([self._pending_t, t])
+        self._pending_x = np.concatenate([self._pending_x, x])
+        out: list[SlipEstimate] = []
+        for count, g in points:
+            if count > 0:
+                self._force = float(force[count - 1])
+            self._run_detector(base + count)
+            out.append(self._report(g))
+        self._force = float(force[-1])
+        return out
+
+    def _run_detector(self, received: int) -> None:
+        """Detect in whole blocks of `self._block` samples (fixed by sample index, so
+        chunking cannot matter), then apply what the detector decided, in order."""
+        upto = received - received % self._block
+        count = upto - self._n_in
+        if count > 0:
+            t, x = self._pending_t[:count], self._pending_x[:count]
+            self._pending_t, self._pending_x = self._pending_t[count:], self._pending_x[count:]
+            self._n_in = upto
+            events, checks = self.detector.feed(t, x)
+            for ev in events:
+                bisect.insort(self._items, (ev.emit_index, 0, ev.id, ev))
+            for ck in checks:
+                bisect.insort(self._items, (ck.emit_index, 1, ck.id, ck))
+        while self._items and self._items[0][0] < self._n_in:
+            _, kind, _, item = self._items.pop(0)
+            if kind == 0:
+                self._add_contact(item)  # type: ignore[arg-type]
+            else:
+                self._add_check(item)  # type: ignore[arg-type]
+
+    def _add_check(self, check: PulseCheck) -> None:
+        slot = check.id % RING
+        self._ring_id[slot] = check.id
+        self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[check.pulse]
+        self._cache = None
+        if check.pulse is False:
+            self._steps.add(check.id)
+            if len(self._steps) > 64:
+                self._steps = {i for i in self._steps if i > check.id - RING}
+            # replay from that contact, now a step (stop or grip change)
+            for at, c in enumerate(self._contacts):
+                if c.id == check.id:
+                    self._replay(at, [])
+                    break
+
+    # ------------------------------------------------------------------ hypotheses
+    def _add_contact(self, ev: ContactEvent) -> None:
+        self._cache = None
+        times = [c.t_s for c in self._contacts]
+        at = bisect.bisect_right(times, ev.t_s)
+        if at == len(self._contacts):
+            self._snapshots.append((self._null, self._tracks))
+            self._contacts.append(ev)
+            self._step(ev)
+        else:  # an earlier contact decided late: replay from before it
+            if at == 0 and len(self._contacts) >= self._history:
+                return  # older than anything we can replay: drop it
+            self._replay(at, [ev])
+        while len(self._contacts) > self._history:
+            self._contacts.pop(0)
+            self._snapshots.pop(0)
+
+    def _replay(self, at: int, extra: list[ContactEvent]) -> None:
+        self._null, self._tracks = self._snapshots[at]
+        replay = [*extra, *self._contacts[at:]]
+        del self._snapshots[at:]
+        del self._contacts[at:]
+        for c in replay:
+            self._snapshots.append((self._null, self._tracks))
+            self._contacts.append(c)
+            self._step(c)
+        self._cache = None
+
+    def _step(self, ev: ContactEvent) -> None:
+        tc = ev.t_s
+        B = self._tracks
+        step = ev.id in self._steps
+        best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
+        # spurious contacts: detector false alarms, plus tip contacts in proportion to
+        # the contact rate actually seen
+        recent = sum(1 for c in self._contacts[:-1] if tc - c.t_s <= self.RATE_WINDOW_S)
+        rate = self.CLUTTER_PER_S + self.P_TIP * recent / self.RATE_WINDOW_S
+        children = []
+        if len(B):
+            moving = np.isnan(B.stop)
+            if step:  # a grip change (slipping or not) or, slipping, a stop here
+                clutter = np.where(moving & (B.n >= 2), self.GRIP_STEP_PER_S, rate)
+                children.append(B.replace(score=B.score + np.log(clutter)))
+                children.append(self._stopped_at(B.take(np.flatnonzero(moving & (B.n >= 2))), tc))
+            else:
+                children.append(B.replace(score=B.score + math.log(rate)))
+            assigned = self._assign(B, ev)
+            children += assigned
+            if step:  # a stop right at a ridge
+                for c in assigned:
+                    children.append(self._stopped_at(c.take(np.flatnonzero(c.n >= 2)), tc))
+        # a new track starting at this contact (the earlier story ends here)
+        base = best_before + self.LOG_NEW_TRACK + self._log_strength(ev.z)
+        children.append(self._births(ev, base))
+        self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
+        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
+        self._tracks = self._prune(_Bank.concat(children), recent_ids)
+
+    def _births(self, ev: ContactEvent, base: float) -> _Bank:
+        R = self.count
+        dirn = np.repeat(np.array([1, -1]), R)
+        ridge = np.tile(np.arange(R), 2)
+        X = np.zeros((2 * R, 4))
+        X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
+        ids = np.full((2 * R, IDS), -1, np.int64)
+        ids[:, -1] = ev.id
+        return _Bank(
+            P=np.zeros((2 * R, 4, 4)),
+            X=X,
+            dirn=dirn,
+            first=np.full(2 * R, ev.id, np.int64),
+            ids=ids,
+            m=np.ones(2 * R),
+            model=np.zeros(2 * R, np.int64),
+            n=np.ones(2 * R, np.int64),
+            ridge=ridge,
+            run=np.ones(2 * R, np.int64),
+            score=base + self._log_prior.ravel(),
+            sig=np.full(2 * R, ev.sigma_s),
+            stop=np.full(2 * R, np.nan),
+            t=np.full(2 * R, ev.t_s),
+        )
+
+    def _stopped_at(self, B: _Bank, tc: float) -> _Bank:
+        """Copies of slipping tracks B that stopped at tc (a step), where they were then."""
+        if not len(B):
+            return B
+        s, _, _ = self._kinematics(B, tc)
+        limit = self._pos[(1 - B.dirn) // 2, np.minimum(B.ridge + 1, self.count)]
+        X = B.X.copy()
+        X[:, 0] = np.minimum(s, limit - 0.1)
+        X[:, 1] = X[:, 2] = 0.0
+        score = B.score + math.log(self.STOP_STEP_PER_S)
+        return B.replace(X=X, stop=np.full(len(B), tc), score=score)
+
+    def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
+        """Children of B that assign contact ev to one of the next ridges."""
+        tc, sig_t = ev.t_s, ev.sigma_s
+        dt = tc - B.t
+        out = []
+        R = self.count
+        di = (1 - B.dirn) // 2
+        moving = np.isnan(B.stop)
+        ok = dt > 0
+        miss = np.zeros(len(B))
+        for skip in range(self.MAX_SKIP + 1):
+            k = B.ridge + 1 + skip
+            valid = ok & (k < R)
+            if not valid.any():
+                break
+            kk = np.minimum(k, R - 1)
+            log_pd = self._log_pd[di, kk]
+            prior = miss + log_pd
+            # speed from this contact and the last (one-contact or restarted tracks)
+            sel = np.flatnonzero(valid & moving & (B.run == 1))
+            if len(sel):
+                out.append(self._start_speed(B.take(sel), ev, skip, prior[sel]))
+            # the Kalman filter (slipping tracks with a speed)
+            sel = np.flatnonzero(valid & moving & (B.run >= 2))
+            if len(sel):
+                out.append(self._kalman(B.take(sel), ev, skip, prior[sel]))
+                # or the slip stopped unseen and went on: a restart at ridge k
+                if skip == 0:
+                    out.append(
+                        self._restart(B.take(sel), ev, k[sel], prior[sel] + self.LOG_RESTART)
+                    )
+            # a stopped track restarting here
+            sel = np.flatnonzero(valid & ~moving)
+            if len(sel):
+                log_rate = math.log(self.RESTART_PER_S)
+                out.append(self._restart(B.take(sel), ev, k[sel], prior[sel] + log_rate))
+            miss = miss + self._log_miss[di, kk]
+        del sig_t
+        return out
+
+    def _with_contact(self, B: _Bank, ev: ContactEvent) -> np.ndarray:
+        ids = np.empty_like(B.ids)
+        ids[:, :-1] = B.ids[:, 1:]
+        ids[:, -1] = ev.id
+        return ids
+
+    def _restart(self, B: _Bank, ev: ContactEvent, k: np.ndarray, log_prior: np.ndarray) -> _Bank:
+        """B restarted (speed unknown) with ev at ridge k."""
+        di = (1 - B.dirn) // 2
+        X = np.zeros((len(B), 4))
+        X[:, 0] = self._pos[di, k]
+        X[:, 3] = B.X[:, 3]
+        P = np.zeros((len(B), 4, 4))
+        P[:, 3, 3] = np.maximum(B.P[:, 3, 3], 0.0)
+        return B.replace(
+            X=X,
+            P=P,
+            ridge=k,
+            n=B.n + 1,
+            run=np.ones(len(B), np.int64),
+            t=np.full(len(B), ev.t_s),
+            sig=np.full(len(B), ev.sigma_s),
+            m=np.ones(len(B)),
+            ids=self._with_contact(B, ev),
+            stop=np.full(len(B), np.nan),
+            score=B.score + log_prior,
+        )
+
+    def _start_speed(
+        self,
+        B: _Bank,
+        ev: ContactEvent,
+        skip: int,
+        log_prior: np.ndarray,
+        models: np.ndarray | None = None,
+        v_ref: np.ndarray | None = None,
+    ) -> _Bank:
+        """Tracks at ridge k whose speed comes from their last contact and this one: each in
+        both motion models (with their priors), or in `models` (a restart of the speed, within
+        MAX_SPEED_JUMP of `v_ref`)."""
+        tc = ev.t_s
+        dt = tc - B.t
+        di = (1 - B.dirn) // 2
+        k = B.ridge + 1 + skip
+        target = self._pos[di, k]
+        decay = np.exp(-dt / self.DIP_RECOVERY_S)
+        lag = B.m * (1.0 - decay) + skip
+        d = B.X[:, 3]
+        v = (target - B.X[:, 0] + lag * d) / dt
+        good = (v >= V_MIN_MM_S) & (v <= V_MAX_MM_S)
+        if v_ref is not None:
+            good &= (v * self.MAX_SPEED_JUMP >= v_ref) & (v <= self.MAX_SPEED_JUMP * v_ref)
+        if not good.all():
+            sel = np.flatnonzero(good)
+            B, dt, k, target, decay, lag, d, v = (
+                B.take(sel),
+                dt[sel],
+                k[sel],
+                target[sel],
+                decay[sel],
+                lag[sel],
+                d[sel],
+                v[sel],
+            )
+            log_prior = log_prior[sel]
+            if models is not None:
+                models = models[sel]
+        N = len(B)
+        if not N:
+            return B
+        var_d = np.where(B.P[:, 3, 3] > 0, B.P[:, 3, 3], self.DIP_PRIOR_MM**2)
+        r = self._meas_var(v, ev.sigma_s)
+        r_before = self._meas_var(v, B.sig)
+        P = np.zeros((N, 4, 4))
+        P[:, 0, 0] = r
+        P[:, 0, 1] = P[:, 1, 0] = r / dt
+        P[:, 1, 1] = (r + r_before + lag * lag * var_d) / (dt * dt) + (self.SPEED_INIT_REL * v) ** 2
+        P[:, 1, 3] = P[:, 3, 1] = lag * var_d / dt
+        P[:, 3, 3] = var_d
+        X = np.zeros((N, 4))
+        X[:, 0] = target
+        X[:, 1] = v
+        X[:, 3] = d
+        score = B.score + log_prior + self._log_speed_prior(v) - np.log(dt)
+        common = dict(
+            ridge=k,
+            t=np.full(N, tc),
+            n=B.n + 1,
+            run=np.full(N, 2, np.int64),
+            sig=np.full(N, ev.sigma_s),
+            m=1.0 + B.m * decay,
+            ids=self._with_contact(B, ev),
+        )
+        # changing: the mean speed over the interval is the speed half an interval ago
+        sa = self.ACC_PRIOR * v * v / self.ACC_MM
+        Pc = P.copy()
+        half = dt / 2.0
+        Pc[:, 1, 1] += (half * sa) ** 2
+        Pc[:, 1, 2] = Pc[:, 2, 1] = half * sa * sa
+        Pc[:, 2, 2] = sa * sa
+        if models is not None:
+            chg = models == CHANGING
+            return B.replace(
+                X=X, P=np.where(chg[:, None, None], Pc, P), model=models, score=score, **common
+            )
+        steady = B.replace(
+            X=X,
+            P=P,
+            model=np.full(N, STEADY, np.int64),
+            score=score + math.log(1.0 - math.exp(self.LOG_CHANGING)),
+            **common,
+        )
+        changing = B.replace(
+            X=X.copy(),
+            P=Pc,
+            model=np.full(N, CHANGING, np.int64),
+            score=score + self.LOG_CHANGING,
+            **common,
+        )
+        return _Bank.concat([steady, changing])
+
+    def _kalman(self, B: _Bank, ev: ContactEvent, skip: int, log_prior: np.ndarray) -> _Bank:
+        """Predict B to the contact and update with ridge k (robust: far off, the speed
+        starts again from the last two contacts)."""
+        tc = ev.t_s
+        N = len(B)
+        dt = tc - B.t
+        di = (1 - B.dirn) // 2
+        k = B.ridge + 1 + skip
+        target = self._pos[di, k]
+        decay = np.exp(-dt / self.DIP_RECOVERY_S)
+        lag = B.m * (1.0 - decay) + skip
+        X, P = B.X, B.P
+        v = np.maximum(X[:, 1], V_MIN_MM_S)
+        F = np.zeros((N, 4, 4))
+        F[:, 0, 0] = F[:, 1, 1] = F[:, 2, 2] = F[:, 3, 3] = 1.0
+        F[:, 0, 1] = F[:, 1, 2] = dt
+        F[:, 0, 2] = 0.5 * dt * dt
+        F[:, 0, 3] = -lag
+        Xp = np.einsum("nij,nj->ni", F, X)
+        Pp = F @ P @ F.transpose(0, 2, 1)
+        # process noise: the speed's random walk; the jerk of the changing model
+        qv = self.SPEED_WALK**2 * v**3 / self.SPEED_WALK_MM
+        dt2, dt3 = dt * dt, dt * dt * dt
+        Pp[:, 0, 0] += qv * dt3 / 3.0
+        Pp[:, 0, 1] += qv * dt2 / 2.0
+        Pp[:, 1, 0] += qv * dt2 / 2.0
+        Pp[:, 1, 1] += qv * dt
+        chg = B.model == CHANGING
+        if chg.any():
+            qj = np.where(chg, self.JERK**2 * v**5 / self.ACC_MM**3, 0.0)
+            Pp[:, 0, 0] += qj * dt3 * dt2 / 20.0
+            Pp[:, 0, 1] += qj * dt2 * dt2 / 8.0
+            Pp[:, 1, 0] += qj * dt2 * dt2 / 8.0
+            Pp[:, 0, 2] += qj * dt3 / 6.0
+            Pp[:, 2, 0] += qj * dt3 / 6.0
+            Pp[:, 1, 1] += qj * dt3 / 3.0
+            Pp[:, 1, 2] += qj * dt2 / 2.0
+            Pp[:, 2, 1] += qj * dt2 / 2.0
+            Pp[:, 2, 2] += qj * dt
+        var = Pp[:, 0, 0] + self._meas_var(v, ev.sigma_s) + skip * self.SIGMA_POS_MM**2
+        resid = target - Xp[:, 0]
+        inlier = (
+            (1.0 - self.ROBUST_FLOOR)
+            * v
+            * np.exp(-0.5 * resid * resid / var)
+            / np.sqrt(2 * np.pi * var)
+        )
+        outlier = self.ROBUST_FLOOR * v / (4.0 * np.maximum(target - X[:, 0], 1.0))
+        like = np.log(inlier + outlier)
+        K = Pp[:, :, 0] / var[:, None]
+        Xn = Xp + K * resid[:, None]
+        Xn[:, 3] = np.clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
+        Pn = Pp - K[:, :, None] * Pp[:, None, 0, :]
+        Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
+        good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
+        out = []
+        sel = np.flatnonzero(good)
+        if len(sel):
+            Bs = B.take(sel)
+            out.append(
+                Bs.replace(
+                    X=Xn[sel],
+                    P=Pn[sel],
+                    ridge=k[sel],
+                    t=np.full(len(sel), tc),
+                    n=Bs.n + 1,
+                    run=Bs.run + 1,
+                    sig=np.full(len(sel), ev.sigma_s),
+                    m=1.0 + Bs.m * decay[sel],
+                    ids=self._with_contact(Bs, ev),
+                    score=Bs.score + log_prior[sel] + like[sel],
+                )
+            )
+        far = np.flatnonzero(inlier < outlier)
+        if len(far):  # far off: the speed changed; start again from the last two contacts
+            Bf = B.take(far)
+            vp = np.maximum(Bf.X[:, 1], V_MIN_MM_S)
+            prior = log_prior[far] + like[far]
+            out.append(self._start_speed(Bf, ev, skip, prior, models=Bf.model, v_ref=vp))
+        return _Bank.concat(out)
+
+    def _meas_var(self, v, sigma_t):
+        """Variance of a ridge contact as a position measurement at speed v."""
+        return self.SIGMA_POS_MM**2 + (v * sigma_t) ** 2
+
+    def _log_strength(self, z: float) -> float:
+        """Log likelihood ratio ridge contact / false alarm of a contact of strength z.
+
+        False alarms crowd just above the detector's threshold (a Gaussian tail);
+        ridge contacts spread over a wide range of strengths.
+        """
+        thr = self.detector.threshold
+        log_false_alarm = math.log(thr) - thr * (z - thr)
+        log_ridge = -math.log(z * math.log(self.STRONG_Z / thr))
+        return min(self.STRENGTH_MAX, max(self.STRENGTH_MIN, log_ridge - log_false_alarm))
+
+    def _log_speed_prior(self, v: np.ndarray) -> np.ndarray:
+        """Log density of ln(v): log-normal around the usual slip speeds."""
+        z = np.log(v / self.SPEED_PRIOR_MM_S) / self.SPEED_PRIOR_LOG_SIGMA
+        return -0.5 * z * z - math.log(self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0 * math.pi))
+
+    def _prune(self, B: _Bank, recent: np.ndarray) -> _Bank:
+        """Best first, one per (direction, ridge, model, state, last three contacts); bounded.
+
+        Tracks with two or more contacts: the best max_hypotheses, plus the best
+        PER_START of every contact a track starts at, so that a slip whose true
+        start came after a spurious contact is not crowded out by the tracks
+        that took the spurious one for its start. One-contact tracks (a slip
+        starting at one of the `recent` contacts) are all kept.
+        """
+        if not len(B):
+            return B
+        order = np.argsort(-B.score, kind="stable")
+        B = B.take(order)
+        single = B.n == 1
+        key = B.ids[:, -1] * 1000003 + B.ids[:, -2]
+        key = key * 1000003 + B.ids[:, -3]
+        state = B.ridge * 16 + (B.dirn > 0) * 8 + B.model * 4 + np.isnan(B.stop) * 2 + (B.run == 1)
+        key = key * 1000003 + state
+        _, first_idx = np.unique(key, return_index=True)
+        keep = np.zeros(len(B), bool)
+        keep[first_idx] = True
+        keep &= B.score >= B.score[0] - self.NEGLIGIBLE - 20.0
+        # one-contact tracks: only those starting at a recent contact
+        keep &= ~single | np.isin(B.ids[:, -1], recent)
+        multi = keep & ~single
+        idx = np.flatnonzero(multi)
+        rank = np.arange(len(idx))
+        # rank within each start contact
+        firsts = B.first[idx]
+        order2 = np.argsort(firsts, kind="stable")
+        sf = firsts[order2]
+        starts = np.r_[0, np.flatnonzero(np.diff(sf)) + 1]
+        group_rank = np.empty(len(idx), np.int64)
+        group_rank[order2] = np.arange(len(idx)) - np.repeat(
+            starts, np.diff(np.r_[starts, len(idx)])
+        )
+        ok = (rank < self.max_hypotheses) | (group_rank < self.PER_START)
+        keep[idx[~ok]] = False
+        return B.take(np.flatnonzero(keep))
+
+    # ------------------------------------------------------------------ motion
+    def _kinematics(self, B: _Bank, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(travel, speed, position sigma) of slipping tracks B extrapolated to g."""
+        tau = np.maximum(0.0, g - B.t)
+        v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
+        v_end = np.clip(v + a * tau, 0.25 * v, 4.0 * v)
+        decay = np.exp(-tau / self.DIP_RECOVERY_S)
+        s = B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
+        speed = np.maximum(0.0, v_end - d * B.m * decay / self.DIP_RECOVERY_S)
+        P = B.P
+        var = (
+            P[:, 0, 0]
+            + 2 * tau * P[:, 0, 1]
+            + tau * tau * P[:, 1, 1]
+            + tau**2 * (P[:, 0, 2] + tau * P[:, 1, 2] + 0.25 * tau * tau * P[:, 2, 2])
+        )
+        return s, speed, np.sqrt(np.maximum(var, 0.0))
+
+    def _schedule(self, B: _Bank):
+        """Silence of slipping tracks with a speed: per track and ridge ahead (time due,
+        score adjustment from then, stopped from then, next ridge not reached from then)."""
+        if B._sched is not None:
+            return B._sched
+        N, J = len(B), self.SCHEDULE + 1
+        due = np.full((N, J), np.inf)
+        adj = np.zeros((N, J))
+        stopped = np.zeros((N, J), bool)
+        limit = np.zeros((N, J), np.int64)
+        active = np.isnan(B.stop) & (B.run >= 2)
+        di = (1 - B.dirn) // 2
+        limit[:, 0] = np.minimum(B.ridge + 1, self.count)
+        if active.any():
+            s0, v, a, d = B.X[:, 0], np.maximum(B.X[:, 1], V_MIN_MM_S), B.X[:, 2], B.X[:, 3]
+            P = B.P
+            miss = np.zeros(N)
+            done = ~active
+            tau = np.zeros(N)
+            for j in range(self.SCHEDULE):
+                k = B.ridge + 1 + j
+                kk = np.minimum(k, self.count)  # the coast end is index count
+                target = self._pos[di, kk]
+                dist = np.maximum(target - s0, 1e-3)
+                a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
+                root = np.sqrt(np.maximum(v * v + 2.0 * a_p * dist, 1e-9))
+                tau = 2.0 * dist / (v + root)
+                for _ in range(2):  # the part of the dip recovered by then
+                    eff = dist + d * B.m * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
+                    root = np.sqrt(np.maximum(v * v + 2.0 * a_p * eff, 1e-9))
+                    tau = 2.0 * eff / (v + root)
+                v_k = np.maximum(v + a_p * tau, 0.2 * v)
+                var = (
+                    P[:, 0, 0]
+                    + 2 * tau * P[:, 0, 1]
+                    + tau * tau * P[:, 1, 1]
+                    + tau**2 * (P[:, 0, 2] + tau * P[:, 1, 2] + 0.25 * tau * tau * P[:, 2, 2])
+                )
+                span = np.sqrt(np.maximum(var, 0.0)) / v_k
+                latency = np.clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
+                t_due = B.t + tau + 3.0 * span + self.LATE_REL * tau + latency
+                miss = miss + self._log_miss[di, kk]
+                go_on = miss >= self.LOG_STOP
+                now = ~done
+                due[now, j + 1] = t_due[now]
+                adj[now, j + 1] = np.where(go_on, miss, self.LOG_STOP)[now]
+                stopped[now, j + 1] = ~go_on[now]
+                limit[now, j + 1] = np.where(go_on, kk + 1, kk)[now]
+                done = done | ~go_on | (k >= self.count)
+                if done.all():
+                    break
+        due[:, 0] = -np.inf
+        B._sched = (due, adj, stopped, limit)
+        return B._sched
+
+    # ------------------------------------------------------------------ reporting
+    def _report(self, g: float) -> SlipEstimate:
+        force = self._force
+        if not len(self._tracks):
+            return SlipEstimate(g, False, None, None, force, 1.0)
+        # the posterior changes only when a contact or verdict arrives or silence lasts;
+        # the agreement (confidence) is refreshed every REFRESH_S
+        if self._cache is None or g >= self._cache[0]:
+            self._cache = self._posterior(g)
+        _, chosen, p_slip, agree, odds = self._cache
+        if chosen is None:
+            return SlipEstimate(g, False, None, None, force, min(1.0, max(0.0, 1.0 - p_slip)))
+        i, stopped, limit = chosen
+        B = self._tracks
+        h = B.take(np.array([i]))
+        n, run = int(h.n[0]), int(h.run[0])
+        if not stopped and run == 1:  # restarted: where is known, the speed is not yet
+            x = float(self._x(h, h.X[:, 0])[0])
+            known = n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
+            conf = min(1.0, max(0.0, p_slip))
+            return SlipEstimate(g, True, None, x if known else None, force, conf)
+        if not stopped and (n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS):
+            # a slip, but its direction is not told yet (two contacts fit any alignment
+            # either way; a third may fit both): say so rather than guess a sign
+            return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)))
+        s, speed, sigma = self._where(h, g, stopped, limit)
+        maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
+        direction = 1.0 / (1.0 + math.exp(-(odds - self.LOG_CONF_ODDS) / self.CONF_ODDS_SCALE))
+        conf = agree * maturity * direction / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
+        x = float(self._x(h, s)[0])
+        conf = min(1.0, max(0.0, float(conf)))
+        if not stopped:
+            return SlipEstimate(g, True, float(h.dirn[0] * speed), x, force, conf)
+        return SlipEstimate(g, False, 0.0, x, force, conf)
+
+    def _x(self, B: _Bank, s: np.ndarray) -> np.ndarray:
+        return np.where(B.dirn > 0, s, self.length - s)
+
+    def _where(self, h: _Bank, g: float, stopped: bool, limit: int):
+        """(travel of the edge from the first ridge met, speed, sigma) at g, for one track."""
+        if not np.isnan(h.stop[0]):  # stopped at a step: where it was then
+            di = (1 - int(h.dirn[0])) // 2
+            r = int(h.ridge[0])
+            nxt = self._pos[di, min(r + 1, self.count)]
+            return (
+                h.X[:, 0],
+                0.0,
+                max(float(np.sqrt(max(h.P[0, 0, 0], 0.0))), 0.1 * (nxt - self._pos[di, r])),
+            )
+        s, speed, sigma = self._kinematics(h, g)
+        di = (1 - int(h.dirn[0])) // 2
+        end = self._pos[di, min(limit, self.count)]
+        if stopped:  # somewhere before the ridge it never reached: as likely anywhere
+            s = np.minimum(s, end)
+            start = self._pos[di, min(limit, self.count) - 1]
+            sigma = np.maximum(sigma, (end - start) / math.sqrt(12.0))
+            speed = 0.0
+        else:
+            s = np.minimum(s, end)
+        if int(h.ridge[0]) == self.count - 1:
+            sigma = sigma + 0.2 * np.maximum(0.0, s - self._pos[di, self.count - 1])
+        return s, float(np.asarray(speed).ravel()[0]), float(np.asarray(sigma).ravel()[0])
+
+    def _posterior(self, g: float):
+        """(valid until, chosen (index, stopped, limit) or None, P(slip), agreement,
+        direction log odds) at g.
+
+        Agreement: the share of the posterior that puts the edge within AGREE_MM of
+        the chosen track's position (and, slipping, its speed within AGREE_SPEED).
+        Direction log odds: the chosen track's score over the best slipping track's moving
+        the other way (a generalised likelihood ratio: the best stories, not the whole
+        posterior, which many weak clutter stories of either direction dilute).
+        """
+        B = self._tracks
+        until = g + self.REFRESH_S
+        score = B.score
+        best = float(score.max())
+        live = score >= best - self.NEGLIGIBLE
+        # silence
+        due, adj_t, stop_t, limit_t = self._schedule(B)
+        j = (due <= g).sum(axis=1) - 1
+        rows = np.arange(len(B))
+        adj = adj_t[rows, j]
+        stopped = stop_t[rows, j] | ~np.isnan(B.stop)
+        limit = limit_t[rows, j]
+        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)]
+        upcoming = np.where(j + 1 < due.shape[1], upcoming, np.inf)
+        nxt = upcoming[live & (upcoming > g)]
+        if len(nxt):
+            until = min(until, float(nxt.min()))
+        waiting = np.isnan(B.stop) & (B.run == 1)
+        if waiting.any():
+            w = np.flatnonzero(waiting & live)
+            adj[w] = self._log_waiting(B.take(w), g)
+        evident, bonus = self._evidence(B)
+        total = np.where(live, score + adj + bonus, -np.inf)
+        top = max(self._null, float(total.max()))
+        weight = np.exp(total - top)
+        mass = math.exp(self._null - top) + float(weight.sum())
+        slipping = evident & ~stopped
+        p_slip = float(weight[slipping].sum()) / mass
+        chosen = None
+        if p_slip >= 0.5 and slipping.any():
+            i = int(np.flatnonzero(slipping)[np.argmax(total[slipping])])
+            chosen = (i, False, int(limit[i]))
+        else:
+            cand = evident & stopped
+            if cand.any():
+                i = int(np.flatnonzero(cand)[np.argmax(total[cand])])
+                if total[i] >= self._null:
+                    chosen = (i, True, int(limit[i]))
+        if chosen is None:
+            return (until, None, p_slip, 0.0, -math.inf)
+        i, is_stopped, lim = chosen
+        # agreement
+        h = B.take(np.array([i]))
+        x_ref = float(self._x(h, self._where(h, g, is_stopped, lim)[0])[0])
+        use = live & evident & (stopped == is_stopped) & (weight >= 1e-4 * mass)
+        if not is_stopped:
+            use &= (B.dirn == B.dirn[i]) & (
+                np.abs(B.X[:, 1] - B.X[i, 1]) <= self.AGREE_SPEED * B.X[i, 1]
+            )
+        idx = np.flatnonzero(use)
+        agree = 0.0
+        if len(idx):
+            Bu = B.take(idx)
+            s, _, _ = self._kinematics(Bu, g)
+            # held where the ridge not reached is, or where they stopped
+            di = (1 - Bu.dirn) // 2
+            end = self._pos[di, np.minimum(limit[idx], self.count)]
+            s = np.where(np.isnan(Bu.stop), np.minimum(s, end), Bu.X[:, 0])
+            xs = self._x(Bu, s)
+            agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
+        odds = math.inf
+        if not is_stopped:
+            other = slipping & (B.dirn != B.dirn[i]) & (B.n >= 2)
+            if other.any():
+                odds = float(total[i] - total[other].max())
+        else:
+            odds = math.inf
+        return (until, chosen, p_slip, agree, odds)
+
+    def _evidence(self, B: _Bank) -> tuple[np.ndarray, np.ndarray]:
+        """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
+        And the score bonus of the pulse verdicts on its recent contacts."""
+        ids = B.ids
+        slot = ids % RING
+        known = (self._ring_id[slot] == ids) & (ids >= 0)
+        verdict = np.where(known, self._ring[slot], UNKNOWN)
+        pulses = (verdict == PULSE).sum(axis=1)
+        steps = (verdict == STEP).sum(axis=1)
+        bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
+        evident = (B.n >= 2) & ((pulses > 0) | ((B.n >= 4) & (steps == 0)))
+        return evident, bonus
+
+    def _log_waiting(self, B: _Bank, g: float) -> np.ndarray:
+        """Log P(no contact detected yet) for tracks whose speed is unknown (one contact, or
+        restarted), g - t after their contact: every ridge ahead not yet reached under the
+        speed prior, or reached and missed."""
+        elapsed = g - B.t - self._max_latency
+        out = np.zeros(len(B))
+        pos = elapsed > 0
+        if not pos.any():
+            return out
+        di = (1 - B.dirn) // 2
+        r = np.minimum(B.ridge, self.count - 1)
+        logd = self._ahead_log[di, r]  # (N, R)
+        missed = self._ahead_missed[di, r]
+        shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
+        nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
+        nr = np.where(np.isfinite(logd), nr, 1.0)
+        # P(reached ridge j but not j+1) weighted by P(all missed up to j)
+        prev = np.concatenate([np.zeros((len(B), 1)), nr[:, :-1]], axis=1)
+        m_before = np.concatenate([np.ones((len(B), 1)), missed[:, :-1]], axis=1)
+        total = (m_before * (nr - prev)).sum(axis=1)  # the first pad: past the last
+        out = np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)
+        return out
