@@ -62,7 +62,7 @@ def scene_nodes(scene: Scene) -> dict[str, dict[str, Any]]:
     return nodes
 
 
-def simulation(scene: Scene, recorder: Recorder | None = None, **options) -> Simulation:
+def simulation(scene: Scene, recorder: Recorder | None = None, **options: Any) -> Simulation:
     """A ready `Simulation` of `scene` with the controllers its `[controller]` names."""
     from grasplink.simulators.engine import Simulation
 

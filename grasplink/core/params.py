@@ -14,7 +14,7 @@ import math
 from collections.abc import Sequence
 from typing import Any, overload
 
-from grasplink.errors import SceneError  # defined with every user error; importable from here too
+from grasplink.errors import SceneError as SceneError  # with every user error; re-exported here
 
 _MISSING = object()
 
@@ -193,7 +193,7 @@ class Params:
     def _check_number(
         self, name: str, value: Any, low: float | None, high: float | None, low_open: bool
     ) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if not isinstance(value, int | float) or isinstance(value, bool):
             raise self.error(name, f"expected a number, got {_describe(value)}")
         if not math.isfinite(value):
             raise self.error(name, f"expected a finite number, got {value}")

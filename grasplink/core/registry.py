@@ -33,7 +33,7 @@ def load_class(
                 f"{what} {name!r} is not available: module {module_name} is not installed"
             ) from None
         raise
-    cls = getattr(module, class_name, None)
+    cls: type | None = getattr(module, class_name, None)
     if cls is None:
         raise ConfigError(f"{what} {name!r} is not available: {module_name} has no {class_name}")
     return cls

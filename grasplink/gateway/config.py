@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import itertools
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError
@@ -116,7 +117,7 @@ def load_config(path: str | Path | None) -> GatewayConfig:
     return parse_config(data, source)
 
 
-def parse_config(data: dict, source: str, prefix: str = "") -> GatewayConfig:
+def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> GatewayConfig:
     """A configuration from TOML data; `prefix` names where the table sits (a scene's
     `controller`) so errors point at the right key."""
     top = Params(data, source, prefix)
@@ -156,7 +157,10 @@ def parse_config(data: dict, source: str, prefix: str = "") -> GatewayConfig:
     return config
 
 
-def _checked(p: Params, name: str, build: Any) -> Any:
+_Built = TypeVar("_Built")
+
+
+def _checked(p: Params, name: str, build: Callable[[], _Built]) -> _Built:
     """Build a controller part; its own ConfigError is reported at the table's key."""
     try:
         return build()
@@ -171,10 +175,8 @@ def _feedback(p: Params) -> FeedbackSettings:
     slip = p.raw("slip_table", [list(e) for e in DEFAULT_SLIP_ENTRIES])
     force_h = p.number("force_hysteresis_n", DEFAULT_FORCE_HYSTERESIS_N, low=0.0)
     slip_h = p.number("slip_hysteresis_mm_s", DEFAULT_SLIP_HYSTERESIS_MM_S, low=0.0)
-    tables = {
-        "force_table": _checked(p, "force_table", lambda: force_table(force, hysteresis_n=force_h)),
-        "slip_table": _checked(p, "slip_table", lambda: slip_table(slip, hysteresis_mm_s=slip_h)),
-    }
+    force_levels = _checked(p, "force_table", lambda: force_table(force, hysteresis_n=force_h))
+    slip_levels = _checked(p, "slip_table", lambda: slip_table(slip, hysteresis_mm_s=slip_h))
     timing = {
         f"{name}_us": round(
             p.number(
@@ -199,7 +201,8 @@ def _feedback(p: Params) -> FeedbackSettings:
         p,
         "mode",
         lambda: FeedbackConfig(
-            **tables,
+            force_table=force_levels,
+            slip_table=slip_levels,
             **timing,
             occurrence_velocity_mrad_s=occurrence,
             min_speed_confidence=confidence,

@@ -117,9 +117,8 @@ def slip_table(
     return _build("slip table", Belt.SLIP, "mm/s", entries, hysteresis_mm_s)
 
 
-def _build(
-    name: str, belt: Belt, unit: str, entries: Sequence[Sequence[float]], hysteresis: float
-) -> LevelTable:
+def _build(name: str, belt: Belt, unit: str, entries: object, hysteresis: float) -> LevelTable:
+    """Validated as untrusted (TOML) input: `entries` is checked, not assumed, to be a list."""
     if isinstance(entries, str | bytes) or not isinstance(entries, Sequence):
         raise ConfigError(f"{name}: expected a list of [start {unit}, velocity mrad/s] entries")
     starts: list[float] = []

@@ -50,7 +50,7 @@ class ScriptedMaster(NmtMaster):
         belt_mrad_s: Profile | None = None,
         hand_grip_n: Profile | None = None,
         command_period_us: int = COMMAND_PERIOD_US,
-        **master_options,
+        **master_options: Any,  # NmtMaster's
     ):
         super().__init__(**master_options)
         self.belt_id, self.hand_id = belt_id, hand_id
