@@ -270,7 +270,10 @@ def memory_per_message(messages: list[Message]) -> tuple[float, float]:
     for message in messages:
         box.push(
             Message(
-                message.topic, bytes(message.payload), message.qos, message.retain, message.meta
+                "".join(list(message.topic)),
+                bytes(bytearray(message.payload)),
+                message.qos,
+                message.retain,
             )
         )
     used = tracemalloc.get_traced_memory()[0] - base
