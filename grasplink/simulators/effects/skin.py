@@ -168,7 +168,10 @@ class _Points(NamedTuple):
 
 
 def pulse(
-    tau_s: np.ndarray, alpha: np.ndarray, rise_s: np.ndarray, start: np.ndarray
+    tau_s: np.ndarray | float,
+    alpha: np.ndarray | float,
+    rise_s: np.ndarray | float,
+    start: np.ndarray | float,
 ) -> np.ndarray:
     """c(t) of thesis ch. 5.3.1 at tau = t - t_i (>= 0).
 
@@ -331,14 +334,14 @@ class RidgeContacts(Effect):
             return None
         columns = [np.concatenate(column) for column in zip(*found, strict=True)]
         order = np.lexsort((columns[1], columns[0]))  # by interval, then along the travel
-        interval, _, sign, x_point, ridge, tip, height = (c[order] for c in columns)
+        interval, _, signs, x_point, ridge, tip, height = (c[order] for c in columns)
         frac = (x_point - x0[interval]) / (x1[interval] - x0[interval])
         times = t0[interval] + frac * (t1[interval] - t0[interval])
         # Never earlier than a previous contact (rounding at sample boundaries).
         times = np.maximum.accumulate(np.concatenate([[self._last_crossing_s], times]))[1:]
         self._last_crossing_s = float(times[-1])
         speed = v0[interval] + frac * (v1[interval] - v0[interval])
-        return times, ridge, sign, tip, height, speed
+        return times, ridge, signs, tip, height, speed
 
     def _events(self, t: np.ndarray, x: np.ndarray, v: np.ndarray):
         crossings = self._crossings(t, x, v)

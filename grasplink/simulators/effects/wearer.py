@@ -471,6 +471,7 @@ class WearerVirtual(Effect):
             if now_us > end_us:
                 break
             if which == 0:
+                assert self._landing is not None  # event 0 is queued only while a landing is set
                 self.level = float(self._landing[1])
                 self._landing = None
                 level[np.searchsorted(times_us, now_us) :] = self.level
