@@ -150,7 +150,12 @@ def test_reads_beyond_the_tables_and_coils_are_refused(client):
     assert response.isError() and response.exception_code == 0x02
     response = client.read_holding_registers(RMAP.holding_count, count=1)
     assert response.isError() and response.exception_code == 0x02
-    response = client.read_coils(0, count=1)
+    for address in (0, 1000, 0xFFF0):
+        response = client.read_coils(address, count=1)
+        assert response.isError() and response.exception_code == 0x01
+        response = client.read_discrete_inputs(address, count=8)
+        assert response.isError() and response.exception_code == 0x01
+    response = client.write_coil(5, True)
     assert response.isError() and response.exception_code == 0x01
 
 

@@ -254,11 +254,12 @@ def _holding(rmap: RegisterMap) -> list[str]:
         if register.codes is not None:
             accepted = ", ".join(f"{c} {n}" for n, c in register.codes.items())
         else:
-            accepted = f"{register.low}..{register.high}"
+            low = register.type.low if register.low is None else register.low
+            high = register.type.high if register.high is None else register.high
+            accepted = f"{low}..{high}"
             if register.scale != 1:
-                low = register.low * register.scale
-                high = register.high * register.scale
-                accepted += f" ({low:g}..{high:g} {register.unit})"
+                scaled = f"{low * register.scale:g}..{high * register.scale:g}"
+                accepted += f" ({scaled} {register.unit})"
         reads = register.description
         if register.default is None:
             reads += " (sentinel: no such node)" if register.profile else ""

@@ -146,6 +146,8 @@ def profile_source(kind: str, index: int, subindex: int = 0) -> ProfileSource:
     if not hasattr(entry, "data_type"):
         entry = entry[subindex]
     unit = _UNIT_RE.search(entry.name)
+    if not isinstance(entry.data_type, int) or entry.data_type not in _EDS_TYPES:
+        raise ValueError(f"{kind} {index:04X}h:{subindex:02X}: no register type for it")
     low, high = object_limits(kind, index, subindex)
     return ProfileSource(
         kind,
@@ -213,12 +215,13 @@ class Register:
         """Engineering value -> raw integer (saturated, or wrapped for counters);
         None when unknown (None, NaN, a name not in the codes)."""
         kind = type(value)
+        raw: int
         if kind is float:
             if not math.isfinite(value):
                 return None
             raw = round(value / self.scale)
         elif kind is int:
-            raw = value if self.scale == 1 else round(value / self.scale)
+            raw = int(value) if self.scale == 1 else round(value / self.scale)
         elif kind is bool:
             return int(value)
         elif kind is str:
@@ -262,15 +265,25 @@ def to_words(word_type: WordType, raw: int | None) -> list[int]:
 
 def from_words(word_type: WordType, words: Sequence[int], *, sentinel: bool = True) -> int | None:
     """Words (high first) -> raw integer; None for the sentinel pattern."""
+    if sentinel and _pattern(word_type, words) == word_type.sentinel:
+        return None
+    return words_to_int(word_type, words)
+
+
+def words_to_int(word_type: WordType, words: Sequence[int]) -> int:
+    """Words (high first) -> raw integer, the sentinel pattern read as a number (writes)."""
+    pattern = _pattern(word_type, words)
+    if word_type.signed and pattern >= 1 << (word_type.bits - 1):
+        pattern -= 1 << word_type.bits
+    return pattern
+
+
+def _pattern(word_type: WordType, words: Sequence[int]) -> int:
     if len(words) != word_type.words or any(not 0 <= w <= 0xFFFF for w in words):
         raise ValueError(f"{word_type.name} takes {word_type.words} words of 0..0xFFFF")
     pattern = 0
     for word in words:
         pattern = pattern << 16 | word
-    if sentinel and pattern == word_type.sentinel:
-        return None
-    if word_type.signed and pattern >= 1 << (word_type.bits - 1):
-        pattern -= 1 << word_type.bits
     return pattern
 
 
@@ -363,12 +376,12 @@ class RegisterMap:
                 f"holding registers {span} are not one command; commands: "
                 + ", ".join(f"{g.command} {_span(g)}" for g in self.groups),
             )
-        raws = []
+        raws: list[int] = []
         offset = 0
         for register in group.registers:
             chunk = words[offset : offset + register.words]
             offset += register.words
-            raw = from_words(register.type, chunk, sentinel=False)
+            raw = words_to_int(register.type, chunk)
             if not _accepts(register, raw):
                 raise RegisterError(
                     ExceptionCode.ILLEGAL_VALUE,

@@ -34,7 +34,7 @@ from typing import Any
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
-from pymodbus.pdu import ModbusPDU
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
@@ -60,6 +60,7 @@ START_TIMEOUT_S = 5.0
 READ_INPUTS, READ_HOLDING = 4, 3
 WRITE_FUNCTIONS = frozenset({6, 16, 23})
 REGISTER_FUNCTIONS = frozenset({3, 4, 6, 16, 23})
+BIT_FUNCTIONS = frozenset({1, 2, 5, 15})  # coils and discrete inputs: this map has none
 
 
 class ModbusServer:
@@ -156,24 +157,24 @@ class ModbusServer:
             await server.serve_forever(background=True)
         except RuntimeError:  # pymodbus logs the OSError and says only "could not listen"
             self._error = self._listen_error()
-            await server.shutdown()
+            await server.shutdown()  # type: ignore[no-untyped-call]
             return
-        if self.url.scheme == "tcp" and server.transport is not None:
+        if isinstance(server.transport, asyncio.Server):  # TCP: the port actually bound
             host, port = server.transport.sockets[0].getsockname()[:2]
             self.address = ModbusUrl("tcp", host=host, port=port)
         self._ready.set()
         try:
             await self._stopping.wait()
         finally:
-            await server.shutdown()
+            await server.shutdown()  # type: ignore[no-untyped-call]
 
     def _make_server(self) -> _TcpServer | _SerialServer:
         url = self.url
         device = SimDevice(
             id=url.unit or 0,  # 0: every unit id (TCP)
             simdata=(
-                [SimData(0, datatype=DataType.BITS)],  # coils, discrete inputs: refused in
-                [SimData(0, datatype=DataType.BITS)],  # _action with ILLEGAL FUNCTION
+                [SimData(0, datatype=DataType.BITS)],  # coils, discrete inputs: none,
+                [SimData(0, datatype=DataType.BITS)],  # refused by _Handler
                 [SimData(0, count=self.map.holding_count, datatype=DataType.REGISTERS)],
                 [
                     SimData(
@@ -187,7 +188,13 @@ class ModbusServer:
             action=self._action,
         )
         if url.scheme == "tcp":
-            return _TcpServer(device, address=(url.host, url.port), trace_pdu=self._trace)
+            # trace_pdu may return None to drop a request (pymodbus types it as returning
+            # the PDU): how other units' requests stay unanswered on a shared line.
+            return _TcpServer(
+                device,
+                address=(url.host, url.port),
+                trace_pdu=self._trace,  # type: ignore[arg-type]
+            )
         return _SerialServer(
             device,
             framer=FramerType.RTU,
@@ -196,7 +203,7 @@ class ModbusServer:
             parity=url.parity,
             stopbits=url.stopbits,
             bytesize=8,
-            trace_pdu=self._trace,
+            trace_pdu=self._trace,  # type: ignore[arg-type]
         )
 
     def _listen_error(self) -> BusError:
@@ -308,13 +315,24 @@ class _Handler(ServerRequestHandler):
     """
 
     def __init__(self, *args: Any) -> None:
-        super().__init__(*args)
+        super().__init__(*args)  # type: ignore[no-untyped-call]
         self._tasks: set[asyncio.Task[None]] = set()  # the loop keeps only weak references
 
     def handle_later(self) -> None:
         task = self.loop.create_task(self.handle_request())
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
+
+    async def handle_request(self) -> None:
+        """Coil and discrete-input functions: ILLEGAL FUNCTION at any address (pymodbus
+        would answer ILLEGAL ADDRESS outside the bit block it insists on)."""
+        pdu = self.last_pdu
+        if pdu is not None and pdu.function_code in BIT_FUNCTIONS:
+            response = ExceptionResponse(pdu.function_code, ExcCodes.ILLEGAL_FUNCTION)
+            response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
+            self.server_send(response, self.last_addr)  # type: ignore[no-untyped-call]
+            return
+        await super().handle_request()  # type: ignore[no-untyped-call]
 
 
 class _TcpServer(ModbusTcpServer):
