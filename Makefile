@@ -105,10 +105,12 @@ format: setup
 	$(VENV)/bin/ruff format $(LINT_PATHS)
 
 # The Sparkplug B payload classes, generated from the committed schema (grpcio-tools' protoc;
-# the protobuf runtime pinned in pyproject.toml matches its generator's version).
+# the protobuf runtime pinned in pyproject.toml matches its generator's version), and their
+# typed stub for mypy (mypy-protobuf's plugin).
 SPARKPLUG := grasplink/gateway/telemetry
 proto: setup
-	cd $(SPARKPLUG) && ../../../$(PY) -m grpc_tools.protoc -I. --python_out=. sparkplug_b.proto
+	cd $(SPARKPLUG) && ../../../$(PY) -m grpc_tools.protoc -I. --python_out=. \
+	  --plugin=protoc-gen-mypy=../../../$(VENV)/bin/protoc-gen-mypy --mypy_out=. sparkplug_b.proto
 
 docs: setup
 	$(VENV)/bin/grasplink profiles doc --out docs/profiles.md
