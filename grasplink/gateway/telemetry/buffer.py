@@ -99,7 +99,7 @@ class Outbox:
 
     def take(self, count: int) -> list[Message]:
         """The oldest `count` messages (fewer if there are fewer), removed."""
-        taken = []
+        taken: list[Message] = []
         while self._items and len(taken) < count:
             message = self._items.popleft()
             self.bytes -= message.size_bytes

@@ -455,8 +455,8 @@ class SparkplugSession:
             elif device is None and name.startswith(CALIBRATION):
                 calibration[name[len(CALIBRATION) :]] = value
             elif device is None and name.startswith("Control/"):
-                command = name[len("Control/") :]
-                incoming.requests.append(CommandRequest(command, Command(command, value)))
+                control = name[len("Control/") :]
+                incoming.requests.append(CommandRequest(control, Command(control, value)))
             elif device is not None and name == RESTART:
                 if value is True:
                     command = Command("restart_node", device)

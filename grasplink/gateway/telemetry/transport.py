@@ -293,6 +293,7 @@ class MqttLink:
         paho's own work at this rate (benchmarks/bench_telemetry.py)."""
         inner = client._client  # aiomqtt 2.5.1 (pinned) keeps its paho client here
         aiomqtt_on_publish = inner.on_publish
+        assert aiomqtt_on_publish is not None  # aiomqtt's Client.__init__ sets it
 
         def on_publish(*args: Any) -> None:
             aiomqtt_on_publish(*args)
@@ -339,11 +340,8 @@ class MqttLink:
     async def _receive(self, client: aiomqtt.Client) -> None:
         try:
             async for message in client.messages:
-                payload = message.payload
-                if not isinstance(payload, bytes | bytearray):
-                    payload = b"" if payload is None else str(payload).encode()
-                incoming = self.protocol.receive(
-                    message.topic.value, bytes(payload), bool(message.retain), now_ms()
+                incoming = self.protocol.receive(  # aiomqtt's payload is paho's, always bytes
+                    message.topic.value, bytes(message.payload), bool(message.retain), now_ms()
                 )
                 self.push(incoming.messages)
                 for request in incoming.requests:
