@@ -75,8 +75,8 @@ class SosFilter:
     transient); `reset` forgets the state (after a gap).
 
     Small pieces of an IIR cascade (a CAN frame brings 1-3 samples) run the
-    recursion in Python - scipy's `sosfilt` costs ~20 us per call in
-    argument checks, more than the arithmetic - with exactly sosfilt's
+    recursion in Python - scipy's `sosfilt` spends more per call on
+    argument checks than on the arithmetic - with exactly sosfilt's
     operations in sosfilt's order, so the two paths give the same bits.
     """
 
