@@ -57,8 +57,7 @@ logger = logging.getLogger(__name__)
 logging.getLogger("pymodbus").addHandler(logging.NullHandler())
 
 START_TIMEOUT_S = 5.0
-READ_INPUTS, READ_HOLDING = 4, 3
-WRITE_FUNCTIONS = frozenset({6, 16, 23})
+READ_INPUTS = 4
 REGISTER_FUNCTIONS = frozenset({3, 4, 6, 16, 23})
 BIT_FUNCTIONS = frozenset({1, 2, 5, 15})  # coils and discrete inputs: this map has none
 
@@ -85,13 +84,13 @@ class ModbusServer:
         self.command_timeout_s = command_timeout_s
         self.stats: Counter[str] = Counter()  # requests, exceptions, commands; this thread only
         self.address: ModbusUrl = self.url
-        self.last_result: CommandResult | None = None
         self._last_actions: dict[str, str] = {}  # action registers read back what was asked
         self._cached: tuple[Any, list[int]] | None = None  # (snapshot, its encoded table)
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
         self._ready = threading.Event()
+        self._stop_requested = threading.Event()  # stop() may come before the loop exists
         self._error: BaseException | None = None
 
     # -- control (any thread) ------------------------------------------------------------
@@ -110,6 +109,7 @@ class ModbusServer:
 
     def stop(self, timeout: float = 2.0) -> None:
         """Close the listener and every connection (idempotent)."""
+        self._stop_requested.set()
         loop, stopping = self._loop, self._stopping
         if loop is not None and stopping is not None and not loop.is_closed():
             with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
@@ -163,6 +163,8 @@ class ModbusServer:
             host, port = server.transport.sockets[0].getsockname()[:2]
             self.address = ModbusUrl("tcp", host=host, port=port)
         self._ready.set()
+        if self._stop_requested.is_set():
+            self._stopping.set()
         try:
             await self._stopping.wait()
         finally:
@@ -272,7 +274,8 @@ class ModbusServer:
         return None
 
     def _inputs(self) -> list[int]:
-        """The encoded input table, once per snapshot (a poller at any rate costs the same)."""
+        """The encoded input table, once per snapshot (pollers faster than 20 Hz, or several,
+        share one encoding)."""
         snapshot = self.gateway.latest
         cached = self._cached
         if cached is not None and cached[0] is snapshot:
@@ -294,7 +297,6 @@ class ModbusServer:
                 "modbus: %s got no result within %.1f s", command.name, self.command_timeout_s
             )
             return ExcCodes.DEVICE_FAILURE
-        self.last_result = result
         if result.accepted:
             if command.name in ("emg_calibrate", "restart_node"):
                 self._last_actions[command.name] = command.value
