@@ -28,6 +28,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 from grasplink.errors import ConfigError
 from grasplink.evaluation import nonstationary as ns
@@ -327,7 +328,7 @@ def synthetic(quick: bool, log: Callable[[str], None]) -> dict:
             memory = ev.peak_memory_kib(
                 _factory(name, settings, recordings[0][1]), recordings[0][1]
             )
-            entry = {g: ev.summarise(v) for g, v in groups.items() if v}
+            entry: dict[str, Any] = {g: ev.summarise(v) for g, v in groups.items() if v}
             entry["per_layout"] = per_layout
             entry["false_slip_pct"] = 100.0 * false_updates / max(1, static_updates)
             entry["memory_kib"] = memory

@@ -28,9 +28,11 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from grasplink.bus.faults import ErrorFrame
 from grasplink.core.frames import Frame
 from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import ConfigError, PdoError
@@ -192,8 +194,10 @@ class BusLog:
         self._emg = PdoCodec("emg", node_ids["emg"])
         self._emg_ids = self._emg.tpdo_can_ids()
 
-    def tap(self, t_us: int, frame: Frame, sender: object) -> None:
-        can_id = getattr(frame, "can_id", None)  # error frames carry none
+    def tap(self, t_us: int, frame: Frame | ErrorFrame, sender: object) -> None:
+        if isinstance(frame, ErrorFrame):
+            return  # no CAN-ID, no data
+        can_id = frame.can_id
         if can_id in self._emg_ids:
             try:
                 values = self._emg.decode(can_id, frame.data)
@@ -610,7 +614,7 @@ def run_report(
     trials = grid(quick) if trials is None else list(trials)
     log(f"closed-loop trials: {len(trials)} ({grid_name})")
     rows = run_trials(trials, controllers_for, workers, log)
-    results = {
+    results: dict[str, Any] = {
         "quick": quick,
         "grid": {
             "modes": list(MODES),

@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any, Literal
 
 import numpy as np
 
@@ -747,7 +748,9 @@ def _pct(values: np.ndarray, q: float) -> float | None:
     return float(100 * np.percentile(values, q)) if len(values) else None
 
 
-def _q(values: np.ndarray, q: float, method: str = "linear") -> float | None:
+def _q(
+    values: np.ndarray, q: float, method: Literal["linear", "higher"] = "linear"
+) -> float | None:
     """The q-th percentile; None when there is none or it is infinite (never cleared)."""
     if not len(values):
         return None
@@ -776,7 +779,7 @@ CONSTANT_FIGURES = ("speed_median_pct", "speed_p90_pct", "position_median_mm", "
 
 def target_rows(results: dict, default: str, before: dict | None, now: dict | None) -> list:
     """(label, figure, bound text, met) for the default decoder; None = not measured."""
-    rows = []
+    rows: list[tuple[str, Any, str, bool | None]] = []
     for label, where, key, bound, kind in TARGETS:
         block = results["overall" if where == "overall" else "categories"].get(default, {})
         figures = block if where == "overall" else block.get(where, {})
@@ -787,8 +790,8 @@ def target_rows(results: dict, default: str, before: dict | None, now: dict | No
         old = (before or {}).get(key)
         new = (now or {}).get(key)
         met = None if old is None or new is None else round(new, 1) <= round(old, 1)
-        bound = f"≤ {old:.1f} (last run)" if old is not None else "≤ last run (none found)"
-        rows.append((f"constant-speed target set: {key}", new, bound, met))
+        last = f"≤ {old:.1f} (last run)" if old is not None else "≤ last run (none found)"
+        rows.append((f"constant-speed target set: {key}", new, last, met))
     return rows
 
 
