@@ -122,6 +122,8 @@ bench: setup
 	$(PY) benchmarks/bench_decoding.py
 	$(PY) benchmarks/bench_gateway.py
 	$(PY) benchmarks/bench_loop.py
+	$(PY) benchmarks/bench_telemetry.py
+	$(PY) benchmarks/bench_modbus.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
