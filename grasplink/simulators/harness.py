@@ -7,6 +7,7 @@ time grid, proving that chunked and one-shot stepping give the same output.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from grasplink.core.params import Params
 from grasplink.simulators.core import Context, Effect, Io
 
 US_PER_S = 1_000_000
+_E = TypeVar("_E", bound=Effect)
 
 
 def sample_times_us(rate_hz: int, duration_s: float) -> np.ndarray:
@@ -26,7 +28,7 @@ def context(seed: int = 1, rate_hz: int = 1000, layout_mm=None, nodes=None) -> C
     return Context("test", seed, rates, layout_mm, nodes or {})
 
 
-def make(kind_cls: type[Effect], ctx: Context, **params) -> Effect:
+def make(kind_cls: type[_E], ctx: Context, **params: Any) -> _E:
     p = Params(dict(params), "test", "effect")
     effect = kind_cls(p, ctx)
     p.finish()

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grasplink.simulators import harness
+from grasplink.simulators.core import Effect
 from grasplink.simulators.effects import actuators, kinematics, noise, skin
 
 NOISE_WHITE_N = 0.02  # thesis-like: high-frequency FSR noise
@@ -60,7 +61,7 @@ def slip_recording(
     duration = onset_s + travel / abs(speed_mm_s) + tail_s
     start = length + LEAD_MM if reverse else -LEAD_MM
     profile = [[0.0, 0.0], [onset_s, 0.0], [onset_s + 1e-6, abs(speed_mm_s)]]
-    physics = [
+    physics: list[tuple[type[Effect], dict[str, object]]] = [
         (
             kinematics.ScriptedObject,
             {
@@ -138,7 +139,7 @@ def scripted_recording(
     `object.scripted`). `grip_n` (default 5 N) may step during the slip;
     `full_scale_n` clips the FSR (`skin.saturation`); noise in N.
     """
-    physics = [
+    physics: list[tuple[type[Effect], dict[str, object]]] = [
         (
             kinematics.ScriptedObject,
             {
