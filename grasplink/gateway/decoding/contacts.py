@@ -52,7 +52,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -69,7 +69,7 @@ class ContactEvent(NamedTuple):
 
     id: int
     t_s: float  # onset time, sub-sample
-    index: int  # global index of the sample nearest the onset
+    index: int  # type: ignore[assignment]  # (shadows tuple.index) the sample nearest the onset
     emit_index: int  # global index of the sample that decided it
     z: float  # strength: slope jump in noise units
     jump_n_s: float  # slope jump, N/s
@@ -111,6 +111,7 @@ class _Watch:
     base: float  # level before the onset
     trend: float  # rising trend before the onset (N/sample, >= 0)
     noise: float  # level noise (N)
+    fall: float = 0.0  # falling slope just before the onset (N/sample, >= 0): a pulse's tail
     peak: float = -math.inf
     early: float = -math.inf  # highest level in the first quarter of the watch
     history: np.ndarray = field(default_factory=lambda: np.zeros(0))  # running peak by sample
@@ -173,6 +174,8 @@ class ContactDetector:
         # a sharp rise that stays: judged a step early (a stop, a grip change), see _advance
         self.step_rise = max(1, round(step_rise_s * self.fs_hz))
         self.step_hold = max(self.step_rise + 1, round(step_hold_s * self.fs_hz))
+        self.fall_n = max(2, round(0.02 * self.fs_hz))  # an earlier pulse's tail: its slope ...
+        self.fall_credit = max(1, round(0.03 * self.fs_hz))  # ... followed this long at most
         half = max(0, round(level_s * self.fs_hz / 2.0))
         self.level_half = half
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
@@ -215,7 +218,8 @@ class ContactDetector:
             - max(self.noise_blocks, self.history_blocks)
             - 2
         )
-        for cache in [self._censored, self._floor] + [
+        caches: list[dict[int, Any]] = [self._censored, self._floor]
+        for cache in caches + [
             c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
         ]:
             for b in [b for b in cache if b < oldest]:
@@ -470,15 +474,24 @@ class ContactDetector:
             if base is None:
                 base = self._level_at(ev.index)
             earlier = self._level_at(before - self.trend_n)
-            trend = 0.0
+            trend = fall = 0.0
             if base is not None and earlier is not None:  # rising trend before the onset
                 trend = max(0.0, (base - earlier) / self.trend_n)
+            recent = self._level_at(before - self.fall_n)
+            if base is not None and recent is not None:  # an earlier pulse's tail falling
+                fall = max(0.0, (recent - base) / self.fall_n)
             fine_noise = self._noise(fine, ev.index // self.block)
             white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
             noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
             self._watches.append(
                 _Watch(
-                    ev.id, ev.index, 0.0 if base is None else base, trend, noise, next_k=ev.index
+                    ev.id,
+                    ev.index,
+                    0.0 if base is None else base,
+                    trend,
+                    noise,
+                    fall=fall,
+                    next_k=ev.index,
                 )
             )
         still = []
@@ -495,7 +508,10 @@ class ContactDetector:
         """Examine the level from watch.next_k on; a verdict, or None while undecided.
 
         The rising trend of the `trend_s` before the onset (the object
-        covering more of the sensor) is taken out. A pulse falls back by
+        covering more of the sensor) is taken out, and an earlier pulse's tail
+        falling under it is followed for 30 ms (its slope just before the onset),
+        no further: a tail flattens, and a fast pulse on a steep tail still falls
+        back. A pulse falls back by
         `drop_fraction` of its height within `decay_rises` times its rise time
         (to 90 % of its peak) after that (a grip step up and, later, down is no pulse); a step
         stays level for the whole watch. A *sharp* rise (to 90 % within `step_rise_s`)
@@ -513,6 +529,7 @@ class ContactDetector:
             level = self._level[i0 : i0 + end - watch.next_k + 1]
             k = np.arange(watch.next_k, end + 1)
             d = level - watch.base - watch.trend * (k - watch.index + 2 * h + 1)
+            d += watch.fall * np.minimum(k - watch.index, self.fall_credit)
             peak = np.maximum.accumulate(np.maximum(d, watch.peak))
             history = np.concatenate([watch.history, peak])  # running peak since the onset
             watch.history = history
@@ -542,8 +559,8 @@ class ContactDetector:
             watch.peak = float(peak[-1])
             watch.next_k = end + 1
         if watch.next_k > watch.index + self.watch:
-            level = watch.peak <= 1.5 * watch.early
-            return PulseCheck(watch.id, watch.index + self.watch + h, False if level else None)
+            flat = watch.peak <= 1.5 * watch.early
+            return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
         return None
 
     def _is_step(self, watch: _Watch) -> bool:

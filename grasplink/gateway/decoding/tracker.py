@@ -62,6 +62,7 @@ import bisect
 import math
 from collections import deque
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -358,8 +359,8 @@ class TrackerDecoder(Decoder):
                     )
                 )
         self._null += self.LOG_CLUTTER_IDLE
-        recent = {c.id for c in self._contacts[-self.START_CONTACTS :]}
-        self._tracks = self._prune(children, recent)
+        recent_ids = {c.id for c in self._contacts[-self.START_CONTACTS :]}
+        self._tracks = self._prune(children, recent_ids)
 
     def _branch(self, h: _Track, ev: ContactEvent, rate: float) -> list[_Track]:
         """Children of h for contact ev: assigned to one of the next ridges, or spurious.
@@ -528,11 +529,15 @@ class TrackerDecoder(Decoder):
             if not V_MIN_MM_S <= c.v <= V_MAX_MM_S:
                 return None
         else:  # far off: the speed changed; start again from the last two contacts
-            c = self._start_speed(
+            restart = self._start_speed(
                 h, k, tc, dt, skipped, sigma_t, d, max(h.p22, self.DIP_PRIOR_MM**2)
             )
-            if c is None or not 1.0 / self.MAX_SPEED_JUMP <= c.v / v <= self.MAX_SPEED_JUMP:
+            if (
+                restart is None
+                or not 1.0 / self.MAX_SPEED_JUMP <= restart.v / v <= self.MAX_SPEED_JUMP
+            ):
                 return None
+            c = restart
         c.score += log_prior + math.log(inlier + outlier)
         return c
 
@@ -693,7 +698,7 @@ class TrackerDecoder(Decoder):
         the other way (a generalised likelihood ratio: the best stories, not the whole
         posterior, which many weak clutter stories of either direction dilute).
         """
-        entries = []
+        entries: list[list[Any]] = []  # [score, track, stopped, evident, limit, weight]
         until = g + self.REFRESH_S
         best = max(h.score for h in self._tracks)
         # one-contact tracks only lose to silence: skip those that cannot matter
