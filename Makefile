@@ -129,4 +129,4 @@ bench: setup
 	$(PY) benchmarks/bench_modbus.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache
