@@ -529,8 +529,8 @@ class ContactDetector:
             level = self._level[i0 : i0 + end - watch.next_k + 1]
             k = np.arange(watch.next_k, end + 1)
             d = level - watch.base - watch.trend * (k - watch.index + 2 * h + 1)
-            d += watch.fall * np.minimum(k - watch.index, self.fall_credit)
             peak = np.maximum.accumulate(np.maximum(d, watch.peak))
+            d = d + watch.fall * np.minimum(k - watch.index, self.fall_credit)  # fallen back?
             history = np.concatenate([watch.history, peak])  # running peak since the onset
             watch.history = history
             hold = watch.index + self.step_hold

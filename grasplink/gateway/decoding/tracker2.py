@@ -149,8 +149,10 @@ class TrackerDecoder(Decoder):
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
     LOG_NEW_TRACK = math.log(0.01)  # slips starting (or reversing) per s
     CLUTTER_PER_S = 0.05  # spurious contacts per s (detector false alarms, grip changes)
-    P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge)
-    RATE_WINDOW_S = 1.0  # contacts seen in this window set the rate of tip contacts
+    P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge) ...
+    TIP_MM = 10.0  # ... within this travel after it, into a spacing of at least TIP_GAP_MM
+    TIP_GAP_MM = 10.0  # (the edge tips over a long gap, never right before the next ridge)
+    TIP_S = 0.3  # ... or, speed unknown, within this time
     LOG_STOP = math.log(0.2)  # a slip stops before the next ridge (silence)
     LOG_RESTART = math.log(0.05)  # a slip stopped unseen and restarted before this contact
     RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
@@ -162,9 +164,8 @@ class TrackerDecoder(Decoder):
     SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
     SPEED_WALK_MM = 10.0
     LOG_CHANGING = math.log(0.3)  # prior of the changing-speed model at each (re)start
-    ACC_PRIOR = 1.0  # changing: acceleration sigma, in v^2 / ACC_MM
-    ACC_MM = 10.0
-    JERK = 0.3  # changing: acceleration change (sigma) per ACC_MM of travel, in v^2 / ACC_MM
+    ACC_PER_S = 2.0  # changing: acceleration sigma at a (re)start, x speed (v doubles in 0.5 s)
+    JERK_PER_S2 = 1.0  # changing: the acceleration drifts this much (sigma) in 1 s, x speed
     ACC_FLOOR = 0.4  # predicted braking keeps at least sqrt(1 - 2 x this) of the speed
     DIP_RECOVERY_S = 0.05  # the speed recovers from a ridge's dip within about this time
     DIP_PRIOR_MM = 1.0  # prior sigma of the distance lost at each ridge (mean 0)
@@ -226,6 +227,8 @@ class TrackerDecoder(Decoder):
         )
         total = 2.0 * float(before[0].sum())
         self._log_prior = np.log(before / total)  # (2, R): where a new track starts
+        # the spacing after each ridge, travel order (0 after the last)
+        self._gap = np.concatenate([before[:, 1:], np.zeros((2, 1))], axis=1)
         pd = np.vectorize(self._detect_probability)(before)
         self._pd = np.concatenate([pd, np.zeros((2, 1))], axis=1)  # the coast end: never seen
         with np.errstate(divide="ignore"):
@@ -359,19 +362,15 @@ class TrackerDecoder(Decoder):
         B = self._tracks
         step = ev.id in self._steps
         best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
-        # spurious contacts: detector false alarms, plus tip contacts in proportion to
-        # the contact rate actually seen
-        recent = sum(1 for c in self._contacts[:-1] if tc - c.t_s <= self.RATE_WINDOW_S)
-        rate = self.CLUTTER_PER_S + self.P_TIP * recent / self.RATE_WINDOW_S
+        rate = self._clutter_rate(B, tc)
         children = []
         if len(B):
             moving = np.isnan(B.stop)
             if step:  # a grip change (slipping or not) or, slipping, a stop here
-                clutter = np.where(moving & (B.n >= 2), self.GRIP_STEP_PER_S, rate)
-                children.append(B.replace(score=B.score + np.log(clutter)))
+                children.append(B.replace(score=B.score + math.log(self.GRIP_STEP_PER_S)))
                 children.append(self._stopped_at(B.take(np.flatnonzero(moving & (B.n >= 2))), tc))
             else:
-                children.append(B.replace(score=B.score + math.log(rate)))
+                children.append(B.replace(score=B.score + np.log(rate)))
             assigned = self._assign(B, ev)
             children += assigned
             if step:  # a stop right at a ridge
@@ -383,6 +382,23 @@ class TrackerDecoder(Decoder):
         self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
         self._tracks = self._prune(_Bank.concat(children), recent_ids)
+
+    def _clutter_rate(self, B: _Bank, tc: float) -> np.ndarray:
+        """Spurious contacts per s at tc under each track: detector false alarms, and while
+        slipping the tipping front edge's, within TIP_MM of travel after a ridge contact."""
+        rate = np.full(len(B), self.CLUTTER_PER_S)
+        moving = np.isnan(B.stop)
+        dt = tc - B.t
+        v = B.X[:, 1]
+        di = (1 - B.dirn) // 2
+        gap = self._gap[di, np.minimum(B.ridge, self.count - 1)]
+        room = np.minimum(self.TIP_MM, gap - 2.0)
+        tipping = moving & (gap >= self.TIP_GAP_MM)
+        fast = tipping & (B.run >= 2) & (v * dt <= room)
+        rate[fast] += self.P_TIP * v[fast] / room[fast]
+        slow = tipping & (B.run == 1) & (dt <= self.TIP_S)
+        rate[slow] += self.P_TIP / self.TIP_S
+        return rate
 
     def _births(self, ev: ContactEvent, base: float) -> _Bank:
         R = self.count
@@ -555,7 +571,7 @@ class TrackerDecoder(Decoder):
             ids=self._with_contact(B, ev),
         )
         # changing: the mean speed over the interval is the speed half an interval ago
-        sa = self.ACC_PRIOR * v * v / self.ACC_MM
+        sa = self.ACC_PER_S * v
         Pc = P.copy()
         half = dt / 2.0
         Pc[:, 1, 1] += (half * sa) ** 2
@@ -611,7 +627,7 @@ class TrackerDecoder(Decoder):
         Pp[:, 1, 1] += qv * dt
         chg = B.model == CHANGING
         if chg.any():
-            qj = np.where(chg, self.JERK**2 * v**5 / self.ACC_MM**3, 0.0)
+            qj = np.where(chg, (self.JERK_PER_S2 * v) ** 2, 0.0)
             Pp[:, 0, 0] += qj * dt3 * dt2 / 20.0
             Pp[:, 0, 1] += qj * dt2 * dt2 / 8.0
             Pp[:, 1, 0] += qj * dt2 * dt2 / 8.0
