@@ -9,7 +9,14 @@ from __future__ import annotations
 
 import canopen.objectdictionary as cod
 
-from grasplink.core.frames import HEARTBEAT_BASE, NMT_COB_ID, SDO_RX_BASE, SDO_TX_BASE, Frame
+from grasplink.core.frames import (
+    HEARTBEAT_BASE,
+    NMT_COB_ID,
+    SDO_RX_BASE,
+    SDO_TX_BASE,
+    Frame,
+    is_restricted_can_id,
+)
 from grasplink.core.nmt import (
     EMCY_ALLOWED,
     SDO_ALLOWED,
@@ -20,7 +27,7 @@ from grasplink.core.nmt import (
 from grasplink.devices import emcy as em
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.heartbeat import HeartbeatConsumer, HeartbeatProducer
-from grasplink.devices.pdo import CAN_ID_MASK, PdoEngine, is_restricted_can_id
+from grasplink.devices.pdo import CAN_ID_MASK, PdoEngine
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sdo_server import SdoServer
 from grasplink.devices.store import APPLICATION_AREA, COMMUNICATION_AREA, ObjectStore, Value

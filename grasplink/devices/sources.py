@@ -8,9 +8,11 @@ simulates nothing a scene did not ask for. Simulators plug in here.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 class SampleSource(Protocol):
@@ -35,7 +37,7 @@ class ConstantSource:
 class FunctionSource:
     """A signal given as a vectorised function of time in seconds (tests, demos)."""
 
-    def __init__(self, fn):
+    def __init__(self, fn: Callable[[np.ndarray], ArrayLike]):
         self.fn = fn
 
     def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
