@@ -99,8 +99,8 @@ lint: setup
 	$(VENV)/bin/ruff check $(LINT_PATHS)
 	$(VENV)/bin/ruff format --check $(LINT_PATHS)
 
-# Types: [tool.mypy] in pyproject.toml (strict for core, the gateway less its decoding
-# algorithms, and controllers; the checked-untyped-defs baseline elsewhere).
+# Types: [tool.mypy] in pyproject.toml (strict for core, devices, the gateway less its
+# decoding algorithms, and controllers; the checked-untyped-defs baseline elsewhere).
 typecheck: setup
 	$(VENV)/bin/mypy grasplink
 
