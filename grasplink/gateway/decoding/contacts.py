@@ -187,6 +187,7 @@ class ContactDetector:
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
         self._keep = keep
         self._t = np.zeros(0)  # recent sample times
+        self._x = np.zeros(0)  # and samples (same index)
         self._t_start = 0
         self._level = np.zeros(0)  # box-smoothed level, by centre index
         self._level_start = 0
@@ -204,6 +205,7 @@ class ContactDetector:
         n0 = self._n
         self._n += len(x)
         self._t = np.concatenate([self._t, t])
+        self._x = np.concatenate([self._x, x])
         self._raw_stats(x)
         candidates: list[tuple[int, int, int, float, float, float]] = []
         for ci, ch in enumerate(self.channels):
@@ -396,9 +398,28 @@ class ContactDetector:
             if rising < needed * jump:
                 continue
             n_at, delta, placed = self._refine(ci, n)
+            if self._after_drop(n_at, w):
+                continue
             # decided once z is known over +-w (late where the noise had to be waited for)
             emit = max(n + 2 * w, int(ch.zready[i - w : i + w + 1].max()))
             candidates.append((emit, w, n_at, delta, float(z[i]), float(jump), placed))
+
+    def _after_drop(self, n: int, w: int) -> bool:
+        """Is the kink at sample n the bottom of a sharp fall (the level stepping down: a
+        slip starting, the FSR model's friction term, or a grip released)? A fall within
+        w + 2 samples before it, in one sample, of over 5 sigma of the noise's steps and
+        over twice what the force then rises: a ridge pulse rises by far more than the
+        fastest decay of the one before it falls in a sample."""
+        i = n - self._t_start
+        if i - w - 2 < 0 or i + w >= len(self._x):
+            return False
+        white = self._white(n // self.block)
+        if white is None:
+            return False
+        x = self._x
+        fall = float(np.max(x[i - w - 2 : i] - x[i - w - 1 : i + 1]))
+        rise = float(np.mean(x[i + 1 : i + w + 1]) - x[i])
+        return fall > 5.0 * math.sqrt(2.0) * white[0] and fall > 2.0 * max(rise, 0.0)
 
     def _refine(self, ci: int, n: int) -> tuple[int, float, int]:
         """Coarse to fine: move the onset to the peak of each finer scale that sees it.
@@ -580,6 +601,7 @@ class ContactDetector:
         if len(self._t) > 2 * keep:
             cut = len(self._t) - keep
             self._t = self._t[cut:]
+            self._x = self._x[cut:]
             self._t_start += cut
         oldest_watch = min((w.next_k for w in self._watches), default=None)
         lv_keep = keep

@@ -147,7 +147,8 @@ class TrackerDecoder(Decoder):
     P_DETECT_MAX = 0.9  # chance a ridge contact is detected, after a long spacing
     P_DETECT_MIN = 0.5  # ... after a very short one (its pulse is small and merges)
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
-    LOG_NEW_TRACK = math.log(0.01)  # slips starting (or reversing) per s
+    LOG_NEW_TRACK = math.log(0.01)  # slips starting per s
+    LOG_REVERSE = math.log(0.2)  # a contact while slipping is the first after a reversal
     CLUTTER_PER_S = 0.05  # spurious contacts per s (detector false alarms, grip changes)
     P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge) ...
     TIP_MM = 10.0  # ... within this travel after it, into a spacing of at least TIP_GAP_MM
@@ -376,9 +377,17 @@ class TrackerDecoder(Decoder):
             if step:  # a stop right at a ridge
                 for c in assigned:
                     children.append(self._stopped_at(c.take(np.flatnonzero(c.n >= 2)), tc))
-        # a new track starting at this contact (the earlier story ends here)
-        base = best_before + self.LOG_NEW_TRACK + self._log_strength(ev.z)
-        children.append(self._births(ev, base))
+        # a new track starting at this contact: a slip starting (the earlier story ends
+        # here) or, while one slips, reversing (the other edge leads, anywhere)
+        base = np.full(2, best_before + self.LOG_NEW_TRACK)
+        if len(B):
+            slipping = np.isnan(B.stop) & (B.n >= 2)
+            for di, d in enumerate((1, -1)):
+                way = slipping & (B.dirn == -d)
+                if way.any():
+                    reverse = float(B.score[way].max()) + self.LOG_REVERSE + math.log(2.0)
+                    base[di] = max(base[di], reverse)
+        children.append(self._births(ev, base + self._log_strength(ev.z)))
         self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
         self._tracks = self._prune(_Bank.concat(children), recent_ids)
@@ -400,7 +409,8 @@ class TrackerDecoder(Decoder):
         rate[slow] += self.P_TIP / self.TIP_S
         return rate
 
-    def _births(self, ev: ContactEvent, base: float) -> _Bank:
+    def _births(self, ev: ContactEvent, base: np.ndarray) -> _Bank:
+        """One-contact tracks at every ridge, both ways; `base`: log prior per direction."""
         R = self.count
         dirn = np.repeat(np.array([1, -1]), R)
         ridge = np.tile(np.arange(R), 2)
@@ -419,7 +429,7 @@ class TrackerDecoder(Decoder):
             n=np.ones(2 * R, np.int64),
             ridge=ridge,
             run=np.ones(2 * R, np.int64),
-            score=base + self._log_prior.ravel(),
+            score=(base[:, None] + self._log_prior).ravel(),
             sig=np.full(2 * R, ev.sigma_s),
             stop=np.full(2 * R, np.nan),
             t=np.full(2 * R, ev.t_s),
@@ -881,9 +891,9 @@ class TrackerDecoder(Decoder):
 
         Agreement: the share of the posterior that puts the edge within AGREE_MM of
         the chosen track's position (and, slipping, its speed within AGREE_SPEED).
-        Direction log odds: the chosen track's score over the best slipping track's moving
-        the other way (a generalised likelihood ratio: the best stories, not the whole
-        posterior, which many weak clutter stories of either direction dilute).
+        Direction log odds: the posterior mass of the slipping tracks, and the tracks just
+        started (a slip starting or reversing), moving the chosen track's way over that
+        moving the other way.
         """
         B = self._tracks
         until = g + self.REFRESH_S
@@ -947,11 +957,13 @@ class TrackerDecoder(Decoder):
             agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
         odds = math.inf
         if not is_stopped:
-            other = slipping & (B.dirn != B.dirn[i]) & (B.n >= 2)
-            if other.any():
-                odds = float(total[i] - total[other].max())
-        else:
-            odds = math.inf
+            # the direction: the posterior mass of moving each way - slipping tracks, and
+            # tracks just started at a contact (a slip starting or reversing)
+            moving = (slipping | (waiting & live)) & np.isfinite(total)
+            way = B.dirn == B.dirn[i]
+            this = float(weight[moving & way].sum())
+            other = float(weight[moving & ~way].sum())
+            odds = math.log(this / other) if other > 0 else math.inf
         return (until, chosen, p_slip, agree, odds)
 
     def _evidence(self, B: _Bank) -> tuple[np.ndarray, np.ndarray]:
