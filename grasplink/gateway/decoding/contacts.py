@@ -112,10 +112,11 @@ class _Watch:
     trend: float  # rising trend before the onset (N/sample, >= 0)
     noise: float  # level noise (N)
     fall: float = 0.0  # falling slope just before the onset (N/sample, >= 0): a pulse's tail
+    tail: tuple[int, float, float] | None = None  # the pulse before it: onset, height, rise
     peak: float = -math.inf
     early: float = -math.inf  # highest level in the first quarter of the watch
     history: np.ndarray = field(default_factory=lambda: np.zeros(0))  # running peak by sample
-    levels: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level by sample (hold)
+    levels: np.ndarray = field(default_factory=lambda: np.zeros(0))  # raw level (to the hold)
     next_k: int = 0  # next level sample to examine
 
 
@@ -194,6 +195,7 @@ class ContactDetector:
         self._next_id = 0
         self._recent: deque[float] = deque(maxlen=16)  # times of the contacts emitted
         self._watches: list[_Watch] = []
+        self._onsets: deque[tuple[int, float, float]] = deque(maxlen=4)  # (index, base, trend)
         self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
         self.trend_n = max(1, round(trend_s * self.fs_hz))
 
@@ -504,16 +506,11 @@ class ContactDetector:
             fine_noise = self._noise(fine, ev.index // self.block)
             white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
             noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
+            base = 0.0 if base is None else base
+            tail = self._tail(ev.index, noise)
+            self._onsets.append((ev.index, base, trend))
             self._watches.append(
-                _Watch(
-                    ev.id,
-                    ev.index,
-                    0.0 if base is None else base,
-                    trend,
-                    noise,
-                    fall=fall,
-                    next_k=ev.index,
-                )
+                _Watch(ev.id, ev.index, base, trend, noise, fall=fall, tail=tail, next_k=ev.index)
             )
         still = []
         for watch in self._watches:
@@ -535,7 +532,7 @@ class ContactDetector:
         back. A pulse falls back by
         `drop_fraction` of its height within `decay_rises` times its rise time
         (to 90 % of its peak) after that (a grip step up and, later, down is no pulse); a step
-        stays level for the whole watch. A *sharp* rise (to 90 % within `step_rise_s`)
+        stays level for the whole watch. A *sharp* rise (to 80 % within `step_rise_s`)
         that has not fallen back by `drop_fraction` `step_hold_s` after the onset is a
         step already then: a ridge pulse that sharp is a fast one and has fallen back
         by then (its peak comes after ~1.25 mm of travel), while the end of a slip
@@ -549,14 +546,16 @@ class ContactDetector:
             i0 = watch.next_k + h - self._level_start
             level = self._level[i0 : i0 + end - watch.next_k + 1]
             k = np.arange(watch.next_k, end + 1)
-            d = level - watch.base - watch.trend * (k - watch.index + 2 * h + 1)
-            peak = np.maximum.accumulate(np.maximum(d, watch.peak))
-            d = d + watch.fall * np.minimum(k - watch.index, self.fall_credit)  # fallen back?
+            # fallen back? an earlier pulse's tail under it taken out
+            credit = self._tail_credit(watch, k)
+            raw = level - watch.base + credit
+            d = raw - watch.trend * (k - watch.index + 2 * h + 1)
+            peak = np.maximum.accumulate(np.maximum(d - credit, watch.peak))
             history = np.concatenate([watch.history, peak])  # running peak since the onset
             watch.history = history
             hold = watch.index + self.step_hold
             if watch.next_k <= hold:
-                watch.levels = np.concatenate([watch.levels, d[: hold - watch.next_k + 1]])
+                watch.levels = np.concatenate([watch.levels, raw[: hold - watch.next_k + 1]])
             # rise time: onset to the first sample at 90 % of the peak so far (a noisy
             # plateau keeps nudging the peak, not this)
             rise = np.searchsorted(history, 0.9 * peak)
@@ -584,16 +583,51 @@ class ContactDetector:
             return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
         return None
 
+    def _tail(self, n: int, noise: float) -> tuple[int, float, float] | None:
+        """The pulse of the last contact before sample n, as the thesis pulse model (ch.
+        5.3.1, c = P u e^(1 - u), u = (k - onset) / rise) fitted to its peak - if it
+        peaked before n, clear of the noise; None otherwise."""
+        earlier = [o for o in self._onsets if o[0] < n - 1]
+        if not earlier:
+            return None
+        i0, base, trend = earlier[-1]
+        h = self.level_half
+        j0, j1 = i0 + h - self._level_start, n + h - self._level_start
+        if j0 < 0 or j1 > len(self._level) or j1 - j0 < 3:
+            return None
+        k = np.arange(i0, n)
+        d = self._level[j0:j1] - base - trend * (k - i0 + 2 * h + 1)
+        top = int(np.argmax(d))
+        if top < 1 or top >= len(d) - 2 or d[top] < 4.0 * noise:
+            return None  # still rising at n (or no pulse to speak of)
+        return (i0, float(d[top]), float(top))
+
+    def _tail_credit(self, watch: _Watch, k: np.ndarray) -> np.ndarray:
+        """How far the earlier pulse's tail falls from the onset to k (>= 0): the model
+        pulse's decay if known, else its slope just before the onset for fall_credit."""
+        if watch.tail is None:
+            return watch.fall * np.minimum(k - watch.index, self.fall_credit)
+        i0, height, rise = watch.tail
+
+        def pulse(at):
+            u = (at - i0) / rise
+            return height * u * np.exp(1.0 - u)
+
+        return np.maximum(0.0, pulse(watch.index) - pulse(k))
+
     def _is_step(self, watch: _Watch) -> bool:
-        """At step_hold after the onset: rose sharply (to 90 % of the peak within step_rise)
-        and has not fallen back by drop_fraction since."""
-        top = float(watch.history[self.step_hold])
+        """At step_hold after the onset: rose sharply (to 80 % of the peak within step_rise)
+        and has not fallen back by drop_fraction since. On the level itself, the rising
+        trend not taken out: a slip that stops ends the trend (the object no longer
+        covers more of the sensor), and a grip step while it slips rides on it."""
+        levels = watch.levels
+        top = float(np.max(levels))
         if top < 6.0 * watch.noise:
             return False
-        rise = int(np.searchsorted(watch.history[: self.step_hold + 1], 0.9 * top))
+        rise = int(np.argmax(levels >= 0.8 * top))
         if rise > self.step_rise:
             return False
-        return float(np.min(watch.levels[rise:])) >= (1.0 - self.drop_fraction) * top
+        return float(np.min(levels[rise:])) >= (1.0 - self.drop_fraction) * top
 
     # ------------------------------------------------------------------ memory
     def _trim(self) -> None:
