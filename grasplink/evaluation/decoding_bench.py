@@ -273,10 +273,13 @@ def run_benchmark(
 
 
 def default_target_figures(results: dict, name: str = DEFAULT_DECODER) -> dict | None:
-    """The target-set figures of `name` at its default settings in a results dict."""
+    """The target-set figures of `name` at its default settings (and its static false slip)."""
     for entry in results.get("decoders", {}).values():
         if entry.get("decoder") == name and entry.get("default_settings", True):
-            return entry.get("target")
+            target = entry.get("target")
+            if target is None:
+                return None
+            return {**target, "false_slip_pct": entry.get("false_slip_pct")}
     return None
 
 

@@ -774,7 +774,17 @@ TARGETS: list[tuple[str, str, str, float, str]] = [
     ("CPU per sample at 3-sample chunks (µs)", "overall", "cpu_us_per_sample_3", 50.0, "max"),
 ]
 #: "No regression on the constant-speed table": the synthetic target set against the last run.
-CONSTANT_FIGURES = ("speed_median_pct", "speed_p90_pct", "position_median_mm", "position_p90_mm")
+#: Every figure of the target-set table (lower is better), with its label.
+CONSTANT_FIGURES = {
+    "speed_median_pct": "speed med %",
+    "speed_p90_pct": "speed p90 %",
+    "position_median_mm": "pos med mm",
+    "position_p90_mm": "pos p90 mm",
+    "missing_pct": "missing %",
+    "slip_flag_intervals": "slip flag (intervals)",
+    "first_good_ratio": "first good / limit",
+    "false_slip_pct": "false slip % (static grip steps)",
+}
 
 
 def target_rows(results: dict, default: str, before: dict | None, now: dict | None) -> list:
@@ -786,12 +796,12 @@ def target_rows(results: dict, default: str, before: dict | None, now: dict | No
         value = figures.get(key)
         met = None if value is None else (value <= bound if kind == "max" else value >= bound)
         rows.append((label, value, f"{'≤' if kind == 'max' else '≥'} {bound:g}", met))
-    for key in CONSTANT_FIGURES:
+    for key, name in CONSTANT_FIGURES.items():
         old = (before or {}).get(key)
         new = (now or {}).get(key)
-        met = None if old is None or new is None else round(new, 1) <= round(old, 1)
-        last = f"≤ {old:.1f} (last run)" if old is not None else "≤ last run (none found)"
-        rows.append((f"constant-speed target set: {key}", new, last, met))
+        met = None if old is None or new is None else round(new, 2) <= round(old, 2)
+        last = f"≤ {old:.2f} (last run)" if old is not None else "≤ last run (none found)"
+        rows.append((f"no regression, constant-speed target set: {name}", new, last, met))
     return rows
 
 
@@ -875,7 +885,8 @@ def render(results: dict, default: str, before: dict | None, now: dict | None) -
     ]
     for label, value, bound, met in target_rows(results, default, before, now):
         mark = "-" if met is None else ("yes" if met else "**no**")
-        lines.append(f"| {label} | {_fmt(value)} | {bound} | {mark} |")
+        digits = 2 if "intervals" in label or "limit" in label else 1
+        lines.append(f"| {label} | {_fmt(value, digits)} | {bound} | {mark} |")
     lines += ["", "### All moving categories", "", MOVING_HEADER, "|---|" + "---:|" * 12]
     lines += [_moving_row(name, results["overall"][name]) for name in decoders]
     for category, title in CATEGORIES.items():

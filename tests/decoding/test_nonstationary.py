@@ -244,18 +244,28 @@ def test_the_report_has_the_targets_and_a_table_per_category():
     for title in ns.CATEGORIES.values():
         assert title in text
     assert "| wrong direction, all estimates | 0.0 | ≤ 5 | yes |" in text
-    assert "| constant-speed target set: speed_p90_pct | 2.0 | ≤ 1.0 (last run) | **no** |" in text
+    regression = (
+        "| no regression, constant-speed target set: speed p90 % | 2.0 | ≤ 1.00 (last run) |"
+    )
+    assert regression + " **no** |" in text
     assert "µs/sample 3 / 256" in text and "| tracker |" in text
 
 
 def test_the_constant_speed_baseline_is_the_last_run_of_the_same_grid(tmp_path):
-    entry = {"decoder": "tracker", "default_settings": True, "target": {"speed_p90_pct": 4.2}}
+    entry = {
+        "decoder": "tracker",
+        "default_settings": True,
+        "target": {"speed_p90_pct": 4.2, "missing_pct": 0.0},
+        "false_slip_pct": 0.5,
+    }
     (tmp_path / "decoding.json").write_text(
         '{"quick": false, "decoders": {"tracker (default)": '
         + __import__("json").dumps(entry)
         + "}}"
     )
-    assert bench.previous_constant(tmp_path, quick=False)["speed_p90_pct"] == 4.2
+    before = bench.previous_constant(tmp_path, quick=False)
+    assert before["speed_p90_pct"] == 4.2 and before["missing_pct"] == 0.0
+    assert before["false_slip_pct"] == 0.5 and before["first_good_ratio"] is None
     assert bench.previous_constant(tmp_path, quick=True) is None
     assert bench.previous_constant(tmp_path / "nowhere", quick=False) is None
 
