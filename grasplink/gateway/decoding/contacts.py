@@ -112,11 +112,12 @@ class _Watch:
     trend: float  # rising trend before the onset (N/sample, >= 0)
     noise: float  # level noise (N)
     fall: float = 0.0  # falling slope just before the onset (N/sample, >= 0): a pulse's tail
-    tail: tuple[int, float, float] | None = None  # the pulse before it: onset, height, rise
     peak: float = -math.inf
     early: float = -math.inf  # highest level in the first quarter of the watch
     history: np.ndarray = field(default_factory=lambda: np.zeros(0))  # running peak by sample
     levels: np.ndarray = field(default_factory=lambda: np.zeros(0))  # raw level (to the hold)
+    detrended: np.ndarray = field(default_factory=lambda: np.zeros(0))  # ... trend taken out
+    fell: bool = False  # a sharp rise that fell back like a pulse before the hold
     next_k: int = 0  # next level sample to examine
 
 
@@ -195,7 +196,6 @@ class ContactDetector:
         self._next_id = 0
         self._recent: deque[float] = deque(maxlen=16)  # times of the contacts emitted
         self._watches: list[_Watch] = []
-        self._onsets: deque[tuple[int, float, float]] = deque(maxlen=4)  # (index, base, trend)
         self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
         self.trend_n = max(1, round(trend_s * self.fs_hz))
 
@@ -501,16 +501,17 @@ class ContactDetector:
             if base is not None and earlier is not None:  # rising trend before the onset
                 trend = max(0.0, (base - earlier) / self.trend_n)
             recent = self._level_at(before - self.fall_n)
-            if base is not None and recent is not None:  # an earlier pulse's tail falling
+            floor = self._level_floor(before)
+            if base is not None and recent is not None and floor is not None:
+                # an earlier pulse's tail falling: its slope, and how far it can still fall
                 fall = max(0.0, (recent - base) / self.fall_n)
+                fall = min(fall, max(0.0, base - floor) / self.fall_credit)
             fine_noise = self._noise(fine, ev.index // self.block)
             white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
             noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
             base = 0.0 if base is None else base
-            tail = self._tail(ev.index, noise)
-            self._onsets.append((ev.index, base, trend))
             self._watches.append(
-                _Watch(ev.id, ev.index, base, trend, noise, fall=fall, tail=tail, next_k=ev.index)
+                _Watch(ev.id, ev.index, base, trend, noise, fall=fall, next_k=ev.index)
             )
         still = []
         for watch in self._watches:
@@ -527,9 +528,7 @@ class ContactDetector:
 
         The rising trend of the `trend_s` before the onset (the object
         covering more of the sensor) is taken out, and an earlier pulse's tail
-        falling under it is followed for 30 ms (its slope just before the onset),
-        no further: a tail flattens, and a fast pulse on a steep tail still falls
-        back. A pulse falls back by
+        falling under it for a while (`_tail_credit`). A pulse falls back by
         `drop_fraction` of its height within `decay_rises` times its rise time
         (to 90 % of its peak) after that (a grip step up and, later, down is no pulse); a step
         stays level for the whole watch. A *sharp* rise (to 80 % within `step_rise_s`)
@@ -555,7 +554,9 @@ class ContactDetector:
             watch.history = history
             hold = watch.index + self.step_hold
             if watch.next_k <= hold:
-                watch.levels = np.concatenate([watch.levels, raw[: hold - watch.next_k + 1]])
+                keep = hold - watch.next_k + 1
+                watch.levels = np.concatenate([watch.levels, raw[:keep]])
+                watch.detrended = np.concatenate([watch.detrended, d[:keep]])
             # rise time: onset to the first sample at 90 % of the peak so far (a noisy
             # plateau keeps nudging the peak, not this)
             rise = np.searchsorted(history, 0.9 * peak)
@@ -566,11 +567,17 @@ class ContactDetector:
                 & (peak - d >= self.drop_fraction * peak)
                 & (since <= (1.0 + self.decay_rises) * rise)
             )
-            hit = np.flatnonzero(ok)
-            if len(hit) and k[hit[0]] <= hold:
+            # a sharp rise is judged at the hold: a step, or (fallen back by then) a pulse
+            deferred = (k < hold) & (np.searchsorted(history, 0.8 * peak) <= self.step_rise)
+            watch.fell = watch.fell or bool((ok & deferred).any())
+            hit = np.flatnonzero(ok & ~deferred)
+            if len(hit) and k[hit[0]] < hold:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
-            if watch.next_k <= hold <= end and self._is_step(watch):
-                return PulseCheck(watch.id, hold + h, False)
+            if watch.next_k <= hold <= end:
+                if self._is_step(watch):
+                    return PulseCheck(watch.id, hold + h, False)
+                if watch.fell:
+                    return PulseCheck(watch.id, hold + h, True)
             if len(hit):
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             early = k <= watch.index + self.watch // 4
@@ -583,51 +590,47 @@ class ContactDetector:
             return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
         return None
 
-    def _tail(self, n: int, noise: float) -> tuple[int, float, float] | None:
-        """The pulse of the last contact before sample n, as the thesis pulse model (ch.
-        5.3.1, c = P u e^(1 - u), u = (k - onset) / rise) fitted to its peak - if it
-        peaked before n, clear of the noise; None otherwise."""
-        earlier = [o for o in self._onsets if o[0] < n - 1]
-        if not earlier:
+    def _level_floor(self, before: int) -> float | None:
+        """The lowest level over the trend window up to `before` (under an earlier pulse)."""
+        i1 = before + self.level_half - self._level_start + 1
+        i0 = max(0, i1 - self.trend_n)
+        if i1 <= i0:
             return None
-        i0, base, trend = earlier[-1]
-        h = self.level_half
-        j0, j1 = i0 + h - self._level_start, n + h - self._level_start
-        if j0 < 0 or j1 > len(self._level) or j1 - j0 < 3:
-            return None
-        k = np.arange(i0, n)
-        d = self._level[j0:j1] - base - trend * (k - i0 + 2 * h + 1)
-        top = int(np.argmax(d))
-        if top < 1 or top >= len(d) - 2 or d[top] < 4.0 * noise:
-            return None  # still rising at n (or no pulse to speak of)
-        return (i0, float(d[top]), float(top))
+        return float(np.min(self._level[i0:i1]))
 
     def _tail_credit(self, watch: _Watch, k: np.ndarray) -> np.ndarray:
-        """How far the earlier pulse's tail falls from the onset to k (>= 0): the model
-        pulse's decay if known, else its slope just before the onset for fall_credit."""
-        if watch.tail is None:
-            return watch.fall * np.minimum(k - watch.index, self.fall_credit)
-        i0, height, rise = watch.tail
-
-        def pulse(at):
-            u = (at - i0) / rise
-            return height * u * np.exp(1.0 - u)
-
-        return np.maximum(0.0, pulse(watch.index) - pulse(k))
+        """How far an earlier pulse's tail under the onset falls by k (>= 0): its slope
+        just before the onset, followed for fall_credit and no further, and never below
+        the level before that pulse (a tail flattens; a new ridge pulse replaces it -
+        thesis ch. 5.3.1 - and still falls back)."""
+        return watch.fall * np.minimum(k - watch.index, self.fall_credit)
 
     def _is_step(self, watch: _Watch) -> bool:
-        """At step_hold after the onset: rose sharply (to 80 % of the peak within step_rise)
-        and has not fallen back by drop_fraction since. On the level itself, the rising
-        trend not taken out: a slip that stops ends the trend (the object no longer
-        covers more of the sensor), and a grip step while it slips rides on it."""
-        levels = watch.levels
-        top = float(np.max(levels))
-        if top < 6.0 * watch.noise:
+        """At step_hold after the onset: rose sharply (to 80 % of its top within
+        step_rise) and has not fallen back by drop_fraction since - with the rising trend
+        taken out (a grip step while the object slips on), or on the level itself when
+        it is flat by then (a slip that stops ends the trend: the object no longer
+        covers more of the sensor). A ridge pulse on a rising trend falls back from it,
+        and the trend goes on."""
+
+        def stays(levels: np.ndarray) -> bool:
+            top = float(np.max(levels))
+            if top < 6.0 * watch.noise:
+                return False
+            rise = int(np.argmax(levels >= 0.8 * top))
+            if rise > self.step_rise:
+                return False
+            return float(np.min(levels[rise:])) >= (1.0 - self.drop_fraction) * top
+
+        if stays(watch.detrended):
+            return True
+        if watch.trend <= 0.0 or not stays(watch.levels):
             return False
-        rise = int(np.argmax(levels >= 0.8 * top))
-        if rise > self.step_rise:
-            return False
-        return float(np.min(levels[rise:])) >= (1.0 - self.drop_fraction) * top
+        tail = watch.levels[len(watch.levels) // 2 :]  # flat by the hold?
+        m = len(tail)
+        x = np.arange(m) - (m - 1) / 2.0
+        change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
+        return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
 
     # ------------------------------------------------------------------ memory
     def _trim(self) -> None:

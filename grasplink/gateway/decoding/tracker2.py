@@ -160,6 +160,7 @@ class TrackerDecoder(Decoder):
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
     STOP_STEP_PER_S = 1.0
     GRIP_STEP_PER_S = 0.3
+    LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
     ROBUST_FLOOR = 0.05  # weight of the broad part of the contact-time likelihood
     SIGMA_POS_MM = 0.3  # ridge-contact position noise (ridge compliance, speed dips)
     SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
@@ -374,9 +375,10 @@ class TrackerDecoder(Decoder):
                 children.append(B.replace(score=B.score + np.log(rate)))
             assigned = self._assign(B, ev)
             children += assigned
-            if step:  # a stop right at a ridge
+            if step:  # a stop right at a ridge (the step is that ridge's contact)
                 for c in assigned:
-                    children.append(self._stopped_at(c.take(np.flatnonzero(c.n >= 2)), tc))
+                    at = c.take(np.flatnonzero(c.n >= 2))
+                    children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
         # a new track starting at this contact: a slip starting (the earlier story ends
         # here) or, while one slips, reversing (the other edge leads, anywhere)
         base = np.full(2, best_before + self.LOG_NEW_TRACK)
@@ -435,8 +437,10 @@ class TrackerDecoder(Decoder):
             t=np.full(2 * R, ev.t_s),
         )
 
-    def _stopped_at(self, B: _Bank, tc: float) -> _Bank:
-        """Copies of slipping tracks B that stopped at tc (a step), where they were then."""
+    def _stopped_at(self, B: _Bank, tc: float, log_prior: float | None = None) -> _Bank:
+        """Copies of slipping tracks B that stopped at tc (a step), where they were then.
+
+        `log_prior`: of the stop (by default STOP_STEP_PER_S, a density in time)."""
         if not len(B):
             return B
         s, _, _ = self._kinematics(B, tc)
@@ -444,8 +448,8 @@ class TrackerDecoder(Decoder):
         X = B.X.copy()
         X[:, 0] = np.minimum(s, limit - 0.1)
         X[:, 1] = X[:, 2] = 0.0
-        score = B.score + math.log(self.STOP_STEP_PER_S)
-        return B.replace(X=X, stop=np.full(len(B), tc), score=score)
+        prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
+        return B.replace(X=X, stop=np.full(len(B), tc), score=B.score + prior)
 
     def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
         """Children of B that assign contact ev to one of the next ridges."""
