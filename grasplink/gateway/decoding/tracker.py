@@ -360,7 +360,8 @@ class TrackerDecoder(Decoder):
                 )
         self._null += self.LOG_CLUTTER_IDLE
         recent_ids = {c.id for c in self._contacts[-self.START_CONTACTS :]}
-        self._tracks = self._prune(children, recent_ids)
+        held_ids = {c.id for c in self._contacts}
+        self._tracks = self._prune(children, recent_ids, held_ids)
 
     def _branch(self, h: _Track, ev: ContactEvent, rate: float) -> list[_Track]:
         """Children of h for contact ev: assigned to one of the next ridges, or spurious.
@@ -551,13 +552,16 @@ class TrackerDecoder(Decoder):
         """Variance of a ridge contact as a position measurement at speed v."""
         return self.SIGMA_POS_MM**2 + (v * sigma_t) ** 2
 
-    def _prune(self, children: list[_Track], recent: set[int]) -> list[_Track]:
+    def _prune(self, children: list[_Track], recent: set[int], held: set[int]) -> list[_Track]:
         """Best first, one per (direction, ridge, last three contacts); bounded.
 
         Tracks with two or more contacts: the best max_hypotheses, plus the best
-        PER_START of every contact a track starts at, so that a slip whose true
-        start came after a spurious contact is not crowded out by the tracks
-        that took the spurious one for its start. One-contact tracks (a slip
+        PER_START of every contact a track starts at while that contact is still in
+        the bounded history (`held`), so that a slip whose true start came after a
+        spurious contact is not crowded out by the tracks that took the spurious one
+        for its start. A start older than the history competes on score alone:
+        otherwise every contact ever seen would keep tracks alive and a gateway
+        running for hours would grow without bound. One-contact tracks (a slip
         starting at one of the `recent` contacts) are all kept.
         """
         children.sort(key=lambda c: -c.score)
@@ -571,7 +575,9 @@ class TrackerDecoder(Decoder):
                 continue
             if c.n >= 2:
                 starts = per_start.get(c.first, 0)
-                if count >= self.max_hypotheses and starts >= self.PER_START:
+                if count >= self.max_hypotheses and (
+                    starts >= self.PER_START or c.first not in held
+                ):
                     continue
                 count += 1
                 per_start[c.first] = starts + 1
