@@ -62,6 +62,7 @@ DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
+STEP_IDS = 1_000_000_000  # ids of the small steps found by the step probe (their own series)
 
 
 class ContactEvent(NamedTuple):
@@ -157,6 +158,8 @@ class ContactDetector:
         decay_rises: float = 5.0,
         step_rise_s: float = 0.02,
         step_hold_s: float = 0.1,
+        step_window_s: float = 0.02,
+        step_threshold: float = 6.0,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -176,6 +179,19 @@ class ContactDetector:
         # a sharp rise that stays: judged a step early (a stop, a grip change), see _advance
         self.step_rise = max(1, round(step_rise_s * self.fs_hz))
         self.step_hold = max(self.step_rise + 1, round(step_hold_s * self.fs_hz))
+        # small steps the kink bank misses: a difference of means over +-step_w samples
+        self.step_w = max(2, round(step_window_s * self.fs_hz))
+        self.small_rise = max(1, round(0.6 * step_window_s * self.fs_hz))
+        w = self.step_w
+        self._step_fir = SosFilter.fir(np.concatenate([np.full(w, 1.0 / w), np.full(w, -1.0 / w)]))
+        self.step_threshold = float(step_threshold)
+        self._step_d = np.zeros(0)  # difference of means by centre, from _step_start
+        self._step_start = -w  # centre of _step_d[0] (output m is centre m - w)
+        self._step_next = 0  # next centre to test
+        self._probes: list[tuple[_Watch, float]] = []  # step candidates being judged (z)
+        self._confirmed: list[tuple[int, int, float, float]] = []  # (emit, index, t, z)
+        self._onsets: deque[tuple[int, int]] = deque(maxlen=32)  # contacts emitted: (index, emit)
+        self._next_step_id = STEP_IDS
         self.fall_n = max(2, round(0.02 * self.fs_hz))  # an earlier pulse's tail: its slope ...
         self.fall_credit = max(1, round(0.03 * self.fs_hz))  # ... followed this long at most
         half = max(0, round(level_s * self.fs_hz / 2.0))
@@ -213,8 +229,11 @@ class ContactDetector:
         for ci, ch in enumerate(self.channels):
             self._run_channel(ci, ch, x, n0, candidates)
         self._run_level(x)
+        self._run_steps(x)
         events = self._merge(candidates)
+        self._onsets.extend((ev.index, ev.emit_index) for ev in events)
         checks = self._check_pulses(events)
+        steps, step_checks = self._step_events()
         self._trim()
         # block noises still needed: the last noise_blocks before the slowest channel's block
         oldest = (
@@ -228,7 +247,8 @@ class ContactDetector:
         ]:
             for b in [b for b in cache if b < oldest]:
                 del cache[b]
-        return events, checks
+        events = sorted(events + steps, key=lambda e: (e.emit_index, e.id))
+        return events, checks + step_checks
 
     def _raw_stats(self, x: np.ndarray) -> None:
         """Per block of raw samples: on a rail (noise cut off)? quantisation floor?"""
@@ -475,6 +495,74 @@ class ContactDetector:
             events.append(ev)
         return events
 
+    # ------------------------------------------------------------------ small steps
+    def _run_steps(self, x: np.ndarray) -> None:
+        """Step candidates: local maxima (over +-step_w) of the difference of the means after
+        and before, less the mean of the same difference 2 step_w earlier and later (a ramp
+        - the object covering more of the sensor - is no step), above step_threshold noise
+        units; each is watched like a contact and kept only if judged a step at the hold
+        (`_step_events`)."""
+        w = self.step_w
+        self._step_d = np.concatenate([self._step_d, self._step_fir(x)])
+        last = self._step_start + len(self._step_d) - 1  # last centre with a difference
+        lo = max(self._step_next, self._step_start + 3 * w, 3 * w)
+        hi = last - 3 * w
+        if hi < lo:
+            return
+        self._step_next = hi + 1
+        d = self._step_d
+        i0, i1 = lo - self._step_start - w, hi - self._step_start + w  # adjusted over +-w
+        idx = np.arange(i0, i1 + 1)
+        adj = d[idx] - 0.5 * (d[idx - 2 * w] + d[idx + 2 * w])
+        for j in range(w, len(adj) - w):
+            a = adj[j]
+            if a <= 0.0 or a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
+                continue
+            c = int(idx[j]) + self._step_start
+            white = self._white(c // self.block)
+            if white is None:
+                continue
+            z = float(a) / (max(white[0], NOISE_FLOOR_N) * math.sqrt(3.0 / w))
+            if z < self.step_threshold:
+                continue
+            watch = self._watch(-1, c + 1)
+            if watch is not None:
+                self._probes.append((watch, z))
+
+    def _step_events(self) -> tuple[list[ContactEvent], list[PulseCheck]]:
+        """Probes judged steps, told once every contact near them would have been decided:
+        a contact and its verdict - unless the kink bank found that onset itself."""
+        still = []
+        for watch, z in self._probes:
+            done = self._advance(watch, small=True)
+            if done is None and watch.next_k <= watch.index + self.step_hold:
+                still.append((watch, z))
+            elif (
+                done is not None
+                and done.pulse is False
+                and done.emit_index < (watch.index + self.step_hold + self.level_half + 1)
+            ):
+                emit = max(done.emit_index, watch.index + self.lag + self.step_w)
+                self._confirmed.append((emit, watch.index, self._time(watch.index, 0.0), z))
+        self._probes = still
+        events, checks = [], []
+        keep = []
+        for emit, index, t, z in self._confirmed:
+            if emit >= self._n:
+                keep.append((emit, index, t, z))
+                continue
+            if any(abs(index - n) <= self.step_w + 2 for n, e in self._onsets if e <= emit):
+                continue  # the kink bank has it
+            sid = self._next_step_id
+            self._next_step_id += 1
+            sigma = (0.25 * self.step_w + 0.3) / self.fs_hz
+            events.append(
+                ContactEvent(sid, t, index, emit, z, 0.0, self.step_w / self.fs_hz, sigma)
+            )
+            checks.append(PulseCheck(sid, emit, False))
+        self._confirmed = keep
+        return events, checks
+
     # ------------------------------------------------------------------ pulse checks
     def _run_level(self, x: np.ndarray) -> None:
         y = self._level_filter(x)
@@ -487,32 +575,37 @@ class ContactDetector:
             return float(self._level[i])
         return None
 
-    def _check_pulses(self, events: list[ContactEvent]) -> list[PulseCheck]:
-        checks: list[PulseCheck] = []
+    def _watch(self, cid: int, index: int) -> _Watch | None:
+        """A watch on the level after an onset at sample `index`: its base, trends, noise."""
         fine = self.channels[0]
         h = self.level_half
+        before = index - 2 * h - 1  # last level centre not touched by the pulse
+        base = self._level_at(before)
+        if base is None:
+            base = self._level_at(index)
+        earlier = self._level_at(before - self.trend_n)
+        trend = fall = 0.0
+        if base is not None and earlier is not None:  # rising trend before the onset
+            trend = max(0.0, (base - earlier) / self.trend_n)
+        recent = self._level_at(before - self.fall_n)
+        floor = self._level_floor(before)
+        if base is not None and recent is not None and floor is not None:
+            # an earlier pulse's tail falling: its slope, and how far it can still fall
+            fall = max(0.0, (recent - base) / self.fall_n)
+            fall = min(fall, max(0.0, base - floor) / self.fall_credit)
+        fine_noise = self._noise(fine, index // self.block)
+        white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
+        noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
+        return _Watch(
+            cid, index, 0.0 if base is None else base, trend, noise, fall=fall, next_k=index
+        )
+
+    def _check_pulses(self, events: list[ContactEvent]) -> list[PulseCheck]:
+        checks: list[PulseCheck] = []
         for ev in events:
-            before = ev.index - 2 * h - 1  # last level centre not touched by the pulse
-            base = self._level_at(before)
-            if base is None:
-                base = self._level_at(ev.index)
-            earlier = self._level_at(before - self.trend_n)
-            trend = fall = 0.0
-            if base is not None and earlier is not None:  # rising trend before the onset
-                trend = max(0.0, (base - earlier) / self.trend_n)
-            recent = self._level_at(before - self.fall_n)
-            floor = self._level_floor(before)
-            if base is not None and recent is not None and floor is not None:
-                # an earlier pulse's tail falling: its slope, and how far it can still fall
-                fall = max(0.0, (recent - base) / self.fall_n)
-                fall = min(fall, max(0.0, base - floor) / self.fall_credit)
-            fine_noise = self._noise(fine, ev.index // self.block)
-            white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
-            noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
-            base = 0.0 if base is None else base
-            self._watches.append(
-                _Watch(ev.id, ev.index, base, trend, noise, fall=fall, next_k=ev.index)
-            )
+            watch = self._watch(ev.id, ev.index)
+            if watch is not None:
+                self._watches.append(watch)
         still = []
         for watch in self._watches:
             done = self._advance(watch)
@@ -523,7 +616,7 @@ class ContactDetector:
         self._watches = still
         return checks
 
-    def _advance(self, watch: _Watch) -> PulseCheck | None:
+    def _advance(self, watch: _Watch, small: bool = False) -> PulseCheck | None:
         """Examine the level from watch.next_k on; a verdict, or None while undecided.
 
         The rising trend of the `trend_s` before the onset (the object
@@ -574,7 +667,7 @@ class ContactDetector:
             if len(hit) and k[hit[0]] < hold:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             if watch.next_k <= hold <= end:
-                if self._is_step(watch):
+                if self._is_small_step(watch) if small else self._is_step(watch):
                     return PulseCheck(watch.id, hold + h, False)
                 if watch.fell:
                     return PulseCheck(watch.id, hold + h, True)
@@ -632,6 +725,45 @@ class ContactDetector:
         change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
         return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
 
+    def _is_small_step(self, watch: _Watch) -> bool:
+        """A probe (a small step the kink bank missed) at step_hold after the onset: rose
+        sharply (no higher over the next 2 small_rise than over the small_rise after it)
+        and has not fallen back by drop_fraction since (means, not extremes: a small step
+        is a few noise units high) - with the rising trend
+        taken out (a grip step while the object slips on), or on the level itself when
+        it is flat by then (a slip that stops ends the trend: the object no longer
+        covers more of the sensor). A ridge pulse on a rising trend falls back from it,
+        and the trend goes on."""
+
+        def stays(levels: np.ndarray) -> bool:
+            n = self.small_rise
+            first = float(np.mean(levels[n : 2 * n + 1]))  # just after a sharp rise
+            if first < 6.0 * watch.noise:
+                return False
+            later = float(np.mean(levels[2 * n : 4 * n + 1]))
+            if later > 1.15 * first + 2.0 * watch.noise:
+                return False  # still rising: a slow pulse
+            end = float(np.mean(levels[-max(2, len(levels) // 4) :]))
+            low = float(np.min(levels[n:]))
+            keep = 1.0 - self.drop_fraction
+            if end > (2.0 - keep) * first + 2.0 * watch.noise:
+                return False  # went on rising: a ramp
+            return end >= keep * first and low >= (keep - 0.1) * first - 2.0 * watch.noise
+
+        hold = watch.index + self.step_hold
+        told = hold + self.level_half  # the verdict's sample: contacts known by then
+        if any(watch.index + 2 < n <= hold and e <= told for n, e in self._onsets):
+            return False  # more contacts came: a train of ridge pulses keeps the level up
+        if stays(watch.detrended):
+            return True
+        if watch.trend <= 0.0 or not stays(watch.levels):
+            return False
+        tail = watch.levels[len(watch.levels) // 2 :]  # flat by the hold?
+        m = len(tail)
+        x = np.arange(m) - (m - 1) / 2.0
+        change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
+        return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
+
     # ------------------------------------------------------------------ memory
     def _trim(self) -> None:
         keep = self._keep
@@ -640,7 +772,9 @@ class ContactDetector:
             self._t = self._t[cut:]
             self._x = self._x[cut:]
             self._t_start += cut
-        oldest_watch = min((w.next_k for w in self._watches), default=None)
+        oldest_watch = min(
+            [w.next_k for w in self._watches] + [w.next_k for w, _ in self._probes], default=None
+        )
         lv_keep = keep
         if oldest_watch is not None:
             lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
@@ -648,6 +782,10 @@ class ContactDetector:
             cut = len(self._level) - lv_keep
             self._level = self._level[cut:]
             self._level_start += cut
+        if len(self._step_d) > 2 * keep:
+            cut = len(self._step_d) - keep
+            self._step_d = self._step_d[cut:]
+            self._step_start += cut
         for ch in self.channels:
             if len(ch.z) > 2 * keep:
                 cut = len(ch.z) - keep
