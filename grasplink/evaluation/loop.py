@@ -633,10 +633,24 @@ def run_report(
     results["verdict"] = verdict(results["figures"])
     results["mechanisms"] = mechanisms(rows)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "loop.json").write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+    (out / "loop.json").write_text(dump_json(results))
     plot_report(results, out / "loop.png")
     (out / "loop.md").write_text(render(results))
     return results
+
+
+def dump_json(results: dict) -> str:
+    """loop.json: the figures indented, the trials one compact row a line (µs/µm precision)."""
+    head = {k: v for k, v in results.items() if k != "trials"}
+    text = json.dumps(head, indent=1, sort_keys=True)
+    rows = ",\n".join(
+        json.dumps(
+            {k: round(v, 6) if isinstance(v, float) else v for k, v in row.items()},
+            sort_keys=True,
+        )
+        for row in results.get("trials", [])
+    )
+    return text[:-2] + ',\n "trials": [\n' + rows + "\n ]\n}\n"
 
 
 def report_to(
@@ -707,10 +721,26 @@ def mechanisms(rows: Sequence[dict]) -> dict:
         and r["threshold_mm_s"] == THESIS_THRESHOLD_MM_S
         and speed_band(r["speed_mm_s"]) == "reflex"
     ]
-    blind = [r for r in fast if r["mode"] in ("off", "grip_force")]
-    told = [r for r in fast if r["mode"] not in ("off", "grip_force")]
+    acted = [r for r in fast if r["reflex_latency_s"] is not None]  # the reflex's own stops
+    blind = [r for r in acted if r["mode"] in ("off", "grip_force")]
+    told = [r for r in acted if r["mode"] not in ("off", "grip_force")]
     reslipped = [r for r in blind if r["slip_episodes"] > 1]
+    thesis_reflex = [
+        r for r in rows if r["reflex"] and r["threshold_mm_s"] == THESIS_THRESHOLD_MM_S
+    ]
+    at = [r for r in thesis_reflex if r["speed_mm_s"] == THESIS_THRESHOLD_MM_S]
+    below = [r for r in thesis_reflex if r["speed_mm_s"] < THESIS_THRESHOLD_MM_S]
+    fired_below = sorted({r["speed_mm_s"] for r in below if r["reflex_latency_s"] is not None})
     return {
+        "reflex_at_threshold": {
+            "trials": len(at),
+            "reflex_pct": _pct([r["reflex_latency_s"] is not None for r in at]),
+        },
+        "reflex_below_threshold": {
+            "trials": len(below),
+            "reflex_pct": _pct([r["reflex_latency_s"] is not None for r in below]),
+            "speeds_mm_s": fired_below,
+        },
         "slip_speed_trials_with_display": len(speed_rows),
         "slip_speed_first_shown_as_occurrence_pct": _pct(
             [r["belt_first_mrad_s"] == -OCCURRENCE_MRAD_S for r in speed_rows]
@@ -907,37 +937,42 @@ def render_verdict(results: dict) -> list[str]:
             (spd_r, occ_r, "reflex", "fast band with the reflex"),
         ]
         effort_parts = [
-            f"I_EMG {_f(bands[a][band]['i_emg'], 2)} (slip speed) against "
-            f"{_f(bands[b][band]['i_emg'], 2)} (occurrence) in the {label}, success/effort "
+            f"in the {label} I_EMG {_f(bands[a][band]['i_emg'], 2)} (slip speed) against "
+            f"{_f(bands[b][band]['i_emg'], 2)} (occurrence), success/effort "
             f"{_f(bands[a][band]['success_to_effort'], 2)} against "
-            f"{_f(bands[b][band]['success_to_effort'], 2)}"
+            f"{_f(bands[b][band]['success_to_effort'], 2)}: "
+            + _efficiency(bands[a][band]["success_to_effort"], bands[b][band]["success_to_effort"])
             for a, b, band, label in efforts
             if a in bands and b in bands and bands[a][band]["n"]
         ]
-        ratios = [
-            (bands[a][band]["success_to_effort"], bands[b][band]["success_to_effort"])
-            for a, b, band, _ in efforts
-            if a in bands and b in bands and bands[a][band]["n"]
-        ]
-        ratios = [(x, y) for x, y in ratios if x and y]
-        efficiency = (
-            "more"
-            if ratios and all(x > 1.05 * y for x, y in ratios)
-            else "less"
-            if ratios and all(x < y / 1.05 for x, y in ratios)
-            else "about as"
-        )
+        with_reflex = v["slip_speed_vs_occurrence"].get("reflex", {}).get("reflex")
+        reflex_part = ""
+        if with_reflex and spd_r in bands and occ_r in bands:
+            fast_s, fast_o = bands[spd_r]["reflex"], bands[occ_r]["reflex"]
+            reflex_part = (
+                f" With the reflex, where the wearer has to take over from it, slip speed "
+                f"stops {_f(fast_s['stopped_pct'], 0)} % of the fast slips against "
+                f"{_f(fast_o['stopped_pct'], 0)} % with occurrence (**{with_reflex['result']}**; "
+                f"re-slips after the reflex let go {_f(fast_s['reslip_pct'], 0)} % against "
+                f"{_f(fast_o['reslip_pct'], 0)} %)"
+                + (
+                    ": the thesis's direction, and the only place it shows here."
+                    if with_reflex["result"] == "beats"
+                    else ": the thesis's direction, though within twice its standard error."
+                    if (with_reflex["diff_points"] or 0) > 0
+                    else "."
+                )
+            )
         lines += [
             "**1. Slip-speed feedback beats slip occurrence at high speeds (ch. 2, 9.3): "
             + claim
-            + ".** Without the reflex, per speed band: "
+            + " without the reflex.** Per speed band: "
             + "; ".join(parts)
             + ". (*beats* and *loses* need a difference over twice its binomial standard "
-            "error; otherwise *ties*.) Effort: "
-            + "; ".join(effort_parts)
-            + ". The thesis found slip speed the more efficient at the higher speeds "
-            f"(success-to-EMG-intensity, fig. 2.4); here it is {efficiency} efficient. "
-            "See Mechanisms.",
+            "error; otherwise *ties*.)"
+            + reflex_part
+            + " Effort (the thesis found slip speed the more efficient at the higher speeds, "
+            "success-to-EMG-intensity, fig. 2.4): " + "; ".join(effort_parts) + ". See Mechanisms.",
             "",
         ]
     rescue = v["reflex_rescues"]
@@ -998,6 +1033,17 @@ def render_verdict(results: dict) -> list[str]:
     return lines
 
 
+def _efficiency(speed: float | None, occurrence: float | None) -> str:
+    """Slip speed's success-to-effort against occurrence's, in words (5 % either way: same)."""
+    if not speed or not occurrence:
+        return "no comparison"
+    if speed > 1.05 * occurrence:
+        return "slip speed more efficient"
+    if speed < occurrence / 1.05:
+        return "slip speed less efficient"
+    return "about as efficient"
+
+
 def _hand_back_sentence(m: dict) -> str:
     """Whether the reflex's stop lasts with and without a slip display (hand-back)."""
     blind, told = m["reflex_without_slip_display"], m["reflex_with_slip_display"]
@@ -1026,9 +1072,9 @@ def render_mechanisms(results: dict) -> list[str]:
     return [
         "## Mechanisms",
         "",
-        "- **Why slip speed and slip occurrence tie.** (a) The decoder reports slip at the "
-        "second ridge contact but a speed only from the third, and the gateway shows a slip "
-        "of unknown speed as occurrence: "
+        "- **Why slip speed and slip occurrence tie without the reflex.** (a) The decoder "
+        "reports slip at the second ridge contact but a speed only from the third, and the "
+        "gateway shows a slip of unknown speed as occurrence: "
         f"{_f(m['slip_speed_first_shown_as_occurrence_pct'], 0)} % of the "
         f"{m['slip_speed_trials_with_display']} slip-speed trials with a display began with "
         f"the occurrence display ({OCCURRENCE_MRAD_S} mrad/s), so the wearer's first cue is "
@@ -1042,6 +1088,7 @@ def render_mechanisms(results: dict) -> list[str]:
         "the same reaction time (1.51–1.75 s) in both modes; the thesis measured 1.51 s "
         "with occurrence and 1.75 s with slip-speed feedback (ch. 2.4.4), which would favour "
         "occurrence here, where only time matters.",
+        _hand_back_by_mode(results),
         "- **Why force + slip equals slip speed.** While the object slips the belt shows "
         "slip speed; otherwise it shows the skin's static force, the FSR's share of the "
         f"grip (median top command {_f(m['force_belt_max_median_mrad_s'], 0)} mrad/s over "
@@ -1051,6 +1098,7 @@ def render_mechanisms(results: dict) -> list[str]:
         "the force display changes nothing the wearer does. Grip force alone never tells "
         f"the wearer of a slip: without the reflex it stopped {_f(grip_force, 0)} %.",
         _reflex_alone(blind, told),
+        _threshold_bullet(m),
         f"- **The wearer's limit is ≈ {g['wearer_limit_mm_s']:.0f} mm/s, not 45.** A slip is "
         "shown after the second contact (19 mm on alpha0.1), identified and answered "
         "1.51–1.75 s later, and the EMG window, motor delay and hand lag add ≈ 0.35 s, "
@@ -1059,11 +1107,58 @@ def render_mechanisms(results: dict) -> list[str]:
     ]
 
 
+def _hand_back_by_mode(results: dict) -> str:
+    """Why slip speed keeps more of the reflex's stops than occurrence (or does not)."""
+    bands = results["figures"]["bands"]
+    spd, occ = _row("slip_speed", True), _row("slip_occurrence", True)
+    if spd not in bands or occ not in bands or not bands[spd]["reflex"]["n"]:
+        return "- **Hand-back by mode.** No fast trials with the reflex."
+    s, o = bands[spd]["reflex"], bands[occ]["reflex"]
+    return (
+        "- **Where the display's level matters: the hand-back.** After the reflex's stop "
+        "the wearer's own contraction has to hold once the reflex lets go. Occurrence is "
+        f"shown at {OCCURRENCE_MRAD_S} mrad/s, between slip levels 2 and 3, and asks for e2 "
+        "or e3; a fast slip shown by slip speed reads as level 4 and asks for e4. The "
+        "wearer's scatter (one level low 15 %, two levels low 5 %, ch. 2.4.3 shape) turns an "
+        "e2 into e1 (5 N, which does not hold) far more often than an e4: in the fast band "
+        f"I_EMG {_f(s['i_emg'], 2)} (slip speed) against {_f(o['i_emg'], 2)} (occurrence), "
+        f"re-slips {_f(s['reslip_pct'], 0)} % against {_f(o['reslip_pct'], 0)} %, stopped "
+        f"{_f(s['stopped_pct'], 0)} % against {_f(o['stopped_pct'], 0)} %. The harder grip "
+        "is what buys the safer hand-back."
+    )
+
+
+def _threshold_bullet(m: dict) -> str:
+    at, below = m["reflex_at_threshold"], m["reflex_below_threshold"]
+    parts = []
+    if at["trials"]:
+        parts.append(
+            f"At exactly {THESIS_THRESHOLD_MM_S:g} mm/s the reflex acted in "
+            f"{_f(at['reflex_pct'], 0)} % of {at['trials']} trials: the object slows by "
+            "4–15 mm/s at every ridge (ch. 5.5.1, `object.ridge_dips`) and the decoder "
+            "measures the mean speed between contacts, below the nominal pull speed, so a "
+            "slip at the threshold reads as one below it."
+        )
+    if below["trials"]:
+        speeds = ", ".join(f"{v:g}" for v in below["speeds_mm_s"]) or "none"
+        parts.append(
+            f"Below the threshold it acted in {_f(below['reflex_pct'], 0)} % of "
+            f"{below['trials']} trials (at {speeds} mm/s), where the decoder read the slip "
+            "too fast early on (a wrong match of the first contact intervals to the layout, "
+            "which places the object too far along the skin); such a false alarm stops a "
+            "slip the wearer might have lost, and costs a harder grip."
+        )
+    if not parts:
+        return "- **The reflex at its threshold.** No trials at or below it."
+    return "- **The reflex at and below its threshold.** " + " ".join(parts)
+
+
 def _reflex_alone(blind: dict, told: dict) -> str:
     head = (
-        f"Fast slips with the reflex but no slip display (none, grip force; {blind['trials']} "
-        f"trials): the reflex stopped {_f(blind['first_stop_pct'], 0)} % (leading edge at a "
-        f"median {_f(blind['first_stop_median_mm'], 0)} mm) and "
+        "Fast slips (≥ the threshold) in which the reflex acted, without a slip display "
+        f"(none, grip force; {blind['trials']} trials): the reflex stopped "
+        f"{_f(blind['first_stop_pct'], 0)} % (leading edge at a median "
+        f"{_f(blind['first_stop_median_mm'], 0)} mm) and "
         f"{_f(blind['reslip_pct'], 0)} % slid again"
     )
     if not blind["trials"] or not blind["reslip_pct"]:
@@ -1127,7 +1222,7 @@ def plot_report(results: dict, path: Path) -> None:
         ax.axvline(g["wearer_limit_mm_s"], color="0.6", lw=0.8, ls="-.")
         ax.axvline(g["threshold_mm_s"], color="red", lw=0.8, ls="-.")
         ax.set_xscale("log")
-        ax.set_xticks(g["speeds_mm_s"], [f"{v:g}" for v in g["speeds_mm_s"]])
+        ax.set_xticks(g["speeds_mm_s"], [f"{v:g}" for v in g["speeds_mm_s"]], fontsize=7)
         ax.minorticks_off()
         ax.set_xlabel("slip speed [mm/s] (wearer's limit, reflex threshold dash-dotted)")
         ax.set_ylabel(label)
