@@ -67,7 +67,7 @@ from typing import Any
 import numpy as np
 
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
-from grasplink.gateway.decoding.contacts import ContactDetector, ContactEvent, PulseCheck
+from grasplink.gateway.decoding.onsets import ContactDetector, ContactEvent, PulseCheck
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0

@@ -1,0 +1,585 @@
+"""Streaming ridge-contact detector: finds the ONSET of every ridge pulse in the FSR signal.
+
+Physics (thesis ch. 5.3.1, 5.4): when the object's leading edge reaches a
+ridge the FSR force starts to rise fast (over the time the edge needs to
+push the ridge over, ~1.25 mm of travel) and then relaxes. Whatever the exact
+pulse shape, its onset is a *kink*: the slope of the force jumps up. The
+kink is also what survives when pulses merge at high speed (a new pulse
+starting on the decay of the previous one) and it is blind to the slow
+trends of the signal (drift, the object covering more of the sensor).
+
+Detector (all filters are FIR, run as `filters.SosFilter` - sample by sample
+with carried state, so chunking cannot change a single bit):
+
+* a bank of *hinge* filters, one per scale w (5, 10, 20, 40, 80 ms by
+  default): h_w(n) = slope of x over [n, n + w] minus slope over [n - w, n]
+  (least-squares slopes), i.e. the slope jump at n. A pure kink gives the
+  same h at every scale while noise falls as w^-1.5, so the best scale is
+  about half the rise: fast pulses show on the short scales, slow pulses
+  (weak slope, long rise) on the long ones;
+* each scale is normalised by its noise (per fixed block of 0.125 s: the
+  finest scale's white noise times the scale's gain, or - if larger, for
+  coloured noise - the scale's own median |h| over the last 10 s, with a
+  floor and a margin while few blocks are known), so thresholds are in noise
+  units and pulse amplitudes do not matter. What the node sends is
+  quantised (12-bit ADC, ~0.024 N) and clipped at 0 N while nothing presses
+  the sensor, and a plain median of such values sticks to a lattice point
+  or to 0 - thresholds then fall to a fraction of the noise and noise
+  becomes contacts (issue 11: the wrong slip direction through CAN,
+  ~400 mm/s on the headline scene). So the medians are lattice medians
+  (`filters.lattice_median`), the white noise is never taken below the
+  ADC step's rounding noise (step / sqrt(12)), and blocks where the signal
+  sits on a rail (`filters.on_rail`) do not count: they show no noise.
+  Blocks with no such estimate before them wait for the first block that
+  has one (bounded: after `noise_blocks` blocks they are dropped);
+* a contact candidate is a local maximum of z_w = h_w / noise_w over +-w
+  above `threshold`, after which the force rises (the end of a grip release
+  is a kink too, but flat after); its time is refined coarse to fine (the
+  finest scale that still sees it places it) and to a fraction of a sample
+  by a parabola; a candidate within its own reach of an earlier contact is
+  that contact again (long scales decide later);
+* every contact is then watched: a *pulse* rises and falls back (by
+  `drop_fraction` of its height, rising trend removed) within a few rise
+  times; a grip step rises and stays level. The verdict (True, False, or
+  None when the force kept rising) is reported later as a `PulseCheck`.
+
+Events carry `emit_index`, the index of the sample whose arrival decided
+them, so a caller can replay them exactly in step with its own updates.
+
+The default `tracker` uses this detector as verified (CAN path, closed loop); the
+in-progress detector work for the next tracker lives in `contacts.py`. One of the two
+goes when that work lands.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from grasplink.gateway.decoding.filters import SosFilter, lattice_median, on_rail, resolution
+
+DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
+NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
+MEDIAN_TO_STD = 1.0 / 0.6745
+STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
+
+
+class ContactEvent(NamedTuple):
+    """A detected ridge contact (pulse onset)."""
+
+    id: int
+    t_s: float  # onset time, sub-sample
+    index: int  # type: ignore[assignment]  # (shadows tuple.index) the sample nearest the onset
+    emit_index: int  # global index of the sample that decided it
+    z: float  # strength: slope jump in noise units
+    jump_n_s: float  # slope jump, N/s
+    scale_s: float  # the scale that found it
+    sigma_s: float  # timing uncertainty (one sigma)
+
+
+class PulseCheck(NamedTuple):
+    """Later verdict on a contact: did the force fall back like a pulse?"""
+
+    id: int
+    emit_index: int
+    pulse: bool | None  # True: rose and fell back; False: rose and stayed (a step); None: unclear
+
+
+@dataclass
+class _Channel:
+    width: int  # w, samples
+    slope: SosFilter  # LS slope over the last w + 1 samples (FIR)
+    after: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slopes not yet paired
+    next_n: int = 0  # next hinge centre to compute
+    waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
+    noise_by_block: dict = field(default_factory=dict)
+    z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # z by centre, from z_start
+    zh: np.ndarray = field(default_factory=lambda: np.zeros(0))  # hinge (N/sample), same index
+    za: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slope after, same index
+    zready: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # known at
+    z_start: int = 0  # global centre index of z[0]
+    next_test: int = 0  # next centre to test for a local maximum
+    block_abs: list = field(default_factory=list)  # |h| of the block being filled
+    block_noise: dict = field(default_factory=dict)  # completed block -> robust noise
+    done: int = 0  # blocks completed
+
+
+@dataclass
+class _Watch:
+    id: int
+    index: int  # onset sample
+    base: float  # level before the onset
+    trend: float  # rising trend before the onset (N/sample, >= 0)
+    noise: float  # level noise (N)
+    peak: float = -math.inf
+    early: float = -math.inf  # highest level in the first quarter of the watch
+    history: np.ndarray = field(default_factory=lambda: np.zeros(0))  # running peak by sample
+    levels: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level by sample (hold)
+    next_k: int = 0  # next level sample to examine
+
+
+def _hinge_gain(width: int) -> float:
+    """Noise of a hinge output per unit of white input noise (two LS slopes sharing a sample)."""
+    s = width * (width + 1) * (width + 2) / 12.0  # sum of squared centred offsets
+    return math.sqrt(2.0 / s + width * width / (2.0 * s * s))
+
+
+def _slope_taps(width: int) -> np.ndarray:
+    """FIR taps whose output at m is the LS slope of x[m - w .. m] (N/sample)."""
+    k = np.arange(width + 1, dtype=np.float64) - width / 2.0
+    kernel = k / float(np.sum(k * k))  # applied to x[n + 0 .. n + w]
+    return kernel[::-1].copy()
+
+
+class ContactDetector:
+    """Finds ridge-contact onsets in a uniformly sampled FSR stream (see module doc)."""
+
+    def __init__(
+        self,
+        fs_hz: float,
+        *,
+        scales_s: tuple[float, ...] = DEFAULT_SCALES_S,
+        threshold: float = 4.5,
+        refine_z: float = 3.0,
+        merge_widths: float = 2.0,
+        block_s: float = 0.125,
+        noise_blocks: int = 8,
+        history_s: float = 10.0,
+        rise_fraction: float = 0.1,
+        coarse_rise_fraction: float = 0.3,
+        drop_fraction: float = 0.3,
+        watch_s: float = 1.0,
+        level_s: float = 0.01,
+        trend_s: float = 0.1,
+        decay_rises: float = 5.0,
+        step_rise_s: float = 0.02,
+        step_hold_s: float = 0.1,
+    ):
+        self.fs_hz = float(fs_hz)
+        widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
+        self.channels = [_Channel(w, SosFilter.fir(_slope_taps(w))) for w in widths]
+        self.noise_blocks = int(noise_blocks)
+        self.history_blocks = max(self.noise_blocks, round(history_s / block_s))
+        self.threshold = float(threshold)
+        self.refine_z = float(refine_z)
+        self.merge_widths = float(merge_widths)
+        self.block = max(16, round(block_s * self.fs_hz))
+        self.rise_fraction = float(rise_fraction)
+        self.coarse_rise_fraction = float(coarse_rise_fraction)
+        self.drop_fraction = float(drop_fraction)
+        self.watch = max(8, round(watch_s * self.fs_hz))
+        self.decay_rises = float(decay_rises)
+        self.min_rise = max(1, round(0.005 * self.fs_hz))
+        # a sharp rise that stays: judged a step early (a stop, a grip change), see _advance
+        self.step_rise = max(1, round(step_rise_s * self.fs_hz))
+        self.step_hold = max(self.step_rise + 1, round(step_hold_s * self.fs_hz))
+        half = max(0, round(level_s * self.fs_hz / 2.0))
+        self.level_half = half
+        self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
+        self._n = 0  # samples received
+        self._raw = np.zeros(0)  # samples of the raw block being filled
+        self._raw_blocks = 0  # raw blocks completed
+        self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
+        self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
+        keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
+        self._keep = keep
+        self._t = np.zeros(0)  # recent sample times
+        self._t_start = 0
+        self._level = np.zeros(0)  # box-smoothed level, by centre index
+        self._level_start = 0
+        self._next_id = 0
+        self._recent: deque[float] = deque(maxlen=16)  # times of the contacts emitted
+        self._watches: list[_Watch] = []
+        self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
+        self.trend_n = max(1, round(trend_s * self.fs_hz))
+
+    # ------------------------------------------------------------------ feeding
+    def feed(self, t: np.ndarray, x: np.ndarray) -> tuple[list[ContactEvent], list[PulseCheck]]:
+        """Take accepted samples; return contacts and pulse verdicts decided by them."""
+        if not len(x):
+            return [], []
+        n0 = self._n
+        self._n += len(x)
+        self._t = np.concatenate([self._t, t])
+        self._raw_stats(x)
+        candidates: list[tuple[int, int, int, float, float, float]] = []
+        for ci, ch in enumerate(self.channels):
+            self._run_channel(ci, ch, x, n0, candidates)
+        self._run_level(x)
+        events = self._merge(candidates)
+        checks = self._check_pulses(events)
+        self._trim()
+        # block noises still needed: the last noise_blocks before the slowest channel's block
+        oldest = (
+            min(ch.next_n for ch in self.channels) // self.block
+            - max(self.noise_blocks, self.history_blocks)
+            - 2
+        )
+        caches: list[dict[int, Any]] = [self._censored, self._floor]
+        for cache in caches + [
+            c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
+        ]:
+            for b in [b for b in cache if b < oldest]:
+                del cache[b]
+        return events, checks
+
+    def _raw_stats(self, x: np.ndarray) -> None:
+        """Per block of raw samples: on a rail (noise cut off)? quantisation floor?"""
+        raw = np.concatenate([self._raw, x])
+        B = self.block
+        full = len(raw) // B
+        for k in range(full):
+            block = raw[k * B : (k + 1) * B]
+            b = self._raw_blocks + k
+            self._censored[b] = on_rail(block)
+            self._floor[b] = resolution(block) / math.sqrt(12.0)
+        self._raw_blocks += full
+        self._raw = raw[full * B :].copy()
+
+    def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int, candidates: list) -> None:
+        w = ch.width
+        y = ch.slope(x)  # settled: as if the first sample had been held before (slopes 0)
+        # y[m] is the slope over [m - w, m], i.e. "after" of centre n = m - w; `after`
+        # holds the slopes of centres ch.next_n - w, ...; hinge(n) = after(n) - after(n - w).
+        after = np.concatenate([ch.after, y]) if len(ch.after) else y
+        count = len(after) - w
+        if count <= 0:
+            ch.after = after
+            return
+        slope_after = after[w:]
+        hinge = slope_after - after[:count]
+        ch.after = after[count:]
+        start = ch.next_n
+        ch.next_n += count
+        self._normalise(ch, start, hinge, slope_after)
+        self._local_maxima(ci, ch, candidates)
+
+    def _normalise(
+        self, ch: _Channel, start: int, hinge: np.ndarray, slope_after: np.ndarray
+    ) -> None:
+        """Noise per block of centres; z for every centre whose noise is known.
+
+        Centres of a block use the noise of the blocks before it. Where none
+        of those showed its noise (the first block, or a stretch on a rail)
+        they wait for the first block that does - decided late, but judged
+        against noise that was seen; after `noise_blocks` blocks of waiting
+        the oldest are dropped undetected (bounded memory; a signal on a rail
+        has no contacts to find).
+        """
+        B = self.block
+        pos = 0
+        n = start
+        while pos < len(hinge):
+            block = n // B
+            end = min(len(hinge), pos + (block + 1) * B - n)
+            seg_h, seg_a = hinge[pos:end], slope_after[pos:end]
+            ch.block_abs.append(np.abs(seg_h))
+            noise = None if ch.waiting else self._noise(ch, block)
+            if noise is None:
+                ch.waiting.append((block, seg_h, seg_a))
+            else:
+                self._append_z(ch, seg_h, seg_a, noise, n + ch.width)
+            n += end - pos
+            pos = end
+            if n % B == 0:  # block complete: its noise, and perhaps the waiting blocks'
+                values = np.concatenate(ch.block_abs)
+                ch.block_abs = []
+                ch.block_noise[block] = lattice_median(values, floor=0.0) * MEDIAN_TO_STD
+                ch.done = block + 1
+                self._release(ch, n - 1 + ch.width)
+
+    def _release(self, ch: _Channel, ready: int) -> None:
+        """z for the waiting blocks whose noise is now known (sample `ready` told it)."""
+        while ch.waiting:
+            block = ch.waiting[0][0]
+            noise = self._noise(ch, block)
+            if noise is None:
+                if ch.done - block <= self.noise_blocks:
+                    return
+                noise = math.inf  # waited too long: nothing detected there
+            while ch.waiting and ch.waiting[0][0] == block:
+                _, seg_h, seg_a = ch.waiting.pop(0)
+                self._append_z(ch, seg_h, seg_a, noise, ready)
+
+    @staticmethod
+    def _append_z(
+        ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
+    ) -> None:
+        ch.z = np.concatenate([ch.z, seg_h / noise])
+        ch.zh = np.concatenate([ch.zh, seg_h])
+        ch.za = np.concatenate([ch.za, seg_a])
+        ch.zready = np.concatenate([ch.zready, np.full(len(seg_h), ready, dtype=np.int64)])
+
+    def _white(self, block: int) -> tuple[float, int] | None:
+        """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
+
+        The median of the finest scale's noise over the last `noise_blocks`
+        blocks that showed their noise (not on a rail), each at least its
+        quantisation floor (ADC step / sqrt(12)). None if none did: then the
+        first later block that does (the block itself, at the start) - or
+        None while there is none yet.
+        """
+        fine = self.channels[0]
+        gain = _hinge_gain(fine.width)
+
+        def seen(b: int) -> float | None:
+            if b not in fine.block_noise or self._censored.get(b, True):
+                return None
+            return max(fine.block_noise[b] / gain, self._floor.get(b, 0.0))
+
+        values = [v for b in range(max(0, block - self.noise_blocks), block) if (v := seen(b))]
+        if values:
+            values.sort()
+            return values[(len(values) - 1) // 2], len(values)
+        for b in range(block, fine.done):
+            v = seen(b)
+            if v is not None:
+                return v, 1
+        return None
+
+    def _noise(self, ch: _Channel, block: int) -> float | None:
+        """Noise of the hinge for centres of `block` (None: not known yet).
+
+        The larger of: the white noise seen by the finest scale (`_white`)
+        times this scale's gain, and the median of this scale's own blocks
+        over the last `history_s` (those not on a rail) - coloured noise
+        that the white estimate misses; the long history keeps a slip over
+        dense ridges (which keeps the long scales busy) from hiding its own
+        pulses for a while.
+        """
+        cached = ch.noise_by_block.get(block)
+        if cached is not None:
+            return cached
+        white = self._white(block)
+        if white is None:
+            return None
+        sigma, known = white
+        noise = max(sigma, NOISE_FLOOR_N) * _hinge_gain(ch.width)
+        if ch is not self.channels[0]:
+            history = range(max(0, block - self.history_blocks), block)
+            own = sorted(
+                ch.block_noise[b]
+                for b in history
+                if b in ch.block_noise and not self._censored.get(b, True)
+            )
+            if own:
+                noise = max(noise, own[(len(own) - 1) // 2])
+        # few blocks yet: the estimate is itself noisy, be more careful
+        noise *= 1.0 + STARTUP_MARGIN * max(0, self.noise_blocks - known) / self.noise_blocks
+        ch.noise_by_block[block] = noise
+        return noise
+
+    def _local_maxima(self, ci: int, ch: _Channel, candidates: list) -> None:
+        w = ch.width
+        z = ch.z
+        last = ch.z_start + len(z) - 1  # last centre with z
+        lo = max(ch.next_test, ch.z_start + w)
+        hi = last - w  # test centres lo .. hi
+        if hi < lo:
+            return
+        i0, i1 = lo - ch.z_start, hi - ch.z_start
+        ch.next_test = hi + 1
+        above = np.flatnonzero(z[i0 : i1 + 1] >= self.threshold)
+        for h in above.tolist():  # a local maximum over +-w (ties: the first)
+            i = i0 + h
+            zc = z[i]
+            if zc <= z[i - w : i].max() or zc < z[i + 1 : i + w + 1].max():
+                continue
+            n = ch.z_start + i
+            jump, rising = ch.zh[i], ch.za[i]
+            # a contact makes the force rise; long scales must see a clear rise (the
+            # slow bend at the end of a fast pulse's decay is no contact)
+            needed = self.rise_fraction if w / self.fs_hz < 0.03 else self.coarse_rise_fraction
+            if rising < needed * jump:
+                continue
+            n_at, delta, placed = self._refine(ci, n)
+            # decided once z is known over +-w (late where the noise had to be waited for)
+            emit = max(n + 2 * w, int(ch.zready[i - w : i + w + 1].max()))
+            candidates.append((emit, w, n_at, delta, float(z[i]), float(jump), placed))
+
+    def _refine(self, ci: int, n: int) -> tuple[int, float, int]:
+        """Coarse to fine: move the onset to the peak of each finer scale that sees it.
+
+        Returns (sample, fraction of a sample, width of the scale that placed it).
+        """
+        reach = self.channels[ci].width
+        for fi in range(ci, -1, -1):
+            ch = self.channels[fi]
+            i = n - ch.z_start
+            if fi < ci:
+                lo, hi = max(1, i - reach), min(len(ch.z) - 2, i + reach)
+                if hi < lo:
+                    break
+                j = lo + int(np.argmax(ch.z[lo : hi + 1]))
+                if ch.z[j] < self.refine_z or j in (lo, hi):
+                    break
+                i, n, reach = j, ch.z_start + j, ch.width
+            zc, zl, zr = ch.z[i], ch.z[i - 1], ch.z[i + 1]
+            denom = zl - 2.0 * zc + zr
+            delta = 0.5 * (zl - zr) / denom if denom < 0 else 0.0
+            best = (n, min(0.5, max(-0.5, delta)), ch.width)
+        return best
+
+    def _time(self, n: int, delta: float) -> float:
+        i = n - self._t_start
+        t = self._t
+        if delta >= 0 and i + 1 < len(t):
+            return float(t[i] + delta * (t[i + 1] - t[i]))
+        if delta < 0 and i - 1 >= 0:
+            return float(t[i] + delta * (t[i] - t[i - 1]))
+        return float(t[i])
+
+    def _merge(self, candidates: list) -> list[ContactEvent]:
+        events = []
+        candidates.sort(key=lambda c: (c[0], c[1], c[2]))
+        for emit, w, n, delta, z, jump, placed in candidates:
+            t = self._time(n, delta)
+            # the same kink seen again (by a coarser scale, later): within its own reach
+            reach = self.merge_widths * w / self.fs_hz
+            if any(abs(t - t_old) <= reach for t_old in self._recent):
+                continue
+            self._recent.append(t)
+            # timing: a quarter of the placing scale (the hinge peak is that wide), and
+            # the sub-sample interpolation
+            sigma = (0.25 * placed + 0.3) / self.fs_hz
+            ev = ContactEvent(
+                self._next_id, t, n, emit, z, jump * self.fs_hz, w / self.fs_hz, sigma
+            )
+            self._next_id += 1
+            events.append(ev)
+        return events
+
+    # ------------------------------------------------------------------ pulse checks
+    def _run_level(self, x: np.ndarray) -> None:
+        y = self._level_filter(x)
+        # y[m] is the mean of x[m - 2h .. m]: the level centred on m - h.
+        self._level = np.concatenate([self._level, y])
+
+    def _level_at(self, k: int) -> float | None:
+        i = k + self.level_half - self._level_start  # centre k is output m = k + h
+        if 0 <= i < len(self._level):
+            return float(self._level[i])
+        return None
+
+    def _check_pulses(self, events: list[ContactEvent]) -> list[PulseCheck]:
+        checks: list[PulseCheck] = []
+        fine = self.channels[0]
+        h = self.level_half
+        for ev in events:
+            before = ev.index - 2 * h - 1  # last level centre not touched by the pulse
+            base = self._level_at(before)
+            if base is None:
+                base = self._level_at(ev.index)
+            earlier = self._level_at(before - self.trend_n)
+            trend = 0.0
+            if base is not None and earlier is not None:  # rising trend before the onset
+                trend = max(0.0, (base - earlier) / self.trend_n)
+            fine_noise = self._noise(fine, ev.index // self.block)
+            white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
+            noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
+            self._watches.append(
+                _Watch(
+                    ev.id, ev.index, 0.0 if base is None else base, trend, noise, next_k=ev.index
+                )
+            )
+        still = []
+        for watch in self._watches:
+            done = self._advance(watch)
+            if done is None:
+                still.append(watch)
+            else:
+                checks.append(done)
+        self._watches = still
+        return checks
+
+    def _advance(self, watch: _Watch) -> PulseCheck | None:
+        """Examine the level from watch.next_k on; a verdict, or None while undecided.
+
+        The rising trend of the `trend_s` before the onset (the object
+        covering more of the sensor) is taken out. A pulse falls back by
+        `drop_fraction` of its height within `decay_rises` times its rise time
+        (to 90 % of its peak) after that (a grip step up and, later, down is no pulse); a step
+        stays level for the whole watch. A *sharp* rise (to 90 % within `step_rise_s`)
+        that has not fallen back by `drop_fraction` `step_hold_s` after the onset is a
+        step already then: a ridge pulse that sharp is a fast one and has fallen back
+        by then (its peak comes after ~1.25 mm of travel), while the end of a slip
+        (the friction term of the FSR model, thesis ch. 4.3) or a grip change stays.
+        A level that keeps rising (more of the object on the sensor) decides
+        nothing.
+        """
+        h = self.level_half
+        end = min(watch.index + self.watch, self._level_start + len(self._level) - 1 - h)
+        if end >= watch.next_k:
+            i0 = watch.next_k + h - self._level_start
+            level = self._level[i0 : i0 + end - watch.next_k + 1]
+            k = np.arange(watch.next_k, end + 1)
+            d = level - watch.base - watch.trend * (k - watch.index + 2 * h + 1)
+            peak = np.maximum.accumulate(np.maximum(d, watch.peak))
+            history = np.concatenate([watch.history, peak])  # running peak since the onset
+            watch.history = history
+            hold = watch.index + self.step_hold
+            if watch.next_k <= hold:
+                watch.levels = np.concatenate([watch.levels, d[: hold - watch.next_k + 1]])
+            # rise time: onset to the first sample at 90 % of the peak so far (a noisy
+            # plateau keeps nudging the peak, not this)
+            rise = np.searchsorted(history, 0.9 * peak)
+            rise = np.maximum(rise, self.min_rise)
+            since = k - watch.index
+            ok = (
+                (peak >= 4.0 * watch.noise)
+                & (peak - d >= self.drop_fraction * peak)
+                & (since <= (1.0 + self.decay_rises) * rise)
+            )
+            hit = np.flatnonzero(ok)
+            if len(hit) and k[hit[0]] <= hold:
+                return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
+            if watch.next_k <= hold <= end and self._is_step(watch):
+                return PulseCheck(watch.id, hold + h, False)
+            if len(hit):
+                return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
+            early = k <= watch.index + self.watch // 4
+            if early.any():
+                watch.early = max(watch.early, float(peak[early][-1]))
+            watch.peak = float(peak[-1])
+            watch.next_k = end + 1
+        if watch.next_k > watch.index + self.watch:
+            flat = watch.peak <= 1.5 * watch.early
+            return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
+        return None
+
+    def _is_step(self, watch: _Watch) -> bool:
+        """At step_hold after the onset: rose sharply (to 90 % of the peak within step_rise)
+        and has not fallen back by drop_fraction since."""
+        top = float(watch.history[self.step_hold])
+        if top < 6.0 * watch.noise:
+            return False
+        rise = int(np.searchsorted(watch.history[: self.step_hold + 1], 0.9 * top))
+        if rise > self.step_rise:
+            return False
+        return float(np.min(watch.levels[rise:])) >= (1.0 - self.drop_fraction) * top
+
+    # ------------------------------------------------------------------ memory
+    def _trim(self) -> None:
+        keep = self._keep
+        if len(self._t) > 2 * keep:
+            cut = len(self._t) - keep
+            self._t = self._t[cut:]
+            self._t_start += cut
+        oldest_watch = min((w.next_k for w in self._watches), default=None)
+        lv_keep = keep
+        if oldest_watch is not None:
+            lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
+        if len(self._level) > 2 * lv_keep:
+            cut = len(self._level) - lv_keep
+            self._level = self._level[cut:]
+            self._level_start += cut
+        for ch in self.channels:
+            if len(ch.z) > 2 * keep:
+                cut = len(ch.z) - keep
+                ch.z, ch.zh, ch.za = ch.z[cut:], ch.zh[cut:], ch.za[cut:]
+                ch.zready = ch.zready[cut:]
+                ch.z_start += cut
