@@ -565,7 +565,7 @@ def aggregate(rows: Sequence[dict]) -> dict:
     """Figures per row (mode × reflex), per row and band, per row and speed."""
     by_row: dict[str, list[dict]] = {}
     for r in rows:
-        by_row.setdefault(row_key(_trial(r)), []).append(r)
+        by_row.setdefault(row_key(trial_of(r)), []).append(r)
     out: dict = {"rows": {}, "bands": {}, "speeds": {}}
     for key, members in by_row.items():
         out["rows"][key] = summarise(members)
@@ -580,7 +580,8 @@ def aggregate(rows: Sequence[dict]) -> dict:
     return out
 
 
-def _trial(row: dict) -> Trial:
+def trial_of(row: dict) -> Trial:
+    """The trial a result row (trial and outcome fields, as in loop.json) came from."""
     return Trial(**{f.name: row[f.name] for f in fields(Trial)})
 
 

@@ -290,3 +290,13 @@ def test_cli_quick_run_writes_the_report_into_out(tmp_path, capsys):
     assert cli_main(["bench", "loop", "--quick", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "loop.md").read_text().count("**Quick run**") == 1
     assert "force + slip, reflex" in capsys.readouterr().out
+
+
+def test_docs_hold_a_full_run_of_the_current_grid():
+    saved = json.loads((ROOT / "docs" / "benchmarks" / "loop.json").read_text())
+    assert not saved["quick"], "docs hold a quick run; run `grasplink bench loop`"
+    grid = loop.grid(quick=False)
+    assert len(saved["trials"]) == len(grid)
+    assert {loop.row_key(loop.trial_of(r)) for r in saved["trials"]} == {
+        loop.row_key(t) for t in grid
+    }
