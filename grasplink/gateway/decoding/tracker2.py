@@ -392,7 +392,8 @@ class TrackerDecoder(Decoder):
         children.append(self._births(ev, base + self._log_strength(ev.z)))
         self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
-        self._tracks = self._prune(_Bank.concat(children), recent_ids)
+        held_ids = np.array([c.id for c in self._contacts])
+        self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
 
     def _clutter_rate(self, B: _Bank, tc: float) -> np.ndarray:
         """Spurious contacts per s at tc under each track: detector false alarms, and while
@@ -713,14 +714,16 @@ class TrackerDecoder(Decoder):
         z = np.log(v / self.SPEED_PRIOR_MM_S) / self.SPEED_PRIOR_LOG_SIGMA
         return -0.5 * z * z - math.log(self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0 * math.pi))
 
-    def _prune(self, B: _Bank, recent: np.ndarray) -> _Bank:
+    def _prune(self, B: _Bank, recent: np.ndarray, held: np.ndarray) -> _Bank:
         """Best first, one per (direction, ridge, model, state, last three contacts); bounded.
 
         Tracks with two or more contacts: the best max_hypotheses, plus the best
-        PER_START of every contact a track starts at, so that a slip whose true
-        start came after a spurious contact is not crowded out by the tracks
-        that took the spurious one for its start. One-contact tracks (a slip
-        starting at one of the `recent` contacts) are all kept.
+        PER_START of every contact a track starts at while that contact is in the
+        bounded history (`held`), so that a slip whose true start came after a
+        spurious contact is not crowded out by the tracks that took the spurious
+        one for its start (an older start competes on score alone: memory stays
+        bounded however long the stream). One-contact tracks (a slip starting at
+        one of the `recent` contacts) are all kept.
         """
         if not len(B):
             return B
@@ -749,7 +752,9 @@ class TrackerDecoder(Decoder):
         group_rank[order2] = np.arange(len(idx)) - np.repeat(
             starts, np.diff(np.r_[starts, len(idx)])
         )
-        ok = (rank < self.max_hypotheses) | (group_rank < self.PER_START)
+        ok = (rank < self.max_hypotheses) | (
+            (group_rank < self.PER_START) & np.isin(firsts, held)
+        )
         keep[idx[~ok]] = False
         return B.take(np.flatnonzero(keep))
 
