@@ -885,7 +885,7 @@ def render(results: dict, default: str, before: dict | None, now: dict | None) -
     ]
     for label, value, bound, met in target_rows(results, default, before, now):
         mark = "-" if met is None else ("yes" if met else "**no**")
-        digits = 2 if "intervals" in label or "limit" in label else 1
+        digits = 2 if label.startswith("no regression") else 1  # as its bound
         lines.append(f"| {label} | {_fmt(value, digits)} | {bound} | {mark} |")
     lines += ["", "### All moving categories", "", MOVING_HEADER, "|---|" + "---:|" * 12]
     lines += [_moving_row(name, results["overall"][name]) for name in decoders]
