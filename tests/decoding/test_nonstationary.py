@@ -245,7 +245,7 @@ def test_the_report_has_the_targets_and_a_table_per_category():
         assert title in text
     assert "| wrong direction, all estimates | 0.0 | ≤ 5 | yes |" in text
     regression = (
-        "| no regression, constant-speed target set: speed p90 % | 2.0 | ≤ 1.00 (last run) |"
+        "| no regression, constant-speed target set: speed p90 % | 2.00 | ≤ 1.00 (last run) |"
     )
     assert regression + " **no** |" in text
     assert "µs/sample 3 / 256" in text and "| tracker |" in text
