@@ -84,6 +84,9 @@ class PulseCheck(NamedTuple):
     id: int
     emit_index: int
     pulse: bool | None  # True: rose and fell back; False: rose and stayed (a step); None: unclear
+    # a step: the level's rising trend (the object covering more of the sensor) went on
+    # after it (True: the object still moves), stopped (False), or no trend to tell (None)
+    trend_on: bool | None = None
 
 
 @dataclass
@@ -189,7 +192,8 @@ class ContactDetector:
         self._step_start = -w  # centre of _step_d[0] (output m is centre m - w)
         self._step_next = 0  # next centre to test
         self._probes: list[tuple[_Watch, float]] = []  # step candidates being judged (z)
-        self._confirmed: list[tuple[int, int, float, float]] = []  # (emit, index, t, z)
+        # probes judged steps: (emit, index, t, z, trend_on)
+        self._confirmed: list[tuple[int, int, float, float, bool | None]] = []
         self._onsets: deque[tuple[int, int]] = deque(maxlen=32)  # contacts emitted: (index, emit)
         self._next_step_id = STEP_IDS
         self.fall_n = max(2, round(0.02 * self.fs_hz))  # an earlier pulse's tail: its slope ...
@@ -204,6 +208,8 @@ class ContactDetector:
         self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
         self._keep = keep
+        # blocks of samples sitting on the sensor's upper rail (saturation), as times
+        self.blind: deque[tuple[float, float]] = deque(maxlen=64)
         self._t = np.zeros(0)  # recent sample times
         self._x = np.zeros(0)  # and samples (same index)
         self._t_start = 0
@@ -260,6 +266,11 @@ class ContactDetector:
             b = self._raw_blocks + k
             self._censored[b] = on_rail(block)
             self._floor[b] = resolution(block) / math.sqrt(12.0)
+            if self._censored[b] and np.count_nonzero(block == block.max()) >= 0.5 * B:
+                # saturated: no contact can show; times of the block's first and last sample
+                i = b * B - self._t_start
+                if i >= 0 and i + B <= len(self._t):
+                    self.blind.append((float(self._t[i]), float(self._t[i + B - 1])))
         self._raw_blocks += full
         self._raw = raw[full * B :].copy()
 
@@ -543,13 +554,14 @@ class ContactDetector:
                 and done.emit_index < (watch.index + self.step_hold + self.level_half + 1)
             ):
                 emit = max(done.emit_index, watch.index + self.lag + self.step_w)
-                self._confirmed.append((emit, watch.index, self._time(watch.index, 0.0), z))
+                t = self._time(watch.index, 0.0)
+                self._confirmed.append((emit, watch.index, t, z, done.trend_on))
         self._probes = still
         events, checks = [], []
         keep = []
-        for emit, index, t, z in self._confirmed:
+        for emit, index, t, z, trend_on in self._confirmed:
             if emit >= self._n:
-                keep.append((emit, index, t, z))
+                keep.append((emit, index, t, z, trend_on))
                 continue
             if any(abs(index - n) <= self.step_w + 2 for n, e in self._onsets if e <= emit):
                 continue  # the kink bank has it
@@ -559,7 +571,7 @@ class ContactDetector:
             events.append(
                 ContactEvent(sid, t, index, emit, z, 0.0, self.step_w / self.fs_hz, sigma)
             )
-            checks.append(PulseCheck(sid, emit, False))
+            checks.append(PulseCheck(sid, emit, False, trend_on))
         self._confirmed = keep
         return events, checks
 
@@ -668,7 +680,7 @@ class ContactDetector:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             if watch.next_k <= hold <= end:
                 if self._is_small_step(watch) if small else self._is_step(watch):
-                    return PulseCheck(watch.id, hold + h, False)
+                    return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
                 if watch.fell:
                     return PulseCheck(watch.id, hold + h, True)
             if len(hit):
@@ -724,6 +736,21 @@ class ContactDetector:
         x = np.arange(m) - (m - 1) / 2.0
         change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
         return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
+
+    def _trend_on(self, watch: _Watch) -> bool | None:
+        """After a step: did the rising trend before it go on (True) or stop (False)? None
+        when the trend is too weak to tell over half the hold (under 4 noise units)."""
+        half = watch.levels[len(watch.levels) // 2 :]
+        m = len(half)
+        if watch.trend * m < 4.0 * watch.noise:
+            return None
+        x = np.arange(m) - (m - 1) / 2.0
+        slope = float(np.dot(x, half) / np.dot(x, x))
+        if slope >= 0.6 * watch.trend:
+            return True
+        if slope <= 0.3 * watch.trend:
+            return False
+        return None
 
     def _is_small_step(self, watch: _Watch) -> bool:
         """A probe (a small step the kink bank missed) at step_hold after the onset: rose

@@ -270,7 +270,8 @@ class TrackerDecoder(Decoder):
         self._history = int(history)
         self._ring_id = np.full(RING, -1, np.int64)  # pulse verdicts of recent contacts
         self._ring = np.zeros(RING, np.int64)
-        self._steps: set[int] = set()  # contacts told to be steps (replayed as such)
+        # contacts told to be steps (replayed as such): id -> did the trend go on after it
+        self._steps: dict[int, bool | None] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
 
@@ -322,9 +323,9 @@ class TrackerDecoder(Decoder):
         self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[check.pulse]
         self._cache = None
         if check.pulse is False:
-            self._steps.add(check.id)
-            if len(self._steps) > 64:
-                self._steps = {i for i in self._steps if i > check.id - RING}
+            self._steps[check.id] = check.trend_on
+            while len(self._steps) > 64:
+                del self._steps[next(iter(self._steps))]
             # replay from that contact, now a step (stop or grip change)
             for at, c in enumerate(self._contacts):
                 if c.id == check.id:
@@ -363,6 +364,11 @@ class TrackerDecoder(Decoder):
         tc = ev.t_s
         B = self._tracks
         step = ev.id in self._steps
+        # a stop ends the rising trend of the level (the object no longer covers more of
+        # the sensor); a grip change while slipping does not
+        stop_rate = self.STOP_STEP_PER_S * {None: 1.0, True: 0.1, False: 3.0}[
+            self._steps.get(ev.id)
+        ]
         best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
         rate = self._clutter_rate(B, tc)
         children = []
@@ -370,7 +376,8 @@ class TrackerDecoder(Decoder):
             moving = np.isnan(B.stop)
             if step:  # a grip change (slipping or not) or, slipping, a stop here
                 children.append(B.replace(score=B.score + math.log(self.GRIP_STEP_PER_S)))
-                children.append(self._stopped_at(B.take(np.flatnonzero(moving & (B.n >= 2))), tc))
+                stopping = B.take(np.flatnonzero(moving & (B.n >= 2)))
+                children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
             else:
                 children.append(B.replace(score=B.score + np.log(rate)))
             assigned = self._assign(B, ev)
@@ -911,12 +918,13 @@ class TrackerDecoder(Decoder):
         live = score >= best - self.NEGLIGIBLE
         # silence
         due, adj_t, stop_t, limit_t = self._schedule(B)
-        j = (due <= g).sum(axis=1) - 1
+        blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
+        j = (due <= g - blind[:, None]).sum(axis=1) - 1
         rows = np.arange(len(B))
         adj = adj_t[rows, j]
         stopped = stop_t[rows, j] | ~np.isnan(B.stop)
         limit = limit_t[rows, j]
-        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)]
+        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)] + blind
         upcoming = np.where(j + 1 < due.shape[1], upcoming, np.inf)
         nxt = upcoming[live & (upcoming > g)]
         if len(nxt):
@@ -924,7 +932,7 @@ class TrackerDecoder(Decoder):
         waiting = np.isnan(B.stop) & (B.run == 1)
         if waiting.any():
             w = np.flatnonzero(waiting & live)
-            adj[w] = self._log_waiting(B.take(w), g)
+            adj[w] = self._log_waiting(B.take(w), g, blind[w])
         evident, bonus = self._evidence(B)
         total = np.where(live, score + adj + bonus, -np.inf)
         top = max(self._null, float(total.max()))
@@ -975,6 +983,15 @@ class TrackerDecoder(Decoder):
             odds = math.log(this / other) if other > 0 else math.inf
         return (until, chosen, p_slip, agree, odds)
 
+    def _blind(self, t: np.ndarray, g: float) -> np.ndarray:
+        """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there)."""
+        out = np.zeros(len(t))
+        for r0, r1 in self.detector.blind:
+            if r1 <= float(t.min(initial=g)) or r0 >= g:
+                continue
+            out += np.clip(np.minimum(g, r1) - np.maximum(t, r0), 0.0, None)
+        return out
+
     def _evidence(self, B: _Bank) -> tuple[np.ndarray, np.ndarray]:
         """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
         And the score bonus of the pulse verdicts on its recent contacts."""
@@ -988,11 +1005,11 @@ class TrackerDecoder(Decoder):
         evident = (B.n >= 2) & ((pulses > 0) | ((B.n >= 4) & (steps == 0)))
         return evident, bonus
 
-    def _log_waiting(self, B: _Bank, g: float) -> np.ndarray:
+    def _log_waiting(self, B: _Bank, g: float, blind: np.ndarray) -> np.ndarray:
         """Log P(no contact detected yet) for tracks whose speed is unknown (one contact, or
-        restarted), g - t after their contact: every ridge ahead not yet reached under the
-        speed prior, or reached and missed."""
-        elapsed = g - B.t - self._max_latency
+        restarted), g - t after their contact (less the time on the rail): every ridge
+        ahead not yet reached under the speed prior, or reached and missed."""
+        elapsed = g - B.t - blind - self._max_latency
         out = np.zeros(len(B))
         pos = elapsed > 0
         if not pos.any():
