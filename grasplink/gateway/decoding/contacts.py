@@ -56,7 +56,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from grasplink.gateway.decoding.filters import SosFilter, lattice_median, on_rail, resolution
+from grasplink.gateway.decoding.filters import (
+    RAIL_SHARE,
+    SosFilter,
+    lattice_median,
+    on_rail,
+    resolution,
+)
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
@@ -266,7 +272,8 @@ class ContactDetector:
             b = self._raw_blocks + k
             self._censored[b] = on_rail(block)
             self._floor[b] = resolution(block) / math.sqrt(12.0)
-            if self._censored[b] and np.count_nonzero(block == block.max()) >= 0.5 * B:
+            top = float(block.max())
+            if self._censored[b] and top > 0.0 and np.count_nonzero(block == top) >= 0.5 * B:
                 # saturated: no contact can show; times of the block's first and last sample
                 i = b * B - self._t_start
                 if i >= 0 and i + B <= len(self._t):
@@ -678,7 +685,7 @@ class ContactDetector:
             hit = np.flatnonzero(ok & ~deferred)
             if len(hit) and k[hit[0]] < hold:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
-            if watch.next_k <= hold <= end:
+            if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
                 if self._is_small_step(watch) if small else self._is_step(watch):
                     return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
                 if watch.fell:
@@ -736,6 +743,15 @@ class ContactDetector:
         x = np.arange(m) - (m - 1) / 2.0
         change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
         return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
+
+    def _clipped(self, start: int, stop: int) -> bool:
+        """Do samples start..stop pile up at their maximum (the sensor's upper rail)? A
+        level clipped there stays whatever happens: no step to tell."""
+        i0, i1 = start - self._t_start, stop - self._t_start + 1
+        if i0 < 0 or i1 > len(self._x):
+            return False
+        x = self._x[i0:i1]
+        return bool(on_rail(x)) and np.count_nonzero(x == x.max()) >= RAIL_SHARE * len(x)
 
     def _trend_on(self, watch: _Watch) -> bool | None:
         """After a step: did the rising trend before it go on (True) or stop (False)? None
