@@ -165,13 +165,13 @@ class TrackerDecoder(Decoder):
     SIGMA_POS_MM = 0.3  # ridge-contact position noise (ridge compliance, speed dips)
     SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
     SPEED_WALK_MM = 10.0
-    LOG_CHANGING = math.log(0.3)  # prior of the changing-speed model at each (re)start
+    LOG_CHANGING = math.log(0.5)  # prior of the changing-speed model at each (re)start
     ACC_PER_S = 2.0  # changing: acceleration sigma at a (re)start, x speed (v doubles in 0.5 s)
     JERK_PER_S2 = 1.0  # changing: the acceleration drifts this much (sigma) in 1 s, x speed
     ACC_FLOOR = 0.4  # predicted braking keeps at least sqrt(1 - 2 x this) of the speed
     DIP_RECOVERY_S = 0.05  # the speed recovers from a ridge's dip within about this time
-    DIP_PRIOR_MM = 1.0  # prior sigma of the distance lost at each ridge (mean 0)
-    DIP_MAX_MM = 1.5
+    DIP_PRIOR_MM = 0.5  # prior sigma of the distance lost at each ridge (mean 0)
+    DIP_MAX_MM = 0.8  # a 15 mm/s dip recovering over 50 ms costs 0.75 mm (thesis ch. 5.5.1)
     SPEED_INIT_REL = 0.1  # relative speed uncertainty from two contacts (besides timing)
     LATE_REL = 0.15  # a contact may come this share of its interval late (speed changes)
     LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
@@ -366,9 +366,9 @@ class TrackerDecoder(Decoder):
         step = ev.id in self._steps
         # a stop ends the rising trend of the level (the object no longer covers more of
         # the sensor); a grip change while slipping does not
-        stop_rate = self.STOP_STEP_PER_S * {None: 1.0, True: 0.1, False: 3.0}[
-            self._steps.get(ev.id)
-        ]
+        stop_rate = (
+            self.STOP_STEP_PER_S * {None: 1.0, True: 0.1, False: 3.0}[self._steps.get(ev.id)]
+        )
         best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
         rate = self._clutter_rate(B, tc)
         children = []
@@ -759,9 +759,7 @@ class TrackerDecoder(Decoder):
         group_rank[order2] = np.arange(len(idx)) - np.repeat(
             starts, np.diff(np.r_[starts, len(idx)])
         )
-        ok = (rank < self.max_hypotheses) | (
-            (group_rank < self.PER_START) & np.isin(firsts, held)
-        )
+        ok = (rank < self.max_hypotheses) | ((group_rank < self.PER_START) & np.isin(firsts, held))
         keep[idx[~ok]] = False
         return B.take(np.flatnonzero(keep))
 
