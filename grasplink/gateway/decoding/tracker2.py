@@ -65,7 +65,12 @@ import numpy as np
 from scipy.special import erf
 
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
-from grasplink.gateway.decoding.contacts import ContactDetector, ContactEvent, PulseCheck
+from grasplink.gateway.decoding.contacts import (
+    STEP_IDS,
+    ContactDetector,
+    ContactEvent,
+    PulseCheck,
+)
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
@@ -161,6 +166,7 @@ class TrackerDecoder(Decoder):
     STOP_STEP_PER_S = 1.0
     GRIP_STEP_PER_S = 0.3
     LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
+    PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
     ROBUST_FLOOR = 0.05  # weight of the broad part of the contact-time likelihood
     SIGMA_POS_MM = 0.3  # ridge-contact position noise (ridge compliance, speed dips)
     SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
@@ -365,10 +371,10 @@ class TrackerDecoder(Decoder):
         B = self._tracks
         step = ev.id in self._steps
         # a stop ends the rising trend of the level (the object no longer covers more of
-        # the sensor); a grip change while slipping does not
-        stop_rate = (
-            self.STOP_STEP_PER_S * {None: 1.0, True: 0.1, False: 3.0}[self._steps.get(ev.id)]
-        )
+        # the sensor): a step after which it went on is seldom one
+        stop_rate = self.STOP_STEP_PER_S * (0.1 if self._steps.get(ev.id) else 1.0)
+        if ev.id >= STEP_IDS:  # a small step the kink bank missed: often a weak ridge pulse
+            stop_rate *= self.PROBE_STOP
         best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
         rate = self._clutter_rate(B, tc)
         children = []
