@@ -489,6 +489,17 @@ def decoder_meter() -> Iterator[None]:
             setattr(cls, name, method)
 
 
+def provisioning_cost_ms() -> float:
+    """CPU [ms] the gateway spends building one node's provisioning (mean of the four)."""
+    config = gateway_config()
+    costs = []
+    for node in config.nodes.values():
+        t0 = time.thread_time_ns()
+        provisioning_module.Provisioner(node, config).writes()
+        costs.append((time.thread_time_ns() - t0) / 1e6)
+    return statistics.mean(costs)
+
+
 def virtual_set(
     seconds: float, *, profile: bool = False, bounded: bool = False, warm_s: float = 1.0
 ) -> dict:
@@ -952,6 +963,7 @@ def run_all(quick: bool, out: Path, save: Path | None = None) -> int:
     fresh = virtual_set(10.0 if quick else 60.0)
     fresh_bounded = virtual_set(10.0 if quick else 60.0, bounded=True)
     profiled = virtual_set(10.0 if quick else 30.0, profile=True)
+    provisioning_ms = provisioning_cost_ms()
     memory = {v: collect(child) for v, child in children.items()}
     figures = {
         "loops": loops,
@@ -959,6 +971,7 @@ def run_all(quick: bool, out: Path, save: Path | None = None) -> int:
         "fresh": fresh,
         "fresh_bounded": fresh_bounded,
         "profiled": profiled,
+        "provisioning_ms": provisioning_ms,
         "capacity": capacity,
         "together": together,
         "memory": memory,
@@ -1052,6 +1065,122 @@ def fmt(value: float | None, digits: int = 0) -> str:
     if value is None or value != value:  # None or NaN
         return "-"
     return f"{value:,.{digits}f}".replace(",", " ")
+
+
+def diagnosis(
+    figures: dict, mem: dict, mem_b: dict, bus: list[float], capacity: list[dict]
+) -> list[str]:
+    """The diagnosis section, from the figures: what each miss comes from, what to change."""
+    lines: list[str] = []
+    todo: list[str] = []
+    growing = mem["tracks_end"] > 3 * max(1, mem["tracks_start"])
+    if growing:
+        lines += [
+            "**The skin decoder's hypotheses grow without bound.** `TrackerDecoder._prune`",
+            "(grasplink/gateway/decoding/tracker.py) keeps the best `max_hypotheses` tracks",
+            "with two or more contacts *plus* the best `PER_START` of every contact a track",
+            "starts at, and a track whose contacts lie in the past is never retired. Over",
+            f"{mem['minutes']:g} simulated minutes the hypotheses grew {mem['tracks_start']} →",
+            f"{mem['tracks_end']}, the gateway's CPU per set {mem['cpu_first']:.1f} → "
+            f"{mem['cpu_last']:.1f} % of a core, the worst skin TPDO in the last minute",
+            f"{fmt(mem['tpdo_max_last'] / 1e3)} ms, RSS {mem['slope']:+.2f} MiB/min; with the",
+            f"quota off they stay at {mem_b['tracks_end']} and RSS at "
+            f"{mem_b['slope']:+.3f} MiB/min.",
+            "",
+        ]
+        todo.append(
+            "Bound the tracker: the per-start quota only for starts among the recent contacts,"
+            " tracks far below the best retired, a cap on the total."
+        )
+    else:
+        lines += [
+            f"**The decoder's hypotheses stay bounded**: {mem['tracks_start']} → "
+            f"{mem['tracks_end']} over {mem['minutes']:g} simulated minutes of slip cycles, the",
+            f"gateway's CPU per set {mem['cpu_first']:.1f} → {mem['cpu_last']:.1f} % of a core "
+            f"and RSS {mem['slope_second_half']:+.3f} MiB/min over the second half.",
+            "",
+        ]
+    fresh = figures["fresh"]
+    slow = fresh["slowest"]
+    parts = slow.get("parts_us", {})
+    slow_b = figures["fresh_bounded"]["slowest"]
+    loops = figures["loops"]
+    wall = [x for run in loops for x in run["tpdo_wall_us"]]
+    lines += [
+        "**The latency tail is the decoder's contact step, on the frame path.** The slowest",
+        f"1 % of skin TPDOs (a fresh gateway, virtual time) cost {fmt(slow.get('mean_us'))} µs",
+        f"of CPU each and {100 * slow.get('with_contact', 0):.0f} % of them take a ridge contact:",
+        f"{fmt(parts.get('new contact'))} µs branching and updating every hypothesis (a",
+        "contact decided late replays the last few), "
+        f"{fmt(parts.get('detector'))} µs in the contact detector,",
+        f"{fmt(parts.get('estimate'))} µs for the estimate (without the per-start quota the",
+        f"step costs {fmt(slow_b.get('parts_us', {}).get('new contact'))} µs). The gateway",
+        "answers no other frame meanwhile. In real time the processing p99 was "
+        f"{fmt(percentile(wall, 99) / 1e3, 1)} ms and the",
+        f"bus p99 {fmt(percentile(bus, 99) / 1e3, 1)} ms: the rest is thread hand-offs and "
+        "waiting behind that work, stretched by the",
+        f"machine's load (average {figures['loadavg'][0]:.0f} on "
+        f"{os.cpu_count()} cores during the run).",
+        "",
+    ]
+    todo.append(
+        "Keep the decoder's contact work off the frame path, or bound it per call (spread a"
+        " contact's branching over the next updates), so a skin TPDO's answer never waits"
+        " for it; a 2 ms loop leaves no room for a step of several ms. `Gateway."
+        "loop_latency_us` is wall time and includes preemption: a CPU-time figure beside it"
+        " would tell the two apart."
+    )
+    provisioning_ms = figures.get("provisioning_ms", 0.0)
+    if provisioning_ms > 5.0:
+        together = figures.get("together", {})
+        came_up = together.get("up_s") is not None
+        lines += [
+            "**Provisioning parses the node's EDS on the gateway's thread.** Building a",
+            f"`Provisioner` (it calls `load_profile`) costs {provisioning_ms:.0f} ms per node, "
+            "inside `Gateway.receive`",
+            "each time a node boots: four at start-up, and again after every reset. On a loaded",
+            "machine, or beside other gateways sharing the GIL, that CPU becomes hundreds of ms",
+            "of wall time, past the 300 ms heartbeat consumer time: the starting gateway loses",
+            "the nodes, resets them and provisions them again"
+            + (
+                f" (the all-at-once start of {together.get('sets')} gateways never had every "
+                f"node up: {together.get('boots')} boots in 20 s)"
+                if together and not came_up
+                else f" (the all-at-once start of {together.get('sets')} gateways came up this "
+                "time, after "
+                f"{together.get('boots')} node boots)"
+                if together
+                else ""
+            )
+            + "; the capacity runs",
+            "parse each profile once.",
+            "",
+        ]
+        todo.append(
+            "Parse each node's profile once (cache per kind and node-ID, or build the SDO"
+            " writes with the configuration) so a boot costs the gateway microseconds."
+        )
+    boots = sum(c.get("boots", 0) for c in capacity if "error" not in c)
+    boots += sum(run.get("boots", 0) for run in loops)
+    if boots:
+        lines += [
+            "**A stall loses every node, then resets them.** `NodeRunner` delivers one",
+            "received frame per step and then runs every due timer; after the gateway's thread",
+            "stalls (a contact step, a parse, a starved process) the master's heartbeat-loss",
+            "check runs before the heartbeats queued meanwhile are delivered, so a stall longer",
+            "than the consumer time (300 ms) marks every node lost and the master resets them;",
+            "the skin stream resynchronises and the decoder starts over. The real-time runs saw",
+            f"{boots} such node boots; they are what ends the capacity search on this machine.",
+            "",
+        ]
+        todo.append(
+            "(bus) Let `NodeRunner` deliver the frames already queued before it runs due timers"
+            " (bounded per step), so a late thread does not declare on-time nodes lost."
+        )
+    lines += ["What should change (the benchmark only measures):", ""]
+    lines += [f"{i}. {text}" for i, text in enumerate(todo, start=1)]
+    lines.append("")
+    return lines
 
 
 # -- plot ---------------------------------------------------------------------------------------
@@ -1153,7 +1282,6 @@ def write_doc(figures: dict, path: Path) -> None:
     fresh = figures["fresh"]
     per_set = fresh["gateway_percent"]
     memory = {v: memory_summary(figures["memory"][v]) for v in ("default", "bounded")}
-    bounded_slow = figures["fresh_bounded"]["slowest"]
     detector = detector_delays()
     mem, mem_b = memory["default"], memory["bounded"]
     capacity = figures["capacity"]
@@ -1211,10 +1339,7 @@ def write_doc(figures: dict, path: Path) -> None:
         f"MiB/min over the second half (flat: within ±{FLAT_MIB_PER_MIN} MiB/min){stopped} | "
         f"{verdict(flat)} |",
         "",
-        "Misses are diagnosed [below](#diagnosis): latency, capacity and memory all come back",
-        "to the skin decoder, whose hypothesis set grows with every ridge contact the gateway",
-        "has seen and whose contact step runs on the frame path; the onset misses are layouts",
-        "on which two contacts do not yet tell the tracker that the object slips.",
+        "Misses are diagnosed [below](#diagnosis), with what should change in the gateway.",
         "",
         "![CPU and memory over time, capacity, onset delays](gateway.png)",
         "",
@@ -1519,65 +1644,8 @@ def write_doc(figures: dict, path: Path) -> None:
         "",
         "## Diagnosis",
         "",
-        "**The skin decoder's hypotheses grow without bound.** `TrackerDecoder._prune`",
-        "(grasplink/gateway/decoding/tracker.py) keeps the best `max_hypotheses` (24) tracks",
-        "with two or more contacts *plus* the best `PER_START` (4) of every contact a track",
-        "starts at, and a track whose contacts lie in the past is never retired: each new",
-        "contact branches it as clutter and it lives on. So every ridge contact the gateway",
-        f"has ever seen keeps its quota: over {mem['minutes']:g} simulated minutes the",
-        f"hypotheses grew {mem['tracks_start']} → {mem['tracks_end']}, and with them the cost",
-        "of each new contact (every hypothesis is branched and Kalman-updated per contact,",
-        "the posterior sums over all of them at every 10 ms update): the gateway's CPU per set",
-        f"went {mem['cpu_first']:.1f} → {mem['cpu_last']:.1f} % of a core, the median skin TPDO",
-        f"{fmt(mem['tpdo_first'])} → {fmt(mem['tpdo_last'])} µs, the worst one in the last minute",
-        f"{fmt(mem['tpdo_max_last'] / 1e3, 0)} ms, and RSS {mem['slope']:+.2f} MiB/min. With the",
-        f"quota off the hypotheses stay at {mem_b['tracks_end']}, CPU at "
-        f"{mem_b['cpu_last']:.1f} % and RSS {mem_b['slope']:+.3f} MiB/min. The decoding",
-        "benchmark never saw this: its recordings last seconds.",
-        "",
-        "The latency tail has the same root even in a fresh gateway: the p99 of section 1",
-        "is the skin TPDOs that complete a contact (`_add_contact` and the posterior in the",
-        "profile), each branching every hypothesis; while the decoder works the gateway",
-        "answers no other frame (it runs on the frame path).",
-        "",
-        "**Provisioning parses the node's EDS on the gateway's thread.** `Provisioner.__init__`",
-        "calls `load_profile` (validate + canopen import, tens of ms) each time a node boots,",
-        "inside `Gateway.receive`. One gateway pays it four times at start-up; gateways sharing",
-        "a process stall each other past the 300 ms heartbeat consumer time, the master loses",
-        "nodes, resets them, they boot and are provisioned again (a loop; see the",
-        "all-at-once start above), so the real-time runs start gateways one at a time with",
-        "each profile parsed once.",
-        "",
-        "**A stall loses every node, then resets them.** `NodeRunner` delivers one received",
-        "frame per step and then runs every due timer; after the gateway's thread stalls (a",
-        "contact step, a parse, a starved process), the master's heartbeat-loss check runs",
-        "before the heartbeats queued meanwhile are delivered, so a stall longer than the",
-        "consumer time (300 ms) marks every node lost and the master resets them (the node",
-        "boots in sections 1 and 3), the skin stream resynchronises and the decoder starts",
-        "over. On this shared machine that is what ends the real-time capacity search.",
-        "",
-        "What should change in the gateway (not done here; the benchmark only measures):",
-        "",
-        "1. Bound the tracker: give the per-start quota only to starts among the recent",
-        "   contacts (e.g. the last `history`), retire tracks whose score falls a fixed",
-        "   log-likelihood margin below the best, and cap the total; its cost per contact is",
-        "   then O(`max_hypotheses`). Re-run this benchmark and the decoding benchmark (the",
-        "   quota exists for slips whose true start follows a spurious contact).",
-        "2. Parse each node's profile once (cache per kind and node-ID, or build the SDO",
-        "   writes at configuration time) so a boot costs the gateway microseconds (the",
-        "   capacity runs do this locally).",
-        "3. Keep decoder work off the frame path or bound it per call (a contact's work",
-        "   spread over updates) so one TPDO cannot hold the loop for milliseconds: even",
-        "   with the quota off the slowest 1 % of skin TPDOs take "
-        f"{fmt(bounded_slow.get('mean_us'))} µs of CPU,",
-        f"   {fmt(bounded_slow.get('parts_us', {}).get('new contact'))} µs of it the new-contact"
-        " step, against a 2 ms target for the whole loop;",
-        "   `Gateway.loop_latency_us` is wall time and, like the p99 here, includes",
-        "   preemption on a shared machine; a CPU-time figure beside it would separate the two.",
-        "4. (bus) Let `NodeRunner` deliver the frames already queued before it runs due",
-        "   timers (bounded per step), so a late thread does not declare on-time nodes lost.",
-        "",
     ]
+    lines += diagnosis(figures, mem, mem_b, bus, capacity)
     path.write_text("\n".join(lines))
 
 
