@@ -976,6 +976,7 @@ def run_all(quick: bool, out: Path, save: Path | None = None) -> int:
         "together": together,
         "memory": memory,
         "wall_s": time.monotonic() - started,
+        "code": code_version(),
         "loadavg": (load0[0], os.getloadavg()[0]),
         "quick": quick,
     }
@@ -984,6 +985,26 @@ def run_all(quick: bool, out: Path, save: Path | None = None) -> int:
     report(figures, out)
     say("done")
     return 0
+
+
+def code_version() -> str:
+    """The commit the measured code is at, and whether grasplink/ differs from it."""
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        changed = subprocess.run(
+            ["git", "-C", str(ROOT), "status", "--porcelain", "--", "grasplink"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown commit"
+    return f"commit {commit}" + (" with uncommitted changes in grasplink/" if changed else "")
 
 
 def _say(started: float) -> Callable[[str], None]:
@@ -1307,7 +1328,8 @@ def write_doc(figures: dict, path: Path) -> None:
         f"Machine: {sys.platform}, {os.cpu_count()} cores shared with other jobs (load average "
         f"{figures['loadavg'][0]:.1f} at the start, {figures['loadavg'][1]:.1f} at the end), "
         f"Python {sys.version.split()[0]}, python-can {can.__version__}; the run took "
-        f"{figures['wall_s'] / 60:.0f} min.",
+        f"{figures['wall_s'] / 60:.0f} min, measuring the code at "
+        f"{figures.get('code', 'an unknown commit')}.",
         "",
         "The gateway runs as shipped (`Gateway` with the default configuration: all four",
         "nodes, alpha0.1 skin, `tracker` decoder, force-and-slip feedback, reflex from",
