@@ -169,7 +169,7 @@ class TrackerDecoder(Decoder):
     PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
     ROBUST_FLOOR = 0.05  # weight of the broad part of the contact-time likelihood
     SIGMA_POS_MM = 0.3  # ridge-contact position noise (ridge compliance, speed dips)
-    SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
+    SPEED_WALK = 0.01  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
     SPEED_WALK_MM = 10.0
     LOG_CHANGING = math.log(0.5)  # prior of the changing-speed model at each (re)start
     ACC_PER_S = 2.0  # changing: acceleration sigma at a (re)start, x speed (v doubles in 0.5 s)
