@@ -176,7 +176,7 @@ class TrackerDecoder(Decoder):
     JERK_PER_S2 = 1.0  # changing: the acceleration drifts this much (sigma) in 1 s, x speed
     ACC_FLOOR = 0.4  # predicted braking keeps at least sqrt(1 - 2 x this) of the speed
     DIP_RECOVERY_S = 0.05  # the speed recovers from a ridge's dip within about this time
-    DIP_PRIOR_MM = 0.5  # prior sigma of the distance lost at each ridge (mean 0)
+    DIP_PRIOR_MM = 0.1  # prior sigma of the distance lost at each ridge (mean 0)
     DIP_MAX_MM = 0.8  # a 15 mm/s dip recovering over 50 ms costs 0.75 mm (thesis ch. 5.5.1)
     SPEED_INIT_REL = 0.1  # relative speed uncertainty from two contacts (besides timing)
     LATE_REL = 0.15  # a contact may come this share of its interval late (speed changes)
