@@ -373,7 +373,8 @@ class TrackerDecoder(Decoder):
         # a stop ends the rising trend of the level (the object no longer covers more of
         # the sensor): a step after which it went on is seldom one
         stop_rate = self.STOP_STEP_PER_S * (0.1 if self._steps.get(ev.id) else 1.0)
-        if ev.id >= STEP_IDS:  # a small step the kink bank missed: often a weak ridge pulse
+        probe = ev.id >= STEP_IDS
+        if probe:  # a small step the kink bank missed: often a weak ridge pulse
             stop_rate *= self.PROBE_STOP
         best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
         rate = self._clutter_rate(B, tc)
@@ -386,12 +387,19 @@ class TrackerDecoder(Decoder):
                 children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
             else:
                 children.append(B.replace(score=B.score + np.log(rate)))
-            assigned = self._assign(B, ev)
+            # a small step the kink bank missed is timed as a step (mid-rise): no ridge
+            assigned = [] if probe else self._assign(B, ev)
             children += assigned
             if step:  # a stop right at a ridge (the step is that ridge's contact)
                 for c in assigned:
                     at = c.take(np.flatnonzero(c.n >= 2))
                     children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
+        self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
+        if probe:
+            recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
+            held_ids = np.array([c.id for c in self._contacts])
+            self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
+            return
         # a new track starting at this contact: a slip starting (the earlier story ends
         # here) or, while one slips, reversing (the other edge leads, anywhere)
         base = np.full(2, best_before + self.LOG_NEW_TRACK)
@@ -403,7 +411,6 @@ class TrackerDecoder(Decoder):
                     reverse = float(B.score[way].max()) + self.LOG_REVERSE + math.log(2.0)
                     base[di] = max(base[di], reverse)
         children.append(self._births(ev, base + self._log_strength(ev.z)))
-        self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
         held_ids = np.array([c.id for c in self._contacts])
         self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
