@@ -143,6 +143,22 @@ class _Bank:
         return out
 
 
+class _One:
+    """One track's numbers as plain floats (the chosen track, read at every update)."""
+
+    __slots__ = ("a", "d", "dirn", "m", "n", "p00", "p01", "p02", "p11", "p12", "p22")
+    __slots__ += ("ridge", "run", "s", "stop", "t", "v")
+
+    def __init__(self, B: _Bank, i: int):
+        self.dirn, self.ridge = int(B.dirn[i]), int(B.ridge[i])
+        self.n, self.run = int(B.n[i]), int(B.run[i])
+        self.t, self.stop, self.m = float(B.t[i]), float(B.stop[i]), float(B.m[i])
+        self.s, self.v, self.a, self.d = (float(x) for x in B.X[i])
+        P = B.P[i]
+        self.p00, self.p01, self.p02 = float(P[0, 0]), float(P[0, 1]), float(P[0, 2])
+        self.p11, self.p12, self.p22 = float(P[1, 1]), float(P[1, 2]), float(P[2, 2])
+
+
 class TrackerDecoder(Decoder):
     """Contact tracker: hypotheses over (direction, ridge, motion); Kalman speed, acceleration."""
 
@@ -187,7 +203,7 @@ class TrackerDecoder(Decoder):
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
     STRONG_Z = 60.0  # ridge contacts: strengths spread log-uniformly up to about this
     STRENGTH_MIN, STRENGTH_MAX = math.log(0.1), math.log(3.0)
-    REFRESH_S = 0.2  # how often silence (and the agreement) is re-scored between contacts
+    REFRESH_S = 0.5  # how often silence (and the agreement) is re-scored between contacts
     NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out
     MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts (far-off contact)
     START_CONTACTS = 2  # a slip may start at any of the last this many contacts
@@ -861,15 +877,12 @@ class TrackerDecoder(Decoder):
         _, chosen, p_slip, agree, odds = self._cache
         if chosen is None:
             return SlipEstimate(g, False, None, None, force, min(1.0, max(0.0, 1.0 - p_slip)))
-        i, stopped, limit = chosen
-        B = self._tracks
-        h = B.take(np.array([i]))
-        n, run = int(h.n[0]), int(h.run[0])
+        h, stopped, limit = chosen
+        n, run = h.n, h.run
         if not stopped and run == 1:  # restarted: where is known, the speed is not yet
-            x = float(self._x(h, h.X[:, 0])[0])
             known = n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
             conf = min(1.0, max(0.0, p_slip))
-            return SlipEstimate(g, True, None, x if known else None, force, conf)
+            return SlipEstimate(g, True, None, self._x1(h, h.s) if known else None, force, conf)
         if not stopped and (n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS):
             # a slip, but its direction is not told yet (two contacts fit any alignment
             # either way; a third may fit both): say so rather than guess a sign
@@ -878,39 +891,48 @@ class TrackerDecoder(Decoder):
         maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
         direction = 1.0 / (1.0 + math.exp(-(odds - self.LOG_CONF_ODDS) / self.CONF_ODDS_SCALE))
         conf = agree * maturity * direction / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
-        x = float(self._x(h, s)[0])
-        conf = min(1.0, max(0.0, float(conf)))
+        x = self._x1(h, s)
+        conf = min(1.0, max(0.0, conf))
         if not stopped:
-            return SlipEstimate(g, True, float(h.dirn[0] * speed), x, force, conf)
+            return SlipEstimate(g, True, h.dirn * speed, x, force, conf)
         return SlipEstimate(g, False, 0.0, x, force, conf)
+
+    def _x1(self, h: _One, s: float) -> float:
+        return s if h.dirn > 0 else self.length - s
+
+    def _where(self, h: _One, g: float, stopped: bool, limit: int) -> tuple[float, float, float]:
+        """(travel of the edge from the first ridge met, speed, sigma) of one track at g."""
+        di = (1 - h.dirn) // 2
+        pos = self._pos[di]
+        if h.stop == h.stop:  # stopped at a step: where it was then
+            r = h.ridge
+            gap = float(pos[min(r + 1, self.count)] - pos[r])
+            return h.s, 0.0, max(math.sqrt(max(h.p00, 0.0)), 0.1 * gap)
+        tau = max(0.0, g - h.t)
+        v = h.v
+        v_end = min(max(v + h.a * tau, 0.25 * v), 4.0 * v)
+        decay = math.exp(-tau / self.DIP_RECOVERY_S)
+        s = h.s + 0.5 * (v + v_end) * tau - h.d * h.m * (1.0 - decay)
+        speed = max(0.0, v_end - h.d * h.m * decay / self.DIP_RECOVERY_S)
+        var = (
+            h.p00
+            + 2 * tau * h.p01
+            + tau * tau * h.p11
+            + tau * tau * (h.p02 + tau * h.p12 + 0.25 * tau * tau * h.p22)
+        )
+        sigma = math.sqrt(max(var, 0.0))
+        end = float(pos[min(limit, self.count)])
+        s = min(s, end)
+        if stopped:  # somewhere before the ridge it never reached: as likely anywhere
+            start = float(pos[min(limit, self.count) - 1])
+            sigma = max(sigma, (end - start) / math.sqrt(12.0))
+            speed = 0.0
+        if h.ridge == self.count - 1:
+            sigma += 0.2 * max(0.0, s - float(pos[self.count - 1]))
+        return s, speed, sigma
 
     def _x(self, B: _Bank, s: np.ndarray) -> np.ndarray:
         return np.where(B.dirn > 0, s, self.length - s)
-
-    def _where(self, h: _Bank, g: float, stopped: bool, limit: int):
-        """(travel of the edge from the first ridge met, speed, sigma) at g, for one track."""
-        if not np.isnan(h.stop[0]):  # stopped at a step: where it was then
-            di = (1 - int(h.dirn[0])) // 2
-            r = int(h.ridge[0])
-            nxt = self._pos[di, min(r + 1, self.count)]
-            return (
-                h.X[:, 0],
-                0.0,
-                max(float(np.sqrt(max(h.P[0, 0, 0], 0.0))), 0.1 * (nxt - self._pos[di, r])),
-            )
-        s, speed, sigma = self._kinematics(h, g)
-        di = (1 - int(h.dirn[0])) // 2
-        end = self._pos[di, min(limit, self.count)]
-        if stopped:  # somewhere before the ridge it never reached: as likely anywhere
-            s = np.minimum(s, end)
-            start = self._pos[di, min(limit, self.count) - 1]
-            sigma = np.maximum(sigma, (end - start) / math.sqrt(12.0))
-            speed = 0.0
-        else:
-            s = np.minimum(s, end)
-        if int(h.ridge[0]) == self.count - 1:
-            sigma = sigma + 0.2 * np.maximum(0.0, s - self._pos[di, self.count - 1])
-        return s, float(np.asarray(speed).ravel()[0]), float(np.asarray(sigma).ravel()[0])
 
     def _posterior(self, g: float):
         """(valid until, chosen (index, stopped, limit) or None, P(slip), agreement,
@@ -964,9 +986,9 @@ class TrackerDecoder(Decoder):
         if chosen is None:
             return (until, None, p_slip, 0.0, -math.inf)
         i, is_stopped, lim = chosen
+        one = _One(B, i)
         # agreement
-        h = B.take(np.array([i]))
-        x_ref = float(self._x(h, self._where(h, g, is_stopped, lim)[0])[0])
+        x_ref = self._x1(one, self._where(one, g, is_stopped, lim)[0])
         use = live & evident & (stopped == is_stopped) & (weight >= 1e-4 * mass)
         if not is_stopped:
             use &= (B.dirn == B.dirn[i]) & (
@@ -992,6 +1014,7 @@ class TrackerDecoder(Decoder):
             this = float(weight[moving & way].sum())
             other = float(weight[moving & ~way].sum())
             odds = math.log(this / other) if other > 0 else math.inf
+        chosen = (one, is_stopped, lim)
         return (until, chosen, p_slip, agree, odds)
 
     def _blind(self, t: np.ndarray, g: float) -> np.ndarray:
