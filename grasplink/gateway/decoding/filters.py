@@ -43,6 +43,12 @@ from grasplink.errors import ConfigError
 
 MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
 
+try:  # the kernel scipy's lfilter runs (direct form II transposed), called without the
+    # argument checks that cost more than the arithmetic on a CAN frame's 3 samples
+    from scipy.signal._sigtools import _linear_filter
+except ImportError:  # pragma: no cover - a scipy that moved it: lfilter, same numbers
+    _linear_filter = None
+
 
 def bandpass_sos(low_hz: float, high_hz: float, fs_hz: float, order: int = 2) -> np.ndarray:
     """Butterworth band-pass as second-order sections (`order` per edge, 2*order poles).
@@ -121,7 +127,10 @@ class SosFilter:
         if self._zi is None:
             self._zi = self._zi_unit * x[0]
         if self._fir is not None:
-            y, self._zi = signal.lfilter(self._fir, self._a, x, zi=self._zi)
+            if _linear_filter is not None:  # lfilter's own kernel, without its checks
+                y, self._zi = _linear_filter(self._fir, self._a, x, -1, self._zi)
+            else:
+                y, self._zi = signal.lfilter(self._fir, self._a, x, zi=self._zi)
             return y
         if len(x) * len(self._rows) > self.PYTHON_WORK:
             y, self._zi = signal.sosfilt(self.sos, x, zi=self._zi)
