@@ -489,43 +489,50 @@ class TrackerDecoder(Decoder):
         return B.replace(X=X, stop=np.full(len(B), tc), score=B.score + prior)
 
     def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
-        """Children of B that assign contact ev to one of the next ridges."""
-        tc, sig_t = ev.t_s, ev.sigma_s
-        dt = tc - B.t
-        out = []
+        """Children of B that assign contact ev to one of the next ridges (each branch type
+        as one batch over tracks and ridges)."""
+        dt = ev.t_s - B.t
         R = self.count
         di = (1 - B.dirn) // 2
         moving = np.isnan(B.stop)
         ok = dt > 0
         miss = np.zeros(len(B))
+        rows, skips, priors = [], [], []
         for skip in range(self.MAX_SKIP + 1):
             k = B.ridge + 1 + skip
             valid = ok & (k < R)
             if not valid.any():
                 break
             kk = np.minimum(k, R - 1)
-            log_pd = self._log_pd[di, kk]
-            prior = miss + log_pd
-            # speed from this contact and the last (one-contact or restarted tracks)
-            sel = np.flatnonzero(valid & moving & (B.run == 1))
-            if len(sel):
-                out.append(self._start_speed(B.take(sel), ev, skip, prior[sel]))
-            # the Kalman filter (slipping tracks with a speed)
-            sel = np.flatnonzero(valid & moving & (B.run >= 2))
-            if len(sel):
-                out.append(self._kalman(B.take(sel), ev, skip, prior[sel]))
-                # or the slip stopped unseen and went on: a restart at ridge k
-                if skip == 0:
-                    out.append(
-                        self._restart(B.take(sel), ev, k[sel], prior[sel] + self.LOG_RESTART)
-                    )
-            # a stopped track restarting here
-            sel = np.flatnonzero(valid & ~moving)
-            if len(sel):
-                log_rate = math.log(self.RESTART_PER_S)
-                out.append(self._restart(B.take(sel), ev, k[sel], prior[sel] + log_rate))
+            sel = np.flatnonzero(valid)
+            rows.append(sel)
+            skips.append(np.full(len(sel), skip))
+            priors.append((miss + self._log_pd[di, kk])[sel])
             miss = miss + self._log_miss[di, kk]
-        del sig_t
+        if not rows:
+            return []
+        row, skip_arr, prior = np.concatenate(rows), np.concatenate(skips), np.concatenate(priors)
+        run, mov = B.run[row], moving[row]
+        out = []
+        # speed from this contact and the last (one-contact or restarted tracks)
+        sel = np.flatnonzero(mov & (run == 1))
+        if len(sel):
+            out.append(self._start_speed(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
+        # the Kalman filter (slipping tracks with a speed)
+        sel = np.flatnonzero(mov & (run >= 2))
+        if len(sel):
+            out.append(self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
+            # or the slip stopped unseen and went on: a restart at the next ridge
+            first = sel[skip_arr[sel] == 0]
+            if len(first):
+                at = B.take(row[first])
+                out.append(self._restart(at, ev, at.ridge + 1, prior[first] + self.LOG_RESTART))
+        # a stopped track restarting here
+        sel = np.flatnonzero(~mov)
+        if len(sel):
+            at = B.take(row[sel])
+            log_rate = math.log(self.RESTART_PER_S)
+            out.append(self._restart(at, ev, at.ridge + 1 + skip_arr[sel], prior[sel] + log_rate))
         return out
 
     def _with_contact(self, B: _Bank, ev: ContactEvent) -> np.ndarray:
@@ -560,7 +567,7 @@ class TrackerDecoder(Decoder):
         self,
         B: _Bank,
         ev: ContactEvent,
-        skip: int,
+        skip: np.ndarray,
         log_prior: np.ndarray,
         models: np.ndarray | None = None,
         v_ref: np.ndarray | None = None,
@@ -649,7 +656,7 @@ class TrackerDecoder(Decoder):
         )
         return _Bank.concat([steady, changing])
 
-    def _kalman(self, B: _Bank, ev: ContactEvent, skip: int, log_prior: np.ndarray) -> _Bank:
+    def _kalman(self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray) -> _Bank:
         """Predict B to the contact and update with ridge k (robust: far off, the speed
         starts again from the last two contacts)."""
         tc = ev.t_s
@@ -727,7 +734,7 @@ class TrackerDecoder(Decoder):
             Bf = B.take(far)
             vp = np.maximum(Bf.X[:, 1], V_MIN_MM_S)
             prior = log_prior[far] + like[far]
-            out.append(self._start_speed(Bf, ev, skip, prior, models=Bf.model, v_ref=vp))
+            out.append(self._start_speed(Bf, ev, skip[far], prior, models=Bf.model, v_ref=vp))
         return _Bank.concat(out)
 
     def _meas_var(self, v, sigma_t):
