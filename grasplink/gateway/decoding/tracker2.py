@@ -994,6 +994,17 @@ class TrackerDecoder(Decoder):
             return (until, None, p_slip, 0.0, -math.inf)
         i, is_stopped, lim = chosen
         one = _One(B, i)
+        odds = math.inf
+        if not is_stopped:
+            # the direction: the posterior mass of moving each way - slipping tracks, and
+            # tracks just started at a contact (a slip starting or reversing)
+            moving = (slipping | (waiting & live)) & np.isfinite(total)
+            way = B.dirn == B.dirn[i]
+            this = float(weight[moving & way].sum())
+            other = float(weight[moving & ~way].sum())
+            odds = math.log(this / other) if other > 0 else math.inf
+            if one.run == 1 or one.n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS:
+                return (until, (one, is_stopped, lim), p_slip, 0.0, odds)  # no estimate
         # agreement
         x_ref = self._x1(one, self._where(one, g, is_stopped, lim)[0])
         use = live & evident & (stopped == is_stopped) & (weight >= 1e-4 * mass)
@@ -1012,17 +1023,7 @@ class TrackerDecoder(Decoder):
             s = np.where(np.isnan(Bu.stop), np.minimum(s, end), Bu.X[:, 0])
             xs = self._x(Bu, s)
             agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
-        odds = math.inf
-        if not is_stopped:
-            # the direction: the posterior mass of moving each way - slipping tracks, and
-            # tracks just started at a contact (a slip starting or reversing)
-            moving = (slipping | (waiting & live)) & np.isfinite(total)
-            way = B.dirn == B.dirn[i]
-            this = float(weight[moving & way].sum())
-            other = float(weight[moving & ~way].sum())
-            odds = math.log(this / other) if other > 0 else math.inf
-        chosen = (one, is_stopped, lim)
-        return (until, chosen, p_slip, agree, odds)
+        return (until, (one, is_stopped, lim), p_slip, agree, odds)
 
     def _blind(self, t: np.ndarray, g: float) -> np.ndarray:
         """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there)."""
