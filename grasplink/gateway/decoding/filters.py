@@ -35,6 +35,7 @@ import itertools
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import signal
@@ -45,7 +46,9 @@ MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute devi
 
 try:  # the kernel scipy's lfilter runs (direct form II transposed), called without the
     # argument checks that cost more than the arithmetic on a CAN frame's 3 samples
-    from scipy.signal._sigtools import _linear_filter
+    from scipy.signal._sigtools import _linear_filter as _kernel
+
+    _linear_filter: Any = _kernel
 except ImportError:  # pragma: no cover - a scipy that moved it: lfilter, same numbers
     _linear_filter = None
 
