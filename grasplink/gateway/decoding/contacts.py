@@ -208,6 +208,7 @@ class ContactDetector:
         self.level_half = half
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
         self._n = 0  # samples received
+        self._kept_from = -(10**9)  # block caches hold blocks from here on
         self._raw = np.zeros(0)  # samples of the raw block being filled
         self._raw_blocks = 0  # raw blocks completed
         self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
@@ -253,12 +254,14 @@ class ContactDetector:
             - max(self.noise_blocks, self.history_blocks)
             - 2
         )
-        caches: list[dict[int, Any]] = [self._censored, self._floor]
-        for cache in caches + [
-            c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
-        ]:
-            for b in [b for b in cache if b < oldest]:
-                del cache[b]
+        if oldest > self._kept_from:  # a block fell out of the history: forget it
+            self._kept_from = oldest
+            caches: list[dict[int, Any]] = [self._censored, self._floor]
+            for cache in caches + [
+                c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
+            ]:
+                for b in [b for b in cache if b < oldest]:
+                    del cache[b]
         events = sorted(events + steps, key=lambda e: (e.emit_index, e.id))
         return events, checks + step_checks
 
@@ -751,7 +754,7 @@ class ContactDetector:
         if i0 < 0 or i1 > len(self._x):
             return False
         x = self._x[i0:i1]
-        return bool(on_rail(x)) and bool(np.count_nonzero(x == x.max()) >= RAIL_SHARE * len(x))
+        return bool(on_rail(x)) and np.count_nonzero(x == x.max()) >= RAIL_SHARE * len(x)
 
     def _trend_on(self, watch: _Watch) -> bool | None:
         """After a step: did the rising trend before it go on (True) or stop (False)? None
