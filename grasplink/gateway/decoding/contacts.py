@@ -754,7 +754,7 @@ class ContactDetector:
         if i0 < 0 or i1 > len(self._x):
             return False
         x = self._x[i0:i1]
-        return bool(on_rail(x)) and np.count_nonzero(x == x.max()) >= RAIL_SHARE * len(x)
+        return bool(on_rail(x)) and bool(np.count_nonzero(x == x.max()) >= RAIL_SHARE * len(x))
 
     def _trend_on(self, watch: _Watch) -> bool | None:
         """After a step: did the rising trend before it go on (True) or stop (False)? None
