@@ -8,10 +8,17 @@ CiA 301 mapping procedure), and the application parameters (skin layout and
 sample rate, EMG window and calibration, hand crush limit and grip rate).
 Values are encoded through the node's object dictionary (python-canopen's
 types), never by hand.
+
+A node boots on the gateway's real-time thread, so nothing here may parse an
+EDS at that moment (tens of ms: heartbeats and SDO answers of every node would
+wait): each profile is parsed once per process (`profile`), and the gateway
+builds every node's writes when it is constructed (`Provisioner.writes` on a
+cached dictionary costs ~0.1 ms; handing out the built tuple costs nothing).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import canopen
@@ -25,6 +32,15 @@ from grasplink.profiles.layouts import PRESET_CODES, spacings_um
 COB_ID_INVALID = 0x80000000
 # (first communication object, first mapping object) of the RPDOs and of the TPDOs
 PDO_OBJECTS = ((obj.RPDO_COMM, obj.RPDO_MAP), (obj.TPDO_COMM, obj.TPDO_MAP))
+
+
+@functools.lru_cache(maxsize=64)
+def profile(kind: str, node_id: int) -> canopen.ObjectDictionary:
+    """A node's parsed profile, shared and read-only: parsed once per kind and node-ID.
+
+    Bounded: a gateway has a handful of nodes; 64 covers many gateways in one process.
+    """
+    return load_profile(kind, node_id)
 
 
 @dataclass(frozen=True)
@@ -41,7 +57,7 @@ class Provisioner:
     def __init__(self, node: NodeConfig, config: GatewayConfig):
         self.node = node
         self.config = config
-        self.od: canopen.ObjectDictionary = load_profile(node.kind, node.node_id)
+        self.od: canopen.ObjectDictionary = profile(node.kind, node.node_id)  # never mutated
 
     def writes(self) -> list[SdoWrite]:
         out = self._heartbeats()

@@ -93,6 +93,7 @@ class NodeLink:
     sdo: SdoClient
     phase: str = "absent"  # absent, provisioning, starting, operational, failed, lost
     provisioning: list[tuple[SdoWrite, Transfer]] = field(default_factory=list)
+    writes: tuple[SdoWrite, ...] = ()  # built with the gateway: a boot never parses an EDS
     retry_at_us: int | None = None
     boots_seen: int = -1  # the master's boot count when provisioning last began
     failure: str = ""
@@ -132,6 +133,7 @@ class Gateway(NmtMaster):
                 node,
                 PdoCodec(node.kind, node.node_id),
                 SdoClient(node.node_id, timeout_us=config.sdo_timeout_ms * 1000),
+                writes=tuple(Provisioner(node, config).writes()),
             )
             self.links[node.node_id] = link
             self.by_kind[node.kind] = link
@@ -332,8 +334,9 @@ class Gateway(NmtMaster):
     def _provision(self, link: NodeLink, t_us: int) -> list[Frame]:
         link.sdo.cancel()
         link.phase = "provisioning"
-        writes = Provisioner(link.config, self.config).writes()
-        link.provisioning = [(w, link.sdo.download(w.index, w.subindex, w.data)) for w in writes]
+        link.provisioning = [
+            (w, link.sdo.download(w.index, w.subindex, w.data)) for w in link.writes
+        ]
         return link.sdo.advance(t_us)
 
     def _check_provisioning(self, link: NodeLink, t_us: int) -> list[Frame]:
