@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import struct
+import uuid
+
+import can
 
 from grasplink.bus.lockstep import LockstepNetwork
+from grasplink.bus.runner import NodeRunner
+from grasplink.bus.url import frame_to_message
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.devices.factory import build_node
@@ -262,3 +267,45 @@ def test_lost_node_in_consumer_fault_is_reset_only_once_the_fault_clears():
     assert master.receive(_emcy(0x20, 0x0000, 0x00), 650 * MS) == [
         NmtMaster.command(NmtCommand.RESET_COMMUNICATION, 0x20)
     ]
+
+
+# -- a stalled runner hears the heartbeats queued meanwhile before it judges loss --------------
+def _stalled_master(max_batch: int) -> NmtMaster:
+    """A master on a runner whose thread stalls 1 s (> 300 ms consumer time) while a node
+    keeps talking: 20 TPDOs and then its heartbeat wait in the bus when the runner wakes.
+
+    Driven step by step on a frozen clock (no thread, no sleeps): the python-can virtual
+    bus queues a frame in the other handle the moment it is sent.
+    """
+    channel = f"master-stall-{uuid.uuid4().hex}"
+    runner_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    node_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    now = [0]
+    master = NmtMaster(heartbeat_ms=100, node_heartbeat_ms=100, autostart=False)
+    runner = NodeRunner(runner_bus, [master], clock_us=lambda: now[0], max_batch=max_batch)
+    try:
+        runner.power_on()
+        node_bus.send(frame_to_message(Frame(0x700 + 5, bytes([NmtState.OPERATIONAL]))))
+        runner.step()
+        assert master.nodes[5].last_seen_us == 0
+        now[0] = 1_000_000  # the stall: the loss deadline (300 ms) is long past
+        for i in range(20):
+            node_bus.send(frame_to_message(Frame(0x185, bytes([i]))))
+        node_bus.send(frame_to_message(Frame(0x705, bytes([NmtState.OPERATIONAL]))))
+        runner.step()
+        return master
+    finally:
+        runner_bus.shutdown()
+        node_bus.shutdown()
+
+
+def test_runner_after_a_stall_delivers_queued_heartbeats_before_the_loss_check():
+    master = _stalled_master(max_batch=128)
+    assert not master.nodes[5].lost
+    assert master.nodes[5].last_seen_us == 1_000_000
+
+
+def test_runner_delivering_one_frame_per_step_would_lose_the_node_after_a_stall():
+    # What a batch of one (the runner before batching) does: the loss check runs while
+    # the heartbeat still waits behind the TPDOs.
+    assert _stalled_master(max_batch=1).nodes[5].lost

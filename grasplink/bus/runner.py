@@ -22,6 +22,11 @@ from grasplink.errors import BusError
 logger = logging.getLogger(__name__)
 
 DEVICE_BACKOFF_US = 100_000
+# Frames delivered per step before due timers run. A late thread (GIL, a slow device, a
+# loaded machine) finds what the bus queued meanwhile - heartbeats among it - and must
+# hear it before a heartbeat consumer judges loss; bounded so timers (own heartbeat,
+# SDO timeouts) still run while a backlog lasts. 128 frames is ~0.4 s of a set's traffic.
+MAX_BATCH = 128
 
 
 def monotonic_us() -> int:
@@ -57,6 +62,10 @@ class NodeRunner:
     every device. Timers run from ``clock_us`` (default: monotonic µs); the
     thread waits on ``bus.recv`` until the earliest device deadline, at most
     ``max_wait_s``, which also bounds how late a `submit`-ted frame goes out.
+    Each step delivers every frame that has already arrived (up to
+    ``max_batch``, each one's replies sent before the next is read) before it
+    runs due timers: after a stall the heartbeats queued meanwhile reach a
+    heartbeat consumer before its timer can declare their senders lost.
 
     The bus should not echo own frames (``receive_own_messages=False``);
     echoes that python-can marks as such (``is_rx=False``) are ignored.
@@ -87,6 +96,7 @@ class NodeRunner:
         max_wait_s: float = 0.02,
         submit_queue_size: int = 256,
         cascade_limit: int = 1000,
+        max_batch: int = MAX_BATCH,
         name: str = "grasplink-node-runner",
         reopen: Callable[[], can.BusABC] | None = None,
         reconnect_timeout_s: float = DEFAULT_RECONNECT_TIMEOUT_S,
@@ -96,11 +106,14 @@ class NodeRunner:
             raise ValueError("NodeRunner needs at least one device")
         if not 0 <= reconnect_timeout_s < float("inf") or not first_retry_s > 0:
             raise ValueError("reconnect_timeout_s must be >= 0 and first_retry_s > 0")
+        if max_batch < 1:
+            raise ValueError("max_batch must be >= 1")
         self.bus = bus
         self.devices = list(devices)
         self._clock = clock_us or monotonic_us
         self._max_wait_s = max_wait_s
         self._cascade_limit = cascade_limit
+        self._max_batch = max_batch
         self._name = name
         self._submitted: queue.Queue[tuple[Frame, bool]] = queue.Queue(submit_queue_size)
         self._stats = RunnerStats()
@@ -184,13 +197,36 @@ class NodeRunner:
 
     # -- the runner thread ------------------------------------------------------
 
+    def power_on(self) -> None:
+        """Start every device and send their boot-up frames (the thread's first act).
+
+        Public, with `step`, for a caller that drives the runner itself (a test on a
+        virtual clock); never while the thread runs.
+        """
+        self._not_threaded("power_on")
+        self._power_on()
+
+    def step(self) -> None:
+        """One cycle of the thread: wait for the bus (until the earliest deadline, at
+        most ``max_wait_s``), deliver what arrived and what was submitted, run due timers.
+        """
+        self._not_threaded("step")
+        self._step()
+
+    def _not_threaded(self, what: str) -> None:
+        if self._thread is not None and self._thread.is_alive():
+            raise RuntimeError(f"{what}() while the runner's thread runs")
+
+    def _power_on(self) -> None:
+        now = self._clock()
+        boot: list[tuple[Frame, SansIoDevice | None, bool]] = []
+        for device in self.devices:  # power every device on before anyone hears a frame
+            boot.extend((f, device, True) for f in self._call(device, "start", now))
+        self._dispatch(boot, now)
+
     def _run(self) -> None:
         try:
-            now = self._clock()
-            boot: list[tuple[Frame, SansIoDevice | None, bool]] = []
-            for device in self.devices:  # power every device on before anyone hears a frame
-                boot.extend((f, device, True) for f in self._call(device, "start", now))
-            self._dispatch(boot, now)
+            self._power_on()
         finally:
             self._booted.set()
         while not self._stop.is_set() and self.failure is None:
@@ -221,18 +257,15 @@ class NodeRunner:
         else:  # the bus is down: sleep until a device deadline or the next attempt
             self._stop.wait(min(wait_s, max(0, outage.next_attempt_us - now) / 1e6))
             msg = None
+        delivered = 0
+        while msg is not None:  # everything that has arrived, before any timer runs
+            self._deliver(msg)
+            delivered += 1
+            if delivered >= self._max_batch or self._outage is not None or self.failure:
+                break
+            msg = self._recv(0.0)
         now = self._clock()
         work: list[tuple[Frame, SansIoDevice | None, bool]] = []
-        if msg is not None:
-            frame = message_to_frame(msg) if msg.is_rx else None
-            with self._lock:
-                if frame is None:
-                    self._stats.ignored += 1
-                else:
-                    self._stats.frames_rx += 1
-                    self._stats.rx_by_cob_id[frame.can_id] += 1
-            if frame is not None:
-                work.append((frame, None, False))
         while True:
             try:
                 frame, to_bus = self._submitted.get_nowait()
@@ -247,6 +280,17 @@ class NodeRunner:
             if deadline is not None and deadline <= now:
                 out = self._call(device, "advance", now)
                 self._dispatch([(f, device, True) for f in out], now)
+
+    def _deliver(self, msg: can.Message) -> None:
+        """One frame from the bus to every device; their replies go out at once."""
+        frame = message_to_frame(msg) if msg.is_rx else None
+        with self._lock:
+            if frame is None:
+                self._stats.ignored += 1
+                return
+            self._stats.frames_rx += 1
+            self._stats.rx_by_cob_id[frame.can_id] += 1
+        self._dispatch([(frame, None, False)], self._clock())
 
     def _earliest_deadline(self) -> int | None:
         deadlines = [d for d in map(self._effective_deadline, self.devices) if d is not None]
