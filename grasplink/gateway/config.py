@@ -28,7 +28,7 @@ from grasplink.gateway.levels import (
     force_table,
     slip_table,
 )
-from grasplink.gateway.reflex import ReflexConfig
+from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
@@ -225,6 +225,7 @@ def _reflex(p: Params, crush_limit_n: float) -> ReflexConfig:
         "hold_us": round(p.number("hold_ms", d.hold_us / US_PER_MS, low=0.0, high=60e3) * 1000),
         "release_rate_n_s": p.number("release_rate_n_s", d.release_rate_n_s, low=0, low_open=True),
         "min_confidence": p.number("min_confidence", d.min_confidence, low=0.0, high=1.0),
+        "open_below_n": p.number("open_below_n", d.open_below_n, low=0.0, high=HAND_MAX_GRIP_N),
         "crush_limit_n": crush_limit_n,
     }
     reflex = _checked(p, "threshold_mm_s", lambda: ReflexConfig(**values))

@@ -13,6 +13,9 @@ After the fast slip stops the reflex grip is held for `hold_us` (longer than
 the wearer's reaction time, so the wearer, told the reflex acted, can take
 over), then released at `release_rate_n_s`; the release pauses while the
 object slips and ends when the reflex grip meets the wearer's (hand-back).
+A slip that starts again because the release went too far is the reflex's own
+doing: the grip returns to the one that held and stays there (the learned
+holding grip) until the wearer grips as hard or opens the hand.
 Sans-IO: `update(percept, voluntary)`, `set_voluntary(t, grip)` and
 `advance(t)` return the grip command at that moment.
 """
@@ -66,6 +69,7 @@ class ReflexConfig:
     release_rate_n_s: float = 2.0
     min_confidence: float = 0.25  # slip speeds trusted less do not trigger the reflex
     stale_us: int = 500_000  # no percept this long: the slip is taken as stopped
+    open_below_n: float = 0.5  # a voluntary grip falling to this is the wearer opening the hand
     enabled: bool = True
 
     def __post_init__(self) -> None:
@@ -85,6 +89,9 @@ class ReflexConfig:
                 raise ConfigError(
                     f"reflex config: {name} must be whole microseconds >= {low}, got {value!r}"
                 )
+        o = self.open_below_n
+        if not _number(o) or o < 0:
+            raise ConfigError(f"reflex config: open_below_n must be a number >= 0 N, got {o!r}")
         c = self.min_confidence
         if not _number(c) or not 0 <= c <= 1:
             raise ConfigError(f"reflex config: min_confidence must be 0..1, got {c!r}")
@@ -153,6 +160,10 @@ class GripReflex:
         self._released_to_us: int | None = None  # release applied up to this time
         self._last_percept_us: int | None = None
         self._slipping = False  # the last percept's slip flag
+        self.held_n: float | None = None  # the grip that stopped the slip (the hold's)
+        self.learned = False  # a re-slip during the release: hold held_n until the wearer acts
+        self._stopped = False  # the object was seen at rest since the hold began
+        self._voluntary_at_start_n = 0.0  # the wearer's grip when the episode began
 
     def observe(self, percept: Percept, base_grip_n: float, voluntary_n: float) -> None:
         """A percept: time-driven changes up to its time first, then its slip speed."""
@@ -170,17 +181,48 @@ class GripReflex:
         if fast and self.enabled and self.state == ReflexState.IDLE:
             self.base_n = max(0.0, base_grip_n)
             self.grip_n = None
+            self._voluntary_at_start_n = max(0.0, voluntary_n)
+        if self.state in (ReflexState.HOLD, ReflexState.RELEASE) and not p.slipping:
+            self._stopped = True
+        if self._reslipped(p.slipping) and not fast:
+            self._regrip(t)
         if fast and self.enabled:
             self.state = ReflexState.ACTIVE
             self._hold_from_us = self._released_to_us = None
+            self.learned = self._stopped = False
         if self.state == ReflexState.ACTIVE and speed is not None:
             wanted = self.base_n + cfg.gain_n_per_mm_s * speed
             self.limited = self.limited or wanted > self.crush_limit_n
             target = min(self.crush_limit_n, wanted)
             self.grip_n = target if self.grip_n is None else max(self.grip_n, target)
         if self.state == ReflexState.ACTIVE and slowed:
-            self.state = ReflexState.HOLD
-            self._hold_from_us = t
+            self._hold(t, stopped=not p.slipping)
+
+    def _hold(self, t_us: int, stopped: bool) -> None:
+        self.state = ReflexState.HOLD
+        self._hold_from_us = t_us
+        self.held_n = self.grip_n
+        self._stopped = stopped
+
+    def _reslipped(self, slipping: bool) -> bool:
+        """The object slips again while the release lowers the grip that had stopped it."""
+        return (
+            slipping
+            and self.enabled
+            and self.state == ReflexState.RELEASE
+            and self._stopped
+            and self.held_n is not None
+            and self.grip_n is not None
+            and self.grip_n < self.held_n
+        )
+
+    def _regrip(self, t_us: int) -> None:
+        """Back to the grip that held, and no lower for the rest of the episode."""
+        self.state = ReflexState.HOLD
+        self.grip_n = self.held_n
+        self.learned = True
+        self._hold_from_us = t_us
+        self._stopped = False
 
     def advance(self, t_us: int, voluntary_n: float) -> None:
         """Time passes: a stale slip ends, the hold expires, the release progresses."""
@@ -188,9 +230,8 @@ class GripReflex:
         last = self._last_percept_us
         stale = last is None or t_us - last >= cfg.stale_us
         if self.state == ReflexState.ACTIVE and stale:
-            self.state = ReflexState.HOLD
-            self._hold_from_us = t_us if last is None else last + cfg.stale_us
-        if self.state == ReflexState.HOLD:
+            self._hold(t_us if last is None else last + cfg.stale_us, stopped=False)
+        if self.state == ReflexState.HOLD and not self.learned:
             assert self._hold_from_us is not None
             release_at = self._hold_from_us + cfg.hold_us
             if t_us >= release_at:
@@ -204,8 +245,9 @@ class GripReflex:
             self._released_to_us = t_us
         if self.state in (ReflexState.HOLD, ReflexState.RELEASE):
             assert self.grip_n is not None
-            if self.grip_n <= voluntary_n or self.grip_n <= 0.0:
-                self._to_idle()  # the wearer grips at least as hard: hand back
+            opened = self._voluntary_at_start_n > cfg.open_below_n >= voluntary_n
+            if self.grip_n <= voluntary_n or self.grip_n <= 0.0 or opened:
+                self._to_idle()  # the wearer grips at least as hard, or opens: hand back
 
     def stop(self, t_us: int) -> None:
         """Disabled while acting: let go at the release rate from now (never a drop)."""
@@ -218,7 +260,7 @@ class GripReflex:
         if self.state == ReflexState.ACTIVE and self._last_percept_us is not None:
             return self._last_percept_us + cfg.stale_us
         if self.state == ReflexState.HOLD and self._hold_from_us is not None:
-            return self._hold_from_us + cfg.hold_us
+            return None if self.learned else self._hold_from_us + cfg.hold_us
         if self.state == ReflexState.RELEASE and self.grip_n is not None and not self._slipping:
             assert self._released_to_us is not None
             left_n = self.grip_n - max(0.0, voluntary_n)
@@ -230,6 +272,8 @@ class GripReflex:
         self.grip_n = None
         self.limited = False
         self._hold_from_us = self._released_to_us = None
+        self.held_n = None
+        self.learned = self._stopped = False
 
 
 class GripArbiter:

@@ -203,6 +203,70 @@ def test_a_fast_slip_during_the_release_raises_again_from_the_episode_base():
     assert arbiter.update(slip(540, 80.0)).grip_n == pytest.approx(13.0)  # 5 + 8, not 10 + 8
 
 
+def released_after_a_stop(arbiter: GripArbiter, until_ms: int) -> float:
+    """A 60 mm/s slip (11 N from 5 N) stopped at 20 ms, released until `until_ms`."""
+    arbiter.update(slip(10, 60.0))
+    arbiter.update(still(20))
+    return arbiter.advance(until_ms * MS).grip_n
+
+
+def test_a_slip_that_the_release_starts_again_returns_to_the_grip_that_held():
+    arbiter = holding(5.0)
+    assert released_after_a_stop(arbiter, 3020) == pytest.approx(9.0)  # 1 s into the release
+    again = arbiter.update(slip(3030, 12.0))  # slow: below the threshold, but the reflex's doing
+    assert (again.reflex, again.grip_n) == (ReflexState.HOLD, pytest.approx(11.0))
+    assert arbiter.next_deadline_us() is None  # held: no release planned
+    assert arbiter.update(still(3100)).grip_n == pytest.approx(11.0)
+    assert arbiter.advance(60_000 * MS).grip_n == pytest.approx(11.0)  # a minute later still
+
+
+def test_the_learned_grip_is_handed_back_when_the_wearer_grips_as_hard():
+    arbiter = holding(5.0)
+    released_after_a_stop(arbiter, 3020)
+    arbiter.update(slip(3030, 12.0))
+    assert arbiter.set_voluntary(4000 * MS, 10.0).grip_n == pytest.approx(11.0)
+    handed = arbiter.set_voluntary(5000 * MS, 11.5)
+    assert (handed.grip_n, handed.reflex) == (11.5, ReflexState.IDLE)
+
+
+def test_the_wearer_opening_the_hand_ends_a_reflex_hold():
+    arbiter = holding(5.0)
+    released_after_a_stop(arbiter, 3020)
+    arbiter.update(slip(3030, 12.0))
+    opened = arbiter.set_voluntary(4000 * MS, 0.0)
+    assert (opened.grip_n, opened.reflex) == (0.0, ReflexState.IDLE)
+
+
+def test_no_voluntary_grip_from_the_start_is_not_an_opening_hand():
+    arbiter = GripArbiter()  # no EMG path: the voluntary grip is 0 N throughout
+    arbiter.update(slip(10, 60.0))  # base 0 N: 6 N
+    held = arbiter.update(still(20))
+    assert (held.reflex, held.grip_n) == (ReflexState.HOLD, pytest.approx(6.0))
+
+
+def test_a_slip_never_seen_to_stop_is_not_a_re_slip():
+    arbiter = holding(5.0, ReflexConfig(hold_us=0))
+    arbiter.update(slip(10, 60.0))
+    arbiter.update(slip(20, 30.0))  # slowed below the band, still slipping: hold, release
+    # no percept for a while: stale after 500 ms, the release goes on from there
+    command = arbiter.update(slip(1600, 30.0))
+    assert command.reflex == ReflexState.RELEASE
+    assert command.grip_n < 11.0 - 2.0  # released on through the gap, not gripped again
+
+
+def test_a_disabled_reflex_does_not_grip_again_on_a_re_slip():
+    arbiter = holding(5.0)
+    released_after_a_stop(arbiter, 3020)
+    arbiter.set_reflex_enabled(False, 3020 * MS)
+    command = arbiter.update(slip(3030, 12.0))
+    assert command.reflex == ReflexState.RELEASE and command.grip_n < 9.0 + 1e-9
+
+
+def test_the_open_threshold_is_validated():
+    with pytest.raises(ConfigError, match="open_below_n"):
+        ReflexConfig(open_below_n=-1.0)
+
+
 @pytest.mark.parametrize("speed", [None, math.nan, math.inf])
 def test_an_unknown_slip_speed_does_not_trigger_the_reflex(speed):
     command = holding(5.0).update(slip(10, speed))
