@@ -40,6 +40,7 @@ from grasplink.gateway.config import EmgConfig, parse_config
 from grasplink.gateway.emg import EmgCalibration, EmgIntentDecoder
 from grasplink.gateway.feedback import FeedbackConfig
 from grasplink.gateway.levels import DEFAULT_FORCE_ENTRIES
+from grasplink.gateway.reflex import ReflexConfig
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.profiles.pdo_codec import PdoCodec
@@ -69,11 +70,12 @@ SKIN_END_MM = float(sum(LAYOUTS_MM[LAYOUT]))  # 84 mm: the leading edge past it 
 START_S = 1.0  # the pull starts (loop_headline.toml)
 START_MM = -8.0  # the leading edge 8 mm before the first ridge (loop_headline.toml)
 # After a slip that was not stopped would have dropped: long enough for the reflex to hold
-# (2 s), release (2 N/s from at most 5 + 0.1 * 150 = 20 N down to the 5.76 N that holds:
-# 7.1 s) and the object to slip again if nobody took over; see `Trial.duration_s`.
+# (2 s), release (2 N/s from at most 5 + 0.1 * 150 = 20 N: 7.5 s even with no floor) and
+# the object to slip again if that release went too far; see `Trial.duration_s`.
 SETTLE_S = 12.0
 THESIS_THRESHOLD_MM_S = 45.0  # ReflexConfig default: the human limit on an 80 mm skin
 MIN_REST_S = 0.1  # a rest shorter than this (a ridge dip touching 0 mm/s) is not a stop
+REFLEX = ReflexConfig()
 OCCURRENCE_MRAD_S = FeedbackConfig().occurrence_velocity_mrad_s  # a slip of unknown speed
 RELAX_FORCE_LEVEL = 3  # wearer.virtual's default: from this force level it relaxes
 PHYSICS_SIGNALS = (
@@ -824,8 +826,8 @@ def render(results: dict) -> str:
         "identifications, contraction scatter), the ridge dips and the noise; every row uses",
         "the same seeds, so rows differ by their settings only. A trial lasts until an",
         f"unstopped slip would have left the skin, plus {g['settle_s']:g} s (the reflex's 2 s",
-        "hold and its release at 2 N/s from up to 20 N, then a re-slip if nobody took over);",
-        "a drop ends it.",
+        "hold and its release at 2 N/s from up to 20 N towards its floor, then a re-slip if",
+        "that went too far); a drop ends it.",
         "",
         "**Figures.** *stopped*: the object is at rest at the end of the trial (for ≥ "
         f"{MIN_REST_S:g} s) and never passed the skin's end; *first stop*: it came to rest at",
@@ -1167,9 +1169,11 @@ def _reflex_alone(blind: dict, told: dict) -> str:
     return (
         f"- **Why the reflex alone does not hold.** {head} "
         f"({_f(blind['dropped_after_reslip_pct'], 0)} % of those were dropped): after the "
-        "2 s hold the reflex releases at 2 N/s back to the wearer's 5 N, and below 5.76 N "
-        "the pull wins again. Past 51 mm the alpha0.1 skin has one 33 mm spacing and then "
-        "its end: too few ridge contacts for the decoder to report the new slip in time. "
+        f"2 s hold the reflex releases at 2 N/s to its floor, the wearer's 5 N plus "
+        f"{REFLEX.release_floor_share:g} of the raise; where that is below the 5.76 N that "
+        "holds, the pull wins again, and the reflex grips again only if the decoder reports "
+        "the new slip: past 51 mm the alpha0.1 skin has one 33 mm spacing and then its end, "
+        "too few ridge contacts to report it in time. "
         f"With a slip display ({told['trials']} trials) the wearer, who felt even the brief "
         "slip, contracts (≥ e2) during the hold and the reflex hands back to a grip that "
         f"holds: {_f(told['reslip_pct'], 0)} % re-slipped, {_f(told['stopped_pct'], 0)} % "

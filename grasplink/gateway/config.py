@@ -226,6 +226,9 @@ def _reflex(p: Params, crush_limit_n: float) -> ReflexConfig:
         "release_rate_n_s": p.number("release_rate_n_s", d.release_rate_n_s, low=0, low_open=True),
         "min_confidence": p.number("min_confidence", d.min_confidence, low=0.0, high=1.0),
         "open_below_n": p.number("open_below_n", d.open_below_n, low=0.0, high=HAND_MAX_GRIP_N),
+        "release_floor_share": p.number(
+            "release_floor_share", d.release_floor_share, low=0.0, high=1.0
+        ),
         "crush_limit_n": crush_limit_n,
     }
     reflex = _checked(p, "threshold_mm_s", lambda: ReflexConfig(**values))

@@ -13,9 +13,11 @@ After the fast slip stops the reflex grip is held for `hold_us` (longer than
 the wearer's reaction time, so the wearer, told the reflex acted, can take
 over), then released at `release_rate_n_s`; the release pauses while the
 object slips and ends when the reflex grip meets the wearer's (hand-back).
-A slip that starts again because the release went too far is the reflex's own
-doing: the grip returns to the one that held and stays there (the learned
-holding grip) until the wearer grips as hard or opens the hand.
+The release stops above the grip the slip began at (that grip is known not
+to hold the load): at `release_floor_share` of the raise. A slip that starts
+again because the release went too far is the reflex's own doing: the grip
+returns to the one that held and stays there. Either way the reflex keeps
+its grip until the wearer grips as hard or opens the hand.
 Sans-IO: `update(percept, voluntary)`, `set_voluntary(t, grip)` and
 `advance(t)` return the grip command at that moment.
 """
@@ -70,6 +72,7 @@ class ReflexConfig:
     min_confidence: float = 0.25  # slip speeds trusted less do not trigger the reflex
     stale_us: int = 500_000  # no percept this long: the slip is taken as stopped
     open_below_n: float = 0.5  # a voluntary grip falling to this is the wearer opening the hand
+    release_floor_share: float = 0.5  # of the raise kept after the release (0: back to the base)
     enabled: bool = True
 
     def __post_init__(self) -> None:
@@ -92,6 +95,9 @@ class ReflexConfig:
         o = self.open_below_n
         if not _number(o) or o < 0:
             raise ConfigError(f"reflex config: open_below_n must be a number >= 0 N, got {o!r}")
+        f = self.release_floor_share
+        if not _number(f) or not 0 <= f <= 1:
+            raise ConfigError(f"reflex config: release_floor_share must be 0..1, got {f!r}")
         c = self.min_confidence
         if not _number(c) or not 0 <= c <= 1:
             raise ConfigError(f"reflex config: min_confidence must be 0..1, got {c!r}")
@@ -209,7 +215,7 @@ class GripReflex:
         return (
             slipping
             and self.enabled
-            and self.state == ReflexState.RELEASE
+            and self.state in (ReflexState.HOLD, ReflexState.RELEASE)
             and self._stopped
             and self.held_n is not None
             and self.grip_n is not None
@@ -223,6 +229,12 @@ class GripReflex:
         self.learned = True
         self._hold_from_us = t_us
         self._stopped = False
+
+    def floor_n(self) -> float:
+        """The lowest grip the release goes to: above the base, which did not hold."""
+        if not self.enabled or self.held_n is None:
+            return 0.0  # switched off: back to the wearer
+        return self.base_n + self.config.release_floor_share * max(0.0, self.held_n - self.base_n)
 
     def advance(self, t_us: int, voluntary_n: float) -> None:
         """Time passes: a stale slip ends, the hold expires, the release progresses."""
@@ -239,10 +251,15 @@ class GripReflex:
                 self._released_to_us = release_at
         if self.state == ReflexState.RELEASE:
             assert self._released_to_us is not None and self.grip_n is not None
+            floor = self.floor_n()
             if not (self._slipping and not stale):  # pause while the object slips
                 dt_s = (t_us - self._released_to_us) / US_PER_S
-                self.grip_n = max(0.0, self.grip_n - cfg.release_rate_n_s * dt_s)
+                self.grip_n = max(floor, self.grip_n - cfg.release_rate_n_s * dt_s)
             self._released_to_us = t_us
+            if self.grip_n <= floor and floor > voluntary_n:
+                self.state = ReflexState.HOLD  # the floor: kept until the wearer acts
+                self.learned = True
+                self._hold_from_us = t_us
         if self.state in (ReflexState.HOLD, ReflexState.RELEASE):
             assert self.grip_n is not None
             opened = self._voluntary_at_start_n > cfg.open_below_n >= voluntary_n
@@ -263,7 +280,7 @@ class GripReflex:
             return None if self.learned else self._hold_from_us + cfg.hold_us
         if self.state == ReflexState.RELEASE and self.grip_n is not None and not self._slipping:
             assert self._released_to_us is not None
-            left_n = self.grip_n - max(0.0, voluntary_n)
+            left_n = self.grip_n - max(0.0, voluntary_n, self.floor_n())
             return self._released_to_us + math.ceil(left_n / cfg.release_rate_n_s * US_PER_S)
         return None
 

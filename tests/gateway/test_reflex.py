@@ -133,7 +133,7 @@ def test_a_speed_dithering_across_the_threshold_does_not_ratchet_the_grip_up():
 
 
 def test_the_raised_grip_is_held_after_the_slip_stops_then_released_at_a_bounded_rate():
-    config = ReflexConfig(hold_us=2 * S, release_rate_n_s=2.0)
+    config = ReflexConfig(hold_us=2 * S, release_rate_n_s=2.0, release_floor_share=0.0)
     arbiter = holding(1.0, config)
     arbiter.update(slip(10, 100.0))  # 11 N
     stopped = arbiter.update(still(20))
@@ -148,8 +148,8 @@ def test_the_raised_grip_is_held_after_the_slip_stops_then_released_at_a_bounded
     assert commands[-1].grip_n == 1.0 and commands[-1].reflex == ReflexState.IDLE
 
 
-def test_the_release_hands_back_to_the_voluntary_grip():
-    arbiter = holding(5.0)
+def test_with_no_floor_the_release_hands_back_to_the_voluntary_grip():
+    arbiter = holding(5.0, ReflexConfig(release_floor_share=0.0))
     arbiter.update(slip(10, 60.0))
     arbiter.update(still(20))
     end = arbiter.advance(2020 * MS)
@@ -220,6 +220,32 @@ def test_a_slip_that_the_release_starts_again_returns_to_the_grip_that_held():
     assert arbiter.advance(60_000 * MS).grip_n == pytest.approx(11.0)  # a minute later still
 
 
+def test_the_release_stops_above_the_grip_the_slip_began_at():
+    arbiter = holding(5.0)  # 60 mm/s: 11 N; the default floor keeps half the 6 N raise
+    assert released_after_a_stop(arbiter, 2020 + 1000) == pytest.approx(9.0)
+    assert arbiter.next_deadline_us() == 3020 * MS + 500 * MS  # 1 N to go at 2 N/s
+    floor = arbiter.advance(3520 * MS)
+    assert (floor.reflex, floor.grip_n) == (ReflexState.HOLD, pytest.approx(8.0))
+    assert arbiter.next_deadline_us() is None
+    assert arbiter.advance(600_000 * MS).grip_n == pytest.approx(8.0)  # kept: 5 N slipped
+    handed = arbiter.set_voluntary(600_010 * MS, 8.5)
+    assert (handed.reflex, handed.grip_n) == (ReflexState.IDLE, 8.5)
+
+
+def test_a_re_slip_at_the_floor_returns_to_the_grip_that_held():
+    arbiter = holding(5.0)
+    released_after_a_stop(arbiter, 4000)
+    assert arbiter.update(still(4010)).grip_n == pytest.approx(8.0)
+    assert arbiter.update(slip(4500, 10.0)).grip_n == pytest.approx(11.0)
+
+
+def test_switching_the_reflex_off_releases_through_the_floor_to_the_wearer():
+    arbiter = holding(5.0)
+    released_after_a_stop(arbiter, 4000)
+    arbiter.set_reflex_enabled(False, 4000 * MS)
+    assert arbiter.advance(6000 * MS).reflex == ReflexState.IDLE
+
+
 def test_the_learned_grip_is_handed_back_when_the_wearer_grips_as_hard():
     arbiter = holding(5.0)
     released_after_a_stop(arbiter, 3020)
@@ -245,7 +271,7 @@ def test_no_voluntary_grip_from_the_start_is_not_an_opening_hand():
 
 
 def test_a_slip_never_seen_to_stop_is_not_a_re_slip():
-    arbiter = holding(5.0, ReflexConfig(hold_us=0))
+    arbiter = holding(5.0, ReflexConfig(hold_us=0, release_floor_share=0.0))
     arbiter.update(slip(10, 60.0))
     arbiter.update(slip(20, 30.0))  # slowed below the band, still slipping: hold, release
     # no percept for a while: stale after 500 ms, the release goes on from there
@@ -262,9 +288,17 @@ def test_a_disabled_reflex_does_not_grip_again_on_a_re_slip():
     assert command.reflex == ReflexState.RELEASE and command.grip_n < 9.0 + 1e-9
 
 
-def test_the_open_threshold_is_validated():
-    with pytest.raises(ConfigError, match="open_below_n"):
-        ReflexConfig(open_below_n=-1.0)
+@pytest.mark.parametrize(
+    ("options", "key"),
+    [
+        ({"open_below_n": -1.0}, "open_below_n"),
+        ({"release_floor_share": 1.5}, "release_floor_share"),
+        ({"release_floor_share": math.nan}, "release_floor_share"),
+    ],
+)
+def test_open_threshold_and_release_floor_are_validated(options, key):
+    with pytest.raises(ConfigError, match=key):
+        ReflexConfig(**options)
 
 
 @pytest.mark.parametrize("speed", [None, math.nan, math.inf])
