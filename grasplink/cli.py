@@ -96,8 +96,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     gateway.add_argument(
         "--bus",
-        default=DEFAULT_BUS_URL,
-        help=f"bus URL (default {DEFAULT_BUS_URL}; see docs/buses.md)",
+        action="append",
+        default=None,
+        help=f"bus URL (default {DEFAULT_BUS_URL}; see docs/buses.md); repeat it to master "
+        "several buses from one thread, a gateway per bus (telemetry and Modbus: the first)",
     )
     gateway.add_argument(
         "--config", type=Path, default=None, help="gateway TOML (default: built-in defaults)"
@@ -615,6 +617,7 @@ def cmd_bench_loop(args: argparse.Namespace) -> int:
 
 
 def cmd_gateway(args: argparse.Namespace) -> int:
+    from grasplink.bus.url import DEFAULT_BUS_URL
     from grasplink.gateway.config import load_config
     from grasplink.gateway.live import LiveGateway
     from grasplink.terminal import StopSignals
@@ -631,14 +634,16 @@ def cmd_gateway(args: argparse.Namespace) -> int:
 
         modbus_url = parse_modbus_url(args.modbus)  # a bad URL too
     telemetry = telemetry_options(args)  # and bad --mqtt options
+    buses = args.bus or [DEFAULT_BUS_URL]
     deadline = None if args.duration is None else time.monotonic() + args.duration
     with (
         StopSignals() as stop,
         LiveGateway(
-            args.bus,
+            buses[0],
             config,
             with_nodes=args.with_nodes,
             reconnect_timeout_s=args.reconnect_timeout,
+            more_buses=buses[1:],
         ) as live,
         _modbus_server(live.gateway, modbus_url) as modbus,
         telemetry(live.gateway, config) as publisher,
@@ -648,7 +653,7 @@ def cmd_gateway(args: argparse.Namespace) -> int:
         kinds = ", ".join(f"{k} 0x{n.node_id:02X}" for k, n in config.nodes.items())
         reflex = config.reflex
         print(
-            f"gateway 0x{config.node_id:02X} on {args.bus} ({config.source}): "
+            f"gateway 0x{config.node_id:02X} on {', '.join(buses)} ({config.source}): "
             f"{kinds}; feedback {config.feedback.mode.value}, "
             f"reflex {f'above {reflex.threshold_mm_s:g} mm/s' if reflex.enabled else 'off'}",
             flush=True,

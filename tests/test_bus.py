@@ -11,9 +11,11 @@ import inspect
 import os
 import queue
 import re
+import select
 import signal
 import socket
 import statistics
+import struct
 import subprocess
 import sys
 import textwrap
@@ -31,7 +33,7 @@ from grasplink.bus.hub import CanHub
 from grasplink.bus.load import BusLoadMeter, frame_bits_worst_case, frame_time_us
 from grasplink.bus.options import accepted_options
 from grasplink.bus.reconnect import Backoff
-from grasplink.bus.runner import NodeRunner
+from grasplink.bus.runner import MultiRunner, NodeRunner
 from grasplink.bus.url import (
     BusSpec,
     frame_to_message,
@@ -887,3 +889,118 @@ def test_bus_load_meter_window() -> None:
     assert meter.bits_in_window(1_000_000) == 55
     with pytest.raises(ValueError):
         BusLoadMeter(bitrate=0)
+
+
+# -- MultiRunner -------------------------------------------------------------------------
+
+
+class SocketPairBus(can.BusABC):
+    """One end of a Unix SOCK_SEQPACKET pair as a CAN bus: one frame per record, and a
+    file descriptor a MultiRunner can select on (like SocketCAN)."""
+
+    RECORD = struct.Struct("<IB8s")
+
+    def __init__(self, sock: socket.socket) -> None:
+        super().__init__(channel=f"pair{sock.fileno()}")
+        self.sock = sock
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self.sock.send(self.RECORD.pack(msg.arbitration_id, msg.dlc, bytes(msg.data)))
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if not select.select([self.sock], [], [], timeout)[0]:
+            return None, False
+        can_id, dlc, data = self.RECORD.unpack(self.sock.recv(self.RECORD.size))
+        msg = can.Message(arbitration_id=can_id, data=data[:dlc], is_extended_id=False)
+        return msg, False
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self.sock.close()
+
+
+@pytest.fixture
+def socket_links(closing) -> Callable[[], tuple[SocketPairBus, SocketPairBus]]:
+    def link() -> tuple[SocketPairBus, SocketPairBus]:
+        mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        return closing(SocketPairBus(mine)), closing(SocketPairBus(theirs))
+
+    return link
+
+
+def heard_on(bus: can.BusABC) -> list[Frame]:
+    """Every frame waiting on `bus` now (nothing is waited for)."""
+    out = []
+    while (msg := bus.recv(0.0)) is not None:
+        frame = message_to_frame(msg)
+        assert frame is not None
+        out.append(frame)
+    return out
+
+
+def test_multi_runner_serves_each_bus_its_own_devices_frames_and_timers(socket_links) -> None:
+    (bus_a, peer_a), (bus_b, peer_b) = socket_links(), socket_links()
+    now = [1_000_000]
+
+    def clock() -> int:
+        return now[0]
+
+    ticker, echo_a, echo_b = Ticker(1, period_us=10_000), Echo(2), Echo(3)
+    runner_a = NodeRunner(bus_a, [ticker, echo_a], clock_us=clock)
+    runner_b = NodeRunner(bus_b, [echo_b], clock_us=clock)
+    multi = MultiRunner([runner_a, runner_b])
+    multi.power_on()
+    assert heard_on(peer_a) == [Frame(0x701, b"\x00"), Frame(0x702, b"\x00")]
+    assert heard_on(peer_b) == [Frame(0x703, b"\x00")]
+
+    send(peer_b, Frame(0x603, b"\x40\x00\x10\x00"))  # wakes the one thread for bus B only
+    multi.step()
+    assert heard_on(peer_b) == [Frame(0x583, b"\x40\x00\x10\x00")]
+    assert heard_on(peer_a) == []
+    assert Frame(0x603, b"\x40\x00\x10\x00") not in echo_a.heard
+
+    now[0] += 10_000  # bus A's ticker is due: its timer runs with no frame on any bus
+    multi.step()
+    assert heard_on(peer_a) == [Frame(0x181, b"\x01\x00")]
+    assert heard_on(peer_b) == []
+    assert ticker.fired == [(1_010_000, 1_010_000)]
+
+
+def test_multi_runner_polls_buses_without_a_file_descriptor(closing) -> None:
+    urls = [unique_virtual_url(), unique_virtual_url()]
+    buses = [closing(open_bus(u)) for u in urls]
+    peers = [closing(open_bus(u)) for u in urls]
+    multi = MultiRunner([NodeRunner(bus, [Echo(2)]) for bus in buses])
+    multi.power_on()
+    for peer in peers:
+        assert heard_on(peer) == [Frame(0x702, b"\x00")]
+    send(peers[1], Frame(0x602, b"\x07"))
+    multi.step()
+    assert heard_on(peers[1]) == [Frame(0x582, b"\x07")]
+    assert heard_on(peers[0]) == []
+
+
+def test_multi_runner_refuses_runners_with_their_own_thread(closing) -> None:
+    runner = NodeRunner(closing(open_bus(unique_virtual_url())), [Echo(2)]).start()
+    try:
+        with pytest.raises(ValueError, match="own thread"):
+            MultiRunner([runner])
+    finally:
+        runner.stop()
+
+
+@pytest.mark.slow
+def test_multi_runner_thread_starts_serves_and_stops(socket_links) -> None:
+    links = [socket_links() for _ in range(3)]
+    multi = MultiRunner([NodeRunner(bus, [Echo(2)]) for bus, _ in links])
+    with multi:
+        assert multi.running
+        for i, (_, peer) in enumerate(links):
+            recv_until(peer, has(0x702))
+            send(peer, Frame(0x602, bytes([i])))
+            assert Frame(0x582, bytes([i])) in recv_until(peer, has(0x582))
+    assert not multi.running
+    assert not any(t.name == "grasplink-multi-runner" for t in threading.enumerate())

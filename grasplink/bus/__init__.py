@@ -2,7 +2,7 @@
 
 from grasplink.bus.hub import CanHub, run_hub
 from grasplink.bus.load import BusLoadMeter, frame_bits_worst_case
-from grasplink.bus.runner import NodeRunner, RunnerStats
+from grasplink.bus.runner import MultiRunner, NodeRunner, RunnerStats
 from grasplink.bus.url import (
     DEFAULT_BUS_URL,
     DEFAULT_HUB_PORT,
@@ -22,6 +22,7 @@ __all__ = [
     "BusLoadMeter",
     "BusSpec",
     "CanHub",
+    "MultiRunner",
     "NodeRunner",
     "RunnerStats",
     "frame_bits_worst_case",

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import logging
 import queue
+import selectors
 import threading
 import time
 from collections import Counter, deque
@@ -112,6 +114,7 @@ class NodeRunner:
         self.devices = list(devices)
         self._clock = clock_us or monotonic_us
         self._max_wait_s = max_wait_s
+        self._max_wait_us = round(max_wait_s * 1e6)
         self._cascade_limit = cascade_limit
         self._max_batch = max_batch
         self._name = name
@@ -127,6 +130,9 @@ class NodeRunner:
         self._reconnect_timeout_us = round(reconnect_timeout_s * 1e6)
         self._first_retry_us = max(1, round(first_retry_s * 1e6))
         self._outage: Backoff | None = None  # set while the bus is down
+        self._due_us: int | None = None  # earliest device deadline after the last step
+        self._checked_us = 0  # when the timers were last looked at
+        self._backlog = False  # the last step stopped at max_batch frames
         self._bus_dead = False  # the current handle is gone for good: only reopen() helps
         self._last_bus_error = ""
         self._owned: can.BusABC | None = None  # the bus reopen() gave us, ours to shut down
@@ -223,6 +229,8 @@ class NodeRunner:
         for device in self.devices:  # power every device on before anyone hears a frame
             boot.extend((f, device, True) for f in self._call(device, "start", now))
         self._dispatch(boot, now)
+        self._due_us = self._earliest_deadline()
+        self._checked_us = now
 
     def _run(self) -> None:
         try:
@@ -236,7 +244,8 @@ class NodeRunner:
                 logger.exception("%s: unexpected error", self._name)
                 self._stop.wait(self._max_wait_s)
 
-    def _step(self) -> None:
+    def _step(self, *, block: bool = True) -> None:
+        """One cycle; ``block=False`` (a `MultiRunner` waited already): never wait or sleep."""
         now = self._clock()
         outage = self._outage
         if outage is not None and self._bus_dead and outage.due(now):
@@ -244,24 +253,27 @@ class NodeRunner:
             if self.failure is not None:
                 return
             now = self._clock()
-        wait_s = self._max_wait_s
-        if not self._submitted.empty():
-            wait_s = 0.0
-        else:
-            deadline = self._earliest_deadline()
-            if deadline is not None:
-                wait_s = min(wait_s, max(0, deadline - now) / 1e6)
+        wait_s = 0.0
+        if block and self._submitted.empty() and not self._backlog:
+            wait_s = self._max_wait_s
+            if self._due_us is not None:
+                wait_s = min(wait_s, max(0, self._due_us - now) / 1e6)
         outage = self._outage
         if outage is None or (not self._bus_dead and outage.due(now)):
             msg = self._recv(wait_s)
         else:  # the bus is down: sleep until a device deadline or the next attempt
-            self._stop.wait(min(wait_s, max(0, outage.next_attempt_us - now) / 1e6))
+            if block:
+                self._stop.wait(min(wait_s, max(0, outage.next_attempt_us - now) / 1e6))
             msg = None
         delivered = 0
+        self._backlog = False
         while msg is not None:  # everything that has arrived, before any timer runs
             self._deliver(msg)
             delivered += 1
-            if delivered >= self._max_batch or self._outage is not None or self.failure:
+            if self._outage is not None or self.failure:
+                break
+            if delivered >= self._max_batch:
+                self._backlog = True  # more may wait: the next step does not wait
                 break
             msg = self._recv(0.0)
         now = self._clock()
@@ -274,12 +286,41 @@ class NodeRunner:
             with self._lock:
                 self._stats.injected += 1
             work.append((frame, None, to_bus))
+        if not block and not delivered and not work and now < self._timers_due_us():
+            return  # polled by a MultiRunner with nothing new: the deadlines still hold
         self._dispatch(work, now)
+        self._checked_us = now
+        pending: list[int] = []
+        advanced = False
         for device in self.devices:
             deadline = self._effective_deadline(device)
             if deadline is not None and deadline <= now:
                 out = self._call(device, "advance", now)
                 self._dispatch([(f, device, True) for f in out], now)
+                advanced = True
+            elif deadline is not None:
+                pending.append(deadline)
+        # The next wait: the deadlines just read hold until a device hears or runs again
+        # (one next_deadline_us() per device and step; a command another thread posts to
+        # a device is seen at the next frame or within max_wait_s, as before).
+        self._due_us = self._earliest_deadline() if advanced else min(pending, default=None)
+
+    def _timers_due_us(self) -> int:
+        """When the timers must run again: the earliest deadline, and at least every
+        ``max_wait_s`` (a command another thread posted to a device shows only there)."""
+        every = self._checked_us + self._max_wait_us
+        return every if self._due_us is None else min(every, self._due_us)
+
+    def _wake_us(self) -> int | None:
+        """When this runner needs its next step without a frame (for a `MultiRunner`)."""
+        if self.failure is not None:
+            return None
+        if self._backlog or not self._submitted.empty():
+            return 0
+        outage = self._outage
+        if outage is not None:
+            return min(outage.next_attempt_us, self._timers_due_us())
+        return self._timers_due_us()
 
     def _deliver(self, msg: can.Message) -> None:
         """One frame from the bus to every device; their replies go out at once."""
@@ -479,6 +520,143 @@ class NodeRunner:
         self._backoff_until[id(device)] = self._clock() + DEVICE_BACKOFF_US
         with self._lock:
             self._stats.device_errors += 1
+
+
+class MultiRunner:
+    """Several `NodeRunner`s (each its own bus and devices) served by one thread.
+
+    Why: N gateways in one process on N runner threads each wake per frame and
+    pass the GIL back and forth, and a thread that got the GIL late finds its
+    peers' timers due too. One thread waits on every bus at once (``select``
+    on the buses' file descriptors: SocketCAN, socket links), then steps only
+    the runners whose bus has frames or whose timers are due, each exactly as
+    its own thread would (frames first, then timers; outages, back-off and
+    reopening per runner). A bus without a file descriptor (python-can's
+    virtual bus, the hub client) is polled every ``poll_s``. A runner that
+    gives up on its bus (`NodeRunner.failure`) is dropped; the others go on.
+    The runners must not be started themselves; `stop` stops them all.
+    """
+
+    def __init__(
+        self,
+        runners: Sequence[NodeRunner],
+        *,
+        name: str = "grasplink-multi-runner",
+        max_wait_s: float = 0.02,
+        poll_s: float = 0.001,
+    ) -> None:
+        if not runners:
+            raise ValueError("MultiRunner needs at least one runner")
+        if any(r._thread is not None for r in runners):
+            raise ValueError("a MultiRunner's runners must not have their own thread")
+        self.runners = list(runners)
+        self._name = name
+        self._max_wait_s = max_wait_s
+        self._poll_s = poll_s
+        self._selector = selectors.DefaultSelector()
+        self._registered: dict[int, int] = {}  # id(runner) -> the fd registered for it
+        self._stop = threading.Event()
+        self._booted = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def start(self, timeout: float = 5.0) -> MultiRunner:
+        """Start the thread; returns once every runner's devices have booted."""
+        if self._thread is not None:
+            raise RuntimeError("MultiRunner can only be started once")
+        self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
+        self._thread.start()
+        self._booted.wait(timeout)
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop the thread, then every runner (idempotent)."""
+        self._stop.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+            if thread.is_alive():
+                logger.warning("%s did not stop within %.1f s", self._name, timeout)
+                return
+        for runner in self.runners:
+            runner.stop()
+        self._selector.close()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def __enter__(self) -> MultiRunner:
+        return self.start()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def power_on(self) -> None:
+        """Boot every runner's devices (the thread's first act; public like `step`)."""
+        for runner in self.runners:
+            runner.power_on()
+
+    def step(self) -> None:
+        """One cycle: wait for any bus (until the earliest deadline), step who needs it."""
+        if self._thread is not None and self._thread.is_alive():
+            raise RuntimeError("step() while the MultiRunner's thread runs")
+        self._cycle()
+
+    def _run(self) -> None:
+        try:
+            for runner in self.runners:
+                runner._power_on()
+        finally:
+            self._booted.set()
+        while not self._stop.is_set() and any(r.failure is None for r in self.runners):
+            try:
+                self._cycle()
+            except Exception:  # never let one bad cycle stop every bus
+                logger.exception("%s: unexpected error", self._name)
+                self._stop.wait(self._max_wait_s)
+
+    def _cycle(self) -> None:
+        live = [r for r in self.runners if r.failure is None]
+        polled = [r for r in live if not self._watch(r)]
+        timeout = self._poll_s if polled else self._max_wait_s
+        due: list[NodeRunner] = []
+        for runner in live:
+            wake = runner._wake_us()
+            if wake is None:
+                continue
+            left_us = wake - runner._clock()
+            if left_us <= 0:
+                due.append(runner)
+            timeout = min(timeout, max(0, left_us) / 1e6)
+        ready = {key.data for key, _ in self._selector.select(0.0 if due else timeout)}
+        for runner in live:
+            if id(runner) in ready or runner in polled or runner in due:
+                runner._step(block=False)
+            elif (wake := runner._wake_us()) is not None and wake <= runner._clock():
+                runner._step(block=False)  # its deadline passed while we waited
+
+    def _watch(self, runner: NodeRunner) -> bool:
+        """Keep the runner's bus registered with the selector; False if it cannot be."""
+        fd = -1
+        if runner._outage is None:
+            try:
+                fd = runner.bus.fileno()
+            except (NotImplementedError, AttributeError, OSError):
+                fd = -1
+        old = self._registered.get(id(runner))
+        if old == fd:
+            return fd >= 0
+        if old is not None and old >= 0:
+            with contextlib.suppress(KeyError, ValueError, OSError):
+                self._selector.unregister(old)
+        self._registered[id(runner)] = fd
+        if fd >= 0:
+            try:
+                self._selector.register(fd, selectors.EVENT_READ, id(runner))
+            except (KeyError, ValueError, OSError):
+                self._registered[id(runner)] = -1
+                return False
+        return fd >= 0
 
 
 def _node_id(device: object) -> int:

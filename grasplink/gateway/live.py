@@ -4,15 +4,22 @@
 the embedded bus, optionally the four device nodes beside it), reopens a
 lost bus with back-off, and offers the gateway's latest snapshot and a
 one-line status for whoever watches (the CLI, telemetry).
+
+It can master several buses at once (``more_buses``): one `Gateway` per bus,
+each its own CANopen network with the configured node-IDs, all served by one
+thread (`MultiRunner`) rather than one thread per bus, so gateways sharing a
+process do not pass the GIL back and forth at every frame.
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Sequence
 from typing import Any
 
 import can
 
-from grasplink.bus import NodeRunner, open_bus
+from grasplink.bus import MultiRunner, NodeRunner, open_bus
 from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S
 from grasplink.devices.factory import build_node
 from grasplink.errors import BusError
@@ -21,7 +28,8 @@ from grasplink.gateway.service import Gateway
 
 
 class LiveGateway:
-    """Run a `Gateway` on `bus_url` in a background thread; a context manager."""
+    """Run a `Gateway` on `bus_url` (and on each of ``more_buses``) in a background thread;
+    a context manager. `gateway` is the first bus's (telemetry and Modbus serve it)."""
 
     def __init__(
         self,
@@ -30,14 +38,20 @@ class LiveGateway:
         *,
         with_nodes: bool = False,
         reconnect_timeout_s: float = DEFAULT_RECONNECT_TIMEOUT_S,
+        more_buses: Sequence[str] = (),
     ):
         self.bus_url = bus_url
+        self.bus_urls = [bus_url, *more_buses]
+        if len(set(self.bus_urls)) != len(self.bus_urls):
+            raise BusError(f"a bus is named twice: {', '.join(self.bus_urls)}")
         self.config = config
-        self.gateway = Gateway(config)
+        self.gateways = [Gateway(config) for _ in self.bus_urls]
+        self.gateway = self.gateways[0]
         self.with_nodes = with_nodes
         self.reconnect_timeout_s = reconnect_timeout_s
         self._buses: list[can.BusABC] = []
-        self._runners: list[NodeRunner] = []
+        self._runners: list[NodeRunner | MultiRunner] = []
+        self._gateway_runners: list[NodeRunner] = []
 
     def __enter__(self) -> LiveGateway:
         try:
@@ -51,22 +65,32 @@ class LiveGateway:
         self.stop()
 
     def start(self) -> None:
-        bus = open_bus(self.bus_url)
-        self._buses.append(bus)
-        if self.with_nodes:
-            # The four device nodes on their own handle of the same bus, as if in other boxes.
-            nodes_bus = open_bus(self.bus_url)
-            self._buses.append(nodes_bus)
-            nodes = [build_node(n.kind, n.node_id) for n in self.config.nodes.values()]
-            self._runners.append(NodeRunner(nodes_bus, nodes, name="grasplink-nodes").start())
-        runner = NodeRunner(
-            bus,
-            [self.gateway],
-            name="grasplink-gateway",
-            reopen=lambda: open_bus(self.bus_url),
-            reconnect_timeout_s=self.reconnect_timeout_s,
-        )
-        self._runners.append(runner.start())
+        node_runners: list[NodeRunner] = []
+        for url, gateway in zip(self.bus_urls, self.gateways, strict=True):
+            bus = open_bus(url)
+            self._buses.append(bus)
+            if self.with_nodes:
+                # The four device nodes on their own handle of the same bus, as if in other boxes.
+                nodes_bus = open_bus(url)
+                self._buses.append(nodes_bus)
+                nodes = [build_node(n.kind, n.node_id) for n in self.config.nodes.values()]
+                node_runners.append(NodeRunner(nodes_bus, nodes, name=f"grasplink-nodes {url}"))
+            self._gateway_runners.append(
+                NodeRunner(
+                    bus,
+                    [gateway],
+                    name=f"grasplink-gateway {url}",
+                    reopen=functools.partial(open_bus, url),
+                    reconnect_timeout_s=self.reconnect_timeout_s,
+                )
+            )
+        if len(self.bus_urls) == 1:
+            self._runners += [r.start() for r in node_runners]
+            self._runners.append(self._gateway_runners[0].start())
+            return
+        if node_runners:
+            self._runners.append(MultiRunner(node_runners, name="grasplink-nodes").start())
+        self._runners.append(MultiRunner(self._gateway_runners, name="grasplink-gateways").start())
 
     def stop(self) -> None:
         for runner in reversed(self._runners):
@@ -74,42 +98,54 @@ class LiveGateway:
         for bus in self._buses:
             bus.shutdown()
         self._runners.clear()
+        self._gateway_runners.clear()
         self._buses.clear()
 
     @property
     def failure(self) -> BusError | None:
-        return self._runners[-1].failure if self._runners else None
+        """Why a gateway's runner gave up on its bus (the first such), or None."""
+        return next((r.failure for r in self._gateway_runners if r.failure is not None), None)
 
     def snapshot(self) -> dict[str, Any] | None:
         return self.gateway.latest
 
     def status_line(self) -> str:
-        """Node states, decoded values and loop latency, for a log every few seconds."""
-        snap = self.gateway.latest
-        if snap is None:
-            return "gateway starting"
-        nodes = " ".join(
-            f"{kind}:{n['phase']}" + (f"/{n['pdos_dropped']}drop" if n["pdos_dropped"] else "")
-            for kind, n in snap["nodes"].items()
+        """Node states, decoded values and loop latency, for a log every few seconds
+        (one line per bus when there are several)."""
+        if len(self.gateways) == 1:
+            return status_of(self.gateway)
+        return "\n".join(
+            f"[{url}] {status_of(g)}" for url, g in zip(self.bus_urls, self.gateways, strict=True)
         )
-        skin, belt, hand, loop = snap["skin"], snap["belt"], snap["hand"], snap["loop"]
-        slip = "-"
-        if skin["slip"]:
-            speed = skin["slip_speed_mm_s"]
-            slip = f"SLIP {speed:+.0f} mm/s" if speed is not None else "SLIP (speed ?)"
-        force = skin["grip_force_n"]
-        grip = hand["setpoint_n"]
-        latency = loop["latency_p99_us"]
-        parts = [
-            f"up {snap['uptime_s']:.1f} s",
-            nodes,
-            f"skin {force:.1f} N" if force is not None else "skin -",
-            slip,
-            f"belt {belt['belt']}{'' if belt['level'] is None else belt['level']}",
-            f"grip {grip:.1f} N" if grip is not None else "grip -",
-            f"reflex {hand['reflex']}",
-            f"loop p99 {latency:.0f} us" if latency is not None else "loop -",
-        ]
-        if snap["alarms"]:
-            parts.append("ALARMS " + "; ".join(f"{k}: {v}" for k, v in snap["alarms"].items()))
-        return " | ".join(parts)
+
+
+def status_of(gateway: Gateway) -> str:
+    """One gateway's status line, from its latest snapshot."""
+    snap = gateway.latest
+    if snap is None:
+        return "gateway starting"
+    nodes = " ".join(
+        f"{kind}:{n['phase']}" + (f"/{n['pdos_dropped']}drop" if n["pdos_dropped"] else "")
+        for kind, n in snap["nodes"].items()
+    )
+    skin, belt, hand, loop = snap["skin"], snap["belt"], snap["hand"], snap["loop"]
+    slip = "-"
+    if skin["slip"]:
+        speed = skin["slip_speed_mm_s"]
+        slip = f"SLIP {speed:+.0f} mm/s" if speed is not None else "SLIP (speed ?)"
+    force = skin["grip_force_n"]
+    grip = hand["setpoint_n"]
+    latency = loop["latency_p99_us"]
+    parts = [
+        f"up {snap['uptime_s']:.1f} s",
+        nodes,
+        f"skin {force:.1f} N" if force is not None else "skin -",
+        slip,
+        f"belt {belt['belt']}{'' if belt['level'] is None else belt['level']}",
+        f"grip {grip:.1f} N" if grip is not None else "grip -",
+        f"reflex {hand['reflex']}",
+        f"loop p99 {latency:.0f} us" if latency is not None else "loop -",
+    ]
+    if snap["alarms"]:
+        parts.append("ALARMS " + "; ".join(f"{k}: {v}" for k, v in snap["alarms"].items()))
+    return " | ".join(parts)

@@ -1,0 +1,63 @@
+"""A live gateway process masters several buses from one thread."""
+
+from __future__ import annotations
+
+import time
+import uuid
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+from grasplink.bus import MultiRunner
+from grasplink.errors import BusError
+from grasplink.gateway.config import parse_config
+from grasplink.gateway.live import LiveGateway
+
+
+def wait_until(predicate: Callable[[], Any], timeout_s: float = 20.0, what: str = "") -> None:
+    """Poll `predicate` until it is truthy (2 shared cores: be patient, never flaky)."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def operational(gateway) -> bool:
+    snapshot = gateway.latest
+    return snapshot is not None and all(
+        n["phase"] == "operational" for n in snapshot["nodes"].values()
+    )
+
+
+@pytest.mark.slow
+def test_one_gateway_process_masters_three_buses_from_one_thread() -> None:
+    urls = [f"virtual:live-{uuid.uuid4().hex[:12]}" for _ in range(3)]
+    config = parse_config({}, "<test>")
+    with LiveGateway(urls[0], config, with_nodes=True, more_buses=urls[1:]) as live:
+        assert len(live.gateways) == 3 and live.gateway is live.gateways[0]
+        assert any(isinstance(r, MultiRunner) and len(r.runners) == 3 for r in live._runners)
+        wait_until(lambda: all(map(operational, live.gateways)), what="every node on every bus")
+        lines = live.status_line().splitlines()
+        assert [line.split("]")[0] for line in lines] == [f"[{u}" for u in urls]
+        assert all("skin:operational" in line for line in lines)
+        assert live.failure is None
+
+
+def test_a_bus_named_twice_is_refused_before_any_bus_opens() -> None:
+    with pytest.raises(BusError, match="named twice"):
+        LiveGateway("virtual:a", parse_config({}, "<test>"), more_buses=["virtual:a"])
+
+
+@pytest.mark.slow
+def test_gateway_command_takes_several_buses(capsys) -> None:
+    from grasplink import cli
+
+    urls = [f"virtual:cli-multi-{uuid.uuid4().hex[:12]}" for _ in range(2)]
+    args = ["gateway", "--with-nodes", "--duration", "2"]
+    assert cli.main([*args, "--bus", urls[0], "--bus", urls[1]]) == 0
+    out = capsys.readouterr().out
+    assert f"on {urls[0]}, {urls[1]} (" in out
+    stopped = out[out.index("stopped: ") :]
+    assert f"[{urls[0]}]" in stopped and f"[{urls[1]}]" in stopped
