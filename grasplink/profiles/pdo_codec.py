@@ -77,7 +77,9 @@ class PdoCodec:
         if len(data) != expected:
             raise PdoError(f"{pdo.name}: {len(data)} bytes, its mapping needs {expected}")
         pdo.data = bytearray(data)
-        return {(v.od.index, v.od.subindex): v.raw for v in pdo.map}
+        # What `v.raw` returns, without the debug text canopen formats at every read
+        # (two thirds of a decode; this runs for every TPDO on the gateway's frame path).
+        return {(v.od.index, v.od.subindex): v.od.decode_raw(v.get_data()) for v in pdo.map}
 
     # -- transmit (RPDOs the node receives) -----------------------------------------------
     def rpdo(self, number: int) -> PdoMap:
