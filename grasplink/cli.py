@@ -152,6 +152,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="publish telemetry values at most this often (default 20: every snapshot)",
     )
     gateway.add_argument(
+        "--sparkplug-host-id",
+        default=None,
+        metavar="ID",
+        help="Sparkplug primary host application: births wait until its STATE says online "
+        "(default: [telemetry] sparkplug_host_id of the configuration, else none)",
+    )
+    gateway.add_argument(
         "--modbus",
         metavar="URL",
         default=None,
@@ -689,7 +696,8 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
     """The --mqtt options, checked before the bus or broker is touched; returns what starts
     the publisher for a gateway (a context of None without --mqtt)."""
     if args.mqtt is None:
-        given = [f for f in ("mqtt_id", "mqtt_ca", "mqtt_rate_hz") if getattr(args, f) is not None]
+        options = ("mqtt_id", "mqtt_ca", "mqtt_rate_hz", "sparkplug_host_id")
+        given = [f for f in options if getattr(args, f) is not None]
         if given:
             raise ConfigError(f"--{given[0].replace('_', '-')} needs --mqtt URL")
         return lambda gateway, config: nullcontext()
@@ -705,11 +713,15 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
     gateway_id = check_id(args.mqtt_id or "gateway")
     tls = tls_context(url, args.mqtt_ca)
     rate_hz = args.mqtt_rate_hz or DEFAULT_RATE_HZ
+    if args.sparkplug_host_id is not None:
+        check_id(args.sparkplug_host_id, "--sparkplug-host-id")
 
     def start(gateway: Any, config: Any) -> TelemetryPublisher:
+        host_id = args.sparkplug_host_id or config.telemetry.sparkplug_host_id or None
+        waits = f"; Sparkplug births wait for primary host {host_id}" if host_id else ""
         print(
             f"telemetry to {url.display}: grasplink/{gateway_id}/..., "
-            f"spBv1.0/{url.group}/+/{gateway_id}, at most {rate_hz:g} Hz",
+            f"spBv1.0/{url.group}/+/{gateway_id}, at most {rate_hz:g} Hz{waits}",
             flush=True,
         )
         return TelemetryPublisher(
@@ -720,6 +732,8 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
             rate_hz=rate_hz,
             controls=TelemetryPublisher.controls_of(config),
             log=lambda line: print(line, flush=True),
+            primary_host_id=host_id,
+            state_dir=Path(config.telemetry.state_dir).expanduser(),
         )
 
     return start

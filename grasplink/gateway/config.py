@@ -11,6 +11,7 @@ file could have caught.
 from __future__ import annotations
 
 import itertools
+import re
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -39,6 +40,11 @@ EMG_WINDOW_MS = (150, 250)
 FEEDBACK_MODES = tuple(m.value for m in FeedbackMode)
 US_PER_MS = 1000
 GRIP_MODES = ("levels", "proportional")
+# Where telemetry keeps what must outlive a run (the Sparkplug bdSeq); `~` is expanded.
+DEFAULT_STATE_DIR = "~/.local/state/grasplink"
+# A Sparkplug host ID is one MQTT topic level (the rule of telemetry.url.check_id, kept here
+# so reading a configuration does not import the MQTT stack).
+_HOST_ID = re.compile(r"[A-Za-z0-9_.:-]{1,64}")
 
 
 @dataclass
@@ -84,6 +90,14 @@ class FeedbackSettings:
 
 
 @dataclass
+class TelemetrySettings:
+    """What telemetry needs beyond the broker URL (docs/telemetry.md)."""
+
+    sparkplug_host_id: str = ""  # the primary host application births wait for ("": none)
+    state_dir: str = DEFAULT_STATE_DIR  # the Sparkplug bdSeq kept across restarts
+
+
+@dataclass
 class GatewayConfig:
     source: str = "<defaults>"
     node_id: int = obj.GATEWAY_NODE_ID
@@ -95,6 +109,7 @@ class GatewayConfig:
     nodes: dict[str, NodeConfig] = field(default_factory=dict)
     feedback: FeedbackSettings = field(default_factory=FeedbackSettings)
     reflex: ReflexConfig = field(default_factory=ReflexConfig)
+    telemetry: TelemetrySettings = field(default_factory=TelemetrySettings)
 
     def node(self, kind: str) -> NodeConfig | None:
         return self.nodes.get(kind)
@@ -153,6 +168,7 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     hand = config.nodes.get("hand")
     crush_n = hand.crush_limit_n if isinstance(hand, HandConfig) else 40.0
     config.reflex = _reflex(top.table_of("reflex", {}), crush_n)
+    config.telemetry = _telemetry(top.table_of("telemetry", {}))
     top.finish()
     return config
 
@@ -234,6 +250,20 @@ def _reflex(p: Params, crush_limit_n: float) -> ReflexConfig:
     reflex = _checked(p, "threshold_mm_s", lambda: ReflexConfig(**values))
     p.finish()
     return reflex
+
+
+def _telemetry(p: Params) -> TelemetrySettings:
+    host_id = p.string("sparkplug_host_id", "")
+    if host_id and not _HOST_ID.fullmatch(host_id):
+        raise p.error(
+            "sparkplug_host_id",
+            f"expected 1..64 of A-Z a-z 0-9 _ . : - (one topic level), got {host_id!r}",
+        )
+    state_dir = p.string("state_dir", DEFAULT_STATE_DIR)
+    if not state_dir.strip():
+        raise p.error("state_dir", "expected a directory")
+    p.finish()
+    return TelemetrySettings(host_id, state_dir)
 
 
 def _common(p: Params, kind: str) -> dict[str, Any]:

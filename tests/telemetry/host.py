@@ -1,8 +1,14 @@
 """A strict Sparkplug B host for tests: decodes with the generated classes and checks the
-session rules (bdSeq in NBIRTH/NDEATH, seq 0..255 with NBIRTH at 0, births before data)."""
+session rules (bdSeq in NBIRTH/NDEATH, seq 0..255 with NBIRTH at 0, births before data)
+and the alias rules (births: name, alias and datatype for every metric, aliases unique
+across the edge node; NDATA/DDATA: alias only, no name or datatype, resolved through the
+births). Optionally it is the primary host application: `state(online)` is the retained
+STATE payload it would publish."""
 
 from __future__ import annotations
 
+import json
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -15,9 +21,15 @@ class Seen:
     kind: str
     device: str | None
     payload: pb.Payload
+    # (name, metric, value) in payload order: names resolved through the births' aliases
+    named: list[tuple[str, pb.Payload.Metric, Any]] = field(default_factory=list)
 
     def metrics(self) -> dict[str, Any]:
-        return {m.name: metric_value(m) for m in self.payload.metrics}
+        return {name: value for name, _, value in self.named}
+
+    def values_of(self, name: str) -> list[tuple[int, Any]]:
+        """(timestamp, value) of every metric `name` in this message."""
+        return [(m.timestamp, value) for n, m, value in self.named if n == name]
 
 
 @dataclass
@@ -31,6 +43,14 @@ class SparkplugHost:
     online: bool = False
     born: set[str] = field(default_factory=set)
     values: dict[str | None, dict[str, Any]] = field(default_factory=dict)
+    # per device (None: the edge node): alias -> (name, datatype), from the births
+    aliases: dict[str | None, dict[int, tuple[str, int]]] = field(default_factory=dict)
+
+    @staticmethod
+    def state(online: bool, timestamp_ms: int | None = None) -> bytes:
+        """A primary host application's STATE payload (Sparkplug 3.0)."""
+        stamp = timestamp_ms if timestamp_ms is not None else time.time_ns() // 1_000_000
+        return json.dumps({"online": online, "timestamp": stamp}).encode()
 
     def feed(self, topic: str, data: bytes) -> Seen | None:
         parts = topic.split("/")
@@ -42,6 +62,12 @@ class SparkplugHost:
         payload = pb.Payload.FromString(data)
         seen = Seen(kind, device, payload)
         self.messages.append(seen)
+        if kind in ("NBIRTH", "DBIRTH"):
+            self._learn_aliases(seen)
+        elif kind in ("NDATA", "DDATA"):
+            self._resolve(seen)
+        else:
+            seen.named = [(m.name, m, metric_value(m)) for m in payload.metrics]
         metrics = seen.metrics()
         if kind == "NDEATH":
             if payload.HasField("seq"):
@@ -83,6 +109,40 @@ class SparkplugHost:
         elif kind == "NDATA" and not historical:
             self.values.setdefault(None, {}).update(metrics)
         return seen
+
+    def _learn_aliases(self, seen: Seen) -> None:
+        """A birth defines its metrics: name, alias and datatype each; an NBIRTH starts the
+        edge node's alias table afresh, a DBIRTH redefines its device's part of it."""
+        if seen.kind == "NBIRTH":
+            self.aliases = {}
+        table: dict[int, tuple[str, int]] = {}
+        others = {
+            alias: (device, name)
+            for device, entries in self.aliases.items()
+            if device != seen.device
+            for alias, (name, _) in entries.items()
+        }
+        for metric in seen.payload.metrics:
+            if not metric.name or not metric.HasField("alias") or not metric.datatype:
+                self.errors.append(f"{seen.kind} metric {metric.name!r} without name/alias/type")
+                continue
+            if metric.alias in table or metric.alias in others:
+                self.errors.append(f"{seen.kind} alias {metric.alias} ({metric.name}) not unique")
+            table[metric.alias] = (metric.name, metric.datatype)
+            seen.named.append((metric.name, metric, metric_value(metric)))
+        self.aliases[seen.device] = table
+
+    def _resolve(self, seen: Seen) -> None:
+        """DATA metrics by alias only, through the births (no name, no datatype)."""
+        table = self.aliases.get(seen.device, {})
+        for metric in seen.payload.metrics:
+            if metric.name or metric.HasField("datatype"):
+                self.errors.append(f"{seen.kind} metric {metric.name!r} with a name or datatype")
+            if not metric.HasField("alias") or metric.alias not in table:
+                self.errors.append(f"{seen.kind} {seen.device} alias {metric.alias} not born")
+                continue
+            name, datatype = table[metric.alias]
+            seen.named.append((name, metric, metric_value(metric, datatype)))
 
     def kinds(self) -> list[str]:
         return [m.kind + (f"/{m.device}" if m.device else "") for m in self.messages]

@@ -54,11 +54,21 @@ def test_clients_without_valid_credentials_are_refused(secured: Mosquitto, fake)
     assert anonymous.returncode != 0
 
 
-def test_cli_reports_a_refused_broker_on_one_line(secured: Mosquitto, capsys) -> None:
+def state_config(folder: Path) -> Path:
+    """A gateway configuration keeping telemetry's state (the bdSeq) in `folder`."""
+    config = folder / "gateway.toml"
+    config.write_text(f'[telemetry]\nstate_dir = "{folder / "state"}"\n')
+    return config
+
+
+def test_cli_reports_a_refused_broker_on_one_line(
+    secured: Mosquitto, capsys, tmp_path: Path
+) -> None:
     code = cli.main(
         [
             *("gateway", "--bus", "virtual:telemetry-refused", "--with-nodes"),
             *("--duration", "1", "--mqtt", secured.url_for("gateway", "nope")),
+            *("--config", str(state_config(tmp_path))),
         ]
     )
     err = capsys.readouterr().err.strip()
@@ -134,11 +144,10 @@ def test_a_sparkplug_host_reads_births_and_data_in_order(broker: Mosquitto, fake
     assert "DBIRTH/belt" in kinds[death:]
     assert kinds.count("NBIRTH") == 2 and kinds[-1] == "NDEATH"  # rebirth, then a clean stop
     skin = [
-        metric_value(m)
+        value
         for seen in host.messages
         if seen.kind == "DDATA" and seen.device == "skin"
-        for m in seen.payload.metrics
-        if m.name == "grip_force_n"
+        for _, value in seen.values_of("grip_force_n")
     ]
     assert skin == sorted(skin) and len(skin) > 10
     assert host.errors == []
@@ -147,7 +156,8 @@ def test_a_sparkplug_host_reads_births_and_data_in_order(broker: Mosquitto, fake
 def test_commands_are_answered_accepted_or_rejected_with_the_reason(
     broker: Mosquitto, fake
 ) -> None:
-    recorder = Recorder(broker, ["grasplink/gw/reply/#", "spBv1.0/grasplink/NDATA/gw"])
+    recorder = Recorder(broker, ["grasplink/gw/reply/#", "spBv1.0/grasplink/+/gw/#"])
+    host = SparkplugHost("grasplink", "gw")
     with publisher(fake, broker.url, controls={"reflex_enabled": True}):
         for topic, payload in (
             ("feedback_mode", b'{"value": "slip_speed", "id": 1}'),
@@ -158,8 +168,11 @@ def test_commands_are_answered_accepted_or_rejected_with_the_reason(
             ("feedback_mode", b"off"),
         ):
             recorder.publish(f"grasplink/gw/cmd/{topic}", payload)
-        ncmd = pb.Payload()
-        set_value(ncmd.metrics.add(name="Control/reflex_enabled"), BOOLEAN, False)
+        (birth,) = recorder.wait_for(lambda m: m.topic.endswith("NBIRTH/gw"))
+        host.feed(birth.topic, birth.payload)
+        alias = {name: m.alias for name, m, _ in host.messages[0].named}
+        ncmd = pb.Payload()  # as Sparkplug 3.0 has it: by alias only, no name, no datatype
+        ncmd.metrics.add(alias=alias["Control/reflex_enabled"], boolean_value=False)
         recorder.publish("spBv1.0/grasplink/NCMD/gw", ncmd.SerializeToString())
         replies = recorder.wait_for(lambda m: "/reply/" in m.topic and json_of(m)["id"] is None)
         assert replies
@@ -171,11 +184,11 @@ def test_commands_are_answered_accepted_or_rejected_with_the_reason(
     assert answers[4] == {**answers[4], "accepted": True, "command": "restart_node"}
     assert answers[5]["accepted"] is False and "unknown command" in answers[5]["detail"]
     assert answers[None]["accepted"] is False and "not JSON" in answers[None]["detail"]
-    ndata = [
-        {m.name: metric_value(m) for m in pb.Payload.FromString(r.payload).metrics}
-        for r in recorder.taken()
-        if r.topic.endswith("NDATA/gw")
-    ]
+    host = SparkplugHost("grasplink", "gw")
+    for message in recorder.taken():
+        host.feed(message.topic, message.payload)
+    assert host.errors == []
+    ndata = [seen.metrics() for seen in host.messages if seen.kind == "NDATA"]
     reply = next(d for d in ndata if "Command Reply/command" in d)
     assert reply == {
         "Command Reply/command": "reflex_enabled",
@@ -277,12 +290,15 @@ def test_a_small_buffer_drops_the_oldest_and_says_so(tmp_path: Path, fake: FakeG
     assert "dropped the" in back and "oldest" in back and "16 KiB bound" in back
 
 
-def test_the_will_announces_the_gateway_dead_when_it_dies(broker: Mosquitto) -> None:
+def test_the_will_announces_the_gateway_dead_when_it_dies(
+    broker: Mosquitto, tmp_path: Path
+) -> None:
     recorder = Recorder(broker, ["grasplink/live/status", "spBv1.0/grasplink/+/live"])
     process = subprocess.Popen(
         [
             *(sys.executable, "-m", "grasplink.cli", "gateway", "--with-nodes", "--bus"),
             *("virtual:will", "--mqtt", broker.url + "?keepalive_s=2", "--mqtt-id", "live"),
+            *("--config", str(state_config(tmp_path))),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -330,3 +346,69 @@ def json_of_status(message) -> bool | None:
     if not message.topic.endswith("/status"):
         return None
     return json.loads(message.payload).get("online")
+
+
+def test_births_wait_for_the_primary_host_and_its_return_brings_a_new_bdseq(
+    broker: Mosquitto, fake
+) -> None:
+    recorder = Recorder(broker, ["spBv1.0/grasplink/+/gw/#"])
+    scada = Recorder(broker, ["spBv1.0/STATE/scada"])  # the primary host application
+    host = SparkplugHost("grasplink", "gw")
+    lines: list[str] = []
+    with publisher(fake, broker.url, primary_host_id="scada", log=lines.append) as pub:
+        time.sleep(0.6)
+        assert recorder.taken() == []  # connected, but nothing before the host is online
+        scada.publish("spBv1.0/STATE/scada", host.state(True), retain=True)
+        assert recorder.wait_for(lambda m: "/DDATA/" in m.topic)
+        scada.publish("spBv1.0/STATE/scada", host.state(False), retain=True)
+        assert recorder.wait_for(lambda m: m.topic.endswith("NDEATH/gw"))
+        time.sleep(0.5)
+        quiet = len(recorder.taken())
+        time.sleep(0.3)
+        assert len(recorder.taken()) == quiet  # reconnected, waiting for the host again
+        scada.publish("spBv1.0/STATE/scada", host.state(True), retain=True)
+        assert recorder.wait_for(lambda m: m.topic.endswith("NBIRTH/gw") and m.t_mono > 0, 5)
+        time.sleep(0.5)
+        assert pub.stats()["links"]["sparkplug"]["connections"] == 2
+    time.sleep(0.2)
+    for message in recorder.taken():
+        host.feed(message.topic, message.payload)
+    scada.close()
+    recorder.close()
+    births = [m for m in host.messages if m.kind == "NBIRTH"]
+    assert [b.metrics()["bdSeq"] for b in births] == [0, 1]
+    kinds = host.kinds()
+    assert kinds.index("NDEATH") < kinds.index("NBIRTH", 1)
+    assert any(m.kind == "DDATA" for m in host.messages[kinds.index("NBIRTH", 1) :])
+    assert host.errors == []
+    assert any("primary host scada went offline" in line for line in lines)
+
+
+def test_bdseq_goes_on_across_two_runs_of_the_gateway(broker: Mosquitto, tmp_path: Path) -> None:
+    recorder = Recorder(broker, ["spBv1.0/grasplink/+/twice/#"])
+    config = state_config(tmp_path)
+    for run in range(2):
+        subprocess.run(
+            [
+                *(sys.executable, "-m", "grasplink.cli", "gateway", "--with-nodes"),
+                *("--bus", f"virtual:twice-{run}", "--duration", "1.5", "--config", str(config)),
+                *("--mqtt", broker.url, "--mqtt-id", "twice"),
+            ],
+            check=True,
+            capture_output=True,
+            cwd=ROOT,
+            timeout=60,
+        )
+    time.sleep(0.3)
+    host = SparkplugHost("grasplink", "twice")
+    for message in recorder.taken():
+        host.feed(message.topic, message.payload)
+    recorder.close()
+    assert [m.metrics()["bdSeq"] for m in host.messages if m.kind in ("NBIRTH", "NDEATH")] == [
+        0,
+        0,
+        1,
+        1,
+    ]
+    assert host.errors == []
+    assert (tmp_path / "state" / "sparkplug-grasplink-twice.json").read_text() == '{"bdSeq": 1}'

@@ -4,8 +4,10 @@ rebirth, seq/bdSeq across sessions, store-and-forward as historical data, comman
 from __future__ import annotations
 
 from grasplink.gateway.commands import Command, CommandResult
+from grasplink.gateway.config import KINDS
 from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
 from grasplink.gateway.telemetry.buffer import Message, Sample
+from grasplink.gateway.telemetry.protocol import Incoming
 from grasplink.gateway.telemetry.sparkplug import (
     BOOLEAN,
     DOUBLE,
@@ -83,7 +85,7 @@ def test_a_batch_carries_every_change_with_its_own_timestamp() -> None:
     ]
     sent = send(session, host, session.update(batch, EXTRA))
     (ddata,) = [m for m in host.messages[-len(sent) :] if m.kind == "DDATA"]
-    forces = [(m.timestamp, metric_value(m)) for m in ddata.payload.metrics]
+    forces = ddata.values_of("grip_force_n")
     assert forces == [(2050, 1.0), (2100, 2.0), (2150, 3.0), (2200, 4.0)]
 
 
@@ -219,3 +221,103 @@ def test_signed_metric_values_round_trip_through_the_protobuf_runtime() -> None:
         set_value(metric, datatype, value)
         decoded = pb.Payload.Metric.FromString(metric.SerializeToString())
         assert metric_value(decoded) == value
+
+
+def test_births_define_an_alias_per_metric_unique_across_the_edge_node() -> None:
+    session, host, _ = connected()
+    send(session, host, session.update([Sample(2000, snapshot(1.0))], EXTRA))
+    births = [m for m in host.messages if m.kind in ("NBIRTH", "DBIRTH")]
+    aliases = [metric.alias for seen in births for metric in seen.payload.metrics]
+    assert len(births) == 5 and len(aliases) == len(set(aliases))
+    metrics = [m for seen in births for m in seen.payload.metrics]
+    assert all(m.name and m.HasField("alias") and m.datatype for m in metrics)
+    assert not host.errors
+
+
+def test_data_carries_aliases_only_and_decodes_through_the_births() -> None:
+    session, host, _ = connected()
+    send(session, host, session.update([Sample(2000, snapshot(1.0))], EXTRA))
+    moving = snapshot(1.05, belt={"velocity_mrad_s": -4500}, skin={"slip": True})
+    sent = send(session, host, session.update([Sample(2050, moving)], EXTRA))
+    ddata = [pb.Payload.FromString(m.payload) for m in sent if "/DDATA/" in m.topic]
+    metrics = [m for payload in ddata for m in payload.metrics]
+    assert len(metrics) == 2
+    assert all(not m.name and not m.HasField("datatype") and m.alias for m in metrics)
+    decoded = {seen.device: seen.metrics() for seen in host.messages if seen.kind == "DDATA"}
+    assert decoded == {"belt": {"velocity_mrad_s": -4500}, "skin": {"slip": True}}
+    assert not host.errors
+
+
+def test_the_appended_seq_is_the_payload_the_runtime_serialises_with_its_seq() -> None:
+    session, host, _ = connected()
+    for message in send(session, host, session.update([Sample(2000, snapshot(1.0))], EXTRA)):
+        payload = pb.Payload.FromString(message.payload)
+        assert payload.SerializeToString() == message.payload and payload.HasField("seq")
+
+
+def test_ncmd_by_alias_is_a_command_and_an_unknown_alias_is_refused() -> None:
+    session, host, _ = connected()
+    alias = {name: m.alias for name, m, _ in host.messages[0].named}
+    payload = pb.Payload(timestamp=3000)
+    payload.metrics.add(alias=alias["Control/reflex_threshold_mm_s"], double_value=30.0)
+    payload.metrics.add(alias=alias["Control/feedback_mode"], string_value="off")
+    payload.metrics.add(alias=999_999, boolean_value=True)
+    incoming = session.receive("spBv1.0/grp/NCMD/gw", payload.SerializeToString(), False, 3000)
+    assert [r.command for r in incoming.requests if r.command] == [
+        Command("reflex_threshold_mm_s", 30.0),
+        Command("feedback_mode", "off"),
+    ]
+    (refused,) = [r.refused for r in incoming.requests if r.refused]
+    assert "alias 999999" in refused
+
+
+def test_births_wait_for_the_primary_host_and_what_waited_follows_as_historical() -> None:
+    session = SparkplugSession("grp", "gw", primary_host_id="scada")
+    host = SparkplugHost("grp", "gw")
+    assert "spBv1.0/STATE/scada" in session.subscriptions()
+    session.will(1000)
+    first, after = session.on_connect(1000)
+    assert first == after == [] and session.holding
+    waited = session.update([Sample(2000, snapshot(1.0))], EXTRA)
+    waited += session.update([Sample(2050, snapshot(1.05, skin={"grip_force_n": 3.0}))], EXTRA)
+    offline = session.receive("spBv1.0/STATE/scada", host.state(False, 5), True, 2100)
+    assert offline.urgent == [] and not offline.reconnect and session.holding
+    online = session.receive("spBv1.0/STATE/scada", host.state(True, 10), True, 2100)
+    assert not session.holding and online.urgent
+    send(session, host, online.urgent + waited)
+    kinds = host.kinds()
+    assert kinds[0] == "NBIRTH" and sorted(kinds[1:5]) == [f"DBIRTH/{k}" for k in sorted(KINDS)]
+    assert kinds.count("NBIRTH") == 1 and kinds.count("DBIRTH/skin") == 1  # the waiting ones
+    (replayed,) = [m for m in host.messages if m.kind == "DDATA"]  # were of no session: gone
+    assert replayed.metrics() == {"grip_force_n": 3.0} and replayed.payload.metrics[0].is_historical
+    assert not host.errors
+
+
+def test_the_primary_host_going_offline_asks_for_a_new_session_and_a_new_bdseq() -> None:
+    session = SparkplugSession("grp", "gw", primary_host_id="scada")
+    host = SparkplugHost("grp", "gw")
+    state = "spBv1.0/STATE/scada"
+    session.will(1000)
+    session.on_connect(1000)
+    send(session, host, session.receive(state, host.state(True, 10), True, 1).urgent)
+    stale = session.receive("spBv1.0/STATE/scada", host.state(False, 9), False, 2)
+    assert not stale.reconnect  # older than the STATE applied: a stale copy
+    assert session.receive("spBv1.0/STATE/scada", b"not json", False, 2) == Incoming()
+    gone = session.receive("spBv1.0/STATE/scada", host.state(False, 20), False, 3)
+    assert gone.reconnect and session.holding
+    assert pb.Payload.FromString(session.will(4000).payload).metrics[0].long_value == 1
+    assert session.on_connect(4000) == ([], [])  # waits for the host again
+    send(session, host, session.receive(state, host.state(True, 30), True, 5).urgent)
+    births = [m for m in host.messages if m.kind == "NBIRTH"]
+    assert [b.metrics()["bdSeq"] for b in births] == [0, 1] and not host.errors
+
+
+def test_a_bdseq_kept_from_a_previous_run_goes_on_from_there() -> None:
+    assert (
+        pb.Payload.FromString(SparkplugSession("g", "e", last_bdseq=7).will(0).payload)
+        .metrics[0]
+        .long_value
+        == 8
+    )
+    wrapped = SparkplugSession("g", "e", last_bdseq=255).will(0)
+    assert pb.Payload.FromString(wrapped.payload).metrics[0].long_value == 0

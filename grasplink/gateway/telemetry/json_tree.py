@@ -20,6 +20,7 @@ session misses nothing the broker accepted.
 from __future__ import annotations
 
 import json
+import operator
 from collections import Counter
 from typing import Any
 
@@ -37,6 +38,7 @@ from grasplink.gateway.telemetry.protocol import (
 )
 
 ROOT = "grasplink"
+_STATE_OF = operator.itemgetter(*STATE_FIELDS)  # a node's state fields, one C call
 HEALTH_PERIOD_MS = 1000
 VALUES_REFRESH_MS = 1000  # unchanged values are repeated this often (a consumer sees we live)
 QOS = 1
@@ -47,6 +49,8 @@ class JsonTree:
     """Snapshots in, JSON messages out; commands in, replies out."""
 
     name = "json"
+    holding = False  # waits for nobody: the outbox drains whenever connected
+    next_due_ms = 0
 
     def __init__(
         self,
@@ -59,14 +63,17 @@ class JsonTree:
         self.base = f"{ROOT}/{gateway_id}"
         self.health_period_ms = health_period_ms
         self.values_refresh_ms = values_refresh_ms
-        self._values: dict[str, tuple[int, dict[str, Any]]] = {}  # kind -> (ts_ms, values)
+        self._values: dict[str, tuple[int, Any]] = {}  # kind -> (ts_ms, its snapshot section)
         self._published: dict[str, dict[str, Any]] = {}  # retained topic -> body (no ts)
-        self._latest: Sample | None = None
+        self.latest: Sample | None = None
         self._extra: dict[str, Any] = {}
         self._live: list[str] | None = None
         self._last_health_ms: int | None = None
         self._times_lost: Counter[str] = Counter()
         self._was_live: set[str] = set()
+        # What the last snapshot's retained topics were made from (a snapshot is replaced
+        # whole, never changed in place): equal, the topic's body is not even built.
+        self._seen: dict[str, Any] = {}
 
     # -- connection ------------------------------------------------------------------------
     def will(self, t_ms: int, *, new_connect: bool = True) -> Message:
@@ -82,10 +89,10 @@ class JsonTree:
         status = {"ts_ms": t_ms, "online": True, "gateway_id": self.gateway_id}
         first = [Message(f"{self.base}/status", dumps(status), QOS, True)]
         after = []
-        if self._latest is not None:
-            ts = self._latest.ts_ms
+        if self.latest is not None:
+            ts = self.latest.ts_ms
             after = [self._retained(topic, body, ts) for topic, body in self._published.items()]
-            after.append(self._health(self._latest, ts))
+            after.append(self._health(self.latest, ts))
         return first, after
 
     def goodbye(self, t_ms: int) -> list[Message]:
@@ -101,33 +108,41 @@ class JsonTree:
         self._extra = extra
         out: list[Message] = []
         for sample in batch:
-            out += self._changes(sample)
+            self._changes(sample, out)
         if not batch:
             return out
         latest = batch[-1]
-        self._latest = latest
-        snap = latest.snapshot
+        self.latest = latest
+        snap, ts = latest.snapshot, latest.ts_ms
         for kind in snap["nodes"]:
-            values = node_values(snap, kind)
+            section = snap.get(kind)
             last = self._values.get(kind)
-            if last and last[1] == values and latest.ts_ms - last[0] < self.values_refresh_ms:
-                continue
-            self._values[kind] = (latest.ts_ms, values)
-            body = {"ts_ms": latest.ts_ms, **values}
+            if last and last[1] == section and ts - last[0] < self.values_refresh_ms:
+                continue  # compared before anything is built
+            self._values[kind] = (ts, section)
+            body = {"ts_ms": ts, **node_values(snap, kind)}
             out.append(Message(f"{self.base}/node/{kind}/values", dumps(body), QOS, False))
-        live = live_nodes(snap)
-        due = (
-            self._last_health_ms is None
-            or latest.ts_ms - self._last_health_ms >= self.health_period_ms
+        due = self._last_health_ms is None or ts - self._last_health_ms >= self.health_period_ms
+        if due or live_nodes(snap) != self._live:
+            out.append(self._health(latest, ts))
+        self.next_due_ms = min(
+            (self._last_health_ms or 0) + self.health_period_ms,
+            *(seen + self.values_refresh_ms for seen, _ in self._values.values()),
         )
-        if due or live != self._live:
-            out.append(self._health(latest, latest.ts_ms))
         return out
 
-    def _changes(self, sample: Sample) -> list[Message]:
+    def _changes(self, sample: Sample, out: list[Message]) -> None:
         snap, ts = sample.snapshot, sample.ts_ms
-        out = []
+        seen = self._seen
         for kind, node in snap["nodes"].items():
+            topic = f"{self.base}/node/{kind}/state"
+            try:
+                fields = _STATE_OF(node)
+            except KeyError:  # a field missing: build the body and compare that
+                fields = None
+            if fields is not None and seen.get(topic) == fields:
+                continue
+            seen[topic] = fields
             live = node["phase"] == LIVE_PHASE
             if kind in self._was_live and not live:
                 self._times_lost[kind] += 1
@@ -135,13 +150,19 @@ class JsonTree:
             body = {key: node.get(key) for key in STATE_FIELDS}
             body["live"] = live
             body["times_lost"] = self._times_lost[kind]
-            out += self._if_changed(f"{self.base}/node/{kind}/state", body, ts)
+            out += self._if_changed(topic, body, ts)
         alarms = snap["alarms"]
-        out += self._if_changed(
-            f"{self.base}/alarms", {"count": len(alarms), "alarms": dict(alarms)}, ts
-        )
-        out += self._if_changed(f"{self.base}/controls", controls_view(snap, self._extra), ts)
-        return out
+        topic = f"{self.base}/alarms"
+        if seen.get(topic) != alarms:
+            seen[topic] = alarms
+            out += self._if_changed(topic, {"count": len(alarms), "alarms": dict(alarms)}, ts)
+        controls = self._extra.get("controls", {})
+        # the controls dict is changed in place by accepted commands: remember a copy
+        fingerprint = (tuple(controls.items()), snap["belt"].get("mode"))
+        topic = f"{self.base}/controls"
+        if seen.get(topic) != fingerprint:
+            seen[topic] = fingerprint
+            out += self._if_changed(topic, controls_view(snap, self._extra), ts)
 
     def _if_changed(self, topic: str, body: dict[str, Any], ts_ms: int) -> list[Message]:
         if self._published.get(topic) == body:

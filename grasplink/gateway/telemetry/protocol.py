@@ -9,8 +9,9 @@ and the Sparkplug session are tested without a broker. The edge
     will = proto.will(t_ms, new_connect=…)     # before each attempt (Sparkplug: bdSeq)
     first, after = proto.on_connect(t_ms)      # first: sent at once; after: behind the buffer
     outbox.extend(proto.update(batch, extra))  # every publish tick
+    proto.holding                              # True: keep the outbox (Sparkplug: no host yet)
     message = proto.finalize(message)          # just before it is sent (None: skip it)
-    incoming = proto.receive(topic, payload, retain, t_ms)   # a command topic
+    incoming = proto.receive(topic, payload, retain, t_ms)   # a subscribed topic
     outbox.extend(proto.reply(request, result, t_ms))
     goodbye = proto.goodbye(t_ms)              # a clean stop, before DISCONNECT
 """
@@ -57,14 +58,20 @@ class CommandRequest:
 
 @dataclass
 class Incoming:
-    """What one received message asks for: commands, and messages to send at once."""
+    """What one received message asks for: commands, messages to send (`messages` behind
+    what is buffered, `urgent` ahead of it), or a new MQTT session (`reconnect`: why)."""
 
     requests: list[CommandRequest] = field(default_factory=list)
     messages: list[Message] = field(default_factory=list)
+    urgent: list[Message] = field(default_factory=list)
+    reconnect: str = ""
 
 
 class TelemetryProtocol(Protocol):
     name: str
+    holding: bool
+    latest: Sample | None  # the newest snapshot seen (births and retained state report it)
+    next_due_ms: int  # snapshot time from which a snapshot like the last one has news
 
     def will(self, t_ms: int, *, new_connect: bool = True) -> Message: ...
     def subscriptions(self) -> list[str]: ...
@@ -74,6 +81,30 @@ class TelemetryProtocol(Protocol):
     def goodbye(self, t_ms: int) -> list[Message]: ...
     def receive(self, topic: str, payload: bytes, retain: bool, t_ms: int) -> Incoming: ...
     def reply(self, request: CommandRequest, result: CommandResult, t_ms: int) -> list[Message]: ...
+
+
+#: node status fields either protocol reports on change (counters go on their own period)
+REPORTED_NODE_FIELDS = (*STATE_FIELDS, "pdos_dropped", "lost_packets")
+
+
+def same_report(before: dict[str, Any], after: dict[str, Any]) -> bool:
+    """Whether `after` tells nothing `before` did not, apart from uptime and the counters
+    the protocols publish on their own period: then a protocol fed `after` has nothing to
+    say before its `next_due_ms`, and the snapshot need not go through it at all."""
+    for section in VALUE_FIELDS:
+        if before.get(section) != after.get(section):
+            return False
+    if before["alarms"] != after["alarms"]:
+        return False
+    nodes_before, nodes_after = before["nodes"], after["nodes"]
+    if nodes_before.keys() != nodes_after.keys():
+        return False
+    for kind, node in nodes_after.items():
+        other = nodes_before[kind]
+        for key in REPORTED_NODE_FIELDS:
+            if node.get(key) != other.get(key):
+                return False
+    return True
 
 
 def live_nodes(snapshot: dict[str, Any]) -> list[str]:

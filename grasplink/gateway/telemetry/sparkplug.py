@@ -2,28 +2,43 @@
 node a device. Snapshots in, `(topic, payload, qos, retain)` out; see docs/telemetry.md.
 
 - `will()` before every CONNECT: bdSeq advances (0..255) and the NDEATH carrying it
-  is the MQTT Will (QoS 1, not retained).
+  is the MQTT Will (QoS 1, not retained). A bdSeq kept across restarts of the
+  gateway (`last_bdseq`, see `state.BdSeqFile`) goes on from where it was.
 - `on_connect()`: NBIRTH (bdSeq, `Node Control/Rebirth`, every node metric) and a
-  DBIRTH for every device whose node is operational.
+  DBIRTH for every device whose node is operational. With a primary host
+  application configured, the births wait until its `spBv1.0/STATE/<host id>`
+  says online (`holding` meanwhile: data waits in the store-and-forward buffer);
+  the host going offline asks for a new MQTT session (`Incoming.reconnect`), so
+  the births that follow its return carry a new bdSeq.
+- Metric aliases: every metric has an alias, unique across the edge node and its
+  devices (`ALIASES`). Births carry name, alias and datatype; NDATA/DDATA carry
+  the alias only (no name, no datatype); NCMD/DCMD are read by alias or by name.
 - `update()`: report by exception: NDATA/DDATA carry the metrics that changed, each
   with the timestamp of the snapshot it changed in (fast counters at most once a
   second); DDEATH when a node is lost or leaves OPERATIONAL, DBIRTH when it is back.
+  Metrics are grouped by what they are read from (`MetricGroup`), so an unchanged
+  group costs one comparison, not one per metric.
 - `finalize()` runs as a message is actually sent: it stamps `seq` (NBIRTH 0, then
   +1 mod 256 on every message of the edge node, NDEATH none), so a message that
   waited in the store-and-forward buffer is sequenced in the session that sends
-  it; data made in an earlier session is marked `is_historical`, births and
+  it; data made before this session's births is marked `is_historical`, births and
   deaths of an earlier session are dropped (the new session's births replace
   them), and data of a device not born in this session is dropped and counted.
 - `receive()`: NCMD `Node Control/Rebirth` (births again, same bdSeq) and
-  `Control/<command>`, DCMD `Node Control/Restart`; `reply()` answers in NDATA
-  (`Command Reply/command`, `…/accepted`, `…/detail`).
+  `Control/<command>`, DCMD `Node Control/Restart`, the primary host's STATE;
+  `reply()` answers in NDATA (`Command Reply/command`, `…/accepted`, `…/detail`).
 
 Payloads are built and read with the protobuf runtime (`sparkplug_b_pb2`, generated
-from `sparkplug_b.proto`), never by hand.
+from `sparkplug_b.proto`), never by hand. `seq` is appended as the runtime's own
+encoding of `Payload(seq=n)`: concatenated protobuf messages merge, and seq (field 3)
+follows timestamp and metrics (1, 2) in the runtime's field order, so the bytes are
+those of the payload serialised with its seq, without parsing it again per message.
 """
 
 from __future__ import annotations
 
+import json
+import operator
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -48,11 +63,16 @@ INT8, INT16, INT32, INT64 = 1, 2, 3, 4
 UINT8, UINT16, UINT32, UINT64 = 5, 6, 7, 8
 FLOAT, DOUBLE, BOOLEAN, STRING = 9, 10, 11, 12
 COUNTER_PERIOD_MS = 1000  # counters and latencies that change with every snapshot
+BDSEQ = "bdSeq"
 REBIRTH = "Node Control/Rebirth"
 RESTART = "Node Control/Restart"
 REPLY_METRICS = ("Command Reply/command", "Command Reply/accepted", "Command Reply/detail")
 CALIBRATION = "Control/emg_calibration/"
 BIRTHS_AND_DEATHS = ("NBIRTH", "DBIRTH", "DDEATH", "NDEATH")
+# `Payload(seq=n)` as the runtime encodes it: appended to a payload made without seq.
+SEQ_BYTES = tuple(pb.Payload(seq=n).SerializeToString() for n in range(256))
+_NEVER = -(1 << 62)
+_UNSEEN = object()
 
 Getter = Callable[[dict[str, Any] | None, dict[str, Any]], Any]
 
@@ -62,7 +82,17 @@ class MetricSpec:
     name: str
     datatype: int
     get: Getter
-    period_ms: int = 0  # 0: every change; else at most once per period
+
+
+@dataclass(frozen=True)
+class MetricGroup:
+    """Metrics read from the same part of a snapshot. `fingerprint` returns that part (a
+    snapshot is replaced whole, never changed in place): equal to the last one, none of
+    the group's metrics can have changed. `period_ms`: reported at most once a period."""
+
+    specs: tuple[MetricSpec, ...]
+    fingerprint: Getter
+    period_ms: int = 0
 
 
 @dataclass(frozen=True)
@@ -76,7 +106,7 @@ class SpMeta:
 
 def _snap(path: tuple[str, ...], default: Any = None) -> Getter:
     """A snapshot field by its path (None when the snapshot or a level is missing)."""
-    if len(path) == 2:  # the common case, evaluated ~70 times a snapshot: keep it direct
+    if len(path) == 2:  # the common case: keep it direct
         section, key = path
 
         def get2(snap: dict[str, Any] | None, extra: dict[str, Any]) -> Any:
@@ -112,26 +142,68 @@ def _alarms(snap: dict[str, Any] | None, extra: dict[str, Any]) -> str | None:
     return "; ".join(f"{k}: {v}" for k, v in sorted(snap["alarms"].items()))
 
 
-NODE_METRICS: tuple[MetricSpec, ...] = (
-    MetricSpec("Gateway/nodes_live", STRING, lambda s, e: ",".join(live_nodes(s)) if s else None),
-    MetricSpec("Gateway/alarm_count", UINT32, lambda s, e: len(s["alarms"]) if s else None),
-    MetricSpec("Gateway/alarms", STRING, _alarms),
-    MetricSpec("Gateway/uptime_s", DOUBLE, _snap(("uptime_s",)), COUNTER_PERIOD_MS),
-    MetricSpec("Loop/latency_p50_us", DOUBLE, _snap(("loop", "latency_p50_us")), COUNTER_PERIOD_MS),
-    MetricSpec("Loop/latency_p99_us", DOUBLE, _snap(("loop", "latency_p99_us")), COUNTER_PERIOD_MS),
-    MetricSpec("Loop/percepts", UINT64, _snap(("loop", "percepts")), COUNTER_PERIOD_MS),
-    MetricSpec("Control/feedback_mode", STRING, _control("feedback_mode")),
-    MetricSpec("Control/reflex_enabled", BOOLEAN, _control("reflex_enabled")),
-    MetricSpec("Control/reflex_threshold_mm_s", DOUBLE, _control("reflex_threshold_mm_s")),
-    MetricSpec(CALIBRATION + "e_min_uv", DOUBLE, _control("emg_e_min_uv")),
-    MetricSpec(CALIBRATION + "e_max_uv", DOUBLE, _control("emg_e_max_uv")),
-    MetricSpec("Control/emg_calibrate", STRING, lambda s, e: ""),  # write-only: a phase
-    MetricSpec("Control/restart_node", STRING, lambda s, e: ""),  # write-only: a node kind
-    MetricSpec("Telemetry/snapshots_dropped", UINT64, _telemetry("snapshots_dropped")),
-    MetricSpec("Telemetry/buffer_dropped_messages", UINT64, _telemetry("buffer_dropped_messages")),
-    MetricSpec("Telemetry/buffer_dropped_bytes", UINT64, _telemetry("buffer_dropped_bytes")),
-    MetricSpec("Telemetry/historical_dropped", UINT64, _telemetry("historical_dropped")),
+def _phases_and_alarms(snap: dict[str, Any] | None, extra: dict[str, Any]) -> Any:
+    return tuple(node["phase"] for node in snap["nodes"].values()), snap["alarms"]  # type: ignore[index]
+
+
+def _controls(snap: dict[str, Any] | None, extra: dict[str, Any]) -> Any:
+    # `extra["controls"]` is changed in place when a command is accepted: fingerprint a copy
+    return tuple(extra.get("controls", {}).items()), snap["belt"].get("mode")  # type: ignore[index]
+
+
+NODE_GROUPS: tuple[MetricGroup, ...] = (
+    MetricGroup(
+        (
+            MetricSpec(
+                "Gateway/nodes_live", STRING, lambda s, e: ",".join(live_nodes(s)) if s else None
+            ),
+            MetricSpec("Gateway/alarm_count", UINT32, lambda s, e: len(s["alarms"]) if s else None),
+            MetricSpec("Gateway/alarms", STRING, _alarms),
+        ),
+        _phases_and_alarms,
+    ),
+    MetricGroup(
+        (
+            MetricSpec("Gateway/uptime_s", DOUBLE, _snap(("uptime_s",))),
+            MetricSpec("Loop/latency_p50_us", DOUBLE, _snap(("loop", "latency_p50_us"))),
+            MetricSpec("Loop/latency_p99_us", DOUBLE, _snap(("loop", "latency_p99_us"))),
+            MetricSpec("Loop/percepts", UINT64, _snap(("loop", "percepts"))),
+        ),
+        lambda s, e: (s["uptime_s"], s["loop"]),  # type: ignore[index]
+        COUNTER_PERIOD_MS,
+    ),
+    MetricGroup(
+        (
+            MetricSpec("Control/feedback_mode", STRING, _control("feedback_mode")),
+            MetricSpec("Control/reflex_enabled", BOOLEAN, _control("reflex_enabled")),
+            MetricSpec("Control/reflex_threshold_mm_s", DOUBLE, _control("reflex_threshold_mm_s")),
+            MetricSpec(CALIBRATION + "e_min_uv", DOUBLE, _control("emg_e_min_uv")),
+            MetricSpec(CALIBRATION + "e_max_uv", DOUBLE, _control("emg_e_max_uv")),
+        ),
+        _controls,
+    ),
+    MetricGroup(
+        (
+            MetricSpec("Control/emg_calibrate", STRING, lambda s, e: ""),  # write-only: a phase
+            MetricSpec("Control/restart_node", STRING, lambda s, e: ""),  # write-only: a kind
+        ),
+        lambda s, e: None,  # never changes: births only
+    ),
+    MetricGroup(
+        (
+            MetricSpec("Telemetry/snapshots_dropped", UINT64, _telemetry("snapshots_dropped")),
+            MetricSpec(
+                "Telemetry/buffer_dropped_messages", UINT64, _telemetry("buffer_dropped_messages")
+            ),
+            MetricSpec(
+                "Telemetry/buffer_dropped_bytes", UINT64, _telemetry("buffer_dropped_bytes")
+            ),
+            MetricSpec("Telemetry/historical_dropped", UINT64, _telemetry("historical_dropped")),
+        ),
+        lambda s, e: e.get("telemetry"),
+    ),
 )
+NODE_METRICS: tuple[MetricSpec, ...] = tuple(spec for group in NODE_GROUPS for spec in group.specs)
 
 FIELD_TYPES: dict[str, int] = {
     "grip_force_n": DOUBLE,
@@ -152,17 +224,17 @@ FIELD_TYPES: dict[str, int] = {
     "reflex": STRING,
     "source": STRING,
 }
-STATE_METRICS: tuple[tuple[str, int, int], ...] = (  # (field of nodes[kind], type, period)
-    ("node_id", UINT32, 0),
-    ("phase", STRING, 0),
-    ("nmt_state", STRING, 0),
-    ("boots", UINT32, 0),
-    ("last_emcy", STRING, 0),
-    ("failure", STRING, 0),
-    ("pdos_dropped", UINT64, 0),
-    ("lost_packets", UINT64, 0),
-    ("pdos_rx", UINT64, COUNTER_PERIOD_MS),
+STATE_METRICS: tuple[tuple[str, int], ...] = (  # (field of nodes[kind], type), on change
+    ("node_id", UINT32),
+    ("phase", STRING),
+    ("nmt_state", STRING),
+    ("boots", UINT32),
+    ("last_emcy", STRING),
+    ("failure", STRING),
+    ("pdos_dropped", UINT64),
+    ("lost_packets", UINT64),
 )
+COUNTER_STATE_METRICS: tuple[tuple[str, int], ...] = (("pdos_rx", UINT64),)  # once a second
 
 
 def _node_state(kind: str, name: str) -> Getter:
@@ -175,55 +247,122 @@ def _node_state(kind: str, name: str) -> Getter:
     return get
 
 
-def device_metrics(kind: str) -> tuple[MetricSpec, ...]:
+def _node_fields(kind: str, names: tuple[str, ...]) -> Getter:
+    """The node's status fields as one tuple (one C call while every field is there)."""
+    pick = operator.itemgetter(*names)
+
+    def fingerprint(snap: dict[str, Any] | None, extra: dict[str, Any]) -> Any:
+        status = snap["nodes"].get(kind)  # type: ignore[index]
+        if status is None:
+            return None
+        try:
+            return pick(status)
+        except KeyError:
+            return tuple(status.get(name) for name in names)
+
+    return fingerprint
+
+
+def device_groups(kind: str) -> tuple[MetricGroup, ...]:
     """A device's metrics: its decoded values, then `State/…` from the node's status."""
-    specs = [
+    values = tuple(
         MetricSpec(name, FIELD_TYPES[name], _snap((kind, name))) for name in VALUE_FIELDS[kind]
-    ]
-    for name, datatype, period in STATE_METRICS:
-        if name == "lost_packets" and kind != "skin":
-            continue
-        specs.append(MetricSpec(f"State/{name}", datatype, _node_state(kind, name), period))
-    return tuple(specs)
+    )
+    groups = [MetricGroup(values, lambda s, e: s.get(kind))]  # type: ignore[union-attr]
+    for fields, period in ((STATE_METRICS, 0), (COUNTER_STATE_METRICS, COUNTER_PERIOD_MS)):
+        names = tuple(n for n, _ in fields if n != "lost_packets" or kind == "skin")
+        specs = tuple(
+            MetricSpec(f"State/{n}", t, _node_state(kind, n)) for n, t in fields if n in names
+        )
+        fingerprint = _node_fields(kind, names) if len(names) > 1 else _node_state(kind, names[0])
+        groups.append(MetricGroup(specs, fingerprint, period))
+    return tuple(groups)
 
 
-DEVICE_METRICS = {kind: device_metrics(kind) for kind in VALUE_FIELDS}
+DEVICE_GROUPS = {kind: device_groups(kind) for kind in VALUE_FIELDS}
+DEVICE_METRICS = {
+    kind: tuple(spec for group in groups for spec in group.specs)
+    for kind, groups in DEVICE_GROUPS.items()
+}
 
 
-def set_value(metric: pb.Payload.Metric, datatype: int, value: Any) -> None:
-    """Fill a metric's datatype and value (None: is_null); signed ints as two's complement."""
-    metric.datatype = datatype
+def _metric_table() -> tuple[dict[str | None, dict[str, int]], dict[str | None, dict[str, int]]]:
+    """Aliases (1, 2, …: unique across the edge node and all its devices, as Sparkplug
+    requires) and datatypes of every metric, per device (None: the edge node)."""
+    types: dict[str | None, dict[str, int]] = {
+        None: {
+            BDSEQ: INT64,
+            REBIRTH: BOOLEAN,
+            **{spec.name: spec.datatype for spec in NODE_METRICS},
+            **{name: BOOLEAN if name.endswith("accepted") else STRING for name in REPLY_METRICS},
+        }
+    }
+    for kind, specs in DEVICE_METRICS.items():
+        types[kind] = {**{spec.name: spec.datatype for spec in specs}, RESTART: BOOLEAN}
+    aliases: dict[str | None, dict[str, int]] = {}
+    alias = 0
+    for device, names in types.items():
+        aliases[device] = {}
+        for name in names:
+            alias += 1
+            aliases[device][name] = alias
+    return aliases, types
+
+
+ALIASES, DATATYPES = _metric_table()
+# (device, group index, period) of the groups reported at most once a period
+_PERIODIC: dict[str | None, list[tuple[str | None, int, int]]] = {
+    device: [(device, i, g.period_ms) for i, g in enumerate(groups) if g.period_ms]
+    for device, groups in ((None, NODE_GROUPS), *DEVICE_GROUPS.items())
+}
+NAMES_BY_ALIAS = {device: {a: n for n, a in table.items()} for device, table in ALIASES.items()}
+
+_VALUE_FIELD = {
+    **dict.fromkeys((INT8, INT16, INT32, UINT8, UINT16, UINT32), "int_value"),
+    **dict.fromkeys((INT64, UINT64), "long_value"),
+    FLOAT: "float_value",
+    DOUBLE: "double_value",
+    BOOLEAN: "boolean_value",
+    STRING: "string_value",
+}
+_CONVERT: dict[int, Callable[[Any], Any]] = {
+    **dict.fromkeys((INT8, INT16, INT32), lambda v: int(v) & 0xFFFFFFFF),
+    **dict.fromkeys((UINT8, UINT16, UINT32, UINT64), int),
+    INT64: lambda v: int(v) & 0xFFFFFFFFFFFFFFFF,
+    FLOAT: float,
+    DOUBLE: float,
+    BOOLEAN: bool,
+    STRING: str,
+}
+
+
+def set_value(
+    metric: pb.Payload.Metric, datatype: int, value: Any, *, with_datatype: bool = True
+) -> None:
+    """Fill a metric's value (None: is_null) and, unless told not to (DATA messages carry
+    none), its datatype; signed ints as two's complement."""
+    field = _VALUE_FIELD.get(datatype)
+    if field is None:
+        raise ValueError(f"unsupported Sparkplug datatype {datatype}")
+    if with_datatype:
+        metric.datatype = datatype
     if value is None:
         metric.is_null = True
-    elif datatype in (INT8, INT16, INT32):
-        metric.int_value = int(value) & 0xFFFFFFFF
-    elif datatype in (UINT8, UINT16, UINT32):
-        metric.int_value = int(value)
-    elif datatype == INT64:
-        metric.long_value = int(value) & 0xFFFFFFFFFFFFFFFF
-    elif datatype == UINT64:
-        metric.long_value = int(value)
-    elif datatype == FLOAT:
-        metric.float_value = float(value)
-    elif datatype == DOUBLE:
-        metric.double_value = float(value)
-    elif datatype == BOOLEAN:
-        metric.boolean_value = bool(value)
-    elif datatype == STRING:
-        metric.string_value = str(value)
     else:
-        raise ValueError(f"unsupported Sparkplug datatype {datatype}")
+        setattr(metric, field, _CONVERT[datatype](value))
 
 
-def metric_value(metric: pb.Payload.Metric) -> Any:
-    """A metric's value as Python (None when null), signed types sign-extended."""
+def metric_value(metric: pb.Payload.Metric, datatype: int | None = None) -> Any:
+    """A metric's value as Python (None when null), signed types sign-extended. `datatype`:
+    the one its birth declared, for a metric that carries none (DATA, by alias)."""
     if metric.is_null:
         return None
     field = metric.WhichOneof("value")
     if field is None:
         return None
     value = getattr(metric, field)
-    bits = {INT8: 8, INT16: 16, INT32: 32, INT64: 64}.get(metric.datatype)
+    declared = datatype if datatype is not None else metric.datatype
+    bits = {INT8: 8, INT16: 16, INT32: 32, INT64: 64}.get(declared)
     if bits is not None and field in ("int_value", "long_value"):
         width = 32 if field == "int_value" else 64
         value &= (1 << width) - 1
@@ -232,24 +371,53 @@ def metric_value(metric: pb.Payload.Metric) -> Any:
     return value
 
 
+def parse_state(payload: bytes) -> tuple[bool, int] | None:
+    """A host application's STATE payload (`{"online": bool, "timestamp": ms}`, Sparkplug
+    3.0), or None when it is not one."""
+    try:
+        body = json.loads(payload)
+    except (ValueError, UnicodeDecodeError):
+        return None
+    if not isinstance(body, dict):
+        return None
+    online, timestamp = body.get("online"), body.get("timestamp")
+    if not isinstance(online, bool) or not isinstance(timestamp, int) or timestamp < 0:
+        return None
+    return online, timestamp
+
+
 class SparkplugSession:
     """One edge node's Sparkplug state across MQTT sessions; see module docstring."""
 
     name = "sparkplug"
 
-    def __init__(self, group_id: str, edge_node_id: str):
+    def __init__(
+        self,
+        group_id: str,
+        edge_node_id: str,
+        *,
+        primary_host_id: str | None = None,
+        last_bdseq: int | None = None,
+    ):
         self.group_id = group_id
         self.edge_node_id = edge_node_id
-        self.bdseq = -1  # the first will() makes it 0
+        self.primary_host_id = primary_host_id or None
+        # the first will() moves it on: to 0, or past the one a previous run used
+        self.bdseq = last_bdseq % 256 if last_bdseq is not None else -1
         self.seq = 0
-        self.epoch = 0  # MQTT sessions so far; messages remember theirs
+        self.epoch = 0  # births so far (a session of the edge node); messages remember theirs
         self.born: set[str] = set()  # devices born on the broker in this session (send side)
         self.historical_dropped = 0  # data of devices not born when it could be sent
+        self.holding = False  # connected, waiting for the primary host: keep the outbox
+        self.host_online = False  # the primary host's latest STATE (in this connection)
+        self.host_state_ms = -1  # the timestamp of the latest STATE applied
+        self.next_due_ms = 0  # the next snapshot time a periodic group may report at
         self._alive: set[str] = set()  # devices alive in the latest snapshot (make side)
-        self._latest: Sample | None = None
+        self.latest: Sample | None = None
         self._extra: dict[str, Any] = {}
         self._last: dict[str | None, dict[str, Any]] = {}  # device (None: node) -> reported
-        self._last_ms: dict[tuple[str | None, str], int] = {}
+        self._seen: dict[tuple[str | None, int], Any] = {}  # (device, group) -> fingerprint
+        self._reported_ms: dict[tuple[str | None, int], int] = {}  # periodic groups
         self._reply: dict[str, Any] = dict.fromkeys(REPLY_METRICS)
 
     # -- topics ----------------------------------------------------------------------------
@@ -257,8 +425,18 @@ class SparkplugSession:
         base = f"{NAMESPACE}/{self.group_id}/{kind}/{self.edge_node_id}"
         return base if device is None else f"{base}/{device}"
 
+    @property
+    def state_topic(self) -> str | None:
+        """The primary host application's STATE topic (None: no primary host configured)."""
+        if self.primary_host_id is None:
+            return None
+        return f"{NAMESPACE}/STATE/{self.primary_host_id}"
+
     def subscriptions(self) -> list[str]:
-        return [self.topic("NCMD"), self.topic("DCMD", "+")]
+        topics = [self.topic("NCMD"), self.topic("DCMD", "+")]
+        if self.state_topic is not None:
+            topics.append(self.state_topic)
+        return topics
 
     # -- connection ------------------------------------------------------------------------
     def will(self, t_ms: int, *, new_connect: bool = True) -> Message:
@@ -270,13 +448,22 @@ class SparkplugSession:
         return self._ndeath(t_ms)
 
     def on_connect(self, t_ms: int) -> tuple[list[Message], list[Message]]:
-        self.epoch += 1
+        """Births at once; with a primary host, none until its STATE says online."""
         self.born = set()
-        return self._births(t_ms), []
+        self.host_online = False  # learnt again from its (retained) STATE
+        if self.primary_host_id is not None:
+            self.holding = True
+            return [], []
+        return self._new_session(t_ms), []
+
+    def _new_session(self, t_ms: int) -> list[Message]:
+        self.holding = False
+        self.epoch += 1
+        return self._births(t_ms)
 
     def rebirth(self, t_ms: int) -> list[Message]:
         """NBIRTH and DBIRTHs again in this session (same bdSeq; seq restarts at 0)."""
-        return self._births(t_ms)
+        return [] if self.holding else self._births(t_ms)
 
     def goodbye(self, t_ms: int) -> list[Message]:
         """A clean stop publishes the NDEATH itself (a DISCONNECT discards the Will)."""
@@ -284,7 +471,7 @@ class SparkplugSession:
 
     def _ndeath(self, t_ms: int) -> Message:
         payload = pb.Payload(timestamp=t_ms)
-        set_value(payload.metrics.add(name="bdSeq", timestamp=t_ms), INT64, self.bdseq)
+        set_value(payload.metrics.add(name=BDSEQ, timestamp=t_ms), INT64, self.bdseq)
         return Message(
             self.topic("NDEATH"),
             payload.SerializeToString(),
@@ -294,21 +481,22 @@ class SparkplugSession:
         )
 
     def _births(self, t_ms: int) -> list[Message]:
-        snap = self._latest.snapshot if self._latest else None
-        ts = self._latest.ts_ms if self._latest else t_ms
+        snap = self.latest.snapshot if self.latest else None
+        ts = self.latest.ts_ms if self.latest else t_ms
         payload = pb.Payload(timestamp=t_ms)
-        set_value(payload.metrics.add(name="bdSeq", timestamp=t_ms), INT64, self.bdseq)
-        set_value(payload.metrics.add(name=REBIRTH, timestamp=t_ms), BOOLEAN, False)
-        node = self._last.setdefault(None, {})
+        aliases = ALIASES[None]
+        for name, value in ((BDSEQ, self.bdseq), (REBIRTH, False)):
+            metric = payload.metrics.add(name=name, alias=aliases[name], timestamp=t_ms)
+            set_value(metric, DATATYPES[None][name], value)
+        node = self._last[None] = {}
+        self._forget(None, ts)
         for spec in NODE_METRICS:
             node[spec.name] = spec.get(snap, self._extra)
-            self._last_ms[(None, spec.name)] = ts
-            set_value(
-                payload.metrics.add(name=spec.name, timestamp=ts), spec.datatype, node[spec.name]
-            )
+            metric = payload.metrics.add(name=spec.name, alias=aliases[spec.name], timestamp=ts)
+            set_value(metric, spec.datatype, node[spec.name])
         for name in REPLY_METRICS:
-            datatype = BOOLEAN if name.endswith("accepted") else STRING
-            set_value(payload.metrics.add(name=name, timestamp=ts), datatype, self._reply[name])
+            metric = payload.metrics.add(name=name, alias=aliases[name], timestamp=ts)
+            set_value(metric, DATATYPES[None][name], self._reply[name])
         out = [self._message("NBIRTH", payload)]
         if snap is not None:
             out += [self._dbirth(kind, Sample(ts, snap), t_ms) for kind in sorted(self._alive)]
@@ -317,13 +505,25 @@ class SparkplugSession:
     def _dbirth(self, kind: str, sample: Sample, t_ms: int) -> Message:
         payload = pb.Payload(timestamp=t_ms)
         last = self._last[kind] = {}
+        self._forget(kind, sample.ts_ms)
+        aliases = ALIASES[kind]
         for spec in DEVICE_METRICS[kind]:
             last[spec.name] = spec.get(sample.snapshot, self._extra)
-            self._last_ms[(kind, spec.name)] = sample.ts_ms
-            metric = payload.metrics.add(name=spec.name, timestamp=sample.ts_ms)
+            metric = payload.metrics.add(
+                name=spec.name, alias=aliases[spec.name], timestamp=sample.ts_ms
+            )
             set_value(metric, spec.datatype, last[spec.name])
-        set_value(payload.metrics.add(name=RESTART, timestamp=sample.ts_ms), BOOLEAN, False)
+        metric = payload.metrics.add(name=RESTART, alias=aliases[RESTART], timestamp=sample.ts_ms)
+        set_value(metric, BOOLEAN, False)
         return self._message("DBIRTH", payload, kind)
+
+    def _forget(self, device: str | None, ts_ms: int) -> None:
+        """After a birth: compare every group again; periodic ones wait a period."""
+        groups = NODE_GROUPS if device is None else DEVICE_GROUPS[device]
+        for index, group in enumerate(groups):
+            self._seen.pop((device, index), None)
+            if group.period_ms:
+                self._reported_ms[(device, index)] = ts_ms
 
     def _message(self, kind: str, payload: pb.Payload, device: str | None = None) -> Message:
         return Message(
@@ -339,13 +539,14 @@ class SparkplugSession:
         """Births, deaths and changes over the batch, in order; one NDATA at the end."""
         self._extra = extra
         out: list[Message] = []
-        pending: dict[str, list[pb.Payload.Metric]] = {}
-        node_changes: list[pb.Payload.Metric] = []
+        pending: dict[str, pb.Payload] = {}
+        node_payload: pb.Payload | None = None
         for sample in batch:
-            self._latest = sample
+            self.latest = sample
             snap = sample.snapshot
             for kind, status in snap["nodes"].items():
-                if kind not in DEVICE_METRICS:
+                groups = DEVICE_GROUPS.get(kind)
+                if groups is None:
                     continue
                 alive = status["phase"] == LIVE_PHASE
                 if alive and kind not in self._alive:
@@ -353,49 +554,60 @@ class SparkplugSession:
                     out.append(self._dbirth(kind, sample, sample.ts_ms))
                 elif not alive and kind in self._alive:
                     self._alive.discard(kind)
-                    if pending.get(kind):
-                        out.append(self._data("DDATA", pending.pop(kind), kind))
+                    if kind in pending:
+                        out.append(self._message("DDATA", pending.pop(kind), kind))
                     payload = pb.Payload(timestamp=sample.ts_ms)
                     out.append(self._message("DDEATH", payload, kind))
                 elif alive:
-                    changes = self._changes(kind, DEVICE_METRICS[kind], sample)
-                    pending.setdefault(kind, []).extend(changes)
-            node_changes += self._changes(None, NODE_METRICS, sample)
-        for kind, metrics in pending.items():
-            if metrics:
-                out.append(self._data("DDATA", metrics, kind))
-        if node_changes:
-            out.append(self._data("NDATA", node_changes))
+                    changed = self._changes(kind, groups, sample, pending.get(kind))
+                    if changed is not None:
+                        pending[kind] = changed
+            node_payload = self._changes(None, NODE_GROUPS, sample, node_payload)
+        for kind, payload in pending.items():
+            out.append(self._message("DDATA", payload, kind))
+        if node_payload is not None:
+            out.append(self._message("NDATA", node_payload))
+        self.next_due_ms = min(
+            self._reported_ms.get((device, index), _NEVER) + period
+            for device, index, period in _PERIODIC[None]
+            + [key for kind in self._alive for key in _PERIODIC[kind]]
+        )
         return out
 
     def _changes(
-        self, device: str | None, specs: tuple[MetricSpec, ...], sample: Sample
-    ) -> list[pb.Payload.Metric]:
+        self,
+        device: str | None,
+        groups: tuple[MetricGroup, ...],
+        sample: Sample,
+        payload: pb.Payload | None,
+    ) -> pb.Payload | None:
+        """Add what changed in `sample` to `payload` (made when first needed), by alias."""
+        snap, ts, extra = sample.snapshot, sample.ts_ms, self._extra
         last = self._last.setdefault(device, {})
-        changed = []
-        for spec in specs:
-            value = spec.get(sample.snapshot, self._extra)
-            if spec.name in last and last[spec.name] == value:
+        for index, group in enumerate(groups):
+            key = (device, index)
+            if group.period_ms and ts - self._reported_ms.get(key, _NEVER) < group.period_ms:
                 continue
-            key = (device, spec.name)
-            if (
-                spec.period_ms
-                and sample.ts_ms - self._last_ms.get(key, -(1 << 62)) < spec.period_ms
-            ):
+            seen = group.fingerprint(snap, extra)
+            if seen == self._seen.get(key, _UNSEEN):
                 continue
-            last[spec.name] = value
-            self._last_ms[key] = sample.ts_ms
-            metric = pb.Payload.Metric(name=spec.name, timestamp=sample.ts_ms)
-            set_value(metric, spec.datatype, value)
-            changed.append(metric)
-        return changed
-
-    def _data(
-        self, kind: str, metrics: list[pb.Payload.Metric], device: str | None = None
-    ) -> Message:
-        payload = pb.Payload(timestamp=max(m.timestamp for m in metrics))
-        payload.metrics.extend(metrics)
-        return self._message(kind, payload, device)
+            self._seen[key] = seen
+            reported = False
+            for spec in group.specs:
+                value = spec.get(snap, extra)
+                if spec.name in last and last[spec.name] == value:
+                    continue
+                last[spec.name] = value
+                if payload is None:
+                    payload = pb.Payload()
+                metric = payload.metrics.add(alias=ALIASES[device][spec.name], timestamp=ts)
+                set_value(metric, spec.datatype, value, with_datatype=False)
+                reported = True
+            if reported:
+                payload.timestamp = ts  # type: ignore[union-attr]
+                if group.period_ms:
+                    self._reported_ms[key] = ts
+        return payload
 
     # -- sending ---------------------------------------------------------------------------
     def finalize(self, message: Message) -> Message | None:
@@ -409,24 +621,29 @@ class SparkplugSession:
         if meta.kind == "DDATA" and meta.device not in self.born:
             self.historical_dropped += 1
             return None
-        payload = pb.Payload.FromString(message.payload)
         if meta.kind == "NBIRTH":
             self.seq = 0
             self.born = set()
         else:
             self.seq = (self.seq + 1) % 256
-        payload.seq = self.seq
         if meta.kind == "DBIRTH":
             self.born.add(meta.device or "")
         elif meta.kind == "DDEATH":
             self.born.discard(meta.device or "")
-        if not current:
-            for metric in payload.metrics:
+        if current:
+            payload = message.payload + SEQ_BYTES[self.seq]
+        else:
+            old = pb.Payload.FromString(message.payload)
+            old.seq = self.seq
+            for metric in old.metrics:
                 metric.is_historical = True
-        return Message(message.topic, payload.SerializeToString(), message.qos, message.retain)
+            payload = old.SerializeToString()
+        return Message(message.topic, payload, message.qos, message.retain)
 
-    # -- commands --------------------------------------------------------------------------
+    # -- commands and the primary host -----------------------------------------------------
     def receive(self, topic: str, payload: bytes, retain: bool, t_ms: int) -> Incoming:
+        if topic == self.state_topic:
+            return self._host_state(payload, t_ms)
         device = None
         if topic == self.topic("NCMD"):
             label = "NCMD"
@@ -442,14 +659,25 @@ class SparkplugSession:
         if retain:
             refused = "retained commands are not executed (publish with retain off)"
             return Incoming([CommandRequest(label, refused=refused)])
+        if device is not None and device not in DEVICE_METRICS:
+            return Incoming([CommandRequest(label, refused=f"no device {device!r}")])
         incoming = Incoming()
         calibration: dict[str, Any] = {}
         for metric in message.metrics:
-            name, value = metric.name, metric_value(metric)
+            name = metric.name
+            if not name and metric.HasField("alias"):
+                name = NAMES_BY_ALIAS[device].get(metric.alias, "")
+                if not name:
+                    refused = f"alias {metric.alias} is not a metric of {label}"
+                    incoming.requests.append(CommandRequest(label, refused=refused))
+                    continue
             if not name:
-                refused = "metric without a name (this edge node declares no aliases)"
-                incoming.requests.append(CommandRequest(label, refused=refused))
-            elif device is None and name == REBIRTH:
+                incoming.requests.append(
+                    CommandRequest(label, refused="metric without a name or an alias")
+                )
+                continue
+            value = metric_value(metric, DATATYPES[device].get(name))
+            if device is None and name == REBIRTH:
                 if value is True:
                     incoming.messages += self.rebirth(t_ms)
             elif device is None and name.startswith(CALIBRATION):
@@ -474,12 +702,29 @@ class SparkplugSession:
                 incoming.requests.append(CommandRequest("emg_calibration", refused=refused))
         return incoming
 
+    def _host_state(self, payload: bytes, t_ms: int) -> Incoming:
+        """The primary host's STATE: online lets the births go (ahead of the data that
+        waited for them); offline after our births asks for a new MQTT session (Sparkplug
+        3.0: disconnect; the births after the host's return carry a new bdSeq). A STATE
+        older than the last one applied is a stale retained copy: ignored."""
+        state = parse_state(payload)
+        if state is None or state[1] < self.host_state_ms:
+            return Incoming()
+        online, self.host_state_ms = state
+        self.host_online = online
+        if online and self.holding:
+            return Incoming(urgent=self._new_session(t_ms))
+        if not online and not self.holding:
+            self.holding = True  # nothing more goes out in this session
+            return Incoming(reconnect=f"primary host {self.primary_host_id} went offline")
+        return Incoming()
+
     def reply(self, request: CommandRequest, result: CommandResult, t_ms: int) -> list[Message]:
-        """NDATA: `Command Reply/command`, `…/accepted`, `…/detail`."""
+        """NDATA: `Command Reply/command`, `…/accepted`, `…/detail` (by alias)."""
         values = (request.name, result.accepted, result.detail)
         payload = pb.Payload(timestamp=t_ms)
         for name, value in zip(REPLY_METRICS, values, strict=True):
             self._reply[name] = value
-            datatype = BOOLEAN if name.endswith("accepted") else STRING
-            set_value(payload.metrics.add(name=name, timestamp=t_ms), datatype, value)
+            metric = payload.metrics.add(alias=ALIASES[None][name], timestamp=t_ms)
+            set_value(metric, DATATYPES[None][name], value, with_datatype=False)
         return [self._message("NDATA", payload)]

@@ -13,6 +13,13 @@ results answered by the protocol that received them.
 
 One connection per protocol: each has its own Will (JSON `status` offline,
 Sparkplug NDEATH), which MQTT allows only one of per connection.
+
+A window of messages is handed to paho and then written at once, on this thread, into
+a corked socket (TCP_CORK): one TCP segment for the window rather than one per message,
+and no trip through the event loop's self-pipe to register the socket for writing (what
+aiomqtt does for every first publication after an idle spell). On loopback the kernel
+delivers each segment to the broker inside the sender's system call, so segments, not
+bytes, are what a publication costs (benchmarks/bench_telemetry.py).
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ import threading
 import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import Future
+from pathlib import Path
 from typing import Any, Protocol
 
 import aiomqtt
@@ -41,8 +49,10 @@ from grasplink.gateway.telemetry.protocol import (
     CommandRequest,
     TelemetryProtocol,
     apply_result,
+    same_report,
 )
 from grasplink.gateway.telemetry.sparkplug import SparkplugSession
+from grasplink.gateway.telemetry.state import BdSeqFile
 from grasplink.gateway.telemetry.url import BrokerUrl
 
 DEFAULT_RATE_HZ = 20.0
@@ -73,6 +83,15 @@ class GatewayLike(Protocol):
 
 def now_ms() -> int:
     return time.time_ns() // 1_000_000
+
+
+def _cork(sock: Any, on: bool) -> bool:
+    """TCP_CORK on or off (Linux); False where it cannot be set (then writes go as they are)."""
+    try:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_CORK, 1 if on else 0)
+    except (AttributeError, OSError):
+        return False
+    return True
 
 
 class SnapshotClock:
@@ -108,8 +127,10 @@ class MqttLink:
         execute: Callable[[Command], Awaitable[CommandResult]],
         *,
         backoff_s: tuple[float, float] = (BACKOFF_MIN_S, BACKOFF_MAX_S),
+        on_will: Callable[[], None] | None = None,
     ):
         self.protocol = protocol
+        self.on_will = on_will  # after each will(): Sparkplug saves the bdSeq it will use
         self.url = url
         self.client_id = client_id
         self.tls = tls
@@ -127,13 +148,22 @@ class MqttLink:
         self._wake = asyncio.Event()
         self._answers: set[asyncio.Task[None]] = set()
         self._reported_down_at: float | None = None
-        self._unacked: dict[int, int] = {}  # paho message ID -> index in the window
-        self._acked = asyncio.Event()
+        # Published, not yet taken by the broker (QoS 1: PUBACK; QoS 0: written), in order:
+        # paho message ID -> the message as made (finalized again if it must be resent).
+        self._inflight: dict[int, Message] = {}
+        self._progress_at = 0.0  # when the broker last took one (or the window was empty)
+        self._inner: paho.Client | None = None  # while a session runs
+        self._batching = False  # a window is being handed to paho: _flush writes it
+        self._register_write: Callable[..., None] | None = None  # aiomqtt's own
+        self._reconnect = ""  # why the protocol asked for a new MQTT session
+        self._refill: asyncio.Handle | None = None
+        self._settling = False  # _settled waits for the window to empty
 
     def push(self, messages: list[Message]) -> None:
+        """Queue messages and, connected, publish at once (on this thread, no task switch)."""
         if messages:
             self.outbox.extend(messages)
-            self._wake.set()
+            self._drain()
 
     def stop(self) -> None:
         self.stopping.set()
@@ -146,6 +176,8 @@ class MqttLink:
         connect_sent = True
         while not self.stopping.is_set():
             will = self.protocol.will(now_ms(), new_connect=connect_sent)
+            if self.on_will is not None:
+                self.on_will()
             client = aiomqtt.Client(
                 self.url.host,
                 self.url.port,
@@ -164,7 +196,7 @@ class MqttLink:
                 max_inflight_messages=WINDOW,
             )
             client.pending_calls_threshold = 4 * WINDOW
-            self._hook_acknowledgements(client)
+            self._hook_paho(client)
             entered = False
             try:
                 async with client:
@@ -188,6 +220,10 @@ class MqttLink:
                 return
             if self.stopping.is_set():
                 break
+            if self._reconnect:  # asked for by the protocol: at once, no back-off
+                self.log(f"telemetry {self.protocol.name}: {self._reconnect}; new MQTT session")
+                self._reconnect = ""
+                continue
             self._report_down(delay)
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self.stopping.wait(), delay * random.uniform(0.8, 1.0))
@@ -249,34 +285,64 @@ class MqttLink:
     async def _session(self, client: aiomqtt.Client) -> None:
         for topic in self.protocol.subscriptions():
             await client.subscribe(topic, qos=1)
-        first, after = self.protocol.on_connect(now_ms())
-        await self._publish(client, first)
-        self.push(after)
-        if not self.first.done():  # start() returns (and snapshots flow) once births are out
-            self.first.set_result(None)
-        receiver = asyncio.create_task(self._receive(client))
+        self._reconnect = ""
+        self._inner = client._client  # aiomqtt 2.5.1 (pinned) keeps its paho client here
+        self._progress_at = time.monotonic()
         try:
-            await self._send(client, receiver)
-            if self.stopping.is_set():
-                await self._publish(client, self.protocol.goodbye(now_ms()))
+            first, after = self.protocol.on_connect(now_ms())
+            self._publish_now(first)
+            await self._settled(CONNECT_TIMEOUT_S)
+            self.outbox.extend(after)
+            self._drain()
+            if not self.first.done():  # start() returns (and snapshots flow) once births are out
+                self.first.set_result(None)
+            receiver = asyncio.create_task(self._receive(client))
+            try:
+                await self._watch(receiver)
+                if self.stopping.is_set() or self._reconnect:
+                    self._publish_now(self.protocol.goodbye(now_ms()))
+                    await self._settled(FLUSH_S)
+            finally:
+                receiver.cancel()
+                await asyncio.gather(receiver, return_exceptions=True)
         finally:
-            receiver.cancel()
-            await asyncio.gather(receiver, return_exceptions=True)
+            self._inner = None
+            if self._inflight:  # not taken by the broker: first in line for the next session
+                self.outbox.requeue(list(self._inflight.values()))
+                self._inflight.clear()
 
-    async def _send(self, client: aiomqtt.Client, receiver: asyncio.Task[None]) -> None:
+    async def _watch(self, receiver: asyncio.Task[None]) -> None:
+        """While connected: sending happens in `push` and paho's callbacks; this waits for
+        the end (stop, lost receiver, a broker that stopped acknowledging, a new session)."""
         flush_until: float | None = None
         while True:
             if receiver.done():
                 raise aiomqtt.MqttError(self._receiver_error(receiver))
-            if self.stopping.is_set() and flush_until is None:
-                flush_until = time.monotonic() + FLUSH_S
-            if not self.outbox or (flush_until is not None and time.monotonic() > flush_until):
-                if self.stopping.is_set():
+            if self._reconnect:
+                return
+            now = time.monotonic()
+            if self._inflight and now - self._progress_at > CONNECT_TIMEOUT_S:
+                raise aiomqtt.MqttError(f"{len(self._inflight)} publications not acknowledged")
+            if self.stopping.is_set():
+                flush_until = flush_until or now + FLUSH_S
+                idle = not self._inflight and (not self.outbox or self.protocol.holding)
+                if idle or now > flush_until:
                     return
+            self._wake.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), 1.0)
+
+    async def _settled(self, timeout_s: float) -> None:
+        """Wait until the broker took what is in flight (births, a goodbye)."""
+        deadline = time.monotonic() + timeout_s
+        self._settling = True
+        try:
+            while self._inflight and self._inner is not None and time.monotonic() < deadline:
                 self._wake.clear()
-                await self._wake.wait()
-                continue
-            await self._publish(client, self.outbox.take(WINDOW))
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self._wake.wait(), deadline - time.monotonic())
+        finally:
+            self._settling = False
 
     @staticmethod
     def _receiver_error(receiver: asyncio.Task[None]) -> str:
@@ -286,56 +352,106 @@ class MqttLink:
         cause = exc.__cause__ if exc is not None and exc.__cause__ is not None else exc
         return str(cause) if cause is not None else "connection closed"
 
-    def _hook_acknowledgements(self, client: aiomqtt.Client) -> None:
+    def _hook_paho(self, client: aiomqtt.Client) -> None:
         """Hear paho's "published" callbacks (PUBACK for QoS 1, written for QoS 0) beside
-        aiomqtt's own. A window is published with paho's `publish` and awaited as a whole:
-        aiomqtt's `publish` costs a Task, an Event and a `wait_for` per message, three times
-        paho's own work at this rate (benchmarks/bench_telemetry.py)."""
+        aiomqtt's own, and let `_flush` write a window. Messages are published with paho's
+        `publish` and tracked here: aiomqtt's `publish` costs a Task, an Event and a
+        `wait_for` per message, three times paho's own work at this rate."""
         inner = client._client  # aiomqtt 2.5.1 (pinned) keeps its paho client here
         aiomqtt_on_publish = inner.on_publish
         assert aiomqtt_on_publish is not None  # aiomqtt's Client.__init__ sets it
 
         def on_publish(*args: Any) -> None:
             aiomqtt_on_publish(*args)
-            if self._unacked.pop(args[2], None) is not None and not self._unacked:
-                self._acked.set()
+            if self._inflight.pop(args[2], None) is None:
+                return
+            self.sent += 1
+            self._progress_at = time.monotonic()
+            if not self._inflight and (self._settling or self.stopping.is_set()):
+                self._wake.set()  # only when someone waits for it: a wake-up is a task step
+            if self.outbox and self._refill is None and len(self._inflight) <= WINDOW // 2:
+                # not from inside paho's callback: on the loop's next turn
+                self._refill = asyncio.get_running_loop().call_soon(self._drain)
 
         inner.on_publish = on_publish
+        # aiomqtt registers the socket for writing through call_soon_threadsafe (paho may
+        # ask from the thread that connects): a registration that lands after `_flush` has
+        # written everything leaves a writer paho no longer knows of, woken on every turn
+        # of the loop. On the loop's thread it is registered here, at once.
+        loop = asyncio.get_running_loop()
+        loop_thread = threading.get_ident()
 
-    async def _publish(self, client: aiomqtt.Client, messages: list[Message]) -> None:
-        """Publish in order, pipelined; what the broker did not take goes back in front."""
-        inner = client._client
-        window: list[Message] = []
-        failed: list[Message] = []
-        self._unacked.clear()
-        self._acked.clear()
+        def writer() -> None:
+            try:
+                inner.loop_write()
+            except Exception as exc:  # a broken connection, as aiomqtt handles it
+                if not client._disconnected.done():
+                    client._disconnected.set_exception(exc)
+
+        def register_write(_client: Any, _userdata: Any, sock: Any) -> None:
+            if threading.get_ident() == loop_thread:
+                loop.add_writer(sock.fileno(), writer)
+            else:
+                loop.call_soon_threadsafe(loop.add_writer, sock.fileno(), writer)
+
+        def on_socket_register_write(*args: Any) -> None:
+            if not self._batching:  # a window is written by _flush right after
+                register_write(*args)
+
+        self._register_write = register_write
+        inner.on_socket_register_write = on_socket_register_write
+
+    def _drain(self) -> None:
+        """Publish from the outbox while the window has room (connected, not holding)."""
+        self._refill = None
+        if self._inner is None or self.protocol.holding or self._reconnect:
+            return
+        room = WINDOW - len(self._inflight)
+        if room > 0 and self.outbox:
+            self._publish_now(self.outbox.take(room))
+
+    def _publish_now(self, messages: list[Message]) -> None:
+        """Hand messages to paho in order and write them at once; what paho refuses (the
+        connection is gone) goes back in front of the outbox, in order."""
+        inner = self._inner
+        if inner is None:
+            self.outbox.requeue(messages)
+            return
+        if not self._inflight:
+            self._progress_at = time.monotonic()
+        self._batching = True
         try:
-            for message in messages:
+            for index, message in enumerate(messages):
                 final = self.protocol.finalize(message)
                 if final is None:
                     continue
-                if failed:  # no connection any more: keep the rest, in order
-                    failed.append(message)
-                    continue
                 info = inner.publish(final.topic, final.payload, final.qos, final.retain)
-                window.append(message)
                 if info.rc != paho.MQTT_ERR_SUCCESS:
-                    failed.append(message)
-                elif not info.is_published():
-                    self._unacked[info.mid] = len(window) - 1
-            if self._unacked:
-                await asyncio.wait_for(self._acked.wait(), CONNECT_TIMEOUT_S)
-        except TimeoutError:
-            pass
+                    self.outbox.requeue(messages[index:])
+                    self._wake.set()  # _watch sees the lost receiver
+                    break
+                self._inflight[info.mid] = message
         finally:
-            lost = sorted(self._unacked.values())
-            self._unacked.clear()
-            unsent = [window[i] for i in lost] + failed
-            self.sent += len(window) + len(failed) - len(unsent)
-            if unsent:
-                self.outbox.requeue(unsent)
-        if unsent:
-            raise aiomqtt.MqttError(f"{len(unsent)} publications not acknowledged")
+            self._batching = False
+        self._flush(inner)
+
+    def _flush(self, inner: paho.Client) -> None:
+        """Write what paho holds now, corked: the window leaves as one TCP segment. What the
+        socket cannot take yet is left to the event loop (aiomqtt's writer)."""
+        sock = inner.socket()
+        if sock is None or not inner.want_write():
+            return
+        corked = _cork(sock, True)
+        try:
+            inner.loop_write()  # a lost connection: paho's on_disconnect, seen by aiomqtt
+        finally:
+            if corked:
+                _cork(sock, False)
+        sock = inner.socket()
+        if sock is not None and inner.want_write() and self._register_write is not None:
+            # paho believes the writer registered (it asked while the window was handed
+            # over): register it for real, or the rest would wait for the next window
+            self._register_write(inner, None, sock)
 
     async def _receive(self, client: aiomqtt.Client) -> None:
         try:
@@ -343,6 +459,11 @@ class MqttLink:
                 incoming = self.protocol.receive(  # aiomqtt's payload is paho's, always bytes
                     message.topic.value, bytes(message.payload), bool(message.retain), now_ms()
                 )
+                if incoming.reconnect:
+                    self._reconnect = incoming.reconnect
+                    self._wake.set()
+                if incoming.urgent:  # ahead of what is buffered (births after a wait)
+                    self._publish_now(incoming.urgent)
                 self.push(incoming.messages)
                 for request in incoming.requests:
                     task = asyncio.create_task(self._answer(request))
@@ -375,6 +496,8 @@ class TelemetryPublisher:
         json_tree: bool = True,
         sparkplug: bool = True,
         backoff_s: tuple[float, float] = (BACKOFF_MIN_S, BACKOFF_MAX_S),
+        primary_host_id: str | None = None,
+        state_dir: Path | None = None,
     ):
         if not rate_hz > 0:
             raise ValueError("rate_hz must be positive")
@@ -388,13 +511,24 @@ class TelemetryPublisher:
         self.protocols: list[TelemetryProtocol] = []
         if json_tree:
             self.protocols.append(JsonTree(gateway_id))
+        # the bdSeq a previous run used, kept in the state directory (None: not kept)
+        self.bdseq_file = (
+            None if state_dir is None else BdSeqFile(state_dir, url.group, gateway_id, self.log)
+        )
         if sparkplug:
-            self.protocols.append(SparkplugSession(url.group, gateway_id))
+            last = self.bdseq_file.load() if self.bdseq_file is not None else None
+            self.protocols.append(
+                SparkplugSession(
+                    url.group, gateway_id, primary_host_id=primary_host_id, last_bdseq=last
+                )
+            )
         self.backoff_s = backoff_s
         self.queue = SnapshotQueue()
         self.clock = SnapshotClock()
         self.links: list[MqttLink] = []
         self.published_snapshots = 0
+        self.skipped_snapshots = 0  # like the one before: nothing to publish (_has_news)
+        self._state_seen: tuple[Any, ...] = ()
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -446,6 +580,7 @@ class TelemetryPublisher:
         return {
             "snapshots_dropped": self.queue.dropped,
             "published_snapshots": self.published_snapshots,
+            "skipped_snapshots": self.skipped_snapshots,
             "links": {
                 link.protocol.name: {
                     "connected": link.connected,
@@ -487,6 +622,7 @@ class TelemetryPublisher:
                     self.log,
                     self._execute,
                     backoff_s=self.backoff_s,
+                    on_will=self._on_will(protocol),
                 )
                 for protocol in self.protocols
             ]
@@ -516,6 +652,13 @@ class TelemetryPublisher:
         finally:
             self._ready.set()
 
+    def _on_will(self, protocol: TelemetryProtocol) -> Callable[[], None] | None:
+        """Sparkplug: save the bdSeq of the Will about to be registered (before CONNECT)."""
+        store = self.bdseq_file
+        if store is None or not isinstance(protocol, SparkplugSession):
+            return None
+        return lambda: store.save(protocol.bdseq)
+
     async def _pump(self) -> None:
         """Poll for new snapshots (just after each is due) and publish at most at the rate
         (a token bucket: at the default rate every snapshot goes out as soon as it is seen)."""
@@ -527,10 +670,17 @@ class TelemetryPublisher:
             now = time.monotonic()
             snapshot = self.gateway.latest
             if snapshot is not None and snapshot is not last:
-                last, seen_at = snapshot, now
+                previous, last, seen_at = last, snapshot, now
                 wall_minus_mono = time.time() - now
                 ts_ms = self.clock.stamp_ms(snapshot["uptime_s"], now, wall_minus_mono)
-                self.queue.put(Sample(ts_ms, snapshot))
+                sample = Sample(ts_ms, snapshot)
+                if self._has_news(previous, sample):
+                    self.queue.put(sample)
+                else:
+                    self.skipped_snapshots += 1
+                    if not len(self.queue):
+                        for protocol in self.protocols:
+                            protocol.latest = sample
             credit = min(RATE_BURST, credit + (now - credit_at) * rate_hz)
             credit_at = now
             if len(self.queue) and credit >= 1.0:
@@ -543,6 +693,31 @@ class TelemetryPublisher:
             if len(self.queue):
                 wake = min(wake, next_publish)
             await asyncio.sleep(max(0.0005, wake - time.monotonic()))
+
+    def _has_news(self, previous: dict[str, Any] | None, sample: Sample) -> bool:
+        """Whether a snapshot may change what a protocol publishes; compared before any
+        encoding, so a gateway at rest costs a comparison per snapshot, not two encodings.
+        Lossless: a snapshot like the one before (values, states, alarms; counters aside)
+        says nothing new until a protocol's periodic report is due (`next_due_ms`), and
+        what telemetry itself counts (drops, connections, controls) is compared too."""
+        state = (
+            tuple(self.controls.items()),
+            self.queue.dropped,
+            *(
+                (
+                    link.outbox.dropped_messages,
+                    link.connections,
+                    getattr(link.protocol, "historical_dropped", 0),
+                )
+                for link in self.links
+            ),
+        )
+        if state != self._state_seen:
+            self._state_seen = state
+            return True
+        if previous is None or not same_report(previous, sample.snapshot):
+            return True
+        return sample.ts_ms >= min(protocol.next_due_ms for protocol in self.protocols)
 
     def _publish(self, now: float) -> None:
         batch = self.queue.drain()
