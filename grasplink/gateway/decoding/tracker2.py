@@ -222,6 +222,8 @@ class TrackerDecoder(Decoder):
     LOG_CONF_ODDS = math.log(9.0)
     CONF_ODDS_SCALE = 1.0
     SCHEDULE = 3  # ridges ahead whose silence is scored
+    COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
+    TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
 
     def __init__(
         self,
@@ -261,8 +263,9 @@ class TrackerDecoder(Decoder):
         self._log_miss[:, -1] = -np.inf  # past the coast: stopped
         # per (direction, start ridge): log distance to each ridge ahead, and P(all missed
         # from the next one up to it); rows padded with +inf / 1
-        self._ahead_log = np.full((2, R, R), np.inf)
-        self._ahead_missed = np.ones((2, R, R))
+        # and the coast end after them: past it the slip has stopped (missed = 0 there)
+        self._ahead_log = np.full((2, R, R + 1), np.inf)
+        self._ahead_missed = np.ones((2, R, R + 1))
         for di in range(2):
             for r in range(R):
                 missed = 1.0
@@ -270,6 +273,9 @@ class TrackerDecoder(Decoder):
                     missed *= 1.0 - pd[di, k]
                     self._ahead_log[di, r, j] = math.log(float(pos[di, k] - pos[di, r]))
                     self._ahead_missed[di, r, j] = missed
+                coast = float(self._pos[di, R] - pos[di, r])
+                self._ahead_log[di, r, R - 1 - r] = math.log(coast)
+                self._ahead_missed[di, r, R - 1 - r] = 0.0
         self._erf_scale = 1.0 / (self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0))
         self.max_hypotheses = int(max_hypotheses)
         self.detector = detector or ContactDetector(fs_hz)
@@ -839,7 +845,7 @@ class TrackerDecoder(Decoder):
             for j in range(self.SCHEDULE):
                 k = B.ridge + 1 + j
                 kk = np.minimum(k, self.count)  # the coast end is index count
-                target = self._pos[di, kk]
+                target = np.where(kk < self.count, self._pos[di, kk], self._coast_end(di, v))
                 dist = np.maximum(target - s0, 1e-3)
                 a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
                 root = np.sqrt(np.maximum(v * v + 2.0 * a_p * dist, 1e-9))
@@ -889,23 +895,37 @@ class TrackerDecoder(Decoder):
         if not stopped and run == 1:  # restarted: where is known, the speed is not yet
             known = n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
             conf = min(1.0, max(0.0, p_slip))
-            return SlipEstimate(g, True, None, self._x1(h, h.s) if known else None, force, conf)
+            x = self._on_skin(self._x1(h, h.s)) if known else None
+            return SlipEstimate(g, True, None, x, force, conf)
         if not stopped and (n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS):
             # a slip, but its direction is not told yet (two contacts fit any alignment
             # either way; a third may fit both): say so rather than guess a sign
             return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)))
         s, speed, sigma = self._where(h, g, stopped, limit)
         maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
-        direction = 1.0 / (1.0 + math.exp(-(odds - self.LOG_CONF_ODDS) / self.CONF_ODDS_SCALE))
+        direction = 1.0 / (1.0 + math.exp(-odds))  # P(this way)
         conf = agree * maturity * direction / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
-        x = self._x1(h, s)
+        if not stopped:  # told at the last contact: since then the slip may have turned
+            conf *= math.exp(-max(0.0, g - h.t) * self.TURN_PER_S)
+        x = self._x1(h, s)  # slipping past an end: extrapolated with the speed (coast)
         conf = min(1.0, max(0.0, conf))
         if not stopped:
             return SlipEstimate(g, True, h.dirn * speed, x, force, conf)
-        return SlipEstimate(g, False, 0.0, x, force, conf)
+        return SlipEstimate(g, False, 0.0, self._on_skin(x), force, conf)
+
+    def _coast_end(self, di, v):
+        """How far a slip at speed v goes past the last ridge before silence alone says it
+        stopped: past the skin no ridge tells, only the level (a stop's step, thesis ch. 4.3)
+        - so at least the longest spacing, and COAST_S at that speed."""
+        return self._pos[di, self.count - 1] + np.maximum(self._coast, self.COAST_S * v)
 
     def _x1(self, h: _One, s: float) -> float:
         return s if h.dirn > 0 else self.length - s
+
+    def _on_skin(self, x: float) -> float:
+        """A position held (stopped) is held on the skin: past its ends the edge meets no
+        ridge, so where it stopped there is not observed."""
+        return min(self.length, max(0.0, x))
 
     def _where(self, h: _One, g: float, stopped: bool, limit: int) -> tuple[float, float, float]:
         """(travel of the edge from the first ridge met, speed, sigma) of one track at g."""
@@ -928,7 +948,7 @@ class TrackerDecoder(Decoder):
             + tau * tau * (h.p02 + tau * h.p12 + 0.25 * tau * tau * h.p22)
         )
         sigma = math.sqrt(max(var, 0.0))
-        end = float(pos[min(limit, self.count)])
+        end = float(pos[limit]) if limit < self.count else float(self._coast_end(di, v))
         s = min(s, end)
         if stopped:  # somewhere before the ridge it never reached: as likely anywhere
             start = float(pos[min(limit, self.count) - 1])
@@ -1019,7 +1039,10 @@ class TrackerDecoder(Decoder):
             s, _, _ = self._kinematics(Bu, g)
             # held where the ridge not reached is, or where they stopped
             di = (1 - Bu.dirn) // 2
-            end = self._pos[di, np.minimum(limit[idx], self.count)]
+            ahead = np.minimum(limit[idx], self.count)
+            end = np.where(
+                ahead < self.count, self._pos[di, ahead], self._coast_end(di, Bu.X[:, 1])
+            )
             s = np.where(np.isnan(Bu.stop), np.minimum(s, end), Bu.X[:, 0])
             xs = self._x(Bu, s)
             agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
@@ -1058,7 +1081,7 @@ class TrackerDecoder(Decoder):
             return out
         di = (1 - B.dirn) // 2
         r = np.minimum(B.ridge, self.count - 1)
-        logd = self._ahead_log[di, r]  # (N, R)
+        logd = self._ahead_log[di, r]  # (N, R + 1): the ridges ahead, the coast end
         missed = self._ahead_missed[di, r]
         shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
         nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
@@ -1066,6 +1089,6 @@ class TrackerDecoder(Decoder):
         # P(reached ridge j but not j+1) weighted by P(all missed up to j)
         prev = np.concatenate([np.zeros((len(B), 1)), nr[:, :-1]], axis=1)
         m_before = np.concatenate([np.ones((len(B), 1)), missed[:, :-1]], axis=1)
-        total = (m_before * (nr - prev)).sum(axis=1)  # the first pad: past the last
+        total = (m_before * (nr - prev)).sum(axis=1)  # past the coast end: stopped
         out = np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)
         return out
