@@ -35,6 +35,7 @@ from grasplink.bus.options import accepted_options
 from grasplink.bus.reconnect import Backoff
 from grasplink.bus.runner import MultiRunner, NodeRunner
 from grasplink.bus.url import (
+    BusDisconnected,
     BusSpec,
     frame_to_message,
     message_to_frame,
@@ -910,7 +911,16 @@ class SocketPairBus(can.BusABC):
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if not select.select([self.sock], [], [], timeout)[0]:
             return None, False
-        can_id, dlc, data = self.RECORD.unpack(self.sock.recv(self.RECORD.size))
+        try:
+            record = self.sock.recv(self.RECORD.size)
+        except OSError as exc:
+            record = b""
+            why = str(exc)
+        else:
+            why = "link closed"
+        if not record:  # the peer closed the link: gone for good, like a closed hub client
+            raise BusDisconnected(why)
+        can_id, dlc, data = self.RECORD.unpack(record)
         msg = can.Message(arbitration_id=can_id, data=data[:dlc], is_extended_id=False)
         return msg, False
 
@@ -1004,3 +1014,16 @@ def test_multi_runner_thread_starts_serves_and_stops(socket_links) -> None:
             assert Frame(0x582, bytes([i])) in recv_until(peer, has(0x582))
     assert not multi.running
     assert not any(t.name == "grasplink-multi-runner" for t in threading.enumerate())
+
+
+def test_multi_runner_drops_a_runner_that_gives_up_and_serves_the_others(socket_links) -> None:
+    (bus_a, peer_a), (bus_b, peer_b) = socket_links(), socket_links()
+    runner_a, runner_b = NodeRunner(bus_a, [Echo(2)]), NodeRunner(bus_b, [Echo(3)])
+    multi = MultiRunner([runner_a, runner_b])
+    multi.power_on()
+    peer_a.sock.close()  # bus A is gone and cannot be reopened
+    multi.step()
+    assert runner_a.failure is not None and runner_b.failure is None
+    send(peer_b, Frame(0x603, b"\x01"))
+    multi.step()  # bus B is still served
+    assert heard_on(peer_b) == [Frame(0x703, b"\x00"), Frame(0x583, b"\x01")]

@@ -616,6 +616,9 @@ class MultiRunner:
                 self._stop.wait(self._max_wait_s)
 
     def _cycle(self) -> None:
+        for runner in self.runners:
+            if runner.failure is not None and id(runner) in self._registered:
+                self._unregister(runner)  # its bus may stay readable (EOF) for ever
         live = [r for r in self.runners if r.failure is None]
         polled = [r for r in live if not self._watch(r)]
         timeout = self._poll_s if polled else self._max_wait_s
@@ -646,9 +649,7 @@ class MultiRunner:
         old = self._registered.get(id(runner))
         if old == fd:
             return fd >= 0
-        if old is not None and old >= 0:
-            with contextlib.suppress(KeyError, ValueError, OSError):
-                self._selector.unregister(old)
+        self._unregister(runner)
         self._registered[id(runner)] = fd
         if fd >= 0:
             try:
@@ -657,6 +658,12 @@ class MultiRunner:
                 self._registered[id(runner)] = -1
                 return False
         return fd >= 0
+
+    def _unregister(self, runner: NodeRunner) -> None:
+        old = self._registered.pop(id(runner), -1)
+        if old >= 0:
+            with contextlib.suppress(KeyError, ValueError, OSError):
+                self._selector.unregister(old)
 
 
 def _node_id(device: object) -> int:
