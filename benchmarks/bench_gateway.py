@@ -1299,6 +1299,31 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
         "behind another set's.",
         "",
     ]
+    kept = [c for c in capacity + multi if c.get("keeps_up")]
+    if kept:
+        per_set_rt = min(c["cpu_percent"] / c["sets"] for c in kept)
+        lines += [
+            "By CPU the gateway process needs at best "
+            f"{per_set_rt:.1f} % of a core per set in real time (gateways, runners, sockets; "
+            "table above),",
+            f"so {sets_per_core(per_set_rt)} sets if it had a core to itself."
+            + (
+                f" It did not: with a load average around {figures['loadavg'][0]:.0f} on "
+                f"{os.cpu_count()} cores the scheduler shares the cores per thread, so one "
+                "thread gets a fraction of a core however many sets it serves, while a thread "
+                "per gateway draws a share per set."
+                if figures["loadavg"][0] > (os.cpu_count() or 1)
+                else ""
+            ),
+            (
+                "The one-thread steps that fell behind did so below "
+                f"{max(c['cpu_percent'] for c in multi if not c.get('keeps_up')):.0f} % of a "
+                "core: starved, not saturated."
+                if any("cpu_percent" in c and not c.get("keeps_up") for c in multi)
+                else ""
+            ),
+            "",
+        ]
     if max(up_t, up_m) < TARGET_SETS:
         todo.append(
             f"(decoder) Capacity: {TARGET_SETS} sets need at most {100 / TARGET_SETS:.1f} % of "
@@ -1706,24 +1731,26 @@ def write_doc(figures: dict, path: Path) -> None:
         "The search stops after two steps in a row that do not keep up. *Node boots*: nodes",
         "the gateways' masters lost (no heartbeat processed for 300 ms) and reset in the window.",
         "",
-        "| sets | gateway process CPU % | gateways' own % | node process % | RPDOs caused "
+        "| sets | gateway process CPU % | per set % | gateways' own % | node process % "
+        "| RPDOs caused "
         "| p50 µs | p99 µs | max µs | processing p99 µs | skin TPDO rate (worst set) "
         "| node boots | hypotheses (most) | load avg | |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     series = [{"header": "a thread per gateway"}, *capacity]
     series += [{"header": "one thread for every gateway"}, *capacity_multi]
     for c in series:
         if "header" in c:
-            lines.append(f"| *{c['header']}* |" + " |" * 13)
+            lines.append(f"| *{c['header']}* |" + " |" * 14)
             continue
         if "error" in c:
             lines.append(
-                f"| {c['sets']} |" + " |" * 12 + f" never operational: {c['error'][:120]} |"
+                f"| {c['sets']} |" + " |" * 13 + f" never operational: {c['error'][:120]} |"
             )
             continue
         lines.append(
-            f"| {c['sets']} | {c['cpu_percent']:.0f} | {c['gateway_percent']:.0f} | "
+            f"| {c['sets']} | {c['cpu_percent']:.0f} | {c['cpu_percent'] / c['sets']:.1f} | "
+            f"{c['gateway_percent']:.0f} | "
             f"{c['child_percent']:.0f} | {c['caused']} | {fmt(c['p50_us'])} | {fmt(c['p99_us'])} | "
             f"{fmt(c['max_us'])} | {fmt(c['processing_p99_us'])} | "
             f"{100 * c['skin_rate_share']:.0f} % | {c['boots']} | {c['tracks']} | "
