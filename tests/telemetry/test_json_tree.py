@@ -65,19 +65,22 @@ def test_state_and_alarms_are_published_only_when_they_change() -> None:
     assert topics["grasplink/gw/health"]["nodes_down"] == ["skin"]  # at once, not in a second
 
 
-def test_values_go_out_when_they_change_and_every_second_when_they_do_not() -> None:
+def test_values_go_out_when_they_change_and_in_each_new_second_when_they_do_not() -> None:
     tree = JsonTree("gw")
     tree.update([Sample(1000, snapshot(1.0))], EXTRA)
     changed = tree.update([Sample(1050, snapshot(1.05, skin={"grip_force_n": 2.0}))], EXTRA)
     assert [m.topic for m in changed] == ["grasplink/gw/node/skin/values"]
     assert tree.update([Sample(1900, snapshot(1.9, skin={"grip_force_n": 2.0}))], EXTRA) == []
     refresh = tree.update([Sample(2000, snapshot(2.0, skin={"grip_force_n": 2.0}))], EXTRA)
+    # every refresh falls in the first snapshot of a second of the clock, whenever the
+    # last one went (skin's at 1050): one publication a second for a gateway at rest
     assert {m.topic.split("/")[3] for m in refresh if m.topic.endswith("/values")} == {
+        "skin",
         "emg",
         "belt",
         "hand",
-    }  # skin's last went out at 1050: due at 2050
-    assert any(m.topic.endswith("/health") for m in refresh)
+    }
+    assert any(m.topic.endswith("/health") for m in refresh) and tree.next_due_ms == 3000
 
 
 def test_every_state_change_inside_a_batch_is_published_in_order() -> None:

@@ -117,17 +117,24 @@ class JsonTree:
         for kind in snap["nodes"]:
             section = snap.get(kind)
             last = self._values.get(kind)
-            if last and last[1] == section and ts - last[0] < self.values_refresh_ms:
+            refresh = self.values_refresh_ms
+            if last and last[1] == section and ts // refresh == last[0] // refresh:
                 continue  # compared before anything is built
             self._values[kind] = (ts, section)
             body = {"ts_ms": ts, **node_values(snap, kind)}
             out.append(Message(f"{self.base}/node/{kind}/values", dumps(body), QOS, False))
-        due = self._last_health_ms is None or ts - self._last_health_ms >= self.health_period_ms
+        # Periodic topics go once per period of the clock, all in the same snapshot (and with
+        # Sparkplug's counters): a gateway at rest publishes once a second, not four times.
+        period = self.health_period_ms
+        due = self._last_health_ms is None or ts // period != self._last_health_ms // period
         if due or live_nodes(snap) != self._live:
             out.append(self._health(latest, ts))
         self.next_due_ms = min(
-            (self._last_health_ms or 0) + self.health_period_ms,
-            *(seen + self.values_refresh_ms for seen, _ in self._values.values()),
+            ((self._last_health_ms or 0) // period + 1) * period,
+            *(
+                (seen // self.values_refresh_ms + 1) * self.values_refresh_ms
+                for seen, _ in self._values.values()
+            ),
         )
         return out
 

@@ -88,7 +88,9 @@ class MetricSpec:
 class MetricGroup:
     """Metrics read from the same part of a snapshot. `fingerprint` returns that part (a
     snapshot is replaced whole, never changed in place): equal to the last one, none of
-    the group's metrics can have changed. `period_ms`: reported at most once a period."""
+    the group's metrics can have changed. `period_ms`: reported once per period of the
+    clock (in the first snapshot of the period that changes them), so every periodic
+    report of both protocols falls in the same snapshot: one publication, not several."""
 
     specs: tuple[MetricSpec, ...]
     fingerprint: Getter
@@ -568,7 +570,7 @@ class SparkplugSession:
         if node_payload is not None:
             out.append(self._message("NDATA", node_payload))
         self.next_due_ms = min(
-            self._reported_ms.get((device, index), _NEVER) + period
+            (self._reported_ms.get((device, index), _NEVER) // period + 1) * period
             for device, index, period in _PERIODIC[None]
             + [key for kind in self._alive for key in _PERIODIC[kind]]
         )
@@ -586,8 +588,9 @@ class SparkplugSession:
         last = self._last.setdefault(device, {})
         for index, group in enumerate(groups):
             key = (device, index)
-            if group.period_ms and ts - self._reported_ms.get(key, _NEVER) < group.period_ms:
-                continue
+            period = group.period_ms
+            if period and ts // period == self._reported_ms.get(key, _NEVER) // period:
+                continue  # once per period of the clock: every periodic report in one snapshot
             seen = group.fingerprint(snap, extra)
             if seen == self._seen.get(key, _UNSEEN):
                 continue

@@ -63,6 +63,7 @@ WINDOW = 64  # messages published before waiting for the broker's acknowledgemen
 FLUSH_S = 2.0  # a clean stop sends what is buffered for at most this long
 STILL_DOWN_S = 30.0  # while the broker stays away, a reminder this often
 POLL_S = 0.001  # looking for the next snapshot once it is due
+WATCH_S = 2.0  # a session checks its acknowledgements this often (CONNECT_TIMEOUT_S)
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
 
 RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) still goes at once
@@ -330,7 +331,7 @@ class MqttLink:
                     return
             self._wake.clear()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._wake.wait(), 1.0)
+                await asyncio.wait_for(self._wake.wait(), WATCH_S)
 
     async def _settled(self, timeout_s: float) -> None:
         """Wait until the broker took what is in flight (births, a goodbye)."""
@@ -480,6 +481,43 @@ class MqttLink:
         self.push(self.protocol.reply(request, result, now_ms()))
 
 
+class Pump:
+    """Polls the gateway for snapshots (just after each is due) and publishes at most at
+    the rate (a token bucket: at the default rate every snapshot goes out as soon as it
+    is seen). A timer callback on the event loop rather than a task: a look at a gateway
+    at rest is one timer and a comparison, not a future, a timer and a task step."""
+
+    def __init__(self, publisher: TelemetryPublisher):
+        self.publisher = publisher
+        self.loop = asyncio.get_running_loop()
+        self.rate_hz = 1.0 / publisher.period_s
+        self.seen_at = -1.0
+        self.credit, self.credit_at = RATE_BURST, time.monotonic()
+        self.handle: asyncio.TimerHandle | asyncio.Handle = self.loop.call_soon(self.tick)
+
+    def tick(self) -> None:
+        publisher = self.publisher
+        now = time.monotonic()
+        if publisher._look(now):
+            self.seen_at = now
+        self.credit = min(RATE_BURST, self.credit + (now - self.credit_at) * self.rate_hz)
+        self.credit_at = now
+        queued = len(publisher.queue)
+        if queued and self.credit >= 1.0:
+            publisher._publish(now)
+            self.credit -= 1.0
+            queued = 0
+        # Next look: shortly before the next snapshot is due, then every POLL_S.
+        due = self.seen_at + SNAPSHOT_PERIOD_S - POLL_S / 2
+        wake = due if due > now else now + (POLL_S if now - self.seen_at < 1.0 else 0.02)
+        if queued:
+            wake = min(wake, now + (1.0 - self.credit) / self.rate_hz)
+        self.handle = self.loop.call_at(max(wake, time.monotonic() + 0.0005), self.tick)
+
+    def cancel(self) -> None:
+        self.handle.cancel()
+
+
 class TelemetryPublisher:
     """The gateway's telemetry over MQTT, in a background thread; a context manager."""
 
@@ -528,7 +566,9 @@ class TelemetryPublisher:
         self.links: list[MqttLink] = []
         self.published_snapshots = 0
         self.skipped_snapshots = 0  # like the one before: nothing to publish (_has_news)
-        self._state_seen: tuple[Any, ...] = ()
+        self._last_snapshot: dict[str, Any] | None = None
+        self._counted_seen = -1
+        self._controls_seen: dict[str, Any] = {}
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
@@ -638,10 +678,9 @@ class TelemetryPublisher:
                 await asyncio.gather(*runs, return_exceptions=True)
                 return
             self._ready.set()
-            pump = asyncio.create_task(self._pump())
+            pump = Pump(self)
             await self._stop.wait()
             pump.cancel()
-            await asyncio.gather(pump, return_exceptions=True)
             self._publish(time.monotonic())  # the last snapshots still go out
             for link in self.links:
                 link.stop()
@@ -659,40 +698,22 @@ class TelemetryPublisher:
             return None
         return lambda: store.save(protocol.bdseq)
 
-    async def _pump(self) -> None:
-        """Poll for new snapshots (just after each is due) and publish at most at the rate
-        (a token bucket: at the default rate every snapshot goes out as soon as it is seen)."""
-        last: dict[str, Any] | None = None
-        seen_at = -1.0
-        credit, credit_at = RATE_BURST, time.monotonic()
-        rate_hz = 1.0 / self.period_s
-        while True:
-            now = time.monotonic()
-            snapshot = self.gateway.latest
-            if snapshot is not None and snapshot is not last:
-                previous, last, seen_at = last, snapshot, now
-                wall_minus_mono = time.time() - now
-                ts_ms = self.clock.stamp_ms(snapshot["uptime_s"], now, wall_minus_mono)
-                sample = Sample(ts_ms, snapshot)
-                if self._has_news(previous, sample):
-                    self.queue.put(sample)
-                else:
-                    self.skipped_snapshots += 1
-                    if not len(self.queue):
-                        for protocol in self.protocols:
-                            protocol.latest = sample
-            credit = min(RATE_BURST, credit + (now - credit_at) * rate_hz)
-            credit_at = now
-            if len(self.queue) and credit >= 1.0:
-                self._publish(now)
-                credit -= 1.0
-            next_publish = now + (1.0 - credit) / rate_hz
-            # Next look: shortly before the next snapshot is due, then every POLL_S.
-            due = seen_at + SNAPSHOT_PERIOD_S - POLL_S / 2
-            wake = due if due > now else now + (POLL_S if now - seen_at < 1.0 else 0.02)
-            if len(self.queue):
-                wake = min(wake, next_publish)
-            await asyncio.sleep(max(0.0005, wake - time.monotonic()))
+    def _look(self, now: float) -> bool:
+        """Take the gateway's snapshot if it is a new one; True when it was."""
+        snapshot = self.gateway.latest
+        if snapshot is None or snapshot is self._last_snapshot:
+            return False
+        previous, self._last_snapshot = self._last_snapshot, snapshot
+        ts_ms = self.clock.stamp_ms(snapshot["uptime_s"], now, time.time() - now)
+        sample = Sample(ts_ms, snapshot)
+        if self._has_news(previous, sample):
+            self.queue.put(sample)
+        else:
+            self.skipped_snapshots += 1
+            if not len(self.queue):
+                for protocol in self.protocols:
+                    protocol.latest = sample
+        return True
 
     def _has_news(self, previous: dict[str, Any] | None, sample: Sample) -> bool:
         """Whether a snapshot may change what a protocol publishes; compared before any
@@ -700,20 +721,13 @@ class TelemetryPublisher:
         Lossless: a snapshot like the one before (values, states, alarms; counters aside)
         says nothing new until a protocol's periodic report is due (`next_due_ms`), and
         what telemetry itself counts (drops, connections, controls) is compared too."""
-        state = (
-            tuple(self.controls.items()),
-            self.queue.dropped,
-            *(
-                (
-                    link.outbox.dropped_messages,
-                    link.connections,
-                    getattr(link.protocol, "historical_dropped", 0),
-                )
-                for link in self.links
-            ),
-        )
-        if state != self._state_seen:
-            self._state_seen = state
+        # what telemetry itself counts only grows: a sum changes whenever one of them does
+        counted = self.queue.dropped
+        for link in self.links:
+            counted += link.outbox.dropped_messages + link.connections
+            counted += getattr(link.protocol, "historical_dropped", 0)
+        if counted != self._counted_seen or self.controls != self._controls_seen:
+            self._counted_seen, self._controls_seen = counted, dict(self.controls)
             return True
         if previous is None or not same_report(previous, sample.snapshot):
             return True
