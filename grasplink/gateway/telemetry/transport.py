@@ -14,12 +14,12 @@ results answered by the protocol that received them.
 One connection per protocol: each has its own Will (JSON `status` offline,
 Sparkplug NDEATH), which MQTT allows only one of per connection.
 
-A window of messages is handed to paho and then written at once, on this thread, into
-a corked socket (TCP_CORK): one TCP segment for the window rather than one per message,
-and no trip through the event loop's self-pipe to register the socket for writing (what
-aiomqtt does for every first publication after an idle spell). On loopback the kernel
-delivers each segment to the broker inside the sender's system call, so segments, not
-bytes, are what a publication costs (benchmarks/bench_telemetry.py).
+A window of messages is handed to paho and then written at once, on this thread, in one
+system call: one TCP segment for the window rather than one per message, and no trip
+through the event loop's self-pipe to register the socket for writing (what aiomqtt does
+for every first publication after an idle spell). Messages are sent straight from the
+pump's callback (`push`), so a snapshot's messages cost no task switch
+(benchmarks/bench_telemetry.py).
 """
 
 from __future__ import annotations
@@ -364,15 +364,7 @@ class MqttLink:
 
         def on_publish(*args: Any) -> None:
             aiomqtt_on_publish(*args)
-            if self._inflight.pop(args[2], None) is None:
-                return
-            self.sent += 1
-            self._progress_at = time.monotonic()
-            if not self._inflight and (self._settling or self.stopping.is_set()):
-                self._wake.set()  # only when someone waits for it: a wake-up is a task step
-            if self.outbox and self._refill is None and len(self._inflight) <= WINDOW // 2:
-                # not from inside paho's callback: on the loop's next turn
-                self._refill = asyncio.get_running_loop().call_soon(self._drain)
+            self._taken(args[2])
 
         inner.on_publish = on_publish
         # aiomqtt registers the socket for writing through call_soon_threadsafe (paho may
@@ -401,6 +393,47 @@ class MqttLink:
 
         self._register_write = register_write
         inner.on_socket_register_write = on_socket_register_write
+        self._buffer_reads(inner)
+
+    @staticmethod
+    def _buffer_reads(inner: paho.Client) -> None:
+        """paho reads a packet a few bytes per system call (type, length, rest: three for a
+        PUBACK); read what the socket has in one and hand it out from memory. Whatever is
+        left in memory when paho's read loop stops is read at once, not when the socket
+        next becomes readable (it may not)."""
+        sock_recv, loop_read = inner._sock_recv, inner.loop_read
+        pending = bytearray()
+
+        def buffered_recv(size: int) -> bytes:
+            if not pending:
+                data = sock_recv(1 << 16)
+                if not data:
+                    return data  # the broker closed the connection
+                pending.extend(data)
+            out = bytes(pending[:size])
+            del pending[:size]
+            return out
+
+        def read_all(max_packets: int = 1) -> paho.MQTTErrorCode:
+            rc = loop_read(max_packets)
+            while pending and rc == paho.MQTT_ERR_SUCCESS and inner.socket() is not None:
+                rc = loop_read(max_packets)
+            return rc
+
+        inner._sock_recv = buffered_recv  # type: ignore[method-assign,assignment]
+        inner.loop_read = read_all  # type: ignore[method-assign]
+
+    def _taken(self, mid: int) -> None:
+        """The broker took a message (QoS 1: PUBACK; QoS 0: written to the socket)."""
+        if self._inflight.pop(mid, None) is None:
+            return
+        self.sent += 1
+        self._progress_at = time.monotonic()
+        if not self._inflight and (self._settling or self.stopping.is_set()):
+            self._wake.set()  # only when someone waits for it: a wake-up is a task step
+        if self.outbox and self._refill is None and len(self._inflight) <= WINDOW // 2:
+            # not from inside paho's callback: on the loop's next turn
+            self._refill = asyncio.get_running_loop().call_soon(self._drain)
 
     def _drain(self) -> None:
         """Publish from the outbox while the window has room (connected, not holding)."""
@@ -437,11 +470,48 @@ class MqttLink:
         self._flush(inner)
 
     def _flush(self, inner: paho.Client) -> None:
-        """Write what paho holds now, corked: the window leaves as one TCP segment. What the
-        socket cannot take yet is left to the event loop (aiomqtt's writer)."""
+        """Write the window paho holds in one system call: one TCP segment, not one per
+        message (paho writes packet by packet). A QoS 0 message is taken once written, as
+        paho would say, without its per-message callback objects. Anything but publications
+        in the queue, or an error, and paho writes it itself, into a corked socket; what the
+        socket cannot take yet is left to the event loop (the writer)."""
         sock = inner.socket()
         if sock is None or not inner.want_write():
             return
+        queue = inner._out_packet  # paho 2.x: dicts of command, mid, qos, pos, to_process, …
+        if not all(packet["command"] & 0xF0 == paho.PUBLISH for packet in queue):
+            self._paho_write(inner, sock)
+            return
+        data = b"".join(memoryview(packet["packet"])[packet["pos"] :] for packet in queue)
+        try:
+            written = sock.send(data)
+        except (BlockingIOError, ssl.SSLWantReadError, ssl.SSLWantWriteError):
+            written = 0
+        except OSError:
+            self._paho_write(inner, sock)  # paho meets the error and reports the lost link
+            return
+        while queue and written > 0:
+            packet = queue[0]
+            step = min(written, packet["to_process"])
+            packet["pos"] += step
+            packet["to_process"] -= step
+            written -= step
+            if packet["to_process"]:
+                break
+            queue.popleft()
+            if packet["qos"] == 0:
+                if packet["info"] is not None:
+                    packet["info"]._set_as_published()
+                self._taken(packet["mid"])
+        inner._last_msg_out = time.monotonic()  # paho's keep-alive clock (time.monotonic)
+        if queue and self._register_write is not None:
+            # paho believes the writer registered (it asked while the window was handed
+            # over): register it for real, or the rest would wait for the next window
+            self._register_write(inner, None, sock)
+        else:
+            inner._call_socket_unregister_write()  # and it knows none is needed
+
+    def _paho_write(self, inner: paho.Client, sock: Any) -> None:
         corked = _cork(sock, True)
         try:
             inner.loop_write()  # a lost connection: paho's on_disconnect, seen by aiomqtt
@@ -450,8 +520,6 @@ class MqttLink:
                 _cork(sock, False)
         sock = inner.socket()
         if sock is not None and inner.want_write() and self._register_write is not None:
-            # paho believes the writer registered (it asked while the window was handed
-            # over): register it for real, or the rest would wait for the next window
             self._register_write(inner, None, sock)
 
     async def _receive(self, client: aiomqtt.Client) -> None:
