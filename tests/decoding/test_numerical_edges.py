@@ -361,6 +361,8 @@ def test_zero_and_negative_time_steps_around_a_gap_are_dropped_and_counted_never
     assert decoder.stats.gaps == 1
     assert decoder.stats.rejected_time == len(before_gap) + len(after_gap)
     assert decoder.stats.accepted == len(t)
+    report = decoder.input_report() or ""  # what `grasplink decode` prints: it names both
+    assert "7 timing errors" in report and "1 gap(s)" in report, report
     assert_clean(dirty)
     assert dirty == feed(build(name, rec.layout_mm, rec.fs_hz), t, x, None)
     fresh = feed(build(name, rec.layout_mm, rec.fs_hz), t[half:], x[half:], None)
