@@ -154,6 +154,9 @@ class MqttLink:
         self._inflight: dict[int, Message] = {}
         self._progress_at = 0.0  # when the broker last took one (or the window was empty)
         self._inner: paho.Client | None = None  # while a session runs
+        self._client: aiomqtt.Client | None = None
+        self._steady = False  # set up, not stopping: reads may wait for the pump (poll)
+        self._polled_reads = False  # the socket is read by `poll`, not when readable
         self._batching = False  # a window is being handed to paho: _flush writes it
         self._register_write: Callable[..., None] | None = None  # aiomqtt's own
         self._reconnect = ""  # why the protocol asked for a new MQTT session
@@ -168,7 +171,49 @@ class MqttLink:
 
     def stop(self) -> None:
         self.stopping.set()
+        self._steady = False
+        self._reads_polled(False)  # the pump stops: acknowledgements must still be heard
         self._wake.set()
+
+    def poll(self) -> None:
+        """The pump's tick: read what the broker sent since the last (PUBACKs, commands).
+        In steady state the socket is not watched for reading: the acknowledgements of a
+        tick's messages arrive just after it and would wake the loop once more per tick;
+        read with the next tick instead (50 ms later at most, commands included). A backlog
+        to replay (a window waiting for its acknowledgements) reads as they arrive."""
+        if self._polled_reads:
+            self._read_now()
+        elif self._steady and not self.outbox and self._inner is not None:
+            self._reads_polled(True)
+
+    def _read_now(self) -> None:
+        inner, client = self._inner, self._client
+        if inner is None or client is None:
+            return
+        try:
+            inner.loop_read()
+            sock = inner.socket()  # TLS may hold decoded bytes the socket will not signal
+            while sock is not None and getattr(sock, "pending", lambda: 0)() > 0:
+                inner.loop_read()
+                sock = inner.socket()
+        except Exception as exc:  # a broken connection, as aiomqtt handles it
+            if not client._disconnected.done():
+                client._disconnected.set_exception(exc)
+
+    def _reads_polled(self, polled: bool) -> None:
+        inner = self._inner
+        sock = inner.socket() if inner is not None else None
+        if sock is None:
+            self._polled_reads = False
+            return
+        if polled == self._polled_reads:
+            return
+        loop = asyncio.get_running_loop()
+        if polled:
+            loop.remove_reader(sock.fileno())
+        else:
+            loop.add_reader(sock.fileno(), self._read_now)
+        self._polled_reads = polled
 
     async def run(self) -> None:
         """Connect until stopped; the first failure ends it (a start-up error)."""
@@ -288,6 +333,7 @@ class MqttLink:
             await client.subscribe(topic, qos=1)
         self._reconnect = ""
         self._inner = client._client  # aiomqtt 2.5.1 (pinned) keeps its paho client here
+        self._client = client
         self._progress_at = time.monotonic()
         try:
             first, after = self.protocol.on_connect(now_ms())
@@ -298,8 +344,11 @@ class MqttLink:
             if not self.first.done():  # start() returns (and snapshots flow) once births are out
                 self.first.set_result(None)
             receiver = asyncio.create_task(self._receive(client))
+            self._steady = not self.stopping.is_set()
             try:
                 await self._watch(receiver)
+                self._steady = False
+                self._reads_polled(False)
                 if self.stopping.is_set() or self._reconnect:
                     self._publish_now(self.protocol.goodbye(now_ms()))
                     await self._settled(FLUSH_S)
@@ -307,7 +356,9 @@ class MqttLink:
                 receiver.cancel()
                 await asyncio.gather(receiver, return_exceptions=True)
         finally:
-            self._inner = None
+            self._steady = False
+            self._reads_polled(False)
+            self._inner = self._client = None
             if self._inflight:  # not taken by the broker: first in line for the next session
                 self.outbox.requeue(list(self._inflight.values()))
                 self._inflight.clear()
@@ -443,6 +494,8 @@ class MqttLink:
         room = WINDOW - len(self._inflight)
         if room > 0 and self.outbox:
             self._publish_now(self.outbox.take(room))
+        if self.outbox:  # a backlog: its acknowledgements are read as they come
+            self._reads_polled(False)
 
     def _publish_now(self, messages: list[Message]) -> None:
         """Hand messages to paho in order and write them at once; what paho refuses (the
@@ -565,6 +618,8 @@ class Pump:
 
     def tick(self) -> None:
         publisher = self.publisher
+        for link in publisher.links:
+            link.poll()
         now = time.monotonic()
         if publisher._look(now):
             self.seen_at = now
