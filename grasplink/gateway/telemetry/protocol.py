@@ -141,10 +141,14 @@ def apply_result(controls: dict[str, Any], command: Command, result: CommandResu
         controls["emg_e_max_uv"] = float(command.value["e_max_uv"])
 
 
+# One encoder for every message: json.dumps with options builds a new one per call.
+_COMPACT = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+
+
 def dumps(obj: Any) -> bytes:
     """Compact JSON; a non-finite number (never expected from a snapshot) becomes null."""
     try:
-        return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode()
+        return _COMPACT.encode(obj).encode()
     except ValueError:
         return json.dumps(_finite(obj), separators=(",", ":")).encode()
 

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import json
 import operator
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -95,6 +95,8 @@ class MetricGroup:
     specs: tuple[MetricSpec, ...]
     fingerprint: Getter
     period_ms: int = 0
+    # the metrics' values, in `specs` order, read from the fingerprint (None: by getter)
+    values: Callable[[Any], Sequence[Any] | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -265,19 +267,36 @@ def _node_fields(kind: str, names: tuple[str, ...]) -> Getter:
     return fingerprint
 
 
+def _section_values(names: tuple[str, ...]) -> Callable[[Any], Sequence[Any] | None]:
+    """A snapshot section's fields as a tuple (None when the section is not all there)."""
+    pick = operator.itemgetter(*names)
+
+    def values(section: Any) -> Sequence[Any] | None:
+        try:
+            return pick(section)  # type: ignore[no-any-return]
+        except (KeyError, TypeError):
+            return None
+
+    return values
+
+
 def device_groups(kind: str) -> tuple[MetricGroup, ...]:
     """A device's metrics: its decoded values, then `State/…` from the node's status."""
-    values = tuple(
-        MetricSpec(name, FIELD_TYPES[name], _snap((kind, name))) for name in VALUE_FIELDS[kind]
-    )
-    groups = [MetricGroup(values, lambda s, e: s.get(kind))]  # type: ignore[union-attr]
-    for fields, period in ((STATE_METRICS, 0), (COUNTER_STATE_METRICS, COUNTER_PERIOD_MS)):
-        names = tuple(n for n, _ in fields if n != "lost_packets" or kind == "skin")
+    fields = VALUE_FIELDS[kind]
+    values = tuple(MetricSpec(name, FIELD_TYPES[name], _snap((kind, name))) for name in fields)
+    groups = [
+        MetricGroup(values, lambda s, e: s.get(kind), values=_section_values(fields))  # type: ignore[union-attr]
+    ]
+    for state, period in ((STATE_METRICS, 0), (COUNTER_STATE_METRICS, COUNTER_PERIOD_MS)):
+        names = tuple(n for n, _ in state if n != "lost_packets" or kind == "skin")
         specs = tuple(
-            MetricSpec(f"State/{n}", t, _node_state(kind, n)) for n, t in fields if n in names
+            MetricSpec(f"State/{n}", t, _node_state(kind, n)) for n, t in state if n in names
         )
-        fingerprint = _node_fields(kind, names) if len(names) > 1 else _node_state(kind, names[0])
-        groups.append(MetricGroup(specs, fingerprint, period))
+        if len(names) > 1:
+            group = MetricGroup(specs, _node_fields(kind, names), period, values=lambda fp: fp)
+        else:
+            group = MetricGroup(specs, _node_state(kind, names[0]), period, values=lambda fp: (fp,))
+        groups.append(group)
     return tuple(groups)
 
 
@@ -586,6 +605,7 @@ class SparkplugSession:
         """Add what changed in `sample` to `payload` (made when first needed), by alias."""
         snap, ts, extra = sample.snapshot, sample.ts_ms, self._extra
         last = self._last.setdefault(device, {})
+        aliases = ALIASES[device]
         for index, group in enumerate(groups):
             key = (device, index)
             period = group.period_ms
@@ -596,15 +616,22 @@ class SparkplugSession:
                 continue
             self._seen[key] = seen
             reported = False
-            for spec in group.specs:
-                value = spec.get(snap, extra)
-                if spec.name in last and last[spec.name] == value:
+            values = group.values(seen) if group.values is not None else None
+            if values is None:
+                values = [spec.get(snap, extra) for spec in group.specs]
+            for spec, value in zip(group.specs, values, strict=True):
+                name = spec.name
+                if name in last and last[name] == value:
                     continue
-                last[spec.name] = value
+                last[name] = value
                 if payload is None:
                     payload = pb.Payload()
-                metric = payload.metrics.add(alias=ALIASES[device][spec.name], timestamp=ts)
-                set_value(metric, spec.datatype, value, with_datatype=False)
+                metric = payload.metrics.add(alias=aliases[name], timestamp=ts)
+                if value is None:
+                    metric.is_null = True
+                else:  # set_value without the datatype, inlined: the hot path
+                    datatype = spec.datatype
+                    setattr(metric, _VALUE_FIELD[datatype], _CONVERT[datatype](value))
                 reported = True
             if reported:
                 payload.timestamp = ts  # type: ignore[union-attr]
