@@ -28,6 +28,7 @@ import asyncio
 import contextlib
 import logging
 import random
+import select
 import socket
 import ssl
 import threading
@@ -157,6 +158,7 @@ class MqttLink:
         self._client: aiomqtt.Client | None = None
         self._steady = False  # set up, not stopping: reads may wait for the pump (poll)
         self._polled_reads = False  # the socket is read by `poll`, not when readable
+        self._readable = select.poll()  # the socket, while reads are polled
         self._batching = False  # a window is being handed to paho: _flush writes it
         self._register_write: Callable[..., None] | None = None  # aiomqtt's own
         self._reconnect = ""  # why the protocol asked for a new MQTT session
@@ -182,7 +184,11 @@ class MqttLink:
         read with the next tick instead (50 ms later at most, commands included). A backlog
         to replay (a window waiting for its acknowledgements) reads as they arrive."""
         if self._polled_reads:
-            self._read_now()
+            # paho's read path is Python all the way to the EAGAIN: ask the kernel first
+            sock = self._inner.socket() if self._inner is not None else None
+            pending = getattr(sock, "pending", None)  # TLS: bytes decoded, not yet read
+            if self._readable.poll(0) or (pending is not None and pending() > 0):
+                self._read_now()
         elif self._steady and not self.outbox and self._inner is not None:
             self._reads_polled(True)
 
@@ -211,6 +217,8 @@ class MqttLink:
         loop = asyncio.get_running_loop()
         if polled:
             loop.remove_reader(sock.fileno())
+            self._readable = select.poll()
+            self._readable.register(sock.fileno(), select.POLLIN)
         else:
             loop.add_reader(sock.fileno(), self._read_now)
         self._polled_reads = polled
