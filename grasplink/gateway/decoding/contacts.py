@@ -573,8 +573,14 @@ class ContactDetector:
             if emit >= self._n:
                 keep.append((emit, index, t, z, trend_on))
                 continue
-            if any(abs(index - n) <= self.step_w + 2 for n, e in self._onsets if e <= emit):
-                continue  # the kink bank has it
+            # the kink bank has it: a probe is timed mid-rise, up to a step window after
+            # the onset the kink bank placed (a slow pulse rises for longer)
+            if any(
+                -self.step_w - 2 <= index - n <= 2 * self.step_w + 2
+                for n, e in self._onsets
+                if e <= emit
+            ):
+                continue
             sid = self._next_step_id
             self._next_step_id += 1
             sigma = (0.25 * self.step_w + 0.3) / self.fs_hz
@@ -737,6 +743,8 @@ class ContactDetector:
                 return False
             return float(np.min(levels[rise:])) >= (1.0 - self.drop_fraction) * top
 
+        if self._train_follows(watch):
+            return False
         if stays(watch.detrended):
             return True
         if watch.trend <= 0.0 or not stays(watch.levels):
@@ -746,6 +754,15 @@ class ContactDetector:
         x = np.arange(m) - (m - 1) / 2.0
         change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
         return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
+
+    def _train_follows(self, watch: _Watch) -> bool:
+        """Did more contacts come before the hold? Pulses after short spacings start on the
+        one before (thesis ch. 5.3.1): a train of them keeps the level up like a step, and
+        a slip that stopped makes no more contacts. Only contacts decided by the verdict's
+        sample count (chunking cannot change the verdict)."""
+        hold = watch.index + self.step_hold
+        told = hold + self.level_half
+        return any(watch.index + 2 < n <= hold and e <= told for n, e in self._onsets)
 
     def _clipped(self, start: int, stop: int) -> bool:
         """Do samples start..stop pile up at their maximum (the sensor's upper rail)? A
@@ -796,10 +813,8 @@ class ContactDetector:
                 return False  # went on rising: a ramp
             return end >= keep * first and low >= (keep - 0.1) * first - 2.0 * watch.noise
 
-        hold = watch.index + self.step_hold
-        told = hold + self.level_half  # the verdict's sample: contacts known by then
-        if any(watch.index + 2 < n <= hold and e <= told for n, e in self._onsets):
-            return False  # more contacts came: a train of ridge pulses keeps the level up
+        if self._train_follows(watch):
+            return False
         if stays(watch.detrended):
             return True
         if watch.trend <= 0.0 or not stays(watch.levels):

@@ -6,149 +6,180 @@ reaches a ridge; ridge i sits at x_i = cumsum([0, *spacings])[i]. The contact
 sequence is a position measurement: contact k happened when the edge was at
 a ridge. Which ridge, and in which direction the object moves, is unknown
 and must be inferred from the timing pattern (thesis ch. 5.2: with constant
-speed, successive intervals are in the ratio of the spacings).
+speed, successive intervals are in the ratio of the spacings). Real slips
+speed up, slow down, stop, restart and reverse; the end of a slip shows in
+the static force too (thesis ch. 4.3: the FSR reads M = (1 - k mu) W + k P
+while slipping, W at rest, so the level steps when the object sticks).
 
-Design (a small multiple-hypothesis tracker):
+Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
 
 * `contacts.ContactDetector` turns the signal into contact onsets (sub-sample
-  times) and, later, tells whether each one fell back like a pulse.
-* A hypothesis is a direction, the ridge of the last contact it assigned,
-  and a Kalman filter on the distance travelled, the speed and the distance
-  each ridge's speed dip costs (ridge positions are measurements at contact
-  times). Each assignment is tried with a steady speed (little process
-  noise: the dip loss stays identifiable) and with a changing one (much
-  more): the likelier survives, so accelerating or braking slips are
-  followed. Each new contact branches every hypothesis:
-  assign it to the next ridge, to a later one (missed contacts: weak pulses
-  after short spacings), or call it spurious (tip pulses, noise, grip
-  changes). A contact may also start a new track at any ridge, either way,
-  with a prior proportional to the distance from which a slip reaches that
-  ridge first (the spacing before it; an approach length for the end ridge).
-* Scores are log-likelihoods of the contact *times*: with two contacts the
-  speed is D/T, scored by a broad log-normal speed prior (density
-  p(ln v)/T); from the third on, the Kalman innovation (robust: a Gaussian
-  plus a broad floor). Hypotheses with the same recent
-  history are merged, the best `max_hypotheses` kept; memory is bounded.
-* Silence is evidence too: a hypothesis that expected a ridge well before
-  now and saw none either missed it (log(1 - P_D) for that ridge) or the
-  slip has stopped (a fixed cost) - whichever is likelier. A stopped track
-  reports slip False, speed 0 and its last position, held below the ridge
-  it never reached.
+  times) and, later, tells whether each one fell back like a pulse or rose
+  and stayed (a *step*: sharp ones are told within 0.1 s).
+* A hypothesis (track) is a direction, the ridge of the last contact it
+  assigned and a Kalman filter on the distance travelled, the speed, the
+  acceleration and the distance each ridge's speed dip costs (ridge
+  positions are measurements at contact times). Its motion model is chosen
+  when its speed is first measured: *steady* (the acceleration held at 0,
+  the speed a slow random walk: ratios of intervals stay those of the
+  spacings, which tells the alignment) or *changing* (a constant
+  acceleration of unknown size with a slowly varying jerk: speeding up and
+  braking are followed). Each new contact branches every hypothesis: assign
+  it to the next ridge or a later one (missed contacts), call it spurious,
+  or - the object stopped unseen and went on - restart at the next ridge
+  with its speed unknown. A contact may also start a new track at any
+  ridge, either way (a slip starting, or reversing: after a reversal the
+  other edge leads, at a place no contact tells).
+* A contact judged a step branches a slipping track into "stopped there"
+  (position held, speed 0) and "a grip change, slipping on"; the next
+  contact (or its absence) decides. A stopped track restarts with a contact
+  at its next ridge, speed unknown until the one after.
+* Silence is evidence too: a track that expected a ridge well before now
+  and saw none either missed it or has stopped, whichever is likelier.
+  Samples on a rail (saturation) show no contacts: expected ones there are
+  not missed.
 * Output: posterior over hypotheses (plus "no slip": every contact is
-  clutter). Slip is flagged when tracks with two or more contacts (one of
-  which fell back like a pulse, or four or more contacts) hold half the
-  mass; speed and position come from the best such track, position
-  extrapolated at its speed from its last ridge (and no further than the
-  next ridge it has not reached yet). Confidence is the mass of hypotheses
-  that agree with that position (within 3 mm) and speed (within 15 %),
-  discounted by the position's own uncertainty - ambiguous layouts split
-  the mass and so give low confidence rather than a confident wrong answer.
-* The direction must be told by the contacts, not by the priors: speed
-  and position are given only when the best track has three contacts (an
-  interval ratio; two contacts fit some alignment either way) and explains
-  the contacts at least 9 times better than the best track moving the
-  other way. Until then a slip is reported with speed and position None
-  (confidence P(slip)); on a symmetric skin that is always the case.
+  clutter). Slip is flagged when slipping tracks with two or more contacts
+  (one of which fell back like a pulse, or four or more contacts) hold half
+  the mass. Speed and position come from the best such track, extrapolated
+  with its speed and acceleration. Its direction must be told by the
+  contacts: speed and position are given when the track has three contacts
+  and explains them better than the best track moving the other way by at
+  least `LOG_REPORT_ODDS`; the confidence grows with that margin (and with
+  how much of the posterior agrees), so an early answer is a low-confidence
+  one. On a symmetric skin both ways explain the contacts equally: no speed.
 
 Contacts are decided with a delay (longest detector scale), sometimes out of
-time order; the tracker keeps snapshots of its last few steps and replays
-them when an earlier contact arrives, so results do not depend on how the
-input is chunked.
+time order, and a step is told ~0.1 s after its onset; the tracker keeps
+snapshots of its last few steps and replays them, so results do not depend
+on how the input is chunked. Figures: docs/benchmarks/decoding.md.
 """
 
 from __future__ import annotations
 
 import bisect
 import math
-from collections import deque
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
+from scipy.special import erf
 
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
-from grasplink.gateway.decoding.onsets import ContactDetector, ContactEvent, PulseCheck
+from grasplink.gateway.decoding.contacts import (
+    STEP_IDS,
+    ContactDetector,
+    ContactEvent,
+    PulseCheck,
+)
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
+IDS = 6  # recent contact ids a track remembers (pulse evidence, merging)
+STEADY, CHANGING = 0, 1
+# pulse verdicts in the ring of recent contacts
+UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
+RING = 256
 
 
-class _Track:
-    """One hypothesis: direction, last ridge reached, Kalman state at its last contact.
+class _Bank:
+    """The hypotheses as arrays (immutable once built: snapshots share them).
 
-    State: s (edge position along the travel, mm), v (speed without dips,
-    mm/s), d (distance lost to the speed dip at each ridge, mm); covariance
-    p00 .. p22. `m` is the dip memory: the not yet recovered share of the
-    dips so far, in units of d (1 right after a contact).
+    Per track: direction (+1/-1), the ridge (travel order) of its last contact,
+    ridge contacts assigned `n`, contacts since it last (re)started `run`
+    (1: speed unknown), motion model, time `t` of its last contact, Kalman state
+    X = (s, v, a, d) at t - s the edge's travel from the first ridge met, v the
+    speed without dips, a the acceleration, d the distance each ridge's dip
+    costs - and covariance P, dip memory m (the not yet recovered share of the
+    dips, in units of d), timing sigma of its last contact, score (log), the
+    ids of its last contacts, the id it started at, and `stop`: NaN while
+    slipping, else the time it stopped (X[:, 0] then holds where).
     """
 
-    __slots__ = (
-        "crossings",
-        "d",
-        "direction",
-        "evidence",
-        "first",
-        "ids",
-        "m",
-        "n",
-        "p00",
-        "p01",
-        "p02",
-        "p11",
-        "p12",
-        "p22",
-        "ridge",
-        "s",
-        "schedule",
-        "score",
-        "sig",
-        "t",
-        "v",
-    )
+    FIELDS: tuple[str, ...] = (
+        "P", "X", "dirn", "first", "ids", "m", "model", "n", "ridge", "run", "score", "sig",
+        "stop", "t",
+    )  # fmt: skip
+    __slots__ = (*FIELDS, "_sched")
+    P: np.ndarray
+    X: np.ndarray
+    dirn: np.ndarray
+    first: np.ndarray
+    ids: np.ndarray
+    m: np.ndarray
+    model: np.ndarray
+    n: np.ndarray
+    ridge: np.ndarray
+    run: np.ndarray
+    score: np.ndarray
+    sig: np.ndarray
+    stop: np.ndarray
+    t: np.ndarray
+    _sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
 
-    def __init__(
-        self,
-        direction: int,
-        ridge: int,
-        t: float,
-        s: float,
-        score: float,
-        ids: tuple[int, ...],
-        sig: float,
-    ):
-        self.direction = direction
-        self.sig = sig  # timing sigma of the last contact
-        self.ridge = ridge  # index along the travel order
-        self.t = t
-        self.s = s
-        self.v = self.d = 0.0
-        self.m = 1.0
-        self.p00 = self.p01 = self.p02 = self.p11 = self.p12 = self.p22 = 0.0
-        self.n = 1
-        self.score = score
-        self.ids = ids  # ids of the last assigned contacts, newest last
-        self.first = ids[0]  # id of the contact the track started at
-        self.schedule: list[tuple[float, float, bool, int]] | None = None
-        self.crossings: list[tuple[float, float, float]] | None = None
-        self.evidence: tuple | None = None  # (verdict count, _evidence result) cache
+    def __init__(self, **fields: np.ndarray):
+        for key in self.FIELDS:
+            setattr(self, key, fields[key])
+        self._sched = None
 
-    def copy(self) -> _Track:
-        c = _Track.__new__(_Track)
-        c.crossings, c.d, c.direction, c.evidence = (
-            self.crossings,
-            self.d,
-            self.direction,
-            self.evidence,
+    def __len__(self) -> int:
+        return len(self.score)
+
+    @classmethod
+    def empty(cls) -> _Bank:
+        return cls(
+            P=np.zeros((0, 4, 4)),
+            X=np.zeros((0, 4)),
+            dirn=np.zeros(0, np.int64),
+            first=np.zeros(0, np.int64),
+            ids=np.zeros((0, IDS), np.int64),
+            m=np.zeros(0),
+            model=np.zeros(0, np.int64),
+            n=np.zeros(0, np.int64),
+            ridge=np.zeros(0, np.int64),
+            run=np.zeros(0, np.int64),
+            score=np.zeros(0),
+            sig=np.zeros(0),
+            stop=np.zeros(0),
+            t=np.zeros(0),
         )
-        c.first, c.ids, c.m, c.n, c.p00 = self.first, self.ids, self.m, self.n, self.p00
-        c.p01, c.p02, c.p11, c.p12, c.p22 = self.p01, self.p02, self.p11, self.p12, self.p22
-        c.ridge, c.s, c.schedule, c.score = self.ridge, self.s, self.schedule, self.score
-        c.sig, c.t, c.v = self.sig, self.t, self.v
-        return c
+
+    def take(self, idx: np.ndarray) -> _Bank:
+        return _Bank(**{k: getattr(self, k)[idx] for k in self.FIELDS})
+
+    @staticmethod
+    def concat(banks: list[_Bank]) -> _Bank:
+        banks = [b for b in banks if len(b)]
+        if not banks:
+            return _Bank.empty()
+        if len(banks) == 1:
+            return banks[0]
+        return _Bank(**{k: np.concatenate([getattr(b, k) for b in banks]) for k in _Bank.FIELDS})
+
+    def replace(self, **fields) -> _Bank:
+        out = _Bank(**{k: fields.get(k, getattr(self, k)) for k in self.FIELDS})
+        return out
+
+
+class _One:
+    """One track's numbers as plain floats (the chosen track, read at every update)."""
+
+    __slots__ = (
+        "a", "d", "dirn", "m", "n", "p00", "p01", "p02", "p11", "p12", "p22", "ridge", "run",
+        "s", "stop", "t", "v",
+    )  # fmt: skip
+
+    def __init__(self, B: _Bank, i: int):
+        self.dirn, self.ridge = int(B.dirn[i]), int(B.ridge[i])
+        self.n, self.run = int(B.n[i]), int(B.run[i])
+        self.t, self.stop, self.m = float(B.t[i]), float(B.stop[i]), float(B.m[i])
+        self.s, self.v, self.a, self.d = (float(x) for x in B.X[i])
+        P = B.P[i]
+        self.p00, self.p01, self.p02 = float(P[0, 0]), float(P[0, 1]), float(P[0, 2])
+        self.p11, self.p12, self.p22 = float(P[1, 1]), float(P[1, 2]), float(P[2, 2])
 
 
 class TrackerDecoder(Decoder):
-    """Contact tracker: multiple hypotheses over (direction, ridge), Kalman speed."""
+    """Contact tracker: hypotheses over (direction, ridge, motion); Kalman speed, acceleration."""
 
     name = "tracker"
 
@@ -157,19 +188,36 @@ class TrackerDecoder(Decoder):
     P_DETECT_MIN = 0.5  # ... after a very short one (its pulse is small and merges)
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
     LOG_NEW_TRACK = math.log(0.01)  # slips starting per s
+    LOG_REVERSE = math.log(0.2)  # a contact while slipping is the first after a reversal
     CLUTTER_PER_S = 0.05  # spurious contacts per s (detector false alarms, grip changes)
-    P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge)
-    RATE_WINDOW_S = 1.0  # contacts seen in this window set the rate of tip contacts
-    LOG_STOP = math.log(0.2)  # a slip stops before the next ridge
+    P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge) ...
+    TIP_MM = 10.0  # ... within this travel after it, into a spacing of at least TIP_GAP_MM
+    TIP_GAP_MM = 10.0  # (the edge tips over a long gap, never right before the next ridge)
+    TIP_S = 0.3  # ... or, speed unknown, within this time
+    LOG_STOP = math.log(0.2)  # a slip stops before the next ridge (silence)
+    LOG_RESTART = math.log(0.05)  # a slip stopped unseen and restarted before this contact
+    RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
+    # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
+    STOP_STEP_PER_S = 1.0
+    GRIP_STEP_PER_S = 0.3
+    LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
+    PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
+    LOG_PROBE_RIDGE = math.log(0.3)  # ... and a ridge contact (merged pulses) sometimes
+    PROBE_SIGMA_S = 0.02  # its timing (mid-rise of an unresolved pulse train)
     ROBUST_FLOOR = 0.05  # weight of the broad part of the contact-time likelihood
     SIGMA_POS_MM = 0.3  # ridge-contact position noise (ridge compliance, speed dips)
-    SPEED_WALK = 0.03  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
+    SPEED_WALK = 0.01  # relative speed change (1 sigma) per sqrt(SPEED_WALK_MM) of travel
     SPEED_WALK_MM = 10.0
-    SPEED_WALK_CHANGING = 0.3  # ... while the slip speeds up or slows down
-    LOG_SPEED_CHANGE = 0.0  # prior log odds changing : steady at each contact (the data decide)
+    LOG_CHANGING = math.log(0.5)  # prior of the changing-speed model at each (re)start
+    ACC_PER_S = 2.0  # changing: acceleration sigma at a (re)start, x speed (v doubles in 0.5 s)
+    JERK_PER_S2 = 1.0  # changing: the acceleration drifts this much (sigma) in 1 s, x speed
+    ACC_FLOOR = 0.4  # predicted braking keeps at least sqrt(1 - 2 x this) of the speed
     DIP_RECOVERY_S = 0.05  # the speed recovers from a ridge's dip within about this time
-    DIP_PRIOR_MM = 1.0  # prior sigma of the distance lost at each ridge (mean 0)
-    DIP_MAX_MM = 1.5
+    DIP_PRIOR_MM = 0.1  # prior sigma of the distance lost at each ridge (mean 0): thesis
+    # dips of 4-15 mm/s recovering over ~50 ms cost 0.2-0.75 mm, but a wider prior takes a
+    # slowing slip for dips (decelerating and stick-slip figures), more than dips gain
+    DIP_PRIOR_CHANGING_MM = 0.1  # the changing model's (its own, to tune apart)
+    DIP_MAX_MM = 0.8  # a 15 mm/s dip recovering over 50 ms costs 0.75 mm (thesis ch. 5.5.1)
     SPEED_INIT_REL = 0.1  # relative speed uncertainty from two contacts (besides timing)
     LATE_REL = 0.15  # a contact may come this share of its interval late (speed changes)
     LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
@@ -179,9 +227,9 @@ class TrackerDecoder(Decoder):
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
     STRONG_Z = 60.0  # ridge contacts: strengths spread log-uniformly up to about this
     STRENGTH_MIN, STRENGTH_MAX = math.log(0.1), math.log(3.0)
-    REFRESH_S = 0.2  # how often silence (and the agreement) is re-scored between contacts
-    NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out of the posterior
-    MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts
+    REFRESH_S = 0.5  # how often silence (and the agreement) is re-scored between contacts
+    NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out
+    MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts (far-off contact)
     START_CONTACTS = 2  # a slip may start at any of the last this many contacts
     PER_START = 4  # tracks kept per start contact, beyond the best max_hypotheses
     DETECT_MM = 1.2  # travel after a contact before the detector has decided it
@@ -190,11 +238,16 @@ class TrackerDecoder(Decoder):
     AGREE_SPEED = 0.15
     CONF_POS_MM = 3.0  # the position's own sigma halves the confidence at this value
     CONF_CONTACTS = 2.0  # confidence grows as 1 - exp(-(contacts - 1) / this)
-    # a signed speed only when the best track has an interval ratio (three contacts) and
-    # explains the contacts at least 9 times better than the best one moving the other
-    # way (between the two, P(direction) >= 0.9)
+    # the direction: a signed speed once the best track has an interval ratio (three
+    # contacts) and explains them this much better than the best one moving the other
+    # way; the confidence reaches 0.5 at CONF_DIRECTION_ODDS
     DIRECTION_CONTACTS = 3
-    LOG_DIRECTION_ODDS = math.log(9.0)
+    LOG_REPORT_ODDS = math.log(9.0)
+    LOG_CONF_ODDS = math.log(9.0)
+    CONF_ODDS_SCALE = 1.0
+    SCHEDULE = 3  # ridges ahead whose silence is scored
+    COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
+    TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
 
     def __init__(
         self,
@@ -213,31 +266,40 @@ class TrackerDecoder(Decoder):
         self.length = geometry.length_mm
         self.count = len(x)
         spacings = geometry.spacings_mm
-        # travel-order ridge positions and the spacing crossed before each ridge
-        self._pos = {1: x.copy(), -1: (self.length - x[::-1]).copy()}
-        # where a slip starts is unknown: any edge position up to a skin length before
-        # the first ridge met is as likely as any within the skin
-        lead = self.length
+        R = self.count
+        # travel-order ridge positions (index 0 = +1, 1 = -1) and the coast past the end
         self._coast = float(np.max(spacings))  # how far past the last ridge a slip goes on
-        before = {
-            1: np.concatenate([[lead], spacings]),
-            -1: np.concatenate([[lead], spacings[::-1]]),
-        }
-        total = 2.0 * float(sum(before[1]))
-        self._log_prior = {d: [math.log(b / total) for b in before[d]] for d in (1, -1)}
-        self._p_detect = {d: [self._detect_probability(b) for b in before[d]] for d in (1, -1)}
-        # per start ridge: (log distance, P(all missed up to it)) of every ridge ahead
-        self._ahead: dict[int, list[list[tuple[float, float]]]] = {}
-        for d in (1, -1):
-            pos, pd = self._pos[d], self._p_detect[d]
-            rows = []
-            for r in range(self.count):
-                row, missed = [], 1.0
-                for k in range(r + 1, self.count):
-                    missed *= 1.0 - pd[k]
-                    row.append((math.log(float(pos[k] - pos[r])), missed))
-                rows.append(row)
-            self._ahead[d] = rows
+        pos = np.stack([x, self.length - x[::-1]])
+        self._pos = np.concatenate([pos, pos[:, -1:] + self._coast], axis=1)  # + coast end
+        lead = self.length  # a slip may start anywhere up to a skin length before
+        before = np.stack(
+            [np.concatenate([[lead], spacings]), np.concatenate([[lead], spacings[::-1]])]
+        )
+        total = 2.0 * float(before[0].sum())
+        self._log_prior = np.log(before / total)  # (2, R): where a new track starts
+        # the spacing after each ridge, travel order (0 after the last)
+        self._gap = np.concatenate([before[:, 1:], np.zeros((2, 1))], axis=1)
+        pd = np.vectorize(self._detect_probability)(before)
+        self._pd = np.concatenate([pd, np.zeros((2, 1))], axis=1)  # the coast end: never seen
+        with np.errstate(divide="ignore"):
+            self._log_pd = np.log(self._pd)
+            self._log_miss = np.log1p(-self._pd)
+        self._log_miss[:, -1] = -np.inf  # past the coast: stopped
+        # per (direction, start ridge): log distance to each ridge ahead, and P(all missed
+        # from the next one up to it); rows padded with +inf / 1
+        # and the coast end after them: past it the slip has stopped (missed = 0 there)
+        self._ahead_log = np.full((2, R, R + 1), np.inf)
+        self._ahead_missed = np.ones((2, R, R + 1))
+        for di in range(2):
+            for r in range(R):
+                missed = 1.0
+                for j, k in enumerate(range(r + 1, R)):
+                    missed *= 1.0 - pd[di, k]
+                    self._ahead_log[di, r, j] = math.log(float(pos[di, k] - pos[di, r]))
+                    self._ahead_missed[di, r, j] = missed
+                coast = float(self._pos[di, R] - pos[di, r])
+                self._ahead_log[di, r, R - 1 - r] = math.log(coast)
+                self._ahead_missed[di, r, R - 1 - r] = 0.0
         self._erf_scale = 1.0 / (self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0))
         self.max_hypotheses = int(max_hypotheses)
         self.detector = detector or ContactDetector(fs_hz)
@@ -254,13 +316,14 @@ class TrackerDecoder(Decoder):
         self._items: list[tuple[int, int, int, object]] = []  # (emit, kind, id, item) queue
         # tracker state
         self._null = 0.0
-        self._tracks: list[_Track] = []
+        self._tracks = _Bank.empty()
         self._contacts: list[ContactEvent] = []  # processed, in time order (last `history`)
-        self._snapshots: list[tuple[float, list[_Track]]] = []  # state before each of them
+        self._snapshots: list[tuple[float, _Bank]] = []  # state before each of them
         self._history = int(history)
-        self._pulse: dict[int, bool | None] = {}
-        self._pulse_order: deque[int] = deque()
-        self._verdicts = 0  # how many verdicts so far (invalidates cached evidence)
+        self._ring_id = np.full(RING, -1, np.int64)  # pulse verdicts of recent contacts
+        self._ring = np.zeros(RING, np.int64)
+        # contacts told to be steps (replayed as such): id -> did the trend go on after it
+        self._steps: dict[int, bool | None] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
 
@@ -307,12 +370,19 @@ class TrackerDecoder(Decoder):
                 self._add_check(item)  # type: ignore[arg-type]
 
     def _add_check(self, check: PulseCheck) -> None:
-        self._pulse[check.id] = check.pulse
-        self._verdicts += 1
-        self._pulse_order.append(check.id)
-        while len(self._pulse_order) > 64:
-            self._pulse.pop(self._pulse_order.popleft(), None)
+        slot = check.id % RING
+        self._ring_id[slot] = check.id
+        self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[check.pulse]
         self._cache = None
+        if check.pulse is False:
+            self._steps[check.id] = check.trend_on
+            while len(self._steps) > 64:
+                del self._steps[next(iter(self._steps))]
+            # replay from that contact, now a step (stop or grip change)
+            for at, c in enumerate(self._contacts):
+                if c.id == check.id:
+                    self._replay(at, [])
+                    break
 
     # ------------------------------------------------------------------ hypotheses
     def _add_contact(self, ev: ContactEvent) -> None:
@@ -326,108 +396,394 @@ class TrackerDecoder(Decoder):
         else:  # an earlier contact decided late: replay from before it
             if at == 0 and len(self._contacts) >= self._history:
                 return  # older than anything we can replay: drop it
-            self._null, self._tracks = self._snapshots[at]
-            replay = [ev, *self._contacts[at:]]
-            del self._snapshots[at:]
-            del self._contacts[at:]
-            for c in replay:
-                self._snapshots.append((self._null, self._tracks))
-                self._contacts.append(c)
-                self._step(c)
+            self._replay(at, [ev])
         while len(self._contacts) > self._history:
             self._contacts.pop(0)
             self._snapshots.pop(0)
 
+    def _replay(self, at: int, extra: list[ContactEvent]) -> None:
+        self._null, self._tracks = self._snapshots[at]
+        replay = [*extra, *self._contacts[at:]]
+        del self._snapshots[at:]
+        del self._contacts[at:]
+        for c in replay:
+            self._snapshots.append((self._null, self._tracks))
+            self._contacts.append(c)
+            self._step(c)
+        self._cache = None
+
     def _step(self, ev: ContactEvent) -> None:
         tc = ev.t_s
-        best_before = max([self._null, *(h.score for h in self._tracks)])
-        children: list[_Track] = []
-        # spurious contacts: detector false alarms, plus tip contacts in proportion to
-        # the contact rate actually seen
-        recent = sum(1 for c in self._contacts[:-1] if tc - c.t_s <= self.RATE_WINDOW_S)
-        rate = self.CLUTTER_PER_S + self.P_TIP * recent / self.RATE_WINDOW_S
-        for h in self._tracks:
-            children.extend(self._branch(h, ev, rate))
-        # a new track starting at this contact (the earlier story ends here)
-        base = best_before + self.LOG_NEW_TRACK + self._log_strength(ev.z)
-        for d in (1, -1):
-            pos = self._pos[d]
-            for r in range(self.count):
-                children.append(
-                    _Track(
-                        d, r, tc, float(pos[r]), base + self._log_prior[d][r], (ev.id,), ev.sigma_s
-                    )
-                )
-        self._null += self.LOG_CLUTTER_IDLE
-        recent_ids = {c.id for c in self._contacts[-self.START_CONTACTS :]}
-        held_ids = {c.id for c in self._contacts}
-        self._tracks = self._prune(children, recent_ids, held_ids)
+        B = self._tracks
+        step = ev.id in self._steps
+        # a stop ends the rising trend of the level (the object no longer covers more of
+        # the sensor): a step after which it went on is seldom one
+        stop_rate = self.STOP_STEP_PER_S * (0.1 if self._steps.get(ev.id) else 1.0)
+        probe = ev.id >= STEP_IDS
+        if probe:  # a small step the kink bank missed: often a weak ridge pulse
+            stop_rate *= self.PROBE_STOP
+        best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
+        rate = self._clutter_rate(B, tc)
+        children = []
+        if len(B):
+            moving = np.isnan(B.stop)
+            if step:  # a grip change (slipping or not) or, slipping, a stop here
+                children.append(B.replace(score=B.score + math.log(self.GRIP_STEP_PER_S)))
+                stopping = B.take(np.flatnonzero(moving & (B.n >= 2)))
+                children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
+            else:
+                children.append(B.replace(score=B.score + np.log(rate)))
+            if probe:
+                # a small step the kink bank missed: pulses after short spacings start on
+                # the one before (thesis ch. 5.3.1) and pile up like a step - so perhaps a
+                # ridge it could not time (mid-rise, loosely), or a stop, or a grip change
+                loose = ev._replace(sigma_s=max(ev.sigma_s, self.PROBE_SIGMA_S))
+                assigned = [
+                    c.replace(score=c.score + self.LOG_PROBE_RIDGE) for c in self._assign(B, loose)
+                ]
+            else:
+                assigned = self._assign(B, ev)
+            children += assigned
+            if step:  # a stop right at a ridge (the step is that ridge's contact)
+                for c in assigned:
+                    at = c.take(np.flatnonzero(c.n >= 2))
+                    children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
+        self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
+        if probe:
+            recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
+            held_ids = np.array([c.id for c in self._contacts])
+            self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
+            return
+        # a new track starting at this contact: a slip starting (the earlier story ends
+        # here) or, while one slips, reversing (the other edge leads, anywhere)
+        base = np.full(2, best_before + self.LOG_NEW_TRACK)
+        if len(B):
+            slipping = np.isnan(B.stop) & (B.n >= 2)
+            for di, d in enumerate((1, -1)):
+                way = slipping & (B.dirn == -d)
+                if way.any():
+                    reverse = float(B.score[way].max()) + self.LOG_REVERSE + math.log(2.0)
+                    base[di] = max(base[di], reverse)
+        children.append(self._births(ev, base + self._log_strength(ev.z)))
+        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
+        held_ids = np.array([c.id for c in self._contacts])
+        self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
 
-    def _branch(self, h: _Track, ev: ContactEvent, rate: float) -> list[_Track]:
-        """Children of h for contact ev: assigned to one of the next ridges, or spurious.
+    def _clutter_rate(self, B: _Bank, tc: float) -> np.ndarray:
+        """Spurious contacts per s at tc under each track: detector false alarms, and while
+        slipping the tipping front edge's, within TIP_MM of travel after a ridge contact."""
+        rate = np.full(len(B), self.CLUTTER_PER_S)
+        moving = np.isnan(B.stop)
+        dt = tc - B.t
+        v = B.X[:, 1]
+        di = (1 - B.dirn) // 2
+        gap = self._gap[di, np.minimum(B.ridge, self.count - 1)]
+        room = np.minimum(self.TIP_MM, gap - 2.0)
+        tipping = moving & (gap >= self.TIP_GAP_MM)
+        fast = tipping & (B.run >= 2) & (v * dt <= room)
+        rate[fast] += self.P_TIP * v[fast] / room[fast]
+        slow = tipping & (B.run == 1) & (dt <= self.TIP_S)
+        rate[slow] += self.P_TIP / self.TIP_S
+        return rate
 
-        `rate` is the density of spurious contacts (per s), the same for every
-        hypothesis - else the fastest one would explain everything as clutter.
-        """
-        tc = ev.t_s
-        dt = tc - h.t
-        if dt <= 0:
-            return [self._clutter(h, rate)]
-        out: list[_Track] = []
-        pd = self._p_detect[h.direction]
-        last = self.count - 1
-        ids = (*h.ids[-5:], ev.id)
-        miss = 0.0
-        for k in range(h.ridge + 1, min(last, h.ridge + 1 + self.MAX_SKIP) + 1):
-            skipped = k - h.ridge - 1
-            if h.n == 1:  # speed from two contacts; every alignment is equally likely
-                c = self._start_speed(h, k, tc, dt, skipped, ev.sigma_s)
-                if c is not None:
-                    c.score += miss + math.log(pd[k]) + self._log_speed_prior(c.v) - math.log(dt)
-            else:  # steady, or changing speed (the likelier of the two survives pruning)
-                c = self._kalman(
-                    h, k, tc, dt, skipped, ev.sigma_s, miss + math.log(pd[k]), self.SPEED_WALK
-                )
-                c2 = self._kalman(
-                    h,
-                    k,
-                    tc,
-                    dt,
-                    skipped,
-                    ev.sigma_s,
-                    miss + math.log(pd[k]) + self.LOG_SPEED_CHANGE,
-                    self.SPEED_WALK_CHANGING,
-                )
-                if c2 is not None:
-                    c2.ids = ids
-                    out.append(c2)
-            if c is not None:
-                c.ids = ids
-                out.append(c)
-            miss += math.log(1.0 - pd[k])
-        out.append(self._clutter(h, rate))
+    def _births(self, ev: ContactEvent, base: np.ndarray) -> _Bank:
+        """One-contact tracks at every ridge, both ways; `base`: log prior per direction."""
+        R = self.count
+        dirn = np.repeat(np.array([1, -1]), R)
+        ridge = np.tile(np.arange(R), 2)
+        X = np.zeros((2 * R, 4))
+        X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
+        ids = np.full((2 * R, IDS), -1, np.int64)
+        ids[:, -1] = ev.id
+        return _Bank(
+            P=np.zeros((2 * R, 4, 4)),
+            X=X,
+            dirn=dirn,
+            first=np.full(2 * R, ev.id, np.int64),
+            ids=ids,
+            m=np.ones(2 * R),
+            model=np.zeros(2 * R, np.int64),
+            n=np.ones(2 * R, np.int64),
+            ridge=ridge,
+            run=np.ones(2 * R, np.int64),
+            score=(base[:, None] + self._log_prior).ravel(),
+            sig=np.full(2 * R, ev.sigma_s),
+            stop=np.full(2 * R, np.nan),
+            t=np.full(2 * R, ev.t_s),
+        )
+
+    def _stopped_at(self, B: _Bank, tc: float, log_prior: float | None = None) -> _Bank:
+        """Copies of slipping tracks B that stopped at tc (a step), where they were then.
+
+        `log_prior`: of the stop (by default STOP_STEP_PER_S, a density in time)."""
+        if not len(B):
+            return B
+        s, _, _ = self._kinematics(B, tc)
+        limit = self._pos[(1 - B.dirn) // 2, np.minimum(B.ridge + 1, self.count)]
+        X = B.X.copy()
+        X[:, 0] = np.minimum(s, limit - 0.1)
+        X[:, 1] = X[:, 2] = 0.0
+        prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
+        return B.replace(X=X, stop=np.full(len(B), tc), score=B.score + prior)
+
+    def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
+        """Children of B that assign contact ev to one of the next ridges (each branch type
+        as one batch over tracks and ridges)."""
+        dt = ev.t_s - B.t
+        R = self.count
+        di = (1 - B.dirn) // 2
+        moving = np.isnan(B.stop)
+        ok = dt > 0
+        miss = np.zeros(len(B))
+        rows, skips, priors = [], [], []
+        for skip in range(self.MAX_SKIP + 1):
+            k = B.ridge + 1 + skip
+            valid = ok & (k < R)
+            if not valid.any():
+                break
+            kk = np.minimum(k, R - 1)
+            sel = np.flatnonzero(valid)
+            rows.append(sel)
+            skips.append(np.full(len(sel), skip))
+            priors.append((miss + self._log_pd[di, kk])[sel])
+            miss = miss + self._log_miss[di, kk]
+        if not rows:
+            return []
+        row, skip_arr, prior = np.concatenate(rows), np.concatenate(skips), np.concatenate(priors)
+        run, mov = B.run[row], moving[row]
+        out = []
+        # speed from this contact and the last (one-contact or restarted tracks)
+        sel = np.flatnonzero(mov & (run == 1))
+        if len(sel):
+            out.append(self._start_speed(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
+        # the Kalman filter (slipping tracks with a speed)
+        sel = np.flatnonzero(mov & (run >= 2))
+        if len(sel):
+            out.append(self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
+            # or the slip stopped unseen and went on: a restart at the next ridge
+            first = sel[skip_arr[sel] == 0]
+            if len(first):
+                at = B.take(row[first])
+                out.append(self._restart(at, ev, at.ridge + 1, prior[first] + self.LOG_RESTART))
+        # a stopped track restarting here
+        sel = np.flatnonzero(~mov)
+        if len(sel):
+            at = B.take(row[sel])
+            log_rate = math.log(self.RESTART_PER_S)
+            out.append(self._restart(at, ev, at.ridge + 1 + skip_arr[sel], prior[sel] + log_rate))
         return out
 
-    def _log_waiting(self, h: _Track, g: float) -> float:
-        """Log P(no contact detected yet) for a one-contact track, g - h.t after it.
+    def _with_contact(self, B: _Bank, ev: ContactEvent) -> np.ndarray:
+        ids = np.empty_like(B.ids)
+        ids[:, :-1] = B.ids[:, 1:]
+        ids[:, -1] = ev.id
+        return ids
 
-        Under the speed prior: every ridge ahead not yet reached, or reached and
-        missed. Silence makes a fast slip unlikely, then any slip.
-        """
-        elapsed = g - h.t - self._max_latency
-        if elapsed <= 0:
-            return 0.0
-        shift = math.log(elapsed * self.SPEED_PRIOR_MM_S)
-        total, reached_before = 0.0, 0.0
-        missed = 1.0
-        for log_dist, missed_after in self._ahead[h.direction][h.ridge]:
-            # P(v < dist / elapsed): not there yet
-            not_reached = 0.5 * (1.0 + math.erf((log_dist - shift) * self._erf_scale))
-            total += missed * (not_reached - reached_before)
-            reached_before = not_reached
-            missed = missed_after
-        total += missed * (1.0 - reached_before)  # past the last ridge, all missed
-        return math.log(max(total, 1e-12))
+    def _restart(self, B: _Bank, ev: ContactEvent, k: np.ndarray, log_prior: np.ndarray) -> _Bank:
+        """B restarted (speed unknown) with ev at ridge k."""
+        di = (1 - B.dirn) // 2
+        X = np.zeros((len(B), 4))
+        X[:, 0] = self._pos[di, k]
+        X[:, 3] = B.X[:, 3]
+        P = np.zeros((len(B), 4, 4))
+        P[:, 3, 3] = np.maximum(B.P[:, 3, 3], 0.0)
+        return B.replace(
+            X=X,
+            P=P,
+            ridge=k,
+            n=B.n + 1,
+            run=np.ones(len(B), np.int64),
+            t=np.full(len(B), ev.t_s),
+            sig=np.full(len(B), ev.sigma_s),
+            m=np.ones(len(B)),
+            ids=self._with_contact(B, ev),
+            stop=np.full(len(B), np.nan),
+            score=B.score + log_prior,
+        )
+
+    def _start_speed(
+        self,
+        B: _Bank,
+        ev: ContactEvent,
+        skip: np.ndarray,
+        log_prior: np.ndarray,
+        models: np.ndarray | None = None,
+        v_ref: np.ndarray | None = None,
+    ) -> _Bank:
+        """Tracks at ridge k whose speed comes from their last contact and this one: each in
+        both motion models (with their priors), or in `models` (a restart of the speed, within
+        MAX_SPEED_JUMP of `v_ref`)."""
+        tc = ev.t_s
+        dt = tc - B.t
+        di = (1 - B.dirn) // 2
+        k = B.ridge + 1 + skip
+        target = self._pos[di, k]
+        decay = np.exp(-dt / self.DIP_RECOVERY_S)
+        lag = B.m * (1.0 - decay) + skip
+        d = B.X[:, 3]
+        v = (target - B.X[:, 0] + lag * d) / dt
+        good = (v >= V_MIN_MM_S) & (v <= V_MAX_MM_S)
+        if v_ref is not None:
+            good &= (v * self.MAX_SPEED_JUMP >= v_ref) & (v <= self.MAX_SPEED_JUMP * v_ref)
+        if not good.all():
+            sel = np.flatnonzero(good)
+            B, dt, k, target, decay, lag, d, v = (
+                B.take(sel),
+                dt[sel],
+                k[sel],
+                target[sel],
+                decay[sel],
+                lag[sel],
+                d[sel],
+                v[sel],
+            )
+            log_prior = log_prior[sel]
+            if models is not None:
+                models = models[sel]
+        N = len(B)
+        if not N:
+            return B
+        r = self._meas_var(v, ev.sigma_s)
+        r_before = self._meas_var(v, B.sig)
+
+        def covariance(dip_prior_mm: float) -> np.ndarray:
+            var_d = np.where(B.P[:, 3, 3] > 0, B.P[:, 3, 3], dip_prior_mm**2)
+            P = np.zeros((N, 4, 4))
+            P[:, 0, 0] = r
+            P[:, 0, 1] = P[:, 1, 0] = r / dt
+            P[:, 1, 1] = (r + r_before + lag * lag * var_d) / (dt * dt)
+            P[:, 1, 1] += (self.SPEED_INIT_REL * v) ** 2
+            P[:, 1, 3] = P[:, 3, 1] = lag * var_d / dt
+            P[:, 3, 3] = var_d
+            return P
+
+        P = covariance(self.DIP_PRIOR_MM)
+        X = np.zeros((N, 4))
+        X[:, 0] = target
+        X[:, 1] = v
+        X[:, 3] = d
+        score = B.score + log_prior + self._log_speed_prior(v) - np.log(dt)
+        common = dict(
+            ridge=k,
+            t=np.full(N, tc),
+            n=B.n + 1,
+            run=np.full(N, 2, np.int64),
+            sig=np.full(N, ev.sigma_s),
+            m=1.0 + B.m * decay,
+            ids=self._with_contact(B, ev),
+        )
+        # changing: the mean speed over the interval is the speed half an interval ago
+        sa = self.ACC_PER_S * v
+        Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
+        half = dt / 2.0
+        Pc[:, 1, 1] += (half * sa) ** 2
+        Pc[:, 1, 2] = Pc[:, 2, 1] = half * sa * sa
+        Pc[:, 2, 2] = sa * sa
+        if models is not None:
+            chg = models == CHANGING
+            return B.replace(
+                X=X, P=np.where(chg[:, None, None], Pc, P), model=models, score=score, **common
+            )
+        steady = B.replace(
+            X=X,
+            P=P,
+            model=np.full(N, STEADY, np.int64),
+            score=score + math.log(1.0 - math.exp(self.LOG_CHANGING)),
+            **common,
+        )
+        changing = B.replace(
+            X=X.copy(),
+            P=Pc,
+            model=np.full(N, CHANGING, np.int64),
+            score=score + self.LOG_CHANGING,
+            **common,
+        )
+        return _Bank.concat([steady, changing])
+
+    def _kalman(self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray) -> _Bank:
+        """Predict B to the contact and update with ridge k (robust: far off, the speed
+        starts again from the last two contacts)."""
+        tc = ev.t_s
+        N = len(B)
+        dt = tc - B.t
+        di = (1 - B.dirn) // 2
+        k = B.ridge + 1 + skip
+        target = self._pos[di, k]
+        decay = np.exp(-dt / self.DIP_RECOVERY_S)
+        lag = B.m * (1.0 - decay) + skip
+        X, P = B.X, B.P
+        v = np.maximum(X[:, 1], V_MIN_MM_S)
+        F = np.zeros((N, 4, 4))
+        F[:, 0, 0] = F[:, 1, 1] = F[:, 2, 2] = F[:, 3, 3] = 1.0
+        F[:, 0, 1] = F[:, 1, 2] = dt
+        F[:, 0, 2] = 0.5 * dt * dt
+        F[:, 0, 3] = -lag
+        Xp = np.einsum("nij,nj->ni", F, X)
+        Pp = F @ P @ F.transpose(0, 2, 1)
+        # process noise: the speed's random walk; the jerk of the changing model
+        qv = self.SPEED_WALK**2 * v**3 / self.SPEED_WALK_MM
+        dt2, dt3 = dt * dt, dt * dt * dt
+        Pp[:, 0, 0] += qv * dt3 / 3.0
+        Pp[:, 0, 1] += qv * dt2 / 2.0
+        Pp[:, 1, 0] += qv * dt2 / 2.0
+        Pp[:, 1, 1] += qv * dt
+        chg = B.model == CHANGING
+        if chg.any():
+            qj = np.where(chg, (self.JERK_PER_S2 * v) ** 2, 0.0)
+            Pp[:, 0, 0] += qj * dt3 * dt2 / 20.0
+            Pp[:, 0, 1] += qj * dt2 * dt2 / 8.0
+            Pp[:, 1, 0] += qj * dt2 * dt2 / 8.0
+            Pp[:, 0, 2] += qj * dt3 / 6.0
+            Pp[:, 2, 0] += qj * dt3 / 6.0
+            Pp[:, 1, 1] += qj * dt3 / 3.0
+            Pp[:, 1, 2] += qj * dt2 / 2.0
+            Pp[:, 2, 1] += qj * dt2 / 2.0
+            Pp[:, 2, 2] += qj * dt
+        var = Pp[:, 0, 0] + self._meas_var(v, ev.sigma_s) + skip * self.SIGMA_POS_MM**2
+        resid = target - Xp[:, 0]
+        inlier = (
+            (1.0 - self.ROBUST_FLOOR)
+            * v
+            * np.exp(-0.5 * resid * resid / var)
+            / np.sqrt(2 * np.pi * var)
+        )
+        outlier = self.ROBUST_FLOOR * v / (4.0 * np.maximum(target - X[:, 0], 1.0))
+        like = np.log(inlier + outlier)
+        K = Pp[:, :, 0] / var[:, None]
+        Xn = Xp + K * resid[:, None]
+        Xn[:, 3] = np.clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
+        Pn = Pp - K[:, :, None] * Pp[:, None, 0, :]
+        Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
+        good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
+        out = []
+        sel = np.flatnonzero(good)
+        if len(sel):
+            Bs = B.take(sel)
+            out.append(
+                Bs.replace(
+                    X=Xn[sel],
+                    P=Pn[sel],
+                    ridge=k[sel],
+                    t=np.full(len(sel), tc),
+                    n=Bs.n + 1,
+                    run=Bs.run + 1,
+                    sig=np.full(len(sel), ev.sigma_s),
+                    m=1.0 + Bs.m * decay[sel],
+                    ids=self._with_contact(Bs, ev),
+                    score=Bs.score + log_prior[sel] + like[sel],
+                )
+            )
+        far = np.flatnonzero(inlier < outlier)
+        if len(far):  # far off: the speed changed; start again from the last two contacts
+            Bf = B.take(far)
+            vp = np.maximum(Bf.X[:, 1], V_MIN_MM_S)
+            prior = log_prior[far] + like[far]
+            out.append(self._start_speed(Bf, ev, skip[far], prior, models=Bf.model, v_ref=vp))
+        return _Bank.concat(out)
+
+    def _meas_var(self, v, sigma_t):
+        """Variance of a ridge contact as a position measurement at speed v."""
+        return self.SIGMA_POS_MM**2 + (v * sigma_t) ** 2
 
     def _log_strength(self, z: float) -> float:
         """Log likelihood ratio ridge contact / false alarm of a contact of strength z.
@@ -440,370 +796,337 @@ class TrackerDecoder(Decoder):
         log_ridge = -math.log(z * math.log(self.STRONG_Z / thr))
         return min(self.STRENGTH_MAX, max(self.STRENGTH_MIN, log_ridge - log_false_alarm))
 
-    def _log_speed_prior(self, v: float) -> float:
+    def _log_speed_prior(self, v: np.ndarray) -> np.ndarray:
         """Log density of ln(v): log-normal around the usual slip speeds."""
-        z = math.log(v / self.SPEED_PRIOR_MM_S) / self.SPEED_PRIOR_LOG_SIGMA
+        z = np.log(v / self.SPEED_PRIOR_MM_S) / self.SPEED_PRIOR_LOG_SIGMA
         return -0.5 * z * z - math.log(self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0 * math.pi))
 
-    def _start_speed(
-        self,
-        h: _Track,
-        k: int,
-        tc: float,
-        dt: float,
-        skipped: int,
-        sigma_t: float,
-        d: float = 0.0,
-        var_d: float | None = None,
-    ) -> _Track | None:
-        """A track at ridge k whose speed comes from its last contact and this one."""
-        pos = self._pos[h.direction]
-        lag = h.m * (1.0 - math.exp(-dt / self.DIP_RECOVERY_S)) + skipped
-        v = (pos[k] - h.s + lag * d) / dt
-        if not V_MIN_MM_S <= v <= V_MAX_MM_S:
-            return None
-        c = h.copy()
-        var_d = self.DIP_PRIOR_MM**2 if var_d is None else var_d
-        r = self._meas_var(v, sigma_t)
-        r_before = self._meas_var(v, h.sig)
-        c.ridge, c.t, c.s, c.v, c.d, c.n = k, tc, float(pos[k]), v, d, max(h.n + 1, 2)
-        c.sig = sigma_t
-        c.p00, c.p01, c.p02 = r, r / dt, 0.0
-        c.p11 = (r + r_before + lag * lag * var_d) / (dt * dt) + (self.SPEED_INIT_REL * v) ** 2
-        c.p12 = lag * var_d / dt
-        c.p22 = var_d
-        c.m = 1.0 + h.m * math.exp(-dt / self.DIP_RECOVERY_S)
-        c.schedule = c.crossings = c.evidence = None
-        return c
-
-    def _kalman(
-        self,
-        h: _Track,
-        k: int,
-        tc: float,
-        dt: float,
-        skipped: int,
-        sigma_t: float,
-        log_prior: float,
-        walk: float,
-    ) -> _Track | None:
-        """Predict h to tc and update it with ridge k; None if the speed leaves the range."""
-        pos = self._pos[h.direction]
-        v, d = h.v, h.d
-        decay = math.exp(-dt / self.DIP_RECOVERY_S)
-        a = h.m * (1.0 - decay) + skipped  # lag to come, in units of d
-        q = walk**2 * v**3 / self.SPEED_WALK_MM
-        p00 = (
-            h.p00
-            + 2 * dt * h.p01
-            - 2 * a * h.p02
-            + dt * dt * h.p11
-            - 2 * a * dt * h.p12
-            + a * a * h.p22
-            + q * dt**3 / 3.0
-        )
-        p01 = h.p01 + dt * h.p11 - a * h.p12 + q * dt * dt / 2.0
-        p02 = h.p02 + dt * h.p12 - a * h.p22
-        p11 = h.p11 + q * dt
-        p12, p22 = h.p12, h.p22
-        s_pred = h.s + v * dt - a * d
-        var = p00 + self._meas_var(v, sigma_t) + skipped * self.SIGMA_POS_MM**2
-        resid = pos[k] - s_pred
-        inlier = (
-            (1.0 - self.ROBUST_FLOOR)
-            * v
-            * math.exp(-0.5 * resid * resid / var)
-            / math.sqrt(2 * math.pi * var)
-        )
-        outlier = self.ROBUST_FLOOR * v / (4.0 * max(pos[k] - h.s, 1.0))  # within a few intervals
-        if inlier >= outlier:
-            c = h.copy()
-            k0, k1, k2 = p00 / var, p01 / var, p02 / var
-            c.s = s_pred + k0 * resid
-            c.v = v + k1 * resid
-            c.d = min(self.DIP_MAX_MM, max(0.0, d + k2 * resid))
-            c.p00, c.p01, c.p02 = p00 - k0 * p00, p01 - k0 * p01, p02 - k0 * p02
-            c.p11, c.p12, c.p22 = p11 - k1 * p01, p12 - k1 * p02, p22 - k2 * p02
-            c.m = 1.0 + h.m * decay
-            c.ridge, c.t, c.n, c.sig = k, tc, h.n + 1, sigma_t
-            c.schedule = c.crossings = c.evidence = None
-            if not V_MIN_MM_S <= c.v <= V_MAX_MM_S:
-                return None
-        else:  # far off: the speed changed; start again from the last two contacts
-            restart = self._start_speed(
-                h, k, tc, dt, skipped, sigma_t, d, max(h.p22, self.DIP_PRIOR_MM**2)
-            )
-            if (
-                restart is None
-                or not 1.0 / self.MAX_SPEED_JUMP <= restart.v / v <= self.MAX_SPEED_JUMP
-            ):
-                return None
-            c = restart
-        c.score += log_prior + math.log(inlier + outlier)
-        return c
-
-    def _clutter(self, h: _Track, rate: float) -> _Track:
-        """h with the contact called spurious (noise, a tipping edge, a grip change)."""
-        c = h.copy()
-        c.score += math.log(rate)
-        return c
-
-    def _meas_var(self, v: float, sigma_t: float) -> float:
-        """Variance of a ridge contact as a position measurement at speed v."""
-        return self.SIGMA_POS_MM**2 + (v * sigma_t) ** 2
-
-    def _prune(self, children: list[_Track], recent: set[int], held: set[int]) -> list[_Track]:
-        """Best first, one per (direction, ridge, last three contacts); bounded.
+    def _prune(self, B: _Bank, recent: np.ndarray, held: np.ndarray) -> _Bank:
+        """Best first, one per (direction, ridge, model, state, last three contacts); bounded.
 
         Tracks with two or more contacts: the best max_hypotheses, plus the best
-        PER_START of every contact a track starts at while that contact is still in
-        the bounded history (`held`), so that a slip whose true start came after a
-        spurious contact is not crowded out by the tracks that took the spurious one
-        for its start. A start older than the history competes on score alone:
-        otherwise every contact ever seen would keep tracks alive and a gateway
-        running for hours would grow without bound. One-contact tracks (a slip
-        starting at one of the `recent` contacts) are all kept.
+        PER_START of every contact a track starts at while that contact is in the
+        bounded history (`held`), so that a slip whose true start came after a
+        spurious contact is not crowded out by the tracks that took the spurious
+        one for its start (an older start competes on score alone: memory stays
+        bounded however long the stream). One-contact tracks (a slip starting at
+        one of the `recent` contacts) are all kept.
         """
-        children.sort(key=lambda c: -c.score)
-        seen: set[tuple] = set()
-        kept: list[_Track] = []
-        count = 0
-        per_start: dict[int, int] = {}
-        for c in children:
-            key = (c.direction, c.ridge, c.n >= 2, c.ids[-3:] if c.n >= 2 else c.ids[-1:])
-            if key in seen:
-                continue
-            if c.n >= 2:
-                starts = per_start.get(c.first, 0)
-                if count >= self.max_hypotheses and (
-                    starts >= self.PER_START or c.first not in held
-                ):
-                    continue
-                count += 1
-                per_start[c.first] = starts + 1
-            elif c.ids[-1] not in recent:
-                continue
-            seen.add(key)
-            kept.append(c)
-        return kept
+        if not len(B):
+            return B
+        order = np.argsort(-B.score, kind="stable")
+        B = B.take(order)
+        single = B.n == 1
+        key = B.ids[:, -1] * 1000003 + B.ids[:, -2]
+        key = key * 1000003 + B.ids[:, -3]
+        state = B.ridge * 16 + (B.dirn > 0) * 8 + B.model * 4 + np.isnan(B.stop) * 2 + (B.run == 1)
+        key = key * 1000003 + state
+        _, first_idx = np.unique(key, return_index=True)
+        keep = np.zeros(len(B), bool)
+        keep[first_idx] = True
+        keep &= B.score >= B.score[0] - self.NEGLIGIBLE - 20.0
+        # one-contact tracks: only those starting at a recent contact
+        keep &= ~single | np.isin(B.ids[:, -1], recent)
+        multi = keep & ~single
+        idx = np.flatnonzero(multi)
+        rank = np.arange(len(idx))
+        # rank within each start contact
+        firsts = B.first[idx]
+        order2 = np.argsort(firsts, kind="stable")
+        sf = firsts[order2]
+        starts = np.r_[0, np.flatnonzero(np.diff(sf)) + 1]
+        group_rank = np.empty(len(idx), np.int64)
+        group_rank[order2] = np.arange(len(idx)) - np.repeat(
+            starts, np.diff(np.r_[starts, len(idx)])
+        )
+        ok = (rank < self.max_hypotheses) | ((group_rank < self.PER_START) & np.isin(firsts, held))
+        keep[idx[~ok]] = False
+        return B.take(np.flatnonzero(keep))
 
     # ------------------------------------------------------------------ motion
-    def _crossings(self, h: _Track) -> list[tuple[float, float, float]]:
-        """Predicted crossings of the ridges ahead: [(time, position, dip memory after)].
+    def _kinematics(self, B: _Bank, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(travel, speed, position sigma) of slipping tracks B extrapolated to g."""
+        tau = np.maximum(0.0, g - B.t)
+        v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
+        v_end = np.clip(v + a * tau, 0.25 * v, 4.0 * v)
+        decay = np.exp(-tau / self.DIP_RECOVERY_S)
+        s = B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
+        speed = np.maximum(0.0, v_end - d * B.m * decay / self.DIP_RECOVERY_S)
+        P = B.P
+        var = (
+            P[:, 0, 0]
+            + 2 * tau * P[:, 0, 1]
+            + tau * tau * P[:, 1, 1]
+            + tau**2 * (P[:, 0, 2] + tau * P[:, 1, 2] + 0.25 * tau * tau * P[:, 2, 2])
+        )
+        return s, speed, np.sqrt(np.maximum(var, 0.0))
 
-        Constant speed h.v, minus the distance each ridge's dip costs (h.d, recovering
-        over DIP_RECOVERY_S); the last entry is the end of the coasting past the skin.
-        """
-        if h.crossings is not None:
-            return h.crossings
-        pos = self._pos[h.direction]
-        tau = self.DIP_RECOVERY_S
-        v, d = h.v, h.d
-        t0, s0, m = h.t, h.s, h.m
-        out = []
-        for k in range(h.ridge + 1, self.count + 1):
-            target = float(pos[k]) if k < self.count else float(pos[-1]) + self._coast
-            dist = max(target - s0, 0.0)
-            dt = (dist + d * m) / v
-            for _ in range(3):  # fixed point: the part of the dip recovered by then
-                dt = (dist + d * m * (1.0 - math.exp(-dt / tau))) / v
-            t0 += dt
-            m = 1.0 + m * math.exp(-dt / tau)
-            s0 = target
-            out.append((t0, s0, m))
-        h.crossings = out
-        return out
-
-    def _motion(self, h: _Track, g: float) -> tuple[float, float, float]:
-        """(edge position along the travel, speed, position sigma) predicted at g."""
-        t0, s0, m = h.t, h.s, h.m
-        for tk, sk, mk in self._crossings(h)[:-1]:
-            if tk > g:
-                break
-            t0, s0, m = tk, sk, mk
-        dt = max(0.0, g - t0)
-        decay = math.exp(-dt / self.DIP_RECOVERY_S)
-        s = s0 + h.v * dt - h.d * m * (1.0 - decay)
-        speed = max(0.0, h.v - h.d * m * decay / self.DIP_RECOVERY_S)
-        span = max(0.0, g - h.t)
-        var = h.p00 + 2 * span * h.p01 + span * span * h.p11
-        return s, speed, math.sqrt(max(var, 0.0))
-
-    def _schedule(self, h: _Track) -> list[tuple[float, float, bool, int]]:
-        """Silence: [(from time, score adjustment, stopped, next ridge not reached)], in order."""
-        if h.schedule is not None:
-            return h.schedule
-        sched: list[tuple[float, float, bool, int]] = [(-math.inf, 0.0, False, h.ridge + 1)]
-        if h.n >= 2:
-            pd = self._p_detect[h.direction]
-            miss = 0.0
-            latency = self._latency(h.v)
-            for k, (tk, _, _) in enumerate(self._crossings(h), start=h.ridge + 1):
-                dt = tk - h.t
-                span = math.sqrt(max(h.p00 + 2 * dt * h.p01 + dt * dt * h.p11, 0.0)) / h.v
-                due = tk + 3.0 * span + self.LATE_REL * dt + latency
-                p_miss = 1.0 - pd[k] if k < self.count else 0.0
-                miss = miss + math.log(p_miss) if p_miss > 0 else -math.inf
-                if miss >= self.LOG_STOP:
-                    sched.append((due, miss, False, k + 1))
-                    continue
-                sched.append((due, self.LOG_STOP, True, k))
-                break
-        h.schedule = sched
-        return sched
-
-    @staticmethod
-    def _state_at(sched: list[tuple[float, float, bool, int]], g: float) -> tuple[float, bool, int]:
-        state = sched[0]
-        for entry in sched:
-            if g >= entry[0]:
-                state = entry
-            else:
-                break
-        return state[1], state[2], state[3]
+    def _schedule(self, B: _Bank):
+        """Silence of slipping tracks with a speed: per track and ridge ahead (time due,
+        score adjustment from then, stopped from then, next ridge not reached from then)."""
+        if B._sched is not None:
+            return B._sched
+        N, J = len(B), self.SCHEDULE + 1
+        due = np.full((N, J), np.inf)
+        adj = np.zeros((N, J))
+        stopped = np.zeros((N, J), bool)
+        limit = np.zeros((N, J), np.int64)
+        active = np.isnan(B.stop) & (B.run >= 2)
+        di = (1 - B.dirn) // 2
+        limit[:, 0] = np.minimum(B.ridge + 1, self.count)
+        if active.any():
+            s0, v, a, d = B.X[:, 0], np.maximum(B.X[:, 1], V_MIN_MM_S), B.X[:, 2], B.X[:, 3]
+            P = B.P
+            miss = np.zeros(N)
+            done = ~active
+            tau = np.zeros(N)
+            for j in range(self.SCHEDULE):
+                k = B.ridge + 1 + j
+                kk = np.minimum(k, self.count)  # the coast end is index count
+                target = np.where(kk < self.count, self._pos[di, kk], self._coast_end(di, v))
+                dist = np.maximum(target - s0, 1e-3)
+                a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
+                root = np.sqrt(np.maximum(v * v + 2.0 * a_p * dist, 1e-9))
+                tau = 2.0 * dist / (v + root)
+                for _ in range(2):  # the part of the dip recovered by then
+                    eff = dist + d * B.m * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
+                    root = np.sqrt(np.maximum(v * v + 2.0 * a_p * eff, 1e-9))
+                    tau = 2.0 * eff / (v + root)
+                v_k = np.maximum(v + a_p * tau, 0.2 * v)
+                var = (
+                    P[:, 0, 0]
+                    + 2 * tau * P[:, 0, 1]
+                    + tau * tau * P[:, 1, 1]
+                    + tau**2 * (P[:, 0, 2] + tau * P[:, 1, 2] + 0.25 * tau * tau * P[:, 2, 2])
+                )
+                span = np.sqrt(np.maximum(var, 0.0)) / v_k
+                latency = np.clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
+                t_due = B.t + tau + 3.0 * span + self.LATE_REL * tau + latency
+                miss = miss + self._log_miss[di, kk]
+                go_on = miss >= self.LOG_STOP
+                now = ~done
+                due[now, j + 1] = t_due[now]
+                adj[now, j + 1] = np.where(go_on, miss, self.LOG_STOP)[now]
+                stopped[now, j + 1] = ~go_on[now]
+                limit[now, j + 1] = np.where(go_on, kk + 1, kk)[now]
+                done = done | ~go_on | (k >= self.count)
+                if done.all():
+                    break
+        due[:, 0] = -np.inf
+        B._sched = (due, adj, stopped, limit)
+        return B._sched
 
     # ------------------------------------------------------------------ reporting
     def _report(self, g: float) -> SlipEstimate:
         force = self._force
-        if not self._tracks:
+        if not len(self._tracks):
             return SlipEstimate(g, False, None, None, force, 1.0)
         # the posterior changes only when a contact or verdict arrives or silence lasts;
         # the agreement (confidence) is refreshed every REFRESH_S
         if self._cache is None or g >= self._cache[0]:
             self._cache = self._posterior(g)
-        _, chosen, p_slip, agree, direction_odds = self._cache
+        _, chosen, p_slip, agree, odds = self._cache
         if chosen is None:
             return SlipEstimate(g, False, None, None, force, min(1.0, max(0.0, 1.0 - p_slip)))
-        _, h, stopped, _, limit, _ = chosen
-        if not stopped and (
-            h.n < self.DIRECTION_CONTACTS or direction_odds < self.LOG_DIRECTION_ODDS
-        ):
+        h, stopped, limit = chosen
+        n, run = h.n, h.run
+        if not stopped and run == 1:  # restarted: where is known, the speed is not yet
+            known = n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
+            conf = min(1.0, max(0.0, p_slip))
+            x = self._on_skin(self._x1(h, h.s)) if known else None
+            return SlipEstimate(g, True, None, x, force, conf)
+        if not stopped and (n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS):
             # a slip, but its direction is not told yet (two contacts fit any alignment
             # either way; a third may fit both): say so rather than guess a sign
             return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)))
         s, speed, sigma = self._where(h, g, stopped, limit)
-        # a posterior from few contacts is fragile (timing outliers, model errors)
-        maturity = 1.0 - math.exp(-(h.n - 1) / self.CONF_CONTACTS)
-        conf = agree * maturity / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
-        x = float(self._x(h, s))
-        conf = min(1.0, max(0.0, float(conf)))
+        maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
+        direction = 1.0 / (1.0 + math.exp(-odds))  # P(this way)
+        conf = agree * maturity * direction / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
+        if not stopped:  # told at the last contact: since then the slip may have turned
+            conf *= math.exp(-max(0.0, g - h.t) * self.TURN_PER_S)
+        x = self._x1(h, s)  # slipping past an end: extrapolated with the speed (coast)
+        conf = min(1.0, max(0.0, conf))
         if not stopped:
-            return SlipEstimate(g, True, float(h.direction * speed), x, force, conf)
-        return SlipEstimate(g, False, 0.0, x, force, conf)
+            return SlipEstimate(g, True, h.dirn * speed, x, force, conf)
+        return SlipEstimate(g, False, 0.0, self._on_skin(x), force, conf)
 
-    def _x(self, h: _Track, s: float) -> float:
-        return s if h.direction > 0 else self.length - s
+    def _coast_end(self, di, v):
+        """How far a slip at speed v goes past the last ridge before silence alone says it
+        stopped: past the skin no ridge tells, only the level (a stop's step, thesis ch. 4.3)
+        - so at least the longest spacing, and COAST_S at that speed."""
+        return self._pos[di, self.count - 1] + np.maximum(self._coast, self.COAST_S * v)
 
-    def _posterior(self, g: float):
-        """(valid until, chosen entry or None, P(slip), agreement, direction log odds) at g.
+    def _x1(self, h: _One, s: float) -> float:
+        return s if h.dirn > 0 else self.length - s
 
-        entry = [score, track, stopped, evident, next ridge not reached, weight].
-        Agreement: the share of the posterior that puts the edge within AGREE_MM of
-        the chosen track's position (and, slipping, its speed within AGREE_SPEED).
-        Direction log odds: the chosen track's score over the best slipping track's moving
-        the other way (a generalised likelihood ratio: the best stories, not the whole
-        posterior, which many weak clutter stories of either direction dilute).
-        """
-        entries: list[list[Any]] = []  # [score, track, stopped, evident, limit, weight]
-        until = g + self.REFRESH_S
-        best = max(h.score for h in self._tracks)
-        # one-contact tracks only lose to silence: skip those that cannot matter
-        best_long = max([self._null, *(h.score for h in self._tracks if h.n >= 2)])
-        for h in self._tracks:
-            if h.score < best - self.NEGLIGIBLE:
-                continue  # weight below e^-20 whatever its silence and pulses
-            if h.n == 1 and h.score + 2 * self.LOG_PULSE < best_long - self.NEGLIGIBLE:
-                continue
-            sched = self._schedule(h)
-            adj, stopped, limit = self._state_at(sched, g)
-            for entry in sched:
-                if entry[0] > g:
-                    until = min(until, entry[0])
-                    break
-            if h.n == 1:
-                adj = self._log_waiting(h, g)
-            evident, bonus = self._evidence(h)
-            entries.append([h.score + adj + bonus, h, stopped, evident, limit, 0.0])
-        top = max([self._null, *(e[0] for e in entries)])
-        total = math.exp(self._null - top)
-        for e in entries:
-            e[5] = math.exp(e[0] - top)
-            total += e[5]
-        p_slip = 0.0
-        best_way = {1: -math.inf, -1: -math.inf}  # best slipping score per direction
-        best_slip = best_stop = None
-        for e in entries:
-            if not e[3]:
-                continue
-            if not e[2]:
-                p_slip += e[5] / total
-                best_way[e[1].direction] = max(best_way[e[1].direction], e[0])
-                if best_slip is None or e[0] > best_slip[0]:
-                    best_slip = e
-            elif best_stop is None or e[0] > best_stop[0]:
-                best_stop = e
-        if p_slip >= 0.5 and best_slip is not None:
-            chosen = best_slip
-        elif best_stop is not None and best_stop[0] >= self._null:
-            chosen = best_stop
-        else:
-            return (until, None, p_slip, 0.0, -math.inf)
-        _, h, stopped, _, limit, _ = chosen
-        x_ref = self._x(h, self._where(h, g, stopped, limit)[0])
-        agree = 0.0
-        floor = 1e-4 * total
-        for e in entries:
-            _, o, o_stopped, evident, o_limit, w = e
-            if w < floor or not evident or o_stopped != stopped:
-                continue
-            if not stopped and (
-                o.direction != h.direction or abs(o.v - h.v) > self.AGREE_SPEED * h.v
-            ):
-                continue
-            if abs(self._x(o, self._where(o, g, o_stopped, o_limit)[0]) - x_ref) <= self.AGREE_MM:
-                agree += w
-        # the direction: how much better the best story moving this way explains the
-        # contacts than the best one moving the other way (log odds)
-        odds = best_way[h.direction] - best_way[-h.direction]
-        return (until, chosen, p_slip, agree / total, odds)
+    def _on_skin(self, x: float) -> float:
+        """A position held (stopped) is held on the skin: past its ends the edge meets no
+        ridge, so where it stopped there is not observed."""
+        return min(self.length, max(0.0, x))
 
-    def _evidence(self, h: _Track) -> tuple[bool, float]:
-        """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
-
-        Also the score bonus of the pulse verdicts on its recent contacts.
-        """
-        if h.evidence is not None and h.evidence[0] == self._verdicts:
-            return h.evidence[1]
-        pulses = steps = 0
-        for i in h.ids:
-            verdict = self._pulse.get(i)
-            if verdict:
-                pulses += 1
-            elif verdict is False:
-                steps += 1
-        # pulses tell slip from no slip, not one alignment from another (tips and
-        # other extra contacts are pulses too): the first two count
-        bonus = min(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
-        result = ((h.n >= 2 and (pulses > 0 or (h.n >= 4 and steps == 0))), bonus)
-        h.evidence = (self._verdicts, result)
-        return result
-
-    def _where(self, h: _Track, g: float, stopped: bool, limit: int) -> tuple[float, float, float]:
-        """(travelled distance of the edge from the first ridge met, speed, sigma) at g.
-
-        Predicted from the last contact; a stopped slip stopped before the ridge
-        `limit` it never reached.
-        """
-        pos = self._pos[h.direction]
-        s, speed, sigma = self._motion(h, g)
+    def _where(self, h: _One, g: float, stopped: bool, limit: int) -> tuple[float, float, float]:
+        """(travel of the edge from the first ridge met, speed, sigma) of one track at g."""
+        di = (1 - h.dirn) // 2
+        pos = self._pos[di]
+        if h.stop == h.stop:  # stopped at a step: where it was then
+            r = h.ridge
+            gap = float(pos[min(r + 1, self.count)] - pos[r])
+            return h.s, 0.0, max(math.sqrt(max(h.p00, 0.0)), 0.1 * gap)
+        tau = max(0.0, g - h.t)
+        v = h.v
+        v_end = min(max(v + h.a * tau, 0.25 * v), 4.0 * v)
+        decay = math.exp(-tau / self.DIP_RECOVERY_S)
+        s = h.s + 0.5 * (v + v_end) * tau - h.d * h.m * (1.0 - decay)
+        speed = max(0.0, v_end - h.d * h.m * decay / self.DIP_RECOVERY_S)
+        var = (
+            h.p00
+            + 2 * tau * h.p01
+            + tau * tau * h.p11
+            + tau * tau * (h.p02 + tau * h.p12 + 0.25 * tau * tau * h.p22)
+        )
+        sigma = math.sqrt(max(var, 0.0))
+        end = float(pos[limit]) if limit < self.count else float(self._coast_end(di, v))
+        s = min(s, end)
         if stopped:  # somewhere before the ridge it never reached: as likely anywhere
-            end = float(pos[limit]) if limit < self.count else float(pos[-1]) + self._coast
-            s = min(s, end)
-            sigma = max(sigma, (end - float(pos[min(limit, self.count) - 1])) / math.sqrt(12.0))
+            start = float(pos[min(limit, self.count) - 1])
+            sigma = max(sigma, (end - start) / math.sqrt(12.0))
+            speed = 0.0
         if h.ridge == self.count - 1:
-            sigma += 0.2 * max(0.0, s - float(pos[-1]))
+            sigma += 0.2 * max(0.0, s - float(pos[self.count - 1]))
         return s, speed, sigma
 
-    def _latency(self, v: float) -> float:
-        """How late a contact is typically known: the detector needs ~1 mm of travel."""
-        return min(self._max_latency, max(self._min_latency, self.DETECT_MM / v))
+    def _x(self, B: _Bank, s: np.ndarray) -> np.ndarray:
+        return np.where(B.dirn > 0, s, self.length - s)
+
+    def _posterior(self, g: float):
+        """(valid until, chosen (index, stopped, limit) or None, P(slip), agreement,
+        direction log odds) at g.
+
+        Agreement: the share of the posterior that puts the edge within AGREE_MM of
+        the chosen track's position (and, slipping, its speed within AGREE_SPEED).
+        Direction log odds: the posterior mass of the slipping tracks, and the tracks just
+        started (a slip starting or reversing), moving the chosen track's way over that
+        moving the other way.
+        """
+        B = self._tracks
+        until = g + self.REFRESH_S
+        score = B.score
+        best = float(score.max())
+        live = score >= best - self.NEGLIGIBLE
+        # silence
+        due, adj_t, stop_t, limit_t = self._schedule(B)
+        blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
+        j = (due <= g - blind[:, None]).sum(axis=1) - 1
+        rows = np.arange(len(B))
+        adj = adj_t[rows, j]
+        stopped = stop_t[rows, j] | ~np.isnan(B.stop)
+        limit = limit_t[rows, j]
+        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)] + blind
+        upcoming = np.where(j + 1 < due.shape[1], upcoming, np.inf)
+        nxt = upcoming[live & (upcoming > g)]
+        if len(nxt):
+            until = min(until, float(nxt.min()))
+        waiting = np.isnan(B.stop) & (B.run == 1)
+        if waiting.any():
+            w = np.flatnonzero(waiting & live)
+            adj[w] = self._log_waiting(B.take(w), g, blind[w])
+        evident, bonus = self._evidence(B)
+        total = np.where(live, score + adj + bonus, -np.inf)
+        top = max(self._null, float(total.max()))
+        weight = np.exp(total - top)
+        mass = math.exp(self._null - top) + float(weight.sum())
+        slipping = evident & ~stopped
+        p_slip = float(weight[slipping].sum()) / mass
+        chosen = None
+        if p_slip >= 0.5 and slipping.any():
+            i = int(np.flatnonzero(slipping)[np.argmax(total[slipping])])
+            chosen = (i, False, int(limit[i]))
+        else:
+            cand = evident & stopped
+            if cand.any():
+                i = int(np.flatnonzero(cand)[np.argmax(total[cand])])
+                if total[i] >= self._null:
+                    chosen = (i, True, int(limit[i]))
+        if chosen is None:
+            return (until, None, p_slip, 0.0, -math.inf)
+        i, is_stopped, lim = chosen
+        one = _One(B, i)
+        odds = math.inf
+        if not is_stopped:
+            # the direction: the posterior mass of moving each way - slipping tracks, and
+            # tracks just started at a contact (a slip starting or reversing)
+            moving = (slipping | (waiting & live)) & np.isfinite(total)
+            way = B.dirn == B.dirn[i]
+            this = float(weight[moving & way].sum())
+            other = float(weight[moving & ~way].sum())
+            odds = math.log(this / other) if other > 0 else math.inf
+            if one.run == 1 or one.n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS:
+                return (until, (one, is_stopped, lim), p_slip, 0.0, odds)  # no estimate
+        # agreement
+        x_ref = self._x1(one, self._where(one, g, is_stopped, lim)[0])
+        use = live & evident & (stopped == is_stopped) & (weight >= 1e-4 * mass)
+        if not is_stopped:
+            use &= (B.dirn == B.dirn[i]) & (
+                np.abs(B.X[:, 1] - B.X[i, 1]) <= self.AGREE_SPEED * B.X[i, 1]
+            )
+        idx = np.flatnonzero(use)
+        agree = 0.0
+        if len(idx):
+            Bu = B.take(idx)
+            s, _, _ = self._kinematics(Bu, g)
+            # held where the ridge not reached is, or where they stopped
+            di = (1 - Bu.dirn) // 2
+            ahead = np.minimum(limit[idx], self.count)
+            end = np.where(
+                ahead < self.count, self._pos[di, ahead], self._coast_end(di, Bu.X[:, 1])
+            )
+            s = np.where(np.isnan(Bu.stop), np.minimum(s, end), Bu.X[:, 0])
+            xs = self._x(Bu, s)
+            agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
+        return (until, (one, is_stopped, lim), p_slip, agree, odds)
+
+    def _blind(self, t: np.ndarray, g: float) -> np.ndarray:
+        """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there)."""
+        out = np.zeros(len(t))
+        for r0, r1 in self.detector.blind:
+            if r1 <= float(t.min(initial=g)) or r0 >= g:
+                continue
+            out += np.clip(np.minimum(g, r1) - np.maximum(t, r0), 0.0, None)
+        return out
+
+    def _evidence(self, B: _Bank) -> tuple[np.ndarray, np.ndarray]:
+        """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
+        And the score bonus of the pulse verdicts on its recent contacts."""
+        ids = B.ids
+        slot = ids % RING
+        known = (self._ring_id[slot] == ids) & (ids >= 0)
+        verdict = np.where(known, self._ring[slot], UNKNOWN)
+        pulses = (verdict == PULSE).sum(axis=1)
+        steps = (verdict == STEP).sum(axis=1)
+        bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
+        evident = (B.n >= 2) & ((pulses > 0) | ((B.n >= 4) & (steps == 0)))
+        return evident, bonus
+
+    def _log_waiting(self, B: _Bank, g: float, blind: np.ndarray) -> np.ndarray:
+        """Log P(no contact detected yet) for tracks whose speed is unknown (one contact, or
+        restarted), g - t after their contact (less the time on the rail): every ridge
+        ahead not yet reached under the speed prior, or reached and missed."""
+        elapsed = g - B.t - blind - self._max_latency
+        out = np.zeros(len(B))
+        pos = elapsed > 0
+        if not pos.any():
+            return out
+        di = (1 - B.dirn) // 2
+        r = np.minimum(B.ridge, self.count - 1)
+        logd = self._ahead_log[di, r]  # (N, R + 1): the ridges ahead, the coast end
+        missed = self._ahead_missed[di, r]
+        shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
+        nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
+        nr = np.where(np.isfinite(logd), nr, 1.0)
+        # P(reached ridge j but not j+1) weighted by P(all missed up to j)
+        prev = np.concatenate([np.zeros((len(B), 1)), nr[:, :-1]], axis=1)
+        m_before = np.concatenate([np.ones((len(B), 1)), missed[:, :-1]], axis=1)
+        total = (m_before * (nr - prev)).sum(axis=1)  # past the coast end: stopped
+        out = np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)
+        return out
