@@ -28,7 +28,6 @@ import asyncio
 import contextlib
 import logging
 import random
-import select
 import socket
 import ssl
 import threading
@@ -66,6 +65,7 @@ STILL_DOWN_S = 30.0  # while the broker stays away, a reminder this often
 POLL_S = 0.001  # looking for the next snapshot once it is due
 WATCH_S = 2.0  # a session checks its acknowledgements this often (CONNECT_TIMEOUT_S)
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
+PUBACK_TYPE = 0x40  # MQTT 3.1.1 fixed header of a PUBACK (remaining length 2: the ID)
 
 RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) still goes at once
 Log = Callable[[str], None]
@@ -156,9 +156,6 @@ class MqttLink:
         self._progress_at = 0.0  # when the broker last took one (or the window was empty)
         self._inner: paho.Client | None = None  # while a session runs
         self._client: aiomqtt.Client | None = None
-        self._steady = False  # set up, not stopping: reads may wait for the pump (poll)
-        self._polled_reads = False  # the socket is read by `poll`, not when readable
-        self._readable = select.poll()  # the socket, while reads are polled
         self._batching = False  # a window is being handed to paho: _flush writes it
         self._register_write: Callable[..., None] | None = None  # aiomqtt's own
         self._reconnect = ""  # why the protocol asked for a new MQTT session
@@ -173,55 +170,7 @@ class MqttLink:
 
     def stop(self) -> None:
         self.stopping.set()
-        self._steady = False
-        self._reads_polled(False)  # the pump stops: acknowledgements must still be heard
         self._wake.set()
-
-    def poll(self) -> None:
-        """The pump's tick: read what the broker sent since the last (PUBACKs, commands).
-        In steady state the socket is not watched for reading: the acknowledgements of a
-        tick's messages arrive just after it and would wake the loop once more per tick;
-        read with the next tick instead (50 ms later at most, commands included). A backlog
-        to replay (a window waiting for its acknowledgements) reads as they arrive."""
-        if self._polled_reads:
-            # paho's read path is Python all the way to the EAGAIN: ask the kernel first
-            sock = self._inner.socket() if self._inner is not None else None
-            pending = getattr(sock, "pending", None)  # TLS: bytes decoded, not yet read
-            if self._readable.poll(0) or (pending is not None and pending() > 0):
-                self._read_now()
-        elif self._steady and not self.outbox and self._inner is not None:
-            self._reads_polled(True)
-
-    def _read_now(self) -> None:
-        inner, client = self._inner, self._client
-        if inner is None or client is None:
-            return
-        try:
-            inner.loop_read()
-            sock = inner.socket()  # TLS may hold decoded bytes the socket will not signal
-            while sock is not None and getattr(sock, "pending", lambda: 0)() > 0:
-                inner.loop_read()
-                sock = inner.socket()
-        except Exception as exc:  # a broken connection, as aiomqtt handles it
-            if not client._disconnected.done():
-                client._disconnected.set_exception(exc)
-
-    def _reads_polled(self, polled: bool) -> None:
-        inner = self._inner
-        sock = inner.socket() if inner is not None else None
-        if sock is None:
-            self._polled_reads = False
-            return
-        if polled == self._polled_reads:
-            return
-        loop = asyncio.get_running_loop()
-        if polled:
-            loop.remove_reader(sock.fileno())
-            self._readable = select.poll()
-            self._readable.register(sock.fileno(), select.POLLIN)
-        else:
-            loop.add_reader(sock.fileno(), self._read_now)
-        self._polled_reads = polled
 
     async def run(self) -> None:
         """Connect until stopped; the first failure ends it (a start-up error)."""
@@ -352,11 +301,8 @@ class MqttLink:
             if not self.first.done():  # start() returns (and snapshots flow) once births are out
                 self.first.set_result(None)
             receiver = asyncio.create_task(self._receive(client))
-            self._steady = not self.stopping.is_set()
             try:
                 await self._watch(receiver)
-                self._steady = False
-                self._reads_polled(False)
                 if self.stopping.is_set() or self._reconnect:
                     self._publish_now(self.protocol.goodbye(now_ms()))
                     await self._settled(FLUSH_S)
@@ -364,8 +310,6 @@ class MqttLink:
                 receiver.cancel()
                 await asyncio.gather(receiver, return_exceptions=True)
         finally:
-            self._steady = False
-            self._reads_polled(False)
             self._inner = self._client = None
             if self._inflight:  # not taken by the broker: first in line for the next session
                 self.outbox.requeue(list(self._inflight.values()))
@@ -454,21 +398,44 @@ class MqttLink:
         inner.on_socket_register_write = on_socket_register_write
         self._buffer_reads(inner)
 
-    @staticmethod
-    def _buffer_reads(inner: paho.Client) -> None:
+    def _buffer_reads(self, inner: paho.Client) -> None:
         """paho reads a packet a few bytes per system call (type, length, rest: three for a
         PUBACK); read what the socket has in one and hand it out from memory. Whatever is
         left in memory when paho's read loop stops is read at once, not when the socket
-        next becomes readable (it may not)."""
+        next becomes readable (it may not). PUBACKs (MQTT 3.1.1: 40 02 and the message ID)
+        are taken here, at a packet boundary, as paho's own handler would (the message
+        leaves paho's in-flight table, its info says published, the window moves on),
+        without the reason-code and properties objects paho builds for each."""
         sock_recv, loop_read = inner._sock_recv, inner.loop_read
         pending = bytearray()
 
+        def acknowledgements() -> None:
+            while len(pending) >= 4 and pending[0] == PUBACK_TYPE and pending[1] == 2:
+                mid = pending[2] << 8 | pending[3]
+                del pending[:4]
+                inner._last_bytes_received = time.monotonic()  # paho's keep-alive clock
+                with inner._out_message_mutex:
+                    message = inner._out_messages.pop(mid, None)
+                    if message is None:
+                        continue
+                    message.info._set_as_published()
+                    if message.qos > 0:
+                        inner._inflight_messages -= 1
+                        if inner._max_inflight_messages > 0:
+                            inner._update_inflight()  # paho sends what it queued, if any
+                self._taken(mid)
+
         def buffered_recv(size: int) -> bytes:
-            if not pending:
-                data = sock_recv(1 << 16)
-                if not data:
-                    return data  # the broker closed the connection
-                pending.extend(data)
+            while True:
+                if not pending:
+                    data = sock_recv(1 << 16)  # BlockingIOError: nothing (paho: EAGAIN)
+                    if not data:
+                        return data  # the broker closed the connection
+                    pending.extend(data)
+                if size == 1 and inner._in_packet["command"] == 0:  # a packet's first byte
+                    acknowledgements()
+                if pending:
+                    break
             out = bytes(pending[:size])
             del pending[:size]
             return out
@@ -502,8 +469,6 @@ class MqttLink:
         room = WINDOW - len(self._inflight)
         if room > 0 and self.outbox:
             self._publish_now(self.outbox.take(room))
-        if self.outbox:  # a backlog: its acknowledgements are read as they come
-            self._reads_polled(False)
 
     def _publish_now(self, messages: list[Message]) -> None:
         """Hand messages to paho in order and write them at once; what paho refuses (the
@@ -626,8 +591,6 @@ class Pump:
 
     def tick(self) -> None:
         publisher = self.publisher
-        for link in publisher.links:
-            link.poll()
         now = time.monotonic()
         if publisher._look(now):
             self.seen_at = now
