@@ -129,6 +129,8 @@ class _Watch:
     detrended: np.ndarray = field(default_factory=lambda: np.zeros(0))  # ... trend taken out
     fell: bool = False  # a sharp rise that fell back like a pulse before the hold
     next_k: int = 0  # next level sample to examine
+    top: float = 0.0  # told a step: the level it stepped to (trend out), watched for a fall
+    fell_at: int = -1  # ... the sample where it fell back by drop_fraction (-1: not yet)
 
 
 def _hinge_gain(width: int) -> float:
@@ -169,6 +171,7 @@ class ContactDetector:
         step_hold_s: float = 0.1,
         step_window_s: float = 0.02,
         step_threshold: float = 6.0,
+        revise_s: float = 0.35,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -225,6 +228,10 @@ class ContactDetector:
         self._next_id = 0
         self._recent: deque[float] = deque(maxlen=16)  # times of the contacts emitted
         self._watches: list[_Watch] = []
+        # steps told at the hold, watched on: a ridge pulse on a slow (hysteretic) skin may
+        # stay up past the hold and fall back later - then the verdict is revised to a pulse
+        self._stepped: list[_Watch] = []
+        self.revise = max(self.step_hold + 1, round(revise_s * self.fs_hz))
         self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
         self.trend_n = max(1, round(trend_s * self.fs_hz))
 
@@ -641,8 +648,55 @@ class ContactDetector:
                 still.append(watch)
             else:
                 checks.append(done)
+                if done.pulse is False and done.emit_index < watch.index + self.revise:
+                    watch.top = float(np.max(watch.detrended)) if len(watch.detrended) else 0.0
+                    watch.next_k = max(watch.next_k, done.emit_index - self.level_half + 1)
+                    self._stepped.append(watch)
         self._watches = still
+        kept = []
+        for watch in self._stepped:
+            revised = self._revise(watch)
+            if revised is not None:
+                checks.append(revised)
+            elif self._revising(watch):
+                kept.append(watch)
+        self._stepped = kept
         return checks
+
+    def _revise(self, watch: _Watch) -> PulseCheck | None:
+        """A step told at the hold that falls back (trend and earlier tail out) by
+        drop_fraction of the level it stepped to within `revise_s` of the onset, with
+        another contact within that time, was a slow pulse: the verdict revised
+        (pulse=True), told when both are known. A stop's step stays, and a stopped object
+        makes no contacts."""
+        h = self.level_half
+        limit = watch.index + self.revise
+        if watch.fell_at < 0:
+            end = min(limit, self._level_start + len(self._level) - 1 - h)
+            if end >= watch.next_k and watch.top > 0.0:
+                i0 = watch.next_k + h - self._level_start
+                level = self._level[i0 : i0 + end - watch.next_k + 1]
+                k = np.arange(watch.next_k, end + 1)
+                credit = self._tail_credit(watch, k)
+                d = level - watch.base + credit - watch.trend * (k - watch.index + 2 * h + 1)
+                watch.next_k = end + 1
+                fell = np.flatnonzero(watch.top - d >= self.drop_fraction * watch.top)
+                if len(fell):
+                    watch.fell_at = int(k[fell[0]])
+        if watch.fell_at >= 0:
+            later = [e for n, e in self._onsets if watch.index + 2 < n <= limit]
+            if later:
+                watch.next_k = limit + self.lag + 1  # done
+                return PulseCheck(watch.id, max(watch.fell_at + h, min(later)), True)
+        return None
+
+    def _revising(self, watch: _Watch) -> bool:
+        """Still watched: the fall not yet looked for to the end, or a contact within the
+        window not yet decided."""
+        limit = watch.index + self.revise
+        if watch.fell_at < 0:
+            return watch.next_k <= limit
+        return watch.next_k <= limit + self.lag and self._n <= limit + self.lag
 
     def _advance(self, watch: _Watch, small: bool = False) -> PulseCheck | None:
         """Examine the level from watch.next_k on; a verdict, or None while undecided.
@@ -834,7 +888,8 @@ class ContactDetector:
             self._x = self._x[cut:]
             self._t_start += cut
         oldest_watch = min(
-            [w.next_k for w in self._watches] + [w.next_k for w, _ in self._probes], default=None
+            [w.next_k for w in self._watches + self._stepped] + [w.next_k for w, _ in self._probes],
+            default=None,
         )
         lv_keep = keep
         if oldest_watch is not None:

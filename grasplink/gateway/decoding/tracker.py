@@ -374,6 +374,12 @@ class TrackerDecoder(Decoder):
         self._ring_id[slot] = check.id
         self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[check.pulse]
         self._cache = None
+        if check.pulse is True and check.id in self._steps:  # a step revised: a slow pulse
+            del self._steps[check.id]
+            for at, c in enumerate(self._contacts):
+                if c.id == check.id:
+                    self._replay(at, [])
+                    break
         if check.pulse is False:
             self._steps[check.id] = check.trend_on
             while len(self._steps) > 64:
