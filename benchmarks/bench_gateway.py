@@ -92,6 +92,7 @@ MAX_CPU_PERCENT = 100.0  # a memory run stops when one set needs more than a cor
 # A skin stream resyncs when a packet arrives > 30 ms off its grid (the gateway or the
 # node ran that late): the decoder sees a jump in time. Keeping up allows one a minute.
 MAX_RESYNCS_PER_SET_MIN = 1.0
+LATE_S = 0.030  # the stream's resync threshold: 4 packet periods of 7.5 ms
 LINK_BUFFER_BYTES = 1 << 24  # real-time capacity links: tens of thousands of frames
 SO_SNDBUFFORCE = getattr(socket, "SO_SNDBUFFORCE", 32)  # Linux
 SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
@@ -152,6 +153,7 @@ class MeteredGateway(Gateway):
         self.tpdo_parts: list[dict[str, int]] = []
         self.stamp_bus: PairBus | None = None
         self.stamped_us: list[float] = []
+        self.late_tpdos = 0
         self._stamp = 0.0
         self._pending = 0
 
@@ -178,6 +180,8 @@ class MeteredGateway(Gateway):
         if frame.can_id != SKIN_TPDO1:
             return self._metered(lambda: super(MeteredGateway, self).receive(frame, t_us))
         _PARTS.clear()
+        if self.stamp_bus is not None and time.time() - self.stamp_bus.last_stamp > LATE_S:
+            self.late_tpdos += 1  # this gateway took it up > 30 ms after the node sent it
         wall0, cpu0 = time.perf_counter_ns(), time.thread_time_ns()
         out = super().receive(frame, t_us)
         cpu = time.thread_time_ns() - cpu0
@@ -813,6 +817,7 @@ def _realtime_capacity(sets: int, seconds: float, *, together: bool, multi: bool
         packets0 = [st.stats.packets for st in streams if st]
         lost0 = [st.stats.lost_packets for st in streams if st]
         resyncs0 = [st.stats.resyncs for st in streams if st]
+        late0 = sum(g.late_tpdos for g in gateways)
         boots0 = _boots(gateways)
         t0, own0, child0 = time.monotonic(), os.times(), proc_cpu_s(child.pid)
         load0 = os.getloadavg()[0]
@@ -838,6 +843,7 @@ def _realtime_capacity(sets: int, seconds: float, *, together: bool, multi: bool
             "skin_rate_share": min(packets) / wall / (400 / 3),
             "lost_packets": sum(lost),
             "resyncs": sum(resyncs),
+            "late_tpdos": sum(g.late_tpdos for g in gateways) - late0,
             "resyncs_per_set_min": sum(resyncs) / sets / (wall / 60),
             "boots": _boots(gateways) - boots0,
             "tracks": max(len(getattr(g.decoder, "_tracks", ())) for g in gateways),
@@ -1177,7 +1183,8 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
     wall = [x for run in loops for x in run["tpdo_wall_us"]]
     cpu = [x for run in loops for x in run["tpdo_cpu_us"]]
     cpu_p99, wall_p99, bus_p99 = percentile(cpu, 99), percentile(wall, 99), percentile(bus, 99)
-    handoff_us = percentile(bus, 50) - percentile(wall, 50)
+    own = [x for run in loops for x in run["own_us"]]
+    handoff_us = percentile(bus, 50) - percentile(own, 50)
     runner_us = statistics.mean(run.get("runner_us_per_frame", float("nan")) for run in loops)
     contact_share = 100 * slow.get("with_contact", 0)
     if cpu_p99 > TARGET_P99_US:
@@ -1221,8 +1228,9 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
         + ("little next to it" if outside_share < decoder_share / 2 else "as much as it")
         + ". Of the gateway's own time (profile above) the skin decoder",
         f"takes {decoder_share:.0f} %; PDO unpacking, RPDO packing, timers and deadlines "
-        f"together {outside_share:.0f} %. Bus latency p50 minus",
-        f"processing p50 (the hand-off from the nodes' thread through the virtual bus) is "
+        f"together {outside_share:.0f} %. Bus latency p50 minus the",
+        "gateway's own p50 for the same TPDOs (the hand-off from the nodes' thread through "
+        "the virtual bus) is "
         f"{fmt(handoff_us)} µs; the runner costs {fmt(runner_us)} µs",
         "of CPU per received frame beyond the gateway's own calls (the thread's CPU minus the "
         "gateway's: waking on",
@@ -1333,6 +1341,23 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
                 "core: starved, not saturated."
                 if any("cpu_percent" in c and not c.get("keeps_up") for c in multi)
                 else ""
+            ),
+            "",
+        ]
+    failed = [c for c in capacity + multi if "error" not in c and not c.get("keeps_up")]
+    if failed and any("late_tpdos" in c for c in failed):
+        first = min(failed, key=lambda c: c["sets"])
+        lines += [
+            f"What ended the search: at {first['sets']} sets ("
+            + ("one thread" if first.get("multi") else "a thread per gateway")
+            + f") the skin streams resynced {first['resyncs']} times in "
+            f"{first['seconds']:.0f} s and the gateways took up {first['late_tpdos']} skin "
+            "TPDOs more than 30 ms after the node sent them"
+            + (
+                ": the gateway process fell behind."
+                if first["late_tpdos"] >= first["resyncs"] / 2
+                else ": mostly the node process sent late (its TPDOs left their grid), not the "
+                "gateways."
             ),
             "",
         ]
@@ -1750,18 +1775,19 @@ def write_doc(figures: dict, path: Path) -> None:
         "| sets | gateway process CPU % | per set % | gateways' own % | node process % "
         "| RPDOs caused "
         "| p50 µs | p99 µs | max µs | processing p99 µs | skin TPDO rate (worst set) "
-        "| stream resyncs | node boots | hypotheses (most) | load avg | |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| stream resyncs | skin TPDOs taken up > 30 ms late | node boots | hypotheses (most) "
+        "| load avg | |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     series = [{"header": "a thread per gateway"}, *capacity]
     series += [{"header": "one thread for every gateway"}, *capacity_multi]
     for c in series:
         if "header" in c:
-            lines.append(f"| *{c['header']}* |" + " |" * 15)
+            lines.append(f"| *{c['header']}* |" + " |" * 16)
             continue
         if "error" in c:
             lines.append(
-                f"| {c['sets']} |" + " |" * 14 + f" never operational: {c['error'][:120]} |"
+                f"| {c['sets']} |" + " |" * 15 + f" never operational: {c['error'][:120]} |"
             )
             continue
         lines.append(
@@ -1769,7 +1795,8 @@ def write_doc(figures: dict, path: Path) -> None:
             f"{c['gateway_percent']:.0f} | "
             f"{c['child_percent']:.0f} | {c['caused']} | {fmt(c['p50_us'])} | {fmt(c['p99_us'])} | "
             f"{fmt(c['max_us'])} | {fmt(c['processing_p99_us'])} | "
-            f"{100 * c['skin_rate_share']:.0f} % | {c.get('resyncs', '-')} | {c['boots']} | "
+            f"{100 * c['skin_rate_share']:.0f} % | {c.get('resyncs', '-')} | "
+            f"{c.get('late_tpdos', '-')} | {c['boots']} | "
             f"{c['tracks']} | "
             f"{c['loadavg']:.1f} | "
             f"{'pass' if c['passes'] else 'keeps up' if c['keeps_up'] else 'fail'} |"
