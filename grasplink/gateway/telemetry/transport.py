@@ -733,6 +733,9 @@ class TelemetryPublisher:
         parts = []
         for link in self.links:
             state = "up" if link.connected else "DOWN"
+            if link.connected and link.protocol.holding:
+                host = getattr(link.protocol, "primary_host_id", None)
+                state = f"up, waiting for primary host {host}"
             part = f"{link.protocol.name} {state} {link.sent} sent"
             if link.outbox:
                 part += f", {len(link.outbox)} buffered"
