@@ -118,3 +118,20 @@ def test_tls_options_are_checked_before_any_connection(tmp_path: Path) -> None:
         tls_context(parse_broker_url("mqtts://h"), junk)
     assert tls_context(parse_broker_url("mqtt://h"), None) is None
     assert tls_context(parse_broker_url("mqtts://h"), None) is not None  # the system's CAs
+
+
+def test_a_primary_host_id_is_one_topic_level_and_needs_a_broker(capsys) -> None:
+    from grasplink import cli
+    from grasplink.gateway.config import parse_config
+
+    settings = parse_config({"telemetry": {"sparkplug_host_id": "scada-1"}}, "gw.toml").telemetry
+    assert settings.sparkplug_host_id == "scada-1" and settings.state_dir.startswith("~")
+    with pytest.raises(ConfigError, match=r"telemetry\.sparkplug_host_id"):
+        parse_config({"telemetry": {"sparkplug_host_id": "a/b"}}, "gw.toml")
+    with pytest.raises(ConfigError, match=r"telemetry\.state_dir"):
+        parse_config({"telemetry": {"state_dir": " "}}, "gw.toml")
+    assert cli.main(["gateway", "--sparkplug-host-id", "scada"]) == 1
+    assert "--sparkplug-host-id needs --mqtt URL" in capsys.readouterr().err
+    command = ["gateway", "--mqtt", "mqtt://127.0.0.1:1", "--sparkplug-host-id", "a#b"]
+    assert cli.main(command) == 1
+    assert "--sparkplug-host-id 'a#b'" in capsys.readouterr().err
