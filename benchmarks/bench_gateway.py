@@ -1344,15 +1344,15 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
             ),
             "",
         ]
-    failed = [c for c in capacity + multi if "error" not in c and not c.get("keeps_up")]
-    if failed and any("late_tpdos" in c for c in failed):
+    for how, steps in (("a thread per gateway", capacity), ("one thread", multi)):
+        failed = [c for c in steps if "error" not in c and not c.get("keeps_up")]
+        if not failed or "late_tpdos" not in failed[0]:
+            continue
         first = min(failed, key=lambda c: c["sets"])
         lines += [
-            f"What ended the search: at {first['sets']} sets ("
-            + ("one thread" if first.get("multi") else "a thread per gateway")
-            + f") the skin streams resynced {first['resyncs']} times in "
-            f"{first['seconds']:.0f} s and the gateways took up {first['late_tpdos']} skin "
-            "TPDOs more than 30 ms after the node sent them"
+            f"What ended the search with {how}: at {first['sets']} sets the skin streams "
+            f"resynced {first['resyncs']} times in {first['seconds']:.0f} s and the gateways took "
+            f"up {first['late_tpdos']} skin TPDOs more than 30 ms after the node sent them"
             + (
                 ": the gateway process fell behind."
                 if first["late_tpdos"] >= first["resyncs"] / 2
@@ -1529,7 +1529,8 @@ def write_doc(figures: dict, path: Path) -> None:
         "| prosthesis sets one gateway process serves on one core in real time | "
         f"≥ {TARGET_SETS} | "
         f"{largest} within the latency target; {keeping_up} keeping up (CPU < 1 core, skin "
-        f"TPDOs at ≥ 95 % of their rate): a thread per gateway {up_t}, one thread for all "
+        f"TPDOs at ≥ 95 % of their rate, streams intact): a thread per gateway {up_t}, one "
+        "thread for all "
         f"{up_m}; the gateway's CPU per set in virtual time {per_set:.1f} % of a core in the "
         f"first minute ({sets_per_core(per_set)} by CPU alone), {mem['cpu_last']:.1f} % after "
         f"{mem['minutes']:g} min | {verdict(largest >= TARGET_SETS)} |",
@@ -1538,7 +1539,7 @@ def write_doc(figures: dict, path: Path) -> None:
         f"MiB/min over the second half (flat: within ±{FLAT_MIB_PER_MIN} MiB/min){stopped} | "
         f"{verdict(flat)} |",
         "",
-        "Misses are diagnosed [below](#diagnosis), with what should change in the gateway.",
+        "Misses are diagnosed [below](#diagnosis), with what is left to change and where.",
         "",
         "![CPU and memory over time, capacity, onset delays](gateway.png)",
         "",
