@@ -66,6 +66,20 @@ POLL_S = 0.001  # looking for the next snapshot once it is due
 WATCH_S = 2.0  # a session checks its acknowledgements this often (CONNECT_TIMEOUT_S)
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
 PUBACK_TYPE = 0x40  # MQTT 3.1.1 fixed header of a PUBACK (remaining length 2: the ID)
+# what the fast write and read paths use of paho's client (paho-mqtt 2.1/2.2, with aiomqtt 2.5.1)
+PAHO_INTERNALS = (
+    "_out_packet",
+    "_out_messages",
+    "_out_message_mutex",
+    "_inflight_messages",
+    "_max_inflight_messages",
+    "_update_inflight",
+    "_in_packet",
+    "_sock_recv",
+    "_last_msg_out",
+    "_last_bytes_received",
+    "_call_socket_unregister_write",
+)
 
 RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) still goes at once
 Log = Callable[[str], None]
@@ -157,6 +171,7 @@ class MqttLink:
         self._inner: paho.Client | None = None  # while a session runs
         self._client: aiomqtt.Client | None = None
         self._batching = False  # a window is being handed to paho: _flush writes it
+        self._fast = False  # paho's internals are the ones the fast paths know
         self._register_write: Callable[..., None] | None = None  # aiomqtt's own
         self._reconnect = ""  # why the protocol asked for a new MQTT session
         self._refill: asyncio.Handle | None = None
@@ -396,7 +411,10 @@ class MqttLink:
 
         self._register_write = register_write
         inner.on_socket_register_write = on_socket_register_write
-        self._buffer_reads(inner)
+        # The fast paths below use paho 2.x internals; another paho keeps its own paths.
+        self._fast = all(hasattr(inner, name) for name in PAHO_INTERNALS)
+        if self._fast:
+            self._buffer_reads(inner)
 
     def _buffer_reads(self, inner: paho.Client) -> None:
         """paho reads a packet a few bytes per system call (type, length, rest: three for a
@@ -503,6 +521,9 @@ class MqttLink:
         socket cannot take yet is left to the event loop (the writer)."""
         sock = inner.socket()
         if sock is None or not inner.want_write():
+            return
+        if not self._fast:
+            self._paho_write(inner, sock)
             return
         queue = inner._out_packet  # paho 2.x: dicts of command, mid, qos, pos, to_process, …
         if not all(packet["command"] & 0xF0 == paho.PUBLISH for packet in queue):
