@@ -142,22 +142,13 @@ class NodeRunner:
 
     def start(self, timeout: float = 5.0) -> NodeRunner:
         """Start the thread; returns once every device's boot-up has been sent."""
-        if self._thread is not None:
-            raise RuntimeError("NodeRunner can only be started once")
-        self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
-        self._thread.start()
-        self._booted.wait(timeout)
+        self._thread = _start_thread(self, self._run, timeout)
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the thread and wait for it (idempotent)."""
-        self._stop.set()
-        thread = self._thread
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(timeout)
-            if thread.is_alive():
-                logger.warning("%s did not stop within %.1f s", self._name, timeout)
-                return
+        if not _stop_thread(self, timeout):
+            return
         owned, self._owned = self._owned, None
         if owned is not None:
             owned.shutdown()
@@ -561,22 +552,13 @@ class MultiRunner:
 
     def start(self, timeout: float = 5.0) -> MultiRunner:
         """Start the thread; returns once every runner's devices have booted."""
-        if self._thread is not None:
-            raise RuntimeError("MultiRunner can only be started once")
-        self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
-        self._thread.start()
-        self._booted.wait(timeout)
+        self._thread = _start_thread(self, self._run, timeout)
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the thread, then every runner (idempotent)."""
-        self._stop.set()
-        thread = self._thread
-        if thread is not None and thread is not threading.current_thread():
-            thread.join(timeout)
-            if thread.is_alive():
-                logger.warning("%s did not stop within %.1f s", self._name, timeout)
-                return
+        if not _stop_thread(self, timeout):
+            return
         for runner in self.runners:
             runner.stop()
         self._selector.close()
@@ -669,3 +651,27 @@ class MultiRunner:
 def _node_id(device: object) -> int:
     node_id = getattr(device, "node_id", -1)
     return node_id if isinstance(node_id, int) else -1
+
+
+def _start_thread(
+    owner: NodeRunner | MultiRunner, run: Callable[[], None], timeout: float
+) -> threading.Thread:
+    """The owner's one thread, started; returns once the owner says it has booted."""
+    if owner._thread is not None:
+        raise RuntimeError(f"{type(owner).__name__} can only be started once")
+    thread = threading.Thread(target=run, name=owner._name, daemon=True)
+    thread.start()
+    owner._booted.wait(timeout)
+    return thread
+
+
+def _stop_thread(owner: NodeRunner | MultiRunner, timeout: float) -> bool:
+    """Ask the owner's thread to stop and wait for it; False if it is still running."""
+    owner._stop.set()
+    thread = owner._thread
+    if thread is not None and thread is not threading.current_thread():
+        thread.join(timeout)
+        if thread.is_alive():
+            logger.warning("%s did not stop within %.1f s", owner._name, timeout)
+            return False
+    return True
