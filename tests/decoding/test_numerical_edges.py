@@ -558,9 +558,11 @@ def test_an_hour_held_still_keeps_memory_and_state_bounded(name):
     decoders(
         **both(
             "a held object over alpha0.1 with thesis-like noise (0.02 N white, 0.05 N drift) "
-            "is flagged slipping for 4.2 s from 228.6 s and 0.5 s from 598.5 s (473 of 60000 "
-            "updates); over an hour 30239 of 360000 updates in 33 episodes, the longest 119 s, "
-            "with speeds such as -18 mm/s at -33 mm (off the skin)"
+            "is flagged slipping for 4.2 s from 228.6 s (423 of 60000 updates, no speed): two "
+            "noise contacts 1.05 s apart, both falling back like pulses, which a fresh decoder "
+            "started at 200 s or 225 s flags too; over an hour 6528 of 360000 updates in 14 "
+            "episodes, the longest 23 s (tracks retire after 58.5 s of silence: chains of noise "
+            "contacts 40-50 s apart still revive them)"
         )
     ),
 )

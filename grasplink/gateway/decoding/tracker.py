@@ -285,6 +285,10 @@ class TrackerDecoder(Decoder):
             self._log_pd = np.log(self._pd)
             self._log_miss = np.log1p(-self._pd)
         self._log_miss[:, -1] = -np.inf  # past the coast: stopped
+        # the slowest slip a track takes crosses the whole skin and the coast past it in this
+        # time: a track silent for longer has stopped or left the skin, so a later contact is
+        # no part of its slip (a new one starts there); such tracks retire (`_retire`)
+        self._stale_s = (self.length + self._coast) / V_MIN_MM_S
         # per (direction, start ridge): log distance to each ridge ahead, and P(all missed
         # from the next one up to it); rows padded with +inf / 1
         # and the coast end after them: past it the slip has stopped (missed = 0 there)
@@ -420,7 +424,7 @@ class TrackerDecoder(Decoder):
 
     def _step(self, ev: ContactEvent) -> None:
         tc = ev.t_s
-        B = self._tracks
+        B = self._retire(self._tracks, tc)
         step = ev.id in self._steps
         # a stop ends the rising trend of the level (the object no longer covers more of
         # the sensor): a step after which it went on is seldom one
@@ -474,6 +478,17 @@ class TrackerDecoder(Decoder):
         recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
         held_ids = np.array([c.id for c in self._contacts])
         self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
+
+    def _retire(self, B: _Bank, tc: float) -> _Bank:
+        """B without the tracks whose last contact is longer before tc than the slowest
+        slip takes to cross the skin (`_stale_s`): tc is no part of their slip, and one
+        restarting there would carry minutes-old contacts (their count and pulse verdicts)
+        into a new slip - held still for an hour, noise contacts minutes apart were chained
+        into slips that way."""
+        if not len(B):
+            return B
+        stale = tc - B.t > self._stale_s
+        return B.take(np.flatnonzero(~stale)) if stale.any() else B
 
     def _clutter_rate(self, B: _Bank, tc: float) -> np.ndarray:
         """Spurious contacts per s at tc under each track: detector false alarms, and while
