@@ -61,8 +61,9 @@ telemetry-demo: setup
 	mosquitto_sub -p $$mq -v -t 'grasplink/#' > $$out/json.txt & pids="$$pids $$!"; \
 	mosquitto_sub -p $$mq -t 'spBv1.0/#' -F '%t %l bytes' > $$out/sparkplug.txt & pids="$$pids $$!"; \
 	echo "== mosquitto on 127.0.0.1:$$mq, hub on 127.0.0.1:$$hub; gateway with --mqtt, the loop headline's nodes replayed"; \
+	printf '[telemetry]\nstate_dir = "%s/state"\n' $$out > $$out/gateway.toml; \
 	$(VENV)/bin/grasplink gateway --bus remote:ws://127.0.0.1:$$hub/ --duration 12 \
-	  --mqtt mqtt://127.0.0.1:$$mq --mqtt-id demo & gw=$$!; \
+	  --config $$out/gateway.toml --mqtt mqtt://127.0.0.1:$$mq --mqtt-id demo & gw=$$!; \
 	sleep 2; \
 	$(VENV)/bin/grasplink replay out/loop_headline/can.asc --bus remote:ws://127.0.0.1:$$hub/ --nodes-only; \
 	wait $$gw; sleep 0.5; \
