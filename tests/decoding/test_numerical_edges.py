@@ -11,9 +11,8 @@ edge that stopped is no further than the next ridge it never reached, and
 no estimate runs past where the edge ever was; a time step of zero or less
 is a timing error the input guard drops and counts, never decoded.
 
-Runs on the default decoder and, while it exists, on the unregistered
-successor `tracker2` (skipped once its module is gone). Where a decoder is
-wrong, the test stays and is marked xfail(strict) with the defect.
+Runs on the default decoder. Where it is wrong, the test stays and is marked
+xfail(strict) with the defect and its figures.
 """
 
 from __future__ import annotations
@@ -36,7 +35,6 @@ from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 from tests.decoding.test_baselines import assert_clean
 
-SUCCESSOR = "tracker2"  # unregistered; another helper folds it into `tracker`
 ALPHA = LAYOUTS_MM["alpha0.1"]  # the thesis' best skin: 19, 12, 5, 8, 4, 3, 33 mm
 # "exactly on a ridge": 10 µm past it. The simulator counts a contact once the edge is at or
 # past the ridge; rounding, or a turn between two samples, could leave it a hair short.
@@ -46,16 +44,13 @@ MOVING_MM_S = ns.V_MOVING_MM_S
 
 
 def build(name: str, layout_mm: Sequence[float], fs_hz: float) -> Decoder:
-    """A decoder at its default settings: the registry's, or the successor's module."""
-    if name == SUCCESSOR:
-        module = pytest.importorskip(f"grasplink.gateway.decoding.{SUCCESSOR}")
-        return module.TrackerDecoder(layout_mm, fs_hz)
+    """A decoder at its default settings."""
     return make_decoder(name, layout_mm, fs_hz)
 
 
 def decoders(*values: object, **xfail: str) -> list:
-    """The default decoder and the successor (with further parameter `values`), each
-    xfail(strict) with its defect if given."""
+    """The default decoder (with further parameter `values`), xfail(strict) with its
+    defect if given."""
     return [
         pytest.param(
             name,
@@ -63,13 +58,13 @@ def decoders(*values: object, **xfail: str) -> list:
             id="-".join(map(str, (name, *values))),
             marks=[pytest.mark.xfail(strict=True, reason=xfail[name])] if name in xfail else [],
         )
-        for name in (DEFAULT_DECODER, SUCCESSOR)
+        for name in (DEFAULT_DECODER,)
     ]
 
 
-def both(reason: str) -> dict[str, str]:
-    """The same defect on both: the successor is being folded into `tracker` as it is."""
-    return {DEFAULT_DECODER: reason, SUCCESSOR: reason}
+def known_defect(reason: str) -> dict[str, str]:
+    """The default decoder's defect, for `decoders(**known_defect(...))`."""
+    return {DEFAULT_DECODER: reason}
 
 
 def feed(decoder: Decoder, t: np.ndarray, x: np.ndarray, chunk: int | None = 3) -> list:
@@ -218,7 +213,7 @@ STOP_HELD_TOO_FAR = (
 )
 
 
-@pytest.mark.parametrize("name", decoders(**both(STOP_HELD_TOO_FAR)))
+@pytest.mark.parametrize("name", decoders(**known_defect(STOP_HELD_TOO_FAR)))
 def test_a_stop_exactly_on_a_ridge_is_placed_no_further_than_the_next_ridge(name):
     """The contact at the stop places the edge on that ridge; at the very worst a decoder
     that missed it may hold the edge up to the next ridge, which it never reached."""
@@ -235,7 +230,7 @@ def test_a_stop_exactly_on_a_ridge_is_placed_no_further_than_the_next_ridge(name
 
 
 # -- two contacts within one sample -----------------------------------------------------------
-TWO_IN_ONE_SAMPLE_80_HZ = both(
+TWO_IN_ONE_SAMPLE_80_HZ = known_defect(
     "80 Hz, 60 mm/s forward, the contacts at 31 and 31.5 mm 8 ms apart between two samples: "
     "after the contact at 51 mm it reports the object stopped (slip false, speed 0) for 0.5 s "
     "while it crosses the 33 mm spacing at 60 mm/s; slip flagged in 47 % of the updates from "
@@ -291,7 +286,7 @@ def test_a_reversal_exactly_at_a_contact_gives_finite_estimates(name):
 @pytest.mark.parametrize(
     "name",
     decoders(
-        **both(
+        **known_defect(
             "turning exactly on the last ridge of alpha0.1 (84 mm, 41 -> -39 mm/s) it reports "
             "up to 77 mm/s (1.9x the fastest truth) and the edge at 103 mm forward, 19 mm past "
             "anywhere it was (up to 59 mm/s, edge at -8.3 mm in reverse); turning on ridge 5 "
@@ -319,7 +314,7 @@ def test_a_reversal_exactly_at_a_contact_keeps_the_edge_where_it_was_at_a_physic
 @pytest.mark.parametrize(
     "name",
     decoders(
-        **both(
+        **known_defect(
             "turning exactly on the last ridge of alpha0.1 in reverse (41 -> -39 mm/s), all 6 "
             "confident (>= 0.8) directions are wrong; on ridge 5 forward 4 of 13 (issue 9: "
             ">= 95 % right)"
@@ -429,7 +424,7 @@ def railed_slip(speed_mm_s: float, reverse: bool) -> synth.SkinRecording:
 @pytest.mark.parametrize(
     "name",
     decoders(
-        **both(
+        **known_defect(
             "squeezed onto the rail for 0.6 s during a 14 mm/s slip (forward, alpha0.1), it "
             "reports the object stopped after the rail (speed 0 in 130 of the 281 updates to "
             "the end of the slip, none in the rest, slip flagged in 54 %)"
@@ -556,7 +551,7 @@ def test_an_hour_held_still_keeps_memory_and_state_bounded(name):
 @pytest.mark.parametrize(
     "name",
     decoders(
-        **both(
+        **known_defect(
             "a held object over alpha0.1 with thesis-like noise (0.02 N white, 0.05 N drift) "
             "is flagged slipping for 4.2 s from 228.6 s (423 of 60000 updates, no speed): two "
             "noise contacts 1.05 s apart, both falling back like pulses, which a fresh decoder "
