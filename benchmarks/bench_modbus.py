@@ -26,7 +26,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 import uuid
 from pathlib import Path
@@ -34,6 +33,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_telemetry import thread_cpu_s  # noqa: E402  (per-thread CPU, the same clocks)
 
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402
@@ -50,22 +51,6 @@ SCENE_NO_SURFACES = "slipping scene, no Modbus, no telemetry"
 SCENE_BOTH = "slipping scene, input map at 10 Hz, telemetry on"
 REALISTIC = "input map at 10 Hz"
 TARGET_SHARE = 10.0  # % of the gateway's CPU for telemetry + Modbus together
-
-
-def thread_cpu_s() -> dict[str, float]:
-    """CPU seconds per live thread, by name (kernel per-thread clocks); a name's first word
-    ("grasplink-gateway virtual:…" is the gateway's thread)."""
-    out: dict[str, float] = {}
-    for thread in threading.enumerate():
-        if thread.ident is None:
-            continue
-        name = thread.name.split(" ", 1)[0]
-        try:
-            clock = time.pthread_getcpuclockid(thread.ident)
-            out[name] = out.get(name, 0.0) + time.clock_gettime(clock)
-        except (OSError, ProcessLookupError):
-            pass
-    return out
 
 
 def run_gateway(
