@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -797,6 +798,12 @@ class ContactDetector:
                 return False
             return float(np.min(levels[rise:])) >= (1.0 - self.drop_fraction) * top
 
+        return self._stayed_up(watch, stays)
+
+    def _stayed_up(self, watch: _Watch, stays: Callable[[np.ndarray], bool]) -> bool:
+        """The step verdict both step tests share, given how each judges a level that
+        `stays` up: no pulse train follows, and it stays up with the rising trend taken
+        out, or on the level itself once that is flat by the hold."""
         if self._train_follows(watch):
             return False
         if stays(watch.detrended):
@@ -867,17 +874,7 @@ class ContactDetector:
                 return False  # went on rising: a ramp
             return end >= keep * first and low >= (keep - 0.1) * first - 2.0 * watch.noise
 
-        if self._train_follows(watch):
-            return False
-        if stays(watch.detrended):
-            return True
-        if watch.trend <= 0.0 or not stays(watch.levels):
-            return False
-        tail = watch.levels[len(watch.levels) // 2 :]  # flat by the hold?
-        m = len(tail)
-        x = np.arange(m) - (m - 1) / 2.0
-        change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
-        return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
+        return self._stayed_up(watch, stays)
 
     # ------------------------------------------------------------------ memory
     def _trim(self) -> None:
