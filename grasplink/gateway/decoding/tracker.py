@@ -635,12 +635,7 @@ class TrackerDecoder(Decoder):
         both motion models (with their priors), or in `models` (a restart of the speed, within
         MAX_SPEED_JUMP of `v_ref`)."""
         tc = ev.t_s
-        dt = tc - B.t
-        di = (1 - B.dirn) // 2
-        k = B.ridge + 1 + skip
-        target = self._pos[di, k]
-        decay = np.exp(-dt / self.DIP_RECOVERY_S)
-        lag = B.m * (1.0 - decay) + skip
+        dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
         d = B.X[:, 3]
         v = (target - B.X[:, 0] + lag * d) / dt
         good = (v >= V_MIN_MM_S) & (v <= V_MAX_MM_S)
@@ -721,17 +716,24 @@ class TrackerDecoder(Decoder):
         )
         return _Bank.concat([steady, changing])
 
+    def _toward_ridge(
+        self, B: _Bank, tc: float, skip: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per track, for a contact at tc on the ridge after the next `skip`: time since
+        its last contact, that ridge (index, position along the track's direction), how
+        far the last ridge's speed dip has recovered, and the travel the dip lags by."""
+        dt = tc - B.t
+        di = (1 - B.dirn) // 2
+        k = B.ridge + 1 + skip
+        decay = np.exp(-dt / self.DIP_RECOVERY_S)
+        return dt, k, self._pos[di, k], decay, B.m * (1.0 - decay) + skip
+
     def _kalman(self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray) -> _Bank:
         """Predict B to the contact and update with ridge k (robust: far off, the speed
         starts again from the last two contacts)."""
         tc = ev.t_s
         N = len(B)
-        dt = tc - B.t
-        di = (1 - B.dirn) // 2
-        k = B.ridge + 1 + skip
-        target = self._pos[di, k]
-        decay = np.exp(-dt / self.DIP_RECOVERY_S)
-        lag = B.m * (1.0 - decay) + skip
+        dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
         X, P = B.X, B.P
         v = np.maximum(X[:, 1], V_MIN_MM_S)
         F = np.zeros((N, 4, 4))
