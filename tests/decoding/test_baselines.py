@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from grasplink.evaluation.decoders import make_decoder, reference_slips
-from grasplink.gateway.decoding.base import SlipEstimate
+from grasplink.gateway.decoding.base import Decoder, SlipEstimate
 from grasplink.gateway.decoding.registry import DECODERS, available
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
@@ -32,6 +32,11 @@ def run(
     decoder = make_decoder(name, rec.layout_mm, rec.fs_hz, **settings)
     t = rec.t_s if t is None else t
     x = rec.force_n if x is None else x
+    return feed(decoder, t, x, chunk)
+
+
+def feed(decoder: Decoder, t: np.ndarray, x: np.ndarray, chunk: int | None) -> list:
+    """Feed in chunks of `chunk` samples (3: one skin TPDO1; None: one piece)."""
     if chunk is None:
         return decoder.feed(t, x)
     out: list[SlipEstimate] = []

@@ -33,7 +33,7 @@ from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstim
 from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
-from tests.decoding.test_baselines import assert_clean
+from tests.decoding.test_baselines import assert_clean, feed
 
 ALPHA = LAYOUTS_MM["alpha0.1"]  # the thesis' best skin: 19, 12, 5, 8, 4, 3, 33 mm
 # "exactly on a ridge": 10 µm past it. The simulator counts a contact once the edge is at or
@@ -65,16 +65,6 @@ def decoders(*values: object, **xfail: str) -> list:
 def known_defect(reason: str) -> dict[str, str]:
     """The default decoder's defect, for `decoders(**known_defect(...))`."""
     return {DEFAULT_DECODER: reason}
-
-
-def feed(decoder: Decoder, t: np.ndarray, x: np.ndarray, chunk: int | None = 3) -> list:
-    """Feed in chunks of `chunk` samples (3: one skin TPDO1; None: one piece)."""
-    if chunk is None:
-        return decoder.feed(t, x)
-    out: list[SlipEstimate] = []
-    for start in range(0, len(t), chunk):
-        out += decoder.feed(t[start : start + chunk], x[start : start + chunk])
-    return out
 
 
 def decode(name: str, rec: synth.SkinRecording, chunk: int | None = 3) -> list[SlipEstimate]:
