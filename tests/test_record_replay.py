@@ -332,6 +332,19 @@ def _skin_log(source: Path, out: Path) -> int:
     return written
 
 
+def start_recording(path: Path, url: str) -> subprocess.Popen:
+    """`grasplink record PATH --bus URL` in a child process, once it says it records."""
+    recorder = subprocess.Popen(
+        [*GRASPLINK, "record", str(path), "--bus", url],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
+    assert recorder.stdout is not None and "recording" in recorder.stdout.readline()
+    return recorder
+
+
 @pytest.mark.slow
 def test_grasplink_replay_in_real_time_decodes_as_live_through_the_hub(loop_run, tmp_path):
     """`grasplink replay` onto the hub, a `LiveGateway` listening, `grasplink record` too.
@@ -354,14 +367,7 @@ def test_grasplink_replay_in_real_time_decodes_as_live_through_the_hub(loop_run,
     for attempt in range(3):
         with CanHub("127.0.0.1", 0) as hub:
             recorded = tmp_path / f"hub{attempt}.blf"
-            recorder = subprocess.Popen(
-                [*GRASPLINK, "record", str(recorded), "--bus", hub.url],
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-                cwd=ROOT,
-            )
-            assert "recording" in recorder.stdout.readline()
+            recorder = start_recording(recorded, hub.url)
             with LiveGateway(hub.url, config) as live_gateway:
                 gateway = live_gateway.gateway
                 updates = _listen(gateway)
@@ -410,14 +416,7 @@ def test_grasplink_replay_in_real_time_decodes_as_live_through_the_hub(loop_run,
 def test_record_closes_a_complete_file_on_ctrl_c_or_sigterm(tmp_path, suffix, sig, exit_code):
     path = tmp_path / f"bus{suffix}"
     with CanHub("127.0.0.1", 0) as hub:
-        recorder = subprocess.Popen(
-            [*GRASPLINK, "record", str(path), "--bus", hub.url],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            cwd=ROOT,
-        )
-        assert "recording" in recorder.stdout.readline()
+        recorder = start_recording(path, hub.url)
         sender = open_bus(hub.url)
         try:
             for i in range(50):
