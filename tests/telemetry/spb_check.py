@@ -300,7 +300,7 @@ class Runner:
         self.args = args
         self.host = Host()
         self.lock = threading.RLock()  # paho's thread feeds, the main thread commands
-        self.first_nbirth: float | None = None
+        self.first_nbirth: float | None = None  # ... and the DBIRTHs of --devices
         self.last_ndeath: float | None = None
         self.client = paho.Client(client_id=f"spb-check-{time.monotonic_ns()}", clean_session=True)
         self.client.on_connect = lambda c, u, f, rc: c.subscribe(f"{NAMESPACE}/#", qos=1)
@@ -316,8 +316,10 @@ class Runner:
         with self.lock:
             lines = self.host.feed(message.topic, message.payload, message.qos, message.retain)
             kind = message.topic.split("/")[2] if message.topic.count("/") >= 2 else ""
-            if kind == "NBIRTH" and self.first_nbirth is None:
-                self.first_nbirth = time.monotonic()
+            if kind in ("NBIRTH", "DBIRTH") and self.first_nbirth is None:
+                born = max((len(e.dbirths) for e in self.host.edges.values()), default=0)
+                if born >= self.args.devices:
+                    self.first_nbirth = time.monotonic()
             elif kind == "NDEATH":
                 self.last_ndeath = time.monotonic()
             for line in lines:
@@ -382,6 +384,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout-s", type=float, default=60.0)
     parser.add_argument("--until-ndeath", action="store_true", help="stop after an NDEATH")
     parser.add_argument("--grace-s", type=float, default=0.5, help="listen on after the NDEATH")
+    parser.add_argument("--devices", type=int, default=0, help="commands wait for N DBIRTHs")
     parser.add_argument("--rebirth-after-s", type=float, help="NCMD Node Control/Rebirth")
     parser.add_argument("--restart-device", help="DCMD Node Control/Restart to this device")
     parser.add_argument("--restart-after-s", type=float, default=2.0)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import signal
 import subprocess
 import sys
 import threading
@@ -65,6 +66,14 @@ class Checker:
         assert "Traceback" not in (stderr := self.process.stderr.read()), stderr  # type: ignore[union-attr]
         return code
 
+    def wait_for(self, predicate, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline and self.process.poll() is None:
+            if predicate(list(self.lines)):
+                return True
+            time.sleep(0.05)
+        return predicate(list(self.lines))
+
     def of(self, event: str) -> list[dict[str, Any]]:
         return [line for line in self.lines if line["event"] == event]
 
@@ -76,33 +85,55 @@ def gateway_config(folder: Path) -> Path:
     return config
 
 
+def belt_born_again(lines: list[dict[str, Any]]) -> bool:
+    kinds = [(line.get("type"), line.get("device")) for line in lines]
+    return ("DDEATH", "belt") in kinds and ("DBIRTH", "belt") in kinds[
+        kinds.index(("DDEATH", "belt")) :
+    ]
+
+
 def test_pysparkplug_reads_the_gateway_births_data_rebirth_and_death_without_a_violation(
     broker: Mosquitto, tmp_path: Path
 ) -> None:
-    # the host asks for a rebirth (NCMD by alias) 1 s after the first NBIRTH and restarts
-    # the belt node (DCMD) at 2 s; the gateway stops cleanly after 6 s (its NDEATH)
+    # once the four devices are born, the host asks for a rebirth (NCMD by alias) and a
+    # second later restarts the belt node (DCMD); when the belt is born again and data
+    # has flowed a little longer, the gateway is stopped (SIGTERM: a clean stop, NDEATH)
     checker = Checker(
         broker,
-        *("--until-ndeath", "--timeout-s", "60", "--rebirth-after-s", "1"),
+        *("--until-ndeath", "--timeout-s", "90", "--devices", "4", "--rebirth-after-s", "1"),
         *("--restart-device", "belt", "--restart-after-s", "2"),
     )
-    subprocess.run(
-        [
-            *(sys.executable, "-m", "grasplink.cli", "gateway", "--with-nodes"),
-            *("--bus", "virtual:spb-third-party", "--duration", "6"),
-            *("--config", str(gateway_config(tmp_path))),
-            *("--mqtt", broker.url, "--mqtt-id", "third"),
-        ],
-        check=True,
-        capture_output=True,
-        cwd=ROOT,
-        timeout=60,
-    )
+    log = tmp_path / "gateway.log"
+    with log.open("wb") as out:
+        gateway = subprocess.Popen(
+            [
+                *(sys.executable, "-m", "grasplink.cli", "gateway", "--with-nodes"),
+                *("--bus", "virtual:spb-third-party", "--duration", "60"),
+                *("--config", str(gateway_config(tmp_path))),
+                *("--mqtt", broker.url, "--mqtt-id", "third"),
+            ],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            cwd=ROOT,
+        )
+    try:
+        assert checker.wait_for(belt_born_again, timeout_s=45), checker.lines
+        time.sleep(1.0)
+        gateway.send_signal(signal.SIGTERM)
+        code = gateway.wait(20)  # 128 + 15: stopped by SIGTERM, cleanly
+        assert code == 128 + signal.SIGTERM, log.read_text()
+    finally:
+        if gateway.poll() is None:
+            gateway.kill()
+            gateway.wait(5)
     code = checker.finish()
     assert checker.of("violation") == [] and code == 0
     (end,) = checker.of("end")
     assert end["reason"] == "ndeath"
-    messages = [m for m in checker.of("message") if m.get("edge") == "third"]
+    commands = ("NCMD", "DCMD")  # the host's own, read back
+    messages = [
+        m for m in checker.of("message") if m.get("edge") == "third" and m["type"] not in commands
+    ]
     kinds = [m["type"] + (f"/{m['device']}" if m["device"] else "") for m in messages]
     # two births in one MQTT session (the rebirth keeps bdSeq), each followed by all devices
     births = [i for i, m in enumerate(messages) if m["type"] == "NBIRTH"]
@@ -116,7 +147,7 @@ def test_pysparkplug_reads_the_gateway_births_data_rebirth_and_death_without_a_v
     death = kinds.index("DDEATH/belt")
     assert death > births[1] and "DBIRTH/belt" in kinds[death:]
     # seq: 0 at NBIRTH, then +1 (mod 256) on every message of the edge node
-    sequenced = [m for m in messages if m["type"] not in ("NDEATH", "NCMD", "DCMD")]
+    sequenced = [m for m in messages if m["type"] != "NDEATH"]
     for before, after in itertools.pairwise(sequenced):
         expected = 0 if after["type"] == "NBIRTH" else (before["seq"] + 1) % 256
         assert after["seq"] == expected, (before, after)
