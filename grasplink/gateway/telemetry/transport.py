@@ -66,6 +66,7 @@ POLL_S = 0.001  # looking for the next snapshot once it is due
 WATCH_S = 2.0  # a session checks its acknowledgements this often (CONNECT_TIMEOUT_S)
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
 PUBACK_TYPE = 0x40  # MQTT 3.1.1 fixed header of a PUBACK (remaining length 2: the ID)
+TOPIC_CACHE = 256  # encoded topics kept (gateway topics, and replies to commands' names)
 # what the fast write and read paths use of paho's client (paho-mqtt 2.1/2.2, with aiomqtt 2.5.1)
 PAHO_INTERNALS = (
     "_out_packet",
@@ -79,6 +80,9 @@ PAHO_INTERNALS = (
     "_last_msg_out",
     "_last_bytes_received",
     "_call_socket_unregister_write",
+    "_mid_generate",
+    "_sock",
+    "_protocol",
 )
 
 RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) still goes at once
@@ -108,6 +112,31 @@ def _cork(sock: Any, on: bool) -> bool:
     except (AttributeError, OSError):
         return False
     return True
+
+
+class _Written:
+    """The `info` of a packet queued by `MqttLink._queue_packets`: paho marks a written QoS 0
+    packet published through it; nobody waits on it (the link tracks its messages by ID)."""
+
+    __slots__ = ()
+
+    def _set_as_published(self) -> None:
+        pass
+
+
+_WRITTEN = _Written()
+
+
+def _remaining_length(length: int) -> bytes:
+    """MQTT's variable-length integer (1 to 4 bytes, 7 bits each, least significant first)."""
+    if length < 0x80:
+        return bytes((length,))
+    out = bytearray()
+    while True:
+        digit, length = length & 0x7F, length >> 7
+        out.append(digit | 0x80 if length else digit)
+        if not length:
+            return bytes(out)
 
 
 class SnapshotClock:
@@ -176,6 +205,7 @@ class MqttLink:
         self._reconnect = ""  # why the protocol asked for a new MQTT session
         self._refill: asyncio.Handle | None = None
         self._settling = False  # _settled waits for the window to empty
+        self._topics: dict[str, bytes] = {}  # topic -> its UTF-8 with the length in front
 
     def push(self, messages: list[Message]) -> None:
         """Queue messages and, connected, publish at once (on this thread, no task switch)."""
@@ -412,7 +442,10 @@ class MqttLink:
         self._register_write = register_write
         inner.on_socket_register_write = on_socket_register_write
         # The fast paths below use paho 2.x internals; another paho keeps its own paths.
-        self._fast = all(hasattr(inner, name) for name in PAHO_INTERNALS)
+        self._fast = (
+            all(hasattr(inner, name) for name in PAHO_INTERNALS)
+            and inner._protocol != paho.MQTTv5  # the packets built here are MQTT 3.1.1's
+        )
         if self._fast:
             self._buffer_reads(inner)
 
@@ -434,13 +467,12 @@ class MqttLink:
                 inner._last_bytes_received = time.monotonic()  # paho's keep-alive clock
                 with inner._out_message_mutex:
                     message = inner._out_messages.pop(mid, None)
-                    if message is None:
-                        continue
-                    message.info._set_as_published()
-                    if message.qos > 0:
-                        inner._inflight_messages -= 1
-                        if inner._max_inflight_messages > 0:
-                            inner._update_inflight()  # paho sends what it queued, if any
+                    if message is not None:  # published through paho (else: _queue_packets)
+                        message.info._set_as_published()
+                        if message.qos > 0:
+                            inner._inflight_messages -= 1
+                            if inner._max_inflight_messages > 0:
+                                inner._update_inflight()  # paho sends what it queued, if any
                 self._taken(mid)
 
         def buffered_recv(size: int) -> bytes:
@@ -497,6 +529,10 @@ class MqttLink:
             return
         if not self._inflight:
             self._progress_at = time.monotonic()
+        if self._fast:
+            self._queue_packets(inner, messages)
+            self._flush(inner)
+            return
         self._batching = True
         try:
             for index, message in enumerate(messages):
@@ -512,6 +548,54 @@ class MqttLink:
         finally:
             self._batching = False
         self._flush(inner)
+
+    def _queue_packets(self, inner: paho.Client, messages: list[Message]) -> None:
+        """What `paho.Client.publish` does for a message (MQTT 3.1.1: the PUBLISH packet,
+        an ID from paho's own sequence, the packet in paho's write queue), without the
+        message and info objects, the lock, the checks and the log call it makes for each:
+        the link tracks its messages itself (`_inflight`), and PUBACKs are read by
+        `_buffer_reads`. What paho's queue holds is written by `_flush` (or paho)."""
+        if inner._sock is None:  # the connection is gone (paho: MQTT_ERR_NO_CONN)
+            self.outbox.requeue(messages)
+            self._wake.set()  # _watch sees the lost receiver
+            return
+        queue, topics, mid_generate = inner._out_packet, self._topics, inner._mid_generate
+        for message in messages:
+            final = self.protocol.finalize(message)
+            if final is None:
+                continue
+            topic = topics.get(final.topic)
+            if topic is None:
+                if len(topics) >= TOPIC_CACHE:
+                    topics.clear()
+                encoded = final.topic.encode()
+                if not encoded or b"+" in encoded or b"#" in encoded:
+                    raise ValueError(f"invalid topic for a publication: {final.topic!r}")
+                topic = topics[final.topic] = len(encoded).to_bytes(2, "big") + encoded
+            qos, mid = final.qos, mid_generate()
+            length = len(topic) + len(final.payload) + (2 if qos else 0)
+            command = paho.PUBLISH | qos << 1 | bool(final.retain)
+            packet = b"".join(
+                (
+                    bytes((command,)),
+                    _remaining_length(length),
+                    topic,
+                    mid.to_bytes(2, "big") if qos else b"",
+                    final.payload,
+                )
+            )
+            queue.append(
+                {
+                    "command": command,
+                    "mid": mid,
+                    "qos": qos,
+                    "pos": 0,
+                    "to_process": len(packet),
+                    "packet": packet,
+                    "info": _WRITTEN,  # type: ignore[typeddict-item]  # has what paho calls
+                }
+            )
+            self._inflight[mid] = message
 
     def _flush(self, inner: paho.Client) -> None:
         """Write the window paho holds in one system call: one TCP segment, not one per
