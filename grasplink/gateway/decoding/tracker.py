@@ -79,6 +79,25 @@ STEADY, CHANGING = 0, 1
 # pulse verdicts in the ring of recent contacts
 UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
 RING = 256
+# process noise of the Kalman prediction as one scatter per model: flat (4 x 4) index of each
+# entry, and the powers of dt (columns of [1, dt, dt^2, dt^3]) and divisor of its term, in
+# the order _kalman adds them (x * 1.0 and x / 1.0 are exact: the same bits as without)
+_QV_AT, _QV_POW, _QV_DIV = [0, 1, 4, 5], [3, 2, 2, 1], np.array([3.0, 2.0, 2.0, 1.0])
+_QJ_AT = [0, 1, 4, 2, 8, 5, 6, 9, 10]
+_QJ_POW1, _QJ_POW2 = [3, 2, 2, 3, 3, 3, 2, 2, 1], [2, 2, 2, 0, 0, 0, 0, 0, 0]
+_QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
+
+
+def _full(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
+    """np.full without its wrapper: a contact builds dozens of these small arrays."""
+    out: np.ndarray = np.empty(n, dtype)
+    out.fill(value)
+    return out
+
+
+def _nz(mask: np.ndarray) -> np.ndarray:
+    """Indices of a 1-D mask's True entries (np.flatnonzero without its wrappers)."""
+    return mask.nonzero()[0]
 
 
 class _Bank:
@@ -167,6 +186,15 @@ class _Bank:
 
     def replace(self, **fields) -> _Bank:
         out = _Bank(**{k: fields.get(k, getattr(self, k)) for k in self.FIELDS})
+        return out
+
+    def twice(self, first: dict, second: dict) -> _Bank:
+        """concat([self.replace(**first), self.replace(**second)]) in one pass."""
+        out = _Bank.__new__(_Bank)
+        for key in self.FIELDS:
+            own = getattr(self, key)
+            setattr(out, key, np.concatenate((first.get(key, own), second.get(key, own))))
+        out._sched = None
         return out
 
 
@@ -340,6 +368,25 @@ class TrackerDecoder(Decoder):
         self._steps: dict[int, bool | None] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
+        # what every contact's one-contact tracks share (read-only: banks share arrays)
+        dirn = np.repeat(np.array([1, -1]), R)
+        ridge = np.tile(np.arange(R), 2)
+        X = np.zeros((2 * R, 4))
+        X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
+        ones = np.ones(2 * R, np.int64)
+        self._birth = {
+            "P": np.zeros((2 * R, 4, 4)),
+            "X": X,
+            "dirn": dirn,
+            "m": np.ones(2 * R),
+            "model": np.zeros(2 * R, np.int64),
+            "n": ones,
+            "ridge": ridge,
+            "run": ones,
+            "stop": np.full(2 * R, np.nan),
+        }
+        for array in self._birth.values():
+            array.flags.writeable = False
 
     def _detect_probability(self, spacing_before: float) -> float:
         share = min(1.0, max(0.0, (spacing_before - 3.0) / 5.0))
@@ -449,7 +496,7 @@ class TrackerDecoder(Decoder):
             moving = np.isnan(B.stop)
             if step:  # a grip change (slipping or not) or, slipping, a stop here
                 children.append(B.replace(score=B.score + math.log(self.GRIP_STEP_PER_S)))
-                stopping = B.take(np.flatnonzero(moving & (B.n >= 2)))
+                stopping = B.take(_nz(moving & (B.n >= 2)))
                 children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
             else:
                 children.append(B.replace(score=B.score + np.log(rate)))
@@ -466,7 +513,7 @@ class TrackerDecoder(Decoder):
             children += assigned
             if step:  # a stop right at a ridge (the step is that ridge's contact)
                 for c in assigned:
-                    at = c.take(np.flatnonzero(c.n >= 2))
+                    at = c.take(_nz(c.n >= 2))
                     children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
         self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         if probe:
@@ -476,7 +523,7 @@ class TrackerDecoder(Decoder):
             return
         # a new track starting at this contact: a slip starting (the earlier story ends
         # here) or, while one slips, reversing (the other edge leads, anywhere)
-        base = np.full(2, best_before + self.LOG_NEW_TRACK)
+        base = _full(2, best_before + self.LOG_NEW_TRACK)
         if len(B):
             slipping = np.isnan(B.stop) & (B.n >= 2)
             for di, d in enumerate((1, -1)):
@@ -498,12 +545,12 @@ class TrackerDecoder(Decoder):
         if not len(B):
             return B
         stale = tc - B.t > self._stale_s
-        return B.take(np.flatnonzero(~stale)) if stale.any() else B
+        return B.take(_nz(~stale)) if stale.any() else B
 
     def _clutter_rate(self, B: _Bank, tc: float) -> np.ndarray:
         """Spurious contacts per s at tc under each track: detector false alarms, and while
         slipping the tipping front edge's, within TIP_MM of travel after a ridge contact."""
-        rate = np.full(len(B), self.CLUTTER_PER_S)
+        rate = _full(len(B), self.CLUTTER_PER_S)
         moving = np.isnan(B.stop)
         dt = tc - B.t
         v = B.X[:, 1]
@@ -519,28 +566,17 @@ class TrackerDecoder(Decoder):
 
     def _births(self, ev: ContactEvent, base: np.ndarray) -> _Bank:
         """One-contact tracks at every ridge, both ways; `base`: log prior per direction."""
-        R = self.count
-        dirn = np.repeat(np.array([1, -1]), R)
-        ridge = np.tile(np.arange(R), 2)
-        X = np.zeros((2 * R, 4))
-        X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
-        ids = np.full((2 * R, IDS), -1, np.int64)
+        N = 2 * self.count
+        ids = np.empty((N, IDS), np.int64)
+        ids.fill(-1)
         ids[:, -1] = ev.id
         return _Bank(
-            P=np.zeros((2 * R, 4, 4)),
-            X=X,
-            dirn=dirn,
-            first=np.full(2 * R, ev.id, np.int64),
+            first=_full(N, ev.id, np.int64),
             ids=ids,
-            m=np.ones(2 * R),
-            model=np.zeros(2 * R, np.int64),
-            n=np.ones(2 * R, np.int64),
-            ridge=ridge,
-            run=np.ones(2 * R, np.int64),
             score=(base[:, None] + self._log_prior).ravel(),
-            sig=np.full(2 * R, ev.sigma_s),
-            stop=np.full(2 * R, np.nan),
-            t=np.full(2 * R, ev.t_s),
+            sig=_full(N, ev.sigma_s),
+            t=_full(N, ev.t_s),
+            **self._birth,
         )
 
     def _stopped_at(self, B: _Bank, tc: float, log_prior: float | None = None) -> _Bank:
@@ -555,7 +591,7 @@ class TrackerDecoder(Decoder):
         X[:, 0] = np.minimum(s, limit - 0.1)
         X[:, 1] = X[:, 2] = 0.0
         prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
-        return B.replace(X=X, stop=np.full(len(B), tc), score=B.score + prior)
+        return B.replace(X=X, stop=_full(len(B), tc), score=B.score + prior)
 
     def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
         """Children of B that assign contact ev to one of the next ridges (each branch type
@@ -573,9 +609,9 @@ class TrackerDecoder(Decoder):
             if not valid.any():
                 break
             kk = np.minimum(k, R - 1)
-            sel = np.flatnonzero(valid)
+            sel = _nz(valid)
             rows.append(sel)
-            skips.append(np.full(len(sel), skip))
+            skips.append(_full(len(sel), skip, np.int64))
             priors.append((miss + self._log_pd[di, kk])[sel])
             miss = miss + self._log_miss[di, kk]
         if not rows:
@@ -584,11 +620,11 @@ class TrackerDecoder(Decoder):
         run, mov = B.run[row], moving[row]
         out = []
         # speed from this contact and the last (one-contact or restarted tracks)
-        sel = np.flatnonzero(mov & (run == 1))
+        sel = _nz(mov & (run == 1))
         if len(sel):
             out.append(self._start_speed(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
         # the Kalman filter (slipping tracks with a speed)
-        sel = np.flatnonzero(mov & (run >= 2))
+        sel = _nz(mov & (run >= 2))
         if len(sel):
             out.append(self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
             # or the slip stopped unseen and went on: a restart at the next ridge
@@ -597,7 +633,7 @@ class TrackerDecoder(Decoder):
                 at = B.take(row[first])
                 out.append(self._restart(at, ev, at.ridge + 1, prior[first] + self.LOG_RESTART))
         # a stopped track restarting here
-        sel = np.flatnonzero(~mov)
+        sel = _nz(~mov)
         if len(sel):
             at = B.take(row[sel])
             log_rate = math.log(self.RESTART_PER_S)
@@ -624,11 +660,11 @@ class TrackerDecoder(Decoder):
             ridge=k,
             n=B.n + 1,
             run=np.ones(len(B), np.int64),
-            t=np.full(len(B), ev.t_s),
-            sig=np.full(len(B), ev.sigma_s),
+            t=_full(len(B), ev.t_s),
+            sig=_full(len(B), ev.sigma_s),
             m=np.ones(len(B)),
             ids=self._with_contact(B, ev),
-            stop=np.full(len(B), np.nan),
+            stop=_full(len(B), np.nan),
             score=B.score + log_prior,
         )
 
@@ -652,7 +688,7 @@ class TrackerDecoder(Decoder):
         if v_ref is not None:
             good &= (v * self.MAX_SPEED_JUMP >= v_ref) & (v <= self.MAX_SPEED_JUMP * v_ref)
         if not good.all():
-            sel = np.flatnonzero(good)
+            sel = _nz(good)
             B, dt, k, target, decay, lag, d, v = (
                 B.take(sel),
                 dt[sel],
@@ -691,16 +727,19 @@ class TrackerDecoder(Decoder):
         score = B.score + log_prior + self._log_speed_prior(v) - np.log(dt)
         common = dict(
             ridge=k,
-            t=np.full(N, tc),
+            t=_full(N, tc),
             n=B.n + 1,
-            run=np.full(N, 2, np.int64),
-            sig=np.full(N, ev.sigma_s),
+            run=_full(N, 2, np.int64),
+            sig=_full(N, ev.sigma_s),
             m=1.0 + B.m * decay,
             ids=self._with_contact(B, ev),
         )
         # changing: the mean speed over the interval is the speed half an interval ago
         sa = self.ACC_PER_S * v
-        Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
+        if self.DIP_PRIOR_CHANGING_MM == self.DIP_PRIOR_MM:  # the same numbers: built once
+            Pc = P.copy()
+        else:
+            Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
         half = dt / 2.0
         Pc[:, 1, 1] += (half * sa) ** 2
         Pc[:, 1, 2] = Pc[:, 2, 1] = half * sa * sa
@@ -710,21 +749,21 @@ class TrackerDecoder(Decoder):
             return B.replace(
                 X=X, P=np.where(chg[:, None, None], Pc, P), model=models, score=score, **common
             )
-        steady = B.replace(
+        steady = dict(
             X=X,
             P=P,
-            model=np.full(N, STEADY, np.int64),
+            model=_full(N, STEADY, np.int64),
             score=score + math.log(1.0 - math.exp(self.LOG_CHANGING)),
             **common,
         )
-        changing = B.replace(
-            X=X.copy(),
+        changing = dict(
+            X=X,
             P=Pc,
-            model=np.full(N, CHANGING, np.int64),
+            model=_full(N, CHANGING, np.int64),
             score=score + self.LOG_CHANGING,
             **common,
         )
-        return _Bank.concat([steady, changing])
+        return B.twice(steady, changing)
 
     def _toward_ridge(
         self, B: _Bank, tc: float, skip: np.ndarray
@@ -754,24 +793,22 @@ class TrackerDecoder(Decoder):
         Xp = np.einsum("nij,nj->ni", F, X)
         Pp = F @ P @ F.transpose(0, 2, 1)
         # process noise: the speed's random walk; the jerk of the changing model
+        # (qv dt^3 / 3 at (0, 0), qv dt^2 / 2 at (0, 1) and (1, 0), qv dt at (1, 1); then
+        # the jerk's terms: see _QJ_*), each entry's terms added in this order
         qv = self.SPEED_WALK**2 * v**3 / self.SPEED_WALK_MM
         dt2, dt3 = dt * dt, dt * dt * dt
-        Pp[:, 0, 0] += qv * dt3 / 3.0
-        Pp[:, 0, 1] += qv * dt2 / 2.0
-        Pp[:, 1, 0] += qv * dt2 / 2.0
-        Pp[:, 1, 1] += qv * dt
+        powers = np.empty((N, 4))
+        powers[:, 0] = 1.0
+        powers[:, 1] = dt
+        powers[:, 2] = dt2
+        powers[:, 3] = dt3
+        flat = Pp.reshape(N, 16)
+        flat[:, _QV_AT] += qv[:, None] * powers[:, _QV_POW] / _QV_DIV
         chg = B.model == CHANGING
         if chg.any():
             qj = np.where(chg, (self.JERK_PER_S2 * v) ** 2, 0.0)
-            Pp[:, 0, 0] += qj * dt3 * dt2 / 20.0
-            Pp[:, 0, 1] += qj * dt2 * dt2 / 8.0
-            Pp[:, 1, 0] += qj * dt2 * dt2 / 8.0
-            Pp[:, 0, 2] += qj * dt3 / 6.0
-            Pp[:, 2, 0] += qj * dt3 / 6.0
-            Pp[:, 1, 1] += qj * dt3 / 3.0
-            Pp[:, 1, 2] += qj * dt2 / 2.0
-            Pp[:, 2, 1] += qj * dt2 / 2.0
-            Pp[:, 2, 2] += qj * dt
+            flat[:, _QJ_AT] += qj[:, None] * powers[:, _QJ_POW1] * powers[:, _QJ_POW2] / _QJ_DIV
+        Pp = flat.reshape(N, 4, 4)
         var = Pp[:, 0, 0] + self._meas_var(v, ev.sigma_s) + skip * self.SIGMA_POS_MM**2
         resid = target - Xp[:, 0]
         inlier = (
@@ -789,7 +826,7 @@ class TrackerDecoder(Decoder):
         Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
         good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
         out = []
-        sel = np.flatnonzero(good)
+        sel = _nz(good)
         if len(sel):
             Bs = B.take(sel)
             out.append(
@@ -797,16 +834,16 @@ class TrackerDecoder(Decoder):
                     X=Xn[sel],
                     P=Pn[sel],
                     ridge=k[sel],
-                    t=np.full(len(sel), tc),
+                    t=_full(len(sel), tc),
                     n=Bs.n + 1,
                     run=Bs.run + 1,
-                    sig=np.full(len(sel), ev.sigma_s),
+                    sig=_full(len(sel), ev.sigma_s),
                     m=1.0 + Bs.m * decay[sel],
                     ids=self._with_contact(Bs, ev),
                     score=Bs.score + log_prior[sel] + like[sel],
                 )
             )
-        far = np.flatnonzero(inlier < outlier)
+        far = _nz(inlier < outlier)
         if len(far):  # far off: the speed changed; start again from the last two contacts
             Bf = B.take(far)
             vp = np.maximum(Bf.X[:, 1], V_MIN_MM_S)
@@ -871,14 +908,14 @@ class TrackerDecoder(Decoder):
         for r in recent.tolist():
             recent_start |= last == r
         keep &= ~single | recent_start
-        idx = np.flatnonzero(keep & ~single)
+        idx = _nz(keep & ~single)
         # the best max_hypotheses, and the best PER_START of each start contact held
         ok = np.arange(len(idx)) < self.max_hypotheses
         firsts = B.first.take(order).take(idx)
         for f in np.unique(held).tolist():
-            ok[np.flatnonzero(firsts == f)[: self.PER_START]] = True
+            ok[_nz(firsts == f)[: self.PER_START]] = True
         keep[idx[~ok]] = False
-        return B.take(order.take(np.flatnonzero(keep)))
+        return B.take(order.take(_nz(keep)))
 
     # ------------------------------------------------------------------ motion
     def _kinematics(self, B: _Bank, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -1066,7 +1103,7 @@ class TrackerDecoder(Decoder):
             until = min(until, float(nxt.min()))
         waiting = np.isnan(B.stop) & (B.run == 1)
         if waiting.any():
-            w = np.flatnonzero(waiting & live)
+            w = _nz(waiting & live)
             adj[w] = self._log_waiting(B.take(w), g, blind[w])
         evident, bonus = self._evidence(B)
         total = np.where(live, score + adj + bonus, -np.inf)
@@ -1077,12 +1114,12 @@ class TrackerDecoder(Decoder):
         p_slip = float(weight[slipping].sum()) / mass
         chosen = None
         if p_slip >= 0.5 and slipping.any():
-            i = int(np.flatnonzero(slipping)[np.argmax(total[slipping])])
+            i = int(_nz(slipping)[np.argmax(total[slipping])])
             chosen = (i, False, int(limit[i]))
         else:
             cand = evident & stopped
             if cand.any():
-                i = int(np.flatnonzero(cand)[np.argmax(total[cand])])
+                i = int(_nz(cand)[np.argmax(total[cand])])
                 if total[i] >= self._null:
                     chosen = (i, True, int(limit[i]))
         if chosen is None:
@@ -1107,7 +1144,7 @@ class TrackerDecoder(Decoder):
             use &= (B.dirn == B.dirn[i]) & (
                 np.abs(B.X[:, 1] - B.X[i, 1]) <= self.AGREE_SPEED * B.X[i, 1]
             )
-        idx = np.flatnonzero(use)
+        idx = _nz(use)
         agree = 0.0
         if len(idx):
             Bu = B.take(idx)
