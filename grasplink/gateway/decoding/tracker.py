@@ -86,6 +86,7 @@ _QV_AT, _QV_POW, _QV_DIV = [0, 1, 4, 5], [3, 2, 2, 1], np.array([3.0, 2.0, 2.0, 
 _QJ_AT = [0, 1, 4, 2, 8, 5, 6, 9, 10]
 _QJ_POW1, _QJ_POW2 = [3, 2, 2, 3, 3, 3, 2, 2, 1], [2, 2, 2, 0, 0, 0, 0, 0, 0]
 _QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
+_VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
 
 
 def _full(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
@@ -286,6 +287,7 @@ class TrackerDecoder(Decoder):
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
+    MEMO = 8  # contacts whose branches are kept for a replay on the same inputs (`_step`)
 
     def __init__(
         self,
@@ -342,6 +344,12 @@ class TrackerDecoder(Decoder):
                 coast = float(self._pos[di, R] - pos[di, r])
                 self._ahead_log[di, r, R - 1 - r] = math.log(coast)
                 self._ahead_missed[di, r, R - 1 - r] = 0.0
+        # what _log_waiting derives from them, per (direction, start ridge): P(all missed
+        # before each ridge ahead) and which ridges exist
+        self._ahead_before = np.concatenate(
+            [np.ones((2, R, 1)), self._ahead_missed[:, :, :-1]], axis=2
+        )
+        self._ahead_finite = np.isfinite(self._ahead_log)
         self._erf_scale = 1.0 / (self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0))
         self.max_hypotheses = int(max_hypotheses)
         self.detector = detector or ContactDetector(fs_hz)
@@ -366,6 +374,9 @@ class TrackerDecoder(Decoder):
         self._ring = np.zeros(RING, np.int64)
         # contacts told to be steps (replayed as such): id -> did the trend go on after it
         self._steps: dict[int, bool | None] = {}
+        # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
+        self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
+        self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
         # what every contact's one-contact tracks share (read-only: banks share arrays)
@@ -480,6 +491,28 @@ class TrackerDecoder(Decoder):
         self._cache = None
 
     def _step(self, ev: ContactEvent) -> None:
+        """Take contact ev: branch every track (`_branch`), then prune.
+
+        The branches are those of an earlier pass when it ran on the same inputs (the
+        same bank object - banks are immutable -, null score, contact and step verdict):
+        a step told and then revised to a pulse replays the very contacts first taken,
+        and only the pruning can differ (a replay holds one contact fewer)."""
+        key = (ev, self._null, ev.id in self._steps, self._steps.get(ev.id))
+        known = self._memo.get(key)
+        if known is not None and known[0] is self._tracks:
+            self._null, pool = known[1], known[2]
+        else:
+            before = self._tracks
+            pool = self._branch(ev)
+            self._memo[key] = (before, self._null, pool)
+            while len(self._memo) > self.MEMO:
+                del self._memo[next(iter(self._memo))]
+        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
+        held_ids = np.array([c.id for c in self._contacts])
+        self._tracks = self._prune(pool, recent_ids, held_ids)
+
+    def _branch(self, ev: ContactEvent) -> _Bank:
+        """Every track's children for contact ev (updates the null score), unpruned."""
         tc = ev.t_s
         B = self._retire(self._tracks, tc)
         step = ev.id in self._steps
@@ -517,10 +550,7 @@ class TrackerDecoder(Decoder):
                     children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
         self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         if probe:
-            recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
-            held_ids = np.array([c.id for c in self._contacts])
-            self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
-            return
+            return _Bank.concat(children)
         # a new track starting at this contact: a slip starting (the earlier story ends
         # here) or, while one slips, reversing (the other edge leads, anywhere)
         base = _full(2, best_before + self.LOG_NEW_TRACK)
@@ -532,9 +562,7 @@ class TrackerDecoder(Decoder):
                     reverse = float(B.score[way].max()) + self.LOG_REVERSE + math.log(2.0)
                     base[di] = max(base[di], reverse)
         children.append(self._births(ev, base + self._log_strength(ev.z)))
-        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
-        held_ids = np.array([c.id for c in self._contacts])
-        self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
+        return _Bank.concat(children)
 
     def _retire(self, B: _Bank, tc: float) -> _Bank:
         """B without the tracks whose last contact is longer before tc than the slowest
@@ -915,7 +943,17 @@ class TrackerDecoder(Decoder):
         for f in np.unique(held).tolist():
             ok[_nz(firsts == f)[: self.PER_START]] = True
         keep[idx[~ok]] = False
-        return B.take(order.take(_nz(keep)))
+        chosen = order.take(_nz(keep))
+        # the same pool pruned to the same tracks: the same bank object again, so that the
+        # next contact of a replay finds its branches in the memo (`_step`)
+        known = self._pruned.get(id(B))
+        if known is not None and known[0] is B and np.array_equal(known[1], chosen):
+            return known[2]
+        out = B.take(chosen)
+        self._pruned[id(B)] = (B, chosen, out)
+        while len(self._pruned) > self.MEMO:
+            del self._pruned[next(iter(self._pruned))]
+        return out
 
     # ------------------------------------------------------------------ motion
     def _kinematics(self, B: _Bank, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -949,43 +987,51 @@ class TrackerDecoder(Decoder):
         di = (1 - B.dirn) // 2
         limit[:, 0] = np.minimum(B.ridge + 1, self.count)
         if active.any():
+            # every ridge ahead at once (N, SCHEDULE): elementwise the same numbers as one
+            # ridge after the other, in a third of the numpy calls
             s0, v, a, d = B.X[:, 0], np.maximum(B.X[:, 1], V_MIN_MM_S), B.X[:, 2], B.X[:, 3]
             P = B.P
-            miss = np.zeros(N)
-            done = ~active
-            tau = np.zeros(N)
-            for j in range(self.SCHEDULE):
-                k = B.ridge + 1 + j
-                kk = np.minimum(k, self.count)  # the coast end is index count
-                target = np.where(kk < self.count, self._pos[di, kk], self._coast_end(di, v))
-                dist = np.maximum(target - s0, 1e-3)
-                a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
-                root = np.sqrt(np.maximum(v * v + 2.0 * a_p * dist, 1e-9))
-                tau = 2.0 * dist / (v + root)
-                for _ in range(2):  # the part of the dip recovered by then
-                    eff = dist + d * B.m * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
-                    root = np.sqrt(np.maximum(v * v + 2.0 * a_p * eff, 1e-9))
-                    tau = 2.0 * eff / (v + root)
-                v_k = np.maximum(v + a_p * tau, 0.2 * v)
-                var = (
-                    P[:, 0, 0]
-                    + 2 * tau * P[:, 0, 1]
-                    + tau * tau * P[:, 1, 1]
-                    + tau**2 * (P[:, 0, 2] + tau * P[:, 1, 2] + 0.25 * tau * tau * P[:, 2, 2])
-                )
-                span = np.sqrt(np.maximum(var, 0.0)) / v_k
-                latency = np.clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
-                t_due = B.t + tau + 3.0 * span + self.LATE_REL * tau + latency
-                miss = miss + self._log_miss[di, kk]
-                go_on = miss >= self.LOG_STOP
-                now = ~done
-                due[now, j + 1] = t_due[now]
-                adj[now, j + 1] = np.where(go_on, miss, self.LOG_STOP)[now]
-                stopped[now, j + 1] = ~go_on[now]
-                limit[now, j + 1] = np.where(go_on, kk + 1, kk)[now]
-                done = done | ~go_on | (k >= self.count)
-                if done.all():
-                    break
+            p00, p01, p11, p02, p12, p22 = (P[:, i, j, None] for i, j in _VAR_AT)
+            k = B.ridge[:, None] + 1 + np.arange(self.SCHEDULE)
+            kk = np.minimum(k, self.count)  # the coast end is index count
+            di2 = di[:, None]
+            coast = self._coast_end(di, v)[:, None]
+            target = np.where(kk < self.count, self._pos[di2, kk], coast)
+            s0, a, v = s0[:, None], a[:, None], v[:, None]
+            dist = np.maximum(target - s0, 1e-3)
+            a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
+            root = np.sqrt(np.maximum(v * v + 2.0 * a_p * dist, 1e-9))
+            tau = 2.0 * dist / (v + root)
+            dm = (d * B.m)[:, None]
+            for _ in range(2):  # the part of the dip recovered by then
+                eff = dist + dm * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
+                root = np.sqrt(np.maximum(v * v + 2.0 * a_p * eff, 1e-9))
+                tau = 2.0 * eff / (v + root)
+            v_k = np.maximum(v + a_p * tau, 0.2 * v)
+            var = (
+                p00
+                + 2 * tau * p01
+                + tau * tau * p11
+                + tau**2 * (p02 + tau * p12 + 0.25 * tau * tau * p22)
+            )
+            span = np.sqrt(np.maximum(var, 0.0)) / v_k
+            # np.clip's numbers (it is max then min), without its wrapper
+            latency = np.minimum(
+                np.maximum(self.DETECT_MM / v_k, self._min_latency), self._max_latency
+            )
+            t_due = B.t[:, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
+            miss = np.cumsum(self._log_miss[di2, kk], axis=1)  # sequential sums, as before
+            go_on = miss >= self.LOG_STOP
+            # done before each ridge: not active, or stopped / past the end at an earlier one
+            # (such tracks keep the initial values)
+            ended = np.logical_or.accumulate(~go_on | (k >= self.count), axis=1)
+            done = np.empty(ended.shape, bool)
+            done[:, 0] = ~active
+            done[:, 1:] = ended[:, :-1] | ~active[:, None]
+            due[:, 1:] = np.where(done, np.inf, t_due)
+            adj[:, 1:] = np.where(done, 0.0, np.where(go_on, miss, self.LOG_STOP))
+            stopped[:, 1:] = ~(go_on | done)
+            limit[:, 1:] = np.where(done, 0, kk + go_on)
         due[:, 0] = -np.inf
         B._sched = (due, adj, stopped, limit)
         return B._sched
@@ -1194,13 +1240,12 @@ class TrackerDecoder(Decoder):
         di = (1 - B.dirn) // 2
         r = np.minimum(B.ridge, self.count - 1)
         logd = self._ahead_log[di, r]  # (N, R + 1): the ridges ahead, the coast end
-        missed = self._ahead_missed[di, r]
         shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
         nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
-        nr = np.where(np.isfinite(logd), nr, 1.0)
         # P(reached ridge j but not j+1) weighted by P(all missed up to j)
-        prev = np.concatenate([np.zeros((len(B), 1)), nr[:, :-1]], axis=1)
-        m_before = np.concatenate([np.ones((len(B), 1)), missed[:, :-1]], axis=1)
-        total = (m_before * (nr - prev)).sum(axis=1)  # past the coast end: stopped
+        cdf = np.zeros((len(B), nr.shape[1] + 1))
+        cdf[:, 1:] = np.where(self._ahead_finite[di, r], nr, 1.0)
+        step = cdf[:, 1:] - cdf[:, :-1]
+        total = (self._ahead_before[di, r] * step).sum(axis=1)  # past the coast end: stopped
         out = np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)
         return out
