@@ -53,6 +53,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cache
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -134,6 +135,7 @@ class _Watch:
     fell_at: int = -1  # ... the sample where it fell back by drop_fraction (-1: not yet)
 
 
+@cache
 def _hinge_gain(width: int) -> float:
     """Noise of a hinge output per unit of white input noise (two LS slopes sharing a sample)."""
     s = width * (width + 1) * (width + 2) / 12.0  # sum of squared centred offsets
@@ -268,7 +270,7 @@ class ContactDetector:
             for cache in caches + [
                 c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
             ]:
-                for b in [b for b in cache if b < oldest]:
+                for b in list(filter(oldest.__gt__, cache)):  # b < oldest, at C speed
                     del cache[b]
         events = sorted(events + steps, key=lambda e: (e.emit_index, e.id))
         return events, checks + step_checks
@@ -377,13 +379,19 @@ class ContactDetector:
         """
         fine = self.channels[0]
         gain = _hinge_gain(fine.width)
+        noise, censored, floor = fine.block_noise, self._censored, self._floor
 
         def seen(b: int) -> float | None:
-            if b not in fine.block_noise or self._censored.get(b, True):
+            if b not in noise or censored.get(b, True):
                 return None
-            return max(fine.block_noise[b] / gain, self._floor.get(b, 0.0))
+            return max(noise[b] / gain, floor.get(b, 0.0))
 
-        values = [v for b in range(max(0, block - self.noise_blocks), block) if (v := seen(b))]
+        values = []  # seen(b) of each block before, inlined (this runs a few times a block)
+        for b in range(max(0, block - self.noise_blocks), block):
+            if b in noise and not censored.get(b, True):
+                v = max(noise[b] / gain, floor.get(b, 0.0))
+                if v:
+                    values.append(v)
         if values:
             values.sort()
             return values[(len(values) - 1) // 2], len(values)
@@ -413,10 +421,9 @@ class ContactDetector:
         noise = max(sigma, NOISE_FLOOR_N) * _hinge_gain(ch.width)
         if ch is not self.channels[0]:
             history = range(max(0, block - self.history_blocks), block)
+            known_noise, censored = ch.block_noise, self._censored
             own = sorted(
-                ch.block_noise[b]
-                for b in history
-                if b in ch.block_noise and not self._censored.get(b, True)
+                [known_noise[b] for b in history if b in known_noise and not censored.get(b, True)]
             )
             if own:
                 noise = max(noise, own[(len(own) - 1) // 2])
