@@ -208,10 +208,23 @@ class MqttLink:
         self._topics: dict[str, bytes] = {}  # topic -> its UTF-8 with the length in front
 
     def push(self, messages: list[Message]) -> None:
-        """Queue messages and, connected, publish at once (on this thread, no task switch)."""
-        if messages:
-            self.outbox.extend(messages)
-            self._drain()
+        """Queue messages and, connected, publish at once (on this thread, no task switch).
+        With nothing waiting ahead of them and room in the window they go straight out:
+        the outbox is for what must wait (and whatever `_publish_now` cannot send goes
+        back into it)."""
+        if not messages:
+            return
+        if (
+            not self.outbox
+            and self._inner is not None
+            and len(self._inflight) + len(messages) <= WINDOW
+            and not self.protocol.holding
+            and not self._reconnect
+        ):
+            self._publish_now(messages)
+            return
+        self.outbox.extend(messages)
+        self._drain()
 
     def stop(self) -> None:
         self.stopping.set()
