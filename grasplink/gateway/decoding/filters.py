@@ -371,10 +371,10 @@ def lattice_median(values: np.ndarray, floor: float | None = None) -> float:
         return 0.0
     if v[-1] != v[-1]:  # NaN (sorted last): np.median's rules
         m = float(np.median(v))
-    elif n % 2:  # np.median's numbers read off the sorted values (it partitions again)
-        m = float(v[n // 2])
-    else:
-        m = float((v[n // 2 - 1] + v[n // 2]) / 2)
+    else:  # np.median's number off the sorted values (it partitions again): the mean
+        # (np.add.reduce, over the count) of the middle one or two
+        middle = v[(n - 1) // 2 : n // 2 + 1]
+        m = float(np.add.reduce(middle) / len(middle))
     tol = 1e-9 * max(abs(float(v[0])), abs(float(v[-1])))
     lo = int(v.searchsorted(m - tol, side="left"))
     hi = int(v.searchsorted(m + tol, side="right"))

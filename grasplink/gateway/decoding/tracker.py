@@ -96,6 +96,15 @@ def _full(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
     return out
 
 
+def _clip(x: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> np.ndarray:
+    """np.clip's numbers without its wrapper (a dozen microseconds on small arrays). Ties
+    (+0 against -0) as np.clip breaks them: scalar bounds keep x, array bounds give the
+    bound; np.maximum and np.minimum give their second argument on a tie."""
+    if isinstance(low, np.ndarray):
+        return np.minimum(np.maximum(x, low), high)
+    return np.minimum(high, np.maximum(low, x))
+
+
 def _nz(mask: np.ndarray) -> np.ndarray:
     """Indices of a 1-D mask's True entries (np.flatnonzero without its wrappers)."""
     return mask.nonzero()[0]
@@ -849,7 +858,7 @@ class TrackerDecoder(Decoder):
         like = np.log(inlier + outlier)
         K = Pp[:, :, 0] / var[:, None]
         Xn = Xp + K * resid[:, None]
-        Xn[:, 3] = np.clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
+        Xn[:, 3] = _clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
         Pn = Pp - K[:, :, None] * Pp[:, None, 0, :]
         Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
         good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
@@ -938,10 +947,22 @@ class TrackerDecoder(Decoder):
         keep &= ~single | recent_start
         idx = _nz(keep & ~single)
         # the best max_hypotheses, and the best PER_START of each start contact held
-        ok = np.arange(len(idx)) < self.max_hypotheses
-        firsts = B.first.take(order).take(idx)
-        for f in np.unique(held).tolist():
-            ok[_nz(firsts == f)[: self.PER_START]] = True
+        rank = np.arange(len(idx))
+        ok = rank < self.max_hypotheses
+        if len(idx) and len(held):
+            # rank within each start contact: a stable sort by start, counted from each
+            # run's head
+            firsts = B.first.take(order.take(idx))
+            by_start = firsts.argsort(kind="stable")
+            starts = firsts.take(by_start)
+            head = np.empty(len(starts), bool)
+            head[0] = True
+            np.not_equal(starts[1:], starts[:-1], out=head[1:])
+            group_rank = rank - np.maximum.accumulate(np.where(head, rank, 0))
+            held_sorted = np.sort(held)
+            at = np.minimum(held_sorted.searchsorted(starts), len(held_sorted) - 1)
+            quota = (group_rank < self.PER_START) & (held_sorted.take(at) == starts)
+            ok[by_start[quota]] = True
         keep[idx[~ok]] = False
         chosen = order.take(_nz(keep))
         # the same pool pruned to the same tracks: the same bank object again, so that the
@@ -960,7 +981,7 @@ class TrackerDecoder(Decoder):
         """(travel, speed, position sigma) of slipping tracks B extrapolated to g."""
         tau = np.maximum(0.0, g - B.t)
         v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
-        v_end = np.clip(v + a * tau, 0.25 * v, 4.0 * v)
+        v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
         decay = np.exp(-tau / self.DIP_RECOVERY_S)
         s = B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
         speed = np.maximum(0.0, v_end - d * B.m * decay / self.DIP_RECOVERY_S)
@@ -1015,10 +1036,7 @@ class TrackerDecoder(Decoder):
                 + tau**2 * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             )
             span = np.sqrt(np.maximum(var, 0.0)) / v_k
-            # np.clip's numbers (it is max then min), without its wrapper
-            latency = np.minimum(
-                np.maximum(self.DETECT_MM / v_k, self._min_latency), self._max_latency
-            )
+            latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
             t_due = B.t[:, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
             miss = np.cumsum(self._log_miss[di2, kk], axis=1)  # sequential sums, as before
             go_on = miss >= self.LOG_STOP
