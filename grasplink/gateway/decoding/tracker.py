@@ -198,6 +198,14 @@ class _Bank:
         out = _Bank(**{k: fields.get(k, getattr(self, k)) for k in self.FIELDS})
         return out
 
+    def part(self, start: int, stop: int) -> _Bank:
+        """Tracks start..stop (views)."""
+        out = _Bank.__new__(_Bank)
+        for key in self.FIELDS:
+            setattr(out, key, getattr(self, key)[start:stop])
+        out._sched = None
+        return out
+
     def twice(self, first: dict, second: dict) -> _Bank:
         """concat([self.replace(**first), self.replace(**second)]) in one pass."""
         out = _Bank.__new__(_Bank)
@@ -656,14 +664,25 @@ class TrackerDecoder(Decoder):
         row, skip_arr, prior = np.concatenate(rows), np.concatenate(skips), np.concatenate(priors)
         run, mov = B.run[row], moving[row]
         out = []
-        # speed from this contact and the last (one-contact or restarted tracks)
-        sel = _nz(mov & (run == 1))
+        fresh = _nz(mov & (run == 1))  # one-contact or restarted tracks
+        sel = _nz(mov & (run >= 2))  # slipping tracks with a speed
+        # the Kalman filter; far off, the speed starts again from the last two contacts -
+        # in one pass with the tracks whose speed comes from this contact and the last
+        kalman, far, far_prior = _Bank.empty(), sel[:0], prior[:0]
         if len(sel):
-            out.append(self._start_speed(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
-        # the Kalman filter (slipping tracks with a speed)
-        sel = _nz(mov & (run >= 2))
+            kalman, far, far_prior = self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel])
+        again = np.concatenate([fresh, sel.take(far)])
+        started, restarted = self._start_speed(
+            B.take(row.take(again)),
+            ev,
+            skip_arr.take(again),
+            np.concatenate([prior.take(fresh), far_prior]),
+            len(fresh),
+        )
+        if len(fresh):
+            out.append(started)
         if len(sel):
-            out.append(self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
+            out.append(_Bank.concat([kalman, restarted]))
             # or the slip stopped unseen and went on: a restart at the next ridge
             first = sel[skip_arr[sel] == 0]
             if len(first):
@@ -711,21 +730,26 @@ class TrackerDecoder(Decoder):
         ev: ContactEvent,
         skip: np.ndarray,
         log_prior: np.ndarray,
-        models: np.ndarray | None = None,
-        v_ref: np.ndarray | None = None,
-    ) -> _Bank:
-        """Tracks at ridge k whose speed comes from their last contact and this one: each in
-        both motion models (with their priors), or in `models` (a restart of the speed, within
-        MAX_SPEED_JUMP of `v_ref`)."""
+        fresh: int,
+    ) -> tuple[_Bank, _Bank]:
+        """Tracks at ridge k whose speed comes from their last contact and this one: the
+        first `fresh` (one contact, or restarted) each in both motion models (with their
+        priors); the rest (far off their Kalman prediction) in their own model, within
+        MAX_SPEED_JUMP of their speed. Both kinds in one pass (the numbers are per track),
+        returned apart."""
         tc = ev.t_s
         dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
         d = B.X[:, 3]
         v = (target - B.X[:, 0] + lag * d) / dt
         good = (v >= V_MIN_MM_S) & (v <= V_MAX_MM_S)
-        if v_ref is not None:
-            good &= (v * self.MAX_SPEED_JUMP >= v_ref) & (v <= self.MAX_SPEED_JUMP * v_ref)
+        v_ref = np.maximum(B.X[fresh:, 1], V_MIN_MM_S)
+        v_far = v[fresh:]
+        good[fresh:] &= (v_far * self.MAX_SPEED_JUMP >= v_ref) & (
+            v_far <= self.MAX_SPEED_JUMP * v_ref
+        )
         if not good.all():
             sel = _nz(good)
+            fresh = int(np.count_nonzero(good[:fresh]))
             B, dt, k, target, decay, lag, d, v = (
                 B.take(sel),
                 dt[sel],
@@ -737,11 +761,9 @@ class TrackerDecoder(Decoder):
                 v[sel],
             )
             log_prior = log_prior[sel]
-            if models is not None:
-                models = models[sel]
         N = len(B)
         if not N:
-            return B
+            return B, B
         r = self._meas_var(v, ev.sigma_s)
         r_before = self._meas_var(v, B.sig)
 
@@ -781,26 +803,36 @@ class TrackerDecoder(Decoder):
         Pc[:, 1, 1] += (half * sa) ** 2
         Pc[:, 1, 2] = Pc[:, 2, 1] = half * sa * sa
         Pc[:, 2, 2] = sa * sa
-        if models is not None:
-            chg = models == CHANGING
-            return B.replace(
-                X=X, P=np.where(chg[:, None, None], Pc, P), model=models, score=score, **common
+        started = restarted = _Bank.empty()
+        if fresh:
+            part = B.part(0, fresh)
+            both = {key: value[:fresh] for key, value in common.items()}
+            steady = dict(
+                X=X[:fresh],
+                P=P[:fresh],
+                model=_full(fresh, STEADY, np.int64),
+                score=score[:fresh] + math.log(1.0 - math.exp(self.LOG_CHANGING)),
+                **both,
             )
-        steady = dict(
-            X=X,
-            P=P,
-            model=_full(N, STEADY, np.int64),
-            score=score + math.log(1.0 - math.exp(self.LOG_CHANGING)),
-            **common,
-        )
-        changing = dict(
-            X=X,
-            P=Pc,
-            model=_full(N, CHANGING, np.int64),
-            score=score + self.LOG_CHANGING,
-            **common,
-        )
-        return B.twice(steady, changing)
+            changing = dict(
+                X=X[:fresh],
+                P=Pc[:fresh],
+                model=_full(fresh, CHANGING, np.int64),
+                score=score[:fresh] + self.LOG_CHANGING,
+                **both,
+            )
+            started = part.twice(steady, changing)
+        if fresh < N:
+            part = B.part(fresh, N)
+            chg = part.model == CHANGING
+            restarted = part.replace(
+                X=X[fresh:],
+                P=np.where(chg[:, None, None], Pc[fresh:], P[fresh:]),
+                model=part.model,
+                score=score[fresh:],
+                **{key: value[fresh:] for key, value in common.items()},
+            )
+        return started, restarted
 
     def _toward_ridge(
         self, B: _Bank, tc: float, skip: np.ndarray
@@ -814,9 +846,12 @@ class TrackerDecoder(Decoder):
         decay = np.exp(-dt / self.DIP_RECOVERY_S)
         return dt, k, self._pos[di, k], decay, B.m * (1.0 - decay) + skip
 
-    def _kalman(self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray) -> _Bank:
+    def _kalman(
+        self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray
+    ) -> tuple[_Bank, np.ndarray, np.ndarray]:
         """Predict B to the contact and update with ridge k (robust: far off, the speed
-        starts again from the last two contacts)."""
+        starts again from the last two contacts): the updated tracks, and those far off
+        (indices into B, log prior with their likelihood) for `_start_speed`."""
         tc = ev.t_s
         N = len(B)
         dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
@@ -862,31 +897,25 @@ class TrackerDecoder(Decoder):
         Pn = Pp - K[:, :, None] * Pp[:, None, 0, :]
         Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
         good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
-        out = []
+        out = _Bank.empty()
         sel = _nz(good)
         if len(sel):
             Bs = B.take(sel)
-            out.append(
-                Bs.replace(
-                    X=Xn[sel],
-                    P=Pn[sel],
-                    ridge=k[sel],
-                    t=_full(len(sel), tc),
-                    n=Bs.n + 1,
-                    run=Bs.run + 1,
-                    sig=_full(len(sel), ev.sigma_s),
-                    m=1.0 + Bs.m * decay[sel],
-                    ids=self._with_contact(Bs, ev),
-                    score=Bs.score + log_prior[sel] + like[sel],
-                )
+            out = Bs.replace(
+                X=Xn[sel],
+                P=Pn[sel],
+                ridge=k[sel],
+                t=_full(len(sel), tc),
+                n=Bs.n + 1,
+                run=Bs.run + 1,
+                sig=_full(len(sel), ev.sigma_s),
+                m=1.0 + Bs.m * decay[sel],
+                ids=self._with_contact(Bs, ev),
+                score=Bs.score + log_prior[sel] + like[sel],
             )
+        # far off: the speed changed; it starts again from the last two contacts
         far = _nz(inlier < outlier)
-        if len(far):  # far off: the speed changed; start again from the last two contacts
-            Bf = B.take(far)
-            vp = np.maximum(Bf.X[:, 1], V_MIN_MM_S)
-            prior = log_prior[far] + like[far]
-            out.append(self._start_speed(Bf, ev, skip[far], prior, models=Bf.model, v_ref=vp))
-        return _Bank.concat(out)
+        return out, far, log_prior[far] + like[far]
 
     def _meas_var(self, v, sigma_t):
         """Variance of a ridge contact as a position measurement at speed v."""
