@@ -172,11 +172,12 @@ class _Bank:
             t=np.zeros(0),
         )
 
-    def take(self, idx: np.ndarray) -> _Bank:
+    def take(self, idx: np.ndarray, only: tuple[str, ...] | None = None) -> _Bank:
         """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]` on
-        the small arrays a contact branches, 14 fields a time)."""
+        the small arrays a contact branches, 14 fields a time); `only`: just these fields
+        (a partial bank, read where no other field is)."""
         out = _Bank.__new__(_Bank)
-        for key in self.FIELDS:
+        for key in self.FIELDS if only is None else only:
             setattr(out, key, getattr(self, key).take(idx, 0))
         out._sched = None
         return out
@@ -630,7 +631,7 @@ class TrackerDecoder(Decoder):
         `log_prior`: of the stop (by default STOP_STEP_PER_S, a density in time)."""
         if not len(B):
             return B
-        s, _, _ = self._kinematics(B, tc)
+        s = self._travel(B, tc)
         limit = self._pos[(1 - B.dirn) // 2, np.minimum(B.ridge + 1, self.count)]
         X = B.X.copy()
         X[:, 0] = np.minimum(s, limit - 0.1)
@@ -1006,6 +1007,14 @@ class TrackerDecoder(Decoder):
         return out
 
     # ------------------------------------------------------------------ motion
+    def _travel(self, B: _Bank, g: float) -> np.ndarray:
+        """`_kinematics`'s travel alone (the same numbers), for callers that need no more."""
+        tau = np.maximum(0.0, g - B.t)
+        v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
+        v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
+        decay = np.exp(-tau / self.DIP_RECOVERY_S)
+        return B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
+
     def _kinematics(self, B: _Bank, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(travel, speed, position sigma) of slipping tracks B extrapolated to g."""
         tau = np.maximum(0.0, g - B.t)
@@ -1050,20 +1059,17 @@ class TrackerDecoder(Decoder):
             s0, a, v = s0[:, None], a[:, None], v[:, None]
             dist = np.maximum(target - s0, 1e-3)
             a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
-            root = np.sqrt(np.maximum(v * v + 2.0 * a_p * dist, 1e-9))
+            vv, a2 = v * v, 2.0 * a_p  # (the same numbers in every pass below)
+            root = np.sqrt(np.maximum(vv + a2 * dist, 1e-9))
             tau = 2.0 * dist / (v + root)
             dm = (d * B.m)[:, None]
             for _ in range(2):  # the part of the dip recovered by then
                 eff = dist + dm * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
-                root = np.sqrt(np.maximum(v * v + 2.0 * a_p * eff, 1e-9))
+                root = np.sqrt(np.maximum(vv + a2 * eff, 1e-9))
                 tau = 2.0 * eff / (v + root)
             v_k = np.maximum(v + a_p * tau, 0.2 * v)
-            var = (
-                p00
-                + 2 * tau * p01
-                + tau * tau * p11
-                + tau**2 * (p02 + tau * p12 + 0.25 * tau * tau * p22)
-            )
+            tt = tau * tau  # tau**2 too: numpy squares exactly so
+            var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             span = np.sqrt(np.maximum(var, 0.0)) / v_k
             latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
             t_due = B.t[:, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
@@ -1197,7 +1203,7 @@ class TrackerDecoder(Decoder):
         waiting = np.isnan(B.stop) & (B.run == 1)
         if waiting.any():
             w = _nz(waiting & live)
-            adj[w] = self._log_waiting(B.take(w), g, blind[w])
+            adj[w] = self._log_waiting(B.take(w, ("dirn", "ridge", "score", "t")), g, blind[w])
         evident, bonus = self._evidence(B)
         total = np.where(live, score + adj + bonus, -np.inf)
         top = max(self._null, float(total.max()))
@@ -1240,8 +1246,8 @@ class TrackerDecoder(Decoder):
         idx = _nz(use)
         agree = 0.0
         if len(idx):
-            Bu = B.take(idx)
-            s, _, _ = self._kinematics(Bu, g)
+            Bu = B.take(idx, ("X", "dirn", "m", "score", "stop", "t"))
+            s = self._travel(Bu, g)
             # held where the ridge not reached is, or where they stopped
             di = (1 - Bu.dirn) // 2
             ahead = np.minimum(limit[idx], self.count)
