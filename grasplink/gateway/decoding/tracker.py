@@ -82,11 +82,15 @@ RING = 256
 # process noise of the Kalman prediction as one scatter per model: flat (4 x 4) index of each
 # entry, and the powers of dt (columns of [1, dt, dt^2, dt^3]) and divisor of its term, in
 # the order _kalman adds them (x * 1.0 and x / 1.0 are exact: the same bits as without)
-_QV_AT, _QV_POW, _QV_DIV = [0, 1, 4, 5], [3, 2, 2, 1], np.array([3.0, 2.0, 2.0, 1.0])
-_QJ_AT = [0, 1, 4, 2, 8, 5, 6, 9, 10]
-_QJ_POW1, _QJ_POW2 = [3, 2, 2, 3, 3, 3, 2, 2, 1], [2, 2, 2, 0, 0, 0, 0, 0, 0]
+_QV_AT, _QV_POW = np.array([0, 1, 4, 5]), np.array([3, 2, 2, 1])
+_QV_DIV = np.array([3.0, 2.0, 2.0, 1.0])
+_QJ_AT = np.array([0, 1, 4, 2, 8, 5, 6, 9, 10])
+_QJ_POW1, _QJ_POW2 = np.array([3, 2, 2, 3, 3, 3, 2, 2, 1]), np.array([2, 2, 2, 0, 0, 0, 0, 0, 0])
 _QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
 _VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
+
+
+_EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
 
 
 def _full(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
@@ -155,7 +159,10 @@ class _Bank:
 
     @classmethod
     def empty(cls) -> _Bank:
-        return cls(
+        """The empty bank (one shared instance: banks are never changed in place)."""
+        if _EMPTY:
+            return _EMPTY[0]
+        bank = cls(
             P=np.zeros((0, 4, 4)),
             X=np.zeros((0, 4)),
             dirn=np.zeros(0, np.int64),
@@ -171,6 +178,10 @@ class _Bank:
             stop=np.zeros(0),
             t=np.zeros(0),
         )
+        for key in cls.FIELDS:
+            getattr(bank, key).flags.writeable = False
+        _EMPTY.append(bank)
+        return bank
 
     def take(self, idx: np.ndarray, only: tuple[str, ...] | None = None) -> _Bank:
         """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]` on
