@@ -208,6 +208,7 @@ class MqttLink:
         self._settling = False  # _settled waits for the window to empty
         self._topics: dict[str, bytes] = {}  # topic -> its UTF-8 with the length in front
         self._reader: Callable[[], None] | None = None  # reads what the broker sent
+        self._read_acks: Callable[[], bool] | None = None  # PUBACKs read without paho
         self._readable: tuple[int, select.poll] | None = None  # (fd, a poll object for it)
 
     def push(self, messages: list[Message]) -> None:
@@ -246,7 +247,7 @@ class MqttLink:
             poller = select.poll()
             poller.register(fd, select.POLLIN)
             self._readable = (fd, poller)
-        if self._readable[1].poll(0):
+        if self._readable[1].poll(0) and not (self._read_acks and self._read_acks()):
             reader()
 
     def stop(self) -> None:
@@ -545,8 +546,28 @@ class MqttLink:
                 rc = loop_read(max_packets)
             return rc
 
+        def read_acknowledgements() -> bool:
+            """At a packet boundary, read what the socket has and take its PUBACKs without
+            going through paho's read loop; False when paho must read (something else came,
+            or an error, or the connection closed: paho meets it as it would)."""
+            if pending or inner._in_packet["command"] != 0:
+                return False
+            try:
+                data = sock_recv(1 << 16)
+            except BlockingIOError:  # nothing after all (paho turns TLS's wants into this)
+                return True
+            except OSError:
+                return False
+            if not data:
+                return False
+            pending.extend(data)
+            acknowledgements()
+            tls_pending = getattr(inner._sock, "pending", None)  # decrypted, not yet read
+            return not pending and not (tls_pending is not None and tls_pending())
+
         inner._sock_recv = buffered_recv  # type: ignore[method-assign,assignment]
         inner.loop_read = read_all  # type: ignore[method-assign]
+        self._read_acks = read_acknowledgements
 
     def _taken(self, mid: int) -> None:
         """The broker took a message (QoS 1: PUBACK; QoS 0: written to the socket)."""
