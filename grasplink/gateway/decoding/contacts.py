@@ -371,7 +371,9 @@ class ContactDetector:
         ch.z = np.concatenate([ch.z, seg_h / noise])
         ch.zh = np.concatenate([ch.zh, seg_h])
         ch.za = np.concatenate([ch.za, seg_a])
-        ch.zready = np.concatenate([ch.zready, np.full(len(seg_h), ready, dtype=np.int64)])
+        known = np.empty(len(seg_h), np.int64)
+        known.fill(ready)  # np.full's numbers without its wrapper
+        ch.zready = np.concatenate([ch.zready, known])
 
     def _white(self, block: int) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.

@@ -658,22 +658,18 @@ class TrackerDecoder(Decoder):
         di = (1 - B.dirn) // 2
         moving = np.isnan(B.stop)
         ok = dt > 0
-        miss = np.zeros(len(B))
-        rows, skips, priors = [], [], []
-        for skip in range(self.MAX_SKIP + 1):
-            k = B.ridge + 1 + skip
-            valid = ok & (k < R)
-            if not valid.any():
-                break
-            kk = np.minimum(k, R - 1)
-            sel = _nz(valid)
-            rows.append(sel)
-            skips.append(_full(len(sel), skip, np.int64))
-            priors.append((miss + self._log_pd[di, kk])[sel])
-            miss = miss + self._log_miss[di, kk]
-        if not rows:
+        # every (skip, track) at once, skip-major: the order of one skip after the other
+        k = B.ridge[:, None] + 1 + np.arange(self.MAX_SKIP + 1)
+        valid = (ok[:, None] & (k < R)).T
+        skip_arr, row = valid.nonzero()
+        if not len(row):
             return []
-        row, skip_arr, prior = np.concatenate(rows), np.concatenate(skips), np.concatenate(priors)
+        kk = np.minimum(k, R - 1)
+        di2 = di[:, None]
+        # P(the ridges skipped all missed): sequential sums from 0, as one skip after another
+        missed = np.zeros(k.shape)
+        missed[:, 1:] = np.cumsum(self._log_miss[di2, kk[:, :-1]], axis=1)
+        prior = (missed + self._log_pd[di2, kk]).T[skip_arr, row]
         run, mov = B.run[row], moving[row]
         out = []
         fresh = _nz(mov & (run == 1))  # one-contact or restarted tracks
