@@ -573,10 +573,10 @@ class TrackerDecoder(Decoder):
             else:
                 assigned = self._assign(B, ev)
             children += assigned
-            if step:  # a stop right at a ridge (the step is that ridge's contact)
-                for c in assigned:
-                    at = c.take(_nz(c.n >= 2))
-                    children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
+            if step and assigned:  # a stop right at a ridge (the step is that ridge's contact)
+                ridden = _Bank.concat(assigned)  # all at once: the numbers are per track
+                at = ridden.take(_nz(ridden.n >= 2))
+                children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
         self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         if probe:
             return _Bank.concat(children)
