@@ -735,10 +735,11 @@ class ContactDetector:
             i0 = watch.next_k + h - self._level_start
             level = self._level[i0 : i0 + end - watch.next_k + 1]
             k = np.arange(watch.next_k, end + 1)
-            # fallen back? an earlier pulse's tail under it taken out
-            credit = self._tail_credit(watch, k)
+            since = k - watch.index
+            # fallen back? an earlier pulse's tail under it taken out (`_tail_credit`)
+            credit = watch.fall * np.minimum(since, self.fall_credit)
             raw = level - watch.base + credit
-            d = raw - watch.trend * (k - watch.index + 2 * h + 1)
+            d = raw - watch.trend * (since + (2 * h + 1))
             peak = np.maximum.accumulate(np.maximum(d - credit, watch.peak))
             history = np.concatenate([watch.history, peak])  # running peak since the onset
             watch.history = history
@@ -751,7 +752,6 @@ class ContactDetector:
             # plateau keeps nudging the peak, not this)
             rise = history.searchsorted(0.9 * peak)
             rise = np.maximum(rise, self.min_rise)
-            since = k - watch.index
             ok = (
                 (peak >= 4.0 * watch.noise)
                 & (peak - d >= self.drop_fraction * peak)
@@ -770,9 +770,9 @@ class ContactDetector:
                     return PulseCheck(watch.id, hold + h, True)
             if len(hit):
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
-            early = k <= watch.index + self.watch // 4
-            if early.any():
-                watch.early = max(watch.early, float(peak[early][-1]))
+            early = min(len(k), watch.index + self.watch // 4 - watch.next_k + 1)  # k rises
+            if early > 0:
+                watch.early = max(watch.early, float(peak[early - 1]))
             watch.peak = float(peak[-1])
             watch.next_k = end + 1
         if watch.next_k > watch.index + self.watch:
