@@ -132,6 +132,9 @@ class _Watch:
     next_k: int = 0  # next level sample to examine
     top: float = 0.0  # told a step: the level it stepped to (trend out), watched for a fall
     fell_at: int = -1  # ... the sample where it fell back by drop_fraction (-1: not yet)
+    slope: float = 0.0  # the level's slope before the onset (N/sample, either sign)
+    room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
+    plain: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level - base (to the hold)
 
 
 def _hinge_gain(width: int) -> float:
@@ -205,6 +208,8 @@ class ContactDetector:
         # probes judged steps: (emit, index, t, z, trend_on)
         self._confirmed: list[tuple[int, int, float, float, bool | None]] = []
         self._onsets: deque[tuple[int, int]] = deque(maxlen=32)  # contacts emitted: (index, emit)
+        # the level before each contact's onset: (index, emit, level), see _tail_room
+        self._bases: deque[tuple[int, int, float]] = deque(maxlen=32)
         self._next_step_id = STEP_IDS
         self.fall_n = max(2, round(0.02 * self.fs_hz))  # an earlier pulse's tail: its slope ...
         self.fall_credit = max(1, round(0.03 * self.fs_hz))  # ... followed this long at most
@@ -611,8 +616,9 @@ class ContactDetector:
             return float(self._level[i])
         return None
 
-    def _watch(self, cid: int, index: int) -> _Watch | None:
-        """A watch on the level after an onset at sample `index`: its base, trends, noise."""
+    def _watch(self, cid: int, index: int, emit: int | None = None) -> _Watch | None:
+        """A watch on the level after an onset at sample `index`: its base, trends, noise
+        (and, for a kink contact decided at `emit`, the falling tail under it)."""
         fine = self.channels[0]
         h = self.level_half
         before = index - 2 * h - 1  # last level centre not touched by the pulse
@@ -632,14 +638,39 @@ class ContactDetector:
         fine_noise = self._noise(fine, index // self.block)
         white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
         noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
-        return _Watch(
+        watch = _Watch(
             cid, index, 0.0 if base is None else base, trend, noise, fall=fall, next_k=index
         )
+        if emit is not None and base is not None:
+            watch.slope = self._level_slope(before)
+            watch.room = self._tail_room(index, emit, base)
+            self._bases.append((index, emit, base))
+        return watch
+
+    def _level_slope(self, before: int) -> float:
+        """Least-squares slope of the level over the fall_credit samples up to `before`
+        (N/sample): the slope right before the onset (a tail's flattens as it relaxes)."""
+        i1 = before + self.level_half - self._level_start + 1
+        i0 = i1 - self.fall_credit - 1
+        if i0 < 0 or i1 > len(self._level):
+            return 0.0
+        y = self._level[i0:i1]
+        x = np.arange(len(y)) - (len(y) - 1) / 2.0
+        return float(np.dot(x, y) / np.dot(x, x))
+
+    def _tail_room(self, index: int, emit: int, base: float) -> float:
+        """How far the level can still fall under a contact at `index`: down to where it
+        was before the contact before it (that pulse's tail relaxes no lower). Only contacts
+        decided by `emit` count (chunking cannot change it); 0 when there is none."""
+        earlier = [(n, level) for n, e, level in self._bases if n < index - 2 and e <= emit]
+        if not earlier:
+            return 0.0
+        return max(0.0, base - max(earlier)[1])
 
     def _check_pulses(self, events: list[ContactEvent]) -> list[PulseCheck]:
         checks: list[PulseCheck] = []
         for ev in events:
-            watch = self._watch(ev.id, ev.index)
+            watch = self._watch(ev.id, ev.index, ev.emit_index)
             if watch is not None:
                 self._watches.append(watch)
         still = []
@@ -731,6 +762,7 @@ class ContactDetector:
             hold = watch.index + self.step_hold
             if watch.next_k <= hold:
                 keep = hold - watch.next_k + 1
+                watch.plain = np.concatenate([watch.plain, (level - watch.base)[:keep]])
                 watch.levels = np.concatenate([watch.levels, raw[:keep]])
                 watch.detrended = np.concatenate([watch.detrended, d[:keep]])
             # rise time: onset to the first sample at 90 % of the peak so far (a noisy
@@ -798,7 +830,49 @@ class ContactDetector:
                 return False
             return float(np.min(levels[rise:])) >= (1.0 - self.drop_fraction) * top
 
-        return self._stayed_up(watch, stays)
+        return self._stayed_up(watch, stays) or self._tail_step(watch)
+
+    def _tail_step(self, watch: _Watch) -> bool:
+        """A sharp rise on the falling tail of the pulse before it that stays up over that
+        tail relaxing on. A slip that stops leaves its last pulse relaxing (the ridge does
+        not stop relaxing with the object), and the friction term's step (thesis ch. 4.3)
+        may be small: with the tail's fall taken out - its slope before the onset, no
+        further than the level before that pulse - the step stays, where a ridge pulse
+        (which replaces the tail, thesis ch. 5.3.1) falls back. Means over the hold, not
+        extremes: the step may be a few noise units high."""
+        if watch.slope >= 0.0 or watch.room <= 0.0 or len(watch.plain) < 4 * self.step_rise + 2:
+            return False
+        if self._train_follows(watch):
+            return False
+        k = np.arange(len(watch.plain)) + 2 * self.level_half + 1  # samples since `before`
+        y = watch.plain + np.minimum(-watch.slope * k, watch.room)  # the tail relaxing on
+        r = self.step_rise
+        first = float(np.mean(y[r : 2 * r + 1]))
+        if first < 6.0 * watch.noise:
+            return False
+        if y[-1] - watch.plain[-1] < 0.25 * first:
+            return False  # no tail worth the name: the level's own tests judge it
+        tail = watch.plain[len(watch.plain) // 2 :]
+        x = np.arange(len(tail)) - (len(tail) - 1) / 2.0
+        if float(np.dot(x, tail) / np.dot(x, x)) * len(tail) > 0.1 * first + 3.0 * watch.noise:
+            return False  # the level rising by the hold: the object still covers more of it
+        if int(np.argmax(y >= 0.8 * first)) > r:
+            return False  # not sharp: a slow pulse
+        later = float(np.mean(y[2 * r : 4 * r + 1]))
+        if later > 1.15 * first + 2.0 * watch.noise:
+            return False  # still rising: a slow pulse
+        # a tail flattens as it relaxes: a level falling faster than the tail did before
+        # the onset is a pulse of its own falling back
+        after = watch.plain[r:]
+        x = np.arange(len(after)) - (len(after) - 1) / 2.0
+        norm = float(np.dot(x, x))
+        slope = float(np.dot(x, after)) / norm
+        if slope < 1.25 * watch.slope - 6.0 * watch.noise / math.sqrt(norm):
+            return False
+        keep = 1.0 - self.drop_fraction
+        end = float(np.mean(y[-max(2, len(y) // 4) :]))
+        low = float(np.min(y[r:]))
+        return end >= keep * first and low >= (keep - 0.1) * first - 2.0 * watch.noise
 
     def _stayed_up(self, watch: _Watch, stays: Callable[[np.ndarray], bool]) -> bool:
         """The step verdict both step tests share, given how each judges a level that
