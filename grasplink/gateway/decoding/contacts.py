@@ -660,12 +660,13 @@ class ContactDetector:
 
     def _tail_room(self, index: int, emit: int, base: float) -> float:
         """How far the level can still fall under a contact at `index`: down to where it
-        was before the contact before it (that pulse's tail relaxes no lower). Only contacts
-        decided by `emit` count (chunking cannot change it); 0 when there is none."""
-        earlier = [(n, level) for n, e, level in self._bases if n < index - 2 and e <= emit]
+        was before the two contacts before it (their pulses' tails, the one riding on the
+        other's, relax no lower). Only contacts decided by `emit` count (chunking cannot
+        change it); 0 when there is none."""
+        earlier = sorted((n, level) for n, e, level in self._bases if n < index - 2 and e <= emit)
         if not earlier:
             return 0.0
-        return max(0.0, base - max(earlier)[1])
+        return max(0.0, base - min(level for _, level in earlier[-2:]))
 
     def _check_pulses(self, events: list[ContactEvent]) -> list[PulseCheck]:
         checks: list[PulseCheck] = []
@@ -836,43 +837,41 @@ class ContactDetector:
         """A sharp rise on the falling tail of the pulse before it that stays up over that
         tail relaxing on. A slip that stops leaves its last pulse relaxing (the ridge does
         not stop relaxing with the object), and the friction term's step (thesis ch. 4.3)
-        may be small: with the tail's fall taken out - its slope before the onset, no
-        further than the level before that pulse - the step stays, where a ridge pulse
-        (which replaces the tail, thesis ch. 5.3.1) falls back. Means over the hold, not
-        extremes: the step may be a few noise units high."""
+        may be small. The level itself must rise sharply, stop rising, fall no faster than
+        the tail did before the onset (a ridge pulse replaces the tail, thesis ch. 5.3.1,
+        and falls back faster: a pulse of its own) and not rise again by the hold (a
+        stopped object covers no more of the sensor); with the tail's fall taken out - its
+        slope before the onset, no lower than the level before the pulses under it - it
+        stays up. Means over the hold, not extremes: the step may be a few noise units
+        high."""
         if watch.slope >= 0.0 or watch.room <= 0.0 or len(watch.plain) < 4 * self.step_rise + 2:
             return False
         if self._train_follows(watch):
             return False
-        k = np.arange(len(watch.plain)) + 2 * self.level_half + 1  # samples since `before`
-        y = watch.plain + np.minimum(-watch.slope * k, watch.room)  # the tail relaxing on
-        r = self.step_rise
-        first = float(np.mean(y[r : 2 * r + 1]))
-        if first < 6.0 * watch.noise:
-            return False
-        if y[-1] - watch.plain[-1] < 0.25 * first:
-            return False  # no tail worth the name: the level's own tests judge it
-        tail = watch.plain[len(watch.plain) // 2 :]
-        x = np.arange(len(tail)) - (len(tail) - 1) / 2.0
-        if float(np.dot(x, tail) / np.dot(x, x)) * len(tail) > 0.1 * first + 3.0 * watch.noise:
-            return False  # the level rising by the hold: the object still covers more of it
-        if int(np.argmax(y >= 0.8 * first)) > r:
-            return False  # not sharp: a slow pulse
-        later = float(np.mean(y[2 * r : 4 * r + 1]))
-        if later > 1.15 * first + 2.0 * watch.noise:
+        level, r, noise = watch.plain, self.step_rise, watch.noise
+        first = float(np.mean(level[r : 2 * r + 1]))
+        if first < 6.0 * noise or int(np.argmax(level >= 0.8 * first)) > r:
+            return False  # too small, or not sharp: a slow pulse
+        if float(np.mean(level[2 * r : 4 * r + 1])) > 1.15 * first + 2.0 * noise:
             return False  # still rising: a slow pulse
-        # a tail flattens as it relaxes: a level falling faster than the tail did before
-        # the onset is a pulse of its own falling back
-        after = watch.plain[r:]
+        tail = level[len(level) // 2 :]
+        x = np.arange(len(tail)) - (len(tail) - 1) / 2.0
+        if float(np.dot(x, tail) / np.dot(x, x)) * len(tail) > 0.1 * first + 3.0 * noise:
+            return False  # the level rising by the hold: the object still covers more of it
+        after = level[r:]
         x = np.arange(len(after)) - (len(after) - 1) / 2.0
         norm = float(np.dot(x, x))
-        slope = float(np.dot(x, after)) / norm
-        if slope < 1.25 * watch.slope - 6.0 * watch.noise / math.sqrt(norm):
-            return False
+        if float(np.dot(x, after)) / norm < 1.25 * watch.slope - 6.0 * noise / math.sqrt(norm):
+            return False  # falling faster than the tail: a pulse falling back
+        k = np.arange(len(level)) + 2 * self.level_half + 1  # samples since `before`
+        y = level + np.minimum(-watch.slope * k, watch.room)  # the tail relaxing on, out
+        top = float(np.mean(y[r : 2 * r + 1]))
+        if y[-1] - level[-1] < 0.25 * top:
+            return False  # no tail worth the name: the level's own tests judge it
         keep = 1.0 - self.drop_fraction
         end = float(np.mean(y[-max(2, len(y) // 4) :]))
         low = float(np.min(y[r:]))
-        return end >= keep * first and low >= (keep - 0.1) * first - 2.0 * watch.noise
+        return end >= keep * top and low >= (keep - 0.1) * top - 2.0 * noise
 
     def _stayed_up(self, watch: _Watch, stays: Callable[[np.ndarray], bool]) -> bool:
         """The step verdict both step tests share, given how each judges a level that
