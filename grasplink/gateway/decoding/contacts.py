@@ -135,6 +135,19 @@ class _Watch:
     slope: float = 0.0  # the level's slope before the onset (N/sample, either sign)
     room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
     plain: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level - base (to the hold)
+    rise: int = 0  # a probe: the rise of its scale (samples)
+
+
+@dataclass
+class _StepScale:
+    """One scale of the step probe: a difference of means over +-w samples."""
+
+    w: int
+    rise: int  # a step's rise is judged over this many samples (`_is_small_step`)
+    fir: SosFilter
+    d: np.ndarray  # difference of means by centre, from start
+    start: int  # centre of d[0] (output m is centre m - w)
+    next: int = 0  # next centre to test
 
 
 def _hinge_gain(width: int) -> float:
@@ -174,6 +187,7 @@ class ContactDetector:
         step_rise_s: float = 0.02,
         step_hold_s: float = 0.1,
         step_window_s: float = 0.02,
+        long_step_window_s: float = 0.04,
         step_threshold: float = 6.0,
         revise_s: float = 0.35,
     ):
@@ -199,14 +213,20 @@ class ContactDetector:
         self.step_w = max(2, round(step_window_s * self.fs_hz))
         self.small_rise = max(1, round(0.6 * step_window_s * self.fs_hz))
         w = self.step_w
-        self._step_fir = SosFilter.fir(np.concatenate([np.full(w, 1.0 / w), np.full(w, -1.0 / w)]))
         self.step_threshold = float(step_threshold)
-        self._step_d = np.zeros(0)  # difference of means by centre, from _step_start
-        self._step_start = -w  # centre of _step_d[0] (output m is centre m - w)
-        self._step_next = 0  # next centre to test
-        self._probes: list[tuple[_Watch, float]] = []  # step candidates being judged (z)
-        # probes judged steps: (emit, index, t, z, trend_on)
-        self._confirmed: list[tuple[int, int, float, float, bool | None]] = []
+        # and over a longer window too: a stop's step in heavy noise (10 dB of the ridge
+        # pulses) is a few noise units of the short window's difference, more of the long's
+        self._scales = [
+            _StepScale(v, max(1, round(0.6 * v)), SosFilter.fir(k), np.zeros(0), -v)
+            for v, k in (
+                (v, np.concatenate([np.full(v, 1.0 / v), np.full(v, -1.0 / v)]))
+                for v in sorted({w, max(w + 1, round(long_step_window_s * self.fs_hz))})
+            )
+        ]
+        self._probes: list[tuple[_Watch, float, int]] = []  # step candidates judged (z, w)
+        # probes judged steps: (emit, w, index, t, z, trend_on)
+        self._confirmed: list[tuple[int, int, int, float, float, bool | None]] = []
+        self._probe_onsets: deque[tuple[int, int, int]] = deque(maxlen=32)  # (index, emit, w)
         self._onsets: deque[tuple[int, int]] = deque(maxlen=32)  # contacts emitted: (index, emit)
         # the level before each contact's onset: (index, emit, level), see _tail_room
         self._bases: deque[tuple[int, int, float]] = deque(maxlen=32)
@@ -536,23 +556,31 @@ class ContactDetector:
         - the object covering more of the sensor - is no step), above step_threshold noise
         units; each is watched like a contact and kept only if judged a step at the hold
         (`_step_events`)."""
-        w = self.step_w
-        self._step_d = np.concatenate([self._step_d, self._step_fir(x)])
-        last = self._step_start + len(self._step_d) - 1  # last centre with a difference
-        lo = max(self._step_next, self._step_start + 3 * w, 3 * w)
+        for sc in self._scales:
+            self._run_scale(sc, x)
+
+    def _run_scale(self, sc: _StepScale, x: np.ndarray) -> None:
+        w = sc.w
+        sc.d = np.concatenate([sc.d, sc.fir(x)])
+        last = sc.start + len(sc.d) - 1  # last centre with a difference
+        lo = max(sc.next, sc.start + 3 * w, 3 * w)
         hi = last - 3 * w
         if hi < lo:
             return
-        self._step_next = hi + 1
-        d = self._step_d
-        i0, i1 = lo - self._step_start - w, hi - self._step_start + w  # adjusted over +-w
-        idx = np.arange(i0, i1 + 1)
-        adj = d[idx] - 0.5 * (d[idx - 2 * w] + d[idx + 2 * w])
-        for j in range(w, len(adj) - w):
+        sc.next = hi + 1
+        d = sc.d
+        i0, i1 = lo - sc.start - w, hi - sc.start + w  # adjusted over +-w
+        ramp = d[i0 - 2 * w : i1 + 1 - 2 * w] + d[i0 + 2 * w : i1 + 1 + 2 * w]
+        adj = d[i0 : i1 + 1] - 0.5 * ramp
+        # local maxima over +-w (ties: the first): only rises above their neighbours tested
+        n = len(adj) - 2 * w
+        mid = adj[w : w + n]
+        rising = (mid > 0.0) & (mid >= adj[w - 1 : w - 1 + n]) & (mid > adj[w + 1 : w + 1 + n])
+        for j in (np.flatnonzero(rising) + w).tolist():
             a = adj[j]
-            if a <= 0.0 or a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
+            if a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
                 continue
-            c = int(idx[j]) + self._step_start
+            c = i0 + j + sc.start
             white = self._white(c // self.block)
             if white is None:
                 continue
@@ -561,45 +589,44 @@ class ContactDetector:
                 continue
             watch = self._watch(-1, c + 1)
             if watch is not None:
-                self._probes.append((watch, z))
+                watch.rise = sc.rise
+                self._probes.append((watch, z, w))
 
     def _step_events(self) -> tuple[list[ContactEvent], list[PulseCheck]]:
         """Probes judged steps, told once every contact near them would have been decided:
         a contact and its verdict - unless the kink bank found that onset itself."""
         still = []
-        for watch, z in self._probes:
+        for watch, z, w in self._probes:
             done = self._advance(watch, small=True)
             if done is None and watch.next_k <= watch.index + self.step_hold:
-                still.append((watch, z))
+                still.append((watch, z, w))
             elif (
                 done is not None
                 and done.pulse is False
                 and done.emit_index < (watch.index + self.step_hold + self.level_half + 1)
             ):
-                emit = max(done.emit_index, watch.index + self.lag + self.step_w)
+                emit = max(done.emit_index, watch.index + self.lag + w)
                 t = self._time(watch.index, 0.0)
-                self._confirmed.append((emit, watch.index, t, z, done.trend_on))
+                self._confirmed.append((emit, w, watch.index, t, z, done.trend_on))
         self._probes = still
         events, checks = [], []
         keep = []
-        for emit, index, t, z, trend_on in self._confirmed:
+        for emit, w, index, t, z, trend_on in sorted(self._confirmed):
             if emit >= self._n:
-                keep.append((emit, index, t, z, trend_on))
+                keep.append((emit, w, index, t, z, trend_on))
                 continue
             # the kink bank has it: a probe is timed mid-rise, up to a step window after
-            # the onset the kink bank placed (a slow pulse rises for longer)
-            if any(
-                -self.step_w - 2 <= index - n <= 2 * self.step_w + 2
-                for n, e in self._onsets
-                if e <= emit
+            # the onset the kink bank placed (a slow pulse rises for longer); or a probe
+            # of the other scale told it first
+            if any(-w - 2 <= index - n <= 2 * w + 2 for n, e in self._onsets if e <= emit) or any(
+                abs(index - n) <= w + v + 2 for n, _, v in self._probe_onsets
             ):
                 continue
+            self._probe_onsets.append((index, emit, w))
             sid = self._next_step_id
             self._next_step_id += 1
-            sigma = (0.25 * self.step_w + 0.3) / self.fs_hz
-            events.append(
-                ContactEvent(sid, t, index, emit, z, 0.0, self.step_w / self.fs_hz, sigma)
-            )
+            sigma = (0.25 * w + 0.3) / self.fs_hz
+            events.append(ContactEvent(sid, t, index, emit, z, 0.0, w / self.fs_hz, sigma))
             checks.append(PulseCheck(sid, emit, False, trend_on))
         self._confirmed = keep
         return events, checks
@@ -933,7 +960,7 @@ class ContactDetector:
         and the trend goes on."""
 
         def stays(levels: np.ndarray) -> bool:
-            n = self.small_rise
+            n = watch.rise or self.small_rise
             first = float(np.mean(levels[n : 2 * n + 1]))  # just after a sharp rise
             if first < 6.0 * watch.noise:
                 return False
@@ -958,7 +985,8 @@ class ContactDetector:
             self._x = self._x[cut:]
             self._t_start += cut
         oldest_watch = min(
-            [w.next_k for w in self._watches + self._stepped] + [w.next_k for w, _ in self._probes],
+            [w.next_k for w in self._watches + self._stepped]
+            + [w.next_k for w, _, _ in self._probes],
             default=None,
         )
         lv_keep = keep
@@ -968,10 +996,11 @@ class ContactDetector:
             cut = len(self._level) - lv_keep
             self._level = self._level[cut:]
             self._level_start += cut
-        if len(self._step_d) > 2 * keep:
-            cut = len(self._step_d) - keep
-            self._step_d = self._step_d[cut:]
-            self._step_start += cut
+        for sc in self._scales:
+            if len(sc.d) > 2 * keep:
+                cut = len(sc.d) - keep
+                sc.d = sc.d[cut:]
+                sc.start += cut
         for ch in self.channels:
             if len(ch.z) > 2 * keep:
                 cut = len(ch.z) - keep
