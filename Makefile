@@ -34,6 +34,15 @@ $(STAMP_PY): pyproject.toml | $(VENV)/bin/python
 	$(PY) -m pip install -q -e '.[dev]'
 	@touch $@
 
+# The third-party Sparkplug B host the tests read our output with (tests/telemetry/spb_check.py):
+# pysparkplug pins paho-mqtt<2 and we pin 2.x, so it gets a virtual environment of its own.
+CHECK_VENV := .venv-check
+STAMP_CHECK := $(CHECK_VENV)/.stamp-install
+$(STAMP_CHECK): | $(VENV)/bin/python
+	$(PYTHON) -m venv $(CHECK_VENV)
+	$(CHECK_VENV)/bin/python -m pip install -q pysparkplug==0.6.1 paho-mqtt==1.6.1 protobuf==7.36.2
+	@touch $@
+
 HEADLINE := scenes/headline_slip.toml
 LOOP_HEADLINE := scenes/loop_headline.toml
 
@@ -85,7 +94,7 @@ PYTEST_WORKERS ?= auto
 PYTEST := $(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist worksteal
 
 # The whole suite: static checks first, then every test (wall-clock `slow` ones too).
-test: check
+test: check $(STAMP_CHECK)
 	$(PYTEST)
 
 # Quick feedback while editing: the same checks, tests marked `slow` left out
@@ -130,4 +139,4 @@ bench: setup
 	$(PY) benchmarks/bench_modbus.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .mypy_cache
+	rm -rf $(VENV) $(CHECK_VENV) .pytest_cache .ruff_cache .mypy_cache

@@ -33,7 +33,7 @@ from grasplink.bus.hub import CanHub
 from grasplink.bus.load import BusLoadMeter, frame_bits_worst_case, frame_time_us
 from grasplink.bus.options import accepted_options
 from grasplink.bus.reconnect import Backoff
-from grasplink.bus.runner import MultiRunner, NodeRunner
+from grasplink.bus.runner import MultiRunner, NodeRunner, on_tick
 from grasplink.bus.url import (
     BusDisconnected,
     BusSpec,
@@ -991,6 +991,21 @@ def test_multi_runner_polls_buses_without_a_file_descriptor(closing) -> None:
     multi.step()
     assert heard_on(peers[1]) == [Frame(0x582, b"\x07")]
     assert heard_on(peers[0]) == []
+
+
+def test_multi_runner_tick_wakes_for_timers_on_the_tick_grid_only() -> None:
+    # due in 2.3 ms on a 1 ms grid from 0.4 ms past a tick: wake at the 3 ms tick
+    assert on_tick(10_400, 0.0023, 1_000) == pytest.approx(0.0026)
+    assert on_tick(10_000, 0.002, 1_000) == pytest.approx(0.002)  # already on the grid
+    assert on_tick(10_400, 0.0, 1_000) == pytest.approx(0.0006)  # never earlier than asked
+
+
+def test_multi_runner_refuses_a_tick_longer_than_its_longest_wait(closing) -> None:
+    runner = NodeRunner(closing(open_bus(unique_virtual_url())), [Echo(2)])
+    with pytest.raises(ValueError, match="tick_s"):
+        MultiRunner([runner], max_wait_s=0.02, tick_s=0.05)
+    with pytest.raises(ValueError, match="tick_s"):
+        MultiRunner([runner], tick_s=-0.001)
 
 
 def test_multi_runner_refuses_runners_with_their_own_thread(closing) -> None:

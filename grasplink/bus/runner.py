@@ -526,6 +526,12 @@ class MultiRunner:
     virtual bus, the hub client) is polled every ``poll_s``. A runner that
     gives up on its bus (`NodeRunner.failure`) is dropped; the others go on.
     The runners must not be started themselves; `stop` stops them all.
+
+    ``tick_s`` > 0 wakes for timers only on a grid of that period, as a
+    firmware's RTOS tick does: timers of many devices that fall due within one
+    tick run in one wake-up (a process simulating many node sets wakes at most
+    1/tick_s times a second for them instead of once per TPDO), each at most
+    one tick late. Frames still wake the thread at once.
     """
 
     def __init__(
@@ -535,15 +541,19 @@ class MultiRunner:
         name: str = "grasplink-multi-runner",
         max_wait_s: float = 0.02,
         poll_s: float = 0.001,
+        tick_s: float = 0.0,
     ) -> None:
         if not runners:
             raise ValueError("MultiRunner needs at least one runner")
+        if not 0.0 <= tick_s <= max_wait_s:
+            raise ValueError("tick_s must be within [0, max_wait_s]")
         if any(r._thread is not None for r in runners):
             raise ValueError("a MultiRunner's runners must not have their own thread")
         self.runners = list(runners)
         self._name = name
         self._max_wait_s = max_wait_s
         self._poll_s = poll_s
+        self._tick_us = round(tick_s * 1e6)
         self._selector = selectors.DefaultSelector()
         self._registered: dict[int, int] = {}  # id(runner) -> the fd registered for it
         self._stop = threading.Event()
@@ -613,6 +623,8 @@ class MultiRunner:
             if left_us <= 0:
                 due.append(runner)
             timeout = min(timeout, max(0, left_us) / 1e6)
+        if self._tick_us and not due and live:
+            timeout = on_tick(live[0]._clock(), timeout, self._tick_us)
         ready = {key.data for key, _ in self._selector.select(0.0 if due else timeout)}
         for runner in live:
             if id(runner) in ready or runner in polled or runner in due:
@@ -646,6 +658,12 @@ class MultiRunner:
         if old >= 0:
             with contextlib.suppress(KeyError, ValueError, OSError):
                 self._selector.unregister(old)
+
+
+def on_tick(now_us: int, wait_s: float, tick_us: int) -> float:
+    """The wait that ends at the first multiple of ``tick_us`` at or after ``now + wait_s``."""
+    wake_us = now_us + round(wait_s * 1e6)
+    return (-(-wake_us // tick_us) * tick_us - now_us) / 1e6
 
 
 def _node_id(device: object) -> int:

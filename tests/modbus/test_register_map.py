@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from pymodbus.client import ModbusTcpClient
 
@@ -163,6 +164,31 @@ def test_a_slipping_gateways_snapshot_reads_back_through_the_registers(slipping)
     assert table[RMAP["map_version"].address] == MAP_VERSION
     velocity = snapshot["belt"]["velocity_mrad_s"]  # the slip belt runs backwards: signed
     assert velocity < 0 and words_of("belt.velocity_mrad_s", table) == to_words(I32, velocity)
+
+
+def _one_by_one(table, data):
+    """The reference encoding: each register's own value_of and encode."""
+    return [word for register in table for word in register.encode(register.value_of(data))]
+
+
+def test_the_table_encoder_equals_each_registers_own_encoding(slipping):
+    """`encode_inputs`/`encode_holding` inline the common cases for speed; every kind of
+    value (float, int, bool, code, NaN, inf, out of range, numpy, absent) must come out as
+    the registers themselves encode it."""
+    _, snapshot = slipping
+    odd: dict = {**snapshot, "skin": dict(snapshot["skin"]), "emg": dict(snapshot["emg"])}
+    odd["skin"].update(grip_force_n=math.nan, slip_speed_mm_s=-math.inf, position_mm=1e12)
+    odd["skin"]["confidence"] = np.float32(0.25)
+    odd["emg"].update(envelope_uv=np.int64(-7), level="not a level", saturated=None)
+    odd["belt"] = {**snapshot["belt"], "mode": "no such mode", "velocity_mrad_s": -(1 << 40)}
+    odd["loop"] = {**snapshot["loop"], "percepts": (1 << 40) + 5, "latency_p50_us": 2.5}
+    del odd["hand"]
+    odd["nodes"] = {**snapshot["nodes"], "emg": {**snapshot["nodes"]["emg"], "boots": -1}}
+    for data in (snapshot, odd, {}, None, {"nodes": None, "skin": 3}):
+        assert RMAP.encode_inputs(data) == _one_by_one(RMAP.inputs, data)
+    gateway = Gateway(parse_config({}, "<test>"))
+    for settings in (settings_of(gateway), {"reflex_threshold_mm_s": math.inf}, {}, None):
+        assert RMAP.encode_holding(settings) == _one_by_one(RMAP.holding, settings)
 
 
 def test_node_bits_alarm_bits_and_emcy_codes():

@@ -15,7 +15,12 @@ import pytest
 
 from grasplink import cli
 from grasplink.errors import BrokerError
-from grasplink.gateway.telemetry import TelemetryPublisher, parse_broker_url, tls_context
+from grasplink.gateway.telemetry import (
+    TelemetryPublisher,
+    parse_broker_url,
+    tls_context,
+    transport,
+)
 from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
 from grasplink.gateway.telemetry.sparkplug import BOOLEAN, STRING, metric_value, set_value
 from tests.telemetry.broker import (
@@ -151,6 +156,39 @@ def test_a_sparkplug_host_reads_births_and_data_in_order(broker: Mosquitto, fake
     ]
     assert skin == sorted(skin) and len(skin) > 10
     assert host.errors == []
+
+
+@pytest.mark.parametrize("fast", [True, False], ids=["own packets", "paho publish"])
+def test_both_publish_paths_deliver_every_message_in_order(
+    broker: Mosquitto, fake, monkeypatch: pytest.MonkeyPatch, fast: bool
+) -> None:
+    """With the pinned paho the links build PUBLISH packets themselves (`_queue_packets`);
+    a paho without the internals they use publishes through paho. Both deliver the JSON
+    values (QoS 1, acknowledged) and Sparkplug data (QoS 0) in order, and count them."""
+    if not fast:
+        monkeypatch.setattr(transport, "PAHO_INTERNALS", (*transport.PAHO_INTERNALS, "_none"))
+    recorder = Recorder(broker, ["grasplink/gw/node/skin/values", "spBv1.0/#"])
+    host = SparkplugHost("grasplink", "gw")
+    pub = publisher(fake, broker.url)
+    made = spy_on_skin_values(pub)
+    with pub:
+        assert [link._fast for link in pub.links] == [fast, fast]
+        time.sleep(1.0)
+        links = {link.protocol.name: link for link in pub.links}
+        assert links["json"].sent > 20 and links["sparkplug"].sent > 20
+    time.sleep(0.2)
+    recorder.close()
+    forces = []
+    for message in recorder.taken():
+        if message.topic.startswith("spBv1.0"):
+            host.feed(message.topic, message.payload)
+        else:
+            forces.append(json.loads(message.payload)["grip_force_n"])
+    assert len(made) > 10 and forces == made, "a value message was lost or out of order"
+    assert host.kinds()[0] == "NBIRTH" and host.kinds()[-1] == "NDEATH"
+    assert host.errors == []
+    for link in pub.links:
+        assert not link.outbox and not link._inflight
 
 
 def test_commands_are_answered_accepted_or_rejected_with_the_reason(

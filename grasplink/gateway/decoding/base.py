@@ -27,6 +27,7 @@ the bound rather than a numpy error deep inside a decoder.
 
 from __future__ import annotations
 
+import bisect
 import copy
 import math
 from collections.abc import Sequence
@@ -54,6 +55,8 @@ TIME_RESOLUTION_PERIODS = 1e-3
 #: (samples the guard accepted; skin frames of a CAN log): the output would describe
 #: whatever happened to survive, not the recording.
 MIN_USABLE_SHARE = 0.5
+#: Chunks up to this many samples (a CAN frame's) are checked and gridded in plain floats.
+SMALL_CHUNK = 8
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,10 +234,18 @@ class Decoder:
         t, x = self._guard(t, x)
         if not len(t):
             return []
-        steps = np.diff(t, prepend=t[0] if previous is None else previous)  # first: no gap
+        first = t[0] if previous is None else previous  # first: no gap
+        steps: list[float] | np.ndarray
+        if len(t) <= SMALL_CHUNK:  # np.diff's differences, without its temporaries
+            times = t.tolist()
+            steps = [b - a for a, b in zip([float(first), *times[:-1]], times, strict=True)]
+            cuts = [k for k, step in enumerate(steps) if step > self.gap_s]
+        else:
+            steps = np.diff(t, prepend=first)
+            cuts = np.nonzero(steps > self.gap_s)[0].tolist()
         out: list[SlipEstimate] = []
         start = 0
-        for cut in np.nonzero(steps > self.gap_s)[0].tolist():
+        for cut in cuts:
             if cut > start:
                 out += self.process(t[start:cut], x[start:cut])
             self.stats.gaps += 1
@@ -307,6 +318,12 @@ class Decoder:
 
     def _guard(self, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         stats = self.stats
+        if 0 < len(t) <= SMALL_CHUNK and self._clean(t.tolist(), x.tolist()):
+            # a CAN frame's few samples, all usable (the usual case): the checks below in
+            # plain floats, the same numbers without a dozen temporary arrays
+            self._last_t = float(t[-1])
+            stats.accepted += len(t)
+            return t.copy(), x.copy()
         finite = np.isfinite(t) & np.isfinite(x)
         stats.rejected_nonfinite += int(np.count_nonzero(~finite))
         t, x = t[finite], x[finite]
@@ -322,6 +339,18 @@ class Decoder:
             self._last_t = float(t[-1])
             stats.accepted += len(t)
         return t, x
+
+    def _clean(self, t: list[float], x: list[float]) -> bool:
+        """Are all these samples finite, in range and spaced (what `_guard` keeps)?"""
+        previous = -math.inf if self._last_t is None else self._last_t
+        for tk, xk in zip(t, x, strict=True):
+            # NaN fails every comparison; +-inf fails the (finite) bounds
+            if not (abs(xk) <= self.max_force_n and abs(tk) <= self.max_time_s):
+                return False
+            if not tk - previous >= self.min_step_s:
+                return False
+            previous = tk
+        return True
 
     def _spaced(self, t: np.ndarray) -> np.ndarray:
         """Which samples come at least `min_step_s` after the previous accepted one."""
@@ -350,10 +379,16 @@ class Decoder:
         last = math.floor(t[-1] / period + 1e-9)
         if last < self._next_update:
             return []
-        grid = np.arange(self._next_update, last + 1) * period
+        if len(t) <= SMALL_CHUNK and last - self._next_update < SMALL_CHUNK:
+            # np.arange * period and np.searchsorted(side="right") in plain floats
+            times = t.tolist()
+            grid = [float(k) * period for k in range(self._next_update, last + 1)]
+            self._next_update = last + 1
+            return [(bisect.bisect_right(times, g + 1e-12), g) for g in grid]
+        grid_a = np.arange(self._next_update, last + 1) * period
         self._next_update = last + 1
-        counts = np.searchsorted(t, grid + 1e-12, side="right")
-        return list(zip(counts.tolist(), grid.tolist(), strict=True))
+        counts = np.searchsorted(t, grid_a + 1e-12, side="right")
+        return list(zip(counts.tolist(), grid_a.tolist(), strict=True))
 
     def process(self, t: np.ndarray, x: np.ndarray) -> list[SlipEstimate]:
         """Decode accepted samples (finite, in range, spaced, no gap among them)."""

@@ -53,6 +53,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cache
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -150,6 +151,12 @@ class _StepScale:
     next: int = 0  # next centre to test
 
 
+def _mean(x: np.ndarray) -> float:
+    """np.mean's number (its sum over the count) without its wrappers."""
+    return np.add.reduce(x) / len(x)
+
+
+@cache
 def _hinge_gain(width: int) -> float:
     """Noise of a hinge output per unit of white input noise (two LS slopes sharing a sample)."""
     s = width * (width + 1) * (width + 2) / 12.0  # sum of squared centred offsets
@@ -293,7 +300,7 @@ class ContactDetector:
             for cache in caches + [
                 c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
             ]:
-                for b in [b for b in cache if b < oldest]:
+                for b in list(filter(oldest.__gt__, cache)):  # b < oldest, at C speed
                     del cache[b]
         events = sorted(events + steps, key=lambda e: (e.emit_index, e.id))
         return events, checks + step_checks
@@ -389,7 +396,9 @@ class ContactDetector:
         ch.z = np.concatenate([ch.z, seg_h / noise])
         ch.zh = np.concatenate([ch.zh, seg_h])
         ch.za = np.concatenate([ch.za, seg_a])
-        ch.zready = np.concatenate([ch.zready, np.full(len(seg_h), ready, dtype=np.int64)])
+        known = np.empty(len(seg_h), np.int64)
+        known.fill(ready)  # np.full's numbers without its wrapper
+        ch.zready = np.concatenate([ch.zready, known])
 
     def _white(self, block: int) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
@@ -402,13 +411,19 @@ class ContactDetector:
         """
         fine = self.channels[0]
         gain = _hinge_gain(fine.width)
+        noise, censored, floor = fine.block_noise, self._censored, self._floor
 
         def seen(b: int) -> float | None:
-            if b not in fine.block_noise or self._censored.get(b, True):
+            if b not in noise or censored.get(b, True):
                 return None
-            return max(fine.block_noise[b] / gain, self._floor.get(b, 0.0))
+            return max(noise[b] / gain, floor.get(b, 0.0))
 
-        values = [v for b in range(max(0, block - self.noise_blocks), block) if (v := seen(b))]
+        values = []  # seen(b) of each block before, inlined (this runs a few times a block)
+        for b in range(max(0, block - self.noise_blocks), block):
+            if b in noise and not censored.get(b, True):
+                v = max(noise[b] / gain, floor.get(b, 0.0))
+                if v:
+                    values.append(v)
         if values:
             values.sort()
             return values[(len(values) - 1) // 2], len(values)
@@ -438,10 +453,9 @@ class ContactDetector:
         noise = max(sigma, NOISE_FLOOR_N) * _hinge_gain(ch.width)
         if ch is not self.channels[0]:
             history = range(max(0, block - self.history_blocks), block)
+            known_noise, censored = ch.block_noise, self._censored
             own = sorted(
-                ch.block_noise[b]
-                for b in history
-                if b in ch.block_noise and not self._censored.get(b, True)
+                [known_noise[b] for b in history if b in known_noise and not censored.get(b, True)]
             )
             if own:
                 noise = max(noise, own[(len(own) - 1) // 2])
@@ -460,7 +474,7 @@ class ContactDetector:
             return
         i0, i1 = lo - ch.z_start, hi - ch.z_start
         ch.next_test = hi + 1
-        above = np.flatnonzero(z[i0 : i1 + 1] >= self.threshold)
+        above = (z[i0 : i1 + 1] >= self.threshold).nonzero()[0]
         for h in above.tolist():  # a local maximum over +-w (ties: the first)
             i = i0 + h
             zc = z[i]
@@ -493,8 +507,8 @@ class ContactDetector:
         if white is None:
             return False
         x = self._x
-        fall = float(np.max(x[i - w - 2 : i] - x[i - w - 1 : i + 1]))
-        rise = float(np.mean(x[i + 1 : i + w + 1]) - x[i])
+        fall = float((x[i - w - 2 : i] - x[i - w - 1 : i + 1]).max())
+        rise = float(_mean(x[i + 1 : i + w + 1]) - x[i])
         return fall > 5.0 * math.sqrt(2.0) * white[0] and fall > 2.0 * max(rise, 0.0)
 
     def _refine(self, ci: int, n: int) -> tuple[int, float, int]:
@@ -709,7 +723,7 @@ class ContactDetector:
             else:
                 checks.append(done)
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
-                    watch.top = float(np.max(watch.detrended)) if len(watch.detrended) else 0.0
+                    watch.top = float(watch.detrended.max()) if len(watch.detrended) else 0.0
                     watch.next_k = max(watch.next_k, done.emit_index - self.level_half + 1)
                     self._stepped.append(watch)
         self._watches = still
@@ -740,7 +754,7 @@ class ContactDetector:
                 credit = self._tail_credit(watch, k)
                 d = level - watch.base + credit - watch.trend * (k - watch.index + 2 * h + 1)
                 watch.next_k = end + 1
-                fell = np.flatnonzero(watch.top - d >= self.drop_fraction * watch.top)
+                fell = (watch.top - d >= self.drop_fraction * watch.top).nonzero()[0]
                 if len(fell):
                     watch.fell_at = int(k[fell[0]])
         if watch.fell_at >= 0:
@@ -795,7 +809,7 @@ class ContactDetector:
                 watch.detrended = np.concatenate([watch.detrended, d[:keep]])
             # rise time: onset to the first sample at 90 % of the peak so far (a noisy
             # plateau keeps nudging the peak, not this)
-            rise = np.searchsorted(history, 0.9 * peak)
+            rise = history.searchsorted(0.9 * peak)
             rise = np.maximum(rise, self.min_rise)
             since = k - watch.index
             ok = (
@@ -804,9 +818,9 @@ class ContactDetector:
                 & (since <= (1.0 + self.decay_rises) * rise)
             )
             # a sharp rise is judged at the hold: a step, or (fallen back by then) a pulse
-            deferred = (k < hold) & (np.searchsorted(history, 0.8 * peak) <= self.step_rise)
+            deferred = (k < hold) & (history.searchsorted(0.8 * peak) <= self.step_rise)
             watch.fell = watch.fell or bool((ok & deferred).any())
-            hit = np.flatnonzero(ok & ~deferred)
+            hit = (ok & ~deferred).nonzero()[0]
             if len(hit) and k[hit[0]] < hold:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
@@ -832,7 +846,7 @@ class ContactDetector:
         i0 = max(0, i1 - self.trend_n)
         if i1 <= i0:
             return None
-        return float(np.min(self._level[i0:i1]))
+        return float(self._level[i0:i1].min())
 
     def _tail_credit(self, watch: _Watch, k: np.ndarray) -> np.ndarray:
         """How far an earlier pulse's tail under the onset falls by k (>= 0): its slope
@@ -850,13 +864,13 @@ class ContactDetector:
         and the trend goes on."""
 
         def stays(levels: np.ndarray) -> bool:
-            top = float(np.max(levels))
+            top = float(levels.max())
             if top < 6.0 * watch.noise:
                 return False
             rise = int(np.argmax(levels >= 0.8 * top))
             if rise > self.step_rise:
                 return False
-            return float(np.min(levels[rise:])) >= (1.0 - self.drop_fraction) * top
+            return float(levels[rise:].min()) >= (1.0 - self.drop_fraction) * top
 
         return self._stayed_up(watch, stays) or self._tail_step(watch)
 
@@ -914,7 +928,7 @@ class ContactDetector:
         m = len(tail)
         x = np.arange(m) - (m - 1) / 2.0
         change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
-        return change <= 0.2 * float(np.max(watch.levels)) + 3.0 * watch.noise
+        return change <= 0.2 * float(watch.levels.max()) + 3.0 * watch.noise
 
     def _train_follows(self, watch: _Watch) -> bool:
         """Did more contacts come before the hold? Pulses after short spacings start on the
@@ -961,14 +975,14 @@ class ContactDetector:
 
         def stays(levels: np.ndarray) -> bool:
             n = watch.rise or self.small_rise
-            first = float(np.mean(levels[n : 2 * n + 1]))  # just after a sharp rise
+            first = float(_mean(levels[n : 2 * n + 1]))  # just after a sharp rise
             if first < 6.0 * watch.noise:
                 return False
-            later = float(np.mean(levels[2 * n : 4 * n + 1]))
+            later = float(_mean(levels[2 * n : 4 * n + 1]))
             if later > 1.15 * first + 2.0 * watch.noise:
                 return False  # still rising: a slow pulse
-            end = float(np.mean(levels[-max(2, len(levels) // 4) :]))
-            low = float(np.min(levels[n:]))
+            end = float(_mean(levels[-max(2, len(levels) // 4) :]))
+            low = float(levels[n:].min())
             keep = 1.0 - self.drop_fraction
             if end > (2.0 - keep) * first + 2.0 * watch.noise:
                 return False  # went on rising: a ramp

@@ -369,10 +369,15 @@ def lattice_median(values: np.ndarray, floor: float | None = None) -> float:
     n = len(v)
     if not n:
         return 0.0
-    m = float(np.median(v))
+    if v[-1] != v[-1]:  # NaN (sorted last): np.median's rules
+        m = float(np.median(v))
+    else:  # np.median's number off the sorted values (it partitions again): the mean
+        # (np.add.reduce, over the count) of the middle one or two
+        middle = v[(n - 1) // 2 : n // 2 + 1]
+        m = float(np.add.reduce(middle) / len(middle))
     tol = 1e-9 * max(abs(float(v[0])), abs(float(v[-1])))
-    lo = int(np.searchsorted(v, m - tol, side="left"))
-    hi = int(np.searchsorted(v, m + tol, side="right"))
+    lo = int(v.searchsorted(m - tol, side="left"))
+    hi = int(v.searchsorted(m + tol, side="right"))
     ties = hi - lo
     gaps = ([m - float(v[lo - 1])] if lo > 0 else []) + ([float(v[hi]) - m] if hi < n else [])
     if ties <= 1 or not gaps:  # continuous data, or every value the same (no spread to see)
@@ -401,12 +406,18 @@ def on_rail(x: np.ndarray) -> bool:
     x = np.asarray(x, dtype=np.float64)
     if len(x) < 2:
         return False
-    values, counts = np.unique(x, return_counts=True)
-    if len(values) == 1:
+    v = np.sort(x.ravel())
+    if v[-1] != v[-1]:  # NaN: np.unique's rules (NaNs count as one value)
+        counts = np.unique(x, return_counts=True)[1]
+    else:  # np.unique's counts without its wrappers: the runs of the sorted values
+        bounds = np.empty(len(v) + 1, np.int64)
+        change = (v[1:] != v[:-1]).nonzero()[0]
+        bounds[0], bounds[1 : len(change) + 1], bounds[len(change) + 1] = 0, change + 1, len(v)
+        counts = np.diff(bounds[: len(change) + 2])
+    if len(counts) == 1:
         return True  # constant: nothing of the noise shows
     need = max(RAIL_SHARE * len(x), 2.0)
-    for end in (0, len(values) - 1):
-        others = np.delete(counts, end)
+    for end, others in ((0, counts[1:]), (len(counts) - 1, counts[:-1])):
         if counts[end] >= need and counts[end] >= 2 * others.max():
             return True
     return False

@@ -79,6 +79,39 @@ STEADY, CHANGING = 0, 1
 # pulse verdicts in the ring of recent contacts
 UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
 RING = 256
+# process noise of the Kalman prediction as one scatter per model: flat (4 x 4) index of each
+# entry, and the powers of dt (columns of [1, dt, dt^2, dt^3]) and divisor of its term, in
+# the order _kalman adds them (x * 1.0 and x / 1.0 are exact: the same bits as without)
+_QV_AT, _QV_POW = np.array([0, 1, 4, 5]), np.array([3, 2, 2, 1])
+_QV_DIV = np.array([3.0, 2.0, 2.0, 1.0])
+_QJ_AT = np.array([0, 1, 4, 2, 8, 5, 6, 9, 10])
+_QJ_POW1, _QJ_POW2 = np.array([3, 2, 2, 3, 3, 3, 2, 2, 1]), np.array([2, 2, 2, 0, 0, 0, 0, 0, 0])
+_QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
+_VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
+
+
+_EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
+
+
+def _full(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
+    """np.full without its wrapper: a contact builds dozens of these small arrays."""
+    out: np.ndarray = np.empty(n, dtype)
+    out.fill(value)
+    return out
+
+
+def _clip(x: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> np.ndarray:
+    """np.clip's numbers without its wrapper (a dozen microseconds on small arrays). Ties
+    (+0 against -0) as np.clip breaks them: scalar bounds keep x, array bounds give the
+    bound; np.maximum and np.minimum give their second argument on a tie."""
+    if isinstance(low, np.ndarray):
+        return np.minimum(np.maximum(x, low), high)
+    return np.minimum(high, np.maximum(low, x))
+
+
+def _nz(mask: np.ndarray) -> np.ndarray:
+    """Indices of a 1-D mask's True entries (np.flatnonzero without its wrappers)."""
+    return mask.nonzero()[0]
 
 
 class _Bank:
@@ -126,7 +159,10 @@ class _Bank:
 
     @classmethod
     def empty(cls) -> _Bank:
-        return cls(
+        """The empty bank (one shared instance: banks are never changed in place)."""
+        if _EMPTY:
+            return _EMPTY[0]
+        bank = cls(
             P=np.zeros((0, 4, 4)),
             X=np.zeros((0, 4)),
             dirn=np.zeros(0, np.int64),
@@ -142,9 +178,20 @@ class _Bank:
             stop=np.zeros(0),
             t=np.zeros(0),
         )
+        for key in cls.FIELDS:
+            getattr(bank, key).flags.writeable = False
+        _EMPTY.append(bank)
+        return bank
 
-    def take(self, idx: np.ndarray) -> _Bank:
-        return _Bank(**{k: getattr(self, k)[idx] for k in self.FIELDS})
+    def take(self, idx: np.ndarray, only: tuple[str, ...] | None = None) -> _Bank:
+        """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]` on
+        the small arrays a contact branches, 14 fields a time); `only`: just these fields
+        (a partial bank, read where no other field is)."""
+        out = _Bank.__new__(_Bank)
+        for key in self.FIELDS if only is None else only:
+            setattr(out, key, getattr(self, key).take(idx, 0))
+        out._sched = None
+        return out
 
     @staticmethod
     def concat(banks: list[_Bank]) -> _Bank:
@@ -153,10 +200,31 @@ class _Bank:
             return _Bank.empty()
         if len(banks) == 1:
             return banks[0]
-        return _Bank(**{k: np.concatenate([getattr(b, k) for b in banks]) for k in _Bank.FIELDS})
+        out = _Bank.__new__(_Bank)
+        for key in _Bank.FIELDS:
+            setattr(out, key, np.concatenate([getattr(b, key) for b in banks]))
+        out._sched = None
+        return out
 
     def replace(self, **fields) -> _Bank:
         out = _Bank(**{k: fields.get(k, getattr(self, k)) for k in self.FIELDS})
+        return out
+
+    def part(self, start: int, stop: int) -> _Bank:
+        """Tracks start..stop (views)."""
+        out = _Bank.__new__(_Bank)
+        for key in self.FIELDS:
+            setattr(out, key, getattr(self, key)[start:stop])
+        out._sched = None
+        return out
+
+    def twice(self, first: dict, second: dict) -> _Bank:
+        """concat([self.replace(**first), self.replace(**second)]) in one pass."""
+        out = _Bank.__new__(_Bank)
+        for key in self.FIELDS:
+            own = getattr(self, key)
+            setattr(out, key, np.concatenate((first.get(key, own), second.get(key, own))))
+        out._sched = None
         return out
 
 
@@ -248,6 +316,7 @@ class TrackerDecoder(Decoder):
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
+    MEMO = 8  # contacts whose branches are kept for a replay on the same inputs (`_step`)
 
     def __init__(
         self,
@@ -304,6 +373,12 @@ class TrackerDecoder(Decoder):
                 coast = float(self._pos[di, R] - pos[di, r])
                 self._ahead_log[di, r, R - 1 - r] = math.log(coast)
                 self._ahead_missed[di, r, R - 1 - r] = 0.0
+        # what _log_waiting derives from them, per (direction, start ridge): P(all missed
+        # before each ridge ahead) and which ridges exist
+        self._ahead_before = np.concatenate(
+            [np.ones((2, R, 1)), self._ahead_missed[:, :, :-1]], axis=2
+        )
+        self._ahead_finite = np.isfinite(self._ahead_log)
         self._erf_scale = 1.0 / (self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0))
         self.max_hypotheses = int(max_hypotheses)
         self.detector = detector or ContactDetector(fs_hz)
@@ -328,8 +403,30 @@ class TrackerDecoder(Decoder):
         self._ring = np.zeros(RING, np.int64)
         # contacts told to be steps (replayed as such): id -> did the trend go on after it
         self._steps: dict[int, bool | None] = {}
+        # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
+        self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
+        self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
+        # what every contact's one-contact tracks share (read-only: banks share arrays)
+        dirn = np.repeat(np.array([1, -1]), R)
+        ridge = np.tile(np.arange(R), 2)
+        X = np.zeros((2 * R, 4))
+        X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
+        ones = np.ones(2 * R, np.int64)
+        self._birth = {
+            "P": np.zeros((2 * R, 4, 4)),
+            "X": X,
+            "dirn": dirn,
+            "m": np.ones(2 * R),
+            "model": np.zeros(2 * R, np.int64),
+            "n": ones,
+            "ridge": ridge,
+            "run": ones,
+            "stop": np.full(2 * R, np.nan),
+        }
+        for array in self._birth.values():
+            array.flags.writeable = False
 
     def _detect_probability(self, spacing_before: float) -> float:
         share = min(1.0, max(0.0, (spacing_before - 3.0) / 5.0))
@@ -423,6 +520,28 @@ class TrackerDecoder(Decoder):
         self._cache = None
 
     def _step(self, ev: ContactEvent) -> None:
+        """Take contact ev: branch every track (`_branch`), then prune.
+
+        The branches are those of an earlier pass when it ran on the same inputs (the
+        same bank object - banks are immutable -, null score, contact and step verdict):
+        a step told and then revised to a pulse replays the very contacts first taken,
+        and only the pruning can differ (a replay holds one contact fewer)."""
+        key = (ev, self._null, ev.id in self._steps, self._steps.get(ev.id))
+        known = self._memo.get(key)
+        if known is not None and known[0] is self._tracks:
+            self._null, pool = known[1], known[2]
+        else:
+            before = self._tracks
+            pool = self._branch(ev)
+            self._memo[key] = (before, self._null, pool)
+            while len(self._memo) > self.MEMO:
+                del self._memo[next(iter(self._memo))]
+        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
+        held_ids = np.array([c.id for c in self._contacts])
+        self._tracks = self._prune(pool, recent_ids, held_ids)
+
+    def _branch(self, ev: ContactEvent) -> _Bank:
+        """Every track's children for contact ev (updates the null score), unpruned."""
         tc = ev.t_s
         B = self._retire(self._tracks, tc)
         step = ev.id in self._steps
@@ -439,7 +558,7 @@ class TrackerDecoder(Decoder):
             moving = np.isnan(B.stop)
             if step:  # a grip change (slipping or not) or, slipping, a stop here
                 children.append(B.replace(score=B.score + math.log(self.GRIP_STEP_PER_S)))
-                stopping = B.take(np.flatnonzero(moving & (B.n >= 2)))
+                stopping = B.take(_nz(moving & (B.n >= 2)))
                 children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
             else:
                 children.append(B.replace(score=B.score + np.log(rate)))
@@ -456,17 +575,14 @@ class TrackerDecoder(Decoder):
             children += assigned
             if step:  # a stop right at a ridge (the step is that ridge's contact)
                 for c in assigned:
-                    at = c.take(np.flatnonzero(c.n >= 2))
+                    at = c.take(_nz(c.n >= 2))
                     children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
         self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
         if probe:
-            recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
-            held_ids = np.array([c.id for c in self._contacts])
-            self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
-            return
+            return _Bank.concat(children)
         # a new track starting at this contact: a slip starting (the earlier story ends
         # here) or, while one slips, reversing (the other edge leads, anywhere)
-        base = np.full(2, best_before + self.LOG_NEW_TRACK)
+        base = _full(2, best_before + self.LOG_NEW_TRACK)
         if len(B):
             slipping = np.isnan(B.stop) & (B.n >= 2)
             for di, d in enumerate((1, -1)):
@@ -475,9 +591,7 @@ class TrackerDecoder(Decoder):
                     reverse = float(B.score[way].max()) + self.LOG_REVERSE + math.log(2.0)
                     base[di] = max(base[di], reverse)
         children.append(self._births(ev, base + self._log_strength(ev.z)))
-        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
-        held_ids = np.array([c.id for c in self._contacts])
-        self._tracks = self._prune(_Bank.concat(children), recent_ids, held_ids)
+        return _Bank.concat(children)
 
     def _retire(self, B: _Bank, tc: float) -> _Bank:
         """B without the tracks whose last contact is longer before tc than the slowest
@@ -488,12 +602,12 @@ class TrackerDecoder(Decoder):
         if not len(B):
             return B
         stale = tc - B.t > self._stale_s
-        return B.take(np.flatnonzero(~stale)) if stale.any() else B
+        return B.take(_nz(~stale)) if stale.any() else B
 
     def _clutter_rate(self, B: _Bank, tc: float) -> np.ndarray:
         """Spurious contacts per s at tc under each track: detector false alarms, and while
         slipping the tipping front edge's, within TIP_MM of travel after a ridge contact."""
-        rate = np.full(len(B), self.CLUTTER_PER_S)
+        rate = _full(len(B), self.CLUTTER_PER_S)
         moving = np.isnan(B.stop)
         dt = tc - B.t
         v = B.X[:, 1]
@@ -509,28 +623,17 @@ class TrackerDecoder(Decoder):
 
     def _births(self, ev: ContactEvent, base: np.ndarray) -> _Bank:
         """One-contact tracks at every ridge, both ways; `base`: log prior per direction."""
-        R = self.count
-        dirn = np.repeat(np.array([1, -1]), R)
-        ridge = np.tile(np.arange(R), 2)
-        X = np.zeros((2 * R, 4))
-        X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
-        ids = np.full((2 * R, IDS), -1, np.int64)
+        N = 2 * self.count
+        ids = np.empty((N, IDS), np.int64)
+        ids.fill(-1)
         ids[:, -1] = ev.id
         return _Bank(
-            P=np.zeros((2 * R, 4, 4)),
-            X=X,
-            dirn=dirn,
-            first=np.full(2 * R, ev.id, np.int64),
+            first=_full(N, ev.id, np.int64),
             ids=ids,
-            m=np.ones(2 * R),
-            model=np.zeros(2 * R, np.int64),
-            n=np.ones(2 * R, np.int64),
-            ridge=ridge,
-            run=np.ones(2 * R, np.int64),
             score=(base[:, None] + self._log_prior).ravel(),
-            sig=np.full(2 * R, ev.sigma_s),
-            stop=np.full(2 * R, np.nan),
-            t=np.full(2 * R, ev.t_s),
+            sig=_full(N, ev.sigma_s),
+            t=_full(N, ev.t_s),
+            **self._birth,
         )
 
     def _stopped_at(self, B: _Bank, tc: float, log_prior: float | None = None) -> _Bank:
@@ -539,13 +642,13 @@ class TrackerDecoder(Decoder):
         `log_prior`: of the stop (by default STOP_STEP_PER_S, a density in time)."""
         if not len(B):
             return B
-        s, _, _ = self._kinematics(B, tc)
+        s = self._travel(B, tc)
         limit = self._pos[(1 - B.dirn) // 2, np.minimum(B.ridge + 1, self.count)]
         X = B.X.copy()
         X[:, 0] = np.minimum(s, limit - 0.1)
         X[:, 1] = X[:, 2] = 0.0
         prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
-        return B.replace(X=X, stop=np.full(len(B), tc), score=B.score + prior)
+        return B.replace(X=X, stop=_full(len(B), tc), score=B.score + prior)
 
     def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
         """Children of B that assign contact ev to one of the next ridges (each branch type
@@ -555,39 +658,46 @@ class TrackerDecoder(Decoder):
         di = (1 - B.dirn) // 2
         moving = np.isnan(B.stop)
         ok = dt > 0
-        miss = np.zeros(len(B))
-        rows, skips, priors = [], [], []
-        for skip in range(self.MAX_SKIP + 1):
-            k = B.ridge + 1 + skip
-            valid = ok & (k < R)
-            if not valid.any():
-                break
-            kk = np.minimum(k, R - 1)
-            sel = np.flatnonzero(valid)
-            rows.append(sel)
-            skips.append(np.full(len(sel), skip))
-            priors.append((miss + self._log_pd[di, kk])[sel])
-            miss = miss + self._log_miss[di, kk]
-        if not rows:
+        # every (skip, track) at once, skip-major: the order of one skip after the other
+        k = B.ridge[:, None] + 1 + np.arange(self.MAX_SKIP + 1)
+        valid = (ok[:, None] & (k < R)).T
+        skip_arr, row = valid.nonzero()
+        if not len(row):
             return []
-        row, skip_arr, prior = np.concatenate(rows), np.concatenate(skips), np.concatenate(priors)
+        kk = np.minimum(k, R - 1)
+        di2 = di[:, None]
+        # P(the ridges skipped all missed): sequential sums from 0, as one skip after another
+        missed = np.zeros(k.shape)
+        missed[:, 1:] = np.cumsum(self._log_miss[di2, kk[:, :-1]], axis=1)
+        prior = (missed + self._log_pd[di2, kk]).T[skip_arr, row]
         run, mov = B.run[row], moving[row]
         out = []
-        # speed from this contact and the last (one-contact or restarted tracks)
-        sel = np.flatnonzero(mov & (run == 1))
+        fresh = _nz(mov & (run == 1))  # one-contact or restarted tracks
+        sel = _nz(mov & (run >= 2))  # slipping tracks with a speed
+        # the Kalman filter; far off, the speed starts again from the last two contacts -
+        # in one pass with the tracks whose speed comes from this contact and the last
+        kalman, far, far_prior = _Bank.empty(), sel[:0], prior[:0]
         if len(sel):
-            out.append(self._start_speed(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
-        # the Kalman filter (slipping tracks with a speed)
-        sel = np.flatnonzero(mov & (run >= 2))
+            kalman, far, far_prior = self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel])
+        again = np.concatenate([fresh, sel.take(far)])
+        started, restarted = self._start_speed(
+            B.take(row.take(again)),
+            ev,
+            skip_arr.take(again),
+            np.concatenate([prior.take(fresh), far_prior]),
+            len(fresh),
+        )
+        if len(fresh):
+            out.append(started)
         if len(sel):
-            out.append(self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel]))
+            out.append(_Bank.concat([kalman, restarted]))
             # or the slip stopped unseen and went on: a restart at the next ridge
             first = sel[skip_arr[sel] == 0]
             if len(first):
                 at = B.take(row[first])
                 out.append(self._restart(at, ev, at.ridge + 1, prior[first] + self.LOG_RESTART))
         # a stopped track restarting here
-        sel = np.flatnonzero(~mov)
+        sel = _nz(~mov)
         if len(sel):
             at = B.take(row[sel])
             log_rate = math.log(self.RESTART_PER_S)
@@ -614,11 +724,11 @@ class TrackerDecoder(Decoder):
             ridge=k,
             n=B.n + 1,
             run=np.ones(len(B), np.int64),
-            t=np.full(len(B), ev.t_s),
-            sig=np.full(len(B), ev.sigma_s),
+            t=_full(len(B), ev.t_s),
+            sig=_full(len(B), ev.sigma_s),
             m=np.ones(len(B)),
             ids=self._with_contact(B, ev),
-            stop=np.full(len(B), np.nan),
+            stop=_full(len(B), np.nan),
             score=B.score + log_prior,
         )
 
@@ -628,21 +738,26 @@ class TrackerDecoder(Decoder):
         ev: ContactEvent,
         skip: np.ndarray,
         log_prior: np.ndarray,
-        models: np.ndarray | None = None,
-        v_ref: np.ndarray | None = None,
-    ) -> _Bank:
-        """Tracks at ridge k whose speed comes from their last contact and this one: each in
-        both motion models (with their priors), or in `models` (a restart of the speed, within
-        MAX_SPEED_JUMP of `v_ref`)."""
+        fresh: int,
+    ) -> tuple[_Bank, _Bank]:
+        """Tracks at ridge k whose speed comes from their last contact and this one: the
+        first `fresh` (one contact, or restarted) each in both motion models (with their
+        priors); the rest (far off their Kalman prediction) in their own model, within
+        MAX_SPEED_JUMP of their speed. Both kinds in one pass (the numbers are per track),
+        returned apart."""
         tc = ev.t_s
         dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
         d = B.X[:, 3]
         v = (target - B.X[:, 0] + lag * d) / dt
         good = (v >= V_MIN_MM_S) & (v <= V_MAX_MM_S)
-        if v_ref is not None:
-            good &= (v * self.MAX_SPEED_JUMP >= v_ref) & (v <= self.MAX_SPEED_JUMP * v_ref)
+        v_ref = np.maximum(B.X[fresh:, 1], V_MIN_MM_S)
+        v_far = v[fresh:]
+        good[fresh:] &= (v_far * self.MAX_SPEED_JUMP >= v_ref) & (
+            v_far <= self.MAX_SPEED_JUMP * v_ref
+        )
         if not good.all():
-            sel = np.flatnonzero(good)
+            sel = _nz(good)
+            fresh = int(np.count_nonzero(good[:fresh]))
             B, dt, k, target, decay, lag, d, v = (
                 B.take(sel),
                 dt[sel],
@@ -654,11 +769,9 @@ class TrackerDecoder(Decoder):
                 v[sel],
             )
             log_prior = log_prior[sel]
-            if models is not None:
-                models = models[sel]
         N = len(B)
         if not N:
-            return B
+            return B, B
         r = self._meas_var(v, ev.sigma_s)
         r_before = self._meas_var(v, B.sig)
 
@@ -681,40 +794,53 @@ class TrackerDecoder(Decoder):
         score = B.score + log_prior + self._log_speed_prior(v) - np.log(dt)
         common = dict(
             ridge=k,
-            t=np.full(N, tc),
+            t=_full(N, tc),
             n=B.n + 1,
-            run=np.full(N, 2, np.int64),
-            sig=np.full(N, ev.sigma_s),
+            run=_full(N, 2, np.int64),
+            sig=_full(N, ev.sigma_s),
             m=1.0 + B.m * decay,
             ids=self._with_contact(B, ev),
         )
         # changing: the mean speed over the interval is the speed half an interval ago
         sa = self.ACC_PER_S * v
-        Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
+        if self.DIP_PRIOR_CHANGING_MM == self.DIP_PRIOR_MM:  # the same numbers: built once
+            Pc = P.copy()
+        else:
+            Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
         half = dt / 2.0
         Pc[:, 1, 1] += (half * sa) ** 2
         Pc[:, 1, 2] = Pc[:, 2, 1] = half * sa * sa
         Pc[:, 2, 2] = sa * sa
-        if models is not None:
-            chg = models == CHANGING
-            return B.replace(
-                X=X, P=np.where(chg[:, None, None], Pc, P), model=models, score=score, **common
+        started = restarted = _Bank.empty()
+        if fresh:
+            part = B.part(0, fresh)
+            both = {key: value[:fresh] for key, value in common.items()}
+            steady = dict(
+                X=X[:fresh],
+                P=P[:fresh],
+                model=_full(fresh, STEADY, np.int64),
+                score=score[:fresh] + math.log(1.0 - math.exp(self.LOG_CHANGING)),
+                **both,
             )
-        steady = B.replace(
-            X=X,
-            P=P,
-            model=np.full(N, STEADY, np.int64),
-            score=score + math.log(1.0 - math.exp(self.LOG_CHANGING)),
-            **common,
-        )
-        changing = B.replace(
-            X=X.copy(),
-            P=Pc,
-            model=np.full(N, CHANGING, np.int64),
-            score=score + self.LOG_CHANGING,
-            **common,
-        )
-        return _Bank.concat([steady, changing])
+            changing = dict(
+                X=X[:fresh],
+                P=Pc[:fresh],
+                model=_full(fresh, CHANGING, np.int64),
+                score=score[:fresh] + self.LOG_CHANGING,
+                **both,
+            )
+            started = part.twice(steady, changing)
+        if fresh < N:
+            part = B.part(fresh, N)
+            chg = part.model == CHANGING
+            restarted = part.replace(
+                X=X[fresh:],
+                P=np.where(chg[:, None, None], Pc[fresh:], P[fresh:]),
+                model=part.model,
+                score=score[fresh:],
+                **{key: value[fresh:] for key, value in common.items()},
+            )
+        return started, restarted
 
     def _toward_ridge(
         self, B: _Bank, tc: float, skip: np.ndarray
@@ -728,9 +854,12 @@ class TrackerDecoder(Decoder):
         decay = np.exp(-dt / self.DIP_RECOVERY_S)
         return dt, k, self._pos[di, k], decay, B.m * (1.0 - decay) + skip
 
-    def _kalman(self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray) -> _Bank:
+    def _kalman(
+        self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray
+    ) -> tuple[_Bank, np.ndarray, np.ndarray]:
         """Predict B to the contact and update with ridge k (robust: far off, the speed
-        starts again from the last two contacts)."""
+        starts again from the last two contacts): the updated tracks, and those far off
+        (indices into B, log prior with their likelihood) for `_start_speed`."""
         tc = ev.t_s
         N = len(B)
         dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
@@ -744,24 +873,22 @@ class TrackerDecoder(Decoder):
         Xp = np.einsum("nij,nj->ni", F, X)
         Pp = F @ P @ F.transpose(0, 2, 1)
         # process noise: the speed's random walk; the jerk of the changing model
+        # (qv dt^3 / 3 at (0, 0), qv dt^2 / 2 at (0, 1) and (1, 0), qv dt at (1, 1); then
+        # the jerk's terms: see _QJ_*), each entry's terms added in this order
         qv = self.SPEED_WALK**2 * v**3 / self.SPEED_WALK_MM
         dt2, dt3 = dt * dt, dt * dt * dt
-        Pp[:, 0, 0] += qv * dt3 / 3.0
-        Pp[:, 0, 1] += qv * dt2 / 2.0
-        Pp[:, 1, 0] += qv * dt2 / 2.0
-        Pp[:, 1, 1] += qv * dt
+        powers = np.empty((N, 4))
+        powers[:, 0] = 1.0
+        powers[:, 1] = dt
+        powers[:, 2] = dt2
+        powers[:, 3] = dt3
+        flat = Pp.reshape(N, 16)
+        flat[:, _QV_AT] += qv[:, None] * powers[:, _QV_POW] / _QV_DIV
         chg = B.model == CHANGING
         if chg.any():
             qj = np.where(chg, (self.JERK_PER_S2 * v) ** 2, 0.0)
-            Pp[:, 0, 0] += qj * dt3 * dt2 / 20.0
-            Pp[:, 0, 1] += qj * dt2 * dt2 / 8.0
-            Pp[:, 1, 0] += qj * dt2 * dt2 / 8.0
-            Pp[:, 0, 2] += qj * dt3 / 6.0
-            Pp[:, 2, 0] += qj * dt3 / 6.0
-            Pp[:, 1, 1] += qj * dt3 / 3.0
-            Pp[:, 1, 2] += qj * dt2 / 2.0
-            Pp[:, 2, 1] += qj * dt2 / 2.0
-            Pp[:, 2, 2] += qj * dt
+            flat[:, _QJ_AT] += qj[:, None] * powers[:, _QJ_POW1] * powers[:, _QJ_POW2] / _QJ_DIV
+        Pp = flat.reshape(N, 4, 4)
         var = Pp[:, 0, 0] + self._meas_var(v, ev.sigma_s) + skip * self.SIGMA_POS_MM**2
         resid = target - Xp[:, 0]
         inlier = (
@@ -774,35 +901,29 @@ class TrackerDecoder(Decoder):
         like = np.log(inlier + outlier)
         K = Pp[:, :, 0] / var[:, None]
         Xn = Xp + K * resid[:, None]
-        Xn[:, 3] = np.clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
+        Xn[:, 3] = _clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
         Pn = Pp - K[:, :, None] * Pp[:, None, 0, :]
         Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
         good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
-        out = []
-        sel = np.flatnonzero(good)
+        out = _Bank.empty()
+        sel = _nz(good)
         if len(sel):
             Bs = B.take(sel)
-            out.append(
-                Bs.replace(
-                    X=Xn[sel],
-                    P=Pn[sel],
-                    ridge=k[sel],
-                    t=np.full(len(sel), tc),
-                    n=Bs.n + 1,
-                    run=Bs.run + 1,
-                    sig=np.full(len(sel), ev.sigma_s),
-                    m=1.0 + Bs.m * decay[sel],
-                    ids=self._with_contact(Bs, ev),
-                    score=Bs.score + log_prior[sel] + like[sel],
-                )
+            out = Bs.replace(
+                X=Xn[sel],
+                P=Pn[sel],
+                ridge=k[sel],
+                t=_full(len(sel), tc),
+                n=Bs.n + 1,
+                run=Bs.run + 1,
+                sig=_full(len(sel), ev.sigma_s),
+                m=1.0 + Bs.m * decay[sel],
+                ids=self._with_contact(Bs, ev),
+                score=Bs.score + log_prior[sel] + like[sel],
             )
-        far = np.flatnonzero(inlier < outlier)
-        if len(far):  # far off: the speed changed; start again from the last two contacts
-            Bf = B.take(far)
-            vp = np.maximum(Bf.X[:, 1], V_MIN_MM_S)
-            prior = log_prior[far] + like[far]
-            out.append(self._start_speed(Bf, ev, skip[far], prior, models=Bf.model, v_ref=vp))
-        return _Bank.concat(out)
+        # far off: the speed changed; it starts again from the last two contacts
+        far = _nz(inlier < outlier)
+        return out, far, log_prior[far] + like[far]
 
     def _meas_var(self, v, sigma_t):
         """Variance of a ridge contact as a position measurement at speed v."""
@@ -837,41 +958,75 @@ class TrackerDecoder(Decoder):
         """
         if not len(B):
             return B
+        # decided on the fields it needs in score order; the bank is taken once, at the end
         order = np.argsort(-B.score, kind="stable")
-        B = B.take(order)
-        single = B.n == 1
-        key = B.ids[:, -1] * 1000003 + B.ids[:, -2]
-        key = key * 1000003 + B.ids[:, -3]
+        ids = B.ids
+        key = ids[:, -1] * 1000003 + ids[:, -2]
+        key = key * 1000003 + ids[:, -3]
         state = B.ridge * 16 + (B.dirn > 0) * 8 + B.model * 4 + np.isnan(B.stop) * 2 + (B.run == 1)
-        key = key * 1000003 + state
-        _, first_idx = np.unique(key, return_index=True)
+        key = (key * 1000003 + state).take(order)
+        # the first of each key (np.unique's return_index: a stable sort, each run's head)
+        perm = key.argsort(kind="mergesort")
+        aux = key.take(perm)
+        head = np.empty(len(aux), bool)
+        head[0] = True
+        np.not_equal(aux[1:], aux[:-1], out=head[1:])
         keep = np.zeros(len(B), bool)
-        keep[first_idx] = True
-        keep &= B.score >= B.score[0] - self.NEGLIGIBLE - 20.0
+        keep[perm[head]] = True
+        score = B.score.take(order)
+        keep &= score >= score[0] - self.NEGLIGIBLE - 20.0
         # one-contact tracks: only those starting at a recent contact
-        keep &= ~single | np.isin(B.ids[:, -1], recent)
-        multi = keep & ~single
-        idx = np.flatnonzero(multi)
+        single = B.n.take(order) == 1
+        last = ids[:, -1].take(order)
+        recent_start = np.zeros(len(B), bool)
+        for r in recent.tolist():
+            recent_start |= last == r
+        keep &= ~single | recent_start
+        idx = _nz(keep & ~single)
+        # the best max_hypotheses, and the best PER_START of each start contact held
         rank = np.arange(len(idx))
-        # rank within each start contact
-        firsts = B.first[idx]
-        order2 = np.argsort(firsts, kind="stable")
-        sf = firsts[order2]
-        starts = np.r_[0, np.flatnonzero(np.diff(sf)) + 1]
-        group_rank = np.empty(len(idx), np.int64)
-        group_rank[order2] = np.arange(len(idx)) - np.repeat(
-            starts, np.diff(np.r_[starts, len(idx)])
-        )
-        ok = (rank < self.max_hypotheses) | ((group_rank < self.PER_START) & np.isin(firsts, held))
+        ok = rank < self.max_hypotheses
+        if len(idx) and len(held):
+            # rank within each start contact: a stable sort by start, counted from each
+            # run's head
+            firsts = B.first.take(order.take(idx))
+            by_start = firsts.argsort(kind="stable")
+            starts = firsts.take(by_start)
+            head = np.empty(len(starts), bool)
+            head[0] = True
+            np.not_equal(starts[1:], starts[:-1], out=head[1:])
+            group_rank = rank - np.maximum.accumulate(np.where(head, rank, 0))
+            held_sorted = np.sort(held)
+            at = np.minimum(held_sorted.searchsorted(starts), len(held_sorted) - 1)
+            quota = (group_rank < self.PER_START) & (held_sorted.take(at) == starts)
+            ok[by_start[quota]] = True
         keep[idx[~ok]] = False
-        return B.take(np.flatnonzero(keep))
+        chosen = order.take(_nz(keep))
+        # the same pool pruned to the same tracks: the same bank object again, so that the
+        # next contact of a replay finds its branches in the memo (`_step`)
+        known = self._pruned.get(id(B))
+        if known is not None and known[0] is B and np.array_equal(known[1], chosen):
+            return known[2]
+        out = B.take(chosen)
+        self._pruned[id(B)] = (B, chosen, out)
+        while len(self._pruned) > self.MEMO:
+            del self._pruned[next(iter(self._pruned))]
+        return out
 
     # ------------------------------------------------------------------ motion
+    def _travel(self, B: _Bank, g: float) -> np.ndarray:
+        """`_kinematics`'s travel alone (the same numbers), for callers that need no more."""
+        tau = np.maximum(0.0, g - B.t)
+        v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
+        v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
+        decay = np.exp(-tau / self.DIP_RECOVERY_S)
+        return B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
+
     def _kinematics(self, B: _Bank, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(travel, speed, position sigma) of slipping tracks B extrapolated to g."""
         tau = np.maximum(0.0, g - B.t)
         v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
-        v_end = np.clip(v + a * tau, 0.25 * v, 4.0 * v)
+        v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
         decay = np.exp(-tau / self.DIP_RECOVERY_S)
         s = B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
         speed = np.maximum(0.0, v_end - d * B.m * decay / self.DIP_RECOVERY_S)
@@ -898,43 +1053,45 @@ class TrackerDecoder(Decoder):
         di = (1 - B.dirn) // 2
         limit[:, 0] = np.minimum(B.ridge + 1, self.count)
         if active.any():
+            # every ridge ahead at once (N, SCHEDULE): elementwise the same numbers as one
+            # ridge after the other, in a third of the numpy calls
             s0, v, a, d = B.X[:, 0], np.maximum(B.X[:, 1], V_MIN_MM_S), B.X[:, 2], B.X[:, 3]
             P = B.P
-            miss = np.zeros(N)
-            done = ~active
-            tau = np.zeros(N)
-            for j in range(self.SCHEDULE):
-                k = B.ridge + 1 + j
-                kk = np.minimum(k, self.count)  # the coast end is index count
-                target = np.where(kk < self.count, self._pos[di, kk], self._coast_end(di, v))
-                dist = np.maximum(target - s0, 1e-3)
-                a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
-                root = np.sqrt(np.maximum(v * v + 2.0 * a_p * dist, 1e-9))
-                tau = 2.0 * dist / (v + root)
-                for _ in range(2):  # the part of the dip recovered by then
-                    eff = dist + d * B.m * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
-                    root = np.sqrt(np.maximum(v * v + 2.0 * a_p * eff, 1e-9))
-                    tau = 2.0 * eff / (v + root)
-                v_k = np.maximum(v + a_p * tau, 0.2 * v)
-                var = (
-                    P[:, 0, 0]
-                    + 2 * tau * P[:, 0, 1]
-                    + tau * tau * P[:, 1, 1]
-                    + tau**2 * (P[:, 0, 2] + tau * P[:, 1, 2] + 0.25 * tau * tau * P[:, 2, 2])
-                )
-                span = np.sqrt(np.maximum(var, 0.0)) / v_k
-                latency = np.clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
-                t_due = B.t + tau + 3.0 * span + self.LATE_REL * tau + latency
-                miss = miss + self._log_miss[di, kk]
-                go_on = miss >= self.LOG_STOP
-                now = ~done
-                due[now, j + 1] = t_due[now]
-                adj[now, j + 1] = np.where(go_on, miss, self.LOG_STOP)[now]
-                stopped[now, j + 1] = ~go_on[now]
-                limit[now, j + 1] = np.where(go_on, kk + 1, kk)[now]
-                done = done | ~go_on | (k >= self.count)
-                if done.all():
-                    break
+            p00, p01, p11, p02, p12, p22 = (P[:, i, j, None] for i, j in _VAR_AT)
+            k = B.ridge[:, None] + 1 + np.arange(self.SCHEDULE)
+            kk = np.minimum(k, self.count)  # the coast end is index count
+            di2 = di[:, None]
+            coast = self._coast_end(di, v)[:, None]
+            target = np.where(kk < self.count, self._pos[di2, kk], coast)
+            s0, a, v = s0[:, None], a[:, None], v[:, None]
+            dist = np.maximum(target - s0, 1e-3)
+            a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
+            vv, a2 = v * v, 2.0 * a_p  # (the same numbers in every pass below)
+            root = np.sqrt(np.maximum(vv + a2 * dist, 1e-9))
+            tau = 2.0 * dist / (v + root)
+            dm = (d * B.m)[:, None]
+            for _ in range(2):  # the part of the dip recovered by then
+                eff = dist + dm * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
+                root = np.sqrt(np.maximum(vv + a2 * eff, 1e-9))
+                tau = 2.0 * eff / (v + root)
+            v_k = np.maximum(v + a_p * tau, 0.2 * v)
+            tt = tau * tau  # tau**2 too: numpy squares exactly so
+            var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
+            span = np.sqrt(np.maximum(var, 0.0)) / v_k
+            latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
+            t_due = B.t[:, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
+            miss = np.cumsum(self._log_miss[di2, kk], axis=1)  # sequential sums, as before
+            go_on = miss >= self.LOG_STOP
+            # done before each ridge: not active, or stopped / past the end at an earlier one
+            # (such tracks keep the initial values)
+            ended = np.logical_or.accumulate(~go_on | (k >= self.count), axis=1)
+            done = np.empty(ended.shape, bool)
+            done[:, 0] = ~active
+            done[:, 1:] = ended[:, :-1] | ~active[:, None]
+            due[:, 1:] = np.where(done, np.inf, t_due)
+            adj[:, 1:] = np.where(done, 0.0, np.where(go_on, miss, self.LOG_STOP))
+            stopped[:, 1:] = ~(go_on | done)
+            limit[:, 1:] = np.where(done, 0, kk + go_on)
         due[:, 0] = -np.inf
         B._sched = (due, adj, stopped, limit)
         return B._sched
@@ -1052,8 +1209,8 @@ class TrackerDecoder(Decoder):
             until = min(until, float(nxt.min()))
         waiting = np.isnan(B.stop) & (B.run == 1)
         if waiting.any():
-            w = np.flatnonzero(waiting & live)
-            adj[w] = self._log_waiting(B.take(w), g, blind[w])
+            w = _nz(waiting & live)
+            adj[w] = self._log_waiting(B.take(w, ("dirn", "ridge", "score", "t")), g, blind[w])
         evident, bonus = self._evidence(B)
         total = np.where(live, score + adj + bonus, -np.inf)
         top = max(self._null, float(total.max()))
@@ -1063,12 +1220,12 @@ class TrackerDecoder(Decoder):
         p_slip = float(weight[slipping].sum()) / mass
         chosen = None
         if p_slip >= 0.5 and slipping.any():
-            i = int(np.flatnonzero(slipping)[np.argmax(total[slipping])])
+            i = int(_nz(slipping)[np.argmax(total[slipping])])
             chosen = (i, False, int(limit[i]))
         else:
             cand = evident & stopped
             if cand.any():
-                i = int(np.flatnonzero(cand)[np.argmax(total[cand])])
+                i = int(_nz(cand)[np.argmax(total[cand])])
                 if total[i] >= self._null:
                     chosen = (i, True, int(limit[i]))
         if chosen is None:
@@ -1093,11 +1250,11 @@ class TrackerDecoder(Decoder):
             use &= (B.dirn == B.dirn[i]) & (
                 np.abs(B.X[:, 1] - B.X[i, 1]) <= self.AGREE_SPEED * B.X[i, 1]
             )
-        idx = np.flatnonzero(use)
+        idx = _nz(use)
         agree = 0.0
         if len(idx):
-            Bu = B.take(idx)
-            s, _, _ = self._kinematics(Bu, g)
+            Bu = B.take(idx, ("X", "dirn", "m", "score", "stop", "t"))
+            s = self._travel(Bu, g)
             # held where the ridge not reached is, or where they stopped
             di = (1 - Bu.dirn) // 2
             ahead = np.minimum(limit[idx], self.count)
@@ -1143,13 +1300,12 @@ class TrackerDecoder(Decoder):
         di = (1 - B.dirn) // 2
         r = np.minimum(B.ridge, self.count - 1)
         logd = self._ahead_log[di, r]  # (N, R + 1): the ridges ahead, the coast end
-        missed = self._ahead_missed[di, r]
         shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
         nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
-        nr = np.where(np.isfinite(logd), nr, 1.0)
         # P(reached ridge j but not j+1) weighted by P(all missed up to j)
-        prev = np.concatenate([np.zeros((len(B), 1)), nr[:, :-1]], axis=1)
-        m_before = np.concatenate([np.ones((len(B), 1)), missed[:, :-1]], axis=1)
-        total = (m_before * (nr - prev)).sum(axis=1)  # past the coast end: stopped
+        cdf = np.zeros((len(B), nr.shape[1] + 1))
+        cdf[:, 1:] = np.where(self._ahead_finite[di, r], nr, 1.0)
+        step = cdf[:, 1:] - cdf[:, :-1]
+        total = (self._ahead_before[di, r] * step).sum(axis=1)  # past the coast end: stopped
         out = np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)
         return out

@@ -16,7 +16,10 @@ the reply waits, at most `command_timeout_s`, for the `CommandResult`:
 
 pymodbus 3.16's `SimDevice` carries the tables and calls `_action` before
 every access; the action fills the registers read, or vetoes a write with an
-exception code.
+exception code. Reads of a whole table (03, 04: what pollers send, many times a
+second) are answered from the connection's data callback instead (`read_now`):
+same registers and exception codes, without a task, a loop turn and the
+datastore's copy per request.
 """
 
 from __future__ import annotations
@@ -27,17 +30,25 @@ import errno
 import logging
 import os
 import socket
+import struct
 import threading
 from collections import Counter
+from collections.abc import Callable
 from concurrent.futures import Future
 from typing import Any
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import ModbusIOException
 from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.pdu.register_message import (
+    ReadHoldingRegistersResponse,
+    ReadInputRegistersResponse,
+)
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
+from pymodbus.transaction import TransactionManager
 
 from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
@@ -57,7 +68,7 @@ logger = logging.getLogger(__name__)
 logging.getLogger("pymodbus").addHandler(logging.NullHandler())
 
 START_TIMEOUT_S = 5.0
-READ_INPUTS = 4
+READ_HOLDING, READ_INPUTS = 3, 4
 REGISTER_FUNCTIONS = frozenset({3, 4, 6, 16, 23})
 BIT_FUNCTIONS = frozenset({1, 2, 5, 15})  # coils and discrete inputs: this map has none
 
@@ -189,24 +200,28 @@ class ModbusServer:
             ),
             action=self._action,
         )
+        server: _TcpServer | _SerialServer
         if url.scheme == "tcp":
             # trace_pdu may return None to drop a request (pymodbus types it as returning
             # the PDU): how other units' requests stay unanswered on a shared line.
-            return _TcpServer(
+            server = _TcpServer(
                 device,
                 address=(url.host, url.port),
                 trace_pdu=self._trace,  # type: ignore[arg-type]
             )
-        return _SerialServer(
-            device,
-            framer=FramerType.RTU,
-            port=url.device,
-            baudrate=url.baud,
-            parity=url.parity,
-            stopbits=url.stopbits,
-            bytesize=8,
-            trace_pdu=self._trace,  # type: ignore[arg-type]
-        )
+        else:
+            server = _SerialServer(
+                device,
+                framer=FramerType.RTU,
+                port=url.device,
+                baudrate=url.baud,
+                parity=url.parity,
+                stopbits=url.stopbits,
+                bytesize=8,
+                trace_pdu=self._trace,  # type: ignore[arg-type]
+            )
+        server.read_now = self.read_now
+        return server
 
     def _listen_error(self) -> BusError:
         """Why listening failed, found by trying what pymodbus tried (it only logs it)."""
@@ -273,6 +288,23 @@ class ModbusServer:
             return ExcCodes(exc.code)
         return None
 
+    def read_now(self, pdu: ModbusPDU) -> ModbusPDU:
+        """The answer to a register read (03, 04), made at once: the registers, or the
+        exception `_action` would give (0x02 outside the table, 0x03 a bad count)."""
+        try:
+            if pdu.function_code == READ_INPUTS:
+                table = self._inputs()
+                response: ModbusPDU = _InputsResponse()
+            else:
+                table = self.map.encode_holding(settings_of(self.gateway, self._last_actions))
+                response = _HoldingResponse()
+            response.registers = self.map.read(table, pdu.address, pdu.count)
+        except RegisterError as exc:
+            logger.debug("modbus: %s", exc)
+            response = ExceptionResponse(pdu.function_code, ExcCodes(exc.code))
+        response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
+        return response
+
     def _inputs(self) -> list[int]:
         """The encoded input table, once per snapshot (pollers faster than 20 Hz, or several,
         share one encoding)."""
@@ -307,18 +339,65 @@ class ModbusServer:
         return ExcCodes.ILLEGAL_VALUE
 
 
-class _Handler(ServerRequestHandler):
-    """pymodbus's connection handler, scheduling each request as a task of its own loop.
+def _pack_registers(registers: list[int]) -> bytes:
+    """A read response's data (byte count, then the words) in one `struct.pack`; pymodbus
+    packs and concatenates word by word."""
+    return struct.pack(f">B{len(registers)}H", 2 * len(registers), *registers)
 
-    pymodbus 3.16 hands every request to its loop with `run_coroutine_threadsafe` from
-    that loop's own thread: a concurrent Future, its lock and a self-pipe wake-up per
-    request, a quarter of the server's CPU at 10 Hz polling (docs/benchmarks/modbus.md).
-    A task does the same on the same loop.
+
+class _InputsResponse(ReadInputRegistersResponse):
+    def encode(self) -> bytes:
+        return _pack_registers(list(self.registers))
+
+
+class _HoldingResponse(ReadHoldingRegistersResponse):
+    def encode(self) -> bytes:
+        return _pack_registers(list(self.registers))
+
+
+class _Handler(ServerRequestHandler):
+    """pymodbus's connection handler: register reads answered in the data callback, the
+    rest scheduled as a task of its own loop.
+
+    pymodbus 3.16 schedules every request for the loop's next turn (`call_soon`), which
+    hands it to the loop with `run_coroutine_threadsafe` from the loop's own thread: a
+    concurrent Future, its lock and a self-pipe wake-up per request. A read needs none of
+    that: `read_now` answers it where it was decoded. Other requests (writes wait for the
+    gateway) go on as a task on the same loop.
     """
 
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)  # type: ignore[no-untyped-call]
         self._tasks: set[asyncio.Task[None]] = set()  # the loop keeps only weak references
+        self._read_now: Callable[[ModbusPDU], ModbusPDU] | None = getattr(
+            self.server, "read_now", None
+        )
+
+    def callback_data(self, data: bytes, addr: tuple[Any, ...] | None = None) -> int:
+        """`ServerRequestHandler.callback_data` (pymodbus 3.16), reads answered at once."""
+        try:
+            used: int = TransactionManager.callback_data(self, data, addr)
+        except ModbusIOException as exc:  # as pymodbus answers an undecodable request
+            response = ExceptionResponse(
+                0x00 if exc.fcode is None else exc.fcode,
+                exception_code=ExcCodes.ILLEGAL_FUNCTION,
+                device_id=exc.dev_id,
+                transaction=exc.transaction_id,
+            )
+            self.server_send(response, addr)  # type: ignore[no-untyped-call]
+            return len(data)
+        pdu = self.last_pdu
+        if pdu is None:
+            return used
+        if (
+            pdu.function_code in (READ_HOLDING, READ_INPUTS)
+            and self._read_now is not None
+            and not (self.server.broadcast_enable and not pdu.dev_id)
+        ):
+            self.server_send(self._read_now(pdu), self.last_addr)  # type: ignore[no-untyped-call]
+        else:
+            self.loop.call_soon(self.handle_later)
+        return used
 
     def handle_later(self) -> None:
         task = self.loop.create_task(self.handle_request())
@@ -338,10 +417,14 @@ class _Handler(ServerRequestHandler):
 
 
 class _TcpServer(ModbusTcpServer):
+    read_now: Callable[[ModbusPDU], ModbusPDU] | None = None  # ModbusServer.read_now
+
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
 
 
 class _SerialServer(ModbusSerialServer):
+    read_now: Callable[[ModbusPDU], ModbusPDU] | None = None  # ModbusServer.read_now
+
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)

@@ -29,12 +29,12 @@ from grasplink.gateway.telemetry.buffer import Message, Sample
 from grasplink.gateway.telemetry.protocol import (
     LIVE_PHASE,
     STATE_FIELDS,
+    VALUE_FIELDS,
     CommandRequest,
     Incoming,
     controls_view,
     dumps,
     live_nodes,
-    node_values,
 )
 
 ROOT = "grasplink"
@@ -43,6 +43,18 @@ HEALTH_PERIOD_MS = 1000
 VALUES_REFRESH_MS = 1000  # unchanged values are repeated this often (a consumer sees we live)
 QOS = 1
 MAX_REQUEST_ID_CHARS = 64
+
+
+class _NodeTopics(dict[str, tuple[str, str]]):
+    """A node kind's state and values topics, made once."""
+
+    def __init__(self, base: str):
+        super().__init__()
+        self.base = base
+
+    def __missing__(self, kind: str) -> tuple[str, str]:
+        topics = self[kind] = (f"{self.base}/node/{kind}/state", f"{self.base}/node/{kind}/values")
+        return topics
 
 
 class JsonTree:
@@ -74,6 +86,7 @@ class JsonTree:
         # What the last snapshot's retained topics were made from (a snapshot is replaced
         # whole, never changed in place): equal, the topic's body is not even built.
         self._seen: dict[str, Any] = {}
+        self._topics = _NodeTopics(self.base)  # kind -> (its state topic, its values topic)
 
     # -- connection ------------------------------------------------------------------------
     def will(self, t_ms: int, *, new_connect: bool = True) -> Message:
@@ -121,8 +134,11 @@ class JsonTree:
             if last and last[1] == section and ts // refresh == last[0] // refresh:
                 continue  # compared before anything is built
             self._values[kind] = (ts, section)
-            body = {"ts_ms": ts, **node_values(snap, kind)}
-            out.append(Message(f"{self.base}/node/{kind}/values", dumps(body), QOS, False))
+            body: dict[str, Any] = {"ts_ms": ts}
+            get = section.get if section is not None else {}.get
+            for key in VALUE_FIELDS[kind]:
+                body[key] = get(key)
+            out.append(Message(self._topics[kind][1], dumps(body), QOS, False))
         # Periodic topics go once per period of the clock, all in the same snapshot (and with
         # Sparkplug's counters): a gateway at rest publishes once a second, not four times.
         period = self.health_period_ms
@@ -142,7 +158,7 @@ class JsonTree:
         snap, ts = sample.snapshot, sample.ts_ms
         seen = self._seen
         for kind, node in snap["nodes"].items():
-            topic = f"{self.base}/node/{kind}/state"
+            topic = self._topics[kind][0]
             try:
                 fields = _STATE_OF(node)
             except KeyError:  # a field missing: build the body and compare that

@@ -28,6 +28,7 @@ import asyncio
 import contextlib
 import logging
 import random
+import select
 import socket
 import ssl
 import threading
@@ -66,6 +67,7 @@ POLL_S = 0.001  # looking for the next snapshot once it is due
 WATCH_S = 2.0  # a session checks its acknowledgements this often (CONNECT_TIMEOUT_S)
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
 PUBACK_TYPE = 0x40  # MQTT 3.1.1 fixed header of a PUBACK (remaining length 2: the ID)
+TOPIC_CACHE = 256  # encoded topics kept (gateway topics, and replies to commands' names)
 # what the fast write and read paths use of paho's client (paho-mqtt 2.1/2.2, with aiomqtt 2.5.1)
 PAHO_INTERNALS = (
     "_out_packet",
@@ -79,6 +81,9 @@ PAHO_INTERNALS = (
     "_last_msg_out",
     "_last_bytes_received",
     "_call_socket_unregister_write",
+    "_mid_generate",
+    "_sock",
+    "_protocol",
 )
 
 RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) still goes at once
@@ -108,6 +113,31 @@ def _cork(sock: Any, on: bool) -> bool:
     except (AttributeError, OSError):
         return False
     return True
+
+
+class _Written:
+    """The `info` of a packet queued by `MqttLink._queue_packets`: paho marks a written QoS 0
+    packet published through it; nobody waits on it (the link tracks its messages by ID)."""
+
+    __slots__ = ()
+
+    def _set_as_published(self) -> None:
+        pass
+
+
+_WRITTEN = _Written()
+
+
+def _remaining_length(length: int) -> bytes:
+    """MQTT's variable-length integer (1 to 4 bytes, 7 bits each, least significant first)."""
+    if length < 0x80:
+        return bytes((length,))
+    out = bytearray()
+    while True:
+        digit, length = length & 0x7F, length >> 7
+        out.append(digit | 0x80 if length else digit)
+        if not length:
+            return bytes(out)
 
 
 class SnapshotClock:
@@ -176,12 +206,49 @@ class MqttLink:
         self._reconnect = ""  # why the protocol asked for a new MQTT session
         self._refill: asyncio.Handle | None = None
         self._settling = False  # _settled waits for the window to empty
+        self._topics: dict[str, bytes] = {}  # topic -> its UTF-8 with the length in front
+        self._reader: Callable[[], None] | None = None  # reads what the broker sent
+        self._read_acks: Callable[[], bool] | None = None  # PUBACKs read without paho
+        self._readable: tuple[int, select.poll] | None = None  # (fd, a poll object for it)
 
     def push(self, messages: list[Message]) -> None:
-        """Queue messages and, connected, publish at once (on this thread, no task switch)."""
-        if messages:
-            self.outbox.extend(messages)
-            self._drain()
+        """Queue messages and, connected, publish at once (on this thread, no task switch).
+        With nothing waiting ahead of them and room in the window they go straight out:
+        the outbox is for what must wait (and whatever `_publish_now` cannot send goes
+        back into it)."""
+        if not messages:
+            return
+        if (
+            not self.outbox
+            and self._inner is not None
+            and len(self._inflight) + len(messages) <= WINDOW
+            and not self.protocol.holding
+            and not self._reconnect
+        ):
+            self._publish_now(messages)
+            return
+        self.outbox.extend(messages)
+        self._drain()
+
+    def read_acknowledgements(self) -> None:
+        """Read the broker's PUBACKs now if they are already there (a poll(2), no wait): a
+        window's acknowledgements come a fraction of a millisecond after it was written,
+        and reading them at the end of the tick that wrote it, while its code and data are
+        still in the CPU's caches, spares the event loop a wake-up for them. If they are
+        not there yet, the loop's reader takes them as before."""
+        inner, reader = self._inner, self._reader
+        if not self._inflight or inner is None or reader is None or not self._fast:
+            return
+        sock = inner.socket()
+        if sock is None:
+            return
+        fd = sock.fileno()
+        if self._readable is None or self._readable[0] != fd:
+            poller = select.poll()
+            poller.register(fd, select.POLLIN)
+            self._readable = (fd, poller)
+        if self._readable[1].poll(0) and not (self._read_acks and self._read_acks()):
+            reader()
 
     def stop(self) -> None:
         self.stopping.set()
@@ -399,6 +466,19 @@ class MqttLink:
                 if not client._disconnected.done():
                     client._disconnected.set_exception(exc)
 
+        def reader() -> None:  # what aiomqtt's reader does when the socket is readable
+            try:
+                while True:
+                    inner.loop_read()
+                    pending = getattr(inner._sock, "pending", None)  # TLS: decrypted, unread
+                    if pending is None or not pending():
+                        break
+            except Exception as exc:  # a broken connection, as aiomqtt handles it
+                if not client._disconnected.done():
+                    client._disconnected.set_exception(exc)
+
+        self._reader = reader
+
         def register_write(_client: Any, _userdata: Any, sock: Any) -> None:
             if threading.get_ident() == loop_thread:
                 loop.add_writer(sock.fileno(), writer)
@@ -412,7 +492,10 @@ class MqttLink:
         self._register_write = register_write
         inner.on_socket_register_write = on_socket_register_write
         # The fast paths below use paho 2.x internals; another paho keeps its own paths.
-        self._fast = all(hasattr(inner, name) for name in PAHO_INTERNALS)
+        self._fast = (
+            all(hasattr(inner, name) for name in PAHO_INTERNALS)
+            and inner._protocol != paho.MQTTv5  # the packets built here are MQTT 3.1.1's
+        )
         if self._fast:
             self._buffer_reads(inner)
 
@@ -434,13 +517,12 @@ class MqttLink:
                 inner._last_bytes_received = time.monotonic()  # paho's keep-alive clock
                 with inner._out_message_mutex:
                     message = inner._out_messages.pop(mid, None)
-                    if message is None:
-                        continue
-                    message.info._set_as_published()
-                    if message.qos > 0:
-                        inner._inflight_messages -= 1
-                        if inner._max_inflight_messages > 0:
-                            inner._update_inflight()  # paho sends what it queued, if any
+                    if message is not None:  # published through paho (else: _queue_packets)
+                        message.info._set_as_published()
+                        if message.qos > 0:
+                            inner._inflight_messages -= 1
+                            if inner._max_inflight_messages > 0:
+                                inner._update_inflight()  # paho sends what it queued, if any
                 self._taken(mid)
 
         def buffered_recv(size: int) -> bytes:
@@ -464,8 +546,28 @@ class MqttLink:
                 rc = loop_read(max_packets)
             return rc
 
+        def read_acknowledgements() -> bool:
+            """At a packet boundary, read what the socket has and take its PUBACKs without
+            going through paho's read loop; False when paho must read (something else came,
+            or an error, or the connection closed: paho meets it as it would)."""
+            if pending or inner._in_packet["command"] != 0:
+                return False
+            try:
+                data = sock_recv(1 << 16)
+            except BlockingIOError:  # nothing after all (paho turns TLS's wants into this)
+                return True
+            except OSError:
+                return False
+            if not data:
+                return False
+            pending.extend(data)
+            acknowledgements()
+            tls_pending = getattr(inner._sock, "pending", None)  # decrypted, not yet read
+            return not pending and not (tls_pending is not None and tls_pending())
+
         inner._sock_recv = buffered_recv  # type: ignore[method-assign,assignment]
         inner.loop_read = read_all  # type: ignore[method-assign]
+        self._read_acks = read_acknowledgements
 
     def _taken(self, mid: int) -> None:
         """The broker took a message (QoS 1: PUBACK; QoS 0: written to the socket)."""
@@ -497,6 +599,10 @@ class MqttLink:
             return
         if not self._inflight:
             self._progress_at = time.monotonic()
+        if self._fast:
+            self._queue_packets(inner, messages)
+            self._flush(inner)
+            return
         self._batching = True
         try:
             for index, message in enumerate(messages):
@@ -512,6 +618,54 @@ class MqttLink:
         finally:
             self._batching = False
         self._flush(inner)
+
+    def _queue_packets(self, inner: paho.Client, messages: list[Message]) -> None:
+        """What `paho.Client.publish` does for a message (MQTT 3.1.1: the PUBLISH packet,
+        an ID from paho's own sequence, the packet in paho's write queue), without the
+        message and info objects, the lock, the checks and the log call it makes for each:
+        the link tracks its messages itself (`_inflight`), and PUBACKs are read by
+        `_buffer_reads`. What paho's queue holds is written by `_flush` (or paho)."""
+        if inner._sock is None:  # the connection is gone (paho: MQTT_ERR_NO_CONN)
+            self.outbox.requeue(messages)
+            self._wake.set()  # _watch sees the lost receiver
+            return
+        queue, topics, mid_generate = inner._out_packet, self._topics, inner._mid_generate
+        for message in messages:
+            final = self.protocol.finalize(message)
+            if final is None:
+                continue
+            topic = topics.get(final.topic)
+            if topic is None:
+                if len(topics) >= TOPIC_CACHE:
+                    topics.clear()
+                encoded = final.topic.encode()
+                if not encoded or b"+" in encoded or b"#" in encoded:
+                    raise ValueError(f"invalid topic for a publication: {final.topic!r}")
+                topic = topics[final.topic] = len(encoded).to_bytes(2, "big") + encoded
+            qos, mid = final.qos, mid_generate()
+            length = len(topic) + len(final.payload) + (2 if qos else 0)
+            command = paho.PUBLISH | qos << 1 | bool(final.retain)
+            packet = b"".join(
+                (
+                    bytes((command,)),
+                    _remaining_length(length),
+                    topic,
+                    mid.to_bytes(2, "big") if qos else b"",
+                    final.payload,
+                )
+            )
+            queue.append(
+                {
+                    "command": command,
+                    "mid": mid,
+                    "qos": qos,
+                    "pos": 0,
+                    "to_process": len(packet),
+                    "packet": packet,
+                    "info": _WRITTEN,  # type: ignore[typeddict-item]  # has what paho calls
+                }
+            )
+            self._inflight[mid] = message
 
     def _flush(self, inner: paho.Client) -> None:
         """Write the window paho holds in one system call: one TCP segment, not one per
@@ -856,9 +1010,18 @@ class TelemetryPublisher:
         if not batch:
             return
         self.published_snapshots += len(batch)
-        for link in self.links:
-            extra = {"controls": self.controls, "telemetry": self._telemetry(link)}
-            link.push(link.protocol.update(batch, extra))
+        # every protocol's messages first, then the writes back to back: the broker, woken by
+        # the first, is still awake for the second (one wake-up of its process, not two)
+        made = [
+            link.protocol.update(
+                batch, {"controls": self.controls, "telemetry": self._telemetry(link)}
+            )
+            for link in self.links
+        ]
+        for link, messages in zip(self.links, made, strict=True):
+            link.push(messages)
+        for link in self.links:  # the first link's PUBACKs may be in by now
+            link.read_acknowledgements()
 
     def _telemetry(self, link: MqttLink) -> dict[str, Any]:
         stats = {
