@@ -133,6 +133,22 @@ class _Watch:
     next_k: int = 0  # next level sample to examine
     top: float = 0.0  # told a step: the level it stepped to (trend out), watched for a fall
     fell_at: int = -1  # ... the sample where it fell back by drop_fraction (-1: not yet)
+    slope: float = 0.0  # the level's slope before the onset (N/sample, either sign)
+    room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
+    plain: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level - base (to the hold)
+    rise: int = 0  # a probe: the rise of its scale (samples)
+
+
+@dataclass
+class _StepScale:
+    """One scale of the step probe: a difference of means over +-w samples."""
+
+    w: int
+    rise: int  # a step's rise is judged over this many samples (`_is_small_step`)
+    fir: SosFilter
+    d: np.ndarray  # difference of means by centre, from start
+    start: int  # centre of d[0] (output m is centre m - w)
+    next: int = 0  # next centre to test
 
 
 def _mean(x: np.ndarray) -> float:
@@ -178,6 +194,7 @@ class ContactDetector:
         step_rise_s: float = 0.02,
         step_hold_s: float = 0.1,
         step_window_s: float = 0.02,
+        long_step_window_s: float = 0.04,
         step_threshold: float = 6.0,
         revise_s: float = 0.35,
     ):
@@ -203,15 +220,23 @@ class ContactDetector:
         self.step_w = max(2, round(step_window_s * self.fs_hz))
         self.small_rise = max(1, round(0.6 * step_window_s * self.fs_hz))
         w = self.step_w
-        self._step_fir = SosFilter.fir(np.concatenate([np.full(w, 1.0 / w), np.full(w, -1.0 / w)]))
         self.step_threshold = float(step_threshold)
-        self._step_d = np.zeros(0)  # difference of means by centre, from _step_start
-        self._step_start = -w  # centre of _step_d[0] (output m is centre m - w)
-        self._step_next = 0  # next centre to test
-        self._probes: list[tuple[_Watch, float]] = []  # step candidates being judged (z)
-        # probes judged steps: (emit, index, t, z, trend_on)
-        self._confirmed: list[tuple[int, int, float, float, bool | None]] = []
+        # and over a longer window too: a stop's step in heavy noise (10 dB of the ridge
+        # pulses) is a few noise units of the short window's difference, more of the long's
+        self._scales = [
+            _StepScale(v, max(1, round(0.6 * v)), SosFilter.fir(k), np.zeros(0), -v)
+            for v, k in (
+                (v, np.concatenate([np.full(v, 1.0 / v), np.full(v, -1.0 / v)]))
+                for v in sorted({w, max(w + 1, round(long_step_window_s * self.fs_hz))})
+            )
+        ]
+        self._probes: list[tuple[_Watch, float, int]] = []  # step candidates judged (z, w)
+        # probes judged steps: (emit, w, index, t, z, trend_on)
+        self._confirmed: list[tuple[int, int, int, float, float, bool | None]] = []
+        self._probe_onsets: deque[tuple[int, int, int]] = deque(maxlen=32)  # (index, emit, w)
         self._onsets: deque[tuple[int, int]] = deque(maxlen=32)  # contacts emitted: (index, emit)
+        # the level before each contact's onset: (index, emit, level), see _tail_room
+        self._bases: deque[tuple[int, int, float]] = deque(maxlen=32)
         self._next_step_id = STEP_IDS
         self.fall_n = max(2, round(0.02 * self.fs_hz))  # an earlier pulse's tail: its slope ...
         self.fall_credit = max(1, round(0.03 * self.fs_hz))  # ... followed this long at most
@@ -545,23 +570,31 @@ class ContactDetector:
         - the object covering more of the sensor - is no step), above step_threshold noise
         units; each is watched like a contact and kept only if judged a step at the hold
         (`_step_events`)."""
-        w = self.step_w
-        self._step_d = np.concatenate([self._step_d, self._step_fir(x)])
-        last = self._step_start + len(self._step_d) - 1  # last centre with a difference
-        lo = max(self._step_next, self._step_start + 3 * w, 3 * w)
+        for sc in self._scales:
+            self._run_scale(sc, x)
+
+    def _run_scale(self, sc: _StepScale, x: np.ndarray) -> None:
+        w = sc.w
+        sc.d = np.concatenate([sc.d, sc.fir(x)])
+        last = sc.start + len(sc.d) - 1  # last centre with a difference
+        lo = max(sc.next, sc.start + 3 * w, 3 * w)
         hi = last - 3 * w
         if hi < lo:
             return
-        self._step_next = hi + 1
-        d = self._step_d
-        i0, i1 = lo - self._step_start - w, hi - self._step_start + w  # adjusted over +-w
-        idx = np.arange(i0, i1 + 1)
-        adj = d[idx] - 0.5 * (d[idx - 2 * w] + d[idx + 2 * w])
-        for j in range(w, len(adj) - w):
+        sc.next = hi + 1
+        d = sc.d
+        i0, i1 = lo - sc.start - w, hi - sc.start + w  # adjusted over +-w
+        ramp = d[i0 - 2 * w : i1 + 1 - 2 * w] + d[i0 + 2 * w : i1 + 1 + 2 * w]
+        adj = d[i0 : i1 + 1] - 0.5 * ramp
+        # local maxima over +-w (ties: the first): only rises above their neighbours tested
+        n = len(adj) - 2 * w
+        mid = adj[w : w + n]
+        rising = (mid > 0.0) & (mid >= adj[w - 1 : w - 1 + n]) & (mid > adj[w + 1 : w + 1 + n])
+        for j in (np.flatnonzero(rising) + w).tolist():
             a = adj[j]
-            if a <= 0.0 or a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
+            if a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
                 continue
-            c = int(idx[j]) + self._step_start
+            c = i0 + j + sc.start
             white = self._white(c // self.block)
             if white is None:
                 continue
@@ -570,45 +603,44 @@ class ContactDetector:
                 continue
             watch = self._watch(-1, c + 1)
             if watch is not None:
-                self._probes.append((watch, z))
+                watch.rise = sc.rise
+                self._probes.append((watch, z, w))
 
     def _step_events(self) -> tuple[list[ContactEvent], list[PulseCheck]]:
         """Probes judged steps, told once every contact near them would have been decided:
         a contact and its verdict - unless the kink bank found that onset itself."""
         still = []
-        for watch, z in self._probes:
+        for watch, z, w in self._probes:
             done = self._advance(watch, small=True)
             if done is None and watch.next_k <= watch.index + self.step_hold:
-                still.append((watch, z))
+                still.append((watch, z, w))
             elif (
                 done is not None
                 and done.pulse is False
                 and done.emit_index < (watch.index + self.step_hold + self.level_half + 1)
             ):
-                emit = max(done.emit_index, watch.index + self.lag + self.step_w)
+                emit = max(done.emit_index, watch.index + self.lag + w)
                 t = self._time(watch.index, 0.0)
-                self._confirmed.append((emit, watch.index, t, z, done.trend_on))
+                self._confirmed.append((emit, w, watch.index, t, z, done.trend_on))
         self._probes = still
         events, checks = [], []
         keep = []
-        for emit, index, t, z, trend_on in self._confirmed:
+        for emit, w, index, t, z, trend_on in sorted(self._confirmed):
             if emit >= self._n:
-                keep.append((emit, index, t, z, trend_on))
+                keep.append((emit, w, index, t, z, trend_on))
                 continue
             # the kink bank has it: a probe is timed mid-rise, up to a step window after
-            # the onset the kink bank placed (a slow pulse rises for longer)
-            if any(
-                -self.step_w - 2 <= index - n <= 2 * self.step_w + 2
-                for n, e in self._onsets
-                if e <= emit
+            # the onset the kink bank placed (a slow pulse rises for longer); or a probe
+            # of the other scale told it first
+            if any(-w - 2 <= index - n <= 2 * w + 2 for n, e in self._onsets if e <= emit) or any(
+                abs(index - n) <= w + v + 2 for n, _, v in self._probe_onsets
             ):
                 continue
+            self._probe_onsets.append((index, emit, w))
             sid = self._next_step_id
             self._next_step_id += 1
-            sigma = (0.25 * self.step_w + 0.3) / self.fs_hz
-            events.append(
-                ContactEvent(sid, t, index, emit, z, 0.0, self.step_w / self.fs_hz, sigma)
-            )
+            sigma = (0.25 * w + 0.3) / self.fs_hz
+            events.append(ContactEvent(sid, t, index, emit, z, 0.0, w / self.fs_hz, sigma))
             checks.append(PulseCheck(sid, emit, False, trend_on))
         self._confirmed = keep
         return events, checks
@@ -625,8 +657,9 @@ class ContactDetector:
             return float(self._level[i])
         return None
 
-    def _watch(self, cid: int, index: int) -> _Watch | None:
-        """A watch on the level after an onset at sample `index`: its base, trends, noise."""
+    def _watch(self, cid: int, index: int, emit: int | None = None) -> _Watch | None:
+        """A watch on the level after an onset at sample `index`: its base, trends, noise
+        (and, for a kink contact decided at `emit`, the falling tail under it)."""
         fine = self.channels[0]
         h = self.level_half
         before = index - 2 * h - 1  # last level centre not touched by the pulse
@@ -646,14 +679,40 @@ class ContactDetector:
         fine_noise = self._noise(fine, index // self.block)
         white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
         noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
-        return _Watch(
+        watch = _Watch(
             cid, index, 0.0 if base is None else base, trend, noise, fall=fall, next_k=index
         )
+        if emit is not None and base is not None:
+            watch.slope = self._level_slope(before)
+            watch.room = self._tail_room(index, emit, base)
+            self._bases.append((index, emit, base))
+        return watch
+
+    def _level_slope(self, before: int) -> float:
+        """Least-squares slope of the level over the fall_credit samples up to `before`
+        (N/sample): the slope right before the onset (a tail's flattens as it relaxes)."""
+        i1 = before + self.level_half - self._level_start + 1
+        i0 = i1 - self.fall_credit - 1
+        if i0 < 0 or i1 > len(self._level):
+            return 0.0
+        y = self._level[i0:i1]
+        x = np.arange(len(y)) - (len(y) - 1) / 2.0
+        return float(np.dot(x, y) / np.dot(x, x))
+
+    def _tail_room(self, index: int, emit: int, base: float) -> float:
+        """How far the level can still fall under a contact at `index`: down to where it
+        was before the two contacts before it (their pulses' tails, the one riding on the
+        other's, relax no lower). Only contacts decided by `emit` count (chunking cannot
+        change it); 0 when there is none."""
+        earlier = sorted((n, level) for n, e, level in self._bases if n < index - 2 and e <= emit)
+        if not earlier:
+            return 0.0
+        return max(0.0, base - min(level for _, level in earlier[-2:]))
 
     def _check_pulses(self, events: list[ContactEvent]) -> list[PulseCheck]:
         checks: list[PulseCheck] = []
         for ev in events:
-            watch = self._watch(ev.id, ev.index)
+            watch = self._watch(ev.id, ev.index, ev.emit_index)
             if watch is not None:
                 self._watches.append(watch)
         still = []
@@ -746,6 +805,7 @@ class ContactDetector:
             hold = watch.index + self.step_hold
             if watch.next_k <= hold:
                 keep = hold - watch.next_k + 1
+                watch.plain = np.concatenate([watch.plain, (level - watch.base)[:keep]])
                 watch.levels = np.concatenate([watch.levels, raw[:keep]])
                 watch.detrended = np.concatenate([watch.detrended, d[:keep]])
             # rise time: onset to the first sample at 90 % of the peak so far (a noisy
@@ -812,7 +872,47 @@ class ContactDetector:
                 return False
             return float(levels[rise:].min()) >= (1.0 - self.drop_fraction) * top
 
-        return self._stayed_up(watch, stays)
+        return self._stayed_up(watch, stays) or self._tail_step(watch)
+
+    def _tail_step(self, watch: _Watch) -> bool:
+        """A sharp rise on the falling tail of the pulse before it that stays up over that
+        tail relaxing on. A slip that stops leaves its last pulse relaxing (the ridge does
+        not stop relaxing with the object), and the friction term's step (thesis ch. 4.3)
+        may be small. The level itself must rise sharply, stop rising, fall no faster than
+        the tail did before the onset (a ridge pulse replaces the tail, thesis ch. 5.3.1,
+        and falls back faster: a pulse of its own) and not rise again by the hold (a
+        stopped object covers no more of the sensor); with the tail's fall taken out - its
+        slope before the onset, no lower than the level before the pulses under it - it
+        stays up. Means over the hold, not extremes: the step may be a few noise units
+        high."""
+        if watch.slope >= 0.0 or watch.room <= 0.0 or len(watch.plain) < 4 * self.step_rise + 2:
+            return False
+        if self._train_follows(watch):
+            return False
+        level, r, noise = watch.plain, self.step_rise, watch.noise
+        first = float(np.mean(level[r : 2 * r + 1]))
+        if first < 6.0 * noise or int(np.argmax(level >= 0.8 * first)) > r:
+            return False  # too small, or not sharp: a slow pulse
+        if float(np.mean(level[2 * r : 4 * r + 1])) > 1.15 * first + 2.0 * noise:
+            return False  # still rising: a slow pulse
+        tail = level[len(level) // 2 :]
+        x = np.arange(len(tail)) - (len(tail) - 1) / 2.0
+        if float(np.dot(x, tail) / np.dot(x, x)) * len(tail) > 0.1 * first + 3.0 * noise:
+            return False  # the level rising by the hold: the object still covers more of it
+        after = level[r:]
+        x = np.arange(len(after)) - (len(after) - 1) / 2.0
+        norm = float(np.dot(x, x))
+        if float(np.dot(x, after)) / norm < 1.25 * watch.slope - 6.0 * noise / math.sqrt(norm):
+            return False  # falling faster than the tail: a pulse falling back
+        k = np.arange(len(level)) + 2 * self.level_half + 1  # samples since `before`
+        y = level + np.minimum(-watch.slope * k, watch.room)  # the tail relaxing on, out
+        top = float(np.mean(y[r : 2 * r + 1]))
+        if y[-1] - level[-1] < 0.25 * top:
+            return False  # no tail worth the name: the level's own tests judge it
+        keep = 1.0 - self.drop_fraction
+        end = float(np.mean(y[-max(2, len(y) // 4) :]))
+        low = float(np.min(y[r:]))
+        return end >= keep * top and low >= (keep - 0.1) * top - 2.0 * noise
 
     def _stayed_up(self, watch: _Watch, stays: Callable[[np.ndarray], bool]) -> bool:
         """The step verdict both step tests share, given how each judges a level that
@@ -874,7 +974,7 @@ class ContactDetector:
         and the trend goes on."""
 
         def stays(levels: np.ndarray) -> bool:
-            n = self.small_rise
+            n = watch.rise or self.small_rise
             first = float(_mean(levels[n : 2 * n + 1]))  # just after a sharp rise
             if first < 6.0 * watch.noise:
                 return False
@@ -899,7 +999,8 @@ class ContactDetector:
             self._x = self._x[cut:]
             self._t_start += cut
         oldest_watch = min(
-            [w.next_k for w in self._watches + self._stepped] + [w.next_k for w, _ in self._probes],
+            [w.next_k for w in self._watches + self._stepped]
+            + [w.next_k for w, _, _ in self._probes],
             default=None,
         )
         lv_keep = keep
@@ -909,10 +1010,11 @@ class ContactDetector:
             cut = len(self._level) - lv_keep
             self._level = self._level[cut:]
             self._level_start += cut
-        if len(self._step_d) > 2 * keep:
-            cut = len(self._step_d) - keep
-            self._step_d = self._step_d[cut:]
-            self._step_start += cut
+        for sc in self._scales:
+            if len(sc.d) > 2 * keep:
+                cut = len(sc.d) - keep
+                sc.d = sc.d[cut:]
+                sc.start += cut
         for ch in self.channels:
             if len(ch.z) > 2 * keep:
                 cut = len(ch.z) - keep
