@@ -45,6 +45,17 @@ def test_one_gateway_process_masters_three_buses_from_one_thread() -> None:
         assert live.failure is None
 
 
+def test_a_started_gateway_keeps_what_it_built_out_of_the_collectors_generations() -> None:
+    import gc
+
+    gc.unfreeze()
+    url = f"virtual:live-gc-{uuid.uuid4().hex[:12]}"
+    with LiveGateway(url, parse_config({}, "<test>")):
+        # its object dictionaries and decoder tables are frozen: full collections in the
+        # loop do not scan them
+        assert gc.get_freeze_count() > 10_000
+
+
 def test_a_bus_named_twice_is_refused_before_any_bus_opens() -> None:
     with pytest.raises(BusError, match="named twice"):
         LiveGateway("virtual:a", parse_config({}, "<test>"), more_buses=["virtual:a"])
