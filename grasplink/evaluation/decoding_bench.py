@@ -62,7 +62,7 @@ SETTINGS: dict[str, list[tuple[str, dict]]] = {
     "tracker": [
         ("default", {}),
         ("8 hypotheses", {"max_hypotheses": 8}),
-        ("detect every 10 ms", {"detect_block_s": 0.01}),
+        ("detect every 30 ms", {"detect_block_s": 0.03}),
     ],
     "ratio": [("band 0.5-30 Hz", {}), ("thesis band 1-20 Hz", {"band_hz": (1.0, 20.0)})],
     "fft": [("window 1 s", {"window_s": 1.0}), ("window 0.5 s", {"window_s": 0.5})],
