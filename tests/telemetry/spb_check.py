@@ -186,6 +186,7 @@ class Host:
         metrics = {m.name: m for m in payload.metrics}
         line["metrics"] = list(metrics)
         line["nulls"] = sum(m.is_null for m in payload.metrics)
+        line["null_metrics"] = [m.name for m in payload.metrics if m.is_null]
         if qos != 0:
             violation("payloads-nbirth-qos", f"NBIRTH QoS {qos}")
         if payload.seq != 0 or not raw.HasField("seq"):

@@ -138,6 +138,10 @@ def test_pysparkplug_reads_the_gateway_births_data_rebirth_and_death_without_a_v
     # two births in one MQTT session (the rebirth keeps bdSeq), each followed by all devices
     births = [i for i, m in enumerate(messages) if m["type"] == "NBIRTH"]
     assert len(births) == 2 and [messages[i]["bdSeq"] for i in births] == [0, 0]
+    # the first NBIRTH carries the gateway's current values, not nulls for what it knew
+    known = {"Gateway/nodes_live", "Gateway/uptime_s", "Control/feedback_mode"}
+    known |= {"Control/reflex_enabled", "Control/reflex_threshold_mm_s"}
+    assert not known & set(messages[births[0]]["null_metrics"])
     after_rebirth = kinds[births[1] + 1 : births[1] + 5]
     assert sorted(after_rebirth) == sorted(f"DBIRTH/{kind}" for kind in KINDS)
     assert {k for k in kinds[: births[1]] if k.startswith("DBIRTH")} == {

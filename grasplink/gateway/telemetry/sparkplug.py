@@ -477,6 +477,13 @@ class SparkplugSession:
             return [], []
         return self._new_session(t_ms), []
 
+    def prime(self, sample: Sample, extra: dict[str, Any]) -> None:
+        """The gateway's state before the first connection, for the first births: an NBIRTH
+        carries every metric's current value (Sparkplug 3.0), not nulls for values the
+        gateway already had. The sample still goes through `update` like any other."""
+        self.latest = sample
+        self._extra = extra
+
     def _new_session(self, t_ms: int) -> list[Message]:
         self.holding = False
         self.epoch += 1

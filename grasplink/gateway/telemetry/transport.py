@@ -64,6 +64,7 @@ WINDOW = 64  # messages published before waiting for the broker's acknowledgemen
 FLUSH_S = 2.0  # a clean stop sends what is buffered for at most this long
 STILL_DOWN_S = 30.0  # while the broker stays away, a reminder this often
 POLL_S = 0.001  # looking for the next snapshot once it is due
+FIRST_SNAPSHOT_S = 1.0  # the first connection waits at most this for the gateway's first snapshot
 WATCH_S = 2.0  # a session checks its acknowledgements this often (CONNECT_TIMEOUT_S)
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
 PUBACK_TYPE = 0x40  # MQTT 3.1.1 fixed header of a PUBACK (remaining length 2: the ID)
@@ -925,6 +926,7 @@ class TelemetryPublisher:
         self._stop = asyncio.Event()
         client_ids = {p.name: f"grasplink-{self.gateway_id}-{p.name}" for p in self.protocols}
         try:
+            await self._first_snapshot()
             self.links = [
                 MqttLink(
                     protocol,
@@ -962,6 +964,22 @@ class TelemetryPublisher:
             raise
         finally:
             self._ready.set()
+
+    async def _first_snapshot(self) -> None:
+        """Before the first connection: wait (at most FIRST_SNAPSHOT_S; a gateway makes one
+        every 50 ms from its start) for the gateway's first snapshot and prime the Sparkplug
+        session with it, so the first NBIRTH reports the gateway's values and controls."""
+        deadline = time.monotonic() + FIRST_SNAPSHOT_S
+        while self.gateway.latest is None and time.monotonic() < deadline:
+            await asyncio.sleep(POLL_S * 10)
+        snapshot = self.gateway.latest
+        if snapshot is None:
+            return
+        now = time.monotonic()
+        sample = Sample(self.clock.stamp_ms(snapshot["uptime_s"], now, time.time() - now), snapshot)
+        for protocol in self.protocols:
+            if isinstance(protocol, SparkplugSession):
+                protocol.prime(sample, {"controls": self.controls, "telemetry": {}})
 
     def _on_will(self, protocol: TelemetryProtocol) -> Callable[[], None] | None:
         """Sparkplug: save the bdSeq of the Will about to be registered (before CONNECT)."""
