@@ -253,6 +253,7 @@ def run(
     out.mkdir(parents=True, exist_ok=True)
     (out / "decoding.json").write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
     plot_pareto(results, out / "decoding_pareto.png")
+    ns.plot(results["nonstationary"], DEFAULT_DECODER, out / ns.PLOT_NAME)
     (out / "decoding.md").write_text(render(results))
     return results
 

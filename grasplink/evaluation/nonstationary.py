@@ -848,6 +848,82 @@ def _moving_row(name: str, f: dict) -> str:
     )
 
 
+PLOT_NAME = "decoding_nonstationary.png"
+
+
+def _not_cleared(figures: dict) -> float | None:
+    cleared = figures.get("cleared_in_time_pct")
+    return None if cleared is None else 100.0 - cleared
+
+
+def plot(results: dict, default: str, path: Any) -> None:
+    """Left: what accuracy costs in time on the moving categories (speed error median and
+    wrong direction against CPU per sample at 3-sample chunks), every decoder. Right: the
+    default decoder per category - speed error median, wrong direction, stops not cleared
+    within 0.3 s, missing estimates - beside the issue's bounds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (cost_ax, cat_ax) = plt.subplots(1, 2, figsize=(13, 5), dpi=100)
+    for index, (name, figures) in enumerate(results["overall"].items()):
+        cost = figures.get("cpu_us_per_sample_3")
+        for key, marker in (("speed_median_pct", "o"), ("wrong_direction_pct", "x")):
+            value = figures.get(key)
+            if cost is None or value is None:
+                continue
+            shown = max(value, 0.05)  # 0 % on a log axis
+            cost_ax.scatter(cost, shown, marker=marker, s=40, color=f"C{index % 10}")
+            if marker == "o":
+                cost_ax.annotate(
+                    name, (cost, shown), xytext=(5, 4), textcoords="offset points", fontsize=8
+                )
+    cost_ax.axvline(50.0, color="red", lw=0.8, ls=":", label="cost budget 50 µs/sample")
+    cost_ax.axhline(8.0, color="green", lw=0.8, ls=":", label="speed median bound 8 %")
+    cost_ax.axhline(5.0, color="purple", lw=0.8, ls="--", label="wrong direction bound 5 %")
+    cost_ax.scatter([], [], marker="o", color="grey", label="speed error median %")
+    cost_ax.scatter([], [], marker="x", color="grey", label="wrong direction %")
+    cost_ax.set_xscale("log")
+    cost_ax.set_yscale("log")
+    cost_ax.set_xlabel("CPU per sample [µs] at 3-sample chunks (this machine)")
+    cost_ax.set_ylabel("% over the moving categories (asymmetric layouts)")
+    cost_ax.set_title("What accuracy costs in time: non-stationary slips")
+    cost_ax.grid(alpha=0.3, which="both")
+    cost_ax.legend(fontsize=7)
+
+    categories = [c for c in MOVING if c in results["categories"][default]]
+    per = results["categories"][default]
+    series = (
+        ("speed error median %", lambda f: f.get("speed_median_pct")),
+        ("wrong direction %", lambda f: f.get("wrong_direction_pct")),
+        ("stops not cleared in 0.3 s %", _not_cleared),
+        ("missing estimates %", lambda f: f.get("missing_pct")),
+    )
+    width = 0.8 / len(series)
+    x = np.arange(len(categories))
+    for i, (label, get) in enumerate(series):
+        values = [get(per[c]) for c in categories]
+        heights = [np.nan if v is None else v for v in values]
+        cat_ax.bar(x + (i - (len(series) - 1) / 2) * width, heights, width, label=label)
+    bounds = (
+        (8.0, "speed bound 8 %", "green"),
+        (5.0, "stops / direction bound 5 %", "purple"),
+        (20.0, "missing at 10 dB bound 20 %", "grey"),
+    )
+    for bound, label, color in bounds:
+        cat_ax.axhline(bound, color=color, lw=0.8, ls=":", label=label)
+    cat_ax.set_xticks(x, categories, rotation=35, ha="right", fontsize=8)
+    cat_ax.set_ylim(0, 100)
+    cat_ax.set_ylabel("%")
+    cat_ax.set_title(f"`{default}` per category (bounds: see the Targets table)")
+    cat_ax.legend(fontsize=7, ncol=2)
+    cat_ax.grid(alpha=0.3, axis="y")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def render(results: dict, default: str, before: dict | None, now: dict | None) -> list[str]:
     """The "Non-stationary slips" section of decoding.md."""
     decoders = list(results["overall"])
@@ -887,6 +963,11 @@ def render(results: dict, default: str, before: dict | None, now: dict | None) -
         mark = "-" if met is None else ("yes" if met else "**no**")
         digits = 2 if label.startswith("no regression") else 1  # as its bound
         lines.append(f"| {label} | {_fmt(value, digits)} | {bound} | {mark} |")
+    lines += [
+        "",
+        f"![Non-stationary slips: accuracy against cost per decoder, and `{default}` per "
+        f"category against its targets]({PLOT_NAME})",
+    ]
     lines += ["", "### All moving categories", "", MOVING_HEADER, "|---|" + "---:|" * 12]
     lines += [_moving_row(name, results["overall"][name]) for name in decoders]
     for category, title in CATEGORIES.items():
