@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import time
 import uuid
-from collections.abc import Callable
-from typing import Any
 
 import pytest
 
@@ -13,22 +10,7 @@ from grasplink.bus import MultiRunner
 from grasplink.errors import BusError
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.live import LiveGateway
-
-
-def wait_until(predicate: Callable[[], Any], timeout_s: float = 20.0, what: str = "") -> None:
-    """Poll `predicate` until it is truthy (2 shared cores: be patient, never flaky)."""
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.05)
-
-
-def operational(gateway) -> bool:
-    snapshot = gateway.latest
-    return snapshot is not None and all(
-        n["phase"] == "operational" for n in snapshot["nodes"].values()
-    )
+from tests.live import operational, wait_until
 
 
 @pytest.mark.slow
@@ -38,7 +20,7 @@ def test_one_gateway_process_masters_three_buses_from_one_thread() -> None:
     with LiveGateway(urls[0], config, with_nodes=True, more_buses=urls[1:]) as live:
         assert len(live.gateways) == 3 and live.gateway is live.gateways[0]
         assert any(isinstance(r, MultiRunner) and len(r.runners) == 3 for r in live._runners)
-        wait_until(lambda: all(map(operational, live.gateways)), what="every node on every bus")
+        wait_until(lambda: all(map(operational, live.gateways)), 20.0, "every node on every bus")
         lines = live.status_line().splitlines()
         assert [line.split("]")[0] for line in lines] == [f"[{u}" for u in urls]
         assert all("skin:operational" in line for line in lines)

@@ -7,10 +7,8 @@ virtual CAN channel is named uniquely within its process.
 from __future__ import annotations
 
 import subprocess
-import time
 import uuid
-from collections.abc import Callable, Iterator
-from typing import Any
+from collections.abc import Iterator
 
 import pytest
 
@@ -18,28 +16,10 @@ from grasplink.gateway.config import parse_config
 from grasplink.gateway.live import LiveGateway
 from grasplink.gateway.modbus.registers import register_map
 from grasplink.gateway.modbus.server import ModbusServer
+from tests.live import operational, wait_until
 
 RMAP = register_map()
 ALL_NODES = 0b1111
-
-
-def wait_until(predicate: Callable[[], Any], timeout_s: float = 15.0, what: str = "") -> Any:
-    """Poll `predicate` until it is truthy (2 shared cores: be patient, never flaky)."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what or predicate}")
-        time.sleep(0.02)
-
-
-def operational(gateway) -> bool:
-    snapshot = gateway.latest
-    return snapshot is not None and all(
-        n["phase"] == "operational" for n in snapshot["nodes"].values()
-    )
 
 
 def node_of(live: LiveGateway, kind: str):
