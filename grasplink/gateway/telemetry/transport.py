@@ -975,8 +975,7 @@ class TelemetryPublisher:
         snapshot = self.gateway.latest
         if snapshot is None:
             return
-        now = time.monotonic()
-        sample = Sample(self.clock.stamp_ms(snapshot["uptime_s"], now, time.time() - now), snapshot)
+        sample = self._sample(snapshot, time.monotonic())
         for protocol in self.protocols:
             if isinstance(protocol, SparkplugSession):
                 protocol.prime(sample, {"controls": self.controls, "telemetry": {}})
@@ -994,8 +993,7 @@ class TelemetryPublisher:
         if snapshot is None or snapshot is self._last_snapshot:
             return False
         previous, self._last_snapshot = self._last_snapshot, snapshot
-        ts_ms = self.clock.stamp_ms(snapshot["uptime_s"], now, time.time() - now)
-        sample = Sample(ts_ms, snapshot)
+        sample = self._sample(snapshot, now)
         if self._has_news(previous, sample):
             self.queue.put(sample)
         else:
@@ -1004,6 +1002,10 @@ class TelemetryPublisher:
                 for protocol in self.protocols:
                     protocol.latest = sample
         return True
+
+    def _sample(self, snapshot: dict[str, Any], now: float) -> Sample:
+        """The snapshot stamped with the wall-clock time it was made (seen at monotonic `now`)."""
+        return Sample(self.clock.stamp_ms(snapshot["uptime_s"], now, time.time() - now), snapshot)
 
     def _has_news(self, previous: dict[str, Any] | None, sample: Sample) -> bool:
         """Whether a snapshot may change what a protocol publishes; compared before any
