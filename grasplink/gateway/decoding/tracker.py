@@ -1018,29 +1018,13 @@ class TrackerDecoder(Decoder):
 
     # ------------------------------------------------------------------ motion
     def _travel(self, B: _Bank, g: float) -> np.ndarray:
-        """`_kinematics`'s travel alone (the same numbers), for callers that need no more."""
+        """Travel of slipping tracks B extrapolated to g: speed changing at the track's
+        acceleration (bounded to 0.25-4x), less the ridge dip still recovering."""
         tau = np.maximum(0.0, g - B.t)
         v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
         v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
         decay = np.exp(-tau / self.DIP_RECOVERY_S)
         return B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
-
-    def _kinematics(self, B: _Bank, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(travel, speed, position sigma) of slipping tracks B extrapolated to g."""
-        tau = np.maximum(0.0, g - B.t)
-        v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
-        v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
-        decay = np.exp(-tau / self.DIP_RECOVERY_S)
-        s = B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
-        speed = np.maximum(0.0, v_end - d * B.m * decay / self.DIP_RECOVERY_S)
-        P = B.P
-        var = (
-            P[:, 0, 0]
-            + 2 * tau * P[:, 0, 1]
-            + tau * tau * P[:, 1, 1]
-            + tau**2 * (P[:, 0, 2] + tau * P[:, 1, 2] + 0.25 * tau * tau * P[:, 2, 2])
-        )
-        return s, speed, np.sqrt(np.maximum(var, 0.0))
 
     def _schedule(self, B: _Bank):
         """Silence of slipping tracks with a speed: per track and ridge ahead (time due,
