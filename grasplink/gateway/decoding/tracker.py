@@ -310,12 +310,10 @@ class TrackerDecoder(Decoder):
     CONF_POS_MM = 3.0  # the position's own sigma halves the confidence at this value
     CONF_CONTACTS = 2.0  # confidence grows as 1 - exp(-(contacts - 1) / this)
     # the direction: a signed speed once the best track has an interval ratio (three
-    # contacts) and explains them this much better than the best one moving the other
-    # way; the confidence reaches 0.5 at CONF_DIRECTION_ODDS
+    # contacts) and every track moving its way explains them this much better than those
+    # moving the other way; the confidence carries P(this way), the logistic of those odds
     DIRECTION_CONTACTS = 3
     LOG_REPORT_ODDS = math.log(9.0)
-    LOG_CONF_ODDS = math.log(9.0)
-    CONF_ODDS_SCALE = 1.0
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
