@@ -42,6 +42,7 @@ _STATE_OF = operator.itemgetter(*STATE_FIELDS)  # a node's state fields, one C c
 HEALTH_PERIOD_MS = 1000
 VALUES_REFRESH_MS = 1000  # unchanged values are repeated this often (a consumer sees we live)
 QOS = 1
+VALUES_QOS = QOS  # the values stream (20 Hz); the benchmark's QoS 0 what-if sets it
 MAX_REQUEST_ID_CHARS = 64
 
 
@@ -138,7 +139,7 @@ class JsonTree:
             get = section.get if section is not None else {}.get
             for key in VALUE_FIELDS[kind]:
                 body[key] = get(key)
-            out.append(Message(self._topics[kind][1], dumps(body), QOS, False))
+            out.append(Message(self._topics[kind][1], dumps(body), VALUES_QOS, False))
         # Periodic topics go once per period of the clock, all in the same snapshot (and with
         # Sparkplug's counters): a gateway at rest publishes once a second, not four times.
         period = self.health_period_ms
