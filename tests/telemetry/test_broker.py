@@ -4,6 +4,7 @@ restarted mid-run, the Will when the gateway dies."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import signal
 import subprocess
@@ -237,6 +238,54 @@ def test_commands_are_answered_accepted_or_rejected_with_the_reason(
     assert any(d.get("Control/feedback_mode") == "slip_speed" for d in ndata)
     assert not fake.real.arbiter.reflex.enabled
     recorder.close()
+
+
+def test_a_steady_connection_is_read_by_the_ticks_and_still_answers_commands(
+    broker: Mosquitto, fake
+) -> None:
+    """Once connected and caught up, the event loop no longer watches the broker's sockets
+    (an acknowledgement arriving after a tick would wake it once more); the pump's ticks
+    read them: PUBACKs are taken, a command is answered, every value message is delivered
+    and a clean stop still waits for the last acknowledgements."""
+    recorder = Recorder(broker, ["grasplink/gw/reply/#", "grasplink/gw/node/skin/values"])
+    pub = publisher(fake, broker.url)
+    made = spy_on_skin_values(pub)
+    with pub:
+        time.sleep(0.6)
+        loop = pub._loop
+        assert loop is not None
+
+        async def watched() -> dict[str, bool]:
+            watching = {}
+            for link in pub.links:
+                assert link._inner is not None and link._polled is not None
+                key = loop._selector.get_map().get(link._polled)  # type: ignore[attr-defined]
+                watching[link.protocol.name] = key is not None and bool(key.events & 1)
+            return watching
+
+        assert asyncio.run_coroutine_threadsafe(watched(), loop).result(2) == {
+            "json": False,
+            "sparkplug": False,
+        }
+        recorder.publish("grasplink/gw/cmd/feedback_mode", b'{"value": "slip_speed", "id": 7}')
+        replies = recorder.wait_for(lambda m: "/reply/" in m.topic, timeout_s=2.0)
+        assert replies and json_of(replies[0]) == {
+            **json_of(replies[0]),
+            "id": 7,
+            "accepted": True,
+        }
+        json_link = next(link for link in pub.links if link.protocol.name == "json")
+        sent = json_link.sent
+        time.sleep(0.3)
+        assert json_link.sent > sent and len(json_link._inflight) < transport.WINDOW // 2
+    time.sleep(0.2)
+    recorder.close()
+    forces = [
+        json_of(m)["grip_force_n"] for m in recorder.taken() if m.topic.endswith("skin/values")
+    ]
+    assert len(made) > 10 and forces == made, "a value message was lost or out of order"
+    for link in pub.links:
+        assert not link.outbox and not link._inflight
 
 
 def test_tls_with_the_brokers_ca_and_refused_with_another(tmp_path: Path, fake) -> None:
