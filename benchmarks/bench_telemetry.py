@@ -34,6 +34,7 @@ import tempfile
 import threading
 import time
 import tracemalloc
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -617,46 +618,28 @@ def render(run_s, rounds, runs, lat, gone, encoders, measured) -> str:
                 + " | ".join(f"{med(label, thread):.2f} %" for label in labels)
                 + " |"
             )
-        out.append(
-            "| telemetry thread | "
-            + " | ".join(
-                "—"
-                if not runs[label][0]["telemetry"]
-                else f"{med(label, 'grasplink-telemetry'):.2f} %"
-                for label in labels
+
+        def telemetry_row(name: str, cell: Callable[[str], str]) -> str:
+            """A row of figures that exist only in the runs with telemetry on."""
+            return (
+                f"| {name} | "
+                + " | ".join(
+                    "—" if not runs[label][0]["telemetry"] else cell(label) for label in labels
+                )
+                + " |"
             )
-            + " |"
-        )
-        out.append(
-            "| telemetry CPU per gateway snapshot | "
-            + " | ".join(
-                "—" if not runs[label][0]["telemetry"] else f"{per_snapshot_us(label):.0f} µs"
-                for label in labels
-            )
-            + " |"
-        )
-        out.append(
-            "| telemetry thread wake-ups per gateway snapshot | "
-            + " | ".join(
-                "—" if not runs[label][0]["telemetry"] else f"{wakeups(label):.2f}"
-                for label in labels
-            )
-            + " |"
-        )
-        out.append(
-            "| **telemetry / gateway** | "
-            + " | ".join(
-                "—" if not runs[label][0]["telemetry"] else share_cell(label) for label in labels
-            )
-            + " |"
-        )
-        out.append(
-            "| messages sent | "
-            + " | ".join(
-                "—" if not runs[label][0]["telemetry"] else sent(label) for label in labels
-            )
-            + " |"
-        )
+
+        out += [
+            telemetry_row("telemetry thread", lambda x: f"{med(x, 'grasplink-telemetry'):.2f} %"),
+            telemetry_row(
+                "telemetry CPU per gateway snapshot", lambda x: f"{per_snapshot_us(x):.0f} µs"
+            ),
+            telemetry_row(
+                "telemetry thread wake-ups per gateway snapshot", lambda x: f"{wakeups(x):.2f}"
+            ),
+            telemetry_row("**telemetry / gateway**", share_cell),
+            telemetry_row("messages sent", sent),
+        ]
         out.append(
             "| decoder updates/s | "
             + " | ".join(
