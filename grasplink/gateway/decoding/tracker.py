@@ -90,6 +90,16 @@ _QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
 _VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
 
 
+# the columns of a bank's two matrices: floats (P flattened row-major, X, m, score, sig,
+# stop, t) and integers (dirn, first, ids, model, n, ridge, run); a field is a view
+_F_COLS: dict[str, int | slice] = {
+    "P": slice(0, 16), "X": slice(16, 20), "m": 20, "score": 21, "sig": 22, "stop": 23, "t": 24,
+}  # fmt: skip
+_I_COLS: dict[str, int | slice] = {
+    "dirn": 0, "first": 1, "ids": slice(2, 2 + IDS), "model": 2 + IDS, "n": 3 + IDS,
+    "ridge": 4 + IDS, "run": 5 + IDS,
+}  # fmt: skip
+_F_WIDTH, _I_WIDTH = 25, 6 + IDS
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
 
 
@@ -114,6 +124,18 @@ def _nz(mask: np.ndarray) -> np.ndarray:
     return mask.nonzero()[0]
 
 
+def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict, rows: slice = slice(None)) -> None:
+    """Write `fields` (arrays or scalars, per track) into the bank matrices' rows."""
+    for key, value in fields.items():
+        col = _F_COLS.get(key)
+        if col is not None:
+            if key == "P":
+                value = np.reshape(value, (-1, 16))
+            floats[rows, col] = value
+        else:
+            ints[rows, _I_COLS[key]] = value
+
+
 class _Bank:
     """The hypotheses as arrays (immutable once built: snapshots share them).
 
@@ -126,13 +148,17 @@ class _Bank:
     dips, in units of d), timing sigma of its last contact, score (log), the
     ids of its last contacts, the id it started at, and `stop`: NaN while
     slipping, else the time it stopped (X[:, 0] then holds where).
+
+    Stored as one float and one int matrix (a row per track): taking tracks or
+    joining banks is two numpy calls, not one per field. The fields are views
+    of their columns, made on first reading.
     """
 
     FIELDS: tuple[str, ...] = (
         "P", "X", "dirn", "first", "ids", "m", "model", "n", "ridge", "run", "score", "sig",
         "stop", "t",
     )  # fmt: skip
-    __slots__ = (*FIELDS, "_sched")
+    __slots__ = (*FIELDS, "_f", "_i", "_sched")
     P: np.ndarray
     X: np.ndarray
     dirn: np.ndarray
@@ -147,51 +173,55 @@ class _Bank:
     sig: np.ndarray
     stop: np.ndarray
     t: np.ndarray
+    _f: np.ndarray
+    _i: np.ndarray
     _sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
 
-    def __init__(self, **fields: np.ndarray):
-        for key in self.FIELDS:
-            setattr(self, key, fields[key])
+    def __init__(self, floats: np.ndarray, ints: np.ndarray):
+        self._f, self._i = floats, ints
         self._sched = None
 
+    def __getattr__(self, key: str) -> np.ndarray:
+        """A field's view, made when first read (a bank's readers use a few fields)."""
+        col = _F_COLS.get(key)
+        if col is not None:
+            view = self._f[:, col]
+            if key == "P":
+                view = view.reshape(len(view), 4, 4)
+        elif key in _I_COLS:
+            view = self._i[:, _I_COLS[key]]
+        else:
+            raise AttributeError(key)
+        setattr(self, key, view)
+        return view
+
     def __len__(self) -> int:
-        return len(self.score)
+        return len(self._f)
+
+    @classmethod
+    def of(cls, **fields) -> _Bank:
+        """A bank of the given fields (every one of FIELDS, per track)."""
+        N = len(fields["score"])
+        floats = np.empty((N, _F_WIDTH))
+        ints = np.empty((N, _I_WIDTH), np.int64)
+        _fill(floats, ints, fields)
+        return cls(floats, ints)
 
     @classmethod
     def empty(cls) -> _Bank:
         """The empty bank (one shared instance: banks are never changed in place)."""
         if _EMPTY:
             return _EMPTY[0]
-        bank = cls(
-            P=np.zeros((0, 4, 4)),
-            X=np.zeros((0, 4)),
-            dirn=np.zeros(0, np.int64),
-            first=np.zeros(0, np.int64),
-            ids=np.zeros((0, IDS), np.int64),
-            m=np.zeros(0),
-            model=np.zeros(0, np.int64),
-            n=np.zeros(0, np.int64),
-            ridge=np.zeros(0, np.int64),
-            run=np.zeros(0, np.int64),
-            score=np.zeros(0),
-            sig=np.zeros(0),
-            stop=np.zeros(0),
-            t=np.zeros(0),
-        )
-        for key in cls.FIELDS:
-            getattr(bank, key).flags.writeable = False
+        bank = cls(np.zeros((0, _F_WIDTH)), np.zeros((0, _I_WIDTH), np.int64))
+        bank._f.flags.writeable = False
+        bank._i.flags.writeable = False
         _EMPTY.append(bank)
         return bank
 
     def take(self, idx: np.ndarray, only: tuple[str, ...] | None = None) -> _Bank:
-        """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]` on
-        the small arrays a contact branches, 14 fields a time); `only`: just these fields
-        (a partial bank, read where no other field is)."""
-        out = _Bank.__new__(_Bank)
-        for key in self.FIELDS if only is None else only:
-            setattr(out, key, getattr(self, key).take(idx, 0))
-        out._sched = None
-        return out
+        """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]`);
+        `only`: the fields read (all are taken: two calls either way)."""
+        return _Bank(self._f.take(idx, 0), self._i.take(idx, 0))
 
     @staticmethod
     def concat(banks: list[_Bank]) -> _Bank:
@@ -200,32 +230,32 @@ class _Bank:
             return _Bank.empty()
         if len(banks) == 1:
             return banks[0]
-        out = _Bank.__new__(_Bank)
-        for key in _Bank.FIELDS:
-            setattr(out, key, np.concatenate([getattr(b, key) for b in banks]))
-        out._sched = None
-        return out
+        return _Bank(np.concatenate([b._f for b in banks]), np.concatenate([b._i for b in banks]))
 
     def replace(self, **fields) -> _Bank:
-        out = _Bank(**{k: fields.get(k, getattr(self, k)) for k in self.FIELDS})
-        return out
+        """These tracks with `fields` changed: the matrix no changed field is in is shared."""
+        floats, ints = self._f, self._i
+        if any(key in _F_COLS for key in fields):
+            floats = floats.copy()
+        if any(key in _I_COLS for key in fields):
+            ints = ints.copy()
+        _fill(floats, ints, fields)
+        return _Bank(floats, ints)
 
     def part(self, start: int, stop: int) -> _Bank:
         """Tracks start..stop (views)."""
-        out = _Bank.__new__(_Bank)
-        for key in self.FIELDS:
-            setattr(out, key, getattr(self, key)[start:stop])
-        out._sched = None
-        return out
+        return _Bank(self._f[start:stop], self._i[start:stop])
 
     def twice(self, first: dict, second: dict) -> _Bank:
         """concat([self.replace(**first), self.replace(**second)]) in one pass."""
-        out = _Bank.__new__(_Bank)
-        for key in self.FIELDS:
-            own = getattr(self, key)
-            setattr(out, key, np.concatenate((first.get(key, own), second.get(key, own))))
-        out._sched = None
-        return out
+        N = len(self)
+        floats = np.empty((2 * N, _F_WIDTH))
+        ints = np.empty((2 * N, _I_WIDTH), np.int64)
+        floats[:N] = floats[N:] = self._f
+        ints[:N] = ints[N:] = self._i
+        _fill(floats, ints, first, slice(0, N))
+        _fill(floats, ints, second, slice(N, 2 * N))
+        return _Bank(floats, ints)
 
 
 class _One:
@@ -628,7 +658,7 @@ class TrackerDecoder(Decoder):
         ids = np.empty((N, IDS), np.int64)
         ids.fill(-1)
         ids[:, -1] = ev.id
-        return _Bank(
+        return _Bank.of(
             first=_full(N, ev.id, np.int64),
             ids=ids,
             score=(base[:, None] + self._log_prior).ravel(),
