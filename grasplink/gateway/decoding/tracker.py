@@ -90,14 +90,20 @@ _QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
 _VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
 
 
-# the columns of a bank's two matrices: floats (P flattened row-major, X, m, score, sig,
-# stop, t) and integers (dirn, first, ids, model, n, ridge, run); a field is a view
+# the columns of a bank's two matrices: floats (P flattened row-major, X = (s, v, a, d), m,
+# score, sig, stop, t) and integers (dirn, first, ids, model, n, ridge, run); a field is a
+# view. _P33 etc.: flat covariance entries
+_P, _X, _S, _V, _A, _D = slice(0, 16), slice(16, 20), 16, 17, 18, 19
+_P00, _P01, _P10, _P11, _P12, _P13, _P21, _P22, _P31, _P33 = 0, 1, 4, 5, 6, 7, 9, 10, 13, 15
+_M, _SCORE, _SIG, _STOP, _T = 20, 21, 22, 23, 24
+_DIRN, _FIRST, _IDS = 0, 1, slice(2, 2 + IDS)
+_MODEL, _N, _RIDGE, _RUN = 2 + IDS, 3 + IDS, 4 + IDS, 5 + IDS
 _F_COLS: dict[str, int | slice] = {
-    "P": slice(0, 16), "X": slice(16, 20), "m": 20, "score": 21, "sig": 22, "stop": 23, "t": 24,
+    "P": _P, "X": _X, "m": _M, "score": _SCORE, "sig": _SIG, "stop": _STOP, "t": _T,
 }  # fmt: skip
 _I_COLS: dict[str, int | slice] = {
-    "dirn": 0, "first": 1, "ids": slice(2, 2 + IDS), "model": 2 + IDS, "n": 3 + IDS,
-    "ridge": 4 + IDS, "run": 5 + IDS,
+    "dirn": _DIRN, "first": _FIRST, "ids": _IDS, "model": _MODEL, "n": _N, "ridge": _RIDGE,
+    "run": _RUN,
 }  # fmt: skip
 _F_WIDTH, _I_WIDTH = 25, 6 + IDS
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
@@ -130,10 +136,22 @@ def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict, rows: slice = slic
         col = _F_COLS.get(key)
         if col is not None:
             if key == "P":
-                value = np.reshape(value, (-1, 16))
+                value = value.reshape(len(value), 16)
             floats[rows, col] = value
         else:
             ints[rows, _I_COLS[key]] = value
+
+
+def _with_contact(ints: np.ndarray, ev_id: int, ridge: np.ndarray, run) -> np.ndarray:
+    """The int columns of tracks `ints` that assign contact ev_id to `ridge`: one more
+    contact, `run`, and ev_id the last of their ids (a new matrix)."""
+    out = ints.copy()
+    out[:, _IDS.start : _IDS.stop - 1] = ints[:, _IDS.start + 1 : _IDS.stop]
+    out[:, _IDS.stop - 1] = ev_id
+    out[:, _N] += 1
+    out[:, _RIDGE] = ridge
+    out[:, _RUN] = run
+    return out
 
 
 class _Bank:
@@ -439,25 +457,32 @@ class TrackerDecoder(Decoder):
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
-        # what every contact's one-contact tracks share (read-only: banks share arrays)
+        # what every contact's one-contact tracks share: a bank that `_births` copies and
+        # fills in (the contact's id, time, sigma and the score)
         dirn = np.repeat(np.array([1, -1]), R)
         ridge = np.tile(np.arange(R), 2)
         X = np.zeros((2 * R, 4))
         X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
         ones = np.ones(2 * R, np.int64)
-        self._birth = {
-            "P": np.zeros((2 * R, 4, 4)),
-            "X": X,
-            "dirn": dirn,
-            "m": np.ones(2 * R),
-            "model": np.zeros(2 * R, np.int64),
-            "n": ones,
-            "ridge": ridge,
-            "run": ones,
-            "stop": np.full(2 * R, np.nan),
-        }
-        for array in self._birth.values():
-            array.flags.writeable = False
+        zeros = np.zeros(2 * R)
+        self._birth = _Bank.of(
+            P=np.zeros((2 * R, 4, 4)),
+            X=X,
+            dirn=dirn,
+            first=-ones,
+            ids=np.full((2 * R, IDS), -1, np.int64),
+            m=np.ones(2 * R),
+            model=np.zeros(2 * R, np.int64),
+            n=ones,
+            ridge=ridge,
+            run=ones,
+            score=zeros,
+            sig=zeros,
+            stop=np.full(2 * R, np.nan),
+            t=zeros,
+        )
+        self._birth._f.flags.writeable = False
+        self._birth._i.flags.writeable = False
 
     def _detect_probability(self, spacing_before: float) -> float:
         share = min(1.0, max(0.0, (spacing_before - 3.0) / 5.0))
@@ -654,18 +679,12 @@ class TrackerDecoder(Decoder):
 
     def _births(self, ev: ContactEvent, base: np.ndarray) -> _Bank:
         """One-contact tracks at every ridge, both ways; `base`: log prior per direction."""
-        N = 2 * self.count
-        ids = np.empty((N, IDS), np.int64)
-        ids.fill(-1)
-        ids[:, -1] = ev.id
-        return _Bank.of(
-            first=_full(N, ev.id, np.int64),
-            ids=ids,
-            score=(base[:, None] + self._log_prior).ravel(),
-            sig=_full(N, ev.sigma_s),
-            t=_full(N, ev.t_s),
-            **self._birth,
-        )
+        floats, ints = self._birth._f.copy(), self._birth._i.copy()
+        ints[:, _FIRST] = ints[:, _IDS.stop - 1] = ev.id
+        floats[:, _SCORE] = (base[:, None] + self._log_prior).ravel()
+        floats[:, _SIG] = ev.sigma_s
+        floats[:, _T] = ev.t_s
+        return _Bank(floats, ints)
 
     def _stopped_at(self, B: _Bank, tc: float, log_prior: float | None = None) -> _Bank:
         """Copies of slipping tracks B that stopped at tc (a step), where they were then.
@@ -675,11 +694,13 @@ class TrackerDecoder(Decoder):
             return B
         s = self._travel(B, tc)
         limit = self._pos[(1 - B.dirn) // 2, np.minimum(B.ridge + 1, self.count)]
-        X = B.X.copy()
-        X[:, 0] = np.minimum(s, limit - 0.1)
-        X[:, 1] = X[:, 2] = 0.0
         prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
-        return B.replace(X=X, stop=_full(len(B), tc), score=B.score + prior)
+        floats = B._f.copy()
+        floats[:, _S] = np.minimum(s, limit - 0.1)
+        floats[:, _V] = floats[:, _A] = 0.0
+        floats[:, _STOP] = tc
+        floats[:, _SCORE] = B.score + prior
+        return _Bank(floats, B._i)
 
     def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
         """Children of B that assign contact ev to one of the next ridges (each branch type
@@ -735,33 +756,19 @@ class TrackerDecoder(Decoder):
             out.append(self._restart(at, ev, at.ridge + 1 + skip_arr[sel], prior[sel] + log_rate))
         return out
 
-    def _with_contact(self, B: _Bank, ev: ContactEvent) -> np.ndarray:
-        ids = np.empty_like(B.ids)
-        ids[:, :-1] = B.ids[:, 1:]
-        ids[:, -1] = ev.id
-        return ids
-
     def _restart(self, B: _Bank, ev: ContactEvent, k: np.ndarray, log_prior: np.ndarray) -> _Bank:
         """B restarted (speed unknown) with ev at ridge k."""
         di = (1 - B.dirn) // 2
-        X = np.zeros((len(B), 4))
-        X[:, 0] = self._pos[di, k]
-        X[:, 3] = B.X[:, 3]
-        P = np.zeros((len(B), 4, 4))
-        P[:, 3, 3] = np.maximum(B.P[:, 3, 3], 0.0)
-        return B.replace(
-            X=X,
-            P=P,
-            ridge=k,
-            n=B.n + 1,
-            run=np.ones(len(B), np.int64),
-            t=_full(len(B), ev.t_s),
-            sig=_full(len(B), ev.sigma_s),
-            m=np.ones(len(B)),
-            ids=self._with_contact(B, ev),
-            stop=_full(len(B), np.nan),
-            score=B.score + log_prior,
-        )
+        floats = np.zeros((len(B), _F_WIDTH))  # P, v and a: 0
+        floats[:, _S] = self._pos[di, k]
+        floats[:, _D] = B.X[:, 3]
+        floats[:, _P33] = np.maximum(B.P[:, 3, 3], 0.0)
+        floats[:, _M] = 1.0
+        floats[:, _SCORE] = B.score + log_prior
+        floats[:, _SIG] = ev.sigma_s
+        floats[:, _STOP] = np.nan
+        floats[:, _T] = ev.t_s
+        return _Bank(floats, _with_contact(B._i, ev.id, k, 1))
 
     def _start_speed(
         self,
@@ -807,31 +814,19 @@ class TrackerDecoder(Decoder):
         r_before = self._meas_var(v, B.sig)
 
         def covariance(dip_prior_mm: float) -> np.ndarray:
+            """The covariance, flat (N, 16)."""
             var_d = np.where(B.P[:, 3, 3] > 0, B.P[:, 3, 3], dip_prior_mm**2)
-            P = np.zeros((N, 4, 4))
-            P[:, 0, 0] = r
-            P[:, 0, 1] = P[:, 1, 0] = r / dt
-            P[:, 1, 1] = (r + r_before + lag * lag * var_d) / (dt * dt)
-            P[:, 1, 1] += (self.SPEED_INIT_REL * v) ** 2
-            P[:, 1, 3] = P[:, 3, 1] = lag * var_d / dt
-            P[:, 3, 3] = var_d
+            P = np.zeros((N, 16))
+            P[:, _P00] = r
+            P[:, _P01] = P[:, _P10] = r / dt
+            P[:, _P11] = (r + r_before + lag * lag * var_d) / (dt * dt)
+            P[:, _P11] += (self.SPEED_INIT_REL * v) ** 2
+            P[:, _P13] = P[:, _P31] = lag * var_d / dt
+            P[:, _P33] = var_d
             return P
 
         P = covariance(self.DIP_PRIOR_MM)
-        X = np.zeros((N, 4))
-        X[:, 0] = target
-        X[:, 1] = v
-        X[:, 3] = d
         score = B.score + log_prior + self._log_speed_prior(v) - np.log(dt)
-        common = dict(
-            ridge=k,
-            t=_full(N, tc),
-            n=B.n + 1,
-            run=_full(N, 2, np.int64),
-            sig=_full(N, ev.sigma_s),
-            m=1.0 + B.m * decay,
-            ids=self._with_contact(B, ev),
-        )
         # changing: the mean speed over the interval is the speed half an interval ago
         sa = self.ACC_PER_S * v
         if self.DIP_PRIOR_CHANGING_MM == self.DIP_PRIOR_MM:  # the same numbers: built once
@@ -839,38 +834,37 @@ class TrackerDecoder(Decoder):
         else:
             Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
         half = dt / 2.0
-        Pc[:, 1, 1] += (half * sa) ** 2
-        Pc[:, 1, 2] = Pc[:, 2, 1] = half * sa * sa
-        Pc[:, 2, 2] = sa * sa
+        Pc[:, _P11] += (half * sa) ** 2
+        Pc[:, _P12] = Pc[:, _P21] = half * sa * sa
+        Pc[:, _P22] = sa * sa
+        # the children's columns, built in place: the steady model's covariance first
+        floats = np.empty((N, _F_WIDTH))
+        floats[:, _P] = P
+        floats[:, _S] = target
+        floats[:, _V] = v
+        floats[:, _A] = 0.0
+        floats[:, _D] = d
+        floats[:, _M] = 1.0 + B.m * decay
+        floats[:, _SCORE] = score
+        floats[:, _SIG] = ev.sigma_s
+        floats[:, _STOP] = B.stop
+        floats[:, _T] = tc
+        ints = _with_contact(B._i, ev.id, k, 2)
         started = restarted = _Bank.empty()
-        if fresh:
-            part = B.part(0, fresh)
-            both = {key: value[:fresh] for key, value in common.items()}
-            steady = dict(
-                X=X[:fresh],
-                P=P[:fresh],
-                model=_full(fresh, STEADY, np.int64),
-                score=score[:fresh] + math.log(1.0 - math.exp(self.LOG_CHANGING)),
-                **both,
-            )
-            changing = dict(
-                X=X[:fresh],
-                P=Pc[:fresh],
-                model=_full(fresh, CHANGING, np.int64),
-                score=score[:fresh] + self.LOG_CHANGING,
-                **both,
-            )
-            started = part.twice(steady, changing)
-        if fresh < N:
-            part = B.part(fresh, N)
-            chg = part.model == CHANGING
-            restarted = part.replace(
-                X=X[fresh:],
-                P=np.where(chg[:, None, None], Pc[fresh:], P[fresh:]),
-                model=part.model,
-                score=score[fresh:],
-                **{key: value[fresh:] for key, value in common.items()},
-            )
+        if fresh:  # each in both models: steady, then changing
+            both_f = np.concatenate((floats[:fresh], floats[:fresh]))
+            both_i = np.concatenate((ints[:fresh], ints[:fresh]))
+            both_f[:fresh, _SCORE] = score[:fresh] + math.log(1.0 - math.exp(self.LOG_CHANGING))
+            both_f[fresh:, _SCORE] = score[:fresh] + self.LOG_CHANGING
+            both_f[fresh:, _P] = Pc[:fresh]
+            both_i[:fresh, _MODEL] = STEADY
+            both_i[fresh:, _MODEL] = CHANGING
+            started = _Bank(both_f, both_i)
+        if fresh < N:  # in their own model
+            own_f = floats[fresh:]
+            chg = _nz(ints[fresh:, _MODEL] == CHANGING)
+            own_f[chg, _P] = Pc[fresh:].take(chg, 0)
+            restarted = _Bank(own_f, ints[fresh:])
         return started, restarted
 
     def _toward_ridge(
@@ -939,19 +933,16 @@ class TrackerDecoder(Decoder):
         out = _Bank.empty()
         sel = _nz(good)
         if len(sel):
-            Bs = B.take(sel)
-            out = Bs.replace(
-                X=Xn[sel],
-                P=Pn[sel],
-                ridge=k[sel],
-                t=_full(len(sel), tc),
-                n=Bs.n + 1,
-                run=Bs.run + 1,
-                sig=_full(len(sel), ev.sigma_s),
-                m=1.0 + Bs.m * decay[sel],
-                ids=self._with_contact(Bs, ev),
-                score=Bs.score + log_prior[sel] + like[sel],
-            )
+            floats = np.empty((len(sel), _F_WIDTH))
+            floats[:, _P] = Pn.reshape(N, 16).take(sel, 0)
+            floats[:, _X] = Xn.take(sel, 0)
+            floats[:, _M] = 1.0 + B.m.take(sel) * decay.take(sel)
+            floats[:, _SCORE] = B.score.take(sel) + log_prior.take(sel) + like.take(sel)
+            floats[:, _SIG] = ev.sigma_s
+            floats[:, _STOP] = B.stop.take(sel)
+            floats[:, _T] = tc
+            ints = B._i.take(sel, 0)
+            out = _Bank(floats, _with_contact(ints, ev.id, k.take(sel), ints[:, _RUN] + 1))
         # far off: the speed changed; it starts again from the last two contacts
         far = _nz(inlier < outlier)
         return out, far, log_prior[far] + like[far]
