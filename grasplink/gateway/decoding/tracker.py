@@ -106,6 +106,12 @@ _I_COLS: dict[str, int | slice] = {
     "run": _RUN,
 }  # fmt: skip
 _F_WIDTH, _I_WIDTH = 25, 6 + IDS
+# `_prune`'s dedup key, the int columns' part: the last three contact ids, ridge, direction
+# and model weighted (mod 2^64, as the chained int64 multiply-adds wrap)
+_KEY_M = 1000003
+_KEY_WEIGHTS = np.zeros(_I_WIDTH, np.int64)
+_KEY_WEIGHTS[[_IDS.stop - 1, _IDS.stop - 2, _IDS.stop - 3]] = [_KEY_M**3, _KEY_M**2, _KEY_M]
+_KEY_WEIGHTS[[_RIDGE, _DIRN, _MODEL]] = [16, 4, 4]
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
 
 
@@ -983,10 +989,11 @@ class TrackerDecoder(Decoder):
         # decided on the fields it needs in score order; the bank is taken once, at the end
         order = np.argsort(-B.score, kind="stable")
         ids = B.ids
-        key = ids[:, -1] * 1000003 + ids[:, -2]
-        key = key * 1000003 + ids[:, -3]
-        state = B.ridge * 16 + (B.dirn > 0) * 8 + B.model * 4 + np.isnan(B.stop) * 2 + (B.run == 1)
-        key = (key * 1000003 + state).take(order)
+        # the key ((id[-1] M + id[-2]) M + id[-3]) M + state, state = 16 ridge + 8 (dirn > 0)
+        # + 4 model + 2 slipping + (run == 1), wrapping as int64 does: as one int matmul
+        # (the same sum mod 2^64, less the constant 4 of 8 (dirn > 0) = 4 dirn + 4)
+        key = B._i @ _KEY_WEIGHTS + np.isnan(B.stop) * 2 + (B.run == 1)
+        key = key.take(order)
         # the first of each key (np.unique's return_index: a stable sort, each run's head)
         perm = key.argsort(kind="mergesort")
         aux = key.take(perm)
