@@ -409,6 +409,15 @@ class TrackerDecoder(Decoder):
             self._log_pd = np.log(self._pd)
             self._log_miss = np.log1p(-self._pd)
         self._log_miss[:, -1] = -np.inf  # past the coast: stopped
+        # `_assign`'s log prior per (direction, ridge, skip): the next `skip` ridges all
+        # missed (sequential sums from 0, as one skip after another), the one after seen
+        k = np.arange(R)[:, None] + 1 + np.arange(self.MAX_SKIP + 1)
+        kk = np.minimum(k, R - 1)
+        self._skip_prior = np.empty((2, R, self.MAX_SKIP + 1))
+        for di in range(2):
+            missed = np.zeros(k.shape)
+            missed[:, 1:] = np.cumsum(self._log_miss[di, kk[:, :-1]], axis=1)
+            self._skip_prior[di] = missed + self._log_pd[di, kk]
         # the slowest slip a track takes crosses the whole skin and the coast past it in this
         # time: a track silent for longer has stopped or left the skin, so a later contact is
         # no part of its slip (a new one starts there); such tracks retire (`_retire`)
@@ -739,12 +748,7 @@ class TrackerDecoder(Decoder):
         skip_arr, row = valid.nonzero()
         if not len(row):
             return []
-        kk = np.minimum(k, R - 1)
-        di2 = di[:, None]
-        # P(the ridges skipped all missed): sequential sums from 0, as one skip after another
-        missed = np.zeros(k.shape)
-        missed[:, 1:] = np.cumsum(self._log_miss[di2, kk[:, :-1]], axis=1)
-        prior = (missed + self._log_pd[di2, kk]).T[skip_arr, row]
+        prior = self._skip_prior[di.take(row), B.ridge.take(row), skip_arr]
         run, mov = B.run[row], moving[row]
         out = []
         fresh = _nz(mov & (run == 1))  # one-contact or restarted tracks
