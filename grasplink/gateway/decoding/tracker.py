@@ -1008,13 +1008,13 @@ class TrackerDecoder(Decoder):
         if not len(B):
             return B
         # decided on the fields it needs in score order; the bank is taken once, at the end
-        order = np.argsort(-B.score, kind="stable")
-        ids = B.ids
+        score = B.score
+        order = (-score).argsort(kind="stable")
+        ints = B._i.take(order, 0)  # the int columns in score order
         # the key ((id[-1] M + id[-2]) M + id[-3]) M + state, state = 16 ridge + 8 (dirn > 0)
         # + 4 model + 2 slipping + (run == 1), wrapping as int64 does: as one int matmul
         # (the same sum mod 2^64, less the constant 4 of 8 (dirn > 0) = 4 dirn + 4)
-        key = B._i @ _KEY_WEIGHTS + np.isnan(B.stop) * 2 + (B.run == 1)
-        key = key.take(order)
+        key = ints @ _KEY_WEIGHTS + np.isnan(B.stop.take(order)) * 2 + (ints[:, _RUN] == 1)
         # the first of each key (np.unique's return_index: a stable sort, each run's head)
         perm = key.argsort(kind="mergesort")
         aux = key.take(perm)
@@ -1023,11 +1023,11 @@ class TrackerDecoder(Decoder):
         np.not_equal(aux[1:], aux[:-1], out=head[1:])
         keep = np.zeros(len(B), bool)
         keep[perm[head]] = True
-        score = B.score.take(order)
+        score = score.take(order)
         keep &= score >= score[0] - self.NEGLIGIBLE - 20.0
         # one-contact tracks: only those starting at a recent contact
-        single = B.n.take(order) == 1
-        last = ids[:, -1].take(order)
+        single = ints[:, _N] == 1
+        last = ints[:, _IDS.stop - 1]
         recent_start = np.zeros(len(B), bool)
         for r in recent.tolist():
             recent_start |= last == r
@@ -1039,14 +1039,15 @@ class TrackerDecoder(Decoder):
         if len(idx) and len(held):
             # rank within each start contact: a stable sort by start, counted from each
             # run's head
-            firsts = B.first.take(order.take(idx))
+            firsts = ints[:, _FIRST].take(idx)
             by_start = firsts.argsort(kind="stable")
             starts = firsts.take(by_start)
             head = np.empty(len(starts), bool)
             head[0] = True
             np.not_equal(starts[1:], starts[:-1], out=head[1:])
             group_rank = rank - np.maximum.accumulate(np.where(head, rank, 0))
-            held_sorted = np.sort(held)
+            held_sorted = held.copy()
+            held_sorted.sort()
             at = np.minimum(held_sorted.searchsorted(starts), len(held_sorted) - 1)
             quota = (group_rank < self.PER_START) & (held_sorted.take(at) == starts)
             ok[by_start[quota]] = True
