@@ -769,7 +769,7 @@ class TrackerDecoder(Decoder):
         if len(fresh):
             out.append(started)
         if len(sel):
-            out.append(_Bank.concat([kalman, restarted]))
+            out += [kalman, restarted]  # (joined with the other children, in this order)
             # or the slip stopped unseen and went on: a restart at the next ridge
             first = sel[skip_arr[sel] == 0]
             if len(first):
