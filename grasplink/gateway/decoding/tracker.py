@@ -411,13 +411,12 @@ class TrackerDecoder(Decoder):
         self._log_miss[:, -1] = -np.inf  # past the coast: stopped
         # `_assign`'s log prior per (direction, ridge, skip): the next `skip` ridges all
         # missed (sequential sums from 0, as one skip after another), the one after seen
-        k = np.arange(R)[:, None] + 1 + np.arange(self.MAX_SKIP + 1)
-        kk = np.minimum(k, R - 1)
+        ahead = np.minimum(np.arange(R)[:, None] + 1 + np.arange(self.MAX_SKIP + 1), R - 1)
         self._skip_prior = np.empty((2, R, self.MAX_SKIP + 1))
-        for di in range(2):
-            missed = np.zeros(k.shape)
-            missed[:, 1:] = np.cumsum(self._log_miss[di, kk[:, :-1]], axis=1)
-            self._skip_prior[di] = missed + self._log_pd[di, kk]
+        for way in range(2):
+            skipped = np.zeros(ahead.shape)
+            skipped[:, 1:] = np.cumsum(self._log_miss[way, ahead[:, :-1]], axis=1)
+            self._skip_prior[way] = skipped + self._log_pd[way, ahead]
         # the slowest slip a track takes crosses the whole skin and the coast past it in this
         # time: a track silent for longer has stopped or left the skin, so a later contact is
         # no part of its slip (a new one starts there); such tracks retire (`_retire`)
