@@ -48,3 +48,25 @@ def test_revised_steps_reuse_branches_and_change_no_estimate():
     assert decode(memo, t, x) == decode(plain, t, x)
     assert memo.branched < plain.branched
     assert len(memo._memo) <= memo.MEMO and len(memo._pruned) <= memo.MEMO
+
+
+class AssignCountingTracker(TrackerDecoder):
+    """Counts the assignments computed anew (not found in the assignment memo)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.assigned = 0
+
+    def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
+        self.assigned += 1
+        return super()._assign(B, ev)
+
+
+def test_a_contact_told_to_be_a_step_reuses_its_assignments_and_changes_no_estimate():
+    t, x = slip_cycles(3)
+    memo = AssignCountingTracker(LAYOUTS_MM["alpha0.1"], 400)
+    plain = AssignCountingTracker(LAYOUTS_MM["alpha0.1"], 400)
+    plain.MEMO = 0  # nothing kept: every contact of every replay assigned again
+    assert decode(memo, t, x) == decode(plain, t, x)
+    assert memo.assigned < plain.assigned
+    assert len(memo._assign_memo) <= memo.MEMO and not plain._assign_memo

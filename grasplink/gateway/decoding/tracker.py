@@ -90,6 +90,28 @@ _QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
 _VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
 
 
+# the columns of a bank's two matrices: floats (P flattened row-major, X = (s, v, a, d), m,
+# score, sig, stop, t) and integers (dirn, first, ids, model, n, ridge, run); a field is a
+# view. _P33 etc.: flat covariance entries
+_P, _X, _S, _V, _A, _D = slice(0, 16), slice(16, 20), 16, 17, 18, 19
+_P00, _P01, _P10, _P11, _P12, _P13, _P21, _P22, _P31, _P33 = 0, 1, 4, 5, 6, 7, 9, 10, 13, 15
+_M, _SCORE, _SIG, _STOP, _T = 20, 21, 22, 23, 24
+_DIRN, _FIRST, _IDS = 0, 1, slice(2, 2 + IDS)
+_MODEL, _N, _RIDGE, _RUN = 2 + IDS, 3 + IDS, 4 + IDS, 5 + IDS
+_F_COLS: dict[str, int | slice] = {
+    "P": _P, "X": _X, "m": _M, "score": _SCORE, "sig": _SIG, "stop": _STOP, "t": _T,
+}  # fmt: skip
+_I_COLS: dict[str, int | slice] = {
+    "dirn": _DIRN, "first": _FIRST, "ids": _IDS, "model": _MODEL, "n": _N, "ridge": _RIDGE,
+    "run": _RUN,
+}  # fmt: skip
+_F_WIDTH, _I_WIDTH = 25, 6 + IDS
+# `_prune`'s dedup key, the int columns' part: the last three contact ids, ridge, direction
+# and model weighted (mod 2^64, as the chained int64 multiply-adds wrap)
+_KEY_M = 1000003
+_KEY_WEIGHTS = np.zeros(_I_WIDTH, np.int64)
+_KEY_WEIGHTS[[_IDS.stop - 1, _IDS.stop - 2, _IDS.stop - 3]] = [_KEY_M**3, _KEY_M**2, _KEY_M]
+_KEY_WEIGHTS[[_RIDGE, _DIRN, _MODEL]] = [16, 4, 4]
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
 
 
@@ -114,6 +136,30 @@ def _nz(mask: np.ndarray) -> np.ndarray:
     return mask.nonzero()[0]
 
 
+def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict, rows: slice = slice(None)) -> None:
+    """Write `fields` (arrays or scalars, per track) into the bank matrices' rows."""
+    for key, value in fields.items():
+        col = _F_COLS.get(key)
+        if col is not None:
+            if key == "P":
+                value = value.reshape(len(value), 16)
+            floats[rows, col] = value
+        else:
+            ints[rows, _I_COLS[key]] = value
+
+
+def _with_contact(ints: np.ndarray, ev_id: int, ridge: np.ndarray, run) -> np.ndarray:
+    """The int columns of tracks `ints` that assign contact ev_id to `ridge`: one more
+    contact, `run`, and ev_id the last of their ids (a new matrix)."""
+    out = ints.copy()
+    out[:, _IDS.start : _IDS.stop - 1] = ints[:, _IDS.start + 1 : _IDS.stop]
+    out[:, _IDS.stop - 1] = ev_id
+    out[:, _N] += 1
+    out[:, _RIDGE] = ridge
+    out[:, _RUN] = run
+    return out
+
+
 class _Bank:
     """The hypotheses as arrays (immutable once built: snapshots share them).
 
@@ -126,13 +172,17 @@ class _Bank:
     dips, in units of d), timing sigma of its last contact, score (log), the
     ids of its last contacts, the id it started at, and `stop`: NaN while
     slipping, else the time it stopped (X[:, 0] then holds where).
+
+    Stored as one float and one int matrix (a row per track): taking tracks or
+    joining banks is two numpy calls, not one per field. The fields are views
+    of their columns, made on first reading.
     """
 
     FIELDS: tuple[str, ...] = (
         "P", "X", "dirn", "first", "ids", "m", "model", "n", "ridge", "run", "score", "sig",
         "stop", "t",
     )  # fmt: skip
-    __slots__ = (*FIELDS, "_sched")
+    __slots__ = (*FIELDS, "_f", "_i", "_sched")
     P: np.ndarray
     X: np.ndarray
     dirn: np.ndarray
@@ -147,51 +197,55 @@ class _Bank:
     sig: np.ndarray
     stop: np.ndarray
     t: np.ndarray
+    _f: np.ndarray
+    _i: np.ndarray
     _sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
 
-    def __init__(self, **fields: np.ndarray):
-        for key in self.FIELDS:
-            setattr(self, key, fields[key])
+    def __init__(self, floats: np.ndarray, ints: np.ndarray):
+        self._f, self._i = floats, ints
         self._sched = None
 
+    def __getattr__(self, key: str) -> np.ndarray:
+        """A field's view, made when first read (a bank's readers use a few fields)."""
+        col = _F_COLS.get(key)
+        if col is not None:
+            view = self._f[:, col]
+            if key == "P":
+                view = view.reshape(len(view), 4, 4)
+        elif key in _I_COLS:
+            view = self._i[:, _I_COLS[key]]
+        else:
+            raise AttributeError(key)
+        setattr(self, key, view)
+        return view
+
     def __len__(self) -> int:
-        return len(self.score)
+        return len(self._f)
+
+    @classmethod
+    def of(cls, **fields) -> _Bank:
+        """A bank of the given fields (every one of FIELDS, per track)."""
+        N = len(fields["score"])
+        floats = np.empty((N, _F_WIDTH))
+        ints = np.empty((N, _I_WIDTH), np.int64)
+        _fill(floats, ints, fields)
+        return cls(floats, ints)
 
     @classmethod
     def empty(cls) -> _Bank:
         """The empty bank (one shared instance: banks are never changed in place)."""
         if _EMPTY:
             return _EMPTY[0]
-        bank = cls(
-            P=np.zeros((0, 4, 4)),
-            X=np.zeros((0, 4)),
-            dirn=np.zeros(0, np.int64),
-            first=np.zeros(0, np.int64),
-            ids=np.zeros((0, IDS), np.int64),
-            m=np.zeros(0),
-            model=np.zeros(0, np.int64),
-            n=np.zeros(0, np.int64),
-            ridge=np.zeros(0, np.int64),
-            run=np.zeros(0, np.int64),
-            score=np.zeros(0),
-            sig=np.zeros(0),
-            stop=np.zeros(0),
-            t=np.zeros(0),
-        )
-        for key in cls.FIELDS:
-            getattr(bank, key).flags.writeable = False
+        bank = cls(np.zeros((0, _F_WIDTH)), np.zeros((0, _I_WIDTH), np.int64))
+        bank._f.flags.writeable = False
+        bank._i.flags.writeable = False
         _EMPTY.append(bank)
         return bank
 
     def take(self, idx: np.ndarray, only: tuple[str, ...] | None = None) -> _Bank:
-        """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]` on
-        the small arrays a contact branches, 14 fields a time); `only`: just these fields
-        (a partial bank, read where no other field is)."""
-        out = _Bank.__new__(_Bank)
-        for key in self.FIELDS if only is None else only:
-            setattr(out, key, getattr(self, key).take(idx, 0))
-        out._sched = None
-        return out
+        """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]`);
+        `only`: the fields read (all are taken: two calls either way)."""
+        return _Bank(self._f.take(idx, 0), self._i.take(idx, 0))
 
     @staticmethod
     def concat(banks: list[_Bank]) -> _Bank:
@@ -200,32 +254,32 @@ class _Bank:
             return _Bank.empty()
         if len(banks) == 1:
             return banks[0]
-        out = _Bank.__new__(_Bank)
-        for key in _Bank.FIELDS:
-            setattr(out, key, np.concatenate([getattr(b, key) for b in banks]))
-        out._sched = None
-        return out
+        return _Bank(np.concatenate([b._f for b in banks]), np.concatenate([b._i for b in banks]))
 
     def replace(self, **fields) -> _Bank:
-        out = _Bank(**{k: fields.get(k, getattr(self, k)) for k in self.FIELDS})
-        return out
+        """These tracks with `fields` changed: the matrix no changed field is in is shared."""
+        floats, ints = self._f, self._i
+        if any(key in _F_COLS for key in fields):
+            floats = floats.copy()
+        if any(key in _I_COLS for key in fields):
+            ints = ints.copy()
+        _fill(floats, ints, fields)
+        return _Bank(floats, ints)
 
     def part(self, start: int, stop: int) -> _Bank:
         """Tracks start..stop (views)."""
-        out = _Bank.__new__(_Bank)
-        for key in self.FIELDS:
-            setattr(out, key, getattr(self, key)[start:stop])
-        out._sched = None
-        return out
+        return _Bank(self._f[start:stop], self._i[start:stop])
 
     def twice(self, first: dict, second: dict) -> _Bank:
         """concat([self.replace(**first), self.replace(**second)]) in one pass."""
-        out = _Bank.__new__(_Bank)
-        for key in self.FIELDS:
-            own = getattr(self, key)
-            setattr(out, key, np.concatenate((first.get(key, own), second.get(key, own))))
-        out._sched = None
-        return out
+        N = len(self)
+        floats = np.empty((2 * N, _F_WIDTH))
+        ints = np.empty((2 * N, _I_WIDTH), np.int64)
+        floats[:N] = floats[N:] = self._f
+        ints[:N] = ints[N:] = self._i
+        _fill(floats, ints, first, slice(0, N))
+        _fill(floats, ints, second, slice(N, 2 * N))
+        return _Bank(floats, ints)
 
 
 class _One:
@@ -355,6 +409,14 @@ class TrackerDecoder(Decoder):
             self._log_pd = np.log(self._pd)
             self._log_miss = np.log1p(-self._pd)
         self._log_miss[:, -1] = -np.inf  # past the coast: stopped
+        # `_assign`'s log prior per (direction, ridge, skip): the next `skip` ridges all
+        # missed (sequential sums from 0, as one skip after another), the one after seen
+        ahead = np.minimum(np.arange(R)[:, None] + 1 + np.arange(self.MAX_SKIP + 1), R - 1)
+        self._skip_prior = np.empty((2, R, self.MAX_SKIP + 1))
+        for way in range(2):
+            skipped = np.zeros(ahead.shape)
+            skipped[:, 1:] = np.cumsum(self._log_miss[way, ahead[:, :-1]], axis=1)
+            self._skip_prior[way] = skipped + self._log_pd[way, ahead]
         # the slowest slip a track takes crosses the whole skin and the coast past it in this
         # time: a track silent for longer has stopped or left the skin, so a later contact is
         # no part of its slip (a new one starts there); such tracks retire (`_retire`)
@@ -407,27 +469,36 @@ class TrackerDecoder(Decoder):
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
+        # the last contacts' assignments by their tracks and contact (`_assigned`)
+        self._assign_memo: dict[ContactEvent, tuple[_Bank, list[_Bank]]] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
-        # what every contact's one-contact tracks share (read-only: banks share arrays)
+        # what every contact's one-contact tracks share: a bank that `_births` copies and
+        # fills in (the contact's id, time, sigma and the score)
         dirn = np.repeat(np.array([1, -1]), R)
         ridge = np.tile(np.arange(R), 2)
         X = np.zeros((2 * R, 4))
         X[:, 0] = self._pos[(1 - dirn) // 2, ridge]
         ones = np.ones(2 * R, np.int64)
-        self._birth = {
-            "P": np.zeros((2 * R, 4, 4)),
-            "X": X,
-            "dirn": dirn,
-            "m": np.ones(2 * R),
-            "model": np.zeros(2 * R, np.int64),
-            "n": ones,
-            "ridge": ridge,
-            "run": ones,
-            "stop": np.full(2 * R, np.nan),
-        }
-        for array in self._birth.values():
-            array.flags.writeable = False
+        zeros = np.zeros(2 * R)
+        self._birth = _Bank.of(
+            P=np.zeros((2 * R, 4, 4)),
+            X=X,
+            dirn=dirn,
+            first=-ones,
+            ids=np.full((2 * R, IDS), -1, np.int64),
+            m=np.ones(2 * R),
+            model=np.zeros(2 * R, np.int64),
+            n=ones,
+            ridge=ridge,
+            run=ones,
+            score=zeros,
+            sig=zeros,
+            stop=np.full(2 * R, np.nan),
+            t=zeros,
+        )
+        self._birth._f.flags.writeable = False
+        self._birth._i.flags.writeable = False
 
     def _detect_probability(self, spacing_before: float) -> float:
         share = min(1.0, max(0.0, (spacing_before - 3.0) / 5.0))
@@ -563,16 +634,7 @@ class TrackerDecoder(Decoder):
                 children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
             else:
                 children.append(B.replace(score=B.score + np.log(rate)))
-            if probe:
-                # a small step the kink bank missed: pulses after short spacings start on
-                # the one before (thesis ch. 5.3.1) and pile up like a step - so perhaps a
-                # ridge it could not time (mid-rise, loosely), or a stop, or a grip change
-                loose = ev._replace(sigma_s=max(ev.sigma_s, self.PROBE_SIGMA_S))
-                assigned = [
-                    c.replace(score=c.score + self.LOG_PROBE_RIDGE) for c in self._assign(B, loose)
-                ]
-            else:
-                assigned = self._assign(B, ev)
+            assigned = self._assigned(self._tracks, B, ev, probe)
             children += assigned
             if step and assigned:  # a stop right at a ridge (the step is that ridge's contact)
                 ridden = _Bank.concat(assigned)  # all at once: the numbers are per track
@@ -593,6 +655,30 @@ class TrackerDecoder(Decoder):
                     base[di] = max(base[di], reverse)
         children.append(self._births(ev, base + self._log_strength(ev.z)))
         return _Bank.concat(children)
+
+    def _assigned(self, tracks: _Bank, B: _Bank, ev: ContactEvent, probe: bool) -> list[_Bank]:
+        """The children of B (`tracks` retired at ev) that assign ev to a ridge: those of an
+        earlier pass when it ran on the same tracks object and contact. A contact told to be
+        a step (or a step revised to a pulse) is replayed from the same snapshot: `_step`'s
+        memo misses (the verdict differs), but the assignments are the same numbers, and
+        they are most of the cost of a contact."""
+        known = self._assign_memo.get(ev)
+        if known is not None and known[0] is tracks:
+            return known[1]
+        if probe:
+            # a small step the kink bank missed: pulses after short spacings start on
+            # the one before (thesis ch. 5.3.1) and pile up like a step - so perhaps a
+            # ridge it could not time (mid-rise, loosely), or a stop, or a grip change
+            loose = ev._replace(sigma_s=max(ev.sigma_s, self.PROBE_SIGMA_S))
+            assigned = [
+                c.replace(score=c.score + self.LOG_PROBE_RIDGE) for c in self._assign(B, loose)
+            ]
+        else:
+            assigned = self._assign(B, ev)
+        self._assign_memo[ev] = (tracks, assigned)
+        while len(self._assign_memo) > self.MEMO:
+            del self._assign_memo[next(iter(self._assign_memo))]
+        return assigned
 
     def _retire(self, B: _Bank, tc: float) -> _Bank:
         """B without the tracks whose last contact is longer before tc than the slowest
@@ -624,18 +710,12 @@ class TrackerDecoder(Decoder):
 
     def _births(self, ev: ContactEvent, base: np.ndarray) -> _Bank:
         """One-contact tracks at every ridge, both ways; `base`: log prior per direction."""
-        N = 2 * self.count
-        ids = np.empty((N, IDS), np.int64)
-        ids.fill(-1)
-        ids[:, -1] = ev.id
-        return _Bank(
-            first=_full(N, ev.id, np.int64),
-            ids=ids,
-            score=(base[:, None] + self._log_prior).ravel(),
-            sig=_full(N, ev.sigma_s),
-            t=_full(N, ev.t_s),
-            **self._birth,
-        )
+        floats, ints = self._birth._f.copy(), self._birth._i.copy()
+        ints[:, _FIRST] = ints[:, _IDS.stop - 1] = ev.id
+        floats[:, _SCORE] = (base[:, None] + self._log_prior).ravel()
+        floats[:, _SIG] = ev.sigma_s
+        floats[:, _T] = ev.t_s
+        return _Bank(floats, ints)
 
     def _stopped_at(self, B: _Bank, tc: float, log_prior: float | None = None) -> _Bank:
         """Copies of slipping tracks B that stopped at tc (a step), where they were then.
@@ -645,11 +725,13 @@ class TrackerDecoder(Decoder):
             return B
         s = self._travel(B, tc)
         limit = self._pos[(1 - B.dirn) // 2, np.minimum(B.ridge + 1, self.count)]
-        X = B.X.copy()
-        X[:, 0] = np.minimum(s, limit - 0.1)
-        X[:, 1] = X[:, 2] = 0.0
         prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
-        return B.replace(X=X, stop=_full(len(B), tc), score=B.score + prior)
+        floats = B._f.copy()
+        floats[:, _S] = np.minimum(s, limit - 0.1)
+        floats[:, _V] = floats[:, _A] = 0.0
+        floats[:, _STOP] = tc
+        floats[:, _SCORE] = B.score + prior
+        return _Bank(floats, B._i)
 
     def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
         """Children of B that assign contact ev to one of the next ridges (each branch type
@@ -665,12 +747,7 @@ class TrackerDecoder(Decoder):
         skip_arr, row = valid.nonzero()
         if not len(row):
             return []
-        kk = np.minimum(k, R - 1)
-        di2 = di[:, None]
-        # P(the ridges skipped all missed): sequential sums from 0, as one skip after another
-        missed = np.zeros(k.shape)
-        missed[:, 1:] = np.cumsum(self._log_miss[di2, kk[:, :-1]], axis=1)
-        prior = (missed + self._log_pd[di2, kk]).T[skip_arr, row]
+        prior = self._skip_prior[di.take(row), B.ridge.take(row), skip_arr]
         run, mov = B.run[row], moving[row]
         out = []
         fresh = _nz(mov & (run == 1))  # one-contact or restarted tracks
@@ -691,7 +768,7 @@ class TrackerDecoder(Decoder):
         if len(fresh):
             out.append(started)
         if len(sel):
-            out.append(_Bank.concat([kalman, restarted]))
+            out += [kalman, restarted]  # (joined with the other children, in this order)
             # or the slip stopped unseen and went on: a restart at the next ridge
             first = sel[skip_arr[sel] == 0]
             if len(first):
@@ -705,33 +782,19 @@ class TrackerDecoder(Decoder):
             out.append(self._restart(at, ev, at.ridge + 1 + skip_arr[sel], prior[sel] + log_rate))
         return out
 
-    def _with_contact(self, B: _Bank, ev: ContactEvent) -> np.ndarray:
-        ids = np.empty_like(B.ids)
-        ids[:, :-1] = B.ids[:, 1:]
-        ids[:, -1] = ev.id
-        return ids
-
     def _restart(self, B: _Bank, ev: ContactEvent, k: np.ndarray, log_prior: np.ndarray) -> _Bank:
         """B restarted (speed unknown) with ev at ridge k."""
         di = (1 - B.dirn) // 2
-        X = np.zeros((len(B), 4))
-        X[:, 0] = self._pos[di, k]
-        X[:, 3] = B.X[:, 3]
-        P = np.zeros((len(B), 4, 4))
-        P[:, 3, 3] = np.maximum(B.P[:, 3, 3], 0.0)
-        return B.replace(
-            X=X,
-            P=P,
-            ridge=k,
-            n=B.n + 1,
-            run=np.ones(len(B), np.int64),
-            t=_full(len(B), ev.t_s),
-            sig=_full(len(B), ev.sigma_s),
-            m=np.ones(len(B)),
-            ids=self._with_contact(B, ev),
-            stop=_full(len(B), np.nan),
-            score=B.score + log_prior,
-        )
+        floats = np.zeros((len(B), _F_WIDTH))  # P, v and a: 0
+        floats[:, _S] = self._pos[di, k]
+        floats[:, _D] = B.X[:, 3]
+        floats[:, _P33] = np.maximum(B.P[:, 3, 3], 0.0)
+        floats[:, _M] = 1.0
+        floats[:, _SCORE] = B.score + log_prior
+        floats[:, _SIG] = ev.sigma_s
+        floats[:, _STOP] = np.nan
+        floats[:, _T] = ev.t_s
+        return _Bank(floats, _with_contact(B._i, ev.id, k, 1))
 
     def _start_speed(
         self,
@@ -777,31 +840,19 @@ class TrackerDecoder(Decoder):
         r_before = self._meas_var(v, B.sig)
 
         def covariance(dip_prior_mm: float) -> np.ndarray:
+            """The covariance, flat (N, 16)."""
             var_d = np.where(B.P[:, 3, 3] > 0, B.P[:, 3, 3], dip_prior_mm**2)
-            P = np.zeros((N, 4, 4))
-            P[:, 0, 0] = r
-            P[:, 0, 1] = P[:, 1, 0] = r / dt
-            P[:, 1, 1] = (r + r_before + lag * lag * var_d) / (dt * dt)
-            P[:, 1, 1] += (self.SPEED_INIT_REL * v) ** 2
-            P[:, 1, 3] = P[:, 3, 1] = lag * var_d / dt
-            P[:, 3, 3] = var_d
+            P = np.zeros((N, 16))
+            P[:, _P00] = r
+            P[:, _P01] = P[:, _P10] = r / dt
+            P[:, _P11] = (r + r_before + lag * lag * var_d) / (dt * dt)
+            P[:, _P11] += (self.SPEED_INIT_REL * v) ** 2
+            P[:, _P13] = P[:, _P31] = lag * var_d / dt
+            P[:, _P33] = var_d
             return P
 
         P = covariance(self.DIP_PRIOR_MM)
-        X = np.zeros((N, 4))
-        X[:, 0] = target
-        X[:, 1] = v
-        X[:, 3] = d
         score = B.score + log_prior + self._log_speed_prior(v) - np.log(dt)
-        common = dict(
-            ridge=k,
-            t=_full(N, tc),
-            n=B.n + 1,
-            run=_full(N, 2, np.int64),
-            sig=_full(N, ev.sigma_s),
-            m=1.0 + B.m * decay,
-            ids=self._with_contact(B, ev),
-        )
         # changing: the mean speed over the interval is the speed half an interval ago
         sa = self.ACC_PER_S * v
         if self.DIP_PRIOR_CHANGING_MM == self.DIP_PRIOR_MM:  # the same numbers: built once
@@ -809,38 +860,37 @@ class TrackerDecoder(Decoder):
         else:
             Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
         half = dt / 2.0
-        Pc[:, 1, 1] += (half * sa) ** 2
-        Pc[:, 1, 2] = Pc[:, 2, 1] = half * sa * sa
-        Pc[:, 2, 2] = sa * sa
+        Pc[:, _P11] += (half * sa) ** 2
+        Pc[:, _P12] = Pc[:, _P21] = half * sa * sa
+        Pc[:, _P22] = sa * sa
+        # the children's columns, built in place: the steady model's covariance first
+        floats = np.empty((N, _F_WIDTH))
+        floats[:, _P] = P
+        floats[:, _S] = target
+        floats[:, _V] = v
+        floats[:, _A] = 0.0
+        floats[:, _D] = d
+        floats[:, _M] = 1.0 + B.m * decay
+        floats[:, _SCORE] = score
+        floats[:, _SIG] = ev.sigma_s
+        floats[:, _STOP] = B.stop
+        floats[:, _T] = tc
+        ints = _with_contact(B._i, ev.id, k, 2)
         started = restarted = _Bank.empty()
-        if fresh:
-            part = B.part(0, fresh)
-            both = {key: value[:fresh] for key, value in common.items()}
-            steady = dict(
-                X=X[:fresh],
-                P=P[:fresh],
-                model=_full(fresh, STEADY, np.int64),
-                score=score[:fresh] + math.log(1.0 - math.exp(self.LOG_CHANGING)),
-                **both,
-            )
-            changing = dict(
-                X=X[:fresh],
-                P=Pc[:fresh],
-                model=_full(fresh, CHANGING, np.int64),
-                score=score[:fresh] + self.LOG_CHANGING,
-                **both,
-            )
-            started = part.twice(steady, changing)
-        if fresh < N:
-            part = B.part(fresh, N)
-            chg = part.model == CHANGING
-            restarted = part.replace(
-                X=X[fresh:],
-                P=np.where(chg[:, None, None], Pc[fresh:], P[fresh:]),
-                model=part.model,
-                score=score[fresh:],
-                **{key: value[fresh:] for key, value in common.items()},
-            )
+        if fresh:  # each in both models: steady, then changing
+            both_f = np.concatenate((floats[:fresh], floats[:fresh]))
+            both_i = np.concatenate((ints[:fresh], ints[:fresh]))
+            both_f[:fresh, _SCORE] = score[:fresh] + math.log(1.0 - math.exp(self.LOG_CHANGING))
+            both_f[fresh:, _SCORE] = score[:fresh] + self.LOG_CHANGING
+            both_f[fresh:, _P] = Pc[:fresh]
+            both_i[:fresh, _MODEL] = STEADY
+            both_i[fresh:, _MODEL] = CHANGING
+            started = _Bank(both_f, both_i)
+        if fresh < N:  # in their own model
+            own_f = floats[fresh:]
+            chg = _nz(ints[fresh:, _MODEL] == CHANGING)
+            own_f[chg, _P] = Pc[fresh:].take(chg, 0)
+            restarted = _Bank(own_f, ints[fresh:])
         return started, restarted
 
     def _toward_ridge(
@@ -909,19 +959,16 @@ class TrackerDecoder(Decoder):
         out = _Bank.empty()
         sel = _nz(good)
         if len(sel):
-            Bs = B.take(sel)
-            out = Bs.replace(
-                X=Xn[sel],
-                P=Pn[sel],
-                ridge=k[sel],
-                t=_full(len(sel), tc),
-                n=Bs.n + 1,
-                run=Bs.run + 1,
-                sig=_full(len(sel), ev.sigma_s),
-                m=1.0 + Bs.m * decay[sel],
-                ids=self._with_contact(Bs, ev),
-                score=Bs.score + log_prior[sel] + like[sel],
-            )
+            floats = np.empty((len(sel), _F_WIDTH))
+            floats[:, _P] = Pn.reshape(N, 16).take(sel, 0)
+            floats[:, _X] = Xn.take(sel, 0)
+            floats[:, _M] = 1.0 + B.m.take(sel) * decay.take(sel)
+            floats[:, _SCORE] = B.score.take(sel) + log_prior.take(sel) + like.take(sel)
+            floats[:, _SIG] = ev.sigma_s
+            floats[:, _STOP] = B.stop.take(sel)
+            floats[:, _T] = tc
+            ints = B._i.take(sel, 0)
+            out = _Bank(floats, _with_contact(ints, ev.id, k.take(sel), ints[:, _RUN] + 1))
         # far off: the speed changed; it starts again from the last two contacts
         far = _nz(inlier < outlier)
         return out, far, log_prior[far] + like[far]
@@ -960,12 +1007,13 @@ class TrackerDecoder(Decoder):
         if not len(B):
             return B
         # decided on the fields it needs in score order; the bank is taken once, at the end
-        order = np.argsort(-B.score, kind="stable")
-        ids = B.ids
-        key = ids[:, -1] * 1000003 + ids[:, -2]
-        key = key * 1000003 + ids[:, -3]
-        state = B.ridge * 16 + (B.dirn > 0) * 8 + B.model * 4 + np.isnan(B.stop) * 2 + (B.run == 1)
-        key = (key * 1000003 + state).take(order)
+        score = B.score
+        order = (-score).argsort(kind="stable")
+        ints = B._i.take(order, 0)  # the int columns in score order
+        # the key ((id[-1] M + id[-2]) M + id[-3]) M + state, state = 16 ridge + 8 (dirn > 0)
+        # + 4 model + 2 slipping + (run == 1), wrapping as int64 does: as one int matmul
+        # (the same sum mod 2^64, less the constant 4 of 8 (dirn > 0) = 4 dirn + 4)
+        key = ints @ _KEY_WEIGHTS + np.isnan(B.stop.take(order)) * 2 + (ints[:, _RUN] == 1)
         # the first of each key (np.unique's return_index: a stable sort, each run's head)
         perm = key.argsort(kind="mergesort")
         aux = key.take(perm)
@@ -974,11 +1022,11 @@ class TrackerDecoder(Decoder):
         np.not_equal(aux[1:], aux[:-1], out=head[1:])
         keep = np.zeros(len(B), bool)
         keep[perm[head]] = True
-        score = B.score.take(order)
+        score = score.take(order)
         keep &= score >= score[0] - self.NEGLIGIBLE - 20.0
         # one-contact tracks: only those starting at a recent contact
-        single = B.n.take(order) == 1
-        last = ids[:, -1].take(order)
+        single = ints[:, _N] == 1
+        last = ints[:, _IDS.stop - 1]
         recent_start = np.zeros(len(B), bool)
         for r in recent.tolist():
             recent_start |= last == r
@@ -990,14 +1038,15 @@ class TrackerDecoder(Decoder):
         if len(idx) and len(held):
             # rank within each start contact: a stable sort by start, counted from each
             # run's head
-            firsts = B.first.take(order.take(idx))
+            firsts = ints[:, _FIRST].take(idx)
             by_start = firsts.argsort(kind="stable")
             starts = firsts.take(by_start)
             head = np.empty(len(starts), bool)
             head[0] = True
             np.not_equal(starts[1:], starts[:-1], out=head[1:])
             group_rank = rank - np.maximum.accumulate(np.where(head, rank, 0))
-            held_sorted = np.sort(held)
+            held_sorted = held.copy()
+            held_sorted.sort()
             at = np.minimum(held_sorted.searchsorted(starts), len(held_sorted) - 1)
             quota = (group_rank < self.PER_START) & (held_sorted.take(at) == starts)
             ok[by_start[quota]] = True
