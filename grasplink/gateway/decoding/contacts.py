@@ -97,6 +97,49 @@ class PulseCheck(NamedTuple):
     trend_on: bool | None = None
 
 
+class _Series:
+    """An array appended to in place and cut from the front by moving what is kept down.
+
+    The detector extends a dozen arrays by a few samples every block; a
+    concatenate copies the whole array each time, a slice write copies only
+    the new samples. `view` is what is held (valid until the next append or
+    cut); rows (`rows` > 0) share one index along the last axis. The storage
+    grows (doubling) only when an append would not fit, and a cut keeps it:
+    bounded by the longest stretch held.
+    """
+
+    __slots__ = ("data", "size")
+
+    def __init__(self, capacity: int = 64, rows: int = 0):
+        shape = (rows, max(1, capacity)) if rows else (max(1, capacity),)
+        self.data: np.ndarray = np.empty(shape)
+        self.size = 0
+
+    def extend(self, count: int) -> np.ndarray:
+        """`count` more entries (the caller fills them): their view."""
+        start, end = self.size, self.size + count
+        if end > self.data.shape[-1]:
+            data = np.empty((*self.data.shape[:-1], max(end, 2 * self.data.shape[-1])))
+            data[..., :start] = self.data[..., :start]
+            self.data = data
+        self.size = end
+        return self.data[..., start:end]
+
+    def append(self, values: np.ndarray) -> np.ndarray:
+        """Write `values` after what is held; the new view of all."""
+        self.extend(len(values))[...] = values
+        return self.data[..., : self.size]
+
+    def keep_last(self, keep: int) -> np.ndarray:
+        """Drop all but the last `keep` entries; the new view of all."""
+        self.data[..., :keep] = self.data[..., self.size - keep : self.size]
+        self.size = keep
+        return self.data[..., :keep]
+
+    def view(self) -> np.ndarray:
+        return self.data[..., : self.size]
+
+
 @dataclass
 class _Channel:
     width: int  # w, samples
@@ -105,13 +148,17 @@ class _Channel:
     next_n: int = 0  # next hinge centre to compute
     waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
     noise_by_block: dict = field(default_factory=dict)
-    z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # z by centre, from z_start
-    zh: np.ndarray = field(default_factory=lambda: np.zeros(0))  # hinge (N/sample), same index
-    za: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slope after, same index
-    zready: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # known at
+    # rows z, hinge (N/sample), slope after, sample that told the noise (known at), by centre
+    # from z_start; z, zh, za, zready are views of them (refreshed at every append and cut)
+    rows: _Series = field(default_factory=lambda: _Series(256, rows=4))
+    z: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    zh: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    za: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    zready: np.ndarray = field(default_factory=lambda: np.zeros(0))
     z_start: int = 0  # global centre index of z[0]
     next_test: int = 0  # next centre to test for a local maximum
-    block_abs: list = field(default_factory=list)  # |h| of the block being filled
+    block_abs: np.ndarray = field(default_factory=lambda: np.zeros(0))  # |h| of the block ...
+    abs_n: int = 0  # ... being filled, so far
     block_noise: dict = field(default_factory=dict)  # completed block -> robust noise
     done: int = 0  # blocks completed
 
@@ -146,9 +193,10 @@ class _StepScale:
     w: int
     rise: int  # a step's rise is judged over this many samples (`_is_small_step`)
     fir: SosFilter
-    d: np.ndarray  # difference of means by centre, from start
+    d: np.ndarray  # difference of means by centre, from start (a view of `store`)
     start: int  # centre of d[0] (output m is centre m - w)
     next: int = 0  # next centre to test
+    store: _Series = field(default_factory=lambda: _Series(256))
 
 
 def _mean(x: np.ndarray) -> float:
@@ -200,13 +248,16 @@ class ContactDetector:
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
-        self.channels = [_Channel(w, SosFilter.fir(_slope_taps(w))) for w in widths]
         self.noise_blocks = int(noise_blocks)
         self.history_blocks = max(self.noise_blocks, round(history_s / block_s))
         self.threshold = float(threshold)
         self.refine_z = float(refine_z)
         self.merge_widths = float(merge_widths)
         self.block = max(16, round(block_s * self.fs_hz))
+        self.channels = [
+            _Channel(w, SosFilter.fir(_slope_taps(w)), block_abs=np.empty(self.block))
+            for w in widths
+        ]
         self.rise_fraction = float(rise_fraction)
         self.coarse_rise_fraction = float(coarse_rise_fraction)
         self.drop_fraction = float(drop_fraction)
@@ -253,10 +304,11 @@ class ContactDetector:
         self._keep = keep
         # blocks of samples sitting on the sensor's upper rail (saturation), as times
         self.blind: deque[tuple[float, float]] = deque(maxlen=64)
-        self._t = np.zeros(0)  # recent sample times
-        self._x = np.zeros(0)  # and samples (same index)
+        self._tx = _Series(4 * keep, rows=2)  # recent sample times and samples, ...
+        self._t, self._x = self._tx.view()  # ... as views (same index)
         self._t_start = 0
-        self._level = np.zeros(0)  # box-smoothed level, by centre index
+        self._levels = _Series(4 * keep)
+        self._level = self._levels.view()  # box-smoothed level, by centre index
         self._level_start = 0
         self._next_id = 0
         self._recent: deque[float] = deque(maxlen=16)  # times of the contacts emitted
@@ -275,8 +327,9 @@ class ContactDetector:
             return [], []
         n0 = self._n
         self._n += len(x)
-        self._t = np.concatenate([self._t, t])
-        self._x = np.concatenate([self._x, x])
+        new = self._tx.extend(len(x))
+        new[0], new[1] = t, x
+        self._t, self._x = self._tx.view()
         self._raw_stats(x)
         candidates: list[tuple[int, int, int, float, float, float]] = []
         for ci, ch in enumerate(self.channels):
@@ -361,7 +414,8 @@ class ContactDetector:
             block = n // B
             end = min(len(hinge), pos + (block + 1) * B - n)
             seg_h, seg_a = hinge[pos:end], slope_after[pos:end]
-            ch.block_abs.append(np.abs(seg_h))
+            np.abs(seg_h, out=ch.block_abs[ch.abs_n : ch.abs_n + len(seg_h)])
+            ch.abs_n += len(seg_h)
             noise = None if ch.waiting else self._noise(ch, block)
             if noise is None:
                 ch.waiting.append((block, seg_h, seg_a))
@@ -370,8 +424,8 @@ class ContactDetector:
             n += end - pos
             pos = end
             if n % B == 0:  # block complete: its noise, and perhaps the waiting blocks'
-                values = np.concatenate(ch.block_abs)
-                ch.block_abs = []
+                values = ch.block_abs[: ch.abs_n]
+                ch.abs_n = 0
                 ch.block_noise[block] = lattice_median(values, floor=0.0) * MEDIAN_TO_STD
                 ch.done = block + 1
                 self._release(ch, n - 1 + ch.width)
@@ -393,12 +447,10 @@ class ContactDetector:
     def _append_z(
         ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
     ) -> None:
-        ch.z = np.concatenate([ch.z, seg_h / noise])
-        ch.zh = np.concatenate([ch.zh, seg_h])
-        ch.za = np.concatenate([ch.za, seg_a])
-        known = np.empty(len(seg_h), np.int64)
-        known.fill(ready)  # np.full's numbers without its wrapper
-        ch.zready = np.concatenate([ch.zready, known])
+        new = ch.rows.extend(len(seg_h))
+        np.divide(seg_h, noise, out=new[0])
+        new[1], new[2], new[3] = seg_h, seg_a, ready
+        ch.z, ch.zh, ch.za, ch.zready = ch.rows.view()
 
     def _white(self, block: int) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
@@ -575,7 +627,7 @@ class ContactDetector:
 
     def _run_scale(self, sc: _StepScale, x: np.ndarray) -> None:
         w = sc.w
-        sc.d = np.concatenate([sc.d, sc.fir(x)])
+        sc.d = sc.store.append(sc.fir(x))
         last = sc.start + len(sc.d) - 1  # last centre with a difference
         lo = max(sc.next, sc.start + 3 * w, 3 * w)
         hi = last - 3 * w
@@ -590,7 +642,7 @@ class ContactDetector:
         n = len(adj) - 2 * w
         mid = adj[w : w + n]
         rising = (mid > 0.0) & (mid >= adj[w - 1 : w - 1 + n]) & (mid > adj[w + 1 : w + 1 + n])
-        for j in (np.flatnonzero(rising) + w).tolist():
+        for j in (rising.nonzero()[0] + w).tolist():
             a = adj[j]
             if a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
                 continue
@@ -649,7 +701,7 @@ class ContactDetector:
     def _run_level(self, x: np.ndarray) -> None:
         y = self._level_filter(x)
         # y[m] is the mean of x[m - 2h .. m]: the level centred on m - h.
-        self._level = np.concatenate([self._level, y])
+        self._level = self._levels.append(y)
 
     def _level_at(self, k: int) -> float | None:
         i = k + self.level_half - self._level_start  # centre k is output m = k + h
@@ -995,8 +1047,7 @@ class ContactDetector:
         keep = self._keep
         if len(self._t) > 2 * keep:
             cut = len(self._t) - keep
-            self._t = self._t[cut:]
-            self._x = self._x[cut:]
+            self._t, self._x = self._tx.keep_last(keep)
             self._t_start += cut
         oldest_watch = min(
             [w.next_k for w in self._watches + self._stepped]
@@ -1008,16 +1059,15 @@ class ContactDetector:
             lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
         if len(self._level) > 2 * lv_keep:
             cut = len(self._level) - lv_keep
-            self._level = self._level[cut:]
+            self._level = self._levels.keep_last(lv_keep)
             self._level_start += cut
         for sc in self._scales:
             if len(sc.d) > 2 * keep:
                 cut = len(sc.d) - keep
-                sc.d = sc.d[cut:]
+                sc.d = sc.store.keep_last(keep)
                 sc.start += cut
         for ch in self.channels:
             if len(ch.z) > 2 * keep:
                 cut = len(ch.z) - keep
-                ch.z, ch.zh, ch.za = ch.z[cut:], ch.zh[cut:], ch.za[cut:]
-                ch.zready = ch.zready[cut:]
+                ch.z, ch.zh, ch.za, ch.zready = ch.rows.keep_last(keep)
                 ch.z_start += cut
