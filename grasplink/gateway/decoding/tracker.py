@@ -60,6 +60,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
+from functools import cached_property
 
 import numpy as np
 from scipy.special import erf
@@ -1024,37 +1025,78 @@ class TrackerDecoder(Decoder):
         decay = np.exp(-tau / self.DIP_RECOVERY_S)
         return B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
 
+    @cached_property
+    def _silence_tables(self) -> dict[str, np.ndarray]:
+        """What a track's schedule (`_schedule`) takes from its direction and ridge alone,
+        per row di * (count + 1) + ridge (a ridge past the last one schedules as the
+        coast end does), for idle tracks (stopped, or no speed yet: rows from 0) and
+        active ones (rows from 2 (count + 1)): the ridges ahead (the coast end is index
+        count), their positions, P(all missed) so far, and the (due, adj, stopped, limit)
+        rows but for the times due. The same numbers as from each track's own arrays:
+        the cumulative misses summed one ridge after the other as there."""
+        R, S = self.count, self.SCHEDULE
+        di = np.repeat(np.arange(2), R + 1)
+        ridge = np.tile(np.arange(R + 1), 2)
+        k = ridge[:, None] + 1 + np.arange(S)
+        kk = np.minimum(k, R)
+        miss = np.cumsum(self._log_miss[di[:, None], kk], axis=1)
+        go_on = miss >= self.LOG_STOP
+        ended = np.logical_or.accumulate(~go_on | (k >= R), axis=1)
+        done = np.zeros(ended.shape, bool)  # active tracks: done before each ridge ahead
+        done[:, 1:] = ended[:, :-1]
+        rows, J = 2 * (R + 1), S + 1
+        due = np.full((2 * rows, J), np.inf)
+        due[:, 0] = -np.inf
+        adj = np.zeros((2 * rows, J))
+        adj[rows:, 1:] = np.where(done, 0.0, np.where(go_on, miss, self.LOG_STOP))
+        stopped = np.zeros((2 * rows, J), bool)
+        stopped[rows:, 1:] = ~(go_on | done)
+        limit = np.zeros((2 * rows, J), np.int64)
+        limit[:, 0] = np.tile(np.minimum(ridge + 1, R), 2)
+        limit[rows:, 1:] = np.where(done, 0, kk + go_on)
+        return {
+            "due": due,
+            "adj": adj,
+            "stopped": stopped,
+            "limit": limit,
+            "done": done,
+            "coast": kk >= R,
+            "target": self._pos[di[:, None], kk],
+        }
+
     def _schedule(self, B: _Bank):
         """Silence of slipping tracks with a speed: per track and ridge ahead (time due,
-        score adjustment from then, stopped from then, next ridge not reached from then)."""
+        score adjustment from then, stopped from then, next ridge not reached from then).
+        All but the times due come from tables (`_silence_tables`); the times are
+        computed for the active tracks only (the others keep the tables' values)."""
         if B._sched is not None:
             return B._sched
-        N, J = len(B), self.SCHEDULE + 1
-        due = np.full((N, J), np.inf)
-        adj = np.zeros((N, J))
-        stopped = np.zeros((N, J), bool)
-        limit = np.zeros((N, J), np.int64)
+        T, R = self._silence_tables, self.count
         active = np.isnan(B.stop) & (B.run >= 2)
         di = (1 - B.dirn) // 2
-        limit[:, 0] = np.minimum(B.ridge + 1, self.count)
-        if active.any():
-            # every ridge ahead at once (N, SCHEDULE): elementwise the same numbers as one
-            # ridge after the other, in a third of the numpy calls
-            s0, v, a, d = B.X[:, 0], np.maximum(B.X[:, 1], V_MIN_MM_S), B.X[:, 2], B.X[:, 3]
-            P = B.P
+        row = di * (R + 1) + np.minimum(B.ridge, R)
+        at = row + active * (2 * (R + 1))
+        due = T["due"].take(at, axis=0)
+        adj = T["adj"].take(at, axis=0)
+        stopped = T["stopped"].take(at, axis=0)
+        limit = T["limit"].take(at, axis=0)
+        act = _nz(active)
+        if len(act):
+            # every ridge ahead at once (tracks, SCHEDULE): elementwise the same numbers as
+            # one ridge after the other, in a third of the numpy calls
+            ra = row[act]
+            X, P = B.X[act], B.P[act]
+            s0, v, a, d = X[:, 0], np.maximum(X[:, 1], V_MIN_MM_S), X[:, 2], X[:, 3]
             p00, p01, p11, p02, p12, p22 = (P[:, i, j, None] for i, j in _VAR_AT)
-            k = B.ridge[:, None] + 1 + np.arange(self.SCHEDULE)
-            kk = np.minimum(k, self.count)  # the coast end is index count
-            di2 = di[:, None]
-            coast = self._coast_end(di, v)[:, None]
-            target = np.where(kk < self.count, self._pos[di2, kk], coast)
+            coast = self._coast_end(di[act], v)[:, None]
+            target = np.where(T["coast"][ra], coast, T["target"][ra])
             s0, a, v = s0[:, None], a[:, None], v[:, None]
             dist = np.maximum(target - s0, 1e-3)
             a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
             vv, a2 = v * v, 2.0 * a_p  # (the same numbers in every pass below)
             root = np.sqrt(np.maximum(vv + a2 * dist, 1e-9))
             tau = 2.0 * dist / (v + root)
-            dm = (d * B.m)[:, None]
+            dm = (d * B.m[act])[:, None]
             for _ in range(2):  # the part of the dip recovered by then
                 eff = dist + dm * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
                 root = np.sqrt(np.maximum(vv + a2 * eff, 1e-9))
@@ -1064,20 +1106,8 @@ class TrackerDecoder(Decoder):
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             span = np.sqrt(np.maximum(var, 0.0)) / v_k
             latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
-            t_due = B.t[:, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
-            miss = np.cumsum(self._log_miss[di2, kk], axis=1)  # sequential sums, as before
-            go_on = miss >= self.LOG_STOP
-            # done before each ridge: not active, or stopped / past the end at an earlier one
-            # (such tracks keep the initial values)
-            ended = np.logical_or.accumulate(~go_on | (k >= self.count), axis=1)
-            done = np.empty(ended.shape, bool)
-            done[:, 0] = ~active
-            done[:, 1:] = ended[:, :-1] | ~active[:, None]
-            due[:, 1:] = np.where(done, np.inf, t_due)
-            adj[:, 1:] = np.where(done, 0.0, np.where(go_on, miss, self.LOG_STOP))
-            stopped[:, 1:] = ~(go_on | done)
-            limit[:, 1:] = np.where(done, 0, kk + go_on)
-        due[:, 0] = -np.inf
+            t_due = B.t[act, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
+            due[act, 1:] = np.where(T["done"][ra], np.inf, t_due)
         B._sched = (due, adj, stopped, limit)
         return B._sched
 
