@@ -1212,20 +1212,25 @@ class TrackerDecoder(Decoder):
         # silence
         due, adj_t, stop_t, limit_t = self._schedule(B)
         blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
-        j = (due <= g - blind[:, None]).sum(axis=1) - 1
+        # (None: none - the same numbers as subtracting and adding zeros)
+        seen = g if blind is None else g - blind[:, None]
+        j = np.add.reduce(due <= seen, axis=1) - 1  # (a bool sum without its wrapper)
         rows = np.arange(len(B))
         adj = adj_t[rows, j]
-        stopped = stop_t[rows, j] | ~np.isnan(B.stop)
+        running = np.isnan(B.stop)
+        stopped = stop_t[rows, j] | ~running
         limit = limit_t[rows, j]
-        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)] + blind
+        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)]
+        if blind is not None:
+            upcoming = upcoming + blind
         upcoming = np.where(j + 1 < due.shape[1], upcoming, np.inf)
         nxt = upcoming[live & (upcoming > g)]
         if len(nxt):
             until = min(until, float(nxt.min()))
-        waiting = np.isnan(B.stop) & (B.run == 1)
-        if waiting.any():
-            w = _nz(waiting & live)
-            adj[w] = self._log_waiting(B.take(w, ("dirn", "ridge", "score", "t")), g, blind[w])
+        waiting = running & (B.run == 1)
+        w = _nz(waiting & live)
+        if len(w):
+            adj[w] = self._log_waiting(B, w, g, None if blind is None else blind[w])
         evident, bonus = self._evidence(B)
         total = np.where(live, score + adj + bonus, -np.inf)
         top = max(self._null, float(total.max()))
@@ -1235,7 +1240,8 @@ class TrackerDecoder(Decoder):
         p_slip = float(weight[slipping].sum()) / mass
         chosen = None
         if p_slip >= 0.5 and slipping.any():
-            i = int(_nz(slipping)[np.argmax(total[slipping])])
+            # the first best of the slipping tracks (one of them has weight)
+            i = int(np.where(slipping, total, -np.inf).argmax())
             chosen = (i, False, int(limit[i]))
         else:
             cand = evident & stopped
@@ -1281,46 +1287,75 @@ class TrackerDecoder(Decoder):
             agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
         return (until, (one, is_stopped, lim), p_slip, agree, odds)
 
-    def _blind(self, t: np.ndarray, g: float) -> np.ndarray:
-        """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there)."""
-        out = np.zeros(len(t))
+    def _blind(self, t: np.ndarray, g: float) -> np.ndarray | None:
+        """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there);
+        None when it sat there for none of them."""
+        out = None
         for r0, r1 in self.detector.blind:
             if r1 <= float(t.min(initial=g)) or r0 >= g:
                 continue
+            if out is None:
+                out = np.zeros(len(t))
             out += np.clip(np.minimum(g, r1) - np.maximum(t, r0), 0.0, None)
         return out
 
+    @cached_property
+    def _evidence_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What `_evidence` reads off a track's verdict counts, packed as pulses + 256
+        steps: the weight of each verdict in such a count, the score bonus per count, and
+        whether it is evident per count and min(n, 4) contacts - the same numbers as from
+        the counts themselves."""
+        weight = np.zeros(max(UNKNOWN, PULSE, STEP, UNCLEAR) + 1, np.int64)
+        weight[PULSE], weight[STEP] = 1, 256
+        packed = np.arange(256 * IDS + IDS + 1)
+        pulses, steps = packed & 255, packed >> 8
+        bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
+        n = np.arange(5)[:, None]
+        evident = (n >= 2) & ((pulses > 0) | ((n >= 4) & (steps == 0)))
+        return weight, bonus, evident
+
     def _evidence(self, B: _Bank) -> tuple[np.ndarray, np.ndarray]:
         """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
-        And the score bonus of the pulse verdicts on its recent contacts."""
+        And the score bonus of the pulse verdicts on its recent contacts. (A slot never
+        written holds id -1 and no verdict: an unused id, -1, reads no verdict there.)"""
+        weight, bonus, evident = self._evidence_tables
         ids = B.ids
         slot = ids % RING
-        known = (self._ring_id[slot] == ids) & (ids >= 0)
-        verdict = np.where(known, self._ring[slot], UNKNOWN)
-        pulses = (verdict == PULSE).sum(axis=1)
-        steps = (verdict == STEP).sum(axis=1)
-        bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
-        evident = (B.n >= 2) & ((pulses > 0) | ((B.n >= 4) & (steps == 0)))
-        return evident, bonus
+        counted = weight.take(self._ring.take(slot))
+        packed = np.add.reduce(np.where(self._ring_id.take(slot) == ids, counted, 0), axis=1)
+        return evident[np.minimum(B.n, 4), packed], bonus.take(packed)
 
-    def _log_waiting(self, B: _Bank, g: float, blind: np.ndarray) -> np.ndarray:
-        """Log P(no contact detected yet) for tracks whose speed is unknown (one contact, or
-        restarted), g - t after their contact (less the time on the rail): every ridge
+    @cached_property
+    def _waiting_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`_log_waiting`'s tables by row di * count + ridge (one take, not a 2-D index)."""
+        rows = 2 * self.count
+        return (
+            self._ahead_log.reshape(rows, -1),
+            self._ahead_finite.reshape(rows, -1),
+            self._ahead_before.reshape(rows, -1),
+        )
+
+    def _log_waiting(
+        self, B: _Bank, w: np.ndarray, g: float, blind: np.ndarray | None
+    ) -> np.ndarray:
+        """Log P(no contact detected yet) for tracks w whose speed is unknown (one contact,
+        or restarted), g - t after their contact (less the time on the rail): every ridge
         ahead not yet reached under the speed prior, or reached and missed."""
-        elapsed = g - B.t - blind - self._max_latency
-        out = np.zeros(len(B))
+        elapsed = g - B.t[w]
+        if blind is not None:
+            elapsed = elapsed - blind
+        elapsed = elapsed - self._max_latency
         pos = elapsed > 0
         if not pos.any():
-            return out
-        di = (1 - B.dirn) // 2
-        r = np.minimum(B.ridge, self.count - 1)
-        logd = self._ahead_log[di, r]  # (N, R + 1): the ridges ahead, the coast end
+            return np.zeros(len(w))
+        ahead_log, ahead_finite, ahead_before = self._waiting_tables
+        row = (1 - B.dirn[w]) // 2 * self.count + np.minimum(B.ridge[w], self.count - 1)
+        logd = ahead_log.take(row, axis=0)  # (N, R + 1): the ridges ahead, the coast end
         shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
         nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
         # P(reached ridge j but not j+1) weighted by P(all missed up to j)
-        cdf = np.zeros((len(B), nr.shape[1] + 1))
-        cdf[:, 1:] = np.where(self._ahead_finite[di, r], nr, 1.0)
+        cdf = np.zeros((len(w), nr.shape[1] + 1))
+        cdf[:, 1:] = np.where(ahead_finite.take(row, axis=0), nr, 1.0)
         step = cdf[:, 1:] - cdf[:, :-1]
-        total = (self._ahead_before[di, r] * step).sum(axis=1)  # past the coast end: stopped
-        out = np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)
-        return out
+        total = np.add.reduce(ahead_before.take(row, axis=0) * step, axis=1)  # past the coast
+        return np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)  # end: stopped
