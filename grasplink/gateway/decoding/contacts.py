@@ -149,7 +149,8 @@ class _Channel:
     waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
     noise_by_block: dict = field(default_factory=dict)
     # rows z, hinge (N/sample), slope after, sample that told the noise (known at), by centre
-    # from z_start; z, zh, za, zready are views of them (refreshed at every append and cut)
+    # from z_start; z, zh, za, zready are views of their whole storage (refreshed when it
+    # grows): the first rows.size entries are held
     rows: _Series = field(default_factory=lambda: _Series(256, rows=4))
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))
     zh: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -300,6 +301,7 @@ class ContactDetector:
         self._raw_blocks = 0  # raw blocks completed
         self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
         self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
+        self._white_by_block: dict[int, tuple[float, int]] = {}  # `_white` of final blocks
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
         self._keep = keep
         # blocks of samples sitting on the sensor's upper rail (saturation), as times
@@ -355,6 +357,10 @@ class ContactDetector:
             ]:
                 for b in list(filter(oldest.__gt__, cache)):  # b < oldest, at C speed
                     del cache[b]
+            # white noises that read a block just forgotten: read again if asked (as then)
+            white = self._white_by_block
+            for b in list(filter((oldest + self.noise_blocks).__gt__, white)):
+                del white[b]
         events = sorted(events + steps, key=lambda e: (e.emit_index, e.id))
         return events, checks + step_checks
 
@@ -447,10 +453,12 @@ class ContactDetector:
     def _append_z(
         ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
     ) -> None:
-        new = ch.rows.extend(len(seg_h))
-        np.divide(seg_h, noise, out=new[0])
+        rows = ch.rows
+        new = rows.extend(len(seg_h))
+        np.divide(seg_h, noise, new[0])
         new[1], new[2], new[3] = seg_h, seg_a, ready
-        ch.z, ch.zh, ch.za, ch.zready = ch.rows.view()
+        if ch.z.base is not rows.data:  # grown (or the first append): views of the new storage
+            ch.z, ch.zh, ch.za, ch.zready = rows.data
 
     def _white(self, block: int) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
@@ -470,6 +478,9 @@ class ContactDetector:
                 return None
             return max(noise[b] / gain, floor.get(b, 0.0))
 
+        told = self._white_by_block.get(block)
+        if told is not None:
+            return told
         values = []  # seen(b) of each block before, inlined (this runs a few times a block)
         for b in range(max(0, block - self.noise_blocks), block):
             if b in noise and not censored.get(b, True):
@@ -478,7 +489,10 @@ class ContactDetector:
                     values.append(v)
         if values:
             values.sort()
-            return values[(len(values) - 1) // 2], len(values)
+            told = values[(len(values) - 1) // 2], len(values)
+            if block <= fine.done:  # every block before it complete: final
+                self._white_by_block[block] = told
+            return told
         for b in range(block, fine.done):
             v = seen(b)
             if v is not None:
@@ -519,7 +533,7 @@ class ContactDetector:
     def _local_maxima(self, ci: int, ch: _Channel, candidates: list) -> None:
         w = ch.width
         z = ch.z
-        last = ch.z_start + len(z) - 1  # last centre with z
+        last = ch.z_start + ch.rows.size - 1  # last centre with z
         lo = max(ch.next_test, ch.z_start + w)
         hi = last - w  # test centres lo .. hi
         if hi < lo:
@@ -530,6 +544,9 @@ class ContactDetector:
         for h in above.tolist():  # a local maximum over +-w (ties: the first)
             i = i0 + h
             zc = z[i]
+            if z[i - 1] >= zc or z[i + 1] > zc:  # a neighbour's higher: the window's too (z
+                # is finite: the decoders take finite samples only)
+                continue
             if zc <= z[i - w : i].max() or zc < z[i + 1 : i + w + 1].max():
                 continue
             n = ch.z_start + i
@@ -573,7 +590,7 @@ class ContactDetector:
             ch = self.channels[fi]
             i = n - ch.z_start
             if fi < ci:
-                lo, hi = max(1, i - reach), min(len(ch.z) - 2, i + reach)
+                lo, hi = max(1, i - reach), min(ch.rows.size - 2, i + reach)
                 if hi < lo:
                     break
                 j = lo + int(np.argmax(ch.z[lo : hi + 1]))
@@ -1067,7 +1084,7 @@ class ContactDetector:
                 sc.d = sc.store.keep_last(keep)
                 sc.start += cut
         for ch in self.channels:
-            if len(ch.z) > 2 * keep:
-                cut = len(ch.z) - keep
-                ch.z, ch.zh, ch.za, ch.zready = ch.rows.keep_last(keep)
+            if ch.rows.size > 2 * keep:
+                cut = ch.rows.size - keep
+                ch.rows.keep_last(keep)  # (in place: the views stay)
                 ch.z_start += cut
