@@ -297,7 +297,8 @@ class ContactDetector:
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
         self._n = 0  # samples received
         self._kept_from = -(10**9)  # block caches hold blocks from here on
-        self._raw = np.zeros(0)  # samples of the raw block being filled
+        self._raw = np.empty(self.block)  # samples of the raw block being filled ...
+        self._raw_n = 0  # ... so far
         self._raw_blocks = 0  # raw blocks completed
         self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
         self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
@@ -345,7 +346,7 @@ class ContactDetector:
         self._trim()
         # block noises still needed: the last noise_blocks before the slowest channel's block
         oldest = (
-            min(ch.next_n for ch in self.channels) // self.block
+            self.channels[-1].next_n // self.block  # the widest lags most
             - max(self.noise_blocks, self.history_blocks)
             - 2
         )
@@ -366,8 +367,12 @@ class ContactDetector:
 
     def _raw_stats(self, x: np.ndarray) -> None:
         """Per block of raw samples: on a rail (noise cut off)? quantisation floor?"""
-        raw = np.concatenate([self._raw, x])
-        B = self.block
+        B, held = self.block, self._raw_n
+        if held + len(x) < B:  # the block not full yet: only keep the samples
+            self._raw[held : held + len(x)] = x
+            self._raw_n += len(x)
+            return
+        raw = np.concatenate([self._raw[:held], x])
         full = len(raw) // B
         for k in range(full):
             block = raw[k * B : (k + 1) * B]
@@ -381,7 +386,8 @@ class ContactDetector:
                 if i >= 0 and i + B <= len(self._t):
                     self.blind.append((float(self._t[i]), float(self._t[i + B - 1])))
         self._raw_blocks += full
-        self._raw = raw[full * B :].copy()
+        self._raw_n = len(raw) - full * B
+        self._raw[: self._raw_n] = raw[full * B :]
 
     def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int, candidates: list) -> None:
         w = ch.width
@@ -887,9 +893,12 @@ class ContactDetector:
                 & (since <= (1.0 + self.decay_rises) * rise)
             )
             # a sharp rise is judged at the hold: a step, or (fallen back by then) a pulse
-            deferred = (k < hold) & (history.searchsorted(0.8 * peak) <= self.step_rise)
-            watch.fell = watch.fell or bool((ok & deferred).any())
-            hit = (ok & ~deferred).nonzero()[0]
+            if watch.next_k < hold:
+                deferred = (k < hold) & (history.searchsorted(0.8 * peak) <= self.step_rise)
+                watch.fell = watch.fell or bool((ok & deferred).any())
+                hit = (ok & ~deferred).nonzero()[0]
+            else:  # past the hold: nothing deferred
+                hit = ok.nonzero()[0]
             if len(hit) and k[hit[0]] < hold:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
@@ -1066,18 +1075,19 @@ class ContactDetector:
             cut = len(self._t) - keep
             self._t, self._x = self._tx.keep_last(keep)
             self._t_start += cut
-        oldest_watch = min(
-            [w.next_k for w in self._watches + self._stepped]
-            + [w.next_k for w, _, _ in self._probes],
-            default=None,
-        )
-        lv_keep = keep
-        if oldest_watch is not None:
-            lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
-        if len(self._level) > 2 * lv_keep:
-            cut = len(self._level) - lv_keep
-            self._level = self._levels.keep_last(lv_keep)
-            self._level_start += cut
+        if len(self._level) > 2 * keep:  # (under that it is under 2 lv_keep too)
+            oldest_watch = min(
+                [w.next_k for w in self._watches + self._stepped]
+                + [w.next_k for w, _, _ in self._probes],
+                default=None,
+            )
+            lv_keep = keep
+            if oldest_watch is not None:
+                lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
+            if len(self._level) > 2 * lv_keep:
+                cut = len(self._level) - lv_keep
+                self._level = self._levels.keep_last(lv_keep)
+                self._level_start += cut
         for sc in self._scales:
             if len(sc.d) > 2 * keep:
                 cut = len(sc.d) - keep
