@@ -399,13 +399,36 @@ class ContactDetector:
         if count <= 0:
             ch.after = after
             return
-        slope_after = after[w:]
-        hinge = slope_after - after[:count]
-        ch.after = after[count:]
         start = ch.next_n
         ch.next_n += count
-        self._normalise(ch, start, hinge, slope_after)
+        block = start // self.block
+        noise = None if ch.waiting else ch.noise_by_block.get(block)
+        if noise is not None and (start + count - 1) // self.block == block:
+            self._one_block(ch, after, count, noise, start)
+        else:
+            slope_after = after[w:]
+            self._normalise(ch, start, slope_after - after[:count], slope_after)
+        ch.after = after[count:]
         self._local_maxima(ci, ch, candidates)
+
+    def _one_block(
+        self, ch: _Channel, after: np.ndarray, count: int, noise: float, start: int
+    ) -> None:
+        """`_normalise` of centres start .. start + count - 1 when they lie in one block
+        whose noise is known and none wait (the usual case: a CAN frame's few samples):
+        the hinge written straight into the z rows, the same numbers."""
+        w = ch.width
+        rows = ch.rows
+        new = rows.extend(count)
+        hinge = np.subtract(after[w:], after[:count], new[1])
+        np.divide(hinge, noise, new[0])
+        new[2], new[3] = after[w:], start + w
+        if ch.z.base is not rows.data:  # grown (or the first append): views of the new storage
+            ch.z, ch.zh, ch.za, ch.zready = rows.data
+        np.abs(hinge, out=ch.block_abs[ch.abs_n : ch.abs_n + count])
+        ch.abs_n += count
+        if (start + count) % self.block == 0:
+            self._block_done(ch, start // self.block, start + count)
 
     def _normalise(
         self, ch: _Channel, start: int, hinge: np.ndarray, slope_after: np.ndarray
@@ -435,12 +458,16 @@ class ContactDetector:
                 self._append_z(ch, seg_h, seg_a, noise, n + ch.width)
             n += end - pos
             pos = end
-            if n % B == 0:  # block complete: its noise, and perhaps the waiting blocks'
-                values = ch.block_abs[: ch.abs_n]
-                ch.abs_n = 0
-                ch.block_noise[block] = lattice_median(values, floor=0.0) * MEDIAN_TO_STD
-                ch.done = block + 1
-                self._release(ch, n - 1 + ch.width)
+            if n % B == 0:
+                self._block_done(ch, block, n)
+
+    def _block_done(self, ch: _Channel, block: int, n: int) -> None:
+        """Block complete (centres up to n - 1): its noise, and perhaps the waiting blocks'."""
+        values = ch.block_abs[: ch.abs_n]
+        ch.abs_n = 0
+        ch.block_noise[block] = lattice_median(values, floor=0.0) * MEDIAN_TO_STD
+        ch.done = block + 1
+        self._release(ch, n - 1 + ch.width)
 
     def _release(self, ch: _Channel, ready: int) -> None:
         """z for the waiting blocks whose noise is now known (sample `ready` told it)."""
