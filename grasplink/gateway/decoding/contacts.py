@@ -97,6 +97,49 @@ class PulseCheck(NamedTuple):
     trend_on: bool | None = None
 
 
+class _Series:
+    """An array appended to in place and cut from the front by moving what is kept down.
+
+    The detector extends a dozen arrays by a few samples every block; a
+    concatenate copies the whole array each time, a slice write copies only
+    the new samples. `view` is what is held (valid until the next append or
+    cut); rows (`rows` > 0) share one index along the last axis. The storage
+    grows (doubling) only when an append would not fit, and a cut keeps it:
+    bounded by the longest stretch held.
+    """
+
+    __slots__ = ("data", "size")
+
+    def __init__(self, capacity: int = 64, rows: int = 0):
+        shape = (rows, max(1, capacity)) if rows else (max(1, capacity),)
+        self.data: np.ndarray = np.empty(shape)
+        self.size = 0
+
+    def extend(self, count: int) -> np.ndarray:
+        """`count` more entries (the caller fills them): their view."""
+        start, end = self.size, self.size + count
+        if end > self.data.shape[-1]:
+            data = np.empty((*self.data.shape[:-1], max(end, 2 * self.data.shape[-1])))
+            data[..., :start] = self.data[..., :start]
+            self.data = data
+        self.size = end
+        return self.data[..., start:end]
+
+    def append(self, values: np.ndarray) -> np.ndarray:
+        """Write `values` after what is held; the new view of all."""
+        self.extend(len(values))[...] = values
+        return self.data[..., : self.size]
+
+    def keep_last(self, keep: int) -> np.ndarray:
+        """Drop all but the last `keep` entries; the new view of all."""
+        self.data[..., :keep] = self.data[..., self.size - keep : self.size]
+        self.size = keep
+        return self.data[..., :keep]
+
+    def view(self) -> np.ndarray:
+        return self.data[..., : self.size]
+
+
 @dataclass
 class _Channel:
     width: int  # w, samples
@@ -105,13 +148,18 @@ class _Channel:
     next_n: int = 0  # next hinge centre to compute
     waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
     noise_by_block: dict = field(default_factory=dict)
-    z: np.ndarray = field(default_factory=lambda: np.zeros(0))  # z by centre, from z_start
-    zh: np.ndarray = field(default_factory=lambda: np.zeros(0))  # hinge (N/sample), same index
-    za: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slope after, same index
-    zready: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))  # known at
+    # rows z, hinge (N/sample), slope after, sample that told the noise (known at), by centre
+    # from z_start; z, zh, za, zready are views of their whole storage (refreshed when it
+    # grows): the first rows.size entries are held
+    rows: _Series = field(default_factory=lambda: _Series(256, rows=4))
+    z: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    zh: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    za: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    zready: np.ndarray = field(default_factory=lambda: np.zeros(0))
     z_start: int = 0  # global centre index of z[0]
     next_test: int = 0  # next centre to test for a local maximum
-    block_abs: list = field(default_factory=list)  # |h| of the block being filled
+    block_abs: np.ndarray = field(default_factory=lambda: np.zeros(0))  # |h| of the block ...
+    abs_n: int = 0  # ... being filled, so far
     block_noise: dict = field(default_factory=dict)  # completed block -> robust noise
     done: int = 0  # blocks completed
 
@@ -146,9 +194,10 @@ class _StepScale:
     w: int
     rise: int  # a step's rise is judged over this many samples (`_is_small_step`)
     fir: SosFilter
-    d: np.ndarray  # difference of means by centre, from start
+    d: np.ndarray  # difference of means by centre, from start (a view of `store`)
     start: int  # centre of d[0] (output m is centre m - w)
     next: int = 0  # next centre to test
+    store: _Series = field(default_factory=lambda: _Series(256))
 
 
 def _mean(x: np.ndarray) -> float:
@@ -200,13 +249,16 @@ class ContactDetector:
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
-        self.channels = [_Channel(w, SosFilter.fir(_slope_taps(w))) for w in widths]
         self.noise_blocks = int(noise_blocks)
         self.history_blocks = max(self.noise_blocks, round(history_s / block_s))
         self.threshold = float(threshold)
         self.refine_z = float(refine_z)
         self.merge_widths = float(merge_widths)
         self.block = max(16, round(block_s * self.fs_hz))
+        self.channels = [
+            _Channel(w, SosFilter.fir(_slope_taps(w)), block_abs=np.empty(self.block))
+            for w in widths
+        ]
         self.rise_fraction = float(rise_fraction)
         self.coarse_rise_fraction = float(coarse_rise_fraction)
         self.drop_fraction = float(drop_fraction)
@@ -245,18 +297,21 @@ class ContactDetector:
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
         self._n = 0  # samples received
         self._kept_from = -(10**9)  # block caches hold blocks from here on
-        self._raw = np.zeros(0)  # samples of the raw block being filled
+        self._raw = np.empty(self.block)  # samples of the raw block being filled ...
+        self._raw_n = 0  # ... so far
         self._raw_blocks = 0  # raw blocks completed
         self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
         self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
+        self._white_by_block: dict[int, tuple[float, int]] = {}  # `_white` of final blocks
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
         self._keep = keep
         # blocks of samples sitting on the sensor's upper rail (saturation), as times
         self.blind: deque[tuple[float, float]] = deque(maxlen=64)
-        self._t = np.zeros(0)  # recent sample times
-        self._x = np.zeros(0)  # and samples (same index)
+        self._tx = _Series(4 * keep, rows=2)  # recent sample times and samples, ...
+        self._t, self._x = self._tx.view()  # ... as views (same index)
         self._t_start = 0
-        self._level = np.zeros(0)  # box-smoothed level, by centre index
+        self._levels = _Series(4 * keep)
+        self._level = self._levels.view()  # box-smoothed level, by centre index
         self._level_start = 0
         self._next_id = 0
         self._recent: deque[float] = deque(maxlen=16)  # times of the contacts emitted
@@ -275,8 +330,9 @@ class ContactDetector:
             return [], []
         n0 = self._n
         self._n += len(x)
-        self._t = np.concatenate([self._t, t])
-        self._x = np.concatenate([self._x, x])
+        new = self._tx.extend(len(x))
+        new[0], new[1] = t, x
+        self._t, self._x = self._tx.view()
         self._raw_stats(x)
         candidates: list[tuple[int, int, int, float, float, float]] = []
         for ci, ch in enumerate(self.channels):
@@ -290,7 +346,7 @@ class ContactDetector:
         self._trim()
         # block noises still needed: the last noise_blocks before the slowest channel's block
         oldest = (
-            min(ch.next_n for ch in self.channels) // self.block
+            self.channels[-1].next_n // self.block  # the widest lags most
             - max(self.noise_blocks, self.history_blocks)
             - 2
         )
@@ -302,13 +358,21 @@ class ContactDetector:
             ]:
                 for b in list(filter(oldest.__gt__, cache)):  # b < oldest, at C speed
                     del cache[b]
+            # white noises that read a block just forgotten: read again if asked (as then)
+            white = self._white_by_block
+            for b in list(filter((oldest + self.noise_blocks).__gt__, white)):
+                del white[b]
         events = sorted(events + steps, key=lambda e: (e.emit_index, e.id))
         return events, checks + step_checks
 
     def _raw_stats(self, x: np.ndarray) -> None:
         """Per block of raw samples: on a rail (noise cut off)? quantisation floor?"""
-        raw = np.concatenate([self._raw, x])
-        B = self.block
+        B, held = self.block, self._raw_n
+        if held + len(x) < B:  # the block not full yet: only keep the samples
+            self._raw[held : held + len(x)] = x
+            self._raw_n += len(x)
+            return
+        raw = np.concatenate([self._raw[:held], x])
         full = len(raw) // B
         for k in range(full):
             block = raw[k * B : (k + 1) * B]
@@ -322,7 +386,8 @@ class ContactDetector:
                 if i >= 0 and i + B <= len(self._t):
                     self.blind.append((float(self._t[i]), float(self._t[i + B - 1])))
         self._raw_blocks += full
-        self._raw = raw[full * B :].copy()
+        self._raw_n = len(raw) - full * B
+        self._raw[: self._raw_n] = raw[full * B :]
 
     def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int, candidates: list) -> None:
         w = ch.width
@@ -334,13 +399,36 @@ class ContactDetector:
         if count <= 0:
             ch.after = after
             return
-        slope_after = after[w:]
-        hinge = slope_after - after[:count]
-        ch.after = after[count:]
         start = ch.next_n
         ch.next_n += count
-        self._normalise(ch, start, hinge, slope_after)
+        block = start // self.block
+        noise = None if ch.waiting else ch.noise_by_block.get(block)
+        if noise is not None and (start + count - 1) // self.block == block:
+            self._one_block(ch, after, count, noise, start)
+        else:
+            slope_after = after[w:]
+            self._normalise(ch, start, slope_after - after[:count], slope_after)
+        ch.after = after[count:]
         self._local_maxima(ci, ch, candidates)
+
+    def _one_block(
+        self, ch: _Channel, after: np.ndarray, count: int, noise: float, start: int
+    ) -> None:
+        """`_normalise` of centres start .. start + count - 1 when they lie in one block
+        whose noise is known and none wait (the usual case: a CAN frame's few samples):
+        the hinge written straight into the z rows, the same numbers."""
+        w = ch.width
+        rows = ch.rows
+        new = rows.extend(count)
+        hinge = np.subtract(after[w:], after[:count], new[1])
+        np.divide(hinge, noise, new[0])
+        new[2], new[3] = after[w:], start + w
+        if ch.z.base is not rows.data:  # grown (or the first append): views of the new storage
+            ch.z, ch.zh, ch.za, ch.zready = rows.data
+        np.abs(hinge, out=ch.block_abs[ch.abs_n : ch.abs_n + count])
+        ch.abs_n += count
+        if (start + count) % self.block == 0:
+            self._block_done(ch, start // self.block, start + count)
 
     def _normalise(
         self, ch: _Channel, start: int, hinge: np.ndarray, slope_after: np.ndarray
@@ -361,7 +449,8 @@ class ContactDetector:
             block = n // B
             end = min(len(hinge), pos + (block + 1) * B - n)
             seg_h, seg_a = hinge[pos:end], slope_after[pos:end]
-            ch.block_abs.append(np.abs(seg_h))
+            np.abs(seg_h, out=ch.block_abs[ch.abs_n : ch.abs_n + len(seg_h)])
+            ch.abs_n += len(seg_h)
             noise = None if ch.waiting else self._noise(ch, block)
             if noise is None:
                 ch.waiting.append((block, seg_h, seg_a))
@@ -369,12 +458,16 @@ class ContactDetector:
                 self._append_z(ch, seg_h, seg_a, noise, n + ch.width)
             n += end - pos
             pos = end
-            if n % B == 0:  # block complete: its noise, and perhaps the waiting blocks'
-                values = np.concatenate(ch.block_abs)
-                ch.block_abs = []
-                ch.block_noise[block] = lattice_median(values, floor=0.0) * MEDIAN_TO_STD
-                ch.done = block + 1
-                self._release(ch, n - 1 + ch.width)
+            if n % B == 0:
+                self._block_done(ch, block, n)
+
+    def _block_done(self, ch: _Channel, block: int, n: int) -> None:
+        """Block complete (centres up to n - 1): its noise, and perhaps the waiting blocks'."""
+        values = ch.block_abs[: ch.abs_n]
+        ch.abs_n = 0
+        ch.block_noise[block] = lattice_median(values, floor=0.0) * MEDIAN_TO_STD
+        ch.done = block + 1
+        self._release(ch, n - 1 + ch.width)
 
     def _release(self, ch: _Channel, ready: int) -> None:
         """z for the waiting blocks whose noise is now known (sample `ready` told it)."""
@@ -393,12 +486,12 @@ class ContactDetector:
     def _append_z(
         ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
     ) -> None:
-        ch.z = np.concatenate([ch.z, seg_h / noise])
-        ch.zh = np.concatenate([ch.zh, seg_h])
-        ch.za = np.concatenate([ch.za, seg_a])
-        known = np.empty(len(seg_h), np.int64)
-        known.fill(ready)  # np.full's numbers without its wrapper
-        ch.zready = np.concatenate([ch.zready, known])
+        rows = ch.rows
+        new = rows.extend(len(seg_h))
+        np.divide(seg_h, noise, new[0])
+        new[1], new[2], new[3] = seg_h, seg_a, ready
+        if ch.z.base is not rows.data:  # grown (or the first append): views of the new storage
+            ch.z, ch.zh, ch.za, ch.zready = rows.data
 
     def _white(self, block: int) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
@@ -418,6 +511,9 @@ class ContactDetector:
                 return None
             return max(noise[b] / gain, floor.get(b, 0.0))
 
+        told = self._white_by_block.get(block)
+        if told is not None:
+            return told
         values = []  # seen(b) of each block before, inlined (this runs a few times a block)
         for b in range(max(0, block - self.noise_blocks), block):
             if b in noise and not censored.get(b, True):
@@ -426,7 +522,10 @@ class ContactDetector:
                     values.append(v)
         if values:
             values.sort()
-            return values[(len(values) - 1) // 2], len(values)
+            told = values[(len(values) - 1) // 2], len(values)
+            if block <= fine.done:  # every block before it complete: final
+                self._white_by_block[block] = told
+            return told
         for b in range(block, fine.done):
             v = seen(b)
             if v is not None:
@@ -467,7 +566,7 @@ class ContactDetector:
     def _local_maxima(self, ci: int, ch: _Channel, candidates: list) -> None:
         w = ch.width
         z = ch.z
-        last = ch.z_start + len(z) - 1  # last centre with z
+        last = ch.z_start + ch.rows.size - 1  # last centre with z
         lo = max(ch.next_test, ch.z_start + w)
         hi = last - w  # test centres lo .. hi
         if hi < lo:
@@ -478,6 +577,9 @@ class ContactDetector:
         for h in above.tolist():  # a local maximum over +-w (ties: the first)
             i = i0 + h
             zc = z[i]
+            if z[i - 1] >= zc or z[i + 1] > zc:  # a neighbour's higher: the window's too (z
+                # is finite: the decoders take finite samples only)
+                continue
             if zc <= z[i - w : i].max() or zc < z[i + 1 : i + w + 1].max():
                 continue
             n = ch.z_start + i
@@ -521,7 +623,7 @@ class ContactDetector:
             ch = self.channels[fi]
             i = n - ch.z_start
             if fi < ci:
-                lo, hi = max(1, i - reach), min(len(ch.z) - 2, i + reach)
+                lo, hi = max(1, i - reach), min(ch.rows.size - 2, i + reach)
                 if hi < lo:
                     break
                 j = lo + int(np.argmax(ch.z[lo : hi + 1]))
@@ -575,7 +677,7 @@ class ContactDetector:
 
     def _run_scale(self, sc: _StepScale, x: np.ndarray) -> None:
         w = sc.w
-        sc.d = np.concatenate([sc.d, sc.fir(x)])
+        sc.d = sc.store.append(sc.fir(x))
         last = sc.start + len(sc.d) - 1  # last centre with a difference
         lo = max(sc.next, sc.start + 3 * w, 3 * w)
         hi = last - 3 * w
@@ -590,7 +692,7 @@ class ContactDetector:
         n = len(adj) - 2 * w
         mid = adj[w : w + n]
         rising = (mid > 0.0) & (mid >= adj[w - 1 : w - 1 + n]) & (mid > adj[w + 1 : w + 1 + n])
-        for j in (np.flatnonzero(rising) + w).tolist():
+        for j in (rising.nonzero()[0] + w).tolist():
             a = adj[j]
             if a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
                 continue
@@ -649,7 +751,7 @@ class ContactDetector:
     def _run_level(self, x: np.ndarray) -> None:
         y = self._level_filter(x)
         # y[m] is the mean of x[m - 2h .. m]: the level centred on m - h.
-        self._level = np.concatenate([self._level, y])
+        self._level = self._levels.append(y)
 
     def _level_at(self, k: int) -> float | None:
         i = k + self.level_half - self._level_start  # centre k is output m = k + h
@@ -818,9 +920,12 @@ class ContactDetector:
                 & (since <= (1.0 + self.decay_rises) * rise)
             )
             # a sharp rise is judged at the hold: a step, or (fallen back by then) a pulse
-            deferred = (k < hold) & (history.searchsorted(0.8 * peak) <= self.step_rise)
-            watch.fell = watch.fell or bool((ok & deferred).any())
-            hit = (ok & ~deferred).nonzero()[0]
+            if watch.next_k < hold:
+                deferred = (k < hold) & (history.searchsorted(0.8 * peak) <= self.step_rise)
+                watch.fell = watch.fell or bool((ok & deferred).any())
+                hit = (ok & ~deferred).nonzero()[0]
+            else:  # past the hold: nothing deferred
+                hit = ok.nonzero()[0]
             if len(hit) and k[hit[0]] < hold:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
@@ -995,29 +1100,28 @@ class ContactDetector:
         keep = self._keep
         if len(self._t) > 2 * keep:
             cut = len(self._t) - keep
-            self._t = self._t[cut:]
-            self._x = self._x[cut:]
+            self._t, self._x = self._tx.keep_last(keep)
             self._t_start += cut
-        oldest_watch = min(
-            [w.next_k for w in self._watches + self._stepped]
-            + [w.next_k for w, _, _ in self._probes],
-            default=None,
-        )
-        lv_keep = keep
-        if oldest_watch is not None:
-            lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
-        if len(self._level) > 2 * lv_keep:
-            cut = len(self._level) - lv_keep
-            self._level = self._level[cut:]
-            self._level_start += cut
+        if len(self._level) > 2 * keep:  # (under that it is under 2 lv_keep too)
+            oldest_watch = min(
+                [w.next_k for w in self._watches + self._stepped]
+                + [w.next_k for w, _, _ in self._probes],
+                default=None,
+            )
+            lv_keep = keep
+            if oldest_watch is not None:
+                lv_keep = max(lv_keep, self._level_start + len(self._level) - oldest_watch + 4)
+            if len(self._level) > 2 * lv_keep:
+                cut = len(self._level) - lv_keep
+                self._level = self._levels.keep_last(lv_keep)
+                self._level_start += cut
         for sc in self._scales:
             if len(sc.d) > 2 * keep:
                 cut = len(sc.d) - keep
-                sc.d = sc.d[cut:]
+                sc.d = sc.store.keep_last(keep)
                 sc.start += cut
         for ch in self.channels:
-            if len(ch.z) > 2 * keep:
-                cut = len(ch.z) - keep
-                ch.z, ch.zh, ch.za = ch.z[cut:], ch.zh[cut:], ch.za[cut:]
-                ch.zready = ch.zready[cut:]
+            if ch.rows.size > 2 * keep:
+                cut = ch.rows.size - keep
+                ch.rows.keep_last(keep)  # (in place: the views stay)
                 ch.z_start += cut

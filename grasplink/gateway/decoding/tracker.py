@@ -60,6 +60,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
+from functools import cached_property
 
 import numpy as np
 from scipy.special import erf
@@ -1073,37 +1074,78 @@ class TrackerDecoder(Decoder):
         decay = np.exp(-tau / self.DIP_RECOVERY_S)
         return B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
 
+    @cached_property
+    def _silence_tables(self) -> dict[str, np.ndarray]:
+        """What a track's schedule (`_schedule`) takes from its direction and ridge alone,
+        per row di * (count + 1) + ridge (a ridge past the last one schedules as the
+        coast end does), for idle tracks (stopped, or no speed yet: rows from 0) and
+        active ones (rows from 2 (count + 1)): the ridges ahead (the coast end is index
+        count), their positions, P(all missed) so far, and the (due, adj, stopped, limit)
+        rows but for the times due. The same numbers as from each track's own arrays:
+        the cumulative misses summed one ridge after the other as there."""
+        R, S = self.count, self.SCHEDULE
+        di = np.repeat(np.arange(2), R + 1)
+        ridge = np.tile(np.arange(R + 1), 2)
+        k = ridge[:, None] + 1 + np.arange(S)
+        kk = np.minimum(k, R)
+        miss = np.cumsum(self._log_miss[di[:, None], kk], axis=1)
+        go_on = miss >= self.LOG_STOP
+        ended = np.logical_or.accumulate(~go_on | (k >= R), axis=1)
+        done = np.zeros(ended.shape, bool)  # active tracks: done before each ridge ahead
+        done[:, 1:] = ended[:, :-1]
+        rows, J = 2 * (R + 1), S + 1
+        due = np.full((2 * rows, J), np.inf)
+        due[:, 0] = -np.inf
+        adj = np.zeros((2 * rows, J))
+        adj[rows:, 1:] = np.where(done, 0.0, np.where(go_on, miss, self.LOG_STOP))
+        stopped = np.zeros((2 * rows, J), bool)
+        stopped[rows:, 1:] = ~(go_on | done)
+        limit = np.zeros((2 * rows, J), np.int64)
+        limit[:, 0] = np.tile(np.minimum(ridge + 1, R), 2)
+        limit[rows:, 1:] = np.where(done, 0, kk + go_on)
+        return {
+            "due": due,
+            "adj": adj,
+            "stopped": stopped,
+            "limit": limit,
+            "done": done,
+            "coast": kk >= R,
+            "target": self._pos[di[:, None], kk],
+        }
+
     def _schedule(self, B: _Bank):
         """Silence of slipping tracks with a speed: per track and ridge ahead (time due,
-        score adjustment from then, stopped from then, next ridge not reached from then)."""
+        score adjustment from then, stopped from then, next ridge not reached from then).
+        All but the times due come from tables (`_silence_tables`); the times are
+        computed for the active tracks only (the others keep the tables' values)."""
         if B._sched is not None:
             return B._sched
-        N, J = len(B), self.SCHEDULE + 1
-        due = np.full((N, J), np.inf)
-        adj = np.zeros((N, J))
-        stopped = np.zeros((N, J), bool)
-        limit = np.zeros((N, J), np.int64)
+        T, R = self._silence_tables, self.count
         active = np.isnan(B.stop) & (B.run >= 2)
         di = (1 - B.dirn) // 2
-        limit[:, 0] = np.minimum(B.ridge + 1, self.count)
-        if active.any():
-            # every ridge ahead at once (N, SCHEDULE): elementwise the same numbers as one
-            # ridge after the other, in a third of the numpy calls
-            s0, v, a, d = B.X[:, 0], np.maximum(B.X[:, 1], V_MIN_MM_S), B.X[:, 2], B.X[:, 3]
-            P = B.P
+        row = di * (R + 1) + np.minimum(B.ridge, R)
+        at = row + active * (2 * (R + 1))
+        due = T["due"].take(at, axis=0)
+        adj = T["adj"].take(at, axis=0)
+        stopped = T["stopped"].take(at, axis=0)
+        limit = T["limit"].take(at, axis=0)
+        act = _nz(active)
+        if len(act):
+            # every ridge ahead at once (tracks, SCHEDULE): elementwise the same numbers as
+            # one ridge after the other, in a third of the numpy calls
+            ra = row[act]
+            X, P = B.X[act], B.P[act]
+            s0, v, a, d = X[:, 0], np.maximum(X[:, 1], V_MIN_MM_S), X[:, 2], X[:, 3]
             p00, p01, p11, p02, p12, p22 = (P[:, i, j, None] for i, j in _VAR_AT)
-            k = B.ridge[:, None] + 1 + np.arange(self.SCHEDULE)
-            kk = np.minimum(k, self.count)  # the coast end is index count
-            di2 = di[:, None]
-            coast = self._coast_end(di, v)[:, None]
-            target = np.where(kk < self.count, self._pos[di2, kk], coast)
+            coast = self._coast_end(di[act], v)[:, None]
+            target = np.where(T["coast"][ra], coast, T["target"][ra])
             s0, a, v = s0[:, None], a[:, None], v[:, None]
             dist = np.maximum(target - s0, 1e-3)
             a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
             vv, a2 = v * v, 2.0 * a_p  # (the same numbers in every pass below)
             root = np.sqrt(np.maximum(vv + a2 * dist, 1e-9))
             tau = 2.0 * dist / (v + root)
-            dm = (d * B.m)[:, None]
+            dm = (d * B.m[act])[:, None]
             for _ in range(2):  # the part of the dip recovered by then
                 eff = dist + dm * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
                 root = np.sqrt(np.maximum(vv + a2 * eff, 1e-9))
@@ -1113,20 +1155,8 @@ class TrackerDecoder(Decoder):
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             span = np.sqrt(np.maximum(var, 0.0)) / v_k
             latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
-            t_due = B.t[:, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
-            miss = np.cumsum(self._log_miss[di2, kk], axis=1)  # sequential sums, as before
-            go_on = miss >= self.LOG_STOP
-            # done before each ridge: not active, or stopped / past the end at an earlier one
-            # (such tracks keep the initial values)
-            ended = np.logical_or.accumulate(~go_on | (k >= self.count), axis=1)
-            done = np.empty(ended.shape, bool)
-            done[:, 0] = ~active
-            done[:, 1:] = ended[:, :-1] | ~active[:, None]
-            due[:, 1:] = np.where(done, np.inf, t_due)
-            adj[:, 1:] = np.where(done, 0.0, np.where(go_on, miss, self.LOG_STOP))
-            stopped[:, 1:] = ~(go_on | done)
-            limit[:, 1:] = np.where(done, 0, kk + go_on)
-        due[:, 0] = -np.inf
+            t_due = B.t[act, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
+            due[act, 1:] = np.where(T["done"][ra], np.inf, t_due)
         B._sched = (due, adj, stopped, limit)
         return B._sched
 
@@ -1231,20 +1261,25 @@ class TrackerDecoder(Decoder):
         # silence
         due, adj_t, stop_t, limit_t = self._schedule(B)
         blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
-        j = (due <= g - blind[:, None]).sum(axis=1) - 1
+        # (None: none - the same numbers as subtracting and adding zeros)
+        seen = g if blind is None else g - blind[:, None]
+        j = np.add.reduce(due <= seen, axis=1) - 1  # (a bool sum without its wrapper)
         rows = np.arange(len(B))
         adj = adj_t[rows, j]
-        stopped = stop_t[rows, j] | ~np.isnan(B.stop)
+        running = np.isnan(B.stop)
+        stopped = stop_t[rows, j] | ~running
         limit = limit_t[rows, j]
-        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)] + blind
+        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)]
+        if blind is not None:
+            upcoming = upcoming + blind
         upcoming = np.where(j + 1 < due.shape[1], upcoming, np.inf)
         nxt = upcoming[live & (upcoming > g)]
         if len(nxt):
             until = min(until, float(nxt.min()))
-        waiting = np.isnan(B.stop) & (B.run == 1)
-        if waiting.any():
-            w = _nz(waiting & live)
-            adj[w] = self._log_waiting(B.take(w, ("dirn", "ridge", "score", "t")), g, blind[w])
+        waiting = running & (B.run == 1)
+        w = _nz(waiting & live)
+        if len(w):
+            adj[w] = self._log_waiting(B, w, g, None if blind is None else blind[w])
         evident, bonus = self._evidence(B)
         total = np.where(live, score + adj + bonus, -np.inf)
         top = max(self._null, float(total.max()))
@@ -1254,7 +1289,8 @@ class TrackerDecoder(Decoder):
         p_slip = float(weight[slipping].sum()) / mass
         chosen = None
         if p_slip >= 0.5 and slipping.any():
-            i = int(_nz(slipping)[np.argmax(total[slipping])])
+            # the first best of the slipping tracks (one of them has weight)
+            i = int(np.where(slipping, total, -np.inf).argmax())
             chosen = (i, False, int(limit[i]))
         else:
             cand = evident & stopped
@@ -1300,46 +1336,75 @@ class TrackerDecoder(Decoder):
             agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
         return (until, (one, is_stopped, lim), p_slip, agree, odds)
 
-    def _blind(self, t: np.ndarray, g: float) -> np.ndarray:
-        """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there)."""
-        out = np.zeros(len(t))
+    def _blind(self, t: np.ndarray, g: float) -> np.ndarray | None:
+        """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there);
+        None when it sat there for none of them."""
+        out = None
         for r0, r1 in self.detector.blind:
             if r1 <= float(t.min(initial=g)) or r0 >= g:
                 continue
+            if out is None:
+                out = np.zeros(len(t))
             out += np.clip(np.minimum(g, r1) - np.maximum(t, r0), 0.0, None)
         return out
 
+    @cached_property
+    def _evidence_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What `_evidence` reads off a track's verdict counts, packed as pulses + 256
+        steps: the weight of each verdict in such a count, the score bonus per count, and
+        whether it is evident per count and min(n, 4) contacts - the same numbers as from
+        the counts themselves."""
+        weight = np.zeros(max(UNKNOWN, PULSE, STEP, UNCLEAR) + 1, np.int64)
+        weight[PULSE], weight[STEP] = 1, 256
+        packed = np.arange(256 * IDS + IDS + 1)
+        pulses, steps = packed & 255, packed >> 8
+        bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
+        n = np.arange(5)[:, None]
+        evident = (n >= 2) & ((pulses > 0) | ((n >= 4) & (steps == 0)))
+        return weight, bonus, evident
+
     def _evidence(self, B: _Bank) -> tuple[np.ndarray, np.ndarray]:
         """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
-        And the score bonus of the pulse verdicts on its recent contacts."""
+        And the score bonus of the pulse verdicts on its recent contacts. (A slot never
+        written holds id -1 and no verdict: an unused id, -1, reads no verdict there.)"""
+        weight, bonus, evident = self._evidence_tables
         ids = B.ids
         slot = ids % RING
-        known = (self._ring_id[slot] == ids) & (ids >= 0)
-        verdict = np.where(known, self._ring[slot], UNKNOWN)
-        pulses = (verdict == PULSE).sum(axis=1)
-        steps = (verdict == STEP).sum(axis=1)
-        bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
-        evident = (B.n >= 2) & ((pulses > 0) | ((B.n >= 4) & (steps == 0)))
-        return evident, bonus
+        counted = weight.take(self._ring.take(slot))
+        packed = np.add.reduce(np.where(self._ring_id.take(slot) == ids, counted, 0), axis=1)
+        return evident[np.minimum(B.n, 4), packed], bonus.take(packed)
 
-    def _log_waiting(self, B: _Bank, g: float, blind: np.ndarray) -> np.ndarray:
-        """Log P(no contact detected yet) for tracks whose speed is unknown (one contact, or
-        restarted), g - t after their contact (less the time on the rail): every ridge
+    @cached_property
+    def _waiting_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`_log_waiting`'s tables by row di * count + ridge (one take, not a 2-D index)."""
+        rows = 2 * self.count
+        return (
+            self._ahead_log.reshape(rows, -1),
+            self._ahead_finite.reshape(rows, -1),
+            self._ahead_before.reshape(rows, -1),
+        )
+
+    def _log_waiting(
+        self, B: _Bank, w: np.ndarray, g: float, blind: np.ndarray | None
+    ) -> np.ndarray:
+        """Log P(no contact detected yet) for tracks w whose speed is unknown (one contact,
+        or restarted), g - t after their contact (less the time on the rail): every ridge
         ahead not yet reached under the speed prior, or reached and missed."""
-        elapsed = g - B.t - blind - self._max_latency
-        out = np.zeros(len(B))
+        elapsed = g - B.t[w]
+        if blind is not None:
+            elapsed = elapsed - blind
+        elapsed = elapsed - self._max_latency
         pos = elapsed > 0
         if not pos.any():
-            return out
-        di = (1 - B.dirn) // 2
-        r = np.minimum(B.ridge, self.count - 1)
-        logd = self._ahead_log[di, r]  # (N, R + 1): the ridges ahead, the coast end
+            return np.zeros(len(w))
+        ahead_log, ahead_finite, ahead_before = self._waiting_tables
+        row = (1 - B.dirn[w]) // 2 * self.count + np.minimum(B.ridge[w], self.count - 1)
+        logd = ahead_log.take(row, axis=0)  # (N, R + 1): the ridges ahead, the coast end
         shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
         nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
         # P(reached ridge j but not j+1) weighted by P(all missed up to j)
-        cdf = np.zeros((len(B), nr.shape[1] + 1))
-        cdf[:, 1:] = np.where(self._ahead_finite[di, r], nr, 1.0)
+        cdf = np.zeros((len(w), nr.shape[1] + 1))
+        cdf[:, 1:] = np.where(ahead_finite.take(row, axis=0), nr, 1.0)
         step = cdf[:, 1:] - cdf[:, :-1]
-        total = (self._ahead_before[di, r] * step).sum(axis=1)  # past the coast end: stopped
-        out = np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)
-        return out
+        total = np.add.reduce(ahead_before.take(row, axis=0) * step, axis=1)  # past the coast
+        return np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)  # end: stopped

@@ -1,0 +1,72 @@
+"""The contact detector's buffers (written in place, not concatenated) stay bounded on an
+endless stream, and what it tells does not depend on how the samples are chunked."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grasplink.gateway.decoding.contacts import ContactDetector
+from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
+
+FS_HZ = 400.0
+
+
+def _cycle() -> np.ndarray:
+    """A slip over the ridges, then rest: contacts, pulse verdicts and quiet blocks."""
+    layout = LAYOUTS_MM["alpha0.1"]
+    slip = synth.slip_recording(layout, 60.0, seed=1).force_n
+    rest = np.full(320, slip[0]) + np.random.default_rng(0).normal(0, 0.02, 320)
+    return np.concatenate([slip, rest])
+
+
+def _held(detector: ContactDetector) -> dict[str, int]:
+    """Storage (entries allocated) of every buffer the detector extends per block."""
+    sizes = {
+        "samples": detector._tx.data.shape[-1],
+        "level": detector._levels.data.shape[-1],
+        "raw": len(detector._raw),
+    }
+    for i, ch in enumerate(detector.channels):
+        sizes[f"z{i}"] = ch.rows.data.shape[-1]
+        sizes[f"abs{i}"] = len(ch.block_abs)
+    for i, sc in enumerate(detector._scales):
+        sizes[f"step{i}"] = sc.store.data.shape[-1]
+    return sizes
+
+
+def _feed(detector: ContactDetector, x: np.ndarray, start: int, chunk: int) -> list[tuple]:
+    """Contacts and verdicts told, by the sample that decided them (a chunk tells what its
+    samples decided together: the order within one chunk is the detector's own)."""
+    told: list[tuple] = []
+    t = (start + np.arange(len(x))) / FS_HZ
+    for i in range(0, len(x), chunk):
+        events, checks = detector.feed(t[i : i + chunk], x[i : i + chunk])
+        told += [(e.emit_index, 0, e.id, tuple(e)) for e in events]
+        told += [(c.emit_index, 1, c.id, tuple(c)) for c in checks]
+    return sorted(told)
+
+
+def test_the_detector_buffers_stay_bounded_over_a_long_stream():
+    cycle = _cycle()
+    detector = ContactDetector(FS_HZ)
+    held, told = [], 0
+    for k in range(12):
+        told += len(_feed(detector, cycle, k * len(cycle), 3))
+        held.append(_held(detector))
+    assert told > 0  # it did see contacts
+    assert held[-1] == held[2]  # after the first cycles, no buffer grows any more
+    keep = detector._keep
+    assert len(detector._t) <= 2 * keep and len(detector._level) <= 2 * keep + detector.watch
+    for ch in detector.channels:
+        assert ch.rows.size <= 2 * keep
+    for sc in detector._scales:
+        assert sc.store.size <= 2 * keep
+
+
+def test_the_detector_tells_the_same_in_any_chunking():
+    x = np.concatenate([_cycle()] * 2)
+    told = {chunk: _feed(ContactDetector(FS_HZ), x, 0, chunk) for chunk in (1, 3, 7, 50, 256)}
+    assert told[3]  # contacts and verdicts to compare
+    for chunk in (1, 7, 50, 256):
+        assert told[chunk] == told[3]
