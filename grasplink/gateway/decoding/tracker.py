@@ -243,9 +243,9 @@ class _Bank:
         _EMPTY.append(bank)
         return bank
 
-    def take(self, idx: np.ndarray, only: tuple[str, ...] | None = None) -> _Bank:
-        """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]`);
-        `only`: the fields read (all are taken: two calls either way)."""
+    def take(self, idx: np.ndarray) -> _Bank:
+        """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]`;
+        two calls, one per matrix, whatever fields the caller reads)."""
         return _Bank(self._f.take(idx, 0), self._i.take(idx, 0))
 
     @staticmethod
@@ -1323,7 +1323,7 @@ class TrackerDecoder(Decoder):
         idx = _nz(use)
         agree = 0.0
         if len(idx):
-            Bu = B.take(idx, ("X", "dirn", "m", "score", "stop", "t"))
+            Bu = B.take(idx)
             s = self._travel(Bu, g)
             # held where the ridge not reached is, or where they stopped
             di = (1 - Bu.dirn) // 2
