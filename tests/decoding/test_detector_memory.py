@@ -4,6 +4,7 @@ endless stream, and what it tells does not depend on how the samples are chunked
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from grasplink.gateway.decoding.contacts import ContactDetector
 from grasplink.profiles.layouts import LAYOUTS_MM
@@ -70,3 +71,21 @@ def test_the_detector_tells_the_same_in_any_chunking():
     assert told[3]  # contacts and verdicts to compare
     for chunk in (1, 7, 50, 256):
         assert told[chunk] == told[3]
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_non_finite_sample_is_refused_by_name_and_nothing_of_its_chunk_is_kept(
+    bad: float,
+) -> None:
+    x = _cycle()
+    t = np.arange(len(x)) / FS_HZ
+    half = len(x) // 2
+    clean, refused = ContactDetector(FS_HZ), ContactDetector(FS_HZ)
+    told_clean = [clean.feed(t[:half], x[:half]), clean.feed(t[half:], x[half:])]
+    told = [refused.feed(t[:half], x[:half])]
+    broken = x[half : half + 3].copy()
+    broken[1] = bad
+    with pytest.raises(ValueError, match="finite"):
+        refused.feed(t[half : half + 3], broken)
+    told.append(refused.feed(t[half:], x[half:]))
+    assert told == told_clean

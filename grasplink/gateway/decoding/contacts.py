@@ -325,9 +325,18 @@ class ContactDetector:
 
     # ------------------------------------------------------------------ feeding
     def feed(self, t: np.ndarray, x: np.ndarray) -> tuple[list[ContactEvent], list[PulseCheck]]:
-        """Take accepted samples; return contacts and pulse verdicts decided by them."""
+        """Take accepted samples; return contacts and pulse verdicts decided by them.
+
+        Accepted: finite (`Decoder.process` drops the rest before they get here). The
+        detector's buffers are written in place and its maxima assume finite z, so a NaN
+        is refused here, by name, rather than spread through the history."""
         if not len(x):
             return [], []
+        if not (np.isfinite(x).all() and np.isfinite(t).all()):
+            raise ValueError(
+                "ContactDetector.feed: samples must be finite (NaN or inf in t or x); "
+                "drop them first, as Decoder.process does"
+            )
         n0 = self._n
         self._n += len(x)
         new = self._tx.extend(len(x))
