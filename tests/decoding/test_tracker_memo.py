@@ -14,21 +14,15 @@ from grasplink.simulators import synth
 
 
 class CountingTracker(TrackerDecoder):
-    """Counts the contacts branched and the assignments computed anew (not found in the
-    step memo or the assignment memo)."""
+    """Counts the contacts branched anew (not found in the memo)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.branched = 0
-        self.assigned = 0
 
     def _branch(self, ev: ContactEvent) -> _Bank:
         self.branched += 1
         return super()._branch(ev)
-
-    def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
-        self.assigned += 1
-        return super()._assign(B, ev)
 
 
 def slip_cycles(cycles: int) -> tuple[np.ndarray, np.ndarray]:
@@ -46,16 +40,11 @@ def decode(decoder: TrackerDecoder, t: np.ndarray, x: np.ndarray) -> list[SlipEs
     return out
 
 
-def test_replays_reuse_branches_and_assignments_and_change_no_estimate():
-    """A step revised to a pulse replays contacts taken before (their branches come from
-    the step memo); a contact told to be a step replays with another verdict (its
-    assignments come from the assignment memo). Without the memos: the same estimates."""
+def test_revised_steps_reuse_branches_and_change_no_estimate():
     t, x = slip_cycles(3)
     memo = CountingTracker(LAYOUTS_MM["alpha0.1"], 400)
     plain = CountingTracker(LAYOUTS_MM["alpha0.1"], 400)
-    plain.MEMO = 0  # nothing kept: every contact of every replay branched and assigned again
+    plain.MEMO = 0  # nothing kept: every contact of every replay branched again
     assert decode(memo, t, x) == decode(plain, t, x)
     assert memo.branched < plain.branched
-    assert memo.assigned < plain.assigned
     assert len(memo._memo) <= memo.MEMO and len(memo._pruned) <= memo.MEMO
-    assert len(memo._assign_memo) <= memo.MEMO and not plain._assign_memo
