@@ -60,16 +60,6 @@ def test_joining_banks_keeps_every_field_of_each_track_in_order():
     assert _Bank.concat([_Bank.empty(), _Bank.empty()]) is _Bank.empty()
 
 
-def test_twice_is_the_two_replaced_banks_joined():
-    B = bank()
-    first = {"score": B.score + 1.0, "model": np.zeros(N, np.int64)}
-    second = {"score": B.score - 1.0, "X": B.X * 2.0, "run": np.full(N, 9)}
-    out = B.twice(first, second)
-    want = _Bank.concat([B.replace(**first), B.replace(**second)])
-    for j in range(2 * N):
-        assert same(fields(out, j), fields(want, j))
-
-
 def test_replacing_fields_changes_only_those_and_not_the_original():
     B = bank()
     before = [fields(B, i) for i in range(N)]
@@ -88,9 +78,9 @@ def test_field_views_stay_consistent_with_the_packed_matrices():
     assert B.P.shape == (N, 4, 4) and B.X.shape == (N, 4) and B.ids.shape == (N, IDS)
     assert B.score.shape == (N,) and B.n.dtype == np.int64 and B.score.dtype == np.float64
     assert np.may_share_memory(B.P, B.X) and np.may_share_memory(B.ids, B.ridge)  # views
-    part = B.part(1, 4)
-    assert len(part) == 3 and same(fields(part, 0), fields(B, 1))
-    assert np.array_equal(part.P, B.P[1:4]) and np.array_equal(part.ids, B.ids[1:4])
+    some = B.take(np.arange(1, 4))
+    assert len(some) == 3 and same(fields(some, 0), fields(B, 1))
+    assert np.array_equal(some.P, B.P[1:4]) and np.array_equal(some.ids, B.ids[1:4])
 
 
 def test_the_empty_bank_is_one_read_only_instance_with_every_field():

@@ -137,16 +137,16 @@ def _nz(mask: np.ndarray) -> np.ndarray:
     return mask.nonzero()[0]
 
 
-def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict, rows: slice = slice(None)) -> None:
-    """Write `fields` (arrays or scalars, per track) into the bank matrices' rows."""
+def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict) -> None:
+    """Write `fields` (arrays or scalars, per track) into the bank matrices."""
     for key, value in fields.items():
         col = _F_COLS.get(key)
         if col is not None:
             if key == "P":
                 value = value.reshape(len(value), 16)
-            floats[rows, col] = value
+            floats[:, col] = value
         else:
-            ints[rows, _I_COLS[key]] = value
+            ints[:, _I_COLS[key]] = value
 
 
 def _with_contact(ints: np.ndarray, ev_id: int, ridge: np.ndarray, run) -> np.ndarray:
@@ -265,21 +265,6 @@ class _Bank:
         if any(key in _I_COLS for key in fields):
             ints = ints.copy()
         _fill(floats, ints, fields)
-        return _Bank(floats, ints)
-
-    def part(self, start: int, stop: int) -> _Bank:
-        """Tracks start..stop (views)."""
-        return _Bank(self._f[start:stop], self._i[start:stop])
-
-    def twice(self, first: dict, second: dict) -> _Bank:
-        """concat([self.replace(**first), self.replace(**second)]) in one pass."""
-        N = len(self)
-        floats = np.empty((2 * N, _F_WIDTH))
-        ints = np.empty((2 * N, _I_WIDTH), np.int64)
-        floats[:N] = floats[N:] = self._f
-        ints[:N] = ints[N:] = self._i
-        _fill(floats, ints, first, slice(0, N))
-        _fill(floats, ints, second, slice(N, 2 * N))
         return _Bank(floats, ints)
 
 
@@ -633,7 +618,16 @@ class TrackerDecoder(Decoder):
                 children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
             else:
                 children.append(B.replace(score=B.score + np.log(rate)))
-            assigned = self._assigned(B, ev, probe)
+            if probe:
+                # a small step the kink bank missed: pulses after short spacings start on
+                # the one before (thesis ch. 5.3.1) and pile up like a step - so perhaps a
+                # ridge it could not time (mid-rise, loosely), or a stop, or a grip change
+                loose = ev._replace(sigma_s=max(ev.sigma_s, self.PROBE_SIGMA_S))
+                assigned = [
+                    c.replace(score=c.score + self.LOG_PROBE_RIDGE) for c in self._assign(B, loose)
+                ]
+            else:
+                assigned = self._assign(B, ev)
             children += assigned
             if step and assigned:  # a stop right at a ridge (the step is that ridge's contact)
                 ridden = _Bank.concat(assigned)  # all at once: the numbers are per track
@@ -654,19 +648,6 @@ class TrackerDecoder(Decoder):
                     base[di] = max(base[di], reverse)
         children.append(self._births(ev, base + self._log_strength(ev.z)))
         return _Bank.concat(children)
-
-    def _assigned(self, B: _Bank, ev: ContactEvent, probe: bool) -> list[_Bank]:
-        """The children of B (the tracks retired at ev) that assign ev to a ridge.
-
-        Not memoised for replays: a memo of them saved 2.6 % of the decoder's
-        instructions and took the state held still for an hour from 1.9 to 2.3 MB."""
-        if probe:
-            # a small step the kink bank missed: pulses after short spacings start on
-            # the one before (thesis ch. 5.3.1) and pile up like a step - so perhaps a
-            # ridge it could not time (mid-rise, loosely), or a stop, or a grip change
-            loose = ev._replace(sigma_s=max(ev.sigma_s, self.PROBE_SIGMA_S))
-            return [c.replace(score=c.score + self.LOG_PROBE_RIDGE) for c in self._assign(B, loose)]
-        return self._assign(B, ev)
 
     def _retire(self, B: _Bank, tc: float) -> _Bank:
         """B without the tracks whose last contact is longer before tc than the slowest
