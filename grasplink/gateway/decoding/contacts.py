@@ -163,6 +163,12 @@ class _Channel:
     block_noise: dict = field(default_factory=dict)  # completed block -> robust noise
     done: int = 0  # blocks completed
 
+    def refresh_views(self) -> None:
+        """z, zh, za, zready as views of the rows' storage, after an append that grew it
+        (or the first one); an append that fits keeps them."""
+        if self.z.base is not self.rows.data:
+            self.z, self.zh, self.za, self.zready = self.rows.data
+
 
 @dataclass
 class _Watch:
@@ -427,13 +433,11 @@ class ContactDetector:
         whose noise is known and none wait (the usual case: a CAN frame's few samples):
         the hinge written straight into the z rows, the same numbers."""
         w = ch.width
-        rows = ch.rows
-        new = rows.extend(count)
+        new = ch.rows.extend(count)
         hinge = np.subtract(after[w:], after[:count], new[1])
         np.divide(hinge, noise, new[0])
         new[2], new[3] = after[w:], start + w
-        if ch.z.base is not rows.data:  # grown (or the first append): views of the new storage
-            ch.z, ch.zh, ch.za, ch.zready = rows.data
+        ch.refresh_views()
         np.abs(hinge, out=ch.block_abs[ch.abs_n : ch.abs_n + count])
         ch.abs_n += count
         if (start + count) % self.block == 0:
@@ -495,12 +499,10 @@ class ContactDetector:
     def _append_z(
         ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
     ) -> None:
-        rows = ch.rows
-        new = rows.extend(len(seg_h))
+        new = ch.rows.extend(len(seg_h))
         np.divide(seg_h, noise, new[0])
         new[1], new[2], new[3] = seg_h, seg_a, ready
-        if ch.z.base is not rows.data:  # grown (or the first append): views of the new storage
-            ch.z, ch.zh, ch.za, ch.zready = rows.data
+        ch.refresh_views()
 
     def _white(self, block: int) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
