@@ -543,6 +543,15 @@ def provisioning_cost() -> dict:
     }
 
 
+def lockstep_set() -> tuple[MeteredGateway, LockstepNetwork]:
+    """A fresh default gateway and one set of nodes, started on a `LockstepNetwork`."""
+    config = gateway_config()
+    gateway = MeteredGateway(config)
+    net = LockstepNetwork([gateway, *set_nodes(config)])
+    net.start()
+    return gateway, net
+
+
 def virtual_set(
     seconds: float, *, profile: bool = False, bounded: bool = False, warm_s: float = 1.0
 ) -> dict:
@@ -554,10 +563,7 @@ def virtual_set(
     if bounded:
         TrackerDecoder.PER_START = 0
     try:
-        config = gateway_config()
-        gateway = MeteredGateway(config)
-        net = LockstepNetwork([gateway, *set_nodes(config)])
-        net.start()
+        gateway, net = lockstep_set()
         net.run_for(round(warm_s * S))
         gateway.busy_ns = 0
         gateway.tpdo_cpu_us.clear()
@@ -597,10 +603,7 @@ def paced_cost(seconds: float, rounds: int = 2) -> dict:
     out: dict[str, dict[str, list[float]]] = {}
     for _ in range(rounds):
         for label, pace_s in (("back_to_back", 0.0), ("paced", TPDO_PERIOD_S)):
-            config = gateway_config()
-            gateway = MeteredGateway(config)
-            net = LockstepNetwork([gateway, *set_nodes(config)])
-            net.start()
+            gateway, net = lockstep_set()
             net.run_for(S)  # operational, decoder warm
             gateway.tpdo_cpu_us.clear()
             gateway.caused_cpu_us.clear()
@@ -948,10 +951,7 @@ def memory_virtual(seconds: float, sample_s: float, bounded: bool = False) -> di
     """
     if bounded:
         TrackerDecoder.PER_START = 0
-    config = gateway_config()
-    gateway = MeteredGateway(config)
-    net = LockstepNetwork([gateway, *set_nodes(config)])
-    net.start()
+    gateway, net = lockstep_set()
     series = []
     t = 0.0
     busy0 = 0

@@ -54,6 +54,8 @@ def run_workload(tree: Path, workload: str, amount: float) -> None:
         for i in range(0, len(t), 3):
             decoder.process(t[i : i + 3], x[i : i + 3])
     else:
+        # built here, not with bench_gateway's `lockstep_set`: the base tree's
+        # bench_gateway is imported, and older ones do not have it
         config = bg.gateway_config()
         net = bg.LockstepNetwork([bg.Gateway(config), *bg.set_nodes(config)])
         net.start()
