@@ -72,6 +72,7 @@ from grasplink.gateway.decoding.contacts import (
     ContactEvent,
     PulseCheck,
 )
+from grasplink.gateway.decoding.kernels.prune import prune_choice
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
@@ -592,8 +593,8 @@ class TrackerDecoder(Decoder):
             self._memo[key] = (before, self._null, pool)
             while len(self._memo) > self.MEMO:
                 del self._memo[next(iter(self._memo))]
-        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]])
-        held_ids = np.array([c.id for c in self._contacts])
+        recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]], np.int64)
+        held_ids = np.array([c.id for c in self._contacts], np.int64)
         self._tracks = self._prune(pool, recent_ids, held_ids)
 
     def _branch(self, ev: ContactEvent) -> _Bank:
@@ -975,52 +976,21 @@ class TrackerDecoder(Decoder):
         """
         if not len(B):
             return B
-        # decided on the fields it needs in score order; the bank is taken once, at the end
-        score = B.score
-        order = (-score).argsort(kind="stable")
-        ints = B._i.take(order, 0)  # the int columns in score order
-        # the key ((id[-1] M + id[-2]) M + id[-3]) M + state, state = 16 ridge + 8 (dirn > 0)
-        # + 4 model + 2 slipping + (run == 1), wrapping as int64 does: as one int matmul
-        # (the same sum mod 2^64, less the constant 4 of 8 (dirn > 0) = 4 dirn + 4)
-        key = ints @ _KEY_WEIGHTS + np.isnan(B.stop.take(order)) * 2 + (ints[:, _RUN] == 1)
-        # the first of each key (np.unique's return_index: a stable sort, each run's head)
-        perm = key.argsort(kind="mergesort")
-        aux = key.take(perm)
-        head = np.empty(len(aux), bool)
-        head[0] = True
-        np.not_equal(aux[1:], aux[:-1], out=head[1:])
-        keep = np.zeros(len(B), bool)
-        keep[perm[head]] = True
-        score = score.take(order)
-        keep &= score >= score[0] - self.NEGLIGIBLE - 20.0
-        # one-contact tracks: only those starting at a recent contact
-        single = ints[:, _N] == 1
-        last = ints[:, _IDS.stop - 1]
-        recent_start = np.zeros(len(B), bool)
-        for r in recent.tolist():
-            recent_start |= last == r
-        keep &= ~single | recent_start
-        idx = _nz(keep & ~single)
-        # the best max_hypotheses, and the best PER_START of each start contact held
-        rank = np.arange(len(idx))
-        ok = rank < self.max_hypotheses
-        if len(idx) and len(held):
-            # rank within each start contact: a stable sort by start, counted from each
-            # run's head
-            firsts = ints[:, _FIRST].take(idx)
-            by_start = firsts.argsort(kind="stable")
-            starts = firsts.take(by_start)
-            head = np.empty(len(starts), bool)
-            head[0] = True
-            np.not_equal(starts[1:], starts[:-1], out=head[1:])
-            group_rank = rank - np.maximum.accumulate(np.where(head, rank, 0))
-            held_sorted = held.copy()
-            held_sorted.sort()
-            at = np.minimum(held_sorted.searchsorted(starts), len(held_sorted) - 1)
-            quota = (group_rank < self.PER_START) & (held_sorted.take(at) == starts)
-            ok[by_start[quota]] = True
-        keep[idx[~ok]] = False
-        chosen = order.take(_nz(keep))
+        chosen = prune_choice(
+            B.score,
+            B.stop,
+            B._i,
+            _KEY_WEIGHTS,
+            _RUN,
+            _N,
+            _IDS.stop - 1,
+            _FIRST,
+            recent,
+            held,
+            self.NEGLIGIBLE,
+            self.max_hypotheses,
+            self.PER_START,
+        )
         # the same pool pruned to the same tracks: the same bank object again, so that the
         # next contact of a replay finds its branches in the memo (`_step`)
         known = self._pruned.get(id(B))
