@@ -63,7 +63,6 @@ from collections.abc import Sequence
 from functools import cached_property
 
 import numpy as np
-from scipy.special import erf
 
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.gateway.decoding.contacts import (
@@ -72,6 +71,7 @@ from grasplink.gateway.decoding.contacts import (
     ContactEvent,
     PulseCheck,
 )
+from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
 from grasplink.gateway.decoding.kernels.prune import prune_choice
 
 V_MIN_MM_S = 2.0
@@ -89,7 +89,6 @@ _QV_DIV = np.array([3.0, 2.0, 2.0, 1.0])
 _QJ_AT = np.array([0, 1, 4, 2, 8, 5, 6, 9, 10])
 _QJ_POW1, _QJ_POW2 = np.array([3, 2, 2, 3, 3, 3, 2, 2, 1]), np.array([2, 2, 2, 0, 0, 0, 0, 0, 0])
 _QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
-_VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
 
 
 # the columns of a bank's two matrices: floats (P flattened row-major, X = (s, v, a, d), m,
@@ -115,6 +114,7 @@ _KEY_WEIGHTS = np.zeros(_I_WIDTH, np.int64)
 _KEY_WEIGHTS[[_IDS.stop - 1, _IDS.stop - 2, _IDS.stop - 3]] = [_KEY_M**3, _KEY_M**2, _KEY_M]
 _KEY_WEIGHTS[[_RIDGE, _DIRN, _MODEL]] = [16, 4, 4]
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
+_NO_BLIND = np.zeros(0)  # the posterior kernel's blind times when none
 
 
 def _full(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
@@ -423,8 +423,8 @@ class TrackerDecoder(Decoder):
                 coast = float(self._pos[di, R] - pos[di, r])
                 self._ahead_log[di, r, R - 1 - r] = math.log(coast)
                 self._ahead_missed[di, r, R - 1 - r] = 0.0
-        # what _log_waiting derives from them, per (direction, start ridge): P(all missed
-        # before each ridge ahead) and which ridges exist
+        # what the waiting tracks' score derives from them, per (direction, start ridge):
+        # P(all missed before each ridge ahead) and which ridges exist
         self._ahead_before = np.concatenate(
             [np.ones((2, R, 1)), self._ahead_missed[:, :, :-1]], axis=2
         )
@@ -1055,47 +1055,14 @@ class TrackerDecoder(Decoder):
         """Silence of slipping tracks with a speed: per track and ridge ahead (time due,
         score adjustment from then, stopped from then, next ridge not reached from then).
         All but the times due come from tables (`_silence_tables`); the times are
-        computed for the active tracks only (the others keep the tables' values)."""
-        if B._sched is not None:
-            return B._sched
-        T, R = self._silence_tables, self.count
-        active = np.isnan(B.stop) & (B.run >= 2)
-        di = (1 - B.dirn) // 2
-        row = di * (R + 1) + np.minimum(B.ridge, R)
-        at = row + active * (2 * (R + 1))
-        due = T["due"].take(at, axis=0)
-        adj = T["adj"].take(at, axis=0)
-        stopped = T["stopped"].take(at, axis=0)
-        limit = T["limit"].take(at, axis=0)
-        act = _nz(active)
-        if len(act):
-            # every ridge ahead at once (tracks, SCHEDULE): elementwise the same numbers as
-            # one ridge after the other, in a third of the numpy calls
-            ra = row[act]
-            X, P = B.X[act], B.P[act]
-            s0, v, a, d = X[:, 0], np.maximum(X[:, 1], V_MIN_MM_S), X[:, 2], X[:, 3]
-            p00, p01, p11, p02, p12, p22 = (P[:, i, j, None] for i, j in _VAR_AT)
-            coast = self._coast_end(di[act], v)[:, None]
-            target = np.where(T["coast"][ra], coast, T["target"][ra])
-            s0, a, v = s0[:, None], a[:, None], v[:, None]
-            dist = np.maximum(target - s0, 1e-3)
-            a_p = np.maximum(a, -self.ACC_FLOOR * v * v / dist)
-            vv, a2 = v * v, 2.0 * a_p  # (the same numbers in every pass below)
-            root = np.sqrt(np.maximum(vv + a2 * dist, 1e-9))
-            tau = 2.0 * dist / (v + root)
-            dm = (d * B.m[act])[:, None]
-            for _ in range(2):  # the part of the dip recovered by then
-                eff = dist + dm * (1.0 - np.exp(-tau / self.DIP_RECOVERY_S))
-                root = np.sqrt(np.maximum(vv + a2 * eff, 1e-9))
-                tau = 2.0 * eff / (v + root)
-            v_k = np.maximum(v + a_p * tau, 0.2 * v)
-            tt = tau * tau  # tau**2 too: numpy squares exactly so
-            var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
-            span = np.sqrt(np.maximum(var, 0.0)) / v_k
-            latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
-            t_due = B.t[act, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
-            due[act, 1:] = np.where(T["done"][ra], np.inf, t_due)
-        B._sched = (due, adj, stopped, limit)
+        computed for the active tracks only (kernels.posterior.schedule). Cached on the
+        bank (banks are immutable)."""
+        if B._sched is None:
+            T = self._silence_tables
+            B._sched = posterior_kernels.schedule(
+                B.X, B.P, B.m, B.t, B.stop, B.dirn, B.ridge, B.run, T["due"], T["adj"],
+                T["stopped"], T["limit"], T["done"], T["coast"], T["target"], self._pos, self._K,
+            )  # fmt: skip
         return B._sched
 
     # ------------------------------------------------------------------ reporting
@@ -1133,12 +1100,6 @@ class TrackerDecoder(Decoder):
             return SlipEstimate(g, True, h.dirn * speed, x, force, conf)
         return SlipEstimate(g, False, 0.0, self._on_skin(x), force, conf)
 
-    def _coast_end(self, di, v):
-        """How far a slip at speed v goes past the last ridge before silence alone says it
-        stopped: past the skin no ridge tells, only the level (a stop's step, thesis ch. 4.3)
-        - so at least the longest spacing, and COAST_S at that speed."""
-        return self._pos[di, self.count - 1] + np.maximum(self._coast, self.COAST_S * v)
-
     def _x1(self, h: _One, s: float) -> float:
         return s if h.dirn > 0 else self.length - s
 
@@ -1148,38 +1109,13 @@ class TrackerDecoder(Decoder):
         return min(self.length, max(0.0, x))
 
     def _where(self, h: _One, g: float, stopped: bool, limit: int) -> tuple[float, float, float]:
-        """(travel of the edge from the first ridge met, speed, sigma) of one track at g."""
-        di = (1 - h.dirn) // 2
-        pos = self._pos[di]
-        if h.stop == h.stop:  # stopped at a step: where it was then
-            r = h.ridge
-            gap = float(pos[min(r + 1, self.count)] - pos[r])
-            return h.s, 0.0, max(math.sqrt(max(h.p00, 0.0)), 0.1 * gap)
-        tau = max(0.0, g - h.t)
-        v = h.v
-        v_end = min(max(v + h.a * tau, 0.25 * v), 4.0 * v)
-        decay = math.exp(-tau / self.DIP_RECOVERY_S)
-        s = h.s + 0.5 * (v + v_end) * tau - h.d * h.m * (1.0 - decay)
-        speed = max(0.0, v_end - h.d * h.m * decay / self.DIP_RECOVERY_S)
-        var = (
-            h.p00
-            + 2 * tau * h.p01
-            + tau * tau * h.p11
-            + tau * tau * (h.p02 + tau * h.p12 + 0.25 * tau * tau * h.p22)
-        )
-        sigma = math.sqrt(max(var, 0.0))
-        end = float(pos[limit]) if limit < self.count else float(self._coast_end(di, v))
-        s = min(s, end)
-        if stopped:  # somewhere before the ridge it never reached: as likely anywhere
-            start = float(pos[min(limit, self.count) - 1])
-            sigma = max(sigma, (end - start) / math.sqrt(12.0))
-            speed = 0.0
-        if h.ridge == self.count - 1:
-            sigma += 0.2 * max(0.0, s - float(pos[self.count - 1]))
-        return s, speed, sigma
-
-    def _x(self, B: _Bank, s: np.ndarray) -> np.ndarray:
-        return np.where(B.dirn > 0, s, self.length - s)
+        """(travel of the edge from the first ridge met, speed, sigma) of one track at g:
+        extrapolated with its speed and acceleration, less the dip still recovering; held
+        where it stopped (kernels.posterior.where)."""
+        return posterior_kernels.where(
+            h.s, h.v, h.a, h.d, h.m, h.t, h.stop, h.p00, h.p01, h.p11, h.p02, h.p12, h.p22,
+            h.dirn, h.ridge, g, stopped, limit, self._pos, self._K,
+        )  # fmt: skip
 
     def _posterior(self, g: float):
         """(valid until, chosen (index, stopped, limit) or None, P(slip), agreement,
@@ -1192,87 +1128,18 @@ class TrackerDecoder(Decoder):
         moving the other way.
         """
         B = self._tracks
-        until = g + self.REFRESH_S
-        score = B.score
-        best = float(score.max())
-        live = score >= best - self.NEGLIGIBLE
-        # silence
         due, adj_t, stop_t, limit_t = self._schedule(B)
         blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
-        # (None: none - the same numbers as subtracting and adding zeros)
-        seen = g if blind is None else g - blind[:, None]
-        j = np.add.reduce(due <= seen, axis=1) - 1  # (a bool sum without its wrapper)
-        rows = np.arange(len(B))
-        adj = adj_t[rows, j]
-        running = np.isnan(B.stop)
-        stopped = stop_t[rows, j] | ~running
-        limit = limit_t[rows, j]
-        upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)]
-        if blind is not None:
-            upcoming = upcoming + blind
-        upcoming = np.where(j + 1 < due.shape[1], upcoming, np.inf)
-        nxt = upcoming[live & (upcoming > g)]
-        if len(nxt):
-            until = min(until, float(nxt.min()))
-        waiting = running & (B.run == 1)
-        w = _nz(waiting & live)
-        if len(w):
-            adj[w] = self._log_waiting(B, w, g, None if blind is None else blind[w])
-        evident, bonus = self._evidence(B)
-        total = np.where(live, score + adj + bonus, -np.inf)
-        top = max(self._null, float(total.max()))
-        weight = np.exp(total - top)
-        mass = math.exp(self._null - top) + float(weight.sum())
-        slipping = evident & ~stopped
-        p_slip = float(weight[slipping].sum()) / mass
-        chosen = None
-        if p_slip >= 0.5 and slipping.any():
-            # the first best of the slipping tracks (one of them has weight)
-            i = int(np.where(slipping, total, -np.inf).argmax())
-            chosen = (i, False, int(limit[i]))
-        else:
-            cand = evident & stopped
-            if cand.any():
-                i = int(_nz(cand)[np.argmax(total[cand])])
-                if total[i] >= self._null:
-                    chosen = (i, True, int(limit[i]))
-        if chosen is None:
+        ahead_log, ahead_finite, ahead_before = self._waiting_tables
+        until, i, is_stopped, lim, p_slip, agree, odds = posterior_kernels.posterior(
+            g, self._null, B.score, B.X, B.P, B.m, B.t, B.stop, B.dirn, B.ridge, B.run, B.n,
+            due, adj_t, stop_t, limit_t, _NO_BLIND if blind is None else blind,
+            blind is not None, B.ids, self._ring, self._ring_id, self._evidence_tables,
+            ahead_log, ahead_finite, ahead_before, self._pos, self._K,
+        )  # fmt: skip
+        if i < 0:
             return (until, None, p_slip, 0.0, -math.inf)
-        i, is_stopped, lim = chosen
-        one = _One(B, i)
-        odds = math.inf
-        if not is_stopped:
-            # the direction: the posterior mass of moving each way - slipping tracks, and
-            # tracks just started at a contact (a slip starting or reversing)
-            moving = (slipping | (waiting & live)) & np.isfinite(total)
-            way = B.dirn == B.dirn[i]
-            this = float(weight[moving & way].sum())
-            other = float(weight[moving & ~way].sum())
-            odds = math.log(this / other) if other > 0 else math.inf
-            if one.run == 1 or one.n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS:
-                return (until, (one, is_stopped, lim), p_slip, 0.0, odds)  # no estimate
-        # agreement
-        x_ref = self._x1(one, self._where(one, g, is_stopped, lim)[0])
-        use = live & evident & (stopped == is_stopped) & (weight >= 1e-4 * mass)
-        if not is_stopped:
-            use &= (B.dirn == B.dirn[i]) & (
-                np.abs(B.X[:, 1] - B.X[i, 1]) <= self.AGREE_SPEED * B.X[i, 1]
-            )
-        idx = _nz(use)
-        agree = 0.0
-        if len(idx):
-            Bu = B.take(idx)
-            s = self._travel(Bu, g)
-            # held where the ridge not reached is, or where they stopped
-            di = (1 - Bu.dirn) // 2
-            ahead = np.minimum(limit[idx], self.count)
-            end = np.where(
-                ahead < self.count, self._pos[di, ahead], self._coast_end(di, Bu.X[:, 1])
-            )
-            s = np.where(np.isnan(Bu.stop), np.minimum(s, end), Bu.X[:, 0])
-            xs = self._x(Bu, s)
-            agree = float(weight[idx][np.abs(xs - x_ref) <= self.AGREE_MM].sum()) / mass
-        return (until, (one, is_stopped, lim), p_slip, agree, odds)
+        return (until, (_One(B, i), is_stopped, lim), p_slip, agree, odds)
 
     def _blind(self, t: np.ndarray, g: float) -> np.ndarray | None:
         """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there);
@@ -1288,10 +1155,11 @@ class TrackerDecoder(Decoder):
 
     @cached_property
     def _evidence_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """What `_evidence` reads off a track's verdict counts, packed as pulses + 256
-        steps: the weight of each verdict in such a count, the score bonus per count, and
-        whether it is evident per count and min(n, 4) contacts - the same numbers as from
-        the counts themselves."""
+        """What the pulse verdicts on a track's recent contacts say (is it a slip, a score
+        bonus; kernels.posterior), read off their counts packed as pulses + 256 steps: the
+        weight of each verdict in such a count, the bonus per count, and whether it is
+        evident per count and min(n, 4) contacts. (A ring slot never written holds id -1
+        and no verdict: an unused id, -1, reads no verdict there.)"""
         weight = np.zeros(max(UNKNOWN, PULSE, STEP, UNCLEAR) + 1, np.int64)
         weight[PULSE], weight[STEP] = 1, 256
         packed = np.arange(256 * IDS + IDS + 1)
@@ -1301,48 +1169,37 @@ class TrackerDecoder(Decoder):
         evident = (n >= 2) & ((pulses > 0) | ((n >= 4) & (steps == 0)))
         return weight, bonus, evident
 
-    def _evidence(self, B: _Bank) -> tuple[np.ndarray, np.ndarray]:
-        """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
-        And the score bonus of the pulse verdicts on its recent contacts. (A slot never
-        written holds id -1 and no verdict: an unused id, -1, reads no verdict there.)"""
-        weight, bonus, evident = self._evidence_tables
-        ids = B.ids
-        slot = ids % RING
-        counted = weight.take(self._ring.take(slot))
-        packed = np.add.reduce(np.where(self._ring_id.take(slot) == ids, counted, 0), axis=1)
-        return evident[np.minimum(B.n, 4), packed], bonus.take(packed)
+    @cached_property
+    def _K(self) -> np.ndarray:
+        """The posterior kernels' constants (kernels.posterior.NAMES)."""
+        return posterior_kernels.constants(
+            negligible=self.NEGLIGIBLE,
+            refresh_s=self.REFRESH_S,
+            v_min_mm_s=V_MIN_MM_S,
+            acc_floor=self.ACC_FLOOR,
+            dip_recovery_s=self.DIP_RECOVERY_S,
+            detect_mm=self.DETECT_MM,
+            late_rel=self.LATE_REL,
+            min_latency_s=self._min_latency,
+            max_latency_s=self._max_latency,
+            coast_mm=self._coast,
+            coast_s=self.COAST_S,
+            length_mm=self.length,
+            agree_mm=self.AGREE_MM,
+            agree_speed=self.AGREE_SPEED,
+            direction_contacts=self.DIRECTION_CONTACTS,
+            log_report_odds=self.LOG_REPORT_ODDS,
+            speed_prior_mm_s=self.SPEED_PRIOR_MM_S,
+            erf_scale=self._erf_scale,
+        )
 
     @cached_property
     def _waiting_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """`_log_waiting`'s tables by row di * count + ridge (one take, not a 2-D index)."""
+        """The waiting tracks' tables (P(no contact yet), kernels.posterior) by row
+        di * count + ridge."""
         rows = 2 * self.count
         return (
             self._ahead_log.reshape(rows, -1),
             self._ahead_finite.reshape(rows, -1),
             self._ahead_before.reshape(rows, -1),
         )
-
-    def _log_waiting(
-        self, B: _Bank, w: np.ndarray, g: float, blind: np.ndarray | None
-    ) -> np.ndarray:
-        """Log P(no contact detected yet) for tracks w whose speed is unknown (one contact,
-        or restarted), g - t after their contact (less the time on the rail): every ridge
-        ahead not yet reached under the speed prior, or reached and missed."""
-        elapsed = g - B.t[w]
-        if blind is not None:
-            elapsed = elapsed - blind
-        elapsed = elapsed - self._max_latency
-        pos = elapsed > 0
-        if not pos.any():
-            return np.zeros(len(w))
-        ahead_log, ahead_finite, ahead_before = self._waiting_tables
-        row = (1 - B.dirn[w]) // 2 * self.count + np.minimum(B.ridge[w], self.count - 1)
-        logd = ahead_log.take(row, axis=0)  # (N, R + 1): the ridges ahead, the coast end
-        shift = np.log(np.maximum(elapsed, 1e-9) * self.SPEED_PRIOR_MM_S)
-        nr = 0.5 * (1.0 + erf((logd - shift[:, None]) * self._erf_scale))
-        # P(reached ridge j but not j+1) weighted by P(all missed up to j)
-        cdf = np.zeros((len(w), nr.shape[1] + 1))
-        cdf[:, 1:] = np.where(ahead_finite.take(row, axis=0), nr, 1.0)
-        step = cdf[:, 1:] - cdf[:, :-1]
-        total = np.add.reduce(ahead_before.take(row, axis=0) * step, axis=1)  # past the coast
-        return np.where(pos, np.log(np.maximum(total, 1e-12)), 0.0)  # end: stopped

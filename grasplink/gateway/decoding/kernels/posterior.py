@@ -1,0 +1,419 @@
+"""The tracker's posterior as compiled kernels: each track's silence schedule, and what
+the posterior over the tracks says at a time g (`TrackerDecoder._posterior` reads it).
+
+The formulas and their order are the numpy code's (see the tracker's docstrings for
+what they mean); sums keep numpy's pairwise order. exp, log and erf come from LLVM's
+libm, not numpy's SIMD loops or scipy: the same numbers to an ulp or so.
+
+Constants come in one float vector, `K`, indexed by the names below (the decoder
+packs it once with `constants`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grasplink.gateway.decoding.kernels import jit
+
+NAMES = (
+    "negligible",
+    "refresh_s",
+    "v_min_mm_s",
+    "acc_floor",
+    "dip_recovery_s",
+    "detect_mm",
+    "late_rel",
+    "min_latency_s",
+    "max_latency_s",
+    "coast_mm",
+    "coast_s",
+    "length_mm",
+    "agree_mm",
+    "agree_speed",
+    "direction_contacts",
+    "log_report_odds",
+    "speed_prior_mm_s",
+    "erf_scale",
+)
+(
+    NEGLIGIBLE,
+    REFRESH_S,
+    V_MIN,
+    ACC_FLOOR,
+    DIP_S,
+    DETECT_MM,
+    LATE_REL,
+    MIN_LATENCY,
+    MAX_LATENCY,
+    COAST_MM,
+    COAST_S,
+    LENGTH_MM,
+    AGREE_MM,
+    AGREE_SPEED,
+    DIRECTION_CONTACTS,
+    LOG_REPORT_ODDS,
+    SPEED_PRIOR,
+    ERF_SCALE,
+) = range(len(NAMES))
+
+
+def constants(**values: float) -> np.ndarray:
+    """The constants vector `K` from its named values (every name in NAMES, no other)."""
+    missing, extra = set(NAMES) - set(values), set(values) - set(NAMES)
+    if missing or extra:
+        raise ValueError(f"posterior constants: missing {sorted(missing)}, unknown {sorted(extra)}")
+    return np.array([float(values[name]) for name in NAMES])
+
+
+@jit()
+def pairwise_sum(x: np.ndarray) -> float:
+    """Sum in numpy's pairwise order (np.add.reduce on a contiguous float64 vector)."""
+    n = len(x)
+    if n < 8:
+        total = -0.0
+        for i in range(n):
+            total += x[i]
+        return total
+    if n <= 128:
+        r = x[:8].copy()
+        i = 8
+        while i < n - n % 8:
+            for k in range(8):
+                r[k] += x[i + k]
+            i += 8
+        total = (r[0] + r[1] + (r[2] + r[3])) + (r[4] + r[5] + (r[6] + r[7]))
+        while i < n:
+            total += x[i]
+            i += 1
+        return total
+    half = n // 2
+    half -= half % 8
+    return pairwise_sum(x[:half]) + pairwise_sum(x[half:])
+
+
+@jit()
+def coast_end(pos: np.ndarray, di: int, v: float, K: np.ndarray) -> float:
+    """How far a slip at speed v goes past the last ridge before silence alone says it
+    stopped (`TrackerDecoder._coast_end`)."""
+    return pos[di, pos.shape[1] - 2] + np.maximum(K[COAST_MM], K[COAST_S] * v)
+
+
+@jit()
+def schedule(
+    X: np.ndarray,
+    P: np.ndarray,
+    m: np.ndarray,
+    t: np.ndarray,
+    stop: np.ndarray,
+    dirn: np.ndarray,
+    ridge: np.ndarray,
+    run: np.ndarray,
+    due_t: np.ndarray,
+    adj_t: np.ndarray,
+    stopped_t: np.ndarray,
+    limit_t: np.ndarray,
+    done_t: np.ndarray,
+    coast_t: np.ndarray,
+    target_t: np.ndarray,
+    pos: np.ndarray,
+    K: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per track and ridge ahead: time due, score adjustment, stopped, next ridge not
+    reached, from then on (`TrackerDecoder._schedule`): the tables' rows, and for the
+    slipping tracks with a speed the times due computed."""
+    N = len(t)
+    R = pos.shape[1] - 1
+    S = done_t.shape[1]
+    J = due_t.shape[1]
+    due = np.empty((N, J))
+    adj = np.empty((N, J))
+    stopped = np.empty((N, J), np.bool_)
+    limit = np.empty((N, J), np.int64)
+    for n in range(N):
+        active = np.isnan(stop[n]) and run[n] >= 2
+        di = (1 - dirn[n]) // 2
+        row = di * (R + 1) + min(ridge[n], R)
+        at = row + (2 * (R + 1) if active else 0)
+        due[n] = due_t[at]
+        adj[n] = adj_t[at]
+        stopped[n] = stopped_t[at]
+        limit[n] = limit_t[at]
+        if not active:
+            continue
+        s0, v, a, d = X[n, 0], np.maximum(X[n, 1], K[V_MIN]), X[n, 2], X[n, 3]
+        p00, p01, p11 = P[n, 0, 0], P[n, 0, 1], P[n, 1, 1]
+        p02, p12, p22 = P[n, 0, 2], P[n, 1, 2], P[n, 2, 2]
+        coast = coast_end(pos, di, v, K)
+        dm = d * m[n]
+        vv = v * v
+        for j in range(S):
+            target = coast if coast_t[row, j] else target_t[row, j]
+            dist = np.maximum(target - s0, 1e-3)
+            a_p = np.maximum(a, -K[ACC_FLOOR] * v * v / dist)
+            a2 = 2.0 * a_p
+            root = math.sqrt(np.maximum(vv + a2 * dist, 1e-9))
+            tau = 2.0 * dist / (v + root)
+            for _ in range(2):  # the part of the dip recovered by then
+                eff = dist + dm * (1.0 - math.exp(-tau / K[DIP_S]))
+                root = math.sqrt(np.maximum(vv + a2 * eff, 1e-9))
+                tau = 2.0 * eff / (v + root)
+            v_k = np.maximum(v + a_p * tau, 0.2 * v)
+            tt = tau * tau
+            var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
+            span = math.sqrt(np.maximum(var, 0.0)) / v_k
+            latency = np.minimum(K[MAX_LATENCY], np.maximum(K[MIN_LATENCY], K[DETECT_MM] / v_k))
+            t_due = t[n] + tau + 3.0 * span + K[LATE_REL] * tau + latency
+            due[n, j + 1] = np.inf if done_t[row, j] else t_due
+    return due, adj, stopped, limit
+
+
+@jit()
+def where(
+    s: float,
+    v: float,
+    a: float,
+    d: float,
+    m: float,
+    t: float,
+    stop: float,
+    p00: float,
+    p01: float,
+    p11: float,
+    p02: float,
+    p12: float,
+    p22: float,
+    dirn: int,
+    ridge: int,
+    g: float,
+    stopped: bool,
+    limit: int,
+    pos: np.ndarray,
+    K: np.ndarray,
+) -> tuple[float, float, float]:
+    """(travel of the edge from the first ridge met, speed, sigma) of one track at g
+    (`TrackerDecoder._where`)."""
+    R = pos.shape[1] - 1
+    di = (1 - dirn) // 2
+    if stop == stop:  # stopped at a step: where it was then
+        gap = pos[di, min(ridge + 1, R)] - pos[di, ridge]
+        return s, 0.0, max(math.sqrt(max(p00, 0.0)), 0.1 * gap)
+    tau = max(0.0, g - t)
+    v_end = min(max(v + a * tau, 0.25 * v), 4.0 * v)
+    decay = math.exp(-tau / K[DIP_S])
+    x = s + 0.5 * (v + v_end) * tau - d * m * (1.0 - decay)
+    speed = max(0.0, v_end - d * m * decay / K[DIP_S])
+    var = (
+        p00
+        + 2 * tau * p01
+        + tau * tau * p11
+        + tau * tau * (p02 + tau * p12 + 0.25 * tau * tau * p22)
+    )
+    sigma = math.sqrt(max(var, 0.0))
+    end = pos[di, limit] if limit < R else coast_end(pos, di, v, K)
+    x = min(x, end)
+    if stopped:  # somewhere before the ridge it never reached: as likely anywhere
+        start = pos[di, min(limit, R) - 1]
+        sigma = max(sigma, (end - start) / math.sqrt(12.0))
+        speed = 0.0
+    if ridge == R - 1:
+        sigma += 0.2 * max(0.0, x - pos[di, R - 1])
+    return x, speed, sigma
+
+
+@jit()
+def _log_waiting(
+    elapsed: float,
+    row: int,
+    ahead_log: np.ndarray,
+    ahead_finite: np.ndarray,
+    ahead_before: np.ndarray,
+    K: np.ndarray,
+) -> float:
+    """Log P(no contact detected yet) for a track whose speed is unknown, `elapsed`
+    after its contact less the detector's latency (`TrackerDecoder._log_waiting`)."""
+    if not elapsed > 0:
+        return 0.0
+    shift = math.log(np.maximum(elapsed, 1e-9) * K[SPEED_PRIOR])
+    C = ahead_log.shape[1]
+    step = np.empty(C)
+    before = 0.0
+    for c in range(C):
+        nr = 0.5 * (1.0 + math.erf((ahead_log[row, c] - shift) * K[ERF_SCALE]))
+        now = nr if ahead_finite[row, c] else 1.0
+        step[c] = ahead_before[row, c] * (now - before)
+        before = now
+    return math.log(np.maximum(pairwise_sum(step), 1e-12))
+
+
+@jit()
+def _evidence(
+    ids: np.ndarray,
+    n: np.ndarray,
+    ring: np.ndarray,
+    ring_id: np.ndarray,
+    weight_t: np.ndarray,
+    bonus_t: np.ndarray,
+    evident_t: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per track: is it evidently a slip, and its score bonus, from the pulse verdicts on
+    its recent contacts (`TrackerDecoder._evidence_tables`): a contact's verdict counts
+    where the ring of verdicts still holds that contact's id."""
+    N, R = ids.shape[0], len(ring)
+    evident = np.empty(N, np.bool_)
+    bonus = np.empty(N)
+    for i in range(N):
+        packed = 0
+        for c in range(ids.shape[1]):
+            slot = ids[i, c] % R
+            if ring_id[slot] == ids[i, c]:
+                packed += weight_t[ring[slot]]
+        evident[i] = evident_t[min(n[i], 4), packed]
+        bonus[i] = bonus_t[packed]
+    return evident, bonus
+
+
+@jit()
+def posterior(
+    g: float,
+    null: float,
+    score: np.ndarray,
+    X: np.ndarray,
+    P: np.ndarray,
+    m: np.ndarray,
+    t: np.ndarray,
+    stop: np.ndarray,
+    dirn: np.ndarray,
+    ridge: np.ndarray,
+    run: np.ndarray,
+    n: np.ndarray,
+    due: np.ndarray,
+    adj_t: np.ndarray,
+    stop_t: np.ndarray,
+    limit_t: np.ndarray,
+    blind: np.ndarray,
+    has_blind: bool,
+    ids: np.ndarray,
+    ring: np.ndarray,
+    ring_id: np.ndarray,
+    evidence_t: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ahead_log: np.ndarray,
+    ahead_finite: np.ndarray,
+    ahead_before: np.ndarray,
+    pos: np.ndarray,
+    K: np.ndarray,
+) -> tuple[float, int, bool, int, float, float, float]:
+    """(valid until, chosen track or -1, stopped, its limit, P(slip), agreement, direction
+    log odds) at g: `TrackerDecoder._posterior`. `ids`: each track's recent contacts,
+    whose pulse verdicts (`ring`, `ring_id`, `evidence_t`: see `_evidence`) tell a slip;
+    `blind` (if `has_blind`) the time each track's contact has spent on
+    the sensor's rail since."""
+    N = len(score)
+    R = pos.shape[1] - 1
+    J = due.shape[1]
+    until = g + K[REFRESH_S]
+    evident, bonus = _evidence(ids, n, ring, ring_id, *evidence_t)
+    best = -np.inf
+    for i in range(N):
+        best = max(best, score[i])
+    total = np.empty(N)
+    stopped = np.empty(N, np.bool_)
+    limit = np.empty(N, np.int64)
+    live = np.empty(N, np.bool_)
+    waiting = np.empty(N, np.bool_)
+    for i in range(N):
+        live[i] = score[i] >= best - K[NEGLIGIBLE]
+        seen = g - blind[i] if has_blind else g
+        j = -1
+        for c in range(J):
+            if due[i, c] <= seen:
+                j += 1
+        adj = adj_t[i, j]
+        running = np.isnan(stop[i])
+        stopped[i] = stop_t[i, j] or not running
+        limit[i] = limit_t[i, j]
+        if j + 1 < J:
+            upcoming = due[i, j + 1] + blind[i] if has_blind else due[i, j + 1]
+            if live[i] and upcoming > g:
+                until = min(until, upcoming)
+        waiting[i] = running and run[i] == 1
+        if waiting[i] and live[i]:
+            elapsed = g - t[i]
+            if has_blind:
+                elapsed = elapsed - blind[i]
+            row = (1 - dirn[i]) // 2 * R + min(ridge[i], R - 1)
+            adj = _log_waiting(
+                elapsed - K[MAX_LATENCY], row, ahead_log, ahead_finite, ahead_before, K
+            )
+        total[i] = score[i] + adj + bonus[i] if live[i] else -np.inf
+    top = null
+    for i in range(N):
+        top = max(top, total[i])
+    weight = np.exp(total - top)
+    mass = math.exp(null - top) + pairwise_sum(weight)
+    slipping = evident & ~stopped
+    p_slip = pairwise_sum(weight[slipping]) / mass
+    chosen, is_stopped = -1, False
+    if p_slip >= 0.5 and slipping.any():
+        best_total = -np.inf  # the first best of the slipping tracks
+        for i in range(N):
+            if slipping[i] and (chosen < 0 or total[i] > best_total):
+                chosen, best_total = i, total[i]
+    else:
+        best_total = -np.inf
+        cand = -1
+        for i in range(N):
+            if evident[i] and stopped[i] and (cand < 0 or total[i] > best_total):
+                cand, best_total = i, total[i]
+        if cand >= 0 and total[cand] >= null:
+            chosen, is_stopped = cand, True
+    if chosen < 0:
+        return until, -1, False, 0, p_slip, 0.0, -np.inf
+    lim = limit[chosen]
+    odds = np.inf
+    if not is_stopped:
+        # the direction: the posterior mass moving each way - slipping tracks, and tracks
+        # just started at a contact (a slip starting or reversing)
+        moving = (slipping | (waiting & live)) & np.isfinite(total)
+        way = dirn == dirn[chosen]
+        this = pairwise_sum(weight[moving & way])
+        other = pairwise_sum(weight[moving & ~way])
+        odds = math.log(this / other) if other > 0 else np.inf
+        if run[chosen] == 1 or n[chosen] < K[DIRECTION_CONTACTS] or odds < K[LOG_REPORT_ODDS]:
+            return until, chosen, is_stopped, lim, p_slip, 0.0, odds
+    c = chosen
+    x_ref = where(
+        X[c, 0], X[c, 1], X[c, 2], X[c, 3], m[c], t[c], stop[c],
+        P[c, 0, 0], P[c, 0, 1], P[c, 1, 1], P[c, 0, 2], P[c, 1, 2], P[c, 2, 2],
+        dirn[c], ridge[c], g, is_stopped, lim, pos, K,
+    )[0]  # fmt: skip
+    if dirn[c] < 0:
+        x_ref = K[LENGTH_MM] - x_ref
+    # agreement: the share of the posterior within AGREE_MM (and AGREE_SPEED) of the chosen
+    use = live & evident & (stopped == is_stopped) & (weight >= 1e-4 * mass)
+    if not is_stopped:
+        v_i = X[chosen, 1]
+        use &= (dirn == dirn[chosen]) & (np.abs(X[:, 1] - v_i) <= K[AGREE_SPEED] * v_i)
+    idx = np.nonzero(use)[0]
+    agreeing = np.zeros(len(idx))
+    count = 0
+    for u in idx:
+        if np.isnan(stop[u]):
+            tau = np.maximum(0.0, g - t[u])
+            v, a, d = X[u, 1], X[u, 2], X[u, 3]
+            v_end = np.minimum(np.maximum(v + a * tau, 0.25 * v), 4.0 * v)
+            decay = math.exp(-tau / K[DIP_S])
+            s = X[u, 0] + 0.5 * (v + v_end) * tau - d * m[u] * (1.0 - decay)
+            di = (1 - dirn[u]) // 2
+            ahead = min(limit[u], R)
+            end = pos[di, ahead] if ahead < R else coast_end(pos, di, X[u, 1], K)
+            s = np.minimum(s, end)
+        else:
+            s = X[u, 0]
+        x = s if dirn[u] > 0 else K[LENGTH_MM] - s
+        if np.abs(x - x_ref) <= K[AGREE_MM]:
+            agreeing[count] = weight[u]
+            count += 1
+    agree = pairwise_sum(agreeing[:count]) / mass
+    return until, chosen, is_stopped, lim, p_slip, agree, odds
