@@ -10,7 +10,10 @@ STAMP_SYS := $(VENV)/.stamp-system
 
 .PHONY: demo test test-fast check lint typecheck format docs bench clean setup system proto telemetry-demo
 
+# The decoders' compiled kernels: compiled on a machine's first run (and after a kernel
+# changes), loaded from numba's cache after that.
 setup: $(STAMP_PY) $(STAMP_SYS)
+	@$(PY) -m grasplink.gateway.decoding.warm_up
 
 # Debian packages the test-suite and the integration surfaces use (MQTT broker, Modbus client).
 $(STAMP_SYS): | $(VENV)/bin/python

@@ -62,7 +62,7 @@ from grasplink.gateway import provisioning as provisioning_module
 from grasplink.gateway.config import GatewayConfig, parse_config
 from grasplink.gateway.decoding.contacts import ContactDetector
 from grasplink.gateway.decoding.tracker import TrackerDecoder
-from grasplink.gateway.live import freeze_startup_objects
+from grasplink.gateway.live import prepare_to_go_live
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import load_profile
 from grasplink.profiles import objects as obj
@@ -261,7 +261,7 @@ def realtime_loop(seconds: float) -> dict:
     nodes = NodeRunner(nodes_bus, set_nodes(config), name="bench-nodes")
     runner = NodeRunner(gw_bus, [gateway], name="bench-gateway")
     rss: list[tuple[float, float]] = []
-    freeze_startup_objects()  # as `LiveGateway.start` does before its runners start
+    prepare_to_go_live([gateway])  # as `LiveGateway.start` does before its runners start
     try:
         nodes.start()
         runner.start()
@@ -819,7 +819,7 @@ def _realtime_capacity(sets: int, seconds: float, *, together: bool, multi: bool
             gateway.stamp_bus = bus
             gateways.append(gateway)
             buses.append(bus)
-        freeze_startup_objects()  # as `LiveGateway.start` does before its runners start
+        prepare_to_go_live(gateways)  # as `LiveGateway.start` does before its runners start
         up0 = time.monotonic()
         if multi:
             for i, (gateway, bus) in enumerate(zip(gateways, buses, strict=True)):

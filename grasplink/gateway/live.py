@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 import gc
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import can
@@ -28,11 +28,19 @@ from grasplink.gateway.config import GatewayConfig
 from grasplink.gateway.service import Gateway
 
 
-def freeze_startup_objects() -> None:
-    """Move everything built so far (modules, object dictionaries, decoder tables) out of
-    the garbage collector's generations: a full collection in the loop then scans only
-    what the loop made, a pause of well under a millisecond instead of a few ms on the
-    skin TPDO that happens to trigger it (CPython's `gc.freeze`)."""
+def prepare_to_go_live(gateways: Iterable[Gateway]) -> None:
+    """What a gateway's loop must not meet once live, done before its runners start:
+
+    - its decoder's kernels loaded (or compiled): the first call would stall a second or
+      more (`Decoder.warm_up`);
+    - everything built so far (modules, object dictionaries, decoder tables) moved out of
+      the garbage collector's generations: a full collection in the loop then scans only
+      what the loop made, a pause of well under a millisecond instead of a few ms on the
+      skin TPDO that happens to trigger it (CPython's `gc.freeze`).
+    """
+    for gateway in gateways:
+        if gateway.decoder is not None:
+            gateway.decoder.warm_up()
     gc.collect()
     gc.freeze()
 
@@ -94,7 +102,7 @@ class LiveGateway:
                     reconnect_timeout_s=self.reconnect_timeout_s,
                 )
             )
-        freeze_startup_objects()
+        prepare_to_go_live(self.gateways)
         if len(self.bus_urls) == 1:
             self._runners += [r.start() for r in node_runners]
             self._runners.append(self._gateway_runners[0].start())

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from grasplink.evaluation import nonstationary
+from grasplink.gateway.decoding import tracker
 from grasplink.gateway.decoding.kernels.posterior import constants, pairwise_sum
 from tests.decoding.data.make_posterior_golden import record
 from tests.decoding.test_numerical_edges import railed_slip
@@ -52,3 +53,14 @@ def test_pairwise_sum_adds_in_numpys_order(size):
 def test_posterior_constants_are_all_named():
     with pytest.raises(ValueError, match=r"missing .*refresh_s"):
         constants(negligible=25.0)
+
+
+def test_warm_up_leaves_the_decoder_it_is_asked_of_as_it_was():
+    rec = nonstationary.signals(True)[0].make()
+    t, x = np.asarray(rec.t_s), np.asarray(rec.force_n)
+    warmed = tracker.TrackerDecoder(rec.truth.layout_mm, rec.fs_hz)
+    tracker._WARM = False  # as in a fresh process
+    warmed.warm_up()
+    assert tracker._WARM
+    fresh = tracker.TrackerDecoder(rec.truth.layout_mm, rec.fs_hz)
+    assert warmed.feed(t, x) == fresh.feed(t, x)

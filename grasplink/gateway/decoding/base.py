@@ -222,6 +222,12 @@ class Decoder:
         self._next_update: int | None = None  # index of the next update on the grid
         self._pristine: dict | None = None  # state before the first sample (for reset)
 
+    def warm_up(self) -> None:
+        """Load, or on a machine's first run compile, whatever this decoder compiles
+        (kernels/), before it goes live: the first call would otherwise stall the loop
+        for a second or more. Leaves this decoder's state alone; nothing to do for a
+        decoder that compiles nothing."""
+
     def feed(self, t_s: np.ndarray, force_n: np.ndarray) -> list[SlipEstimate]:
         """Take samples (any chunking) and return the updates that fell due."""
         t = np.asarray(t_s, dtype=np.float64).ravel()

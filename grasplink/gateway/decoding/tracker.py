@@ -73,6 +73,7 @@ from grasplink.gateway.decoding.contacts import (
 )
 from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
 from grasplink.gateway.decoding.kernels.prune import prune_choice
+from grasplink.simulators.synth import slip_recording
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
@@ -114,6 +115,8 @@ _KEY_WEIGHTS = np.zeros(_I_WIDTH, np.int64)
 _KEY_WEIGHTS[[_IDS.stop - 1, _IDS.stop - 2, _IDS.stop - 3]] = [_KEY_M**3, _KEY_M**2, _KEY_M]
 _KEY_WEIGHTS[[_RIDGE, _DIRN, _MODEL]] = [16, 4, 4]
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
+WARM_UP_MM_S = 40.0  # the warm-up's slip (`TrackerDecoder.warm_up`)
+_WARM = False  # this process's kernels are loaded
 _NO_BLIND = np.zeros(0)  # the posterior kernel's blind times when none
 
 
@@ -484,6 +487,20 @@ class TrackerDecoder(Decoder):
         )
         self._birth._f.flags.writeable = False
         self._birth._i.flags.writeable = False
+
+    def warm_up(self) -> None:
+        """Load (or compile) the kernels: a throwaway decoder on this one's layout and rate
+        decodes a short synthetic slip (every kernel and argument type a live stream
+        meets), once per process."""
+        global _WARM
+        if _WARM:
+            return
+        layout_mm = tuple(float(mm) for mm in self.geometry.spacings_mm)
+        rec = slip_recording(layout_mm, WARM_UP_MM_S, fs_hz=400)
+        throwaway = TrackerDecoder(layout_mm, rec.fs_hz)
+        for i in range(0, len(rec.t_s), 3):  # as a skin TPDO brings them
+            throwaway.feed(rec.t_s[i : i + 3], rec.force_n[i : i + 3])
+        _WARM = True
 
     def _detect_probability(self, spacing_before: float) -> float:
         share = min(1.0, max(0.0, (spacing_before - 3.0) / 5.0))
