@@ -73,7 +73,6 @@ from grasplink.gateway.decoding.contacts import (
 )
 from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
 from grasplink.gateway.decoding.kernels.prune import prune_choice
-from grasplink.simulators.synth import slip_recording
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
@@ -115,7 +114,6 @@ _KEY_WEIGHTS = np.zeros(_I_WIDTH, np.int64)
 _KEY_WEIGHTS[[_IDS.stop - 1, _IDS.stop - 2, _IDS.stop - 3]] = [_KEY_M**3, _KEY_M**2, _KEY_M]
 _KEY_WEIGHTS[[_RIDGE, _DIRN, _MODEL]] = [16, 4, 4]
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
-WARM_UP_MM_S = 40.0  # the warm-up's slip (`TrackerDecoder.warm_up`)
 _WARM = False  # this process's kernels are loaded
 _NO_BLIND = np.zeros(0)  # the posterior kernel's blind times when none
 
@@ -163,6 +161,18 @@ def _with_contact(ints: np.ndarray, ev_id: int, ridge: np.ndarray, run) -> np.nd
     out[:, _RIDGE] = ridge
     out[:, _RUN] = run
     return out
+
+
+def warm_up_signal(ridges_mm: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t_s, force_n) of an edge slipping at 40 mm/s across ridges at `ridges_mm`: a held
+    level with a small noise and one pulse a ridge - what `TrackerDecoder.warm_up` feeds
+    (the gateway imports no simulator: a plain stand-in for one)."""
+    speed_mm_s, lead_s, pulse_n, width_s = 40.0, 0.3, 0.4, 0.008
+    t = np.arange(round((lead_s * 2 + ridges_mm[-1] / speed_mm_s) * fs_hz)) / fs_hz
+    x = 2.0 + 0.002 * np.random.default_rng(0).standard_normal(len(t))
+    for at_s in lead_s + ridges_mm / speed_mm_s:
+        x += pulse_n * np.exp(-0.5 * ((t - at_s) / width_s) ** 2)
+    return t, x
 
 
 class _Bank:
@@ -490,16 +500,15 @@ class TrackerDecoder(Decoder):
 
     def warm_up(self) -> None:
         """Load (or compile) the kernels: a throwaway decoder on this one's layout and rate
-        decodes a short synthetic slip (every kernel and argument type a live stream
-        meets), once per process."""
+        decodes a slip's ridge pulses (`warm_up_signal`: every kernel and argument type a
+        live stream meets), once per process."""
         global _WARM
         if _WARM:
             return
-        layout_mm = tuple(float(mm) for mm in self.geometry.spacings_mm)
-        rec = slip_recording(layout_mm, WARM_UP_MM_S, fs_hz=400)
-        throwaway = TrackerDecoder(layout_mm, rec.fs_hz)
-        for i in range(0, len(rec.t_s), 3):  # as a skin TPDO brings them
-            throwaway.feed(rec.t_s[i : i + 3], rec.force_n[i : i + 3])
+        t, x = warm_up_signal(self.geometry.ridges_mm, self.fs_hz)
+        throwaway = TrackerDecoder(self.geometry.spacings_mm.tolist(), self.fs_hz)
+        for i in range(0, len(t), 3):  # as a skin TPDO brings them
+            throwaway.feed(t[i : i + 3], x[i : i + 3])
         _WARM = True
 
     def _detect_probability(self, spacing_before: float) -> float:
