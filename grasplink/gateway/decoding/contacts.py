@@ -9,7 +9,9 @@ starting on the decay of the previous one) and it is blind to the slow
 trends of the signal (drift, the object covering more of the sensor).
 
 Detector (all filters are FIR, run as `filters.SosFilter` - sample by sample
-with carried state, so chunking cannot change a single bit):
+with carried state, so chunking cannot change a single bit; the per-block numeric
+path - filters, hinges, normalising, local maxima - runs compiled, one crossing per
+channel: `kernels.detector`):
 
 * a bank of *hinge* filters, one per scale w (5, 10, 20, 40, 80 ms by
   default): h_w(n) = slope of x over [n, n + w] minus slope over [n - w, n]
@@ -64,6 +66,13 @@ from grasplink.gateway.decoding.filters import (
     lattice_median,
     on_rail,
     resolution,
+)
+from grasplink.gateway.decoding.kernels.detector import (
+    channel_fast,
+    channel_hinge,
+    fir_run,
+    hinge_maxima,
+    step_scale,
 )
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
@@ -144,7 +153,13 @@ class _Series:
 class _Channel:
     width: int  # w, samples
     slope: SosFilter  # LS slope over the last w + 1 samples (FIR)
-    after: np.ndarray = field(default_factory=lambda: np.zeros(0))  # slopes not yet paired
+    needed: float  # the rise after a candidate, per unit of its hinge (`hinge_maxima`)
+    # slopes not yet paired: the first `held` of `after` (w entries, filled in place)
+    after: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    held: int = 0
+    # the slope filter's taps and carried state (in place), from the first sample on
+    taps: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    state: np.ndarray = field(default_factory=lambda: np.zeros(0))
     next_n: int = 0  # next hinge centre to compute
     waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
     noise_by_block: dict = field(default_factory=dict)
@@ -204,6 +219,8 @@ class _StepScale:
     start: int  # centre of d[0] (output m is centre m - w)
     next: int = 0  # next centre to test
     store: _Series = field(default_factory=lambda: _Series(256))
+    taps: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fir's, from the first
+    state: np.ndarray = field(default_factory=lambda: np.zeros(0))  # sample on (in place)
 
 
 def _mean(x: np.ndarray) -> float:
@@ -261,12 +278,20 @@ class ContactDetector:
         self.refine_z = float(refine_z)
         self.merge_widths = float(merge_widths)
         self.block = max(16, round(block_s * self.fs_hz))
-        self.channels = [
-            _Channel(w, SosFilter.fir(_slope_taps(w)), block_abs=np.empty(self.block))
-            for w in widths
-        ]
         self.rise_fraction = float(rise_fraction)
         self.coarse_rise_fraction = float(coarse_rise_fraction)
+        # a contact makes the force rise; long scales must see a clear rise (the slow bend
+        # at the end of a fast pulse's decay is no contact)
+        self.channels = [
+            _Channel(
+                w,
+                SosFilter.fir(_slope_taps(w)),
+                self.rise_fraction if w / self.fs_hz < 0.03 else self.coarse_rise_fraction,
+                after=np.empty(w),
+                block_abs=np.empty(self.block),
+            )
+            for w in widths
+        ]
         self.drop_fraction = float(drop_fraction)
         self.watch = max(8, round(watch_s * self.fs_hz))
         self.decay_rises = float(decay_rises)
@@ -301,6 +326,7 @@ class ContactDetector:
         half = max(0, round(level_s * self.fs_hz / 2.0))
         self.level_half = half
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
+        self._level_fir: tuple[np.ndarray, np.ndarray] | None = None  # (taps, state), see _settle
         self._n = 0  # samples received
         self._kept_from = -(10**9)  # block caches hold blocks from here on
         self._raw = np.empty(self.block)  # samples of the raw block being filled ...
@@ -343,7 +369,8 @@ class ContactDetector:
                 "ContactDetector.feed: samples must be finite (NaN or inf in t or x); "
                 "drop them first, as Decoder.process does"
             )
-        n0 = self._n
+        if self._n == 0:
+            self._settle(float(x[0]))
         self._n += len(x)
         new = self._tx.extend(len(x))
         new[0], new[1] = t, x
@@ -351,7 +378,7 @@ class ContactDetector:
         self._raw_stats(x)
         candidates: list[tuple[int, int, int, float, float, float]] = []
         for ci, ch in enumerate(self.channels):
-            self._run_channel(ci, ch, x, n0, candidates)
+            self._run_channel(ci, ch, x, candidates)
         self._run_level(x)
         self._run_steps(x)
         events = self._merge(candidates)
@@ -404,44 +431,89 @@ class ContactDetector:
         self._raw_n = len(raw) - full * B
         self._raw[: self._raw_n] = raw[full * B :]
 
-    def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, n0: int, candidates: list) -> None:
+    def _settle(self, first: float) -> None:
+        """The filters' taps and states, settled on the first sample (as if it had been
+        held before: slopes and differences 0), for the kernels that run them in place."""
+        for ch in self.channels:
+            ch.taps, ch.state = ch.slope.fir_state(first)
+        for sc in self._scales:
+            sc.taps, sc.state = sc.fir.fir_state(first)
+        if self._level_filter.is_fir:  # (one tap, under 100 Hz: a plain gain, run as is)
+            self._level_fir = self._level_filter.fir_state(first)
+
+    def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, candidates: list) -> None:
+        """The hinge of the centres x completes (y[m], the slope over [m - w, m], is the
+        "after" of centre m - w; hinge(n) = after(n) - after(n - w)), normalised, and the
+        contact candidates among them. Usually (the centres in one block whose noise is
+        known, none waiting) one kernel does it all (`_one_block`); else the slopes come
+        from a kernel and `_normalise` sorts them into blocks."""
         w = ch.width
-        y = ch.slope(x)  # settled: as if the first sample had been held before (slopes 0)
-        # y[m] is the slope over [m - w, m], i.e. "after" of centre n = m - w; `after`
-        # holds the slopes of centres ch.next_n - w, ...; hinge(n) = after(n) - after(n - w).
-        after = np.concatenate([ch.after, y]) if len(ch.after) else y
-        count = len(after) - w
-        if count <= 0:
-            ch.after = after
-            return
+        count = ch.held + len(x) - w  # centres completed
         start = ch.next_n
-        ch.next_n += count
         block = start // self.block
-        noise = None if ch.waiting else ch.noise_by_block.get(block)
+        noise = None if ch.waiting or count <= 0 else ch.noise_by_block.get(block)
         if noise is not None and (start + count - 1) // self.block == block:
-            self._one_block(ch, after, count, noise, start)
+            found = self._one_block(ch, x, count, noise, start)
         else:
-            slope_after = after[w:]
-            self._normalise(ch, start, slope_after - after[:count], slope_after)
-        ch.after = after[count:]
-        self._local_maxima(ci, ch, candidates)
+            hinge, slope_after = channel_hinge(x, ch.taps, ch.state, ch.after, ch.held)
+            ch.held = min(w, ch.held + len(x))
+            if count <= 0:
+                return
+            ch.next_n += count
+            self._normalise(ch, start, hinge, slope_after)
+            found = self._maxima(ch)
+        if len(found):
+            self._candidates(ci, ch, found, candidates)
 
     def _one_block(
-        self, ch: _Channel, after: np.ndarray, count: int, noise: float, start: int
-    ) -> None:
-        """`_normalise` of centres start .. start + count - 1 when they lie in one block
-        whose noise is known and none wait (the usual case: a CAN frame's few samples):
-        the hinge written straight into the z rows, the same numbers."""
+        self, ch: _Channel, x: np.ndarray, count: int, noise: float, start: int
+    ) -> np.ndarray:
+        """`_normalise` and `_maxima` of centres start .. start + count - 1 when they lie in
+        one block whose noise is known and none wait (the usual case: a CAN frame's few
+        samples), as one kernel writing the z rows in place: the same numbers."""
         w = ch.width
-        new = ch.rows.extend(count)
-        hinge = np.subtract(after[w:], after[:count], new[1])
-        np.divide(hinge, noise, new[0])
-        new[2], new[3] = after[w:], start + w
+        ch.next_n += count
+        at = ch.rows.size
+        ch.rows.extend(count)
         ch.refresh_views()
-        np.abs(hinge, out=ch.block_abs[ch.abs_n : ch.abs_n + count])
+        lo = self._test_range(ch)[0]
+        found = channel_fast(
+            x,
+            ch.taps,
+            ch.state,
+            ch.after,
+            ch.held,
+            ch.rows.data,
+            at,
+            start + w,
+            noise,
+            ch.block_abs,
+            ch.abs_n,
+            lo - ch.z_start,
+            self.threshold,
+            ch.needed,
+        )
+        ch.held = w
         ch.abs_n += count
         if (start + count) % self.block == 0:
             self._block_done(ch, start // self.block, start + count)
+        return found
+
+    @staticmethod
+    def _test_range(ch: _Channel) -> tuple[int, int]:
+        """Centres lo .. hi to test for a local maximum (z known over +-w): the next ones
+        from now on (hi < lo: none yet)."""
+        lo = max(ch.next_test, ch.z_start + ch.width)
+        hi = ch.z_start + ch.rows.size - 1 - ch.width
+        if hi >= lo:
+            ch.next_test = hi + 1
+        return lo, hi
+
+    def _maxima(self, ch: _Channel) -> np.ndarray:
+        """Rows of the candidates among the centres not yet tested (`hinge_maxima`)."""
+        lo, hi = self._test_range(ch)
+        i0, i1 = lo - ch.z_start, hi - ch.z_start
+        return hinge_maxima(ch.rows.data, i0, i1, ch.width, self.threshold, ch.needed)
 
     def _normalise(
         self, ch: _Channel, start: int, hinge: np.ndarray, slope_after: np.ndarray
@@ -574,38 +646,18 @@ class ContactDetector:
         ch.noise_by_block[block] = noise
         return noise
 
-    def _local_maxima(self, ci: int, ch: _Channel, candidates: list) -> None:
+    def _candidates(self, ci: int, ch: _Channel, found: np.ndarray, candidates: list) -> None:
+        """Local maxima of z (rows `found`, see `hinge_maxima`) as contact candidates: timed
+        coarse to fine, unless the bottom of a sharp fall."""
         w = ch.width
-        z = ch.z
-        last = ch.z_start + ch.rows.size - 1  # last centre with z
-        lo = max(ch.next_test, ch.z_start + w)
-        hi = last - w  # test centres lo .. hi
-        if hi < lo:
-            return
-        i0, i1 = lo - ch.z_start, hi - ch.z_start
-        ch.next_test = hi + 1
-        above = (z[i0 : i1 + 1] >= self.threshold).nonzero()[0]
-        for h in above.tolist():  # a local maximum over +-w (ties: the first)
-            i = i0 + h
-            zc = z[i]
-            if z[i - 1] >= zc or z[i + 1] > zc:  # a neighbour's higher: the window's too (z
-                # is finite: the decoders take finite samples only)
-                continue
-            if zc <= z[i - w : i].max() or zc < z[i + 1 : i + w + 1].max():
-                continue
+        for i in found.tolist():
             n = ch.z_start + i
-            jump, rising = ch.zh[i], ch.za[i]
-            # a contact makes the force rise; long scales must see a clear rise (the
-            # slow bend at the end of a fast pulse's decay is no contact)
-            needed = self.rise_fraction if w / self.fs_hz < 0.03 else self.coarse_rise_fraction
-            if rising < needed * jump:
-                continue
             n_at, delta, placed = self._refine(ci, n)
             if self._after_drop(n_at, w):
                 continue
             # decided once z is known over +-w (late where the noise had to be waited for)
             emit = max(n + 2 * w, int(ch.zready[i - w : i + w + 1].max()))
-            candidates.append((emit, w, n_at, delta, float(z[i]), float(jump), placed))
+            candidates.append((emit, w, n_at, delta, float(ch.z[i]), float(ch.zh[i]), placed))
 
     def _after_drop(self, n: int, w: int) -> bool:
         """Is the kink at sample n the bottom of a sharp fall (the level stepping down: a
@@ -688,30 +740,25 @@ class ContactDetector:
 
     def _run_scale(self, sc: _StepScale, x: np.ndarray) -> None:
         w = sc.w
-        sc.d = sc.store.append(sc.fir(x))
+        at = sc.store.size
+        sc.store.extend(len(x))
+        sc.d = sc.store.view()
         last = sc.start + len(sc.d) - 1  # last centre with a difference
         lo = max(sc.next, sc.start + 3 * w, 3 * w)
         hi = last - 3 * w
-        if hi < lo:
-            return
-        sc.next = hi + 1
-        d = sc.d
         i0, i1 = lo - sc.start - w, hi - sc.start + w  # adjusted over +-w
-        ramp = d[i0 - 2 * w : i1 + 1 - 2 * w] + d[i0 + 2 * w : i1 + 1 + 2 * w]
-        adj = d[i0 : i1 + 1] - 0.5 * ramp
-        # local maxima over +-w (ties: the first): only rises above their neighbours tested
-        n = len(adj) - 2 * w
-        mid = adj[w : w + n]
-        rising = (mid > 0.0) & (mid >= adj[w - 1 : w - 1 + n]) & (mid > adj[w + 1 : w + 1 + n])
-        for j in (rising.nonzero()[0] + w).tolist():
-            a = adj[j]
-            if a < adj[j - w : j].max() or a <= adj[j + 1 : j + w + 1].max():
-                continue
+        if hi >= lo:
+            sc.next = hi + 1
+        else:
+            i0, i1 = 0, -1  # nothing to test yet
+        # the difference filter, and the local maxima of the difference less the ramp
+        found, adj = step_scale(x, sc.taps, sc.state, sc.store.data, at, i0, i1, w)
+        for j, a in zip(found.tolist(), adj.tolist(), strict=True):
             c = i0 + j + sc.start
             white = self._white(c // self.block)
             if white is None:
                 continue
-            z = float(a) / (max(white[0], NOISE_FLOOR_N) * math.sqrt(3.0 / w))
+            z = a / (max(white[0], NOISE_FLOOR_N) * math.sqrt(3.0 / w))
             if z < self.step_threshold:
                 continue
             watch = self._watch(-1, c + 1)
@@ -760,9 +807,13 @@ class ContactDetector:
 
     # ------------------------------------------------------------------ pulse checks
     def _run_level(self, x: np.ndarray) -> None:
-        y = self._level_filter(x)
         # y[m] is the mean of x[m - 2h .. m]: the level centred on m - h.
-        self._level = self._levels.append(y)
+        new = self._levels.extend(len(x))
+        if self._level_fir is None:
+            new[...] = self._level_filter(x)
+        else:
+            fir_run(*self._level_fir, x, new)
+        self._level = self._levels.view()
 
     def _level_at(self, k: int) -> float | None:
         i = k + self.level_half - self._level_start  # centre k is output m = k + h

@@ -35,22 +35,14 @@ import itertools
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from scipy import signal
 
 from grasplink.errors import ConfigError
+from grasplink.gateway.decoding.kernels.detector import fir_run
 
 MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
-
-try:  # the kernel scipy's lfilter runs (direct form II transposed), called without the
-    # argument checks that cost more than the arithmetic on a CAN frame's 3 samples
-    from scipy.signal._sigtools import _linear_filter as _kernel
-
-    _linear_filter: Any = _kernel
-except ImportError:  # pragma: no cover - a scipy that moved it: lfilter, same numbers
-    _linear_filter = None
 
 
 def bandpass_sos(low_hz: float, high_hz: float, fs_hz: float, order: int = 2) -> np.ndarray:
@@ -76,8 +68,9 @@ class SosFilter:
     cascade of second-order sections (direct form II transposed); FIR
     kernels (`SosFilter.fir`: the contact detector's slope and level
     kernels) are the all-zero case, run as one direct-form II transposed
-    filter with a = 1 (scipy's `lfilter` sample loop: a 33-tap kernel needs
-    no factoring into 16 sections). Either way the state is carried and the
+    filter with a = 1 (scipy's `lfilter` sample loop, compiled:
+    `kernels.detector.fir_run`; a 33-tap kernel needs no factoring into 16
+    sections). Either way the state is carried and the
     work is done sample by sample, so feeding a signal in pieces gives
     bit-identical output to feeding it at once. The filter starts settled
     on the first sample it sees (a DC offset of +50 N gives no start-up
@@ -100,8 +93,7 @@ class SosFilter:
         if fir_taps is None:
             self._zi_unit = signal.sosfilt_zi(self.sos)
         else:  # a = [1, 0]: lfilter's sample loop (a = [1] would convolve, chunk-dependent)
-            self._a = np.array([1.0, 0.0])
-            self._zi_unit = signal.lfilter_zi(fir_taps, self._a)
+            self._zi_unit = signal.lfilter_zi(fir_taps, np.array([1.0, 0.0]))
         self._zi: np.ndarray | None = None
 
     @classmethod
@@ -113,7 +105,22 @@ class SosFilter:
         if len(taps) == 1:
             return cls(np.array([[taps[0], 0.0, 0.0, 1.0, 0.0, 0.0]]))
         sos = signal.tf2sos(taps, np.concatenate([[1.0], np.zeros(len(taps) - 1)]))
-        return cls(sos, fir_taps=taps.copy())
+        return cls(sos, fir_taps=np.ascontiguousarray(taps))
+
+    @property
+    def is_fir(self) -> bool:
+        """Runs as one FIR (`fir` with two taps or more): `fir_state` applies."""
+        return self._fir is not None
+
+    def fir_state(self, first: float) -> tuple[np.ndarray, np.ndarray]:
+        """An FIR filter's taps and carried state, settled on `first` if not yet: for a
+        kernel that runs the filter in place (`kernels.detector.fir_run`, as `__call__`
+        does) within a larger step - one crossing into compiled code, not one per filter."""
+        if self._fir is None:
+            raise ValueError("fir_state: not an FIR filter of two taps or more")
+        if self._zi is None:
+            self._zi = self._zi_unit * first
+        return self._fir, self._zi
 
     @property
     def sections(self) -> int:
@@ -130,10 +137,8 @@ class SosFilter:
         if self._zi is None:
             self._zi = self._zi_unit * x[0]
         if self._fir is not None:
-            if _linear_filter is not None:  # lfilter's own kernel, without its checks
-                y, self._zi = _linear_filter(self._fir, self._a, x, -1, self._zi)
-            else:
-                y, self._zi = signal.lfilter(self._fir, self._a, x, zi=self._zi)
+            y = np.empty(len(x))
+            fir_run(self._fir, self._zi, x, y)  # lfilter's sample loop, state in place
             return y
         if len(x) * len(self._rows) > self.PYTHON_WORK:
             y, self._zi = signal.sosfilt(self.sos, x, zi=self._zi)

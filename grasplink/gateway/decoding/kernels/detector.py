@@ -1,0 +1,175 @@
+"""Compiled kernels of the contact detector's per-block numeric path (`contacts.py`).
+
+Why: every CAN frame (about 3 samples) runs five hinge channels, two step-probe scales
+and the level filter; in numpy that is some dozens of calls on arrays of a few entries,
+each costing more in overhead than in arithmetic. Here each channel (or scale, or the
+level) is one crossing that filters with carried state, writes its rows in place and
+returns only the few indices the Python state machines must look at.
+
+Bit-identity with the numpy code they replace: the FIR loop is scipy's `lfilter`
+(direct form II transposed, `a` = [1, 0, ...]) operation for operation, and the rest is
++ - * / abs and comparisons in numpy's order, so the detector's events do not change by
+a bit (tests/decoding/test_detector_kernels.py, against golden outputs of the numpy code).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grasplink.gateway.decoding.kernels import jit
+
+__all__ = ["channel_fast", "channel_hinge", "fir_run", "hinge_maxima", "step_scale"]
+
+
+@jit()
+def fir_run(taps: np.ndarray, state: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """out[k] = the FIR `taps` applied to x[k] with `state` carried (updated in place).
+
+    scipy's lfilter sample loop for b = taps, a = [1, 0, ...] (len(taps) >= 2): y = z0 + b0 x;
+    z[n] = z[n + 1] + x b[n + 1] - y a[n + 1]; z[-1] = x b[-1] - y a[-1]. The `- y * 0.0` of
+    the zero denominator taps is kept: it is what makes a zero state's sign the same.
+    """
+    last = len(taps) - 1
+    for k in range(len(x)):
+        xn = x[k]
+        yn = state[0] + taps[0] * xn
+        for n in range(last - 1):
+            state[n] = state[n + 1] + xn * taps[n + 1] - yn * 0.0
+        state[last - 1] = xn * taps[last] - yn * 0.0
+        out[k] = yn
+
+
+@jit()
+def _slopes(
+    x: np.ndarray, taps: np.ndarray, state: np.ndarray, after: np.ndarray, held: int
+) -> np.ndarray:
+    """The slopes not yet paired (after[:held]) followed by those of the new samples x;
+    `after` keeps the last len(after) of them for the next call."""
+    w = len(after)
+    full = np.empty(held + len(x))
+    full[:held] = after[:held]
+    fir_run(taps, state, x, full[held:])
+    keep = min(w, len(full))
+    after[:keep] = full[len(full) - keep :]
+    return full
+
+
+@jit()
+def channel_hinge(
+    x: np.ndarray, taps: np.ndarray, state: np.ndarray, after: np.ndarray, held: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A hinge channel's slope filter on x: (hinge, slope after) of the centres now complete
+    (none while fewer than w + 1 slopes are held), for the Python normalising path."""
+    w = len(after)
+    full = _slopes(x, taps, state, after, held)
+    count = max(0, len(full) - w)
+    slope_after = full[w : w + count].copy()
+    return slope_after - full[:count], slope_after
+
+
+@jit()
+def _peak(z: np.ndarray, lo: int, hi: int) -> float:
+    """z[lo:hi].max() as numpy has it (NaN if any is NaN); hi > lo."""
+    top = z[lo]
+    for i in range(lo + 1, hi):
+        v = z[i]
+        if v > top or math.isnan(v):
+            top = v
+            if math.isnan(v):
+                break
+    return top
+
+
+@jit()
+def hinge_maxima(
+    rows: np.ndarray, i0: int, i1: int, w: int, threshold: float, needed: float
+) -> np.ndarray:
+    """Rows (z, hinge, slope after, ...) i0 .. i1 that are contact candidates: z at least
+    `threshold`, a local maximum over +-w (ties: the first) and the force rising after it
+    by `needed` of the hinge. The indices, for the Python refinement."""
+    z, jump, rising = rows[0], rows[1], rows[2]
+    found = np.empty(max(0, i1 - i0 + 1), dtype=np.int64)
+    count = 0
+    for i in range(i0, i1 + 1):
+        zc = z[i]
+        if not zc >= threshold:
+            continue
+        if z[i - 1] >= zc or z[i + 1] > zc:  # a neighbour's higher: the window's too
+            continue
+        if zc <= _peak(z, i - w, i) or zc < _peak(z, i + 1, i + w + 1):
+            continue
+        if rising[i] < needed * jump[i]:
+            continue
+        found[count] = i
+        count += 1
+    return found[:count]
+
+
+@jit()
+def channel_fast(
+    x: np.ndarray,
+    taps: np.ndarray,
+    state: np.ndarray,
+    after: np.ndarray,
+    held: int,
+    rows: np.ndarray,
+    at: int,
+    ready: int,
+    noise: float,
+    block_abs: np.ndarray,
+    abs_n: int,
+    lo: int,
+    threshold: float,
+    needed: float,
+) -> np.ndarray:
+    """A hinge channel's usual step (its new centres in one block whose noise is known):
+    the slope filter on x, hinge = slope after - slope before, z = hinge / noise, written
+    into rows[:, at:] (z, hinge, slope after, `ready`) and |hinge| into block_abs[abs_n:];
+    then the candidates (`hinge_maxima`) among rows lo .. (last held - w)."""
+    w = len(after)
+    full = _slopes(x, taps, state, after, held)
+    count = len(full) - w
+    for i in range(count):
+        slope_after = full[w + i]
+        hinge = slope_after - full[i]
+        rows[1, at + i] = hinge
+        rows[0, at + i] = hinge / noise
+        rows[2, at + i] = slope_after
+        rows[3, at + i] = ready
+        block_abs[abs_n + i] = abs(hinge)
+    return hinge_maxima(rows, lo, at + count - 1 - w, w, threshold, needed)
+
+
+@jit()
+def step_scale(
+    x: np.ndarray,
+    taps: np.ndarray,
+    state: np.ndarray,
+    d: np.ndarray,
+    at: int,
+    i0: int,
+    i1: int,
+    w: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A step-probe scale: its difference filter on x into d[at:], then the local maxima
+    (over +-w, ties: the first, above 0) of adj = d - (d 2w before + d 2w after) / 2 over
+    d[i0 .. i1] (i1 < i0: none). Returns the maxima's offsets from i0 and their adj."""
+    fir_run(taps, state, x, d[at : at + len(x)])
+    n = max(0, i1 - i0 + 1)
+    adj = np.empty(n)
+    for j in range(n):
+        i = i0 + j
+        adj[j] = d[i] - 0.5 * (d[i - 2 * w] + d[i + 2 * w])
+    found = np.empty(max(0, n - 2 * w), dtype=np.int64)
+    count = 0
+    for j in range(w, n - w):
+        a = adj[j]
+        if not (a > 0.0 and a >= adj[j - 1] and a > adj[j + 1]):
+            continue
+        if a < _peak(adj, j - w, j) or a <= _peak(adj, j + 1, j + w + 1):
+            continue
+        found[count] = j
+        count += 1
+    return found[:count], adj[found[:count]]

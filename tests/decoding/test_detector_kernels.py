@@ -1,0 +1,190 @@
+"""The contact detector's compiled per-block path (`kernels.detector`) tells what the numpy
+code it replaced told: golden outputs recorded from that code
+(data/make_detector_golden.py, run on main before the kernels), and scipy's lfilter for
+the FIR loop, to the bit."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from grasplink.gateway.decoding.contacts import ContactDetector
+from grasplink.gateway.decoding.filters import SosFilter
+from grasplink.gateway.decoding.kernels.detector import (
+    channel_hinge,
+    fir_run,
+    hinge_maxima,
+    step_scale,
+)
+
+DATA = Path(__file__).parent / "data"
+_spec = importlib.util.spec_from_file_location(
+    "make_detector_golden", DATA / "make_detector_golden.py"
+)
+assert _spec is not None and _spec.loader is not None
+golden_maker = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(golden_maker)
+
+GOLDEN = np.load(DATA / "detector_golden.npz")
+SIGNALS = golden_maker.signals()
+RTOL = 1e-9
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64).view(np.int64)
+
+
+def _assert_told_alike(told: np.ndarray, golden: np.ndarray, exact: list[int]) -> None:
+    """Integer fields (ids, sample indices) exactly, the rest within 1e-9 relative."""
+    assert told.shape == golden.shape
+    np.testing.assert_array_equal(told[:, exact], golden[:, exact])
+    np.testing.assert_allclose(told, golden, rtol=RTOL, atol=0.0)
+
+
+@pytest.mark.parametrize("chunk", golden_maker.CHUNKS)
+@pytest.mark.parametrize("name", sorted(SIGNALS))
+def test_compiled_detector_matches_the_numpy_detectors_events(name: str, chunk: int) -> None:
+    events, checks = golden_maker.told(ContactDetector(golden_maker.FS_HZ), SIGNALS[name], chunk)
+    _assert_told_alike(events, GOLDEN[f"{name}/events{chunk}"], exact=[0, 2, 3])
+    _assert_told_alike(checks, GOLDEN[f"{name}/checks{chunk}"], exact=[0, 1, 2, 3])
+
+
+@pytest.mark.parametrize("name", sorted(SIGNALS))
+def test_compiled_detector_rows_match_the_numpy_detectors_rows(name: str) -> None:
+    """z, hinge, slope after and readiness by centre, the level and the step differences."""
+    detector = ContactDetector(golden_maker.FS_HZ)
+    golden_maker.told(detector, SIGNALS[name], golden_maker.CHUNK)
+    for key, value in golden_maker.state(detector).items():
+        expected = GOLDEN[f"{name}/{key}"]
+        assert value.shape == expected.shape, key
+        if key.endswith("_at"):
+            np.testing.assert_array_equal(value, expected, err_msg=key)
+        else:
+            np.testing.assert_allclose(value, expected, rtol=RTOL, atol=1e-15, err_msg=key)
+
+
+@pytest.mark.parametrize("name", ["slip", "slow", "steps"])
+def test_compiled_detector_tells_the_same_in_any_chunking(name: str) -> None:
+    """(The railed start is left out: there the numpy code already told a little
+    differently with chunks of 128 or more - pinned by the golden test above.)"""
+    told = {
+        chunk: golden_maker.told(ContactDetector(golden_maker.FS_HZ), SIGNALS[name], chunk)
+        for chunk in golden_maker.CHUNKS
+    }
+    assert len(told[3][0])
+    for chunk in golden_maker.CHUNKS:
+        np.testing.assert_array_equal(told[chunk][0], told[3][0])
+        np.testing.assert_array_equal(told[chunk][1], told[3][1])
+
+
+@pytest.mark.parametrize("length", [2, 3, 5, 11, 33, 80])
+def test_compiled_fir_matches_scipy_lfilter_bit_for_bit(length: int) -> None:
+    rng = np.random.default_rng(length)
+    taps = rng.normal(size=length)
+    x = rng.normal(3.0, 2.0, 400)
+    zi = signal.lfilter_zi(taps, [1.0, 0.0]) * x[0]
+    expected, expected_state = signal.lfilter(taps, [1.0, 0.0], x, zi=zi)
+    state, y = zi.copy(), np.empty(len(x))
+    for i in range(0, len(x), 7):  # in pieces, state carried
+        fir_run(taps, state, x[i : i + 7], y[i : i + 7])
+    np.testing.assert_array_equal(_bits(y), _bits(expected))
+    np.testing.assert_array_equal(_bits(state), _bits(expected_state))
+
+
+def test_compiled_fir_spreads_nan_and_inf_as_lfilter_does() -> None:
+    taps = np.array([0.25, -0.5, 0.125])
+    x = np.array([1.0, np.inf, 2.0, 3.0, np.nan, 4.0, 5.0, 6.0])
+    zi = np.zeros(2)
+    expected, _ = signal.lfilter(taps, [1.0, 0.0], x, zi=zi)
+    y = np.empty(len(x))
+    fir_run(taps, zi.copy(), x, y)
+    np.testing.assert_array_equal(y, expected)  # (NaN where lfilter has NaN)
+
+
+def test_compiled_fir_of_no_samples_keeps_the_state() -> None:
+    state = np.array([1.0, 2.0])
+    fir_run(np.array([1.0, 2.0, 3.0]), state, np.zeros(0), np.zeros(0))
+    np.testing.assert_array_equal(state, [1.0, 2.0])
+
+
+def test_a_one_tap_level_filter_still_runs_as_a_gain() -> None:
+    """Under 100 Hz the level is one sample: SosFilter.fir's one-tap section, not a kernel."""
+    detector = ContactDetector(60.0)
+    x = 3.0 + np.random.default_rng(0).normal(0, 0.05, 200)
+    detector.feed(np.arange(len(x)) / 60.0, x)
+    assert not detector._level_filter.is_fir
+    np.testing.assert_array_equal(detector._level, x[-len(detector._level) :])
+
+
+def test_compiled_hinge_holds_slopes_until_a_centre_completes() -> None:
+    taps = SosFilter.fir(np.array([0.5, -0.5]))
+    t, state = taps.fir_state(1.0)
+    after = np.empty(3)
+    hinge, slope_after = channel_hinge(np.array([1.0, 2.0]), t, state, after, 0)
+    assert len(hinge) == len(slope_after) == 0  # 2 slopes held, w = 3
+    hinge, slope_after = channel_hinge(np.array([4.0, 8.0]), t, state, after, 2)
+    # slopes 0, 0.5, 1, 2 (settled on 1: the first is 0); w = 3: one centre completes
+    np.testing.assert_array_equal(slope_after, [2.0])
+    np.testing.assert_array_equal(hinge, [2.0])
+    np.testing.assert_array_equal(after, [0.5, 1.0, 2.0])
+
+
+def _maxima_as_numpy_had_them(rows, i0, i1, w, threshold, needed):
+    """The numpy code's test (contacts._local_maxima before the kernels), for edge cases."""
+    z = rows[0]
+    found = []
+    for h in (z[i0 : i1 + 1] >= threshold).nonzero()[0].tolist():
+        i = i0 + h
+        zc = z[i]
+        if z[i - 1] >= zc or z[i + 1] > zc:
+            continue
+        if zc <= z[i - w : i].max() or zc < z[i + 1 : i + w + 1].max():
+            continue
+        if rows[2, i] < needed * rows[1, i]:
+            continue
+        found.append(i)
+    return found
+
+
+@pytest.mark.parametrize(
+    "z",
+    [
+        [0, 1, 5, 1, 0, 6, 6, 0, 0, 0],  # ties: the first
+        [0, np.nan, 1, 5, 1, np.nan, 0, 0, 0, 0],  # NaN in the window (numpy's max: NaN)
+        [0, 0, 5, np.inf, 5, 0, 0, 0, 0, 0],  # inf is a maximum too
+        [0, 0, 0, 0, 0, 0, 0, 0, 0, 0],  # nothing above the threshold
+    ],
+)
+def test_compiled_maxima_match_the_numpy_test_at_the_edges(z: list[float]) -> None:
+    rows = np.zeros((4, len(z)))
+    rows[0] = z
+    rows[1] = 1.0
+    rows[2] = np.linspace(0.0, 1.0, len(z))
+    for w, needed in ((1, 0.0), (2, 0.0), (2, 0.5)):
+        i0, i1 = w, len(z) - 1 - w
+        expected = _maxima_as_numpy_had_them(rows, i0, i1, w, 4.5, needed)
+        assert hinge_maxima(rows, i0, i1, w, 4.5, needed).tolist() == expected
+
+
+def test_compiled_maxima_of_an_empty_range_are_none() -> None:
+    assert len(hinge_maxima(np.zeros((4, 8)), 5, 4, 2, 4.5, 0.1)) == 0
+
+
+def test_compiled_step_scale_with_nothing_to_test_only_filters() -> None:
+    taps = np.array([0.5, 0.5, -0.5, -0.5])
+    state = signal.lfilter_zi(taps, [1.0, 0.0]) * 2.0
+    d = np.zeros(16)
+    found, adj = step_scale(np.array([2.0, 2.0, 3.0]), taps, state, d, 4, 0, -1, 2)
+    assert len(found) == len(adj) == 0
+    np.testing.assert_array_equal(d[4:7], [0.0, 0.0, 0.5])
+    np.testing.assert_array_equal(d[:4], 0.0)
+
+
+def test_feeding_nothing_tells_nothing_and_changes_nothing() -> None:
+    detector = ContactDetector(400.0)
+    assert detector.feed(np.zeros(0), np.zeros(0)) == ([], [])
+    assert detector._n == 0 and detector.channels[0].held == 0
