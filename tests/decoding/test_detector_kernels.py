@@ -167,19 +167,21 @@ def test_compiled_maxima_match_the_numpy_test_at_the_edges(z: list[float]) -> No
     for w, needed in ((1, 0.0), (2, 0.0), (2, 0.5)):
         i0, i1 = w, len(z) - 1 - w
         expected = _maxima_as_numpy_had_them(rows, i0, i1, w, 4.5, needed)
-        assert hinge_maxima(rows, i0, i1, w, 4.5, needed).tolist() == expected
+        found = np.empty(i1 - i0 + 1, dtype=np.int64)
+        told = hinge_maxima(rows, i0, i1, w, 4.5, needed, found)
+        assert found[:told].tolist() == expected
 
 
 def test_compiled_maxima_of_an_empty_range_are_none() -> None:
-    assert len(hinge_maxima(np.zeros((4, 8)), 5, 4, 2, 4.5, 0.1)) == 0
+    assert hinge_maxima(np.zeros((4, 8)), 5, 4, 2, 4.5, 0.1, np.empty(0, dtype=np.int64)) == 0
 
 
 def test_compiled_step_scale_with_nothing_to_test_only_filters() -> None:
     taps = np.array([0.5, 0.5, -0.5, -0.5])
     state = signal.lfilter_zi(taps, [1.0, 0.0]) * 2.0
     d = np.zeros(16)
-    found, adj = step_scale(np.array([2.0, 2.0, 3.0]), taps, state, d, 4, 0, -1, 2)
-    assert len(found) == len(adj) == 0
+    found, adj = np.empty(0, dtype=np.int64), np.empty(0)
+    assert step_scale(np.array([2.0, 2.0, 3.0]), taps, state, d, 4, 0, -1, 2, found, adj) == 0
     np.testing.assert_array_equal(d[4:7], [0.0, 0.0, 0.5])
     np.testing.assert_array_equal(d[:4], 0.0)
 

@@ -327,6 +327,8 @@ class ContactDetector:
         self.level_half = half
         self._level_filter = SosFilter.fir(np.full(2 * half + 1, 1.0 / (2 * half + 1)))
         self._level_fir: tuple[np.ndarray, np.ndarray] | None = None  # (taps, state), see _settle
+        self._found = np.empty(2 * self.block, dtype=np.int64)  # kernels' found indices ...
+        self._found_values = np.empty(2 * self.block)  # ... and values (`_room`)
         self._n = 0  # samples received
         self._kept_from = -(10**9)  # block caches hold blocks from here on
         self._raw = np.empty(self.block)  # samples of the raw block being filled ...
@@ -451,8 +453,12 @@ class ContactDetector:
         count = ch.held + len(x) - w  # centres completed
         start = ch.next_n
         block = start // self.block
-        noise = None if ch.waiting or count <= 0 else ch.noise_by_block.get(block)
-        if noise is not None and (start + count - 1) // self.block == block:
+        noise = None
+        if count > 0 and not ch.waiting and (start + count - 1) // self.block == block:
+            noise = ch.noise_by_block.get(block)
+            if noise is None:  # the block's first centres: its noise (as _normalise would)
+                noise = self._noise(ch, block)
+        if noise is not None:
             found = self._one_block(ch, x, count, noise, start)
         else:
             hinge, slope_after = channel_hinge(x, ch.taps, ch.state, ch.after, ch.held)
@@ -476,8 +482,9 @@ class ContactDetector:
         at = ch.rows.size
         ch.rows.extend(count)
         ch.refresh_views()
-        lo = self._test_range(ch)[0]
-        found = channel_fast(
+        lo, hi = self._test_range(ch)
+        found = self._room(hi - lo + 1)
+        told = channel_fast(
             x,
             ch.taps,
             ch.state,
@@ -492,12 +499,20 @@ class ContactDetector:
             lo - ch.z_start,
             self.threshold,
             ch.needed,
+            found,
         )
         ch.held = w
         ch.abs_n += count
         if (start + count) % self.block == 0:
             self._block_done(ch, start // self.block, start + count)
-        return found
+        return found[:told]
+
+    def _room(self, count: int) -> np.ndarray:
+        """The kernels' output buffer for `count` found indices (grown when short)."""
+        if count > len(self._found):
+            self._found = np.empty(2 * count, dtype=np.int64)
+            self._found_values = np.empty(2 * count)
+        return self._found
 
     @staticmethod
     def _test_range(ch: _Channel) -> tuple[int, int]:
@@ -513,7 +528,9 @@ class ContactDetector:
         """Rows of the candidates among the centres not yet tested (`hinge_maxima`)."""
         lo, hi = self._test_range(ch)
         i0, i1 = lo - ch.z_start, hi - ch.z_start
-        return hinge_maxima(ch.rows.data, i0, i1, ch.width, self.threshold, ch.needed)
+        found = self._room(i1 - i0 + 1)
+        told = hinge_maxima(ch.rows.data, i0, i1, ch.width, self.threshold, ch.needed, found)
+        return found[:told]
 
     def _normalise(
         self, ch: _Channel, start: int, hinge: np.ndarray, slope_after: np.ndarray
@@ -752,8 +769,13 @@ class ContactDetector:
         else:
             i0, i1 = 0, -1  # nothing to test yet
         # the difference filter, and the local maxima of the difference less the ramp
-        found, adj = step_scale(x, sc.taps, sc.state, sc.store.data, at, i0, i1, w)
-        for j, a in zip(found.tolist(), adj.tolist(), strict=True):
+        found = self._room(i1 - i0 + 1)
+        told = step_scale(
+            x, sc.taps, sc.state, sc.store.data, at, i0, i1, w, found, self._found_values
+        )
+        if not told:
+            return
+        for j, a in zip(found[:told].tolist(), self._found_values[:told].tolist(), strict=True):
             c = i0 + j + sc.start
             white = self._white(c // self.block)
             if white is None:

@@ -84,13 +84,20 @@ def _peak(z: np.ndarray, lo: int, hi: int) -> float:
 
 @jit()
 def hinge_maxima(
-    rows: np.ndarray, i0: int, i1: int, w: int, threshold: float, needed: float
-) -> np.ndarray:
+    rows: np.ndarray,
+    i0: int,
+    i1: int,
+    w: int,
+    threshold: float,
+    needed: float,
+    found: np.ndarray,
+) -> int:
     """Rows (z, hinge, slope after, ...) i0 .. i1 that are contact candidates: z at least
     `threshold`, a local maximum over +-w (ties: the first) and the force rising after it
-    by `needed` of the hinge. The indices, for the Python refinement."""
+    by `needed` of the hinge. Their indices go to found[:count] (room for i1 - i0 + 1: the
+    caller's), for the Python refinement; returns count (a count, not an array: no
+    boxing on the usual call that finds none)."""
     z, jump, rising = rows[0], rows[1], rows[2]
-    found = np.empty(max(0, i1 - i0 + 1), dtype=np.int64)
     count = 0
     for i in range(i0, i1 + 1):
         zc = z[i]
@@ -104,7 +111,7 @@ def hinge_maxima(
             continue
         found[count] = i
         count += 1
-    return found[:count]
+    return count
 
 
 @jit()
@@ -123,11 +130,12 @@ def channel_fast(
     lo: int,
     threshold: float,
     needed: float,
-) -> np.ndarray:
+    found: np.ndarray,
+) -> int:
     """A hinge channel's usual step (its new centres in one block whose noise is known):
     the slope filter on x, hinge = slope after - slope before, z = hinge / noise, written
     into rows[:, at:] (z, hinge, slope after, `ready`) and |hinge| into block_abs[abs_n:];
-    then the candidates (`hinge_maxima`) among rows lo .. (last held - w)."""
+    then the candidates (`hinge_maxima`, into `found`) among rows lo .. (last held - w)."""
     w = len(after)
     full = _slopes(x, taps, state, after, held)
     count = len(full) - w
@@ -139,7 +147,7 @@ def channel_fast(
         rows[2, at + i] = slope_after
         rows[3, at + i] = ready
         block_abs[abs_n + i] = abs(hinge)
-    return hinge_maxima(rows, lo, at + count - 1 - w, w, threshold, needed)
+    return hinge_maxima(rows, lo, at + count - 1 - w, w, threshold, needed, found)
 
 
 @jit()
@@ -152,17 +160,19 @@ def step_scale(
     i0: int,
     i1: int,
     w: int,
-) -> tuple[np.ndarray, np.ndarray]:
+    found: np.ndarray,
+    found_adj: np.ndarray,
+) -> int:
     """A step-probe scale: its difference filter on x into d[at:], then the local maxima
     (over +-w, ties: the first, above 0) of adj = d - (d 2w before + d 2w after) / 2 over
-    d[i0 .. i1] (i1 < i0: none). Returns the maxima's offsets from i0 and their adj."""
+    d[i0 .. i1] (i1 < i0: none). The maxima's offsets from i0 go to found[:count], their
+    adj to found_adj[:count] (room for i1 - i0 + 1: the caller's); returns count."""
     fir_run(taps, state, x, d[at : at + len(x)])
     n = max(0, i1 - i0 + 1)
     adj = np.empty(n)
     for j in range(n):
         i = i0 + j
         adj[j] = d[i] - 0.5 * (d[i - 2 * w] + d[i + 2 * w])
-    found = np.empty(max(0, n - 2 * w), dtype=np.int64)
     count = 0
     for j in range(w, n - w):
         a = adj[j]
@@ -171,5 +181,6 @@ def step_scale(
         if a < _peak(adj, j - w, j) or a <= _peak(adj, j + 1, j + w + 1):
             continue
         found[count] = j
+        found_adj[count] = a
         count += 1
-    return found[:count], adj[found[:count]]
+    return count
