@@ -190,3 +190,105 @@ def test_feeding_nothing_tells_nothing_and_changes_nothing() -> None:
     detector = ContactDetector(400.0)
     assert detector.feed(np.zeros(0), np.zeros(0)) == ([], [])
     assert detector._n == 0 and detector.channels[0].held == 0
+
+
+def _scan_as_numpy_had_it(
+    level,
+    next_k,
+    index,
+    base,
+    fall,
+    fall_credit,
+    trend,
+    width,
+    peak0,
+    history,
+    hold,
+    min_rise,
+    drop,
+    decay,
+    noise,
+    step_rise,
+):
+    """The numpy code's look at new level samples (contacts._advance before the kernels)."""
+    k = np.arange(next_k, next_k + len(level))
+    since = k - index
+    credit = fall * np.minimum(since, fall_credit)
+    raw = level - base + credit
+    d = raw - trend * (since + width)
+    peak = np.maximum.accumulate(np.maximum(d - credit, peak0))
+    history = np.concatenate([history, peak])
+    keep = max(0, hold - next_k + 1)
+    held = np.array([(level - base)[:keep], raw[:keep], d[:keep]])
+    rise = np.maximum(history.searchsorted(0.9 * peak), min_rise)
+    ok = (peak >= 4.0 * noise) & (peak - d >= drop * peak) & (since <= decay * rise)
+    fell = False
+    if next_k < hold:
+        deferred = (k < hold) & (history.searchsorted(0.8 * peak) <= step_rise)
+        fell = bool((ok & deferred).any())
+        hit = (ok & ~deferred).nonzero()[0]
+    else:
+        hit = ok.nonzero()[0]
+    return (int(hit[0]) if len(hit) else -1), fell, history, held
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_compiled_watch_scan_matches_the_numpy_watch(seed: int) -> None:
+    """Pulses, steps and ramps under a watch, looked at a few samples at a time."""
+    from grasplink.gateway.decoding.kernels.detector import watch_scan
+
+    rng = np.random.default_rng(seed)
+    n, index, hold = 120, 50, 50 + int(rng.integers(5, 60))
+    u = np.arange(n) / rng.uniform(3.0, 30.0)
+    shape = [u * np.exp(1.0 - u), np.minimum(u, 1.0), 0.05 * u][seed % 3]
+    level = 1.0 + rng.uniform(0.1, 2.0) * shape + rng.normal(0, 0.02, n) + 0.001 * np.arange(n)
+    args = dict(
+        base=1.0,
+        fall=rng.uniform(0, 0.01),
+        fall_credit=12,
+        trend=rng.uniform(0, 0.003),
+        width=5,
+        min_rise=2,
+        drop=0.3,
+        decay=6.0,
+        noise=0.01,
+        step_rise=8,
+    )
+    history, held = np.empty(n + 1), np.empty((3, hold - index + 1))
+    hist_n = held_n = 0
+    expected_history = np.zeros(0)
+    peak, next_k = -np.inf, index
+    while next_k < index + n:
+        m = int(rng.integers(1, 8))
+        new = level[next_k - index : next_k - index + m]
+        hit, fell, expected_history, expected_held = _scan_as_numpy_had_it(
+            new, next_k, index, peak0=peak, history=expected_history, hold=hold, **args
+        )
+        told = watch_scan(
+            new,
+            next_k,
+            index,
+            args["base"],
+            args["fall"],
+            args["fall_credit"],
+            args["trend"],
+            args["width"],
+            peak,
+            history,
+            hist_n,
+            held,
+            held_n,
+            hold,
+            args["min_rise"],
+            args["drop"],
+            args["decay"],
+            args["noise"],
+            args["step_rise"],
+        )
+        assert told == (hit, fell)
+        hist_n += len(new)
+        np.testing.assert_array_equal(history[:hist_n], expected_history)
+        keep = expected_held.shape[1]
+        np.testing.assert_array_equal(held[:, held_n : held_n + keep], expected_held)
+        held_n += keep
+        peak, next_k = float(history[hist_n - 1]), next_k + len(new)

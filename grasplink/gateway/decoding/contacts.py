@@ -73,6 +73,7 @@ from grasplink.gateway.decoding.kernels.detector import (
     fir_run,
     hinge_maxima,
     step_scale,
+    watch_scan,
 )
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
@@ -195,17 +196,35 @@ class _Watch:
     fall: float = 0.0  # falling slope just before the onset (N/sample, >= 0): a pulse's tail
     peak: float = -math.inf
     early: float = -math.inf  # highest level in the first quarter of the watch
-    history: np.ndarray = field(default_factory=lambda: np.zeros(0))  # running peak by sample
-    levels: np.ndarray = field(default_factory=lambda: np.zeros(0))  # raw level (to the hold)
-    detrended: np.ndarray = field(default_factory=lambda: np.zeros(0))  # ... trend taken out
+    # the running peak by sample since the onset: history[:hist_n] (room for the watch)
+    history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    hist_n: int = 0
+    # to the hold: the level - base, with an earlier tail's fall out, with the trend out
+    # too (`plain`, `levels`, `detrended`): held[:, :held_n] (room to the hold)
+    held: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
+    held_n: int = 0
     fell: bool = False  # a sharp rise that fell back like a pulse before the hold
     next_k: int = 0  # next level sample to examine
     top: float = 0.0  # told a step: the level it stepped to (trend out), watched for a fall
     fell_at: int = -1  # ... the sample where it fell back by drop_fraction (-1: not yet)
     slope: float = 0.0  # the level's slope before the onset (N/sample, either sign)
     room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
-    plain: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level - base (to the hold)
     rise: int = 0  # a probe: the rise of its scale (samples)
+
+    @property
+    def plain(self) -> np.ndarray:
+        """level - base, to the hold."""
+        return self.held[0, : self.held_n]
+
+    @property
+    def levels(self) -> np.ndarray:
+        """The raw level (an earlier pulse's tail out, `_tail_credit`), to the hold."""
+        return self.held[1, : self.held_n]
+
+    @property
+    def detrended(self) -> np.ndarray:
+        """... and the rising trend taken out, to the hold."""
+        return self.held[2, : self.held_n]
 
 
 @dataclass
@@ -866,7 +885,15 @@ class ContactDetector:
         white = 0.0 if fine_noise is None else fine_noise / _hinge_gain(fine.width)
         noise = max(NOISE_FLOOR_N, white) / math.sqrt(2 * h + 1)
         watch = _Watch(
-            cid, index, 0.0 if base is None else base, trend, noise, fall=fall, next_k=index
+            cid,
+            index,
+            0.0 if base is None else base,
+            trend,
+            noise,
+            fall=fall,
+            next_k=index,
+            history=np.empty(self.watch + 1),  # samples index .. index + watch
+            held=np.empty((3, self.step_hold + 1)),  # ... to index + step_hold
         )
         if emit is not None and base is not None:
             watch.slope = self._level_slope(before)
@@ -979,50 +1006,46 @@ class ContactDetector:
         if end >= watch.next_k:
             i0 = watch.next_k + h - self._level_start
             level = self._level[i0 : i0 + end - watch.next_k + 1]
-            k = np.arange(watch.next_k, end + 1)
-            since = k - watch.index
-            # fallen back? an earlier pulse's tail under it taken out (`_tail_credit`)
-            credit = watch.fall * np.minimum(since, self.fall_credit)
-            raw = level - watch.base + credit
-            d = raw - watch.trend * (since + (2 * h + 1))
-            peak = np.maximum.accumulate(np.maximum(d - credit, watch.peak))
-            history = np.concatenate([watch.history, peak])  # running peak since the onset
-            watch.history = history
             hold = watch.index + self.step_hold
-            if watch.next_k <= hold:
-                keep = hold - watch.next_k + 1
-                watch.plain = np.concatenate([watch.plain, (level - watch.base)[:keep]])
-                watch.levels = np.concatenate([watch.levels, raw[:keep]])
-                watch.detrended = np.concatenate([watch.detrended, d[:keep]])
-            # rise time: onset to the first sample at 90 % of the peak so far (a noisy
-            # plateau keeps nudging the peak, not this)
-            rise = history.searchsorted(0.9 * peak)
-            rise = np.maximum(rise, self.min_rise)
-            ok = (
-                (peak >= 4.0 * watch.noise)
-                & (peak - d >= self.drop_fraction * peak)
-                & (since <= (1.0 + self.decay_rises) * rise)
+            first = watch.hist_n  # the new samples' running peaks: history[first:]
+            hit, fell = watch_scan(
+                level,
+                watch.next_k,
+                watch.index,
+                watch.base,
+                watch.fall,
+                self.fall_credit,
+                watch.trend,
+                2 * h + 1,
+                watch.peak,
+                watch.history,
+                first,
+                watch.held,
+                watch.held_n,
+                hold,
+                self.min_rise,
+                self.drop_fraction,
+                1.0 + self.decay_rises,
+                watch.noise,
+                self.step_rise,
             )
-            # a sharp rise is judged at the hold: a step, or (fallen back by then) a pulse
-            if watch.next_k < hold:
-                deferred = (k < hold) & (history.searchsorted(0.8 * peak) <= self.step_rise)
-                watch.fell = watch.fell or bool((ok & deferred).any())
-                hit = (ok & ~deferred).nonzero()[0]
-            else:  # past the hold: nothing deferred
-                hit = ok.nonzero()[0]
-            if len(hit) and k[hit[0]] < hold:
-                return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
+            watch.hist_n += len(level)
+            if watch.next_k <= hold:
+                watch.held_n += min(len(level), hold - watch.next_k + 1)
+            watch.fell = watch.fell or fell
+            if hit >= 0 and watch.next_k + hit < hold:
+                return PulseCheck(watch.id, watch.next_k + hit + h, True)
             if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
                 if self._is_small_step(watch) if small else self._is_step(watch):
                     return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
                 if watch.fell:
                     return PulseCheck(watch.id, hold + h, True)
-            if len(hit):
-                return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
-            early = min(len(k), watch.index + self.watch // 4 - watch.next_k + 1)  # k rises
+            if hit >= 0:
+                return PulseCheck(watch.id, watch.next_k + hit + h, True)
+            early = min(len(level), watch.index + self.watch // 4 - watch.next_k + 1)
             if early > 0:
-                watch.early = max(watch.early, float(peak[early - 1]))
-            watch.peak = float(peak[-1])
+                watch.early = max(watch.early, float(watch.history[first + early - 1]))
+            watch.peak = float(watch.history[watch.hist_n - 1])
             watch.next_k = end + 1
         if watch.next_k > watch.index + self.watch:
             flat = watch.peak <= 1.5 * watch.early

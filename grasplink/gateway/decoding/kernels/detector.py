@@ -20,7 +20,14 @@ import numpy as np
 
 from grasplink.gateway.decoding.kernels import jit
 
-__all__ = ["channel_fast", "channel_hinge", "fir_run", "hinge_maxima", "step_scale"]
+__all__ = [
+    "channel_fast",
+    "channel_hinge",
+    "fir_run",
+    "hinge_maxima",
+    "step_scale",
+    "watch_scan",
+]
 
 
 @jit()
@@ -184,3 +191,84 @@ def step_scale(
         found_adj[count] = a
         count += 1
     return count
+
+
+@jit()
+def _first_at_least(sorted_values: np.ndarray, count: int, value: float) -> int:
+    """sorted_values[:count].searchsorted(value) (side left): binary search, as numpy's."""
+    lo, hi = 0, count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_values[mid] < value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@jit()
+def watch_scan(
+    level: np.ndarray,
+    next_k: int,
+    index: int,
+    base: float,
+    fall: float,
+    fall_credit: int,
+    trend: float,
+    width: int,
+    peak: float,
+    history: np.ndarray,
+    hist_n: int,
+    held: np.ndarray,
+    held_n: int,
+    hold: int,
+    min_rise: int,
+    drop: float,
+    decay: float,
+    noise: float,
+    step_rise: int,
+) -> tuple[int, bool]:
+    """A pulse watch's look at the level samples k = next_k .. (level: their values):
+    the numbers of `ContactDetector._advance`, which keeps the verdicts.
+
+    With since = k - index, credit = fall min(since, fall_credit) (an earlier tail's fall
+    out), raw = level - base + credit and d = raw - trend (since + width) (the trend out):
+    the running peak of d - credit (from `peak`) goes to history[hist_n:], and level - base,
+    raw, d of the samples up to `hold` to held[:, held_n:]. A sample falls back like a
+    pulse (ok) when its peak is at least 4 noise, d is `drop` of the peak below it, and
+    since is at most `decay` times the rise (the first sample at 90 % of the peak, at
+    least min_rise). Before the hold, a sharp rise (to 80 % within step_rise) is deferred:
+    judged at the hold. Returns (the first sample ok and not deferred, as an offset from
+    next_k, -1: none; whether one ok was deferred)."""
+    m = len(level)
+    d = np.empty(m)
+    for j in range(m):
+        since = next_k + j - index
+        credit = fall * min(since, fall_credit)
+        plain = level[j] - base
+        raw = plain + credit
+        d[j] = raw - trend * (since + width)
+        peak = max(d[j] - credit, peak)
+        history[hist_n + j] = peak
+        if next_k + j <= hold:
+            held[0, held_n + j] = plain
+            held[1, held_n + j] = raw
+            held[2, held_n + j] = d[j]
+    count = hist_n + m
+    floor = 4.0 * noise
+    hit = -1
+    fell = False
+    for j in range(m):
+        top = history[hist_n + j]
+        rise = max(_first_at_least(history, count, 0.9 * top), min_rise)
+        since = next_k + j - index
+        ok = top >= floor and top - d[j] >= drop * top and since <= decay * rise
+        if not ok:
+            continue
+        sharp = next_k + j < hold and _first_at_least(history, count, 0.8 * top) <= step_rise
+        if sharp:  # deferred to the hold
+            fell = True
+            continue
+        if hit < 0:
+            hit = j
+    return hit, fell
