@@ -68,6 +68,7 @@ from grasplink.gateway.decoding.filters import (
     resolution,
 )
 from grasplink.gateway.decoding.kernels.detector import (
+    all_finite,
     channel_fast,
     channel_hinge,
     fir_run,
@@ -385,7 +386,7 @@ class ContactDetector:
         is refused here, by name, rather than spread through the history."""
         if not len(x):
             return [], []
-        if not (np.isfinite(x).all() and np.isfinite(t).all()):
+        if not all_finite(t, x):
             raise ValueError(
                 "ContactDetector.feed: samples must be finite (NaN or inf in t or x); "
                 "drop them first, as Decoder.process does"
@@ -496,20 +497,25 @@ class ContactDetector:
         """`_normalise` and `_maxima` of centres start .. start + count - 1 when they lie in
         one block whose noise is known and none wait (the usual case: a CAN frame's few
         samples), as one kernel writing the z rows in place: the same numbers."""
-        w = ch.width
+        w, rows = ch.width, ch.rows
         ch.next_n += count
-        at = ch.rows.size
-        ch.rows.extend(count)
-        ch.refresh_views()
-        lo, hi = self._test_range(ch)
-        found = self._room(hi - lo + 1)
+        at = rows.size
+        rows.extend(count)
+        if ch.z.base is not rows.data:
+            ch.refresh_views()
+        # centres to test (`_test_range`, inline: this runs per channel and frame)
+        lo = max(ch.next_test, ch.z_start + w)
+        hi = ch.z_start + at + count - 1 - w
+        if hi >= lo:
+            ch.next_test = hi + 1
+        found = self._found if hi - lo < len(self._found) else self._room(hi - lo + 1)
         told = channel_fast(
             x,
             ch.taps,
             ch.state,
             ch.after,
             ch.held,
-            ch.rows.data,
+            rows.data,
             at,
             start + w,
             noise,

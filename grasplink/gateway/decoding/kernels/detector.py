@@ -21,6 +21,7 @@ import numpy as np
 from grasplink.gateway.decoding.kernels import jit
 
 __all__ = [
+    "all_finite",
     "channel_fast",
     "channel_hinge",
     "fir_run",
@@ -28,6 +29,13 @@ __all__ = [
     "step_scale",
     "watch_scan",
 ]
+
+
+@jit()
+def all_finite(t: np.ndarray, x: np.ndarray) -> bool:
+    """No NaN or inf in t or x (the detector refuses them by name): one crossing, not four
+    numpy calls per frame."""
+    return bool(np.isfinite(t).all() and np.isfinite(x).all())
 
 
 @jit()
