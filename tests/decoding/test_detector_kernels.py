@@ -6,6 +6,9 @@ the FIR loop, to the bit."""
 from __future__ import annotations
 
 import importlib.util
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -292,3 +295,21 @@ def test_compiled_watch_scan_matches_the_numpy_watch(seed: int) -> None:
         np.testing.assert_array_equal(held[:, held_n : held_n + keep], expected_held)
         held_n += keep
         peak, next_k = float(history[hist_n - 1]), next_k + len(new)
+
+
+def test_the_decoders_warm_up_loads_every_detector_kernel() -> None:
+    """The live loop's first frames and first contact wait for no detector kernel: the
+    tracker's warm-up (a throwaway decoder on a synthetic slip) reaches every one."""
+    child = (
+        "import json\n"
+        "from grasplink.gateway.decoding.kernels import detector\n"
+        "from grasplink.gateway.decoding.tracker import TrackerDecoder\n"
+        "from grasplink.profiles.layouts import LAYOUTS_MM\n"
+        "TrackerDecoder(LAYOUTS_MM['alpha0.1'], 400).warm_up()\n"
+        "print(json.dumps({n: len(getattr(detector, n).signatures) for n in detector.__all__}))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", child], capture_output=True, text=True, check=True, timeout=600
+    )
+    counts = json.loads(done.stdout.strip().splitlines()[-1])
+    assert counts and all(counts.values()), counts
