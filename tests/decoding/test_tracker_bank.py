@@ -1,5 +1,5 @@
 """The tracker's hypothesis bank (`_Bank`): all fields packed in two matrices, read as
-views. Taking, joining and doubling tracks must carry every field of each track along."""
+views. Taking tracks must carry every field of each track along."""
 
 from __future__ import annotations
 
@@ -47,30 +47,6 @@ def test_taking_tracks_keeps_every_field_of_each_track():
     assert len(out) == len(idx)
     for j, i in enumerate(idx):
         assert same(fields(out, j), fields(B, int(i)))
-
-
-def test_joining_banks_keeps_every_field_of_each_track_in_order():
-    a, b = bank(), bank(7.0, 3)
-    out = _Bank.concat([a, _Bank.empty(), b])
-    assert len(out) == len(a) + len(b)
-    for j in range(len(out)):
-        want = fields(a, j) if j < len(a) else fields(b, j - len(a))
-        assert same(fields(out, j), want)
-    assert _Bank.concat([a]) is a
-    assert _Bank.concat([_Bank.empty(), _Bank.empty()]) is _Bank.empty()
-
-
-def test_replacing_fields_changes_only_those_and_not_the_original():
-    B = bank()
-    before = [fields(B, i) for i in range(N)]
-    P = np.zeros((N, 4, 4))
-    out = B.replace(P=P, ridge=np.full(N, 7))
-    for i in range(N):
-        row = fields(out, i)
-        assert np.array_equal(row["P"], P[i]) and row["ridge"] == 7
-        row["P"], row["ridge"] = before[i]["P"], before[i]["ridge"]
-        assert same(row, before[i])
-        assert same(fields(B, i), before[i])
 
 
 def test_field_views_stay_consistent_with_the_packed_matrices():

@@ -72,6 +72,7 @@ from grasplink.gateway.decoding.contacts import (
     PulseCheck,
 )
 from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
+from grasplink.gateway.decoding.kernels.branch import branch, pack_constants
 from grasplink.gateway.decoding.kernels.prune import prune_choice
 
 V_MIN_MM_S = 2.0
@@ -81,14 +82,6 @@ STEADY, CHANGING = 0, 1
 # pulse verdicts in the ring of recent contacts
 UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
 RING = 256
-# process noise of the Kalman prediction as one scatter per model: flat (4 x 4) index of each
-# entry, and the powers of dt (columns of [1, dt, dt^2, dt^3]) and divisor of its term, in
-# the order _kalman adds them (x * 1.0 and x / 1.0 are exact: the same bits as without)
-_QV_AT, _QV_POW = np.array([0, 1, 4, 5]), np.array([3, 2, 2, 1])
-_QV_DIV = np.array([3.0, 2.0, 2.0, 1.0])
-_QJ_AT = np.array([0, 1, 4, 2, 8, 5, 6, 9, 10])
-_QJ_POW1, _QJ_POW2 = np.array([3, 2, 2, 3, 3, 3, 2, 2, 1]), np.array([2, 2, 2, 0, 0, 0, 0, 0, 0])
-_QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
 
 
 # the columns of a bank's two matrices: floats (P flattened row-major, X = (s, v, a, d), m,
@@ -118,13 +111,6 @@ _WARM = False  # this process's kernels are loaded
 _NO_BLIND = np.zeros(0)  # the posterior kernel's blind times when none
 
 
-def _full(n: int, value: float, dtype: type = np.float64) -> np.ndarray:
-    """np.full without its wrapper: a contact builds dozens of these small arrays."""
-    out: np.ndarray = np.empty(n, dtype)
-    out.fill(value)
-    return out
-
-
 def _clip(x: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> np.ndarray:
     """np.clip's numbers without its wrapper (a dozen microseconds on small arrays). Ties
     (+0 against -0) as np.clip breaks them: scalar bounds keep x, array bounds give the
@@ -149,18 +135,6 @@ def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict) -> None:
             floats[:, col] = value
         else:
             ints[:, _I_COLS[key]] = value
-
-
-def _with_contact(ints: np.ndarray, ev_id: int, ridge: np.ndarray, run) -> np.ndarray:
-    """The int columns of tracks `ints` that assign contact ev_id to `ridge`: one more
-    contact, `run`, and ev_id the last of their ids (a new matrix)."""
-    out = ints.copy()
-    out[:, _IDS.start : _IDS.stop - 1] = ints[:, _IDS.start + 1 : _IDS.stop]
-    out[:, _IDS.stop - 1] = ev_id
-    out[:, _N] += 1
-    out[:, _RIDGE] = ridge
-    out[:, _RUN] = run
-    return out
 
 
 def warm_up_signal(ridges_mm: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
@@ -188,9 +162,10 @@ class _Bank:
     ids of its last contacts, the id it started at, and `stop`: NaN while
     slipping, else the time it stopped (X[:, 0] then holds where).
 
-    Stored as one float and one int matrix (a row per track): taking tracks or
-    joining banks is two numpy calls, not one per field. The fields are views
-    of their columns, made on first reading.
+    Stored as one float and one int matrix (a row per track): taking tracks is two
+    numpy calls, not one per field, and the compiled branching (`kernels.branch`)
+    takes and gives the two matrices. The fields are views of their columns, made on
+    first reading.
     """
 
     FIELDS: tuple[str, ...] = (
@@ -261,25 +236,6 @@ class _Bank:
         """The tracks at integer indices idx (`ndarray.take`: half the cost of `a[idx]`;
         two calls, one per matrix, whatever fields the caller reads)."""
         return _Bank(self._f.take(idx, 0), self._i.take(idx, 0))
-
-    @staticmethod
-    def concat(banks: list[_Bank]) -> _Bank:
-        banks = [b for b in banks if len(b)]
-        if not banks:
-            return _Bank.empty()
-        if len(banks) == 1:
-            return banks[0]
-        return _Bank(np.concatenate([b._f for b in banks]), np.concatenate([b._i for b in banks]))
-
-    def replace(self, **fields) -> _Bank:
-        """These tracks with `fields` changed: the matrix no changed field is in is shared."""
-        floats, ints = self._f, self._i
-        if any(key in _F_COLS for key in fields):
-            floats = floats.copy()
-        if any(key in _I_COLS for key in fields):
-            ints = ints.copy()
-        _fill(floats, ints, fields)
-        return _Bank(floats, ints)
 
 
 class _One:
@@ -497,6 +453,16 @@ class TrackerDecoder(Decoder):
         )
         self._birth._f.flags.writeable = False
         self._birth._i.flags.writeable = False
+        # what `kernels.branch` reads besides the tracks: built once
+        self._branch_constants = pack_constants(self._branch_constant_values())
+        self._branch_tables = (
+            self._pos,
+            self._gap,
+            self._log_prior,
+            self._skip_prior,
+            self._birth._f,
+            self._birth._i,
+        )
 
     def warm_up(self) -> None:
         """Load (or compile) the kernels: a throwaway decoder on this one's layout and rate
@@ -624,354 +590,75 @@ class TrackerDecoder(Decoder):
         self._tracks = self._prune(pool, recent_ids, held_ids)
 
     def _branch(self, ev: ContactEvent) -> _Bank:
-        """Every track's children for contact ev (updates the null score), unpruned."""
-        tc = ev.t_s
-        B = self._retire(self._tracks, tc)
+        """Every track's children for contact ev (updates the null score), unpruned: one
+        compiled kernel (`kernels.branch`); what needs Python objects (the step verdicts)
+        is decided here and passed as numbers."""
         step = ev.id in self._steps
         # a stop ends the rising trend of the level (the object no longer covers more of
         # the sensor): a step after which it went on is seldom one
         stop_rate = self.STOP_STEP_PER_S * (0.1 if self._steps.get(ev.id) else 1.0)
         probe = ev.id >= STEP_IDS
+        sigma_s = ev.sigma_s
         if probe:  # a small step the kink bank missed: often a weak ridge pulse
             stop_rate *= self.PROBE_STOP
-        best_before = max(self._null, float(B.score.max()) if len(B) else -math.inf)
-        rate = self._clutter_rate(B, tc)
-        children = []
-        if len(B):
-            moving = np.isnan(B.stop)
-            if step:  # a grip change (slipping or not) or, slipping, a stop here
-                children.append(B.replace(score=B.score + math.log(self.GRIP_STEP_PER_S)))
-                stopping = B.take(_nz(moving & (B.n >= 2)))
-                children.append(self._stopped_at(stopping, tc, math.log(stop_rate)))
-            else:
-                children.append(B.replace(score=B.score + np.log(rate)))
-            if probe:
-                # a small step the kink bank missed: pulses after short spacings start on
-                # the one before (thesis ch. 5.3.1) and pile up like a step - so perhaps a
-                # ridge it could not time (mid-rise, loosely), or a stop, or a grip change
-                loose = ev._replace(sigma_s=max(ev.sigma_s, self.PROBE_SIGMA_S))
-                assigned = [
-                    c.replace(score=c.score + self.LOG_PROBE_RIDGE) for c in self._assign(B, loose)
-                ]
-            else:
-                assigned = self._assign(B, ev)
-            children += assigned
-            if step and assigned:  # a stop right at a ridge (the step is that ridge's contact)
-                ridden = _Bank.concat(assigned)  # all at once: the numbers are per track
-                at = ridden.take(_nz(ridden.n >= 2))
-                children.append(self._stopped_at(at, tc, self.LOG_STOP_AT_RIDGE))
-        self._null += self.LOG_CLUTTER_IDLE if not step else math.log(self.GRIP_STEP_PER_S)
-        if probe:
-            return _Bank.concat(children)
-        # a new track starting at this contact: a slip starting (the earlier story ends
-        # here) or, while one slips, reversing (the other edge leads, anywhere)
-        base = _full(2, best_before + self.LOG_NEW_TRACK)
-        if len(B):
-            slipping = np.isnan(B.stop) & (B.n >= 2)
-            for di, d in enumerate((1, -1)):
-                way = slipping & (B.dirn == -d)
-                if way.any():
-                    reverse = float(B.score[way].max()) + self.LOG_REVERSE + math.log(2.0)
-                    base[di] = max(base[di], reverse)
-        children.append(self._births(ev, base + self._log_strength(ev.z)))
-        return _Bank.concat(children)
-
-    def _retire(self, B: _Bank, tc: float) -> _Bank:
-        """B without the tracks whose last contact is longer before tc than the slowest
-        slip takes to cross the skin (`_stale_s`): tc is no part of their slip, and one
-        restarting there would carry minutes-old contacts (their count and pulse verdicts)
-        into a new slip - held still for an hour, noise contacts minutes apart were chained
-        into slips that way."""
-        if not len(B):
-            return B
-        stale = tc - B.t > self._stale_s
-        return B.take(_nz(~stale)) if stale.any() else B
-
-    def _clutter_rate(self, B: _Bank, tc: float) -> np.ndarray:
-        """Spurious contacts per s at tc under each track: detector false alarms, and while
-        slipping the tipping front edge's, within TIP_MM of travel after a ridge contact."""
-        rate = _full(len(B), self.CLUTTER_PER_S)
-        moving = np.isnan(B.stop)
-        dt = tc - B.t
-        v = B.X[:, 1]
-        di = (1 - B.dirn) // 2
-        gap = self._gap[di, np.minimum(B.ridge, self.count - 1)]
-        room = np.minimum(self.TIP_MM, gap - 2.0)
-        tipping = moving & (gap >= self.TIP_GAP_MM)
-        fast = tipping & (B.run >= 2) & (v * dt <= room)
-        rate[fast] += self.P_TIP * v[fast] / room[fast]
-        slow = tipping & (B.run == 1) & (dt <= self.TIP_S)
-        rate[slow] += self.P_TIP / self.TIP_S
-        return rate
-
-    def _births(self, ev: ContactEvent, base: np.ndarray) -> _Bank:
-        """One-contact tracks at every ridge, both ways; `base`: log prior per direction."""
-        floats, ints = self._birth._f.copy(), self._birth._i.copy()
-        ints[:, _FIRST] = ints[:, _IDS.stop - 1] = ev.id
-        floats[:, _SCORE] = (base[:, None] + self._log_prior).ravel()
-        floats[:, _SIG] = ev.sigma_s
-        floats[:, _T] = ev.t_s
-        return _Bank(floats, ints)
-
-    def _stopped_at(self, B: _Bank, tc: float, log_prior: float | None = None) -> _Bank:
-        """Copies of slipping tracks B that stopped at tc (a step), where they were then.
-
-        `log_prior`: of the stop (by default STOP_STEP_PER_S, a density in time)."""
-        if not len(B):
-            return B
-        s = self._travel(B, tc)
-        limit = self._pos[(1 - B.dirn) // 2, np.minimum(B.ridge + 1, self.count)]
-        prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
-        floats = B._f.copy()
-        floats[:, _S] = np.minimum(s, limit - 0.1)
-        floats[:, _V] = floats[:, _A] = 0.0
-        floats[:, _STOP] = tc
-        floats[:, _SCORE] = B.score + prior
-        return _Bank(floats, B._i)
-
-    def _assign(self, B: _Bank, ev: ContactEvent) -> list[_Bank]:
-        """Children of B that assign contact ev to one of the next ridges (each branch type
-        as one batch over tracks and ridges)."""
-        dt = ev.t_s - B.t
-        R = self.count
-        di = (1 - B.dirn) // 2
-        moving = np.isnan(B.stop)
-        ok = dt > 0
-        # every (skip, track) at once, skip-major: the order of one skip after the other
-        k = B.ridge[:, None] + 1 + np.arange(self.MAX_SKIP + 1)
-        valid = (ok[:, None] & (k < R)).T
-        skip_arr, row = valid.nonzero()
-        if not len(row):
-            return []
-        prior = self._skip_prior[di.take(row), B.ridge.take(row), skip_arr]
-        run, mov = B.run[row], moving[row]
-        out = []
-        fresh = _nz(mov & (run == 1))  # one-contact or restarted tracks
-        sel = _nz(mov & (run >= 2))  # slipping tracks with a speed
-        # the Kalman filter; far off, the speed starts again from the last two contacts -
-        # in one pass with the tracks whose speed comes from this contact and the last
-        kalman, far, far_prior = _Bank.empty(), sel[:0], prior[:0]
-        if len(sel):
-            kalman, far, far_prior = self._kalman(B.take(row[sel]), ev, skip_arr[sel], prior[sel])
-        again = np.concatenate([fresh, sel.take(far)])
-        started, restarted = self._start_speed(
-            B.take(row.take(again)),
-            ev,
-            skip_arr.take(again),
-            np.concatenate([prior.take(fresh), far_prior]),
-            len(fresh),
+            # pulses after short spacings start on the one before (thesis ch. 5.3.1) and
+            # pile up like a step - so perhaps a ridge it could not time (mid-rise, loosely)
+            sigma_s = max(ev.sigma_s, self.PROBE_SIGMA_S)
+        log_strength = 0.0 if probe else self._log_strength(ev.z)  # (a probe starts none)
+        floats, ints, self._null = branch(
+            self._tracks._f,
+            self._tracks._i,
+            (ev.t_s, ev.id, ev.sigma_s),
+            sigma_s,
+            log_strength,
+            math.log(stop_rate),
+            step,
+            probe,
+            self._null,
+            self._branch_constants,
+            self._branch_tables,
         )
-        if len(fresh):
-            out.append(started)
-        if len(sel):
-            out += [kalman, restarted]  # (joined with the other children, in this order)
-            # or the slip stopped unseen and went on: a restart at the next ridge
-            first = sel[skip_arr[sel] == 0]
-            if len(first):
-                at = B.take(row[first])
-                out.append(self._restart(at, ev, at.ridge + 1, prior[first] + self.LOG_RESTART))
-        # a stopped track restarting here
-        sel = _nz(~mov)
-        if len(sel):
-            at = B.take(row[sel])
-            log_rate = math.log(self.RESTART_PER_S)
-            out.append(self._restart(at, ev, at.ridge + 1 + skip_arr[sel], prior[sel] + log_rate))
-        return out
+        return _Bank(floats, ints) if len(floats) else _Bank.empty()
 
-    def _restart(self, B: _Bank, ev: ContactEvent, k: np.ndarray, log_prior: np.ndarray) -> _Bank:
-        """B restarted (speed unknown) with ev at ridge k."""
-        di = (1 - B.dirn) // 2
-        floats = np.zeros((len(B), _F_WIDTH))  # P, v and a: 0
-        floats[:, _S] = self._pos[di, k]
-        floats[:, _D] = B.X[:, 3]
-        floats[:, _P33] = np.maximum(B.P[:, 3, 3], 0.0)
-        floats[:, _M] = 1.0
-        floats[:, _SCORE] = B.score + log_prior
-        floats[:, _SIG] = ev.sigma_s
-        floats[:, _STOP] = np.nan
-        floats[:, _T] = ev.t_s
-        return _Bank(floats, _with_contact(B._i, ev.id, k, 1))
-
-    def _start_speed(
-        self,
-        B: _Bank,
-        ev: ContactEvent,
-        skip: np.ndarray,
-        log_prior: np.ndarray,
-        fresh: int,
-    ) -> tuple[_Bank, _Bank]:
-        """Tracks at ridge k whose speed comes from their last contact and this one: the
-        first `fresh` (one contact, or restarted) each in both motion models (with their
-        priors); the rest (far off their Kalman prediction) in their own model, within
-        MAX_SPEED_JUMP of their speed. Both kinds in one pass (the numbers are per track),
-        returned apart."""
-        tc = ev.t_s
-        dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
-        d = B.X[:, 3]
-        v = (target - B.X[:, 0] + lag * d) / dt
-        good = (v >= V_MIN_MM_S) & (v <= V_MAX_MM_S)
-        v_ref = np.maximum(B.X[fresh:, 1], V_MIN_MM_S)
-        v_far = v[fresh:]
-        good[fresh:] &= (v_far * self.MAX_SPEED_JUMP >= v_ref) & (
-            v_far <= self.MAX_SPEED_JUMP * v_ref
-        )
-        if not good.all():
-            sel = _nz(good)
-            fresh = int(np.count_nonzero(good[:fresh]))
-            B, dt, k, target, decay, lag, d, v = (
-                B.take(sel),
-                dt[sel],
-                k[sel],
-                target[sel],
-                decay[sel],
-                lag[sel],
-                d[sel],
-                v[sel],
-            )
-            log_prior = log_prior[sel]
-        N = len(B)
-        if not N:
-            return B, B
-        r = self._meas_var(v, ev.sigma_s)
-        r_before = self._meas_var(v, B.sig)
-
-        def covariance(dip_prior_mm: float) -> np.ndarray:
-            """The covariance, flat (N, 16)."""
-            var_d = np.where(B.P[:, 3, 3] > 0, B.P[:, 3, 3], dip_prior_mm**2)
-            P = np.zeros((N, 16))
-            P[:, _P00] = r
-            P[:, _P01] = P[:, _P10] = r / dt
-            P[:, _P11] = (r + r_before + lag * lag * var_d) / (dt * dt)
-            P[:, _P11] += (self.SPEED_INIT_REL * v) ** 2
-            P[:, _P13] = P[:, _P31] = lag * var_d / dt
-            P[:, _P33] = var_d
-            return P
-
-        P = covariance(self.DIP_PRIOR_MM)
-        score = B.score + log_prior + self._log_speed_prior(v) - np.log(dt)
-        # changing: the mean speed over the interval is the speed half an interval ago
-        sa = self.ACC_PER_S * v
-        if self.DIP_PRIOR_CHANGING_MM == self.DIP_PRIOR_MM:  # the same numbers: built once
-            Pc = P.copy()
-        else:
-            Pc = covariance(self.DIP_PRIOR_CHANGING_MM)
-        half = dt / 2.0
-        Pc[:, _P11] += (half * sa) ** 2
-        Pc[:, _P12] = Pc[:, _P21] = half * sa * sa
-        Pc[:, _P22] = sa * sa
-        # the children's columns, built in place: the steady model's covariance first
-        floats = np.empty((N, _F_WIDTH))
-        floats[:, _P] = P
-        floats[:, _S] = target
-        floats[:, _V] = v
-        floats[:, _A] = 0.0
-        floats[:, _D] = d
-        floats[:, _M] = 1.0 + B.m * decay
-        floats[:, _SCORE] = score
-        floats[:, _SIG] = ev.sigma_s
-        floats[:, _STOP] = B.stop
-        floats[:, _T] = tc
-        ints = _with_contact(B._i, ev.id, k, 2)
-        started = restarted = _Bank.empty()
-        if fresh:  # each in both models: steady, then changing
-            both_f = np.concatenate((floats[:fresh], floats[:fresh]))
-            both_i = np.concatenate((ints[:fresh], ints[:fresh]))
-            both_f[:fresh, _SCORE] = score[:fresh] + math.log(1.0 - math.exp(self.LOG_CHANGING))
-            both_f[fresh:, _SCORE] = score[:fresh] + self.LOG_CHANGING
-            both_f[fresh:, _P] = Pc[:fresh]
-            both_i[:fresh, _MODEL] = STEADY
-            both_i[fresh:, _MODEL] = CHANGING
-            started = _Bank(both_f, both_i)
-        if fresh < N:  # in their own model
-            own_f = floats[fresh:]
-            chg = _nz(ints[fresh:, _MODEL] == CHANGING)
-            own_f[chg, _P] = Pc[fresh:].take(chg, 0)
-            restarted = _Bank(own_f, ints[fresh:])
-        return started, restarted
-
-    def _toward_ridge(
-        self, B: _Bank, tc: float, skip: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Per track, for a contact at tc on the ridge after the next `skip`: time since
-        its last contact, that ridge (index, position along the track's direction), how
-        far the last ridge's speed dip has recovered, and the travel the dip lags by."""
-        dt = tc - B.t
-        di = (1 - B.dirn) // 2
-        k = B.ridge + 1 + skip
-        decay = np.exp(-dt / self.DIP_RECOVERY_S)
-        return dt, k, self._pos[di, k], decay, B.m * (1.0 - decay) + skip
-
-    def _kalman(
-        self, B: _Bank, ev: ContactEvent, skip: np.ndarray, log_prior: np.ndarray
-    ) -> tuple[_Bank, np.ndarray, np.ndarray]:
-        """Predict B to the contact and update with ridge k (robust: far off, the speed
-        starts again from the last two contacts): the updated tracks, and those far off
-        (indices into B, log prior with their likelihood) for `_start_speed`."""
-        tc = ev.t_s
-        N = len(B)
-        dt, k, target, decay, lag = self._toward_ridge(B, tc, skip)
-        X, P = B.X, B.P
-        v = np.maximum(X[:, 1], V_MIN_MM_S)
-        F = np.zeros((N, 4, 4))
-        F[:, 0, 0] = F[:, 1, 1] = F[:, 2, 2] = F[:, 3, 3] = 1.0
-        F[:, 0, 1] = F[:, 1, 2] = dt
-        F[:, 0, 2] = 0.5 * dt * dt
-        F[:, 0, 3] = -lag
-        Xp = np.einsum("nij,nj->ni", F, X)
-        Pp = F @ P @ F.transpose(0, 2, 1)
-        # process noise: the speed's random walk; the jerk of the changing model
-        # (qv dt^3 / 3 at (0, 0), qv dt^2 / 2 at (0, 1) and (1, 0), qv dt at (1, 1); then
-        # the jerk's terms: see _QJ_*), each entry's terms added in this order
-        qv = self.SPEED_WALK**2 * v**3 / self.SPEED_WALK_MM
-        dt2, dt3 = dt * dt, dt * dt * dt
-        powers = np.empty((N, 4))
-        powers[:, 0] = 1.0
-        powers[:, 1] = dt
-        powers[:, 2] = dt2
-        powers[:, 3] = dt3
-        flat = Pp.reshape(N, 16)
-        flat[:, _QV_AT] += qv[:, None] * powers[:, _QV_POW] / _QV_DIV
-        chg = B.model == CHANGING
-        if chg.any():
-            qj = np.where(chg, (self.JERK_PER_S2 * v) ** 2, 0.0)
-            flat[:, _QJ_AT] += qj[:, None] * powers[:, _QJ_POW1] * powers[:, _QJ_POW2] / _QJ_DIV
-        Pp = flat.reshape(N, 4, 4)
-        var = Pp[:, 0, 0] + self._meas_var(v, ev.sigma_s) + skip * self.SIGMA_POS_MM**2
-        resid = target - Xp[:, 0]
-        inlier = (
-            (1.0 - self.ROBUST_FLOOR)
-            * v
-            * np.exp(-0.5 * resid * resid / var)
-            / np.sqrt(2 * np.pi * var)
-        )
-        outlier = self.ROBUST_FLOOR * v / (4.0 * np.maximum(target - X[:, 0], 1.0))
-        like = np.log(inlier + outlier)
-        K = Pp[:, :, 0] / var[:, None]
-        Xn = Xp + K * resid[:, None]
-        Xn[:, 3] = _clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
-        Pn = Pp - K[:, :, None] * Pp[:, None, 0, :]
-        Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
-        good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
-        out = _Bank.empty()
-        sel = _nz(good)
-        if len(sel):
-            floats = np.empty((len(sel), _F_WIDTH))
-            floats[:, _P] = Pn.reshape(N, 16).take(sel, 0)
-            floats[:, _X] = Xn.take(sel, 0)
-            floats[:, _M] = 1.0 + B.m.take(sel) * decay.take(sel)
-            floats[:, _SCORE] = B.score.take(sel) + log_prior.take(sel) + like.take(sel)
-            floats[:, _SIG] = ev.sigma_s
-            floats[:, _STOP] = B.stop.take(sel)
-            floats[:, _T] = tc
-            ints = B._i.take(sel, 0)
-            out = _Bank(floats, _with_contact(ints, ev.id, k.take(sel), ints[:, _RUN] + 1))
-        # far off: the speed changed; it starts again from the last two contacts
-        far = _nz(inlier < outlier)
-        return out, far, log_prior[far] + like[far]
-
-    def _meas_var(self, v, sigma_t):
-        """Variance of a ridge contact as a position measurement at speed v."""
-        return self.SIGMA_POS_MM**2 + (v * sigma_t) ** 2
+    def _branch_constant_values(self) -> dict[str, float]:
+        """The constants `kernels.branch` reads, by its names (`branch.CONSTANTS`)."""
+        return {
+            "stale_s": self._stale_s,
+            "clutter_per_s": self.CLUTTER_PER_S,
+            "p_tip": self.P_TIP,
+            "tip_mm": self.TIP_MM,
+            "tip_gap_mm": self.TIP_GAP_MM,
+            "tip_s": self.TIP_S,
+            "tip_slow_per_s": self.P_TIP / self.TIP_S,
+            "log_grip": math.log(self.GRIP_STEP_PER_S),
+            "log_probe_ridge": self.LOG_PROBE_RIDGE,
+            "log_stop_at_ridge": self.LOG_STOP_AT_RIDGE,
+            "log_clutter_idle": self.LOG_CLUTTER_IDLE,
+            "log_new_track": self.LOG_NEW_TRACK,
+            "log_reverse": self.LOG_REVERSE,
+            "log_2": math.log(2.0),
+            "dip_recovery_s": self.DIP_RECOVERY_S,
+            "log_restart": self.LOG_RESTART,
+            "log_restart_rate": math.log(self.RESTART_PER_S),
+            "v_min_mm_s": V_MIN_MM_S,
+            "v_max_mm_s": V_MAX_MM_S,
+            "max_speed_jump": self.MAX_SPEED_JUMP,
+            "pos_var_mm2": self.SIGMA_POS_MM**2,
+            "speed_init_rel": self.SPEED_INIT_REL,
+            "dip_var_mm2": self.DIP_PRIOR_MM**2,
+            "dip_var_changing_mm2": self.DIP_PRIOR_CHANGING_MM**2,
+            "acc_per_s": self.ACC_PER_S,
+            "log_changing": self.LOG_CHANGING,
+            "log_steady": math.log(1.0 - math.exp(self.LOG_CHANGING)),
+            "speed_prior_mm_s": self.SPEED_PRIOR_MM_S,
+            "speed_prior_log_sigma": self.SPEED_PRIOR_LOG_SIGMA,
+            "log_speed_norm": math.log(self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0 * math.pi)),
+            "speed_walk2": self.SPEED_WALK**2,
+            "speed_walk_mm": self.SPEED_WALK_MM,
+            "jerk_per_s2": self.JERK_PER_S2,
+            "robust_floor": self.ROBUST_FLOOR,
+            "dip_max_mm": self.DIP_MAX_MM,
+        }
 
     def _log_strength(self, z: float) -> float:
         """Log likelihood ratio ridge contact / false alarm of a contact of strength z.
@@ -983,11 +670,6 @@ class TrackerDecoder(Decoder):
         log_false_alarm = math.log(thr) - thr * (z - thr)
         log_ridge = -math.log(z * math.log(self.STRONG_Z / thr))
         return min(self.STRENGTH_MAX, max(self.STRENGTH_MIN, log_ridge - log_false_alarm))
-
-    def _log_speed_prior(self, v: np.ndarray) -> np.ndarray:
-        """Log density of ln(v): log-normal around the usual slip speeds."""
-        z = np.log(v / self.SPEED_PRIOR_MM_S) / self.SPEED_PRIOR_LOG_SIGMA
-        return -0.5 * z * z - math.log(self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0 * math.pi))
 
     def _prune(self, B: _Bank, recent: np.ndarray, held: np.ndarray) -> _Bank:
         """Best first, one per (direction, ridge, model, state, last three contacts); bounded.
