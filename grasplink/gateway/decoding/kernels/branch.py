@@ -16,6 +16,9 @@ constants come in one float array (`pack_constants`, names in `CONSTANTS`), its 
 from __future__ import annotations
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
 from grasplink.gateway.decoding.kernels import jit
 
@@ -92,6 +95,35 @@ def _nan_max(x: np.ndarray, rows: np.ndarray) -> float:
         if x[r] > best:
             best = x[r]
     return best
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a * b + c rounded once (LLVM's fma): what numpy's BLAS matmul does per term."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        double = ir.DoubleType()
+        fn = builder.module.declare_intrinsic(
+            "llvm.fma", [double], ir.FunctionType(double, [double, double, double])
+        )
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@jit()
+def _matmul_fma(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A @ B (4 x 4) as numpy's matmul (OpenBLAS) sums it: from 0, one fused
+    multiply-add per term in order - the same bits, where plain sums differ by ulps."""
+    C = np.empty((4, 4))
+    for a in range(4):
+        for b in range(4):
+            acc = 0.0
+            for k in range(4):
+                acc = _fma(A[a, k], B[k, b], acc)  # type: ignore[call-arg]
+            C[a, b] = acc
+    return C
 
 
 # ------------------------------------------------------------------ row writers
@@ -345,23 +377,13 @@ def _kalman(
     F[0, 2] = 0.5 * dt * dt
     F[0, 3] = -lag
     X = f[r, F_S : F_D + 1]
-    Xp = np.zeros(4)
-    FP = np.zeros((4, 4))
-    Pp = np.zeros((4, 4))
+    P = np.empty((4, 4))
     for a in range(4):
-        Xp[a] = F[a, 0] * X[0] + F[a, 1] * X[1] + F[a, 2] * X[2] + F[a, 3] * X[3]
-        for b in range(4):
-            FP[a, b] = (
-                F[a, 0] * f[r, b]
-                + F[a, 1] * f[r, 4 + b]
-                + F[a, 2] * f[r, 8 + b]
-                + F[a, 3] * f[r, 12 + b]
-            )
-    for a in range(4):
-        for b in range(4):
-            Pp[a, b] = (
-                FP[a, 0] * F[b, 0] + FP[a, 1] * F[b, 1] + FP[a, 2] * F[b, 2] + FP[a, 3] * F[b, 3]
-            )
+        P[a, :] = f[r, 4 * a : 4 * a + 4]
+    Xp = np.empty(4)
+    for a in range(4):  # (einsum's order: even terms, odd terms, then their sum)
+        Xp[a] = (F[a, 0] * X[0] + F[a, 2] * X[2]) + (F[a, 1] * X[1] + F[a, 3] * X[3])
+    Pp = _matmul_fma(_matmul_fma(F, P), F.T)
     _process_noise(Pp, v, dt, any_changing, i[r, I_MODEL] == CHANGING, c)
     vs = v * sigma_s
     var = Pp[0, 0] + (c[POS_VAR_MM2] + vs * vs) + skip * c[POS_VAR_MM2]
