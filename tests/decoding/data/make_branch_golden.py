@@ -4,8 +4,10 @@ Why: the branching was numpy code; it is now one compiled kernel, and this file 
 the numpy code gave on real contacts, so the kernel is checked against the code it
 replaced (tests/decoding/test_branch_kernel.py), not against itself.
 
-Run against the numpy code (main before the kernel), from anywhere:
-    PYTHONPATH=/work/main python tests/decoding/data/make_branch_golden.py
+Run it with the numpy code's package first on the path (a tree before the kernel, e.g.
+commit 0858d90, checked out at <old>):
+    PYTHONPATH=<old> python tests/decoding/data/make_branch_golden.py
+(it writes branch_golden.npz next to itself). The file here was made so, from main.
 It decodes a few signals of the non-stationary set and the gateway benchmark's slip cycle
 in 3-sample chunks, captures every `_branch` call (the bank, null score, contact and step
 verdict in; the children pool and null score out) and keeps a spread of them, the steps
