@@ -133,17 +133,3 @@ def test_compiled_branch_constants_are_packed_by_name():
     assert packed[kernel.STALE_S] == dec._stale_s
     with pytest.raises(ValueError, match="stale_s"):
         kernel.pack_constants({k: v for k, v in values.items() if k != "stale_s"})
-
-
-def test_compiled_branch_is_loaded_when_the_decoder_is_built():
-    """Taking the kernel from numba's cache at the first contact would stall a live
-    gateway mid-slip: a new decoder has it loaded for both kinds of banks (the read-only
-    empty one and built ones), and a contact loads nothing more."""
-    dec = decoder("alpha0.1", 400)
-    loaded = len(kernel.branch.signatures)
-    assert loaded >= 2
-    dec._tracks, dec._null, dec._steps = _Bank.empty(), 0.0, {}
-    pool = dec._branch(ContactEvent(1, 1.0, 400, 410, 5.0, 1.0, 0.01, 0.003))
-    dec._tracks = pool
-    dec._branch(ContactEvent(2, 1.2, 480, 490, 5.0, 1.0, 0.01, 0.003))
-    assert len(kernel.branch.signatures) == loaded

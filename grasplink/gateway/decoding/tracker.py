@@ -463,7 +463,6 @@ class TrackerDecoder(Decoder):
             self._birth._f,
             self._birth._i,
         )
-        self._load_branch_kernel()
 
     def warm_up(self) -> None:
         """Load (or compile) the kernels: a throwaway decoder on this one's layout and rate
@@ -620,27 +619,6 @@ class TrackerDecoder(Decoder):
             self._branch_tables,
         )
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
-
-    def _load_branch_kernel(self) -> None:
-        """Load the compiled branching now, not at the first contact: taking it from
-        numba's disk cache costs some tenths of a second the first time in a process, a
-        stall a live gateway must not see mid-slip. Both kinds of banks it is given: the
-        shared read-only empty one (numba compiles read-only arrays apart) and built ones."""
-        built = _Bank(np.zeros((0, _F_WIDTH)), np.zeros((0, _I_WIDTH), np.int64))
-        for bank in (_Bank.empty(), built):
-            branch(
-                bank._f,
-                bank._i,
-                (0.0, 0, 0.0),
-                0.0,
-                0.0,
-                0.0,
-                False,
-                False,
-                0.0,
-                self._branch_constants,
-                self._branch_tables,
-            )
 
     def _branch_constant_values(self) -> dict[str, float]:
         """The constants `kernels.branch` reads, by its names (`branch.CONSTANTS`)."""
