@@ -120,11 +120,6 @@ def _clip(x: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> n
     return np.minimum(high, np.maximum(low, x))
 
 
-def _nz(mask: np.ndarray) -> np.ndarray:
-    """Indices of a 1-D mask's True entries (np.flatnonzero without its wrappers)."""
-    return mask.nonzero()[0]
-
-
 def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict) -> None:
     """Write `fields` (arrays or scalars, per track) into the bank matrices."""
     for key, value in fields.items():
