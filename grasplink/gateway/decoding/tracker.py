@@ -111,15 +111,6 @@ _WARM = False  # this process's kernels are loaded
 _NO_BLIND = np.zeros(0)  # the posterior kernel's blind times when none
 
 
-def _clip(x: np.ndarray, low: float | np.ndarray, high: float | np.ndarray) -> np.ndarray:
-    """np.clip's numbers without its wrapper (a dozen microseconds on small arrays). Ties
-    (+0 against -0) as np.clip breaks them: scalar bounds keep x, array bounds give the
-    bound; np.maximum and np.minimum give their second argument on a tie."""
-    if isinstance(low, np.ndarray):
-        return np.minimum(np.maximum(x, low), high)
-    return np.minimum(high, np.maximum(low, x))
-
-
 def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict) -> None:
     """Write `fields` (arrays or scalars, per track) into the bank matrices."""
     for key, value in fields.items():
@@ -706,15 +697,6 @@ class TrackerDecoder(Decoder):
         return out
 
     # ------------------------------------------------------------------ motion
-    def _travel(self, B: _Bank, g: float) -> np.ndarray:
-        """Travel of slipping tracks B extrapolated to g: speed changing at the track's
-        acceleration (bounded to 0.25-4x), less the ridge dip still recovering."""
-        tau = np.maximum(0.0, g - B.t)
-        v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
-        v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
-        decay = np.exp(-tau / self.DIP_RECOVERY_S)
-        return B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
-
     @cached_property
     def _silence_tables(self) -> dict[str, np.ndarray]:
         """What a track's schedule (`_schedule`) takes from its direction and ridge alone,
