@@ -21,6 +21,9 @@ from numba import types
 from numba.extending import intrinsic
 
 from grasplink.gateway.decoding.kernels import jit
+from grasplink.gateway.decoding.kernels.common import maximum as _maximum
+from grasplink.gateway.decoding.kernels.common import minimum as _minimum
+from grasplink.gateway.decoding.kernels.common import pack, travel
 
 __all__ = ["CONSTANTS", "branch", "pack_constants"]
 
@@ -57,34 +60,11 @@ CONSTANTS = (
 
 
 def pack_constants(values: dict[str, float]) -> np.ndarray:
-    """The constants `branch` takes, by name (every one of CONSTANTS), as one array: a
-    single argument, read by index in the kernel."""
-    if set(values) != set(CONSTANTS):
-        raise ValueError(f"constants differ: {sorted(set(values) ^ set(CONSTANTS))}")
-    return np.array([float(values[name]) for name in CONSTANTS])
+    """The constants `branch` takes, by name (every one of CONSTANTS), as one array."""
+    return pack(CONSTANTS, values, "branch")
 
 
 # ------------------------------------------------------------------ numpy's scalar rules
-@jit()
-def _maximum(a: float, b: float) -> float:
-    """np.maximum of two numbers: NaN if either is, the second on a tie (+0 against -0)."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a > b else b
-
-
-@jit()
-def _minimum(a: float, b: float) -> float:
-    """np.minimum of two numbers: NaN if either is, the second on a tie."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a < b else b
-
-
 @jit()
 def _nan_max(x: np.ndarray, rows: np.ndarray) -> float:
     """x[rows].max() as numpy takes it: NaN if any is NaN."""
@@ -144,12 +124,10 @@ def _with_contact(
 
 @jit()
 def _travel(f: np.ndarray, r: int, tc: float, dip_recovery_s: float) -> float:
-    """Travel of slipping track f[r] extrapolated to tc (as the tracker's `_travel`)."""
-    tau = _maximum(0.0, tc - f[r, F_T])
-    v, a, d = f[r, F_V], f[r, F_A], f[r, F_D]
-    v_end = _minimum(_maximum(v + a * tau, 0.25 * v), 4.0 * v)
-    decay = np.exp(-tau / dip_recovery_s)
-    return f[r, F_S] + 0.5 * (v + v_end) * tau - d * f[r, F_M] * (1.0 - decay)
+    """Travel of slipping track f[r] extrapolated to tc."""
+    return travel(
+        f[r, F_S], f[r, F_V], f[r, F_A], f[r, F_D], f[r, F_M], f[r, F_T], tc, dip_recovery_s
+    )
 
 
 @jit()

@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from grasplink.gateway.decoding.kernels import jit
+from grasplink.gateway.decoding.kernels.common import pack, travel
 
 NAMES = (
     "negligible",
@@ -61,10 +62,7 @@ NAMES = (
 
 def constants(**values: float) -> np.ndarray:
     """The constants vector `K` from its named values (every name in NAMES, no other)."""
-    missing, extra = set(NAMES) - set(values), set(values) - set(NAMES)
-    if missing or extra:
-        raise ValueError(f"posterior constants: missing {sorted(missing)}, unknown {sorted(extra)}")
-    return np.array([float(values[name]) for name in NAMES])
+    return pack(NAMES, values, "posterior")
 
 
 @jit()
@@ -400,11 +398,7 @@ def posterior(
     count = 0
     for u in idx:
         if np.isnan(stop[u]):
-            tau = np.maximum(0.0, g - t[u])
-            v, a, d = X[u, 1], X[u, 2], X[u, 3]
-            v_end = np.minimum(np.maximum(v + a * tau, 0.25 * v), 4.0 * v)
-            decay = math.exp(-tau / K[DIP_S])
-            s = X[u, 0] + 0.5 * (v + v_end) * tau - d * m[u] * (1.0 - decay)
+            s = travel(X[u, 0], X[u, 1], X[u, 2], X[u, 3], m[u], t[u], g, K[DIP_S])
             di = (1 - dirn[u]) // 2
             ahead = min(limit[u], R)
             end = pos[di, ahead] if ahead < R else coast_end(pos, di, X[u, 1], K)

@@ -1,0 +1,54 @@
+"""What more than one kernel needs: numpy's scalar rules, a track's travel, constants packed
+by name."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from grasplink.gateway.decoding.kernels import jit
+
+
+def pack(names: tuple[str, ...], values: Mapping[str, float], kernel: str) -> np.ndarray:
+    """A kernel's constants as one float array in the order of `names` (one argument, read
+    by index): every name given, no other."""
+    missing, unknown = set(names) - set(values), set(values) - set(names)
+    if missing or unknown:
+        raise ValueError(
+            f"{kernel} constants: missing {sorted(missing)}, unknown {sorted(unknown)}"
+        )
+    return np.array([float(values[name]) for name in names])
+
+
+@jit()
+def maximum(a: float, b: float) -> float:
+    """np.maximum of two numbers: NaN if either is, the second on a tie (+0 against -0)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a > b else b
+
+
+@jit()
+def minimum(a: float, b: float) -> float:
+    """np.minimum of two numbers: NaN if either is, the second on a tie."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a < b else b
+
+
+@jit()
+def travel(
+    s: float, v: float, a: float, d: float, m: float, t: float, g: float, dip_recovery_s: float
+) -> float:
+    """Travel at g of a slipping track last told at t (travel s, speed v, acceleration a,
+    dip d with multiplier m): the speed changing at a (bounded to 0.25-4x), less the ridge
+    dip still recovering."""
+    tau = maximum(0.0, g - t)
+    v_end = minimum(maximum(v + a * tau, 0.25 * v), 4.0 * v)
+    decay = np.exp(-tau / dip_recovery_s)
+    return s + 0.5 * (v + v_end) * tau - d * m * (1.0 - decay)
