@@ -1345,9 +1345,11 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
         need = (
             f" Paced as live, the same work costs {fmt(ratio, 1)} times its back-to-back CPU"
             f" (section 1): the contact step has to fit about {fmt(TARGET_P99_US / ratio)} µs"
-            " of back-to-back CPU at p99, where numpy's per-call overhead on arrays of tens of"
-            " hypotheses is already most of the cost; what is left is compiling the contact"
-            " step (branching, Kalman update, pruning, posterior) into one kernel."
+            " of back-to-back CPU at p99. Its numeric work (the detector's blocks, branching"
+            " with the Kalman update, pruning, posterior) runs as compiled kernels"
+            " (docs/decoding.md); what is left is the Python around them: the detector's"
+            " bookkeeping, a step verdict's replay of the last contacts, and the gateway's"
+            " feedback, reflex and RPDO packing."
             if ratio
             else ""
         )
