@@ -14,17 +14,7 @@ import pytest
 
 from grasplink.gateway.decoding.contacts import STEP_IDS, ContactEvent
 from grasplink.gateway.decoding.kernels import branch as kernel
-from grasplink.gateway.decoding.tracker import (
-    _F_COLS,
-    _F_WIDTH,
-    _I_COLS,
-    _I_WIDTH,
-    CHANGING,
-    IDS,
-    STEADY,
-    TrackerDecoder,
-    _Bank,
-)
+from grasplink.gateway.decoding.tracker import _F_WIDTH, _I_WIDTH, TrackerDecoder, _Bank
 from grasplink.profiles.layouts import LAYOUTS_MM
 
 GOLDEN = Path(__file__).parent / "data" / "branch_golden.npz"
@@ -102,27 +92,16 @@ def test_compiled_branch_of_no_tracks_at_a_probe_is_the_shared_empty_bank():
     assert pool is _Bank.empty()
 
 
-def test_compiled_branch_columns_match_the_bank_layout():
-    """The kernel repeats the bank's column layout as plain ints (numba freezes them):
-    they must be the tracker's."""
-    assert (kernel.F_WIDTH, kernel.I_WIDTH, kernel.IDS) == (_F_WIDTH, _I_WIDTH, IDS)
-    assert (kernel.STEADY, kernel.CHANGING) == (STEADY, CHANGING)
-    floats = {
-        "m": kernel.F_M, "score": kernel.F_SCORE, "sig": kernel.F_SIG, "stop": kernel.F_STOP,
-        "t": kernel.F_T,
-    }  # fmt: skip
-    for key, col in floats.items():
-        assert _F_COLS[key] == col
-    assert _F_COLS["P"] == slice(0, 16)
-    assert _F_COLS["X"] == slice(kernel.F_S, kernel.F_D + 1)
-    assert (kernel.F_V, kernel.F_A) == (kernel.F_S + 1, kernel.F_S + 2)
-    ints = {
-        "dirn": kernel.I_DIRN, "first": kernel.I_FIRST, "model": kernel.I_MODEL,
-        "n": kernel.I_N, "ridge": kernel.I_RIDGE, "run": kernel.I_RUN,
-    }  # fmt: skip
-    for key, col in ints.items():
-        assert _I_COLS[key] == col
-    assert _I_COLS["ids"] == slice(kernel.I_IDS, kernel.I_LAST + 1)
+def test_a_banks_fields_are_the_kernels_columns():
+    """The tracker's field views read the columns the kernels write (one layout, defined
+    in kernels.branch): each field of a track round-trips through its column."""
+    floats = np.arange(2 * _F_WIDTH, dtype=float).reshape(2, _F_WIDTH)
+    ints = np.arange(2 * _I_WIDTH).reshape(2, _I_WIDTH)
+    bank = _Bank(floats, ints)
+    assert bank.score[1] == floats[1, kernel.F_SCORE] and bank.t[0] == floats[0, kernel.F_T]
+    assert bank.X[1, 1] == floats[1, kernel.F_V] and bank.P[0, 3, 3] == floats[0, kernel.P33]
+    assert bank.run[1] == ints[1, kernel.I_RUN] and bank.ids[0, -1] == ints[0, kernel.I_LAST]
+    assert bank.model[0] == ints[0, kernel.I_MODEL]
 
 
 def test_compiled_branch_constants_are_packed_by_name():

@@ -72,26 +72,44 @@ from grasplink.gateway.decoding.contacts import (
     PulseCheck,
 )
 from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
-from grasplink.gateway.decoding.kernels.branch import branch, pack_constants
+from grasplink.gateway.decoding.kernels.branch import (
+    F_D,
+    F_M,
+    F_S,
+    F_SCORE,
+    F_SIG,
+    F_STOP,
+    F_T,
+    F_WIDTH,
+    I_DIRN,
+    I_FIRST,
+    I_IDS,
+    I_LAST,
+    I_MODEL,
+    I_N,
+    I_RIDGE,
+    I_RUN,
+    I_WIDTH,
+    IDS,
+    branch,
+    pack_constants,
+)
 from grasplink.gateway.decoding.kernels.prune import prune_choice
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
-IDS = 6  # recent contact ids a track remembers (pulse evidence, merging)
-STEADY, CHANGING = 0, 1
 # pulse verdicts in the ring of recent contacts
 UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
 RING = 256
 
 
-# the columns of a bank's two matrices: floats (P flattened row-major, X = (s, v, a, d), m,
-# score, sig, stop, t) and integers (dirn, first, ids, model, n, ridge, run); a field is a
-# view. _P33 etc.: flat covariance entries
-_P, _X, _S, _V, _A, _D = slice(0, 16), slice(16, 20), 16, 17, 18, 19
-_P00, _P01, _P10, _P11, _P12, _P13, _P21, _P22, _P31, _P33 = 0, 1, 4, 5, 6, 7, 9, 10, 13, 15
-_M, _SCORE, _SIG, _STOP, _T = 20, 21, 22, 23, 24
-_DIRN, _FIRST, _IDS = 0, 1, slice(2, 2 + IDS)
-_MODEL, _N, _RIDGE, _RUN = 2 + IDS, 3 + IDS, 4 + IDS, 5 + IDS
+# the columns of a bank's two matrices (`kernels.branch` defines them: the kernels read
+# them as plain ints): floats (P flattened row-major, X = (s, v, a, d), m, score, sig, stop,
+# t) and integers (dirn, first, ids, model, n, ridge, run); a field is a view
+_P, _X = slice(0, 16), slice(F_S, F_D + 1)
+_M, _SCORE, _SIG, _STOP, _T = F_M, F_SCORE, F_SIG, F_STOP, F_T
+_DIRN, _FIRST, _IDS = I_DIRN, I_FIRST, slice(I_IDS, I_LAST + 1)
+_MODEL, _N, _RIDGE, _RUN = I_MODEL, I_N, I_RIDGE, I_RUN
 _F_COLS: dict[str, int | slice] = {
     "P": _P, "X": _X, "m": _M, "score": _SCORE, "sig": _SIG, "stop": _STOP, "t": _T,
 }  # fmt: skip
@@ -99,7 +117,7 @@ _I_COLS: dict[str, int | slice] = {
     "dirn": _DIRN, "first": _FIRST, "ids": _IDS, "model": _MODEL, "n": _N, "ridge": _RIDGE,
     "run": _RUN,
 }  # fmt: skip
-_F_WIDTH, _I_WIDTH = 25, 6 + IDS
+_F_WIDTH, _I_WIDTH = F_WIDTH, I_WIDTH
 # `_prune`'s dedup key, the int columns' part: the last three contact ids, ridge, direction
 # and model weighted (mod 2^64, as the chained int64 multiply-adds wrap)
 _KEY_M = 1000003
