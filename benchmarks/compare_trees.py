@@ -1,0 +1,126 @@
+"""How equal two trees' skin tracker is: every estimate on a fixed input set, compared.
+
+    .venv/bin/python benchmarks/compare_trees.py TREE_A TREE_B [--quick]
+
+TREE_A and TREE_B are checkouts (e.g. `git worktree add /tmp/base REV`). Each runs in its
+own interpreter (the same module names) over 600 non-stationary signals (26 with --quick)
+in 3- and 256-sample chunks, the decoding benchmark's target cases (3-sample chunks) and its
+static recordings. Prints the share of estimates bit-equal and within 1e-9 relative, and
+every signal whose estimates differ beyond tolerance (a slip flag, speed > 0.5 mm/s,
+position > 0.5 mm, confidence > 0.02). docs/decoding.md ("Compiled kernels") quotes it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+TOLERANCE = {"speed_mm_s": 0.5, "position_mm": 0.5, "confidence": 0.02}
+
+# Run inside each tree's interpreter: decode every input, save one array per run.
+COLLECT = """
+import sys
+from concurrent.futures import ProcessPoolExecutor
+import numpy as np
+from grasplink.evaluation import decoding_bench as db
+from grasplink.evaluation import nonstationary as ns
+from grasplink.gateway.decoding.tracker import TrackerDecoder
+
+QUICK, OUT = sys.argv[1] == "1", sys.argv[2]
+
+
+def decode(t, x, layout, fs, chunk):
+    dec, rows = TrackerDecoder(layout, fs), []
+    for i in range(0, len(t), chunk):
+        for e in dec.process(t[i : i + chunk], x[i : i + chunk]):
+            rows.append((e.t_s, float(bool(e.slip)), np.nan if e.speed_mm_s is None else
+                         e.speed_mm_s, np.nan if e.position_mm is None else e.position_mm,
+                         e.force_n, e.confidence))
+    return np.array(rows, float).reshape(-1, 6)
+
+
+def job(key):
+    kind, idx, chunk = key
+    if kind == "ns":
+        r = ns.signals(QUICK)[idx].make()
+        return decode(np.asarray(r.t_s), np.asarray(r.force_n), r.truth.layout_mm, r.fs_hz, chunk)
+    if kind == "case":
+        rec = [c for c in db.cases(QUICK) if "target" in c.tags][idx].recording(1)
+    else:
+        rec = db.static_cases(QUICK)[idx]
+    return decode(rec.t_s, rec.force_n, rec.layout_mm, rec.fs_hz, chunk)
+
+
+if __name__ == "__main__":
+    keys = [("ns", i, c) for i in range(len(ns.signals(QUICK))) for c in (3, 256)]
+    keys += [("case", i, 3) for i in range(len([c for c in db.cases(QUICK) if "target" in c.tags]))]
+    keys += [("static", i, 3) for i in range(len(db.static_cases(QUICK)))]
+    with ProcessPoolExecutor(2) as pool:
+        runs = list(pool.map(job, keys, chunksize=4))
+    np.savez(OUT, *runs, names=np.array([str(k) for k in keys]))
+"""
+
+
+def collect(tree: Path, quick: bool, out: Path) -> None:
+    env_path = f"import sys; sys.path.insert(0, {str(tree)!r}); "
+    script = out.with_suffix(".py")
+    script.write_text(COLLECT)
+    subprocess.run(
+        [sys.executable, "-c", env_path + f"exec(open({str(script)!r}).read())",
+         "1" if quick else "0", str(out)],
+        check=True, cwd=tempfile.gettempdir(),
+    )  # fmt: skip
+
+
+def compare(a: np.lib.npyio.NpzFile, b: np.lib.npyio.NpzFile) -> tuple[int, int, int, list]:
+    total = equal = close = 0
+    beyond = []
+    for k, name in enumerate(a["names"]):
+        x, y = a[f"arr_{k}"], b[f"arr_{k}"]
+        if x.shape != y.shape:
+            beyond.append((name, f"{len(x)} estimates against {len(y)}"))
+            continue
+        total += len(x)
+        same = (x == y) | (np.isnan(x) & np.isnan(y))
+        equal += int(same.all(axis=1).sum())
+        near = same | (np.abs(x - y) <= 1e-9 * np.maximum(np.abs(x), 1.0))
+        close += int(near.all(axis=1).sum())
+        flags = int((x[:, 1] != y[:, 1]).sum())
+        known = int((np.isnan(x[:, 2:4]) != np.isnan(y[:, 2:4])).sum())
+        worst = {
+            field: float(np.nanmax(np.abs(x[:, col] - y[:, col]), initial=0.0))
+            for field, col in (("speed_mm_s", 2), ("position_mm", 3), ("confidence", 5))
+        }
+        if flags or known or any(worst[f] > TOLERANCE[f] for f in TOLERANCE):
+            beyond.append((name, f"slip flags {flags}, known/unknown {known}, worst {worst}"))
+    return total, equal, close, beyond
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("tree_a", type=Path)
+    parser.add_argument("tree_b", type=Path)
+    parser.add_argument("--quick", action="store_true", help="26 non-stationary signals")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = [Path(tmp) / "a.npz", Path(tmp) / "b.npz"]
+        for tree, path in zip((args.tree_a, args.tree_b), paths, strict=True):
+            collect(tree.resolve(), args.quick, path)
+        total, equal, close, beyond = compare(np.load(paths[0]), np.load(paths[1]))
+    print(
+        f"estimates {total}: bit-equal {equal} ({100 * equal / max(total, 1):.2f} %), "
+        f"within 1e-9 relative {close} ({100 * close / max(total, 1):.2f} %)"
+    )
+    print(f"signals differing beyond tolerance: {len(beyond)}")
+    for name, why in beyond:
+        print(f"  {name}: {why}")
+    return 1 if beyond else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
