@@ -19,11 +19,8 @@ NEGLIGIBLE, MAX_HYPOTHESES, PER_START = (
 
 
 def choose(score, stop, ints, recent, held, max_hypotheses=MAX_HYPOTHESES):
-    return prune_choice(
-        score, stop, ints, tr._KEY_WEIGHTS, tr._RUN, tr._N, tr._IDS.stop - 1, tr._FIRST,
-        np.asarray(recent, np.int64), np.asarray(held, np.int64), NEGLIGIBLE, max_hypotheses,
-        PER_START,
-    )  # fmt: skip
+    recent, held = np.asarray(recent, np.int64), np.asarray(held, np.int64)
+    return prune_choice(score, stop, ints, recent, held, NEGLIGIBLE, max_hypotheses, PER_START)
 
 
 def bank(rows: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

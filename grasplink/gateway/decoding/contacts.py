@@ -501,13 +501,8 @@ class ContactDetector:
         ch.next_n += count
         at = rows.size
         rows.extend(count)
-        if ch.z.base is not rows.data:
-            ch.refresh_views()
-        # centres to test (`_test_range`, inline: this runs per channel and frame)
-        lo = max(ch.next_test, ch.z_start + w)
-        hi = ch.z_start + at + count - 1 - w
-        if hi >= lo:
-            ch.next_test = hi + 1
+        ch.refresh_views()
+        lo, hi = self._test_range(ch)  # (after the extend: rows.size is at + count)
         found = self._found if hi - lo < len(self._found) else self._room(hi - lo + 1)
         told = channel_fast(
             x,

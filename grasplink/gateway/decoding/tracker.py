@@ -118,12 +118,6 @@ _I_COLS: dict[str, int | slice] = {
     "run": _RUN,
 }  # fmt: skip
 _F_WIDTH, _I_WIDTH = F_WIDTH, I_WIDTH
-# `_prune`'s dedup key, the int columns' part: the last three contact ids, ridge, direction
-# and model weighted (mod 2^64, as the chained int64 multiply-adds wrap)
-_KEY_M = 1000003
-_KEY_WEIGHTS = np.zeros(_I_WIDTH, np.int64)
-_KEY_WEIGHTS[[_IDS.stop - 1, _IDS.stop - 2, _IDS.stop - 3]] = [_KEY_M**3, _KEY_M**2, _KEY_M]
-_KEY_WEIGHTS[[_RIDGE, _DIRN, _MODEL]] = [16, 4, 4]
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
 _WARM = False  # this process's kernels are loaded
 _NO_BLIND = np.zeros(0)  # the posterior kernel's blind times when none
@@ -692,11 +686,6 @@ class TrackerDecoder(Decoder):
             B.score,
             B.stop,
             B._i,
-            _KEY_WEIGHTS,
-            _RUN,
-            _N,
-            _IDS.stop - 1,
-            _FIRST,
             recent,
             held,
             self.NEGLIGIBLE,

@@ -9,6 +9,23 @@ from __future__ import annotations
 import numpy as np
 
 from grasplink.gateway.decoding.kernels import jit
+from grasplink.gateway.decoding.kernels.branch import (
+    I_DIRN,
+    I_FIRST,
+    I_LAST,
+    I_MODEL,
+    I_N,
+    I_RIDGE,
+    I_RUN,
+    I_WIDTH,
+)
+
+# the dedup key's int-column part: the last three contact ids, ridge, direction and model
+# weighted (mod 2^64, as the chained int64 multiply-adds of the numpy code wrapped)
+KEY_M = 1000003
+KEY_WEIGHTS = np.zeros(I_WIDTH, np.int64)
+KEY_WEIGHTS[[I_LAST, I_LAST - 1, I_LAST - 2]] = [KEY_M**3, KEY_M**2, KEY_M]
+KEY_WEIGHTS[[I_RIDGE, I_DIRN, I_MODEL]] = [16, 4, 4]
 
 
 @jit()
@@ -51,11 +68,6 @@ def prune_choice(
     score: np.ndarray,
     stop: np.ndarray,
     ints: np.ndarray,
-    key_weights: np.ndarray,
-    run_col: int,
-    n_col: int,
-    last_col: int,
-    first_col: int,
     recent: np.ndarray,
     held: np.ndarray,
     negligible: float,
@@ -64,9 +76,9 @@ def prune_choice(
 ) -> np.ndarray:
     """Rows of the pool to keep, best score first.
 
-    One per dedup key (the int columns weighted by `key_weights`, wrapping mod 2^64, plus
-    2 if slipping and 1 if restarted): the first in score order; none below the best
-    score less `floor_below_best`; one-contact tracks only if they start at a `recent`
+    One per dedup key (the int columns weighted by `KEY_WEIGHTS`, wrapping mod 2^64, plus
+    2 if slipping and 1 if restarted): the first in score order; none more than
+    `negligible` + 20 below the best score; one-contact tracks only if they start at a `recent`
     contact; of the others the best `max_hypotheses`, plus the best `per_start` of each
     start contact in `held`.
     """
@@ -77,10 +89,10 @@ def prune_choice(
         row = order[r]
         total = np.int64(0)
         for c in range(ints.shape[1]):
-            total += ints[row, c] * key_weights[c]
+            total += ints[row, c] * KEY_WEIGHTS[c]
         if np.isnan(stop[row]):
             total += 2
-        if ints[row, run_col] == 1:
+        if ints[row, I_RUN] == 1:
             total += 1
         key[r] = total
     keep = _first_of_each(key)
@@ -91,10 +103,10 @@ def prune_choice(
         row = order[r]
         if keep[r] and not score[row] >= floor:
             keep[r] = False
-        if ints[row, n_col] == 1:
+        if ints[row, I_N] == 1:
             if keep[r]:
                 keep[r] = False
-                last = ints[row, last_col]
+                last = ints[row, I_LAST]
                 for c in recent:
                     if last == c:
                         keep[r] = True
@@ -107,7 +119,7 @@ def prune_choice(
     if count and len(held):
         firsts = np.empty(count, np.int64)
         for j in range(count):
-            firsts[j] = ints[order[idx[j]], first_col]
+            firsts[j] = ints[order[idx[j]], I_FIRST]
         by_start = np.argsort(firsts, kind="mergesort")
         starts = firsts[by_start]
         head = _heads(starts)
