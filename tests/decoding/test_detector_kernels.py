@@ -51,9 +51,13 @@ def _assert_told_alike(told: np.ndarray, golden: np.ndarray, exact: list[int]) -
 @pytest.mark.parametrize("chunk", golden_maker.CHUNKS)
 @pytest.mark.parametrize("name", sorted(SIGNALS))
 def test_compiled_detector_matches_the_numpy_detectors_events(name: str, chunk: int) -> None:
+    """(Except the railed start in chunks longer than a block: there the numpy code told
+    a contact earlier than it could be decided live - `feed` now takes such a chunk a
+    block at a time, and tells what it tells in CAN-frame chunks.)"""
+    told = chunk if name != "railed" or chunk <= ContactDetector(golden_maker.FS_HZ).block else 3
     events, checks = golden_maker.told(ContactDetector(golden_maker.FS_HZ), SIGNALS[name], chunk)
-    _assert_told_alike(events, GOLDEN[f"{name}/events{chunk}"], exact=[0, 2, 3])
-    _assert_told_alike(checks, GOLDEN[f"{name}/checks{chunk}"], exact=[0, 1, 2, 3])
+    _assert_told_alike(events, GOLDEN[f"{name}/events{told}"], exact=[0, 2, 3])
+    _assert_told_alike(checks, GOLDEN[f"{name}/checks{told}"], exact=[0, 1, 2, 3])
 
 
 @pytest.mark.parametrize("name", sorted(SIGNALS))
@@ -70,16 +74,16 @@ def test_compiled_detector_rows_match_the_numpy_detectors_rows(name: str) -> Non
             np.testing.assert_allclose(value, expected, rtol=RTOL, atol=1e-15, err_msg=key)
 
 
-@pytest.mark.parametrize("name", ["slip", "slow", "steps"])
+@pytest.mark.parametrize("name", ["slip", "slow", "steps", "railed"])
 def test_compiled_detector_tells_the_same_in_any_chunking(name: str) -> None:
-    """(The railed start is left out: there the numpy code already told a little
-    differently with chunks of 128 or more - pinned by the golden test above.)"""
+    """Including a start on the lower rail, where blocks wait for a noise: a recording fed
+    whole (chunks of several blocks) is told as it would be live."""
     told = {
         chunk: golden_maker.told(ContactDetector(golden_maker.FS_HZ), SIGNALS[name], chunk)
-        for chunk in golden_maker.CHUNKS
+        for chunk in (*golden_maker.CHUNKS, 127, 128, 1000, len(SIGNALS[name]))
     }
     assert len(told[3][0])
-    for chunk in golden_maker.CHUNKS:
+    for chunk in told:
         np.testing.assert_array_equal(told[chunk][0], told[3][0])
         np.testing.assert_array_equal(told[chunk][1], told[3][1])
 

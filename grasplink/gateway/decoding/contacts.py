@@ -391,6 +391,24 @@ class ContactDetector:
                 "ContactDetector.feed: samples must be finite (NaN or inf in t or x); "
                 "drop them first, as Decoder.process does"
             )
+        if len(x) <= self.block:
+            return self._feed(t, x)
+        # Longer runs (a recording decoded whole) go in pieces that end on block
+        # boundaries: the channels take a feed one after the other, so over several blocks
+        # a wide channel would see the finest channel's noise from samples after its own
+        # centres - a contact waiting on a rail decided earlier than it could be live.
+        events: list[ContactEvent] = []
+        checks: list[PulseCheck] = []
+        start = 0
+        while start < len(x):
+            end = min(len(x), start + self.block - (self._n + start) % self.block)
+            ev, ck = self._feed(t[start:end], x[start:end])
+            events += ev
+            checks += ck
+            start = end
+        return sorted(events, key=lambda e: (e.emit_index, e.id)), checks
+
+    def _feed(self, t: np.ndarray, x: np.ndarray) -> tuple[list[ContactEvent], list[PulseCheck]]:
         if self._n == 0:
             self._settle(float(x[0]))
         self._n += len(x)
