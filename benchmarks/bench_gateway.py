@@ -31,6 +31,7 @@ import cProfile
 import functools
 import json
 import logging
+import math
 import os
 import pstats
 import random
@@ -1003,6 +1004,27 @@ def main(argv: list[str] | None = None) -> int:
     return run_all(args.quick, args.out, args.figures)
 
 
+# The bus runner's own CPU per frame (NodeRunner and python-can, code the decoder and the
+# gateway do not touch) in the full run of e457141, the run of record before the decoder's
+# kernels: a yardstick for how fast the machine ran, since the targets are absolute.
+RUNNER_US_OF_RECORD = (39.0, 44.0)
+
+
+def machine_speed(loops: list[dict]) -> str:
+    """How fast the shared machine ran, against the run of record, by the runner's CPU."""
+    runner_us = statistics.mean(run.get("runner_us_per_frame", float("nan")) for run in loops)
+    low, high = RUNNER_US_OF_RECORD
+    if not math.isfinite(runner_us):
+        return "Machine speed: unknown (no real-time run)."
+    return (
+        "Machine speed: the bus runner's own CPU per frame (the runner and python-can, not "
+        f"the gateway's work) was {runner_us:.0f} µs in this run against {low:.0f}–{high:.0f} "
+        f"µs in the run of e457141: this machine ran about "
+        f"{runner_us / ((low + high) / 2):.1f} times as slow as then. The targets are "
+        "absolute; compare rows within a run, not across runs."
+    )
+
+
 def report(figures: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     plot(figures, out / "gateway.png")
@@ -1649,6 +1671,7 @@ def write_doc(figures: dict, path: Path) -> None:
         f"Python {sys.version.split()[0]}, python-can {can.__version__}; the run took "
         f"{figures['wall_s'] / 60:.0f} min, measuring the code at "
         f"{figures.get('code', 'an unknown commit')}.",
+        machine_speed(figures["loops"]),
         "",
         "The gateway runs as shipped (`Gateway` with the default configuration: all four",
         "nodes, alpha0.1 skin, `tracker` decoder, force-and-slip feedback, reflex from",
