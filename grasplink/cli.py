@@ -12,7 +12,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from contextlib import AbstractContextManager, nullcontext
+from contextlib import AbstractContextManager, ExitStack, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -99,7 +99,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=None,
         help=f"bus URL (default {DEFAULT_BUS_URL}; see docs/buses.md); repeat it to master "
-        "several buses from one thread, a gateway per bus (telemetry and Modbus: the first)",
+        "several buses from one thread, a gateway per bus (telemetry: a topic tree and "
+        "Sparkplug edge node per bus, see --mqtt-id; Modbus: a unit per bus)",
     )
     gateway.add_argument(
         "--config", type=Path, default=None, help="gateway TOML (default: built-in defaults)"
@@ -132,10 +133,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     gateway.add_argument(
         "--mqtt-id",
+        action="append",
         default=None,
         metavar="ID",
         help="the gateway's telemetry ID: topics grasplink/ID/..., Sparkplug edge node ID "
-        "(default gateway)",
+        "(default gateway); with several --bus, one per bus in the same order, or one ID "
+        "for all: ID-1, ID-2, ...",
     )
     gateway.add_argument(
         "--mqtt-ca",
@@ -640,8 +643,9 @@ def cmd_gateway(args: argparse.Namespace) -> int:
         from grasplink.gateway.modbus.url import parse_modbus_url
 
         modbus_url = parse_modbus_url(args.modbus)  # a bad URL too
-    telemetry = telemetry_options(args)  # and bad --mqtt options
     buses = args.bus or [DEFAULT_BUS_URL]
+    telemetry = telemetry_options(args)  # and bad --mqtt options
+    telemetry_ids = mqtt_ids(args.mqtt_id, len(buses))
     deadline = None if args.duration is None else time.monotonic() + args.duration
     with (
         StopSignals() as stop,
@@ -652,9 +656,13 @@ def cmd_gateway(args: argparse.Namespace) -> int:
             reconnect_timeout_s=args.reconnect_timeout,
             more_buses=buses[1:],
         ) as live,
-        _modbus_server(live.gateway, modbus_url) as modbus,
-        telemetry(live.gateway, config) as publisher,
+        _modbus_server(live.gateways, modbus_url) as modbus,
+        ExitStack() as publishing,
     ):
+        publishers = [
+            publishing.enter_context(telemetry(gateway, config, gateway_id))
+            for gateway, gateway_id in zip(live.gateways, telemetry_ids, strict=True)
+        ]
         if modbus is not None:
             print(modbus.describe(), flush=True)
         kinds = ", ".join(f"{k} 0x{n.node_id:02X}" for k, n in config.nodes.items())
@@ -674,8 +682,9 @@ def cmd_gateway(args: argparse.Namespace) -> int:
                 break
             if now >= next_status:
                 print(live.status_line(), flush=True)
-                if publisher is not None:
-                    print(publisher.status_line(), flush=True)
+                for publisher in publishers:
+                    if publisher is not None:
+                        print(publisher.status_line(), flush=True)
                 next_status = now + config.status_period_s
             time.sleep(0.05)
         final = live.status_line()
@@ -683,13 +692,34 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
 
 
-def _modbus_server(gateway: object, url: object) -> AbstractContextManager[Any]:
-    """The gateway's Modbus server for `url` (a ModbusUrl), or a context of None without one."""
+def _modbus_server(gateways: list[Any], url: object) -> AbstractContextManager[Any]:
+    """The gateways' Modbus server for `url` (a ModbusUrl; a unit per gateway), or a context
+    of None without one."""
     if url is None:
         return nullcontext()
     from grasplink.gateway.modbus.server import ModbusServer
 
-    return ModbusServer(gateway, url)  # type: ignore[arg-type]
+    return ModbusServer(gateways, url)  # type: ignore[arg-type]
+
+
+def mqtt_ids(given: list[str] | None, buses: int) -> list[str]:
+    """Each bus's telemetry ID: as given, one per bus; one ID (or the default) for several
+    buses becomes ID-1, ID-2, ... Checked before the bus or broker is touched."""
+    from grasplink.gateway.telemetry.url import check_id
+
+    ids = list(given or ["gateway"])
+    if len(ids) == 1 and buses > 1:
+        ids = [f"{ids[0]}-{k}" for k in range(1, buses + 1)]
+    if len(ids) != buses:
+        raise ConfigError(
+            f"--mqtt-id given {len(ids)} times for {buses} buses: give one per --bus, "
+            "or one for all"
+        )
+    for gateway_id in ids:
+        check_id(gateway_id, "--mqtt-id")
+    if len(set(ids)) != len(ids):
+        raise ConfigError(f"--mqtt-id: each bus needs its own ID, got {', '.join(ids)}")
+    return ids
 
 
 def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContextManager[Any]]:
@@ -700,7 +730,7 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
         given = [f for f in options if getattr(args, f) is not None]
         if given:
             raise ConfigError(f"--{given[0].replace('_', '-')} needs --mqtt URL")
-        return lambda gateway, config: nullcontext()
+        return lambda gateway, config, gateway_id: nullcontext()
     from grasplink.gateway.telemetry import (
         DEFAULT_RATE_HZ,
         TelemetryPublisher,
@@ -710,13 +740,12 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
     )
 
     url = parse_broker_url(args.mqtt)
-    gateway_id = check_id(args.mqtt_id or "gateway")
     tls = tls_context(url, args.mqtt_ca)
     rate_hz = args.mqtt_rate_hz or DEFAULT_RATE_HZ
     if args.sparkplug_host_id is not None:
         check_id(args.sparkplug_host_id, "--sparkplug-host-id")
 
-    def start(gateway: Any, config: Any) -> TelemetryPublisher:
+    def start(gateway: Any, config: Any, gateway_id: str) -> TelemetryPublisher:
         host_id = args.sparkplug_host_id or config.telemetry.sparkplug_host_id or None
         waits = f"; Sparkplug births wait for primary host {host_id}" if host_id else ""
         print(

@@ -47,7 +47,7 @@ def prepare_to_go_live(gateways: Iterable[Gateway]) -> None:
 
 class LiveGateway:
     """Run a `Gateway` on `bus_url` (and on each of ``more_buses``) in a background thread;
-    a context manager. `gateway` is the first bus's (telemetry and Modbus serve it)."""
+    a context manager. `gateways` are in bus order; `gateway` is the first bus's."""
 
     def __init__(
         self,

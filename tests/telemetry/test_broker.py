@@ -499,3 +499,46 @@ def test_bdseq_goes_on_across_two_runs_of_the_gateway(broker: Mosquitto, tmp_pat
     ]
     assert host.errors == []
     assert (tmp_path / "state" / "sparkplug-grasplink-twice.json").read_text() == '{"bdSeq": 1}'
+
+
+def test_several_buses_publish_a_topic_tree_and_an_edge_node_each(
+    broker: Mosquitto, tmp_path: Path
+) -> None:
+    recorder = Recorder(broker, ["grasplink/+/node/skin/state", "spBv1.0/grasplink/#"])
+    run = subprocess.run(
+        [
+            *(sys.executable, "-m", "grasplink.cli", "gateway", "--with-nodes"),
+            *("--bus", "virtual:left-bus", "--bus", "virtual:right-bus", "--duration", "8"),
+            *("--config", str(state_config(tmp_path)), "--mqtt", broker.url),
+            *("--mqtt-id", "left", "--mqtt-id", "right"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+    )
+    time.sleep(0.3)
+    taken = recorder.taken()
+    recorder.close()
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "grasplink/left/..." in run.stdout and "grasplink/right/..." in run.stdout
+    for gateway_id in ("left", "right"):
+        states = [m for m in taken if m.topic == f"grasplink/{gateway_id}/node/skin/state"]
+        assert any(json.loads(m.payload)["phase"] == "operational" for m in states)
+        host = SparkplugHost("grasplink", gateway_id)
+        for message in taken:
+            if message.topic.split("/")[3:4] == [gateway_id]:
+                host.feed(message.topic, message.payload)
+        kinds = [m.kind for m in host.messages]
+        assert kinds[0] == "NBIRTH" and "DBIRTH" in kinds and kinds[-1] == "NDEATH"
+        assert host.errors == []
+
+
+def test_mqtt_ids_must_match_the_buses_before_anything_starts(capsys) -> None:
+    args = ["gateway", "--bus", "virtual:a", "--bus", "virtual:b", "--mqtt", "mqtt://127.0.0.1:1"]
+    assert cli.main([*args, "--mqtt-id", "x", "--mqtt-id", "y", "--mqtt-id", "z"]) == cli.EXIT_ERROR
+    assert "--mqtt-id given 3 times for 2 buses" in capsys.readouterr().err
+    assert cli.main([*args, "--mqtt-id", "x", "--mqtt-id", "x"]) == cli.EXIT_ERROR
+    assert "each bus needs its own ID" in capsys.readouterr().err
+    assert cli.mqtt_ids(None, 1) == ["gateway"]
+    assert cli.mqtt_ids(["arm"], 3) == ["arm-1", "arm-2", "arm-3"]

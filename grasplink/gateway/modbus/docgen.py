@@ -112,6 +112,13 @@ def _connection(rmap: RegisterMap) -> list[str]:
         "applied: read the holding registers back. |",
         f"| {ExceptionCode.DEVICE_BUSY:02X} SERVER DEVICE BUSY | too many commands are "
         "waiting for the gateway; nothing applied, try again. |",
+        f"| {ExceptionCode.GATEWAY_NO_RESPONSE:02X} GATEWAY TARGET DEVICE FAILED TO RESPOND | "
+        "(TCP, several buses) a unit id no gateway is served at. |",
+        "",
+        "One bus: a TCP server answers every unit id, a serial one the URL's `unit` only. "
+        "Several buses (`--bus` repeated, a gateway each): one server, a unit per gateway "
+        "in bus order - over TCP units 1, 2, ..., on a serial line the URL's unit and "
+        "those after it; each unit has this whole map, its gateway's values and commands.",
         "",
         f"A read may ask for up to {MAX_READ} registers.",
         "",

@@ -71,6 +71,7 @@ class ExceptionCode(IntEnum):
     ILLEGAL_VALUE = 0x03
     DEVICE_FAILURE = 0x04
     DEVICE_BUSY = 0x06
+    GATEWAY_NO_RESPONSE = 0x0B  # a unit id no gateway of this process is served at
 
 
 class RegisterError(Exception):

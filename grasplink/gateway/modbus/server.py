@@ -20,6 +20,12 @@ exception code. Reads of a whole table (03, 04: what pollers send, many times a
 second) are answered from the connection's data callback instead (`read_now`):
 same registers and exception codes, without a task, a loop turn and the
 datastore's copy per request.
+
+A process mastering several buses (`grasplink gateway --bus A --bus B`) has a gateway
+per bus; one server serves them all, one unit id each (`units`): over TCP 1, 2, ...
+in bus order, on a serial line the URL's unit and those after it. A request to a unit
+id no gateway has is answered 0x0B GATEWAY TARGET DEVICE FAILED TO RESPOND over TCP (as
+pymodbus answers it), and not at all on a serial line (another device's request).
 """
 
 from __future__ import annotations
@@ -33,8 +39,9 @@ import socket
 import struct
 import threading
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future
+from dataclasses import dataclass, field
 from typing import Any
 
 from pymodbus import FramerType
@@ -54,6 +61,7 @@ from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
 from grasplink.gateway.modbus.registers import (
     COMMAND_TIMEOUT_S,
+    ExceptionCode,
     RegisterError,
     RegisterMap,
     register_map,
@@ -71,6 +79,33 @@ START_TIMEOUT_S = 5.0
 READ_HOLDING, READ_INPUTS = 3, 4
 REGISTER_FUNCTIONS = frozenset({3, 4, 6, 16, 23})
 BIT_FUNCTIONS = frozenset({1, 2, 5, 15})  # coils and discrete inputs: this map has none
+MAX_UNIT = 247  # the highest Modbus unit (slave) address
+
+
+@dataclass
+class _Unit:
+    """One gateway as one Modbus unit: what its action registers read back, and its input
+    table encoded once per snapshot."""
+
+    gateway: Gateway
+    last_actions: dict[str, str] = field(default_factory=dict)
+    cached: tuple[Any, list[int]] | None = None  # (snapshot, its encoded table)
+
+
+def unit_ids(url: ModbusUrl, count: int) -> list[int | None]:
+    """The unit ids `count` gateways are served at: one gateway as before (a TCP server
+    answers every unit id: None); several, consecutive from the URL's unit (TCP: from 1)."""
+    if count < 1:
+        raise ValueError("ModbusServer needs at least one gateway")
+    if count == 1:
+        return [url.unit]
+    first = url.unit or 1
+    if first + count - 1 > MAX_UNIT:
+        raise BusError(
+            f"modbus: {count} gateways from unit {first} need units up to "
+            f"{first + count - 1}; the highest is {MAX_UNIT}"
+        )
+    return list(range(first, first + count))
 
 
 class ModbusServer:
@@ -83,20 +118,24 @@ class ModbusServer:
 
     def __init__(
         self,
-        gateway: Gateway,
+        gateway: Gateway | Sequence[Gateway],
         url: str | ModbusUrl,
         *,
         command_timeout_s: float = COMMAND_TIMEOUT_S,
         register_map_: RegisterMap | None = None,
     ):
-        self.gateway = gateway
+        gateways = [gateway] if isinstance(gateway, Gateway) else list(gateway)
         self.url = parse_modbus_url(url) if isinstance(url, str) else url
+        # unit id (None: every one) -> the gateway served there, in bus order
+        self.units: dict[int | None, _Unit] = {
+            unit: _Unit(g)
+            for unit, g in zip(unit_ids(self.url, len(gateways)), gateways, strict=True)
+        }
+        self.gateway = gateways[0]
         self.map = register_map_ or register_map()
         self.command_timeout_s = command_timeout_s
         self.stats: Counter[str] = Counter()  # requests, exceptions, commands; this thread only
         self.address: ModbusUrl = self.url
-        self._last_actions: dict[str, str] = {}  # action registers read back what was asked
-        self._cached: tuple[Any, list[int]] | None = None  # (snapshot, its encoded table)
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
@@ -142,7 +181,12 @@ class ModbusServer:
 
     def describe(self) -> str:
         """One line for the CLI: where, and what the tables hold."""
-        units = "every unit id" if self.address.unit is None else f"unit {self.address.unit}"
+        if len(self.units) > 1:
+            units = "units " + ", ".join(str(u) for u in self.units) + ", a gateway each"
+        elif self.address.unit is None:
+            units = "every unit id"
+        else:
+            units = f"unit {self.address.unit}"
         return (
             f"modbus {self.address} ({units}): input registers 0..{self.map.input_count - 1}, "
             f"holding registers 0..{self.map.holding_count - 1} (docs/modbus.md)"
@@ -183,23 +227,27 @@ class ModbusServer:
 
     def _make_server(self) -> _TcpServer | _SerialServer:
         url = self.url
-        device = SimDevice(
-            id=url.unit or 0,  # 0: every unit id (TCP)
-            simdata=(
-                [SimData(0, datatype=DataType.BITS)],  # coils, discrete inputs: none,
-                [SimData(0, datatype=DataType.BITS)],  # refused by _Handler
-                [SimData(0, count=self.map.holding_count, datatype=DataType.REGISTERS)],
-                [
-                    SimData(
-                        0,
-                        count=self.map.input_count,
-                        datatype=DataType.REGISTERS,
-                        readonly=True,
-                    )
-                ],
-            ),
-            action=self._action,
-        )
+        devices = [
+            SimDevice(
+                id=unit or 0,  # 0: every unit id (TCP, one gateway)
+                simdata=(
+                    [SimData(0, datatype=DataType.BITS)],  # coils, discrete inputs: none,
+                    [SimData(0, datatype=DataType.BITS)],  # refused by _Handler
+                    [SimData(0, count=self.map.holding_count, datatype=DataType.REGISTERS)],
+                    [
+                        SimData(
+                            0,
+                            count=self.map.input_count,
+                            datatype=DataType.REGISTERS,
+                            readonly=True,
+                        )
+                    ],
+                ),
+                action=self._action_of(served),
+            )
+            for unit, served in self.units.items()
+        ]
+        device = devices[0] if len(devices) == 1 else devices
         server: _TcpServer | _SerialServer
         if url.scheme == "tcp":
             # trace_pdu may return None to drop a request (pymodbus types it as returning
@@ -221,6 +269,7 @@ class ModbusServer:
                 trace_pdu=self._trace,  # type: ignore[arg-type]
             )
         server.read_now = self.read_now
+        server.serves = self.serves
         return server
 
     def _listen_error(self) -> BusError:
@@ -255,13 +304,30 @@ class ModbusServer:
                 self.stats["exceptions"] += 1
             return pdu
         self.stats["requests"] += 1
-        if self.url.unit is not None and pdu.dev_id != self.url.unit:
+        if self.url.scheme == "rtu" and pdu.dev_id not in self.units:
             self.stats["other units"] += 1
             return None  # pymodbus then neither executes nor answers it
         return pdu
 
+    def serves(self, dev_id: int) -> bool:
+        """Is a gateway served at this unit id?"""
+        return self._unit(dev_id) is not None
+
+    def _unit(self, dev_id: int) -> _Unit | None:
+        """The gateway a request's unit id addresses (None: no gateway there)."""
+        return self.units.get(dev_id) or self.units.get(None)
+
+    def _action_of(self, unit: _Unit) -> Callable[..., Any]:
+        """pymodbus's per-device action for one unit's gateway."""
+
+        async def action(*args: Any) -> ExcCodes | None:
+            return await self._action(unit, *args)
+
+        return action
+
     async def _action(
         self,
+        unit: _Unit,
         function_code: int,
         start_address: int,
         address: int,
@@ -275,13 +341,13 @@ class ModbusServer:
         offset = address - start_address
         try:
             if values is not None:
-                return await self._write(address, [int(v) for v in values])
+                return await self._write(unit, address, [int(v) for v in values])
             if function_code == 6:
                 return None  # the echo of a single write: the registers hold what was written
             if function_code == READ_INPUTS:
-                table = self._inputs()
+                table = self._inputs(unit)
             else:
-                table = self.map.encode_holding(settings_of(self.gateway, self._last_actions))
+                table = self.map.encode_holding(settings_of(unit.gateway, unit.last_actions))
             registers[offset : offset + count] = self.map.read(table, address, count)
         except RegisterError as exc:
             logger.debug("modbus: %s", exc)
@@ -290,13 +356,20 @@ class ModbusServer:
 
     def read_now(self, pdu: ModbusPDU) -> ModbusPDU:
         """The answer to a register read (03, 04), made at once: the registers, or the
-        exception `_action` would give (0x02 outside the table, 0x03 a bad count)."""
+        exception `_action` would give (0x02 outside the table, 0x03 a bad count; 0x0B
+        for a unit id no gateway is served at, as pymodbus answers it)."""
+        unit = self._unit(pdu.dev_id)
+        response: ModbusPDU
         try:
+            if unit is None:
+                raise RegisterError(
+                    ExceptionCode.GATEWAY_NO_RESPONSE, f"no gateway at unit {pdu.dev_id}"
+                )
             if pdu.function_code == READ_INPUTS:
-                table = self._inputs()
-                response: ModbusPDU = _InputsResponse()
+                table = self._inputs(unit)
+                response = _InputsResponse()
             else:
-                table = self.map.encode_holding(settings_of(self.gateway, self._last_actions))
+                table = self.map.encode_holding(settings_of(unit.gateway, unit.last_actions))
                 response = _HoldingResponse()
             response.registers = self.map.read(table, pdu.address, pdu.count)
         except RegisterError as exc:
@@ -305,21 +378,21 @@ class ModbusServer:
         response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
         return response
 
-    def _inputs(self) -> list[int]:
-        """The encoded input table, once per snapshot (pollers faster than 20 Hz, or several,
-        share one encoding)."""
-        snapshot = self.gateway.latest
-        cached = self._cached
+    def _inputs(self, unit: _Unit) -> list[int]:
+        """A unit's encoded input table, once per snapshot (pollers faster than 20 Hz, or
+        several, share one encoding)."""
+        snapshot = unit.gateway.latest
+        cached = unit.cached
         if cached is not None and cached[0] is snapshot:
             return cached[1]
         table = self.map.encode_inputs(snapshot)
-        self._cached = (snapshot, table)
+        unit.cached = (snapshot, table)
         return table
 
-    async def _write(self, address: int, words: list[int]) -> ExcCodes | None:
+    async def _write(self, unit: _Unit, address: int, words: list[int]) -> ExcCodes | None:
         command = self.map.command_for_write(address, words)  # RegisterError: nothing posted
         self.stats["commands"] += 1
-        future: Future[CommandResult] = self.gateway.post(command)
+        future: Future[CommandResult] = unit.gateway.post(command)
         try:
             result = await asyncio.wait_for(
                 asyncio.shield(asyncio.wrap_future(future)), self.command_timeout_s
@@ -331,7 +404,7 @@ class ModbusServer:
             return ExcCodes.DEVICE_FAILURE
         if result.accepted:
             if command.name in ("emg_calibrate", "restart_node"):
-                self._last_actions[command.name] = command.value
+                unit.last_actions[command.name] = command.value
             return None
         logger.info("modbus: %s refused: %s", command.name, result.detail)
         if result.detail == "too many commands waiting":
@@ -372,6 +445,7 @@ class _Handler(ServerRequestHandler):
         self._read_now: Callable[[ModbusPDU], ModbusPDU] | None = getattr(
             self.server, "read_now", None
         )
+        self._serves: Callable[[int], bool] | None = getattr(self.server, "serves", None)
 
     def callback_data(self, data: bytes, addr: tuple[Any, ...] | None = None) -> int:
         """`ServerRequestHandler.callback_data` (pymodbus 3.16), reads answered at once."""
@@ -388,6 +462,14 @@ class _Handler(ServerRequestHandler):
             return len(data)
         pdu = self.last_pdu
         if pdu is None:
+            return used
+        broadcast = self.server.broadcast_enable and not pdu.dev_id
+        if self._serves is not None and not broadcast and not self._serves(pdu.dev_id):
+            # no gateway at that unit (TCP; a serial line's trace dropped it): pymodbus would
+            # answer a write 0x04 after failing to find the device
+            response = ExceptionResponse(pdu.function_code, ExcCodes.GATEWAY_NO_RESPONSE)
+            response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
+            self.server_send(response, self.last_addr)  # type: ignore[no-untyped-call]
             return used
         if (
             pdu.function_code in (READ_HOLDING, READ_INPUTS)
@@ -418,6 +500,7 @@ class _Handler(ServerRequestHandler):
 
 class _TcpServer(ModbusTcpServer):
     read_now: Callable[[ModbusPDU], ModbusPDU] | None = None  # ModbusServer.read_now
+    serves: Callable[[int], bool] | None = None  # ModbusServer.serves
 
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
@@ -425,6 +508,7 @@ class _TcpServer(ModbusTcpServer):
 
 class _SerialServer(ModbusSerialServer):
     read_now: Callable[[ModbusPDU], ModbusPDU] | None = None  # ModbusServer.read_now
+    serves: Callable[[int], bool] | None = None  # ModbusServer.serves
 
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)

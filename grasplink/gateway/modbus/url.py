@@ -25,7 +25,8 @@ EXAMPLES = "tcp://127.0.0.1:1502 or rtu:///dev/ttyUSB0?baud=115200&parity=N&unit
 @dataclass(frozen=True, slots=True)
 class ModbusUrl:
     """Where the server listens. `unit` (RTU) is the only unit id it answers; over TCP
-    it answers every unit id (a TCP end device, not a gateway to a serial line)."""
+    it answers every unit id (a TCP end device, not a gateway to a serial line). With a
+    gateway per bus, units count up from `unit` (TCP: from 1), one per gateway."""
 
     scheme: str  # "tcp" or "rtu"
     host: str = DEFAULT_HOST
