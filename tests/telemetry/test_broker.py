@@ -24,6 +24,7 @@ from grasplink.gateway.telemetry import (
 )
 from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
 from grasplink.gateway.telemetry.sparkplug import BOOLEAN, STRING, metric_value, set_value
+from tests.live import wait_until
 from tests.telemetry.broker import (
     PASSWORDS,
     FakeGateway,
@@ -354,22 +355,28 @@ def test_a_broker_restarted_mid_run_loses_nothing_within_the_buffer_bound(
     assert [e for e in host.errors if "not born" in e] == []
 
 
+def json_link(pub: TelemetryPublisher) -> dict:
+    """The JSON tree's connection's counters (`TelemetryPublisher.stats`)."""
+    return pub.stats()["links"]["json"]
+
+
 def test_a_small_buffer_drops_the_oldest_and_says_so(tmp_path: Path, fake: FakeGateway) -> None:
     server = Mosquitto(tmp_path / "broker").start()
     lines: list[str] = []
     try:
         url = server.url + "?buffer_kib=16"
         with publisher(fake, url, log=lines.append, backoff_s=(0.2, 0.5)) as pub:
-            time.sleep(0.3)
+            wait_until(lambda: json_link(pub)["connected"], what="the first connection")
             server.stop()
-            time.sleep(2.0)
+            # (waited for, not slept: on a loaded machine 2 s of snapshots may not fill it)
+            wait_until(lambda: json_link(pub)["dropped_messages"] > 0, what="a full buffer")
             server.start()
             recorder = Recorder(server, ["grasplink/gw/health"])
             health = recorder.wait_for(
                 lambda m: json_of(m)["telemetry"]["buffer_dropped_messages"] > 0, timeout_s=8
             )
             recorder.close()
-            stats = pub.stats()["links"]["json"]
+            stats = json_link(pub)
     finally:
         server.stop()
     assert health and stats["dropped_messages"] > 0
