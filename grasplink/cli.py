@@ -644,6 +644,10 @@ def cmd_gateway(args: argparse.Namespace) -> int:
 
         modbus_url = parse_modbus_url(args.modbus)  # a bad URL too
     buses = args.bus or [DEFAULT_BUS_URL]
+    if modbus_url is not None:
+        from grasplink.gateway.modbus.url import unit_ids
+
+        unit_ids(modbus_url, len(buses))  # a unit per bus: too many for the address space
     telemetry = telemetry_options(args)  # and bad --mqtt options
     telemetry_ids = mqtt_ids(args.mqtt_id, len(buses))
     deadline = None if args.duration is None else time.monotonic() + args.duration

@@ -14,8 +14,8 @@ from pymodbus.client import ModbusTcpClient
 from grasplink.errors import BusError
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.live import LiveGateway
-from grasplink.gateway.modbus.server import ModbusServer, unit_ids
-from grasplink.gateway.modbus.url import parse_modbus_url
+from grasplink.gateway.modbus.server import ModbusServer
+from grasplink.gateway.modbus.url import parse_modbus_url, unit_ids
 from tests.modbus.conftest import RMAP, mbpoll, mbpoll_values, operational, wait_until
 
 
@@ -88,3 +88,16 @@ def test_mbpoll_addresses_a_unit_and_reaches_that_buses_gateway(two_units) -> No
     assert mbpoll_values(done.stdout) == {MODE: 3}
     done = mbpoll("-a", "9", "-t", "4", "-r", str(MODE), "-c", "1", *port)
     assert done.returncode != 0  # no gateway at unit 9
+
+
+def test_too_many_buses_for_the_units_left_is_refused_before_any_bus_opens(
+    capsys, monkeypatch
+) -> None:
+    from grasplink import cli
+
+    monkeypatch.setattr(LiveGateway, "start", lambda self: pytest.fail("a bus was opened"))
+    args = ["gateway", "--bus", "virtual:u1", "--bus", "virtual:u2", "--bus", "virtual:u3"]
+    code = cli.main([*args, "--modbus", "rtu:///dev/ttyNONE?unit=246"])
+    assert code == cli.EXIT_ERROR
+    err = capsys.readouterr().err
+    assert "3 gateways from unit 246 need units up to 248; the highest is 247" in err

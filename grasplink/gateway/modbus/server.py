@@ -17,7 +17,7 @@ the reply waits, at most `command_timeout_s`, for the `CommandResult`:
 pymodbus 3.16's `SimDevice` carries the tables and calls `_action` before
 every access; the action fills the registers read, or vetoes a write with an
 exception code. Reads of a whole table (03, 04: what pollers send, many times a
-second) are answered from the connection's data callback instead (`read_now`):
+second) are answered from the connection's data callback instead (`answer_now`):
 same registers and exception codes, without a task, a loop turn and the
 datastore's copy per request.
 
@@ -61,13 +61,12 @@ from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
 from grasplink.gateway.modbus.registers import (
     COMMAND_TIMEOUT_S,
-    ExceptionCode,
     RegisterError,
     RegisterMap,
     register_map,
     settings_of,
 )
-from grasplink.gateway.modbus.url import ModbusUrl, parse_modbus_url
+from grasplink.gateway.modbus.url import ModbusUrl, parse_modbus_url, unit_ids
 from grasplink.gateway.service import Gateway
 
 logger = logging.getLogger(__name__)
@@ -79,7 +78,6 @@ START_TIMEOUT_S = 5.0
 READ_HOLDING, READ_INPUTS = 3, 4
 REGISTER_FUNCTIONS = frozenset({3, 4, 6, 16, 23})
 BIT_FUNCTIONS = frozenset({1, 2, 5, 15})  # coils and discrete inputs: this map has none
-MAX_UNIT = 247  # the highest Modbus unit (slave) address
 
 
 @dataclass
@@ -90,22 +88,6 @@ class _Unit:
     gateway: Gateway
     last_actions: dict[str, str] = field(default_factory=dict)
     cached: tuple[Any, list[int]] | None = None  # (snapshot, its encoded table)
-
-
-def unit_ids(url: ModbusUrl, count: int) -> list[int | None]:
-    """The unit ids `count` gateways are served at: one gateway as before (a TCP server
-    answers every unit id: None); several, consecutive from the URL's unit (TCP: from 1)."""
-    if count < 1:
-        raise ValueError("ModbusServer needs at least one gateway")
-    if count == 1:
-        return [url.unit]
-    first = url.unit or 1
-    if first + count - 1 > MAX_UNIT:
-        raise BusError(
-            f"modbus: {count} gateways from unit {first} need units up to "
-            f"{first + count - 1}; the highest is {MAX_UNIT}"
-        )
-    return list(range(first, first + count))
 
 
 class ModbusServer:
@@ -268,8 +250,7 @@ class ModbusServer:
                 bytesize=8,
                 trace_pdu=self._trace,  # type: ignore[arg-type]
             )
-        server.read_now = self.read_now
-        server.serves = self.serves
+        server.answer_now = self.answer_now
         return server
 
     def _listen_error(self) -> BusError:
@@ -308,10 +289,6 @@ class ModbusServer:
             self.stats["other units"] += 1
             return None  # pymodbus then neither executes nor answers it
         return pdu
-
-    def serves(self, dev_id: int) -> bool:
-        """Is a gateway served at this unit id?"""
-        return self._unit(dev_id) is not None
 
     def _unit(self, dev_id: int) -> _Unit | None:
         """The gateway a request's unit id addresses (None: no gateway there)."""
@@ -354,17 +331,25 @@ class ModbusServer:
             return ExcCodes(exc.code)
         return None
 
-    def read_now(self, pdu: ModbusPDU) -> ModbusPDU:
-        """The answer to a register read (03, 04), made at once: the registers, or the
-        exception `_action` would give (0x02 outside the table, 0x03 a bad count; 0x0B
-        for a unit id no gateway is served at, as pymodbus answers it)."""
+    def answer_now(self, pdu: ModbusPDU) -> ModbusPDU | None:
+        """The answer made at once, in the connection's data callback: 0x0B for a unit id no
+        gateway is served at (pymodbus would answer a write 0x04, failing to find the
+        device), or a register read (03, 04): the registers, or the exception `_action`
+        would give (0x02 outside the table, 0x03 a bad count). None: pymodbus handles it."""
         unit = self._unit(pdu.dev_id)
         response: ModbusPDU
+        if unit is None:
+            response = ExceptionResponse(pdu.function_code, ExcCodes.GATEWAY_NO_RESPONSE)
+        elif pdu.function_code not in (READ_HOLDING, READ_INPUTS):
+            return None
+        else:
+            response = self._read(unit, pdu)
+        response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
+        return response
+
+    def _read(self, unit: _Unit, pdu: ModbusPDU) -> ModbusPDU:
         try:
-            if unit is None:
-                raise RegisterError(
-                    ExceptionCode.GATEWAY_NO_RESPONSE, f"no gateway at unit {pdu.dev_id}"
-                )
+            response: ModbusPDU
             if pdu.function_code == READ_INPUTS:
                 table = self._inputs(unit)
                 response = _InputsResponse()
@@ -375,7 +360,6 @@ class ModbusServer:
         except RegisterError as exc:
             logger.debug("modbus: %s", exc)
             response = ExceptionResponse(pdu.function_code, ExcCodes(exc.code))
-        response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
         return response
 
     def _inputs(self, unit: _Unit) -> list[int]:
@@ -435,17 +419,16 @@ class _Handler(ServerRequestHandler):
     pymodbus 3.16 schedules every request for the loop's next turn (`call_soon`), which
     hands it to the loop with `run_coroutine_threadsafe` from the loop's own thread: a
     concurrent Future, its lock and a self-pipe wake-up per request. A read needs none of
-    that: `read_now` answers it where it was decoded. Other requests (writes wait for the
+    that: `answer_now` answers it where it was decoded. Other requests (writes wait for the
     gateway) go on as a task on the same loop.
     """
 
     def __init__(self, *args: Any) -> None:
         super().__init__(*args)  # type: ignore[no-untyped-call]
         self._tasks: set[asyncio.Task[None]] = set()  # the loop keeps only weak references
-        self._read_now: Callable[[ModbusPDU], ModbusPDU] | None = getattr(
-            self.server, "read_now", None
+        self._answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = getattr(
+            self.server, "answer_now", None
         )
-        self._serves: Callable[[int], bool] | None = getattr(self.server, "serves", None)
 
     def callback_data(self, data: bytes, addr: tuple[Any, ...] | None = None) -> int:
         """`ServerRequestHandler.callback_data` (pymodbus 3.16), reads answered at once."""
@@ -464,19 +447,9 @@ class _Handler(ServerRequestHandler):
         if pdu is None:
             return used
         broadcast = self.server.broadcast_enable and not pdu.dev_id
-        if self._serves is not None and not broadcast and not self._serves(pdu.dev_id):
-            # no gateway at that unit (TCP; a serial line's trace dropped it): pymodbus would
-            # answer a write 0x04 after failing to find the device
-            response = ExceptionResponse(pdu.function_code, ExcCodes.GATEWAY_NO_RESPONSE)
-            response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
-            self.server_send(response, self.last_addr)  # type: ignore[no-untyped-call]
-            return used
-        if (
-            pdu.function_code in (READ_HOLDING, READ_INPUTS)
-            and self._read_now is not None
-            and not (self.server.broadcast_enable and not pdu.dev_id)
-        ):
-            self.server_send(self._read_now(pdu), self.last_addr)  # type: ignore[no-untyped-call]
+        answer = None if broadcast or self._answer_now is None else self._answer_now(pdu)
+        if answer is not None:
+            self.server_send(answer, self.last_addr)  # type: ignore[no-untyped-call]
         else:
             self.loop.call_soon(self.handle_later)
         return used
@@ -499,16 +472,14 @@ class _Handler(ServerRequestHandler):
 
 
 class _TcpServer(ModbusTcpServer):
-    read_now: Callable[[ModbusPDU], ModbusPDU] | None = None  # ModbusServer.read_now
-    serves: Callable[[int], bool] | None = None  # ModbusServer.serves
+    answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = None  # ModbusServer's
 
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
 
 
 class _SerialServer(ModbusSerialServer):
-    read_now: Callable[[ModbusPDU], ModbusPDU] | None = None  # ModbusServer.read_now
-    serves: Callable[[int], bool] | None = None  # ModbusServer.serves
+    answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = None  # ModbusServer's
 
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)

@@ -12,12 +12,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import parse_qsl, urlsplit
 
-from grasplink.errors import ConfigError
+from grasplink.errors import BusError, ConfigError
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_TCP_PORT = 502
 DEFAULT_BAUD = 19200
 DEFAULT_UNIT = 1
+MAX_UNIT = 247  # the highest Modbus unit (slave) address
 PARITIES = {"N": "none", "E": "even", "O": "odd"}
 EXAMPLES = "tcp://127.0.0.1:1502 or rtu:///dev/ttyUSB0?baud=115200&parity=N&unit=1"
 
@@ -85,7 +86,7 @@ def parse_modbus_url(text: str) -> ModbusUrl:
         options = dict(query)
         baud = _integer(text, options, "baud", DEFAULT_BAUD, 50, 4_000_000)
         stopbits = _integer(text, options, "stopbits", 1, 1, 2)
-        unit = _integer(text, options, "unit", DEFAULT_UNIT, 1, 247)
+        unit = _integer(text, options, "unit", DEFAULT_UNIT, 1, MAX_UNIT)
         raw_parity = options.pop("parity", "E")
         parity = raw_parity.upper()[:1]
         if raw_parity.lower() not in {*"neo", *PARITIES.values()}:
@@ -99,6 +100,22 @@ def parse_modbus_url(text: str) -> ModbusUrl:
             "rtu", device=device, baud=baud, parity=parity, stopbits=stopbits, unit=unit
         )
     raise ConfigError(f"modbus URL {text!r}: unknown scheme {parts.scheme!r}; expected {EXAMPLES}")
+
+
+def unit_ids(url: ModbusUrl, count: int) -> list[int | None]:
+    """The unit ids `count` gateways are served at: one gateway as before (a TCP server
+    answers every unit id: None); several, consecutive from the URL's unit (TCP: from 1)."""
+    if count < 1:
+        raise ValueError("ModbusServer needs at least one gateway")
+    if count == 1:
+        return [url.unit]
+    first = url.unit or 1
+    if first + count - 1 > MAX_UNIT:
+        raise BusError(
+            f"modbus: {count} gateways from unit {first} need units up to "
+            f"{first + count - 1}; the highest is {MAX_UNIT}"
+        )
+    return list(range(first, first + count))
 
 
 def _integer(
