@@ -1010,9 +1010,14 @@ def main(argv: list[str] | None = None) -> int:
 RUNNER_US_OF_RECORD = (39.0, 44.0)
 
 
+def runner_us_per_frame(loops: list[dict]) -> float:
+    """The bus runner's own CPU per received frame, mean over the real-time runs."""
+    return statistics.mean(run.get("runner_us_per_frame", float("nan")) for run in loops)
+
+
 def machine_speed(loops: list[dict]) -> str:
     """How fast the shared machine ran, against the run of record, by the runner's CPU."""
-    runner_us = statistics.mean(run.get("runner_us_per_frame", float("nan")) for run in loops)
+    runner_us = runner_us_per_frame(loops)
     low, high = RUNNER_US_OF_RECORD
     if not math.isfinite(runner_us):
         return "Machine speed: unknown (no real-time run)."
@@ -1338,7 +1343,7 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
     cpu_p99, bus_p99 = percentile(cpu, 99), percentile(bus, 99)
     own = [x for run in loops for x in run["own_us"]]
     handoff_us = percentile(bus, 50) - percentile(own, 50)
-    runner_us = statistics.mean(run.get("runner_us_per_frame", float("nan")) for run in loops)
+    runner_us = runner_us_per_frame(loops)
     contact_share = 100 * slow.get("with_contact", 0)
     own_p50, own_p99 = percentile(own, 50), percentile(own, 99)
     if own_p99 > TARGET_P99_US:
