@@ -199,6 +199,58 @@ def test_feeding_nothing_tells_nothing_and_changes_nothing() -> None:
     assert detector._n == 0 and detector.channels[0].held == 0
 
 
+def test_a_deep_copy_of_a_detector_runs_on_alone() -> None:
+    """The channels' numbers live side by side in one bank (one kernel steps them all); a
+    decoder's reset restores a deep copy of its pristine state, so a copy must be one piece
+    of its own: fed the rest of a signal it tells what the original tells, and the
+    original, fed after it, is untouched by it."""
+    import copy
+
+    x = SIGNALS["slip"]
+    t = np.arange(len(x)) / golden_maker.FS_HZ
+    half = len(x) // 2
+    original = ContactDetector(golden_maker.FS_HZ)
+    for i in range(0, half, 3):
+        original.feed(t[i : min(i + 3, half)], x[i : min(i + 3, half)])
+    clone = copy.deepcopy(original)
+    assert clone._bank.rows[0] is clone.channels[0].rows.data
+    assert clone._bank.ints is not original._bank.ints
+
+    def rest(detector: ContactDetector) -> list:
+        out = []
+        for i in range(half, len(x), 3):
+            events, checks = detector.feed(t[i : i + 3], x[i : i + 3])
+            out += [*events, *checks]
+        return out
+
+    told_by_clone = rest(clone)
+    assert told_by_clone
+    assert rest(original) == told_by_clone
+
+
+def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
+    """A channel whose next centres leave the block of its known noise (or with no noise
+    known) is the Python path's: the kernel changes nothing of it."""
+    from grasplink.gateway.decoding.kernels.detector import NOT_TAKEN, channels_fast
+
+    x = SIGNALS["slip"][:400]
+    detector = ContactDetector(golden_maker.FS_HZ)
+    detector.feed(np.arange(len(x)) / golden_maker.FS_HZ, x)
+    bank = detector._bank
+    bank.ints[:, -1] = -1  # no channel knows its block's noise
+    ints, state, after = bank.ints.copy(), bank.state.copy(), bank.after.copy()
+    needs_python = channels_fast(
+        np.array([1.0, 1.1, 1.2]), bank.ints, bank.noise, bank.needed, bank.taps, bank.state,
+        bank.after, bank.block_abs, bank.rows, detector.block, detector.threshold, bank.found,
+        bank.counts, bank.status,
+    )  # fmt: skip
+    assert needs_python
+    assert (bank.status == NOT_TAKEN).all() and (bank.counts == 0).all()
+    np.testing.assert_array_equal(bank.ints, ints)
+    np.testing.assert_array_equal(bank.state, state)
+    np.testing.assert_array_equal(bank.after, after)
+
+
 def _scan_as_numpy_had_it(
     level,
     next_k,

@@ -68,9 +68,14 @@ from grasplink.gateway.decoding.filters import (
     resolution,
 )
 from grasplink.gateway.decoding.kernels.detector import (
+    BLOCK_DONE,
+    CHANNEL_COLUMNS,
+    NOT_TAKEN,
+    TAKEN,
     all_finite,
     channel_fast,
     channel_hinge,
+    channels_fast,
     fir_run,
     hinge_maxima,
     step_scale,
@@ -82,6 +87,10 @@ NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ide
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
 STEP_IDS = 1_000_000_000  # ids of the small steps found by the step probe (their own series)
+# the channels' int state in their bank (`kernels.detector.CHANNEL_COLUMNS`)
+CH_W, CH_HELD, CH_NEXT_N, CH_ABS_N, CH_NEXT_TEST, CH_Z_START, CH_SIZE, CH_NOISE_BLOCK = range(
+    len(CHANNEL_COLUMNS)
+)
 
 
 class ContactEvent(NamedTuple):
@@ -151,34 +160,115 @@ class _Series:
         return self.data[..., : self.size]
 
 
+class _ChannelBank:
+    """The hinge channels' numbers side by side (a row per channel), so that one kernel
+    crossing steps them all (`kernels.detector.channels_fast`): their int state
+    (`CHANNEL_COLUMNS`), the noise of the block they are in, the slope filters' taps and
+    carried state, the slopes held, the block's |hinge|, and the kernel's outputs. A
+    `_Channel` reads and writes its own row through properties (no views are kept: a
+    deep copy of the detector stays one piece)."""
+
+    def __init__(self, widths: list[int], needed: list[float], block: int):
+        C, wide = len(widths), max(widths)
+        self.ints = np.zeros((C, len(CHANNEL_COLUMNS)), np.int64)
+        self.ints[:, CH_W] = widths
+        self.ints[:, CH_NOISE_BLOCK] = -1
+        self.noise = np.zeros(C)
+        self.needed = np.array(needed, dtype=np.float64)
+        self.taps = np.zeros((C, wide + 1))
+        self.state = np.zeros((C, wide))
+        self.after = np.zeros((C, wide))
+        self.block_abs = np.zeros((C, block))
+        self.found = np.zeros((C, 2 * block), np.int64)
+        self.counts = np.zeros(C, np.int64)
+        self.status = np.zeros(C, np.int64)
+        self.rows: tuple[np.ndarray, ...] = ()  # the channels' rows storage (`_BankRows.data`)
+
+
+class _BankInt:
+    """A `_Channel`'s int, held in its bank's row (column `col`)."""
+
+    def __init__(self, col: int):
+        self.col = col
+
+    def __get__(self, ch: Any, owner: type | None = None) -> int:
+        return int(ch.bank.ints[ch.index, self.col])
+
+    def __set__(self, ch: Any, value: int) -> None:
+        ch.bank.ints[ch.index, self.col] = value
+
+
+class _BankRows(_Series):
+    """A channel's rows (z, hinge, slope after, known at), their count in its bank's row."""
+
+    __slots__ = ("bank", "index")
+
+    def __init__(self, bank: _ChannelBank, index: int, capacity: int):
+        self.bank, self.index = bank, index
+        super().__init__(capacity, rows=4)
+
+    @property  # type: ignore[override]
+    def size(self) -> int:
+        return int(self.bank.ints[self.index, CH_SIZE])
+
+    @size.setter
+    def size(self, value: int) -> None:
+        self.bank.ints[self.index, CH_SIZE] = value
+
+    def __getstate__(self) -> tuple[np.ndarray, _ChannelBank, int]:
+        # (a copy: the count is the bank's, copied with it)
+        return self.data, self.bank, self.index
+
+    def __setstate__(self, state: tuple[np.ndarray, _ChannelBank, int]) -> None:
+        self.data, self.bank, self.index = state
+
+
 @dataclass
 class _Channel:
     width: int  # w, samples
     slope: SosFilter  # LS slope over the last w + 1 samples (FIR)
     needed: float  # the rise after a candidate, per unit of its hinge (`hinge_maxima`)
-    # slopes not yet paired: the first `held` of `after` (w entries, filled in place)
-    after: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    held: int = 0
-    # the slope filter's taps and carried state (in place), from the first sample on
-    taps: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    state: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    next_n: int = 0  # next hinge centre to compute
+    bank: _ChannelBank  # where its numbers live: row `index`
+    index: int
     waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
     noise_by_block: dict = field(default_factory=dict)
     # rows z, hinge (N/sample), slope after, sample that told the noise (known at), by centre
     # from z_start; z, zh, za, zready are views of their whole storage (refreshed when it
     # grows): the first rows.size entries are held
-    rows: _Series = field(default_factory=lambda: _Series(256, rows=4))
+    rows: _Series = field(init=False)
     z: np.ndarray = field(default_factory=lambda: np.zeros(0))
     zh: np.ndarray = field(default_factory=lambda: np.zeros(0))
     za: np.ndarray = field(default_factory=lambda: np.zeros(0))
     zready: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    z_start: int = 0  # global centre index of z[0]
-    next_test: int = 0  # next centre to test for a local maximum
-    block_abs: np.ndarray = field(default_factory=lambda: np.zeros(0))  # |h| of the block ...
-    abs_n: int = 0  # ... being filled, so far
     block_noise: dict = field(default_factory=dict)  # completed block -> robust noise
     done: int = 0  # blocks completed
+    # slopes not yet paired: the first `held` of `after` (w entries, filled in place)
+    held = _BankInt(CH_HELD)
+    next_n = _BankInt(CH_NEXT_N)  # next hinge centre to compute
+    abs_n = _BankInt(CH_ABS_N)  # |h| of the block being filled (`block_abs`), so far
+    next_test = _BankInt(CH_NEXT_TEST)  # next centre to test for a local maximum
+    z_start = _BankInt(CH_Z_START)  # global centre index of z[0]
+
+    def __post_init__(self) -> None:
+        self.rows = _BankRows(self.bank, self.index, 256)
+
+    @property
+    def taps(self) -> np.ndarray:
+        """The slope filter's taps (set from the first sample on, `_settle`)."""
+        return self.bank.taps[self.index, : self.width + 1]
+
+    @property
+    def state(self) -> np.ndarray:
+        """... and its carried state (in place)."""
+        return self.bank.state[self.index, : self.width]
+
+    @property
+    def after(self) -> np.ndarray:
+        return self.bank.after[self.index, : self.width]
+
+    @property
+    def block_abs(self) -> np.ndarray:
+        return self.bank.block_abs[self.index]
 
     def refresh_views(self) -> None:
         """z, zh, za, zready as views of the rows' storage, after an append that grew it
@@ -302,16 +392,16 @@ class ContactDetector:
         self.coarse_rise_fraction = float(coarse_rise_fraction)
         # a contact makes the force rise; long scales must see a clear rise (the slow bend
         # at the end of a fast pulse's decay is no contact)
-        self.channels = [
-            _Channel(
-                w,
-                SosFilter.fir(_slope_taps(w)),
-                self.rise_fraction if w / self.fs_hz < 0.03 else self.coarse_rise_fraction,
-                after=np.empty(w),
-                block_abs=np.empty(self.block),
-            )
+        needed = [
+            self.rise_fraction if w / self.fs_hz < 0.03 else self.coarse_rise_fraction
             for w in widths
         ]
+        self._bank = _ChannelBank(widths, needed, self.block)
+        self.channels = [
+            _Channel(w, SosFilter.fir(_slope_taps(w)), needed[ci], self._bank, ci)
+            for ci, w in enumerate(widths)
+        ]
+        self._bank.rows = tuple(ch.rows.data for ch in self.channels)
         self.drop_fraction = float(drop_fraction)
         self.watch = max(8, round(watch_s * self.fs_hz))
         self.decay_rises = float(decay_rises)
@@ -417,8 +507,7 @@ class ContactDetector:
         self._t, self._x = self._tx.view()
         self._raw_stats(x)
         candidates: list[tuple[int, int, int, float, float, float]] = []
-        for ci, ch in enumerate(self.channels):
-            self._run_channel(ci, ch, x, candidates)
+        self._run_channels(x, candidates)
         self._run_level(x)
         self._run_steps(x)
         events = self._merge(candidates)
@@ -475,11 +564,49 @@ class ContactDetector:
         """The filters' taps and states, settled on the first sample (as if it had been
         held before: slopes and differences 0), for the kernels that run them in place."""
         for ch in self.channels:
-            ch.taps, ch.state = ch.slope.fir_state(first)
+            taps, state = ch.slope.fir_state(first)
+            ch.taps[:], ch.state[:] = taps, state  # (the bank's rows: run in place from now)
         for sc in self._scales:
             sc.taps, sc.state = sc.fir.fir_state(first)
         if self._level_filter.is_fir:  # (one tap, under 100 Hz: a plain gain, run as is)
             self._level_fir = self._level_filter.fir_state(first)
+
+    def _run_channels(self, x: np.ndarray, candidates: list) -> None:
+        """Every hinge channel on x. Usually one kernel steps them all (`channels_fast`:
+        a CAN frame's few centres in a block whose noise each channel knows); a channel it
+        leaves (a new block, blocks waiting for a noise, no room) takes the Python path
+        (`_run_channel`), and its block done and its candidates are Python's: in channel
+        order, as the channels one after the other (a channel reads only finer ones)."""
+        bank = self._bank
+        if not channels_fast(
+            x, bank.ints, bank.noise, bank.needed, bank.taps, bank.state, bank.after,
+            bank.block_abs, bank.rows, self.block, self.threshold, bank.found, bank.counts,
+            bank.status,
+        ):  # fmt: skip
+            return
+        said = bank.status.tolist()
+        for ci, told in enumerate(bank.counts.tolist()):
+            if said[ci] == TAKEN and not told:
+                continue
+            ch = self.channels[ci]
+            if said[ci] == NOT_TAKEN:
+                self._run_channel(ci, ch, x, candidates)
+            else:
+                if said[ci] == BLOCK_DONE:
+                    n = ch.next_n
+                    self._block_done(ch, (n - 1) // self.block, n)
+                if told:
+                    self._candidates(ci, ch, bank.found[ci, :told], candidates)
+            self._arm(ci, ch)
+        bank.rows = tuple(ch.rows.data for ch in self.channels)  # (any grown)
+
+    def _arm(self, ci: int, ch: _Channel) -> None:
+        """Tell the kernel the noise of the block the channel's next centres fall in, when
+        known and none wait (else it leaves the channel to `_run_channel`)."""
+        block = ch.next_n // self.block
+        noise = None if ch.waiting else ch.noise_by_block.get(block)
+        self._bank.ints[ci, CH_NOISE_BLOCK] = -1 if noise is None else block
+        self._bank.noise[ci] = 0.0 if noise is None else noise
 
     def _run_channel(self, ci: int, ch: _Channel, x: np.ndarray, candidates: list) -> None:
         """The hinge of the centres x completes (y[m], the slope over [m - w, m], is the

@@ -23,6 +23,7 @@ from grasplink.gateway.decoding.kernels import jit
 __all__ = [
     "all_finite",
     "channel_fast",
+    "channels_fast",
     "channel_hinge",
     "fir_run",
     "hinge_maxima",
@@ -163,6 +164,90 @@ def channel_fast(
         rows[3, at + i] = ready
         block_abs[abs_n + i] = abs(hinge)
     return hinge_maxima(rows, lo, at + count - 1 - w, w, threshold, needed, found)
+
+
+# The hinge channels' int state, a row per channel (`ContactDetector`'s `_Channel`s read
+# and write theirs there): width, slopes held, next centre, |hinge| entries of the block,
+# next centre to test, centre of row 0, rows held, and the block whose noise is
+# `noise[channel]` (-1: none known, or blocks waiting for one: the Python path).
+CHANNEL_COLUMNS = ("width", "held", "next_n", "abs_n", "next_test", "z_start", "size", "noise_block")
+W, HELD, NEXT_N, ABS_N, NEXT_TEST, Z_START, SIZE, NOISE_BLOCK = range(len(CHANNEL_COLUMNS))
+# what `channels_fast` says of each channel
+TAKEN, NOT_TAKEN, BLOCK_DONE = 0, 1, 2
+
+
+@jit()
+def channels_fast(
+    x: np.ndarray,
+    ints: np.ndarray,
+    noise: np.ndarray,
+    needed: np.ndarray,
+    taps: np.ndarray,
+    state: np.ndarray,
+    after: np.ndarray,
+    block_abs: np.ndarray,
+    rows: tuple,
+    block: int,
+    threshold: float,
+    found: np.ndarray,
+    counts: np.ndarray,
+    status: np.ndarray,
+) -> bool:
+    """Every hinge channel's usual step (`channel_fast`) in one crossing: those whose new
+    centres lie in the block of their known noise, with room in their rows and for their
+    candidates. Per channel: status TAKEN (counts[c] candidates in found[c]), BLOCK_DONE
+    (taken, and its block complete: the caller takes its noise) or NOT_TAKEN (nothing
+    changed: the caller's Python path does it), the int state updated in `ints`. Rows
+    of `taps`, `state`, `after` are the channels' (a channel's first `width` + 1, `width`,
+    `width` entries). Returns whether any channel needs the caller (not taken, a block
+    done, a candidate): usually none does."""
+    attention = False
+    for c in range(ints.shape[0]):
+        w, held, start = ints[c, W], ints[c, HELD], ints[c, NEXT_N]
+        count = held + len(x) - w
+        b = start // block
+        size, z_start = ints[c, SIZE], ints[c, Z_START]
+        data = rows[c]
+        counts[c] = 0
+        lo = max(ints[c, NEXT_TEST], z_start + w)
+        hi = z_start + size + count - 1 - w
+        if (
+            count <= 0
+            or ints[c, NOISE_BLOCK] != b
+            or (start + count - 1) // block != b
+            or size + count > data.shape[1]
+            or hi - lo + 1 > found.shape[1]
+        ):
+            status[c] = NOT_TAKEN
+            attention = True
+            continue
+        if hi >= lo:
+            ints[c, NEXT_TEST] = hi + 1
+        told = channel_fast(
+            x,
+            taps[c, : w + 1],
+            state[c, :w],
+            after[c, :w],
+            held,
+            data,
+            size,
+            start + w,
+            noise[c],
+            block_abs[c],
+            ints[c, ABS_N],
+            lo - z_start,
+            threshold,
+            needed[c],
+            found[c],
+        )
+        ints[c, HELD] = w
+        ints[c, ABS_N] += count
+        ints[c, NEXT_N] = start + count
+        ints[c, SIZE] = size + count
+        counts[c] = told
+        status[c] = BLOCK_DONE if (start + count) % block == 0 else TAKEN
+        attention = attention or told > 0 or status[c] == BLOCK_DONE
+    return attention
 
 
 @jit()
