@@ -242,13 +242,37 @@ def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
     needs_python = channels_fast(
         np.array([1.0, 1.1, 1.2]), bank.ints, bank.noise, bank.needed, bank.taps, bank.state,
         bank.after, bank.block_abs, bank.rows, detector.block, detector.threshold, bank.found,
-        bank.counts, bank.status,
+        bank.counts, bank.status, bank.taken,
     )  # fmt: skip
     assert needs_python
     assert (bank.status == NOT_TAKEN).all() and (bank.counts == 0).all()
     np.testing.assert_array_equal(bank.ints, ints)
     np.testing.assert_array_equal(bank.state, state)
     np.testing.assert_array_equal(bank.after, after)
+
+
+def test_step_scales_the_kernel_has_no_room_for_are_left_as_they_were() -> None:
+    """A scale whose store is full is the Python path's (it grows the store there): the
+    kernel changes nothing of it, and says so (-1)."""
+    from grasplink.gateway.decoding.kernels.detector import scales_fast
+
+    x = SIGNALS["slip"][:400]
+    detector = ContactDetector(golden_maker.FS_HZ)
+    detector.feed(np.arange(len(x)) / golden_maker.FS_HZ, x)
+    bank = detector._scale_bank
+    full = tuple(store[: detector._scales[s].store.size] for s, store in enumerate(bank.stores))
+    ints, state = bank.ints.copy(), bank.state.copy()
+    held = [store.copy() for store in full]
+    needs_python = scales_fast(
+        np.array([1.0, 1.1, 1.2]), bank.ints, bank.taps, bank.state, full, bank.found,
+        bank.found_adj, bank.counts, bank.first,
+    )  # fmt: skip
+    assert needs_python
+    assert (bank.counts == -1).all()
+    np.testing.assert_array_equal(bank.ints, ints)
+    np.testing.assert_array_equal(bank.state, state)
+    for store, before in zip(full, held, strict=True):
+        np.testing.assert_array_equal(store, before)
 
 
 def _scan_as_numpy_had_it(

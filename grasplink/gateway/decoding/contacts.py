@@ -71,6 +71,11 @@ from grasplink.gateway.decoding.kernels.detector import (
     BLOCK_DONE,
     CHANNEL_COLUMNS,
     NOT_TAKEN,
+    S_NEXT,
+    S_SIZE,
+    S_START,
+    S_W,
+    SCALE_COLUMNS,
     TAKEN,
     all_finite,
     channel_fast,
@@ -78,6 +83,7 @@ from grasplink.gateway.decoding.kernels.detector import (
     channels_fast,
     fir_run,
     hinge_maxima,
+    scales_fast,
     step_scale,
     watch_scan,
 )
@@ -182,45 +188,47 @@ class _ChannelBank:
         self.found = np.zeros((C, 2 * block), np.int64)
         self.counts = np.zeros(C, np.int64)
         self.status = np.zeros(C, np.int64)
+        self.taken = np.zeros(C, np.int64)
         self.rows: tuple[np.ndarray, ...] = ()  # the channels' rows storage (`_BankRows.data`)
 
 
 class _BankInt:
-    """A `_Channel`'s int, held in its bank's row (column `col`)."""
+    """An int of a `_Channel` or `_StepScale`, held in its bank's row (column `col`)."""
 
     def __init__(self, col: int):
         self.col = col
 
-    def __get__(self, ch: Any, owner: type | None = None) -> int:
-        return int(ch.bank.ints[ch.index, self.col])
+    def __get__(self, owner_of: Any, owner: type | None = None) -> int:
+        return int(owner_of.bank.ints[owner_of.index, self.col])
 
-    def __set__(self, ch: Any, value: int) -> None:
-        ch.bank.ints[ch.index, self.col] = value
+    def __set__(self, owner_of: Any, value: int) -> None:
+        owner_of.bank.ints[owner_of.index, self.col] = value
 
 
 class _BankRows(_Series):
-    """A channel's rows (z, hinge, slope after, known at), their count in its bank's row."""
+    """A `_Series` whose count is held in a bank's int row (`ints[index, col]`), where a
+    kernel that appends to it finds it."""
 
-    __slots__ = ("bank", "index")
+    __slots__ = ("col", "index", "ints")
 
-    def __init__(self, bank: _ChannelBank, index: int, capacity: int):
-        self.bank, self.index = bank, index
-        super().__init__(capacity, rows=4)
+    def __init__(self, ints: np.ndarray, index: int, col: int, capacity: int, rows: int = 0):
+        self.ints, self.index, self.col = ints, index, col
+        super().__init__(capacity, rows=rows)
 
     @property  # type: ignore[override]
     def size(self) -> int:
-        return int(self.bank.ints[self.index, CH_SIZE])
+        return int(self.ints[self.index, self.col])
 
     @size.setter
     def size(self, value: int) -> None:
-        self.bank.ints[self.index, CH_SIZE] = value
+        self.ints[self.index, self.col] = value
 
-    def __getstate__(self) -> tuple[np.ndarray, _ChannelBank, int]:
+    def __getstate__(self) -> tuple[np.ndarray, np.ndarray, int, int]:
         # (a copy: the count is the bank's, copied with it)
-        return self.data, self.bank, self.index
+        return self.data, self.ints, self.index, self.col
 
-    def __setstate__(self, state: tuple[np.ndarray, _ChannelBank, int]) -> None:
-        self.data, self.bank, self.index = state
+    def __setstate__(self, state: tuple[np.ndarray, np.ndarray, int, int]) -> None:
+        self.data, self.ints, self.index, self.col = state
 
 
 @dataclass
@@ -250,7 +258,7 @@ class _Channel:
     z_start = _BankInt(CH_Z_START)  # global centre index of z[0]
 
     def __post_init__(self) -> None:
-        self.rows = _BankRows(self.bank, self.index, 256)
+        self.rows = _BankRows(self.bank.ints, self.index, CH_SIZE, 256, rows=4)
 
     @property
     def taps(self) -> np.ndarray:
@@ -318,6 +326,25 @@ class _Watch:
         return self.held[2, : self.held_n]
 
 
+class _ScaleBank:
+    """The step probe's scales side by side (a row per scale), for one kernel crossing
+    (`kernels.detector.scales_fast`): their int state (`SCALE_COLUMNS`), the difference
+    filters' taps and state, their stores, and the kernel's outputs."""
+
+    def __init__(self, widths: list[int], block: int):
+        S, wide = len(widths), max(widths)
+        self.ints = np.zeros((S, len(SCALE_COLUMNS)), np.int64)
+        self.ints[:, S_W] = widths
+        self.ints[:, S_START] = [-w for w in widths]  # (output m is centre m - w)
+        self.taps = np.zeros((S, 2 * wide))
+        self.state = np.zeros((S, 2 * wide - 1))
+        self.found = np.zeros((S, 2 * block), np.int64)
+        self.found_adj = np.zeros((S, 2 * block))
+        self.counts = np.zeros(S, np.int64)
+        self.first = np.zeros(S, np.int64)
+        self.stores: tuple[np.ndarray, ...] = ()  # the scales' `store.data`
+
+
 @dataclass
 class _StepScale:
     """One scale of the step probe: a difference of means over +-w samples."""
@@ -325,12 +352,29 @@ class _StepScale:
     w: int
     rise: int  # a step's rise is judged over this many samples (`_is_small_step`)
     fir: SosFilter
-    d: np.ndarray  # difference of means by centre, from start (a view of `store`)
-    start: int  # centre of d[0] (output m is centre m - w)
-    next: int = 0  # next centre to test
-    store: _Series = field(default_factory=lambda: _Series(256))
-    taps: np.ndarray = field(default_factory=lambda: np.zeros(0))  # fir's, from the first
-    state: np.ndarray = field(default_factory=lambda: np.zeros(0))  # sample on (in place)
+    bank: _ScaleBank  # where its numbers live: row `index`
+    index: int
+    store: _Series = field(init=False)  # differences of means by centre, from `start`
+    start = _BankInt(S_START)  # centre of d[0] (output m is centre m - w)
+    next = _BankInt(S_NEXT)  # next centre to test
+
+    def __post_init__(self) -> None:
+        self.store = _BankRows(self.bank.ints, self.index, S_SIZE, 256)
+
+    @property
+    def d(self) -> np.ndarray:
+        """The differences held (a view: valid until the next append or cut)."""
+        return self.store.view()
+
+    @property
+    def taps(self) -> np.ndarray:
+        """The difference filter's taps (from the first sample on, `_settle`) ..."""
+        return self.bank.taps[self.index, : 2 * self.w]
+
+    @property
+    def state(self) -> np.ndarray:
+        """... and its carried state (in place)."""
+        return self.bank.state[self.index, : 2 * self.w - 1]
 
 
 def _mean(x: np.ndarray) -> float:
@@ -416,13 +460,19 @@ class ContactDetector:
         self.step_threshold = float(step_threshold)
         # and over a longer window too: a stop's step in heavy noise (10 dB of the ridge
         # pulses) is a few noise units of the short window's difference, more of the long's
+        scale_widths = sorted({w, max(w + 1, round(long_step_window_s * self.fs_hz))})
+        self._scale_bank = _ScaleBank(scale_widths, self.block)
         self._scales = [
-            _StepScale(v, max(1, round(0.6 * v)), SosFilter.fir(k), np.zeros(0), -v)
-            for v, k in (
-                (v, np.concatenate([np.full(v, 1.0 / v), np.full(v, -1.0 / v)]))
-                for v in sorted({w, max(w + 1, round(long_step_window_s * self.fs_hz))})
+            _StepScale(
+                v,
+                max(1, round(0.6 * v)),
+                SosFilter.fir(np.concatenate([np.full(v, 1.0 / v), np.full(v, -1.0 / v)])),
+                self._scale_bank,
+                si,
             )
+            for si, v in enumerate(scale_widths)
         ]
+        self._scale_bank.stores = tuple(sc.store.data for sc in self._scales)
         self._probes: list[tuple[_Watch, float, int]] = []  # step candidates judged (z, w)
         # probes judged steps: (emit, w, index, t, z, trend_on)
         self._confirmed: list[tuple[int, int, int, float, float, bool | None]] = []
@@ -567,24 +617,26 @@ class ContactDetector:
             taps, state = ch.slope.fir_state(first)
             ch.taps[:], ch.state[:] = taps, state  # (the bank's rows: run in place from now)
         for sc in self._scales:
-            sc.taps, sc.state = sc.fir.fir_state(first)
+            taps, state = sc.fir.fir_state(first)
+            sc.taps[:], sc.state[:] = taps, state  # (the bank's rows: run in place from now)
         if self._level_filter.is_fir:  # (one tap, under 100 Hz: a plain gain, run as is)
             self._level_fir = self._level_filter.fir_state(first)
 
     def _run_channels(self, x: np.ndarray, candidates: list) -> None:
         """Every hinge channel on x. Usually one kernel steps them all (`channels_fast`:
-        a CAN frame's few centres in a block whose noise each channel knows); a channel it
-        leaves (a new block, blocks waiting for a noise, no room) takes the Python path
-        (`_run_channel`), and its block done and its candidates are Python's: in channel
-        order, as the channels one after the other (a channel reads only finer ones)."""
+        a CAN frame's few centres in a block whose noise each channel knows; those past
+        the block's end are left here); a channel it leaves (a new block, blocks waiting
+        for a noise, no room) takes the Python path (`_run_channel`), and so do the
+        centres past a block's end, after that block's noise. In channel order, as the
+        channels one after the other: a channel reads only finer ones."""
         bank = self._bank
         if not channels_fast(
             x, bank.ints, bank.noise, bank.needed, bank.taps, bank.state, bank.after,
             bank.block_abs, bank.rows, self.block, self.threshold, bank.found, bank.counts,
-            bank.status,
+            bank.status, bank.taken,
         ):  # fmt: skip
             return
-        said = bank.status.tolist()
+        said, taken = bank.status.tolist(), bank.taken.tolist()
         for ci, told in enumerate(bank.counts.tolist()):
             if said[ci] == TAKEN and not told:
                 continue
@@ -595,7 +647,9 @@ class ContactDetector:
                 if said[ci] == BLOCK_DONE:
                     n = ch.next_n
                     self._block_done(ch, (n - 1) // self.block, n)
-                if told:
+                    if taken[ci] < len(x):  # the next block's first centres
+                        self._run_channel(ci, ch, x[taken[ci] :], candidates)
+                if told:  # (after the rows of the rest: a candidate's timing reads them)
                     self._candidates(ci, ch, bank.found[ci, :told], candidates)
             self._arm(ci, ch)
         bank.rows = tuple(ch.rows.data for ch in self.channels)  # (any grown)
@@ -917,15 +971,27 @@ class ContactDetector:
         - the object covering more of the sensor - is no step), above step_threshold noise
         units; each is watched like a contact and kept only if judged a step at the hold
         (`_step_events`)."""
-        for sc in self._scales:
-            self._run_scale(sc, x)
+        bank = self._scale_bank
+        if not scales_fast(
+            x, bank.ints, bank.taps, bank.state, bank.stores, bank.found, bank.found_adj,
+            bank.counts, bank.first,
+        ):  # fmt: skip
+            return
+        for si, told in enumerate(bank.counts.tolist()):
+            sc = self._scales[si]
+            if told < 0:
+                self._run_scale(sc, x)
+            elif told:
+                found, adj = bank.found[si, :told], bank.found_adj[si, :told]
+                self._probe(sc, int(bank.first[si]), found, adj)
+        bank.stores = tuple(sc.store.data for sc in self._scales)  # (any grown)
 
     def _run_scale(self, sc: _StepScale, x: np.ndarray) -> None:
+        """One scale on x, where `scales_fast` had no room (its store grows here)."""
         w = sc.w
         at = sc.store.size
         sc.store.extend(len(x))
-        sc.d = sc.store.view()
-        last = sc.start + len(sc.d) - 1  # last centre with a difference
+        last = sc.start + sc.store.size - 1  # last centre with a difference
         lo = max(sc.next, sc.start + 3 * w, 3 * w)
         hi = last - 3 * w
         i0, i1 = lo - sc.start - w, hi - sc.start + w  # adjusted over +-w
@@ -938,9 +1004,14 @@ class ContactDetector:
         told = step_scale(
             x, sc.taps, sc.state, sc.store.data, at, i0, i1, w, found, self._found_values
         )
-        if not told:
-            return
-        for j, a in zip(found[:told].tolist(), self._found_values[:told].tolist(), strict=True):
+        if told:
+            self._probe(sc, i0, found[:told], self._found_values[:told])
+
+    def _probe(self, sc: _StepScale, i0: int, found: np.ndarray, adj: np.ndarray) -> None:
+        """The maxima a scale found (offsets from i0 into its differences, and their adj
+        values) strong enough, watched as step candidates."""
+        w = sc.w
+        for j, a in zip(found.tolist(), adj.tolist(), strict=True):
             c = i0 + j + sc.start
             white = self._white(c // self.block)
             if white is None:
@@ -1369,9 +1440,9 @@ class ContactDetector:
                 self._level = self._levels.keep_last(lv_keep)
                 self._level_start += cut
         for sc in self._scales:
-            if len(sc.d) > 2 * keep:
-                cut = len(sc.d) - keep
-                sc.d = sc.store.keep_last(keep)
+            if sc.store.size > 2 * keep:
+                cut = sc.store.size - keep
+                sc.store.keep_last(keep)
                 sc.start += cut
         for ch in self.channels:
             if ch.rows.size > 2 * keep:

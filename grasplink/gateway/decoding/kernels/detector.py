@@ -23,10 +23,11 @@ from grasplink.gateway.decoding.kernels import jit
 __all__ = [
     "all_finite",
     "channel_fast",
-    "channels_fast",
     "channel_hinge",
+    "channels_fast",
     "fir_run",
     "hinge_maxima",
+    "scales_fast",
     "step_scale",
     "watch_scan",
 ]
@@ -170,7 +171,16 @@ def channel_fast(
 # and write theirs there): width, slopes held, next centre, |hinge| entries of the block,
 # next centre to test, centre of row 0, rows held, and the block whose noise is
 # `noise[channel]` (-1: none known, or blocks waiting for one: the Python path).
-CHANNEL_COLUMNS = ("width", "held", "next_n", "abs_n", "next_test", "z_start", "size", "noise_block")
+CHANNEL_COLUMNS = (
+    "width",
+    "held",
+    "next_n",
+    "abs_n",
+    "next_test",
+    "z_start",
+    "size",
+    "noise_block",
+)
 W, HELD, NEXT_N, ABS_N, NEXT_TEST, Z_START, SIZE, NOISE_BLOCK = range(len(CHANNEL_COLUMNS))
 # what `channels_fast` says of each channel
 TAKEN, NOT_TAKEN, BLOCK_DONE = 0, 1, 2
@@ -192,23 +202,30 @@ def channels_fast(
     found: np.ndarray,
     counts: np.ndarray,
     status: np.ndarray,
+    taken: np.ndarray,
 ) -> bool:
-    """Every hinge channel's usual step (`channel_fast`) in one crossing: those whose new
-    centres lie in the block of their known noise, with room in their rows and for their
+    """Every hinge channel's usual step (`channel_fast`) in one crossing: the new centres
+    in the block of the channel's known noise, with room in its rows and for its
     candidates. Per channel: status TAKEN (counts[c] candidates in found[c]), BLOCK_DONE
-    (taken, and its block complete: the caller takes its noise) or NOT_TAKEN (nothing
-    changed: the caller's Python path does it), the int state updated in `ints`. Rows
-    of `taps`, `state`, `after` are the channels' (a channel's first `width` + 1, `width`,
-    `width` entries). Returns whether any channel needs the caller (not taken, a block
-    done, a candidate): usually none does."""
+    (taken, and its block complete: the caller takes its noise; centres past the block's
+    end are left to it: only x[:taken[c]] was taken) or NOT_TAKEN (nothing changed: the
+    caller's Python path does it); the int state updated in `ints`. Rows of `taps`,
+    `state`, `after` are the channels' (a channel's first `width` + 1, `width`, `width`
+    entries). Returns whether any channel needs the caller (not taken, a block done, a
+    candidate): usually none does."""
     attention = False
     for c in range(ints.shape[0]):
         w, held, start = ints[c, W], ints[c, HELD], ints[c, NEXT_N]
-        count = held + len(x) - w
         b = start // block
+        count = held + len(x) - w
+        m = len(x)
+        if held == w and (start + count - 1) // block != b:  # to the block's end only
+            m = (b + 1) * block - start
+            count = m
         size, z_start = ints[c, SIZE], ints[c, Z_START]
         data = rows[c]
         counts[c] = 0
+        taken[c] = 0
         lo = max(ints[c, NEXT_TEST], z_start + w)
         hi = z_start + size + count - 1 - w
         if (
@@ -224,7 +241,7 @@ def channels_fast(
         if hi >= lo:
             ints[c, NEXT_TEST] = hi + 1
         told = channel_fast(
-            x,
+            x[:m],
             taps[c, : w + 1],
             state[c, :w],
             after[c, :w],
@@ -245,6 +262,7 @@ def channels_fast(
         ints[c, NEXT_N] = start + count
         ints[c, SIZE] = size + count
         counts[c] = told
+        taken[c] = m
         status[c] = BLOCK_DONE if (start + count) % block == 0 else TAKEN
         attention = attention or told > 0 or status[c] == BLOCK_DONE
     return attention
@@ -284,6 +302,56 @@ def step_scale(
         found_adj[count] = a
         count += 1
     return count
+
+
+# The step probe's scales' int state, a row per scale (`_StepScale`): width, differences
+# held, centre of the first, next centre to test.
+SCALE_COLUMNS = ("width", "size", "start", "next")
+S_W, S_SIZE, S_START, S_NEXT = range(len(SCALE_COLUMNS))
+
+
+@jit()
+def scales_fast(
+    x: np.ndarray,
+    ints: np.ndarray,
+    taps: np.ndarray,
+    state: np.ndarray,
+    stores: tuple,
+    found: np.ndarray,
+    found_adj: np.ndarray,
+    counts: np.ndarray,
+    first: np.ndarray,
+) -> bool:
+    """Every step-probe scale (`step_scale`) on x in one crossing: its differences written
+    after those held, the centres now testable tested. Per scale: counts[s] maxima, their
+    offsets from first[s] in found[s] and their adj in found_adj[s]; -1: not taken (no
+    room in its store or for its maxima: nothing changed, the caller's Python path does
+    it). Rows of `taps` and `state` are the scales' (2 width and 2 width - 1 entries).
+    Returns whether any scale needs the caller (not taken, or a maximum found)."""
+    attention = False
+    for s in range(ints.shape[0]):
+        w, at, start = ints[s, S_W], ints[s, S_SIZE], ints[s, S_START]
+        size = at + len(x)
+        lo = max(ints[s, S_NEXT], start + 3 * w, 3 * w)
+        hi = start + size - 1 - 3 * w
+        i0, i1 = lo - start - w, hi - start + w  # adjusted over +-w
+        if hi < lo:
+            i0, i1 = 0, -1  # nothing to test yet
+        d = stores[s]
+        if size > len(d) or i1 - i0 + 1 > found.shape[1]:
+            counts[s] = -1
+            attention = True
+            continue
+        if hi >= lo:
+            ints[s, S_NEXT] = hi + 1
+        ints[s, S_SIZE] = size
+        told = step_scale(
+            x, taps[s, : 2 * w], state[s, : 2 * w - 1], d, at, i0, i1, w, found[s], found_adj[s]
+        )
+        counts[s] = told
+        first[s] = i0
+        attention = attention or told > 0
+    return attention
 
 
 @jit()
