@@ -40,7 +40,7 @@ import numpy as np
 from scipy import signal
 
 from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.kernels.detector import fir_run
+from grasplink.gateway.decoding.kernels.detector import fir_run, sos_run
 
 MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
 
@@ -76,19 +76,18 @@ class SosFilter:
     on the first sample it sees (a DC offset of +50 N gives no start-up
     transient); `reset` forgets the state (after a gap).
 
-    Small pieces of an IIR cascade (a CAN frame brings 1-3 samples) run the
-    recursion in Python - scipy's `sosfilt` spends more per call on
-    argument checks than on the arithmetic - with exactly sosfilt's
-    operations in sosfilt's order, so the two paths give the same bits.
+    An IIR cascade runs compiled too (`kernels.detector.sos_run`): scipy's
+    `sosfilt` sample loop, operation for operation, so the bits are sosfilt's,
+    without the argument checks it spends more on than on the arithmetic of
+    the 1-3 samples a CAN frame brings.
     """
-
-    PYTHON_WORK = 24  # samples x sections up to which the Python loop is the cheaper path
 
     def __init__(self, sos: np.ndarray, *, fir_taps: np.ndarray | None = None):
         self.sos = np.ascontiguousarray(np.atleast_2d(np.asarray(sos, dtype=np.float64)))
         if self.sos.ndim != 2 or self.sos.shape[1] != 6 or not len(self.sos):
             raise ValueError(f"sos must have shape (sections, 6), got {self.sos.shape}")
-        self._rows = [tuple(float(c) for c in row) for row in self.sos]
+        if not (self.sos[:, 3] == 1.0).all():
+            raise ValueError(f"sos sections must be normalised (a0 = 1), got a0 {self.sos[:, 3]}")
         self._fir = fir_taps
         if fir_taps is None:
             self._zi_unit = signal.sosfilt_zi(self.sos)
@@ -124,7 +123,7 @@ class SosFilter:
 
     @property
     def sections(self) -> int:
-        return len(self._rows)
+        return len(self.sos)
 
     def reset(self) -> None:
         """Forget the state; the next sample settles the filter again (after a gap)."""
@@ -140,20 +139,9 @@ class SosFilter:
             y = np.empty(len(x))
             fir_run(self._fir, self._zi, x, y)  # lfilter's sample loop, state in place
             return y
-        if len(x) * len(self._rows) > self.PYTHON_WORK:
-            y, self._zi = signal.sosfilt(self.sos, x, zi=self._zi)
-            return y
-        state = self._zi.tolist()
-        out = []
-        for value in x.tolist():
-            for (b0, b1, b2, _, a1, a2), z in zip(self._rows, state, strict=True):
-                y = b0 * value + z[0]
-                z[0] = b1 * value - a1 * y + z[1]
-                z[1] = b2 * value - a2 * y
-                value = y
-            out.append(value)
-        self._zi = np.array(state)
-        return np.array(out)
+        y = np.empty(len(x))
+        sos_run(self.sos, self._zi, x, y)  # sosfilt's sample loop, state in place
+        return y
 
 
 @dataclass(frozen=True, slots=True)

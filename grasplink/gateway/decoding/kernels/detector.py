@@ -28,6 +28,7 @@ __all__ = [
     "fir_run",
     "hinge_maxima",
     "scales_fast",
+    "sos_run",
     "step_scale",
     "watch_scan",
 ]
@@ -56,6 +57,22 @@ def fir_run(taps: np.ndarray, state: np.ndarray, x: np.ndarray, out: np.ndarray)
             state[n] = state[n + 1] + xn * taps[n + 1] - yn * 0.0
         state[last - 1] = xn * taps[last] - yn * 0.0
         out[k] = yn
+
+
+@jit()
+def sos_run(sos: np.ndarray, state: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """out[k] = the second-order sections `sos` (a0 = 1) applied to x[k], `state` (sections,
+    2) carried (updated in place): scipy's `sosfilt` sample loop (direct form II
+    transposed), operation for operation - the same bits, without its per-call checks
+    (a CAN frame brings 1-3 samples)."""
+    for k in range(len(x)):
+        value = x[k]
+        for s in range(sos.shape[0]):
+            y = sos[s, 0] * value + state[s, 0]
+            state[s, 0] = sos[s, 1] * value - sos[s, 4] * y + state[s, 1]
+            state[s, 1] = sos[s, 2] * value - sos[s, 5] * y
+            value = y
+        out[k] = value
 
 
 @jit()
