@@ -93,17 +93,17 @@ def _fma(typingctx, a, b, c):
 
 
 @jit()
-def _matmul_fma(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """A @ B (4 x 4) as numpy's matmul (OpenBLAS) sums it: from 0, one fused
-    multiply-add per term in order - the same bits, where plain sums differ by ulps."""
-    C = np.empty((4, 4))
+def _matmul_fma(A: np.ndarray, B: np.ndarray, C: np.ndarray, b_transposed: bool) -> None:
+    """C = A @ B (4 x 4; B.T given when b_transposed) as numpy's matmul (OpenBLAS) sums
+    it: from 0, one fused multiply-add per term in order - the same bits, where plain sums
+    differ by ulps."""
     for a in range(4):
         for b in range(4):
             acc = 0.0
             for k in range(4):
-                acc = _fma(A[a, k], B[k, b], acc)  # type: ignore[call-arg]
+                term = B[b, k] if b_transposed else B[k, b]
+                acc = _fma(A[a, k], term, acc)  # type: ignore[call-arg]
             C[a, b] = acc
-    return C
 
 
 # ------------------------------------------------------------------ row writers
@@ -343,25 +343,32 @@ def _kalman(
     contact: tuple[float, int, float],
     c: np.ndarray,
     pos: np.ndarray,
+    work: np.ndarray,
+    vectors: np.ndarray,
 ) -> tuple[bool, bool, float]:
     """Predict track r to the contact and update it with ridge k (robust: far off, the
     speed starts again from the last two contacts). Writes out[j] when the update is
-    kept; returns (kept, far off, log prior with the contact's likelihood)."""
+    kept; returns (kept, far off, log prior with the contact's likelihood). `work` (4, 4,
+    4) and `vectors` (2, 4): the caller's scratch, written over (no allocation per
+    assignment: there are a hundred or more at a contact)."""
     tc, ev_id, sigma_s = contact
     dt, k, target, decay, lag = _toward_ridge(f, i, r, skip, tc, c, pos)
     v = _maximum(f[r, F_V], c[V_MIN_MM_S])
-    F = np.eye(4)
+    F, P, FP, Pp = work[0], work[1], work[2], work[3]
+    F[:, :] = 0.0
+    for a in range(4):
+        F[a, a] = 1.0
     F[0, 1] = F[1, 2] = dt
     F[0, 2] = 0.5 * dt * dt
     F[0, 3] = -lag
     X = f[r, F_S : F_D + 1]
-    P = np.empty((4, 4))
     for a in range(4):
         P[a, :] = f[r, 4 * a : 4 * a + 4]
-    Xp = np.empty(4)
+    Xp, Xn = vectors[0], vectors[1]
     for a in range(4):  # (einsum's order: even terms, odd terms, then their sum)
         Xp[a] = (F[a, 0] * X[0] + F[a, 2] * X[2]) + (F[a, 1] * X[1] + F[a, 3] * X[3])
-    Pp = _matmul_fma(_matmul_fma(F, P), F.T)
+    _matmul_fma(F, P, FP, False)
+    _matmul_fma(FP, F, Pp, True)  # (F P) F.T
     _process_noise(Pp, v, dt, any_changing, i[r, I_MODEL] == CHANGING, c)
     vs = v * sigma_s
     var = Pp[0, 0] + (c[POS_VAR_MM2] + vs * vs) + skip * c[POS_VAR_MM2]
@@ -371,7 +378,6 @@ def _kalman(
     outlier = floor * v / (4.0 * _maximum(target - X[0], 1.0))
     like = np.log(inlier + outlier)
     far = inlier < outlier
-    Xn = np.empty(4)
     for a in range(4):
         Xn[a] = Xp[a] + Pp[a, 0] / var * resid
     Xn[3] = _minimum(c[DIP_MAX_MM], _maximum(0.0, Xn[3]))
@@ -485,12 +491,14 @@ def _assign(
         any_changing |= slipping[q] and i[r, I_MODEL] == CHANGING
     far = np.zeros(len(track), np.bool_)
     far_prior = np.empty(len(track))
+    work, vectors = np.empty((4, 4, 4)), np.empty((2, 4))
     for q in range(len(track)):
         if not slipping[q]:
             continue
         kept, far_off, log_like = _kalman(
-            f, i, track[q], skips[q], prior[q], any_changing, out_f, out_i, j, contact, c, pos
-        )
+            f, i, track[q], skips[q], prior[q], any_changing, out_f, out_i, j, contact, c, pos,
+            work, vectors,
+        )  # fmt: skip
         far[q], far_prior[q] = far_off, log_like
         j += int(kept)
     for q in range(len(track)):  # far off: the speed starts again from the last two contacts
