@@ -261,8 +261,14 @@ class NmtMaster:
         return frames
 
     def next_deadline_us(self) -> int | None:
-        deadlines = [self._next_beat_us, *map(self._lost_deadline_us, self.nodes.values())]
-        return min((d for d in deadlines if d is not None), default=None)
+        # asked after every frame: a running minimum of `_lost_deadline_us`, inlined
+        best = self._next_beat_us
+        after = self.node_heartbeat_us * LOST_AFTER_PERIODS + 1
+        for status in self.nodes.values():
+            seen = status.last_seen_us
+            if seen is not None and not status.lost and (best is None or seen + after < best):
+                best = seen + after
+        return best
 
     def _lost_deadline_us(self, status: NodeStatus) -> int | None:
         """When the node counts as lost if nothing is heard from it (None: lost already)."""
