@@ -62,3 +62,29 @@ def test_frame_of_the_wrong_length_or_id_is_refused():
         codec.decode(can_id, bytes(8))
     with pytest.raises(PdoError, match="no TPDO"):
         codec.decode(0x7FF, bytes(2))
+
+
+@pytest.mark.parametrize("kind", ["skin", "emg", "belt", "hand"])
+def test_whole_byte_mappings_decode_in_one_struct_as_canopen_decodes_them(kind):
+    """Every TPDO of the shipped profiles maps whole bytes: the codec unpacks it with one
+    struct made from the mapping, giving what canopen's per-object decoding gives."""
+    import random
+
+    codec = PdoCodec(kind, 0x20)
+    rng = random.Random(kind)
+    assert set(codec._tpdo_structs) == codec.tpdo_can_ids()
+    for can_id, pdo in codec._tpdo_by_can_id.items():
+        for _ in range(200):
+            data = bytes(rng.randrange(256) for _ in range((pdo.length + 7) // 8))
+            assert codec.decode(can_id, data) == codec._decode_by_map(pdo, data)
+
+
+def test_a_mapping_with_bit_fields_is_left_to_canopen():
+    """A mapping that is not whole bytes (a 4-bit object) gets no struct: canopen decodes it."""
+    from grasplink.profiles.pdo_codec import _byte_layout
+
+    codec = PdoCodec("hand", 0x40)
+    pdo = next(iter(codec._tpdo_by_can_id.values()))
+    assert _byte_layout(pdo) is not None
+    pdo.map[0].length = 4  # the statusword's low nibble only
+    assert _byte_layout(pdo) is None

@@ -11,6 +11,7 @@ error naming the PDO and the object, so a caller can drop and count it.
 from __future__ import annotations
 
 import logging
+import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,6 +59,11 @@ class PdoCodec:
         self._tpdo_by_can_id = {
             m.cob_id: m for m in tpdos if m.cob_id is not None and m.enabled and len(m.map)
         }
+        self._tpdo_structs = {
+            can_id: layout
+            for can_id, pdo in self._tpdo_by_can_id.items()
+            if (layout := _byte_layout(pdo)) is not None
+        }
 
     def od_entry(self, index: int, subindex: int = 0) -> ODVariable:
         """An object of the node's dictionary (its type encodes SDO values)."""
@@ -76,6 +82,15 @@ class PdoCodec:
         expected = (pdo.length + 7) // 8
         if len(data) != expected:
             raise PdoError(f"{pdo.name}: {len(data)} bytes, its mapping needs {expected}")
+        layout = self._tpdo_structs.get(can_id)
+        if layout is not None:  # (every TPDO of the shipped profiles)
+            keys, unpack = layout
+            return dict(zip(keys, unpack(data), strict=True))
+        return self._decode_by_map(pdo, data)
+
+    @staticmethod
+    def _decode_by_map(pdo: PdoMap, data: bytes) -> dict[Key, int | float]:
+        """canopen's decoding of a mapped frame: any layout (bit fields too)."""
         pdo.data = bytearray(data)
         # What `v.raw` returns, without the debug text canopen formats at every read
         # (two thirds of a decode; this runs for every TPDO on the gateway's frame path).
@@ -127,3 +142,27 @@ class PdoCodec:
         if pdo.cob_id is None:
             raise PdoError(f"{pdo.name} has no COB-ID")
         return pdo.cob_id, bytes(pdo.data[: (pdo.length + 7) // 8])
+
+
+def _byte_layout(pdo: PdoMap) -> tuple[list[Key], object] | None:
+    """A PDO mapping of whole bytes, as one struct: (keys in map order, its unpack); None
+    for any other mapping (bit fields, strings, odd sizes: canopen decodes those).
+
+    Made from the map canopen read from the EDS, at start-up: offsets, lengths and data
+    types are the mapping's, and each object unpacks with canopen's own struct for its
+    type, so the values are canopen's (`decode_raw` of `get_data`) in one call."""
+    keys: list[Key] = []
+    fields = ["<"]
+    at = 0
+    for var in pdo.map:
+        od = var.od
+        kind = od.STRUCT_TYPES.get(od.data_type)
+        if not isinstance(kind, struct.Struct) or var.offset % 8 or var.length % 8:
+            return None
+        if kind.size * 8 != var.length or len(od) != var.length or var.offset < at * 8:
+            return None
+        fields.append("x" * (var.offset // 8 - at) + kind.format.lstrip("<>=!@"))
+        at = var.offset // 8 + kind.size
+        keys.append((od.index, od.subindex))
+    fields.append("x" * ((pdo.length + 7) // 8 - at))
+    return keys, struct.Struct("".join(fields)).unpack
