@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_telemetry import thread_cpu_s, thread_sleeps  # noqa: E402  (the same clocks)
+from bench_telemetry import since, thread_cpu_s, thread_sleeps  # noqa: E402  (the same clocks)
 
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402
@@ -119,9 +119,9 @@ def run_gateway(
                 server.stop()
             if publisher is not None:
                 publisher.stop()
-    share = {name: 100 * (after[name] - before.get(name, 0.0)) / wall for name in after}
+    share = {name: 100 * cpu_s / wall for name, cpu_s in since(before, after).items()}
     share["requests_per_s"] = requests / wall
-    woken = slept.get(MODBUS_THREAD, 0) - slept0.get(MODBUS_THREAD, 0)
+    woken = since(slept0, slept).get(MODBUS_THREAD, 0)
     share["modbus_sleeps_per_s"] = woken / wall
     share["exceptions"] = exceptions
     return share

@@ -110,39 +110,52 @@ class Broker:
             self.process = None
 
 
-def thread_cpu_s() -> dict[str, float]:
-    """CPU seconds per live thread, by name (kernel per-thread clocks); a name's first word
-    ("grasplink-gateway virtual:…" is the gateway's thread)."""
-    out: dict[str, float] = {}
+ThreadKey = tuple[str, int]  # (name's first word, thread id)
+
+
+def thread_cpu_s() -> dict[ThreadKey, float]:
+    """CPU seconds per live thread (kernel per-thread clocks), by name's first word
+    ("grasplink-gateway virtual:…" is the gateway's thread) and id: compare two readings
+    with `since`."""
+    out: dict[ThreadKey, float] = {}
     for thread in threading.enumerate():
         if thread.ident is None:
             continue
-        name = thread.name.split(" ", 1)[0]
         try:
             clock = time.pthread_getcpuclockid(thread.ident)
-            out[name] = out.get(name, 0.0) + time.clock_gettime(clock)
+            out[(thread.name.split(" ", 1)[0], thread.ident)] = time.clock_gettime(clock)
         except (OSError, ProcessLookupError):
             continue
     return out
 
 
-def thread_sleeps() -> dict[str, int]:
-    """Voluntary context switches per live thread, by name's first word (Linux; else empty).
-    Each is a sleep and the wake-up after it: the event loop waiting for a timer or a
-    socket, or a wait for the GIL. A thread woken from a sleep meets cold caches, so wake-ups
-    per snapshot are a cost of their own (the paced encoder figures below)."""
-    out: dict[str, int] = {}
+def thread_sleeps() -> dict[ThreadKey, int]:
+    """Voluntary context switches per live thread, as `thread_cpu_s` keys them (Linux; else
+    empty). Each is a sleep and the wake-up after it: the event loop waiting for a timer or
+    a socket, or a wait for the GIL. A thread woken from a sleep meets cold caches, so
+    wake-ups per snapshot are a cost of their own (the paced encoder figures below)."""
+    out: dict[ThreadKey, int] = {}
     for thread in threading.enumerate():
-        if thread.native_id is None:
+        if thread.native_id is None or thread.ident is None:
             continue
-        name = thread.name.split(" ", 1)[0]
         try:
             status = Path(f"/proc/self/task/{thread.native_id}/status").read_text()
         except OSError:
             continue
         for line in status.splitlines():
             if line.startswith("voluntary_ctxt_switches:"):
-                out[name] = out.get(name, 0) + int(line.split()[1])
+                out[(thread.name.split(" ", 1)[0], thread.ident)] = int(line.split()[1])
+    return out
+
+
+def since(before: dict[ThreadKey, Any], after: dict[ThreadKey, Any]) -> dict[str, Any]:
+    """What each thread did between two readings, summed by name: threads alive at both and
+    those started since (all of theirs is since). A thread that ended meanwhile is left
+    out: its clock went with it - a runner of an earlier run that took long to stop would
+    otherwise be subtracted from this run's thread of the same name."""
+    out: dict[str, Any] = {}
+    for key, value in after.items():
+        out[key[0]] = out.get(key[0], 0) + value - before.get(key, 0)
     return out
 
 
@@ -310,11 +323,11 @@ def run_gateway(
         time.sleep(0.3)
         sub.send_signal(signal.SIGTERM)
         sub.wait(5)
-    cpu = {name: after[name] - before.get(name, 0.0) for name in after}
+    cpu = since(before, after)
     return {
         "elapsed_s": elapsed,
         "cpu_s": cpu,
-        "sleeps": {name: slept[name] - slept0.get(name, 0) for name in slept},
+        "sleeps": since(slept0, slept),
         "telemetry": stats,
         "percepts_per_s": percepts / elapsed,
         "phases": phases,
