@@ -44,12 +44,25 @@ CHILD = textwrap.dedent(
             dec.feed(t[i : i + 3], x[i : i + 3])
     rec = railed_slip(60.0, True)
     TrackerDecoder(rec.layout_mm, rec.fs_hz).feed(rec.t_s, rec.force_n)
+    # a gap in the stream: the decoder resets to its state before the first sample (a deep
+    # copy), then takes the slip after the gap
+    rec = recordings[0]
+    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz)
+    t, x = np.asarray(rec.t_s), np.asarray(rec.force_n)
+    for i in range(0, len(t), 3):
+        dec.feed(t[i : i + 3], x[i : i + 3])
+    for i in range(0, len(t), 3):
+        dec.feed(t[i : i + 3] + t[-1] + 1.0, x[i : i + 3])
+    assert dec.stats.gaps == 1
     print(json.dumps({"warm": warm, "after": counts()}))
     """
 )
 
 
 def test_after_warm_up_decoding_any_slip_compiles_nothing():
+    """Nor after a gap, where the decoder's reset restores a copy of its first state: a
+    copy that turned a read-only table writable made a kernel signature of its own, which
+    the gateway's loop compiled live at the first contact after the gap (seconds)."""
     done = subprocess.run(
         [sys.executable, "-c", CHILD], capture_output=True, text=True, check=True, timeout=600
     )

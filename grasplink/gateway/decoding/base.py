@@ -30,10 +30,12 @@ from __future__ import annotations
 import bisect
 import copy
 import math
+import types
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -194,6 +196,36 @@ class InputStats:
         return self.rejected_nonfinite + self.rejected_range + self.rejected_time
 
 
+_NOT_STATE = (str, bytes, int, float, bool, type(None), type, types.ModuleType)
+
+
+def _read_only_arrays(root: object) -> list[np.ndarray]:
+    """Every read-only numpy array reachable from `root` through containers (dict, list,
+    tuple, set, deque) and objects' attributes (`__dict__`, `__slots__`)."""
+    found: list[np.ndarray] = []
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen or isinstance(obj, _NOT_STATE):
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, np.ndarray):
+            if not obj.flags.writeable:
+                found.append(obj)
+        elif isinstance(obj, dict):
+            stack.extend(obj.values())
+        elif isinstance(obj, (list, tuple, set, frozenset, deque)):
+            stack.extend(obj)
+        else:
+            stack.extend(getattr(obj, "__dict__", {}).values())
+            for cls in type(obj).__mro__:
+                for slot in getattr(cls, "__slots__", ()):
+                    if hasattr(obj, slot):
+                        stack.append(getattr(obj, slot))
+    return found
+
+
 # attributes of the base class itself, which a reset keeps
 _BASE_STATE = frozenset({"stats", "_last_t", "_next_update", "_pristine"})
 
@@ -318,9 +350,15 @@ class Decoder:
         vars(self).update(state)
 
     def _state_copy(self, state: dict) -> dict:
-        """A deep copy of the subclass's attributes; references to the decoder stay to it."""
+        """A deep copy of the subclass's attributes; references to the decoder stay to it,
+        and read-only arrays (tables built once) are shared, not copied: a copy would be
+        writable, and a compiled kernel's signature tells the two apart - the first contact
+        after a gap would compile a kernel in the live loop (seconds)."""
         own = {k: v for k, v in state.items() if k not in _BASE_STATE}
-        return copy.deepcopy(own, {id(self): self})
+        memo: dict[int, Any] = {id(self): self}
+        for array in _read_only_arrays(own):
+            memo[id(array)] = array
+        return copy.deepcopy(own, memo)
 
     def _guard(self, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         stats = self.stats
