@@ -88,3 +88,21 @@ def test_a_mapping_with_bit_fields_is_left_to_canopen():
     assert _byte_layout(pdo) is not None
     pdo.map[0].length = 4  # the statusword's low nibble only
     assert _byte_layout(pdo) is None
+
+
+def test_an_odd_sized_integer_is_left_to_canopen():
+    """INTEGER24 unpacks through canopen's own subclass of struct (3 bytes, sign-extended):
+    no one-struct layout is made of it."""
+    from types import SimpleNamespace
+
+    from canopen import objectdictionary as od
+
+    from grasplink.profiles.pdo_codec import _byte_layout
+
+    entry = od.ODVariable("odd", 0x2000, 0)
+    entry.data_type = od.INTEGER24
+    mapping = SimpleNamespace(map=[SimpleNamespace(od=entry, offset=0, length=24)], length=24)
+    assert _byte_layout(mapping) is None  # type: ignore[arg-type]
+    entry.data_type = od.INTEGER32
+    mapping.map[0].length = mapping.length = 32
+    assert _byte_layout(mapping) is not None  # type: ignore[arg-type]

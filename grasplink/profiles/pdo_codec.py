@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import logging
 import struct
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import canopen
 from canopen.objectdictionary import ODVariable
@@ -94,7 +95,10 @@ class PdoCodec:
         pdo.data = bytearray(data)
         # What `v.raw` returns, without the debug text canopen formats at every read
         # (two thirds of a decode; this runs for every TPDO on the gateway's frame path).
-        return {(v.od.index, v.od.subindex): v.od.decode_raw(v.get_data()) for v in pdo.map}
+        return {
+            (v.od.index, v.od.subindex): cast(int | float, v.od.decode_raw(v.get_data()))
+            for v in pdo.map
+        }
 
     # -- transmit (RPDOs the node receives) -----------------------------------------------
     def rpdo(self, number: int) -> PdoMap:
@@ -144,7 +148,7 @@ class PdoCodec:
         return pdo.cob_id, bytes(pdo.data[: (pdo.length + 7) // 8])
 
 
-def _byte_layout(pdo: PdoMap) -> tuple[list[Key], object] | None:
+def _byte_layout(pdo: PdoMap) -> tuple[list[Key], Callable[[bytes], tuple[Any, ...]]] | None:
     """A PDO mapping of whole bytes, as one struct: (keys in map order, its unpack); None
     for any other mapping (bit fields, strings, odd sizes: canopen decodes those).
 
@@ -155,14 +159,18 @@ def _byte_layout(pdo: PdoMap) -> tuple[list[Key], object] | None:
     fields = ["<"]
     at = 0
     for var in pdo.map:
-        od = var.od
-        kind = od.STRUCT_TYPES.get(od.data_type)
-        if not isinstance(kind, struct.Struct) or var.offset % 8 or var.length % 8:
+        od, length = var.od, var.length
+        offset: int | None = var.offset  # (set when the map is read; canopen starts it None)
+        kind = od.STRUCT_TYPES.get(od.data_type) if od.data_type is not None else None
+        # (a plain struct: canopen's 24-, 40-, 48-, 56-bit types subclass it to unpack odd sizes)
+        if kind is None or type(kind) is not struct.Struct:
             return None
-        if kind.size * 8 != var.length or len(od) != var.length or var.offset < at * 8:
+        if offset is None or offset % 8 or length % 8:
             return None
-        fields.append("x" * (var.offset // 8 - at) + kind.format.lstrip("<>=!@"))
-        at = var.offset // 8 + kind.size
+        if kind.size * 8 != length or len(od) != length or offset < at * 8:
+            return None
+        fields.append("x" * (offset // 8 - at) + kind.format.lstrip("<>=!@"))
+        at = offset // 8 + kind.size
         keys.append((od.index, od.subindex))
     fields.append("x" * ((pdo.length + 7) // 8 - at))
     return keys, struct.Struct("".join(fields)).unpack

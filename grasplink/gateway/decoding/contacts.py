@@ -215,7 +215,7 @@ class _BankRows(_Series):
         self.ints, self.index, self.col = ints, index, col
         super().__init__(capacity, rows=rows)
 
-    @property  # type: ignore[override]
+    @property
     def size(self) -> int:
         return int(self.ints[self.index, self.col])
 
