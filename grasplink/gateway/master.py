@@ -261,13 +261,12 @@ class NmtMaster:
         return frames
 
     def next_deadline_us(self) -> int | None:
-        # asked after every frame: a running minimum of `_lost_deadline_us`, inlined
+        # asked after every frame: a running minimum (no list, map or generator)
         best = self._next_beat_us
-        after = self.node_heartbeat_us * LOST_AFTER_PERIODS + 1
         for status in self.nodes.values():
-            seen = status.last_seen_us
-            if seen is not None and not status.lost and (best is None or seen + after < best):
-                best = seen + after
+            deadline = self._lost_deadline_us(status)
+            if deadline is not None and (best is None or deadline < best):
+                best = deadline
         return best
 
     def _lost_deadline_us(self, status: NodeStatus) -> int | None:

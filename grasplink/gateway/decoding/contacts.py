@@ -69,6 +69,14 @@ from grasplink.gateway.decoding.filters import (
 )
 from grasplink.gateway.decoding.kernels.detector import (
     BLOCK_DONE,
+    CH_ABS_N,
+    CH_HELD,
+    CH_NEXT_N,
+    CH_NEXT_TEST,
+    CH_NOISE_BLOCK,
+    CH_SIZE,
+    CH_W,
+    CH_Z_START,
     CHANNEL_COLUMNS,
     NOT_TAKEN,
     S_NEXT,
@@ -93,10 +101,6 @@ NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ide
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
 STEP_IDS = 1_000_000_000  # ids of the small steps found by the step probe (their own series)
-# the channels' int state in their bank (`kernels.detector.CHANNEL_COLUMNS`)
-CH_W, CH_HELD, CH_NEXT_N, CH_ABS_N, CH_NEXT_TEST, CH_Z_START, CH_SIZE, CH_NOISE_BLOCK = range(
-    len(CHANNEL_COLUMNS)
-)
 
 
 class ContactEvent(NamedTuple):

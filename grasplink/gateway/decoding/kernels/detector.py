@@ -198,7 +198,9 @@ CHANNEL_COLUMNS = (
     "size",
     "noise_block",
 )
-W, HELD, NEXT_N, ABS_N, NEXT_TEST, Z_START, SIZE, NOISE_BLOCK = range(len(CHANNEL_COLUMNS))
+CH_W, CH_HELD, CH_NEXT_N, CH_ABS_N, CH_NEXT_TEST, CH_Z_START, CH_SIZE, CH_NOISE_BLOCK = range(
+    len(CHANNEL_COLUMNS)
+)
 # what `channels_fast` says of each channel
 TAKEN, NOT_TAKEN, BLOCK_DONE = 0, 1, 2
 
@@ -232,22 +234,22 @@ def channels_fast(
     candidate): usually none does."""
     attention = False
     for c in range(ints.shape[0]):
-        w, held, start = ints[c, W], ints[c, HELD], ints[c, NEXT_N]
+        w, held, start = ints[c, CH_W], ints[c, CH_HELD], ints[c, CH_NEXT_N]
         b = start // block
         count = held + len(x) - w
         m = len(x)
         if held == w and (start + count - 1) // block != b:  # to the block's end only
             m = (b + 1) * block - start
             count = m
-        size, z_start = ints[c, SIZE], ints[c, Z_START]
+        size, z_start = ints[c, CH_SIZE], ints[c, CH_Z_START]
         data = rows[c]
         counts[c] = 0
         taken[c] = 0
-        lo = max(ints[c, NEXT_TEST], z_start + w)
+        lo = max(ints[c, CH_NEXT_TEST], z_start + w)
         hi = z_start + size + count - 1 - w
         if (
             count <= 0
-            or ints[c, NOISE_BLOCK] != b
+            or ints[c, CH_NOISE_BLOCK] != b
             or (start + count - 1) // block != b
             or size + count > data.shape[1]
             or hi - lo + 1 > found.shape[1]
@@ -256,7 +258,7 @@ def channels_fast(
             attention = True
             continue
         if hi >= lo:
-            ints[c, NEXT_TEST] = hi + 1
+            ints[c, CH_NEXT_TEST] = hi + 1
         told = channel_fast(
             x[:m],
             taps[c, : w + 1],
@@ -268,16 +270,16 @@ def channels_fast(
             start + w,
             noise[c],
             block_abs[c],
-            ints[c, ABS_N],
+            ints[c, CH_ABS_N],
             lo - z_start,
             threshold,
             needed[c],
             found[c],
         )
-        ints[c, HELD] = w
-        ints[c, ABS_N] += count
-        ints[c, NEXT_N] = start + count
-        ints[c, SIZE] = size + count
+        ints[c, CH_HELD] = w
+        ints[c, CH_ABS_N] += count
+        ints[c, CH_NEXT_N] = start + count
+        ints[c, CH_SIZE] = size + count
         counts[c] = told
         taken[c] = m
         status[c] = BLOCK_DONE if (start + count) % block == 0 else TAKEN
