@@ -328,6 +328,14 @@ def test_a_broker_restarted_mid_run_loses_nothing_within_the_buffer_bound(
             ):
                 time.sleep(0.05)
             time.sleep(0.5)
+
+        # the historian's session gets the replay when it is back too: wait for the last
+        # value made (a loaded machine takes its time), not for a fixed while; what was
+        # lost is found missing below all the same
+        recorder.wait_for(
+            lambda m: "/values" in m.topic and json.loads(m.payload)["grip_force_n"] == made[-1],
+            timeout_s=10,
+        )
         time.sleep(0.3)
     finally:
         recorder.close()
