@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import copy
 import logging
-import queue
 import selectors
 import threading
 import time
@@ -118,7 +117,12 @@ class NodeRunner:
         self._cascade_limit = cascade_limit
         self._max_batch = max_batch
         self._name = name
-        self._submitted: queue.Queue[tuple[Frame, bool]] = queue.Queue(submit_queue_size)
+        # Submitted frames: appended under `_submit_lock` (any thread, bounded), taken by
+        # the runner's thread alone without a lock (deque appends and pops are atomic), so
+        # a step with nothing submitted costs a truth test, not a queue's mutex and Empty.
+        self._submitted: deque[tuple[Frame, bool]] = deque()
+        self._submit_size = submit_queue_size
+        self._submit_lock = threading.Lock()
         self._stats = RunnerStats()
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -172,13 +176,13 @@ class NodeRunner:
         """
         if not isinstance(frame, Frame):
             raise TypeError(f"submit() takes a Frame, not {type(frame).__name__}")
-        try:
-            self._submitted.put_nowait((frame, to_bus))
-        except queue.Full:
-            with self._lock:
-                self._stats.dropped += 1
-            return False
-        return True
+        with self._submit_lock:
+            if len(self._submitted) < self._submit_size:
+                self._submitted.append((frame, to_bus))
+                return True
+        with self._lock:
+            self._stats.dropped += 1
+        return False
 
     @property
     def stats(self) -> RunnerStats:
@@ -245,7 +249,7 @@ class NodeRunner:
                 return
             now = self._clock()
         wait_s = 0.0
-        if block and self._submitted.empty() and not self._backlog:
+        if block and not self._submitted and not self._backlog:
             wait_s = self._max_wait_s
             if self._due_us is not None:
                 wait_s = min(wait_s, max(0, self._due_us - now) / 1e6)
@@ -269,14 +273,13 @@ class NodeRunner:
             msg = self._recv(0.0)
         now = self._clock()
         work: list[tuple[Frame, SansIoDevice | None, bool]] = []
-        while True:
-            try:
-                frame, to_bus = self._submitted.get_nowait()
-            except queue.Empty:
-                break
-            with self._lock:
-                self._stats.injected += 1
+        submitted = self._submitted
+        while submitted:  # this thread alone takes: not empty, popleft cannot fail
+            frame, to_bus = submitted.popleft()
             work.append((frame, None, to_bus))
+        if work:
+            with self._lock:
+                self._stats.injected += len(work)
         if not block and not delivered and not work and now < self._timers_due_us():
             return  # polled by a MultiRunner with nothing new: the deadlines still hold
         self._dispatch(work, now)
@@ -306,7 +309,7 @@ class NodeRunner:
         """When this runner needs its next step without a frame (for a `MultiRunner`)."""
         if self.failure is not None:
             return None
-        if self._backlog or not self._submitted.empty():
+        if self._backlog or self._submitted:
             return 0
         outage = self._outage
         if outage is not None:
@@ -322,7 +325,15 @@ class NodeRunner:
                 return
             self._stats.frames_rx += 1
             self._stats.rx_by_cob_id[frame.can_id] += 1
-        self._dispatch([(frame, None, False)], self._clock())
+        # `_dispatch([(frame, None, False)])` without its queue: most frames get no reply
+        now = self._clock()
+        replies: list[tuple[Frame, SansIoDevice | None, bool]] = []
+        for device in self.devices:
+            out = self._call(device, "receive", frame, now)
+            if out:
+                replies += [(f, device, True) for f in out]
+        if replies:
+            self._dispatch(replies, now)
 
     def _earliest_deadline(self) -> int | None:
         deadlines = [d for d in map(self._effective_deadline, self.devices) if d is not None]
@@ -483,7 +494,9 @@ class NodeRunner:
     def _call(self, device: SansIoDevice, method: str, *args: object) -> list[Frame]:
         try:
             out = getattr(device, method)(*args)
-            frames = list(out or ())
+            if not out:
+                return []
+            frames = list(out)
             bad = [f for f in frames if not isinstance(f, Frame)]
             if bad:
                 raise TypeError(f"{method}() returned {type(bad[0]).__name__}, not Frame")
