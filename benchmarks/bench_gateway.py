@@ -1010,14 +1010,69 @@ def main(argv: list[str] | None = None) -> int:
 RUNNER_US_OF_RECORD = (39.0, 44.0)
 
 
+# python-can's own receive loop on its virtual bus (a thread woken per frame, no grasplink
+# code): the yardstick from 987ad0c on, when the runner itself got cheaper. Its value in the
+# run of record is derived from the runner's there (RUNNER_US_OF_RECORD) by the ratio of the
+# two measured minutes apart on 2026-11-27 with the runner of 72c0857, which cost what
+# e457141's did: 0.52-0.58 over 4 pairs, median 0.535.
+BUS_US_OF_RECORD = (0.535 * RUNNER_US_OF_RECORD[0], 0.535 * RUNNER_US_OF_RECORD[1])
+YARDSTICK_RATE_HZ = 440  # a set's frames per second at the gateway
+
+
+def bus_yardstick_us(seconds: float = 5.0) -> float:
+    """CPU per frame of a thread doing nothing but python-can's `recv` on the virtual bus,
+    fed at a set's frame rate by another thread: how fast this machine wakes and receives."""
+    channel = f"bench-yardstick-{os.getpid()}-{time.monotonic_ns()}"
+    sender, receiver = (can.Bus(interface="virtual", channel=channel) for _ in range(2))
+    stop = threading.Event()
+    got: dict[str, float] = {}
+
+    def receive() -> None:
+        frames, cpu0 = 0, time.thread_time()
+        while not stop.is_set():
+            if receiver.recv(0.02) is not None:
+                frames += 1
+        got["cpu_s"], got["frames"] = time.thread_time() - cpu0, frames
+
+    thread = threading.Thread(target=receive, name="bench-yardstick", daemon=True)
+    thread.start()
+    msg = can.Message(arbitration_id=SKIN_TPDO1, data=bytes(8), is_extended_id=False)
+    try:
+        end, period = time.monotonic() + seconds, 1.0 / YARDSTICK_RATE_HZ
+        while time.monotonic() < end:
+            sender.send(msg)
+            time.sleep(period)
+    finally:
+        stop.set()
+        thread.join(1.0)
+        sender.shutdown()
+        receiver.shutdown()
+    return got["cpu_s"] / max(1, got["frames"]) * 1e6
+
+
 def runner_us_per_frame(loops: list[dict]) -> float:
     """The bus runner's own CPU per received frame, mean over the real-time runs."""
     return statistics.mean(run.get("runner_us_per_frame", float("nan")) for run in loops)
 
 
-def machine_speed(loops: list[dict]) -> str:
-    """How fast the shared machine ran, against the run of record, by the runner's CPU."""
+def machine_speed(loops: list[dict], yardstick_us: list[float] | None = None) -> str:
+    """How fast the shared machine ran, against the run of record: by python-can's own
+    receive loop (`bus_yardstick_us`) where measured, else by the runner's CPU per frame."""
     runner_us = runner_us_per_frame(loops)
+    if yardstick_us:
+        bus_us = statistics.mean(yardstick_us)
+        low, high = BUS_US_OF_RECORD
+        return (
+            "Machine speed: python-can's own receive loop on the virtual bus (a thread woken "
+            f"for each of {YARDSTICK_RATE_HZ} frames a second, no grasplink code) took "
+            f"{bus_us:.0f} µs of CPU per frame in this run (at its start and end: "
+            f"{', '.join(f'{x:.0f}' for x in yardstick_us)}) against about {low:.0f}–{high:.0f} "
+            f"µs in the run of e457141 (derived from that run's runner figure): this machine ran "
+            f"about {bus_us / ((low + high) / 2):.1f} times as slow as then. The runner's own "
+            f"CPU per frame was {runner_us:.0f} µs (e457141: {RUNNER_US_OF_RECORD[0]:.0f}–"
+            f"{RUNNER_US_OF_RECORD[1]:.0f}; cheaper code since 987ad0c). The targets are "
+            "absolute; compare rows within a run, not across runs."
+        )
     low, high = RUNNER_US_OF_RECORD
     if not math.isfinite(runner_us):
         return "Machine speed: unknown (no real-time run)."
@@ -1060,6 +1115,8 @@ def run_all(quick: bool, out: Path, save: Path | None = None) -> int:
     load0 = os.getloadavg()
     # Real time first, alone: nothing of this benchmark competes with it for the cores.
     loop_s, repeats = (10.0, 1) if quick else (60.0, 3)
+    say("0. machine speed: python-can's own receive loop")
+    yardstick = [bus_yardstick_us(3.0 if quick else 10.0)]
     say(f"1. loop latency: {repeats} x {loop_s:.0f} s in real time")
     loops = [realtime_loop(loop_s) for _ in range(repeats)]
     say("1. the same TPDOs in virtual time, back to back and paced as live")
@@ -1070,6 +1127,7 @@ def run_all(quick: bool, out: Path, save: Path | None = None) -> int:
     say("3. capacity in real time: one thread for every gateway (MultiRunner)")
     capacity_multi = capacity_steps(5.0 if quick else 20.0, steps, multi=True)
     together = realtime_capacity(2 if quick else 8, 0.0, together=True)
+    yardstick.append(bus_yardstick_us(3.0 if quick else 10.0))
     # Virtual time: CPU is counted per thread, so the runs may share the cores.
     minutes = 0.5 if quick else 10.0
     sample_s = 2.0 if quick else 5.0
@@ -1093,6 +1151,7 @@ def run_all(quick: bool, out: Path, save: Path | None = None) -> int:
         "capacity": capacity,
         "capacity_multi": capacity_multi,
         "together": together,
+        "yardstick_us": yardstick,
         "memory": memory,
         "wall_s": time.monotonic() - started,
         "code": code_version(),
@@ -1676,7 +1735,7 @@ def write_doc(figures: dict, path: Path) -> None:
         f"Python {sys.version.split()[0]}, python-can {can.__version__}; the run took "
         f"{figures['wall_s'] / 60:.0f} min, measuring the code at "
         f"{figures.get('code', 'an unknown commit')}.",
-        machine_speed(figures["loops"]),
+        machine_speed(figures["loops"], figures.get("yardstick_us")),
         "",
         "The gateway runs as shipped (`Gateway` with the default configuration: all four",
         "nodes, alpha0.1 skin, `tracker` decoder, force-and-slip feedback, reflex from",
