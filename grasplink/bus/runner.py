@@ -327,11 +327,7 @@ class NodeRunner:
             self._stats.rx_by_cob_id[frame.can_id] += 1
         # `_dispatch([(frame, None, False)])` without its queue: most frames get no reply
         now = self._clock()
-        replies: list[tuple[Frame, SansIoDevice | None, bool]] = []
-        for device in self.devices:
-            out = self._call(device, "receive", frame, now)
-            if out:
-                replies += [(f, device, True) for f in out]
+        replies = self._replies(frame, None, now)
         if replies:
             self._dispatch(replies, now)
 
@@ -461,11 +457,20 @@ class NodeRunner:
             frame, source, to_bus = pending.popleft()
             if to_bus:
                 self._send(frame)
-            for device in self.devices:
-                if device is not source:
-                    pending.extend(
-                        (f, device, True) for f in self._call(device, "receive", frame, now)
-                    )
+            pending.extend(self._replies(frame, source, now))
+
+    def _replies(
+        self, frame: Frame, source: SansIoDevice | None, now: int
+    ) -> list[tuple[Frame, SansIoDevice | None, bool]]:
+        """`frame` delivered to every device but its source; their replies, in device order,
+        each to go on the bus and to the others."""
+        replies: list[tuple[Frame, SansIoDevice | None, bool]] = []
+        for device in self.devices:
+            if device is not source:
+                out = self._call(device, "receive", frame, now)
+                if out:
+                    replies += [(f, device, True) for f in out]
+        return replies
 
     def _send(self, frame: Frame) -> None:
         if self._outage is not None or self.failure is not None:
