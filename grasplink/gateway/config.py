@@ -20,6 +20,7 @@ from typing import Any, TypeVar
 
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError
+from grasplink.gateway.decoding.registry import DEFAULT_DECODER, check_live_decoder
 from grasplink.gateway.feedback import FeedbackConfig, FeedbackMode
 from grasplink.gateway.levels import (
     DEFAULT_FORCE_ENTRIES,
@@ -293,8 +294,18 @@ def _skin(p: Params, kind: str) -> SkinConfig:
         layout_mm=tuple(layout_mm),
         sample_rate_hz=_limits(p, "sample_rate_hz", kind, obj.SKIN_SAMPLE_RATE_HZ, default=400),
         samples_per_pdo=_limits(p, "samples_per_pdo", kind, obj.SKIN_SAMPLES_PER_PDO, default=3),
-        decoder=p.string("decoder", "tracker"),
+        decoder=_decoder(p),
     )
+
+
+def _decoder(p: Params) -> str:
+    """The skin decoder's name, checked now: a typo must name the file and key, not fail
+    at start-up with neither."""
+    name = p.string("decoder", DEFAULT_DECODER)
+    try:
+        return check_live_decoder(name)
+    except ConfigError as exc:
+        raise p.error("decoder", str(exc)) from None
 
 
 def _emg(p: Params, kind: str) -> EmgConfig:

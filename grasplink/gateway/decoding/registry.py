@@ -26,6 +26,30 @@ DECODERS: dict[str, str] = {
 #: The decoder `grasplink decode` uses unless told otherwise (set from the benchmark).
 DEFAULT_DECODER = "tracker"
 
+#: Decoders that match against reference slips (their class sets `needs_references`), named
+#: here so a configuration is checked without importing every decoder; a test keeps the two
+#: in step. A gateway decodes live and has no references to give them.
+NEEDS_REFERENCES = frozenset({"mmse", "dtw"})
+
+
+def live_decoders() -> list[str]:
+    """The decoders that need only the layout and the sample rate: those a gateway runs."""
+    return [name for name in DECODERS if name not in NEEDS_REFERENCES]
+
+
+def check_live_decoder(name: str) -> str:
+    """`name` if a gateway can run it, else ConfigError saying why and listing those it can."""
+    valid = ", ".join(live_decoders())
+    if name not in DECODERS:
+        raise ConfigError(f"unknown decoder {name!r}; valid decoders: {valid}")
+    if name in NEEDS_REFERENCES:
+        raise ConfigError(
+            f"decoder {name!r} matches against reference slips, which a live gateway does not "
+            f"have (grasplink decode and the decoding benchmark simulate them); valid decoders "
+            f"here: {valid}"
+        )
+    return name
+
 
 def decoder_class(name: str) -> type[Decoder]:
     """The class registered under `name` (imported now); ConfigError if unknown or missing."""
