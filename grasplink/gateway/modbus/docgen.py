@@ -7,6 +7,7 @@ output, so the document cannot drift from what the server serves.
 from __future__ import annotations
 
 from grasplink.gateway.config import KINDS
+from grasplink.gateway.modbus.functions import FUNCTIONS, MAX_READ_WRITE_WRITE, MAX_WRITE
 from grasplink.gateway.modbus.registers import (
     COMMAND_TIMEOUT_S,
     MAP_VERSION,
@@ -92,18 +93,19 @@ def _connection(rmap: RegisterMap) -> list[str]:
         "use, a missing serial device or a bad URL stops `grasplink gateway` at start "
         "with a one-line error.",
         "",
-        "Function codes: 03 read holding registers, 04 read input registers, 06 write "
-        "single register, 16 write multiple registers, 23 read/write multiple registers. "
-        "Coil and discrete-input functions (01, 02, 05, 15) answer exception 01.",
-        "",
+        *_functions(),
         "| exception | when |",
         "|---|---|",
-        f"| {ExceptionCode.ILLEGAL_FUNCTION:02X} ILLEGAL FUNCTION | coils and discrete "
-        "inputs: there are none |",
+        f"| {ExceptionCode.ILLEGAL_FUNCTION:02X} ILLEGAL FUNCTION | a function code not in "
+        "the table above (coils and discrete inputs: there are none; serial-line "
+        "diagnostics; 80..FF) |",
         f"| {ExceptionCode.ILLEGAL_ADDRESS:02X} ILLEGAL DATA ADDRESS | a read beyond the "
         "table; a write to holding registers that are not exactly one command (part of "
         "a pair, several commands, beyond the table). Nothing is applied. |",
-        f"| {ExceptionCode.ILLEGAL_VALUE:02X} ILLEGAL DATA VALUE | a written value outside "
+        f"| {ExceptionCode.ILLEGAL_VALUE:02X} ILLEGAL DATA VALUE | a quantity outside the "
+        f"function's range (a read of 0 or more than {MAX_READ} registers, a write of more "
+        f"than {MAX_WRITE}), a byte count or request length that does not match it; a "
+        "written value outside "
         "its range or codes, e_min not below e_max, or a command the gateway refuses "
         "(no such node, calibration it cannot use). Nothing is applied. |",
         f"| {ExceptionCode.DEVICE_FAILURE:02X} SERVER DEVICE FAILURE | the gateway did not "
@@ -121,6 +123,35 @@ def _connection(rmap: RegisterMap) -> list[str]:
         "those after it; each unit has this whole map, its gateway's values and commands.",
         "",
         f"A read may ask for up to {MAX_READ} registers.",
+        "",
+    ]
+
+
+def _functions() -> list[str]:
+    """The function codes served (functions.FUNCTIONS) and what happens to the rest."""
+    rows = [f"| {f.code:02X} ({f.code}) | {f.name} | {f.note} |" for f in FUNCTIONS]
+    return [
+        "Function codes (hexadecimal, decimal in brackets), as the Modbus Application "
+        "Protocol Specification V1.1b3 defines them:",
+        "",
+        "| code | function | |",
+        "|---|---|---|",
+        *rows,
+        "",
+        "Every other function code is exception 01: coils and discrete inputs (01, 02, 05, "
+        "0F: the map has none), the serial-line diagnostics (07, 08, 0B, 0C, 11 Report "
+        "Server ID: the specification defines them for serial lines only, and this server "
+        "keeps none of the serial-line counters they report; 2B/0E identifies it instead), "
+        "file records (14, 15), mask write (16), the FIFO queue (18), 2B with another MEI "
+        "type. Codes 80..FF are exception-response codes, not requests (the specification "
+        "reserves 128..255 for them): a request carrying one is answered exception 01 with "
+        "its code unchanged (e.g. `83 01`), so the client learns it was refused instead of "
+        "waiting for a time-out. A request is checked in the specification's order: "
+        f"function code (01), then quantity and length (03: reads 1..{MAX_READ}, function "
+        f"16 1..{MAX_WRITE}, function 23's write 1..{MAX_READ_WRITE_WRITE} registers), then "
+        "address (02), then execution (04, 06). On a serial line a function code whose "
+        "frame length is unknown (no function defines it) cannot be delimited and gets no "
+        "answer, like a garbled frame.",
         "",
     ]
 

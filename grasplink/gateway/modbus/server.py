@@ -21,6 +21,11 @@ second) are answered from the connection's data callback instead (`answer_now`):
 same registers and exception codes, without a task, a loop turn and the
 datastore's copy per request.
 
+Which requests are answered at all is `functions.check_request`'s: every request PDU goes
+through it before pymodbus decodes it (`_RequestDecoder`), and a function this server does
+not implement, or a quantity or length the specification does not allow, is answered
+with its exception code (01, 03) at once (`answer_now`), whatever pymodbus would do with it.
+
 A process mastering several buses (`grasplink gateway --bus A --bus B`) has a gateway
 per bus; one server serves them all, one unit id each (`units`): over TCP 1, 2, ...
 in bus order, on a serial line the URL's unit and those after it. A request to a unit
@@ -46,8 +51,10 @@ from typing import Any
 
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
+from pymodbus.datastore import ModbusServerContext
 from pymodbus.exceptions import ModbusIOException
-from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
+from pymodbus.pdu.device import ModbusDeviceIdentification
 from pymodbus.pdu.register_message import (
     ReadHoldingRegistersResponse,
     ReadInputRegistersResponse,
@@ -59,6 +66,7 @@ from pymodbus.transaction import TransactionManager
 
 from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
+from grasplink.gateway.modbus.functions import IDENTIFICATION, check_request
 from grasplink.gateway.modbus.registers import (
     COMMAND_TIMEOUT_S,
     RegisterError,
@@ -77,7 +85,6 @@ logging.getLogger("pymodbus").addHandler(logging.NullHandler())
 START_TIMEOUT_S = 5.0
 READ_HOLDING, READ_INPUTS = 3, 4
 REGISTER_FUNCTIONS = frozenset({3, 4, 6, 16, 23})
-BIT_FUNCTIONS = frozenset({1, 2, 5, 15})  # coils and discrete inputs: this map has none
 
 
 @dataclass
@@ -237,7 +244,7 @@ class ModbusServer:
             server = _TcpServer(
                 device,
                 address=(url.host, url.port),
-                trace_pdu=self._trace,  # type: ignore[arg-type]
+                trace_pdu=self._trace,
             )
         else:
             server = _SerialServer(
@@ -248,7 +255,7 @@ class ModbusServer:
                 parity=url.parity,
                 stopbits=url.stopbits,
                 bytesize=8,
-                trace_pdu=self._trace,  # type: ignore[arg-type]
+                trace_pdu=self._trace,
             )
         server.answer_now = self.answer_now
         return server
@@ -335,11 +342,15 @@ class ModbusServer:
         """The answer made at once, in the connection's data callback: 0x0B for a unit id no
         gateway is served at (pymodbus would answer a write 0x04, failing to find the
         device), or a register read (03, 04): the registers, or the exception `_action`
-        would give (0x02 outside the table, 0x03 a bad count). None: pymodbus handles it."""
+        would give (0x02 outside the table), or the exception a refused request gets
+        (`functions.check_request`: 0x01, 0x03). None: pymodbus handles it."""
         unit = self._unit(pdu.dev_id)
         response: ModbusPDU
         if unit is None:
             response = ExceptionResponse(pdu.function_code, ExcCodes.GATEWAY_NO_RESPONSE)
+        elif isinstance(pdu, _Refused):
+            logger.debug("modbus: %s", pdu.error)
+            response = pdu.response()
         elif pdu.function_code not in (READ_HOLDING, READ_INPUTS):
             return None
         else:
@@ -412,6 +423,34 @@ class _HoldingResponse(ReadHoldingRegistersResponse):
         return _pack_registers(list(self.registers))
 
 
+class _Refused(ModbusPDU):
+    """A request `functions.check_request` refuses: answered with its exception code."""
+
+    def __init__(self, function_code: int, error: RegisterError) -> None:
+        super().__init__()
+        self.function_code = function_code
+        self.error = error
+
+    def response(self) -> ExceptionResponse:
+        return ExceptionResponse(self.function_code, ExcCodes(self.error.code))
+
+    async def datastore_update(self, context: ModbusServerContext, device_id: int) -> ModbusPDU:
+        return self.response()  # not answered at once (a path answer_now does not take)
+
+
+class _RequestDecoder(DecodePDU):
+    """pymodbus's request decoder behind `functions.check_request`: a request this server
+    does not answer as it is becomes a `_Refused` carrying its exception code. pymodbus
+    alone would answer 07, 08, 11 (naming itself "Pymodbus"), 14, 15, 18 and others, refuse
+    an exception-response code with 04, and a read of 0 or 126 registers with 80 01."""
+
+    def decode(self, frame: bytes) -> ModbusPDU | None:
+        error = check_request(frame)
+        if error is not None:
+            return _Refused(frame[0] if frame else 0, error)
+        return super().decode(frame)
+
+
 class _Handler(ServerRequestHandler):
     """pymodbus's connection handler: register reads answered in the data callback, the
     rest scheduled as a task of its own loop.
@@ -455,24 +494,17 @@ class _Handler(ServerRequestHandler):
         return used
 
     def handle_later(self) -> None:
-        task = self.loop.create_task(self.handle_request())
+        task = self.loop.create_task(self.handle_request())  # type: ignore[no-untyped-call]
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
-
-    async def handle_request(self) -> None:
-        """Coil and discrete-input functions: ILLEGAL FUNCTION at any address (pymodbus
-        would answer ILLEGAL ADDRESS outside the bit block it insists on)."""
-        pdu = self.last_pdu
-        if pdu is not None and pdu.function_code in BIT_FUNCTIONS:
-            response = ExceptionResponse(pdu.function_code, ExcCodes.ILLEGAL_FUNCTION)
-            response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
-            self.server_send(response, self.last_addr)  # type: ignore[no-untyped-call]
-            return
-        await super().handle_request()  # type: ignore[no-untyped-call]
 
 
 class _TcpServer(ModbusTcpServer):
     answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = None  # ModbusServer's
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, identity=_identity(), **kwargs)
+        self.decoder = _RequestDecoder(True)  # what every connection's framer decodes with
 
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
@@ -481,5 +513,14 @@ class _TcpServer(ModbusTcpServer):
 class _SerialServer(ModbusSerialServer):
     answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = None  # ModbusServer's
 
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, identity=_identity(), **kwargs)
+        self.decoder = _RequestDecoder(True)
+
     def callback_new_connection(self) -> _Handler:
         return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+
+
+def _identity() -> ModbusDeviceIdentification:
+    """What Read Device Identification (2B/0E) reports (pymodbus keeps one per process)."""
+    return ModbusDeviceIdentification(info=dict(IDENTIFICATION))  # type: ignore[no-untyped-call]
