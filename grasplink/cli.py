@@ -404,15 +404,24 @@ def cmd_node(args: argparse.Namespace) -> int:
             print(f"{args.kind} node 0x{node.node_id:02X} running on {args.bus}", flush=True)
             deadline = None if args.duration is None else time.monotonic() + args.duration
             heartbeat_id = HEARTBEAT_BASE + node.node_id
+            warned = False
             try:
                 while not stop.wait(0.1):
                     if runner.failure is not None:
                         raise runner.failure
-                    if runner.stats.rx_by_cob_id[heartbeat_id]:
-                        raise ConfigError(
-                            f"another node with node-ID 0x{node.node_id:02X} "
-                            f"appeared on {args.bus}; stopping"
+                    # Once running, a duplicate node-ID is an alarm (the node sends EMCY
+                    # 8150h itself), never a reason to leave the bus: a guarding RTR or one
+                    # stray frame must not take a node down.
+                    colliding = node.collision_active
+                    if colliding and not warned:
+                        print(
+                            f"warning: another node transmits on 0x{heartbeat_id:03X} "
+                            f"(node-ID 0x{node.node_id:02X}) on {args.bus}: duplicate "
+                            f"node-ID? EMCY 8150h sent; still running",
+                            file=sys.stderr,
+                            flush=True,
                         )
+                    warned = colliding
                     if deadline is not None and time.monotonic() >= deadline:
                         break
             except KeyboardInterrupt:
@@ -421,14 +430,23 @@ def cmd_node(args: argparse.Namespace) -> int:
             if down_s is not None:
                 raise BusError(f"stopped while {args.bus} was down ({down_s:.1f} s)")
             stats = runner.stats
-        print(f"stopped: {stats.frames_tx} frames sent, {stats.frames_rx} received", flush=True)
+        foreign = node.duplicate_frames
+        duplicates = f", {foreign} from another node on our heartbeat COB-ID" if foreign else ""
+        print(
+            f"stopped: {stats.frames_tx} frames sent, {stats.frames_rx} received{duplicates}",
+            flush=True,
+        )
     finally:
         bus.shutdown()
     return 0
 
 
 def _refuse_if_node_id_taken(bus, node_id: int, url: str) -> None:
-    """Listen before booting: a heartbeat, EMCY or TPDO with our node-ID means a clash."""
+    """Listen before booting: a heartbeat, EMCY or TPDO with our node-ID means a clash.
+
+    Only data frames count: a remote frame on 700h+ID is a master's node-guarding
+    request for the node we are about to be, not another node.
+    """
     from grasplink.bus.url import BusDisconnected, message_to_frame
     from grasplink.core.frames import node_cob_ids
 
@@ -440,7 +458,7 @@ def _refuse_if_node_id_taken(bus, node_id: int, url: str) -> None:
         except BusDisconnected:
             return  # the hub went away meanwhile: the runner reconnects, and listens again
         frame = message_to_frame(msg) if msg is not None else None
-        if frame is not None and frame.can_id in ours:
+        if frame is not None and not frame.rtr and frame.can_id in ours:
             raise ConfigError(
                 f"node-ID 0x{node_id:02X} is already in use on {url} "
                 f"(saw COB-ID 0x{frame.can_id:03X}); choose another with --node-id"

@@ -19,6 +19,7 @@ from grasplink.profiles import objects as obj
 # Error codes the grasplink devices use (CiA 301 table 21, CiA 402).
 ERROR_RESET = 0x0000
 HEARTBEAT_TIMEOUT = 0x8130
+CAN_ID_COLLISION = 0x8150  # another node transmits on this node's heartbeat COB-ID
 PDO_LENGTH_ERROR = 0x8210
 PDO_LENGTH_EXCEEDED = 0x8220
 RPDO_TIMEOUT = 0x8250
@@ -35,6 +36,26 @@ REG_MANUFACTURER = 0x80
 
 COB_ID_INVALID = 0x80000000
 QUEUE_LIMIT = 8
+
+# What each code means, as docs/devices.md declares it: a receiver trusts these names only.
+DESCRIPTIONS = {
+    ERROR_RESET: "error reset",
+    HEARTBEAT_TIMEOUT: "heartbeat of a monitored node lost",
+    CAN_ID_COLLISION: "CAN-ID collision: another node uses this node-ID",
+    PDO_LENGTH_ERROR: "RPDO shorter than mapped",
+    PDO_LENGTH_EXCEEDED: "RPDO longer than mapped",
+    RPDO_TIMEOUT: "RPDO deadline expired",
+    SENSOR_SATURATED: "FSR at full scale",
+}
+_EVERY_NODE = frozenset({ERROR_RESET, HEARTBEAT_TIMEOUT, CAN_ID_COLLISION})
+_RPDO_CODES = frozenset({PDO_LENGTH_ERROR, PDO_LENGTH_EXCEEDED, RPDO_TIMEOUT})
+# The codes each node kind can send (RPDO errors only where there are RPDOs).
+CODES_BY_KIND: dict[str, frozenset[int]] = {
+    "skin": _EVERY_NODE | {SENSOR_SATURATED},
+    "emg": _EVERY_NODE,
+    "belt": _EVERY_NODE | _RPDO_CODES,
+    "hand": _EVERY_NODE | _RPDO_CODES,
+}
 
 
 class EmcyProducer:

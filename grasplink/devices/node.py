@@ -38,6 +38,11 @@ SYNC_GENERATE = 0x40000000
 COB_ID_INVALID = 0x80000000
 COB_ID_EXTENDED = 0x20000000
 
+# A CAN-ID collision (EMCY 8150h) clears after this long without another foreign frame
+# on our heartbeat COB-ID, or three of our own heartbeat periods if longer: a duplicate
+# configured like us beats as often as we do.
+COLLISION_CLEAR_US = 1_000_000
+
 # 1029h:01 communication-error behaviour
 ON_ERROR_PRE_OPERATIONAL = 0
 ON_ERROR_NO_CHANGE = 1
@@ -79,6 +84,9 @@ class DeviceNode:
         self.powered = False
         self._deadline: int | None = None
         self._deadline_stale = True
+        # Frames on our own heartbeat COB-ID that we did not send: another node has our ID.
+        self.duplicate_frames = 0
+        self._collision_clear_us: int | None = None
         # Any change in the dictionary (SDO, RPDO, the application, a simulator
         # pushing an actual value) may move a timer: recompute the deadline.
         self.store.add_listener(self._mark_stale)
@@ -119,6 +127,10 @@ class DeviceNode:
         can_id = frame.can_id
         if can_id == NMT_COB_ID:
             return self._on_nmt(frame, t_us)
+        if can_id == HEARTBEAT_BASE + self.node_id:
+            # An RTR here is node guarding, which this device does not support (no
+            # 100Ch/100Dh in its EDS; it produces heartbeats): ignored, as CiA 301 lets it.
+            return None if frame.rtr else self._on_duplicate(can_id, t_us)
         if HEARTBEAT_BASE < can_id <= HEARTBEAT_BASE + 127 and not frame.rtr and frame.data:
             node_id = can_id - HEARTBEAT_BASE
             if not self.consumer.watches(node_id):
@@ -142,6 +154,9 @@ class DeviceNode:
         self._deadline_stale = True
         self._touch(t_us)
         frames: list[Frame] = []
+        if self._collision_clear_us is not None and t_us >= self._collision_clear_us:
+            self._collision_clear_us = None
+            self.emcy.clear_error(em.CAN_ID_COLLISION, t_us)
         for node_id in self.consumer.expired(t_us):
             frames += self._on_heartbeat_lost(node_id, t_us)
         if self.state in SDO_ALLOWED:
@@ -167,6 +182,7 @@ class DeviceNode:
             self.heartbeat.next_deadline_us(),
             self.consumer.next_deadline_us(),
             self.app.next_deadline_us(),
+            self._collision_clear_us,
         ]
         if self.state in SDO_ALLOWED:
             candidates += [self.sdo.next_deadline_us(), self.emcy.next_deadline_us()]
@@ -212,6 +228,7 @@ class DeviceNode:
             self.store.load_defaults(APPLICATION_AREA)
         self.store.load_defaults(COMMUNICATION_AREA)
         self.emcy.reset()
+        self._collision_clear_us = None
         self.pdo.reload()
         self.consumer.reset()
         if application:
@@ -240,6 +257,24 @@ class DeviceNode:
         elif behaviour == ON_ERROR_STOPPED:
             frames += self._enter(NmtState.STOPPED, t_us)
         return frames
+
+    # -- duplicate node-ID -----------------------------------------------------------------
+    @property
+    def collision_active(self) -> bool:
+        """Whether another node is transmitting on our heartbeat COB-ID (EMCY 8150h active)."""
+        return self.emcy.is_active(em.CAN_ID_COLLISION)
+
+    def _on_duplicate(self, can_id: int, t_us: int) -> list[Frame]:
+        """A heartbeat or boot-up with our node-ID that we did not send: EMCY 8150h
+        (CAN-ID collision) once per episode; the node keeps running."""
+        self.duplicate_frames += 1
+        self._collision_clear_us = t_us + max(COLLISION_CLEAR_US, 3 * self.heartbeat.period_us)
+        if self.emcy.is_active(em.CAN_ID_COLLISION):
+            return []
+        self.emcy.raise_error(
+            em.CAN_ID_COLLISION, em.REG_COMMUNICATION, t_us, can_id.to_bytes(2, "little")
+        )
+        return self._emcy(t_us)
 
     # -- helpers ------------------------------------------------------------------------
     def _on_rpdo(self, number: int, t_us: int) -> None:

@@ -103,6 +103,30 @@ def test_na_7_guarding(dut: Dut) -> None:
         absent(dut, index)
 
 
+def test_na_7_2_guarding_rtr_is_ignored_and_the_device_stays_up(dut: Dut) -> None:
+    """7.2 "Transmit RTR and wait for response", on a device without guarding.
+
+    The RTRs the tool sends get no reply (with 1017h = 0 nothing at all appears on
+    700h+node-ID), no EMCY (an RTR is no duplicate node-ID), and the device keeps
+    running: it still answers SDO and heartbeats again when 1017h is set.
+    """
+    dut.set_heartbeat(0)
+    dut.barrier()
+    mark = dut.log.mark()
+    for _ in range(10):
+        dut.send(dut.heartbeat_id, rtr=True, dlc=1)
+    dut.barrier()
+
+    def reply(m) -> bool:
+        return m.arbitration_id in (dut.heartbeat_id, dut.emcy_id) and not m.is_remote_frame
+
+    assert dut.log.since(mark, reply) == []  # exact after the barrier: frames are in order
+    assert dut.device.duplicate_frames == 0
+    assert dut.get(0x1000, 0) == dut.entry(0x1000).var.default
+    dut.set_heartbeat(20)
+    assert dut.wait_heartbeat() is not None
+
+
 def test_na_8_9_verify_configuration(dut: Dut) -> None:
     """8.9: "If object 1010h and 1020h is supported, ..."
 
