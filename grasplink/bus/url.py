@@ -36,6 +36,7 @@ from can_remote.websocket import WebSocket, WebsocketClosed, get_accept_key
 
 from grasplink.bus.options import convert_options, format_value
 from grasplink.core.frames import Frame
+from grasplink.core.hosts import host_problem
 from grasplink.errors import BusError
 
 DEFAULT_HUB_PORT = CAN_REMOTE_DEFAULT_PORT  # 54701
@@ -134,6 +135,9 @@ def _normalise_hub_address(channel: str, url: str) -> str:
         )
     if port == 0:
         raise BusError(f"bus URL {url!r}: hub port 0 is not a port a hub listens on")
+    problem = host_problem(parts.hostname)
+    if problem:
+        raise BusError(f"bus URL {url!r}: bad hub host: {problem}")
     host = f"[{parts.hostname}]" if ":" in parts.hostname else parts.hostname
     port = DEFAULT_HUB_PORT if port is None else port
     return f"{parts.scheme}://{host}:{port}{parts.path or '/'}"
@@ -271,6 +275,7 @@ class _HubUnreachable(Exception):
     def __init__(self, cause: OSError):
         super().__init__(cause.strerror or str(cause))
         self.refused = isinstance(cause, ConnectionRefusedError)
+        self.unresolved = isinstance(cause, socket.gaierror)
 
 
 class BusDisconnected(can.CanOperationError):
@@ -354,6 +359,9 @@ def _open_hub_client(spec: BusSpec, kwargs: dict[str, Any]) -> HubClientBus:
     try:
         return HubClientBus(spec.channel, **kwargs)
     except _HubUnreachable as exc:
+        if exc.unresolved:  # no hub to start there: the name is wrong or DNS is down
+            host = urlsplit(spec.channel).hostname
+            raise BusError(f"cannot resolve hub host {host!r} in {spec.url} ({exc})") from None
         why = "" if exc.refused else f" ({exc})"
         raise BusError(f"no CAN hub at {spec.channel}{why} — {start_hint}") from None
     except (TimeoutError, _NotAHub, HTTPException, WebsocketClosed, RemoteError) as exc:

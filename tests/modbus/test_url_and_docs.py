@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
         ("tcp://0.0.0.0:1502", ModbusUrl("tcp", host="0.0.0.0", port=1502)),  # explicit
         ("tcp://[::1]:1502", ModbusUrl("tcp", host="::1", port=1502)),
         ("tcp://127.0.0.1:0", ModbusUrl("tcp", host="127.0.0.1", port=0)),
-        ("tcp://127.0.0.1", ModbusUrl("tcp", host="127.0.0.1", port=502)),
+        ("tcp://127.0.0.1:502", ModbusUrl("tcp", host="127.0.0.1", port=502)),  # when named
         (
             "rtu:///dev/ttyUSB0?baud=115200&parity=N&unit=1",
             ModbusUrl("rtu", device="/dev/ttyUSB0", baud=115200, parity="N", unit=1),

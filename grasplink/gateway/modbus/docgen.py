@@ -18,7 +18,7 @@ from grasplink.gateway.modbus.registers import (
     WordType,
     register_map,
 )
-from grasplink.gateway.modbus.url import DEFAULT_BAUD, DEFAULT_TCP_PORT
+from grasplink.gateway.modbus.url import DEFAULT_BAUD, EXAMPLE_TCP_PORT, MODBUS_TCP_PORT
 
 TYPES = (
     ("u16", "one register, 0..65535", "0xFFFF", "0..65534"),
@@ -77,8 +77,10 @@ def _connection(rmap: RegisterMap) -> list[str]:
         "| URL | meaning |",
         "|---|---|",
         "| `tcp://HOST:PORT` | Modbus TCP server on HOST (default 127.0.0.1: only this "
-        "machine), PORT (default "
-        f"{DEFAULT_TCP_PORT}; ports below 1024 need privileges). Every interface only when "
+        f"machine), PORT (required, e.g. {EXAMPLE_TCP_PORT}: a URL without one is refused; "
+        f"Modbus's own {MODBUS_TCP_PORT}, like every port below 1024, needs privileges). A "
+        "malformed host (`256.1.1.1`) or one that does not resolve is refused, naming it. "
+        "Every interface only when "
         "asked: `tcp://0.0.0.0:1502`. Answers every unit id. Port 0: any free port, printed "
         "at start. |",
         "| `rtu://DEVICE?baud=B&parity=P&stopbits=S&unit=U` | Modbus RTU on a serial "

@@ -2,9 +2,12 @@
 
 A gateway on a prosthesis must not expose its command registers to a network
 by accident: TCP binds 127.0.0.1 unless the URL names another address
-(`tcp://0.0.0.0:1502` listens on every interface, on purpose). RTU defaults
-are the Modbus serial line's (19200 baud, even parity, one stop bit), which
-are also mbpoll's.
+(`tcp://0.0.0.0:1502` listens on every interface, on purpose). Nor does it take
+Modbus's own port 502 unless told: a URL without a port is refused (502 needs
+root, and a gateway run as root would have bound it silently). The host is
+checked and resolved here, so a bad one is named before anything starts. RTU
+defaults are the Modbus serial line's (19200 baud, even parity, one stop bit),
+which are also mbpoll's.
 """
 
 from __future__ import annotations
@@ -12,10 +15,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import parse_qsl, urlsplit
 
+from grasplink.core.hosts import host_problem, resolve_problem
 from grasplink.errors import BusError, ConfigError
 
 DEFAULT_HOST = "127.0.0.1"
-DEFAULT_TCP_PORT = 502
+MODBUS_TCP_PORT = 502  # Modbus's registered port: taken only when a URL names it
+EXAMPLE_TCP_PORT = 1502  # what the docs and messages suggest: no privileges needed
 DEFAULT_BAUD = 19200
 DEFAULT_UNIT = 1
 MAX_UNIT = 247  # the highest Modbus unit (slave) address
@@ -31,7 +36,7 @@ class ModbusUrl:
 
     scheme: str  # "tcp" or "rtu"
     host: str = DEFAULT_HOST
-    port: int = DEFAULT_TCP_PORT
+    port: int = MODBUS_TCP_PORT
     device: str = ""
     baud: int = DEFAULT_BAUD
     parity: str = "E"
@@ -40,8 +45,7 @@ class ModbusUrl:
 
     def __str__(self) -> str:
         if self.scheme == "tcp":
-            host = f"[{self.host}]" if ":" in self.host else self.host
-            return f"tcp://{host}:{self.port}"
+            return f"tcp://{_bracketed(self.host)}:{self.port}"
         return (
             f"rtu://{self.device}?baud={self.baud}&parity={self.parity}"
             f"&stopbits={self.stopbits}&unit={self.unit}"
@@ -73,12 +77,18 @@ def parse_modbus_url(text: str) -> ModbusUrl:
             )
         if parts.path not in ("", "/"):
             raise ConfigError(f"modbus URL {text!r}: expected tcp://HOST:PORT")
+        host = parts.hostname or DEFAULT_HOST
+        if port is None:
+            raise ConfigError(
+                f"modbus URL {text!r}: give a port, e.g. tcp://{_bracketed(host)}:"
+                f"{EXAMPLE_TCP_PORT}; Modbus's own port {MODBUS_TCP_PORT} needs root and is "
+                f"taken only when named (tcp://{_bracketed(host)}:{MODBUS_TCP_PORT})"
+            )
+        problem = host_problem(host) or resolve_problem(host, port, passive=True)
+        if problem:
+            raise ConfigError(f"modbus URL {text!r}: {problem}")
         # Port 0 takes any free port (tests); the server reports the one it got.
-        return ModbusUrl(
-            "tcp",
-            host=parts.hostname or DEFAULT_HOST,
-            port=DEFAULT_TCP_PORT if port is None else port,
-        )
+        return ModbusUrl("tcp", host=host, port=port)
     if parts.scheme == "rtu":
         device = parts.netloc + parts.path
         if not device:
@@ -100,6 +110,10 @@ def parse_modbus_url(text: str) -> ModbusUrl:
             "rtu", device=device, baud=baud, parity=parity, stopbits=stopbits, unit=unit
         )
     raise ConfigError(f"modbus URL {text!r}: unknown scheme {parts.scheme!r}; expected {EXAMPLES}")
+
+
+def _bracketed(host: str) -> str:
+    return f"[{host}]" if ":" in host else host
 
 
 def unit_ids(url: ModbusUrl, count: int) -> list[int | None]:

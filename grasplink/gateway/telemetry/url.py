@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, unquote, urlsplit
 
+from grasplink.core.hosts import host_problem
 from grasplink.errors import ConfigError
 
 DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
@@ -60,6 +61,9 @@ def parse_broker_url(text: str) -> BrokerUrl:
         raise ConfigError(f"--mqtt {shown!r}: expected {URL_FORM}")
     if not parts.hostname:
         raise ConfigError(f"--mqtt {shown!r}: no host; expected {URL_FORM}")
+    problem = host_problem(parts.hostname)
+    if problem:  # the resolver's own word for 256.1.1.1 was "Name or service not known"
+        raise ConfigError(f"--mqtt {shown!r}: {problem}")
     if parts.path not in ("", "/") or parts.fragment:
         raise ConfigError(f"--mqtt {shown!r}: a broker URL has no path; expected {URL_FORM}")
     if port == 0:
