@@ -19,6 +19,7 @@ from typing import Any
 from grasplink.gateway.feedback import FeedbackMode
 
 INBOX_SIZE = 64  # commands waiting for the gateway's thread; more is a flood, refused
+SHOWN_CHARS = 60  # of a refused value, in the error message
 MIN_THRESHOLD_MM_S, MAX_THRESHOLD_MM_S = 1.0, 1000.0
 CALIBRATION_PHASES = ("rest", "maximum", "finish", "cancel")
 NODE_KINDS = ("skin", "emg", "belt", "hand")
@@ -84,7 +85,14 @@ def parse_value(command: Command) -> Any:
         choices = CALIBRATION_PHASES if name == "emg_calibrate" else NODE_KINDS
         if value in choices:
             return value
-    raise CommandError(f"{name}: expected {expected}, got {value!r}")
+    raise CommandError(f"{name}: expected {expected}, got {shown(value)}")
+
+
+def shown(value: Any, limit: int = SHOWN_CHARS) -> str:
+    """A value as an error message quotes it: its repr, cut short (a command's value may be
+    kilobytes of whatever a client sent; the reply names it, it need not repeat it)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}... ({len(text)} chars)"
 
 
 def _number(value: Any) -> bool:

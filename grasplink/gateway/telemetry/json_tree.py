@@ -8,7 +8,7 @@
 | `controls` | yes | on change (feedback mode, reflex, EMG calibration) |
 | `node/<kind>/state` | yes | on change (phase, NMT state, boots, EMCY, failure) |
 | `node/<kind>/values` | no | latest decoded values, when one changed, else every second |
-| `cmd/<name>` | — | in: `{"value": …, "id": …}` (id optional, echoed) |
+| `cmd/<name>` | — | in: `{"value": …, "id": …}` (id optional, echoed); one command, one reply |
 | `reply/<name>` | no | out: `{"id", "command", "accepted", "detail"}` |
 
 Every payload carries `ts_ms`, when the snapshot it reports was made (wall
@@ -35,6 +35,8 @@ from grasplink.gateway.telemetry.protocol import (
     controls_view,
     dumps,
     live_nodes,
+    nesting_error,
+    size_error,
 )
 
 ROOT = "grasplink"
@@ -222,6 +224,7 @@ class JsonTree:
             "loop_latency_p99_us": loop["latency_p99_us"],
             "percepts": loop["percepts"],
             "alarm_count": len(snap["alarms"]),
+            "own_heartbeat": snap.get("heartbeat"),  # how late the gateway's own went out
             "telemetry": dict(self._extra.get("telemetry", {})),
         }
         return Message(f"{self.base}/health", dumps(body), QOS, True)
@@ -232,6 +235,9 @@ class JsonTree:
         if not topic.startswith(prefix) or "/" in topic[len(prefix) :]:
             return Incoming()
         name = topic[len(prefix) :]
+        too_big = size_error(payload) or nesting_error(payload)  # before parsing: bounded
+        if too_big:
+            return Incoming([CommandRequest(name, refused=too_big)])
         try:
             body = json.loads(payload)
         except (ValueError, UnicodeDecodeError):

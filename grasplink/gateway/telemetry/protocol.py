@@ -39,6 +39,12 @@ VALUE_FIELDS: dict[str, tuple[str, ...]] = {
 #: node state fields of `snapshot["nodes"][kind]` that are published on change
 STATE_FIELDS = ("node_id", "phase", "nmt_state", "boots", "last_emcy", "failure")
 _COMPARED_SECTIONS = (*VALUE_FIELDS, "alarms")
+#: Bounds on what one command message may ask for, checked before it is parsed: the largest
+#: real command is a few hundred bytes, 2 levels deep, 8 metrics (every writable one of the
+#: edge node); a bigger one is refused whole, answered once, and costs no parsing.
+MAX_COMMAND_BYTES = 8192
+MAX_JSON_DEPTH = 8  # nested objects/arrays in a JSON command (json.loads recurses per level)
+MAX_COMMAND_METRICS = 16  # metrics in one Sparkplug NCMD/DCMD
 #: settable gateway values, as `extra["controls"]` carries them (feedback mode: the snapshot's)
 CONTROL_KEYS = (
     "reflex_enabled",
@@ -139,6 +145,42 @@ def apply_result(controls: dict[str, Any], command: Command, result: CommandResu
     elif command.name == "emg_calibration":
         controls["emg_e_min_uv"] = float(command.value["e_min_uv"])
         controls["emg_e_max_uv"] = float(command.value["e_max_uv"])
+
+
+def size_error(payload: bytes) -> str:
+    """Why a command payload is too big to look at ("" when it is not)."""
+    if len(payload) <= MAX_COMMAND_BYTES:
+        return ""
+    return f"payload of {len(payload)} bytes; a command takes at most {MAX_COMMAND_BYTES}"
+
+
+def nesting_error(payload: bytes, limit: int = MAX_JSON_DEPTH) -> str:
+    """Why a JSON payload nests too deep to parse ("" when it does not), found without
+    parsing it: json.loads recurses once per level, and a few KiB of "[" reach Python's
+    recursion limit. Cheap: a payload with no more brackets than `limit` cannot nest
+    deeper and is not scanned; else one pass (brackets inside strings skipped), stopping
+    at the first level too deep."""
+    if payload.count(b"[") + payload.count(b"{") <= limit:
+        return ""
+    depth = 0
+    in_string = escaped = False
+    for byte in payload:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:  # quote
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):  # [ {
+            depth += 1
+            if depth > limit:
+                return f"JSON nested deeper than {limit} levels"
+        elif byte in (0x5D, 0x7D):  # ] }
+            depth -= 1
+    return ""
 
 
 # One encoder for every message: json.dumps with options builds a new one per call.

@@ -45,16 +45,18 @@ from typing import Any
 
 from google.protobuf.message import DecodeError
 
-from grasplink.gateway.commands import Command, CommandResult
+from grasplink.gateway.commands import Command, CommandResult, shown
 from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
 from grasplink.gateway.telemetry.buffer import Message, Sample
 from grasplink.gateway.telemetry.protocol import (
     LIVE_PHASE,
+    MAX_COMMAND_METRICS,
     VALUE_FIELDS,
     CommandRequest,
     Incoming,
     controls_view,
     live_nodes,
+    size_error,
 )
 
 NAMESPACE = "spBv1.0"
@@ -392,6 +394,30 @@ def metric_value(metric: pb.Payload.Metric, datatype: int | None = None) -> Any:
     return value
 
 
+def _last_of_each(
+    device: str | None, metrics: Sequence[pb.Payload.Metric]
+) -> dict[str, pb.Payload.Metric | None]:
+    """A command payload's writes, one per metric: the last of each (by name or by alias,
+    the same metric either way), in the order of those last ones; as if the earlier copies
+    had not been sent, as a later write of a value replaces an earlier one. A metric that
+    names nothing maps its refusal to None (one per distinct alias)."""
+    writes: dict[str, pb.Payload.Metric | None] = {}
+    names = NAMES_BY_ALIAS[device]
+    for metric in metrics:
+        key: str = metric.name
+        found: pb.Payload.Metric | None = metric
+        if not key and metric.HasField("alias"):
+            key = names.get(metric.alias, "")
+            if not key:
+                target = "the edge node" if device is None else f"device {device}"
+                key, found = f"alias {metric.alias} is not a metric of {target}", None
+        if not key:
+            key, found = "metric without a name or an alias", None
+        writes.pop(key, None)
+        writes[key] = found
+    return writes
+
+
 def parse_state(payload: bytes) -> tuple[bool, int] | None:
     """A host application's STATE payload (`{"online": bool, "timestamp": ms}`, Sparkplug
     3.0), or None when it is not one."""
@@ -689,6 +715,9 @@ class SparkplugSession:
             label = f"DCMD {device}"
         else:
             return Incoming()
+        too_big = size_error(payload)  # before parsing: a payload's cost is bounded
+        if too_big:
+            return Incoming([CommandRequest(label, refused=too_big)])
         try:
             message = pb.Payload.FromString(payload)
         except DecodeError:
@@ -698,34 +727,34 @@ class SparkplugSession:
             return Incoming([CommandRequest(label, refused=refused)])
         if device is not None and device not in DEVICE_METRICS:
             return Incoming([CommandRequest(label, refused=f"no device {device!r}")])
+        count = len(message.metrics)
+        if not 1 <= count <= MAX_COMMAND_METRICS:
+            refused = (
+                f"{label} carries {count} metrics; one carries 1..{MAX_COMMAND_METRICS} "
+                "(nothing was executed)"
+            )
+            return Incoming([CommandRequest(label, refused=refused)])
         incoming = Incoming()
         calibration: dict[str, Any] = {}
-        for metric in message.metrics:
-            name = metric.name
-            if not name and metric.HasField("alias"):
-                name = NAMES_BY_ALIAS[device].get(metric.alias, "")
-                if not name:
-                    refused = f"alias {metric.alias} is not a metric of {label}"
-                    incoming.requests.append(CommandRequest(label, refused=refused))
-                    continue
-            if not name:
-                incoming.requests.append(
-                    CommandRequest(label, refused="metric without a name or an alias")
-                )
+        for name, metric in _last_of_each(device, message.metrics).items():
+            if metric is None:
+                incoming.requests.append(CommandRequest(label, refused=name))
                 continue
             value = metric_value(metric, DATATYPES[device].get(name))
-            if device is None and name == REBIRTH:
-                if value is True:
+            if name in (REBIRTH, RESTART) and (name == REBIRTH) == (device is None):
+                if value is not True:
+                    refused = f"{name}: write Boolean true, got {shown(value)}"
+                    incoming.requests.append(CommandRequest(label, refused=refused))
+                elif device is None:
                     incoming.messages += self.rebirth(t_ms)
+                else:
+                    command = Command("restart_node", device)
+                    incoming.requests.append(CommandRequest("restart_node", command))
             elif device is None and name.startswith(CALIBRATION):
                 calibration[name[len(CALIBRATION) :]] = value
             elif device is None and name.startswith("Control/"):
                 control = name[len("Control/") :]
                 incoming.requests.append(CommandRequest(control, Command(control, value)))
-            elif device is not None and name == RESTART:
-                if value is True:
-                    command = Command("restart_node", device)
-                    incoming.requests.append(CommandRequest("restart_node", command))
             else:
                 incoming.requests.append(
                     CommandRequest(label, refused=f"{name!r} is not a writable metric")
