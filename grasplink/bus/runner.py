@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import can
 
+from grasplink.bus.priority import raise_thread_priority
 from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S, FIRST_DELAY_US, Backoff
 from grasplink.bus.url import BusDisconnected, frame_to_message, message_to_frame
 from grasplink.core.frames import Frame
@@ -28,6 +29,10 @@ DEVICE_BACKOFF_US = 100_000
 # hear it before a heartbeat consumer judges loss; bounded so timers (own heartbeat,
 # SDO timeouts) still run while a backlog lasts. 128 frames is ~0.4 s of a set's traffic.
 MAX_BATCH = 128
+# The pacer serves urgent timers only while the runner's thread makes progress: a heartbeat
+# stands for a living gateway, so a thread stuck this long lets the nodes' consumers fire.
+DEFAULT_STALL_LIMIT_S = 2.0
+PACER_STALL_POLL_S = 0.01
 
 
 def monotonic_us() -> int:
@@ -52,6 +57,9 @@ class RunnerStats:
     device_errors: int = 0  # exceptions raised by a device
     offline_drops: int = 0  # frames not sent because the bus was down
     reconnects: int = 0  # outages that ended with the bus back
+    urgent_between_frames: int = 0  # urgent timers the runner's thread served amid a batch
+    urgent_paced: int = 0  # urgent timers the pacer thread served
+    stalls: int = 0  # times the pacer withheld urgent timers: the runner's thread was stuck
 
 
 class NodeRunner:
@@ -67,6 +75,16 @@ class NodeRunner:
     ``max_batch``, each one's replies sent before the next is read) before it
     runs due timers: after a stall the heartbeats queued meanwhile reach a
     heartbeat consumer before its timer can declare their senders lost.
+
+    ``urgent`` devices hold timers that must never wait behind received frames (the
+    master's own heartbeat, `gateway.master.HeartbeatProducer`): they are started with
+    the devices, hear no frames, and are served whenever due - before the next frame of
+    a batch, not only after it - so the work ahead of one is at most one frame's. With
+    ``pace_urgent`` a thread of their own (the pacer, at real-time priority where the
+    host allows it: `bus.priority`) serves them on time even while this thread is busy
+    in a long device call; what it sends goes to the bus at once and to the devices
+    through `submit`. The pacer serves only while this thread makes progress (a step
+    within ``stall_limit_s``): a thread stuck for good must let the heartbeat stop.
 
     The bus should not echo own frames (``receive_own_messages=False``);
     echoes that python-can marks as such (``is_rx=False``) are ignored.
@@ -102,6 +120,9 @@ class NodeRunner:
         reopen: Callable[[], can.BusABC] | None = None,
         reconnect_timeout_s: float = DEFAULT_RECONNECT_TIMEOUT_S,
         first_retry_s: float = FIRST_DELAY_US / 1e6,
+        urgent: Sequence[SansIoDevice] = (),
+        pace_urgent: bool = False,
+        stall_limit_s: float = DEFAULT_STALL_LIMIT_S,
     ) -> None:
         if not devices:
             raise ValueError("NodeRunner needs at least one device")
@@ -141,16 +162,30 @@ class NodeRunner:
         self._last_bus_error = ""
         self._owned: can.BusABC | None = None  # the bus reopen() gave us, ours to shut down
         self.failure: BusError | None = None  # why the runner gave up on its bus
+        self.urgent = list(urgent)
+        self._urgent_lock = threading.Lock()  # urgent devices: the runner's or the pacer's
+        self._send_lock = threading.Lock()  # bus.send from the runner's and the pacer's thread
+        self._urgent_due_us: int | None = None  # earliest urgent deadline
+        self._pace = pace_urgent and bool(self.urgent)
+        self._stall_us = round(stall_limit_s * 1e6)
+        self._progress_us = 0  # when the runner's thread last stepped or delivered a frame
+        self._pacer: threading.Thread | None = None
+        self.pacer_priority: str | None = None  # what the host granted the pacer thread
 
     # -- control (any thread) -------------------------------------------------
 
     def start(self, timeout: float = 5.0) -> NodeRunner:
         """Start the thread; returns once every device's boot-up has been sent."""
         self._thread = _start_thread(self, self._run, timeout)
+        self._start_pacer()
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the thread and wait for it (idempotent)."""
+        self._stop.set()
+        pacer = self._pacer
+        if pacer is not None and pacer is not threading.current_thread():
+            pacer.join(timeout)
         if not _stop_thread(self, timeout):
             return
         owned, self._owned = self._owned, None
@@ -223,9 +258,12 @@ class NodeRunner:
         boot: list[tuple[Frame, SansIoDevice | None, bool]] = []
         for device in self.devices:  # power every device on before anyone hears a frame
             boot.extend((f, device, True) for f in self._call(device, "start", now))
+        for device in self.urgent:
+            boot.extend((f, device, True) for f in self._call(device, "start", now))
         self._dispatch(boot, now)
         self._due_us = self._earliest_deadline()
-        self._checked_us = now
+        self._urgent_due_us = self._urgent_deadline()
+        self._checked_us = self._progress_us = now
 
     def _run(self) -> None:
         try:
@@ -241,7 +279,7 @@ class NodeRunner:
 
     def _step(self, *, block: bool = True) -> None:
         """One cycle; ``block=False`` (a `MultiRunner` waited already): never wait or sleep."""
-        now = self._clock()
+        now = self._progress_us = self._clock()
         outage = self._outage
         if outage is not None and self._bus_dead and outage.due(now):
             self._reopen_bus(outage, now)
@@ -251,8 +289,9 @@ class NodeRunner:
         wait_s = 0.0
         if block and not self._submitted and not self._backlog:
             wait_s = self._max_wait_s
-            if self._due_us is not None:
-                wait_s = min(wait_s, max(0, self._due_us - now) / 1e6)
+            for due in (self._due_us, self._urgent_due_us):
+                if due is not None:
+                    wait_s = min(wait_s, max(0, due - now) / 1e6)
         outage = self._outage
         if outage is None or (not self._bus_dead and outage.due(now)):
             msg = self._recv(wait_s)
@@ -263,6 +302,9 @@ class NodeRunner:
         delivered = 0
         self._backlog = False
         while msg is not None:  # everything that has arrived, before any timer runs
+            urgent = self._urgent_due_us  # ... but an urgent one: before the next frame
+            if urgent is not None and self._clock() >= urgent:
+                self._serve_urgent(self._clock(), between_frames=True)
             self._deliver(msg)
             delivered += 1
             if self._outage is not None or self.failure:
@@ -272,6 +314,8 @@ class NodeRunner:
                 break
             msg = self._recv(0.0)
         now = self._clock()
+        if self._urgent_due_us is not None and now >= self._urgent_due_us:
+            self._serve_urgent(now)
         work: list[tuple[Frame, SansIoDevice | None, bool]] = []
         submitted = self._submitted
         while submitted:  # this thread alone takes: not empty, popleft cannot fail
@@ -303,7 +347,10 @@ class NodeRunner:
         """When the timers must run again: the earliest deadline, and at least every
         ``max_wait_s`` (a command another thread posted to a device shows only there)."""
         every = self._checked_us + self._max_wait_us
-        return every if self._due_us is None else min(every, self._due_us)
+        for due in (self._due_us, self._urgent_due_us):
+            if due is not None and due < every:
+                every = due
+        return every
 
     def _wake_us(self) -> int | None:
         """When this runner needs its next step without a frame (for a `MultiRunner`)."""
@@ -326,7 +373,7 @@ class NodeRunner:
             self._stats.frames_rx += 1
             self._stats.rx_by_cob_id[frame.can_id] += 1
         # `_dispatch([(frame, None, False)])` without its queue: most frames get no reply
-        now = self._clock()
+        now = self._progress_us = self._clock()
         replies = self._replies(frame, None, now)
         if replies:
             self._dispatch(replies, now)
@@ -334,6 +381,100 @@ class NodeRunner:
     def _earliest_deadline(self) -> int | None:
         deadlines = [d for d in map(self._effective_deadline, self.devices) if d is not None]
         return min(deadlines) if deadlines else None
+
+    def _urgent_deadline(self) -> int | None:
+        deadlines = [d for d in map(self._effective_deadline, self.urgent) if d is not None]
+        return min(deadlines) if deadlines else None
+
+    # -- urgent timers -----------------------------------------------------------------
+
+    def _serve_urgent(self, now: int, *, between_frames: bool = False) -> None:
+        """Run the urgent timers due at `now` (the runner's thread): sent, and delivered to
+        the devices like any device's frames."""
+        with self._urgent_lock:
+            out = self._advance_urgent(now)
+        if out:
+            with self._lock:
+                if between_frames:
+                    self._stats.urgent_between_frames += 1
+            self._dispatch(out, now)
+
+    def _advance_urgent(self, now: int) -> list[tuple[Frame, SansIoDevice | None, bool]]:
+        """Under `_urgent_lock`: the due urgent devices advanced, the next deadline kept."""
+        out: list[tuple[Frame, SansIoDevice | None, bool]] = []
+        for device in self.urgent:
+            deadline = self._effective_deadline(device)
+            if deadline is not None and deadline <= now:
+                out += [(f, device, True) for f in self._call(device, "advance", now)]
+        self._urgent_due_us = self._urgent_deadline()
+        return out
+
+    def _start_pacer(self) -> None:
+        if self._pace and self._pacer is None:
+            self._pacer = threading.Thread(
+                target=self._pace_loop, name=f"{self._name} pacer", daemon=True
+            )
+            self._pacer.start()
+
+    def _pace_loop(self) -> None:
+        """The pacer thread: sleep until the next urgent deadline, serve it, repeat."""
+        realtime, self.pacer_priority = raise_thread_priority()
+        log = logger.info if realtime else logger.warning
+        log("%s: urgent timers (heartbeat) on a thread of their own at %s",
+            self._name, self.pacer_priority)  # fmt: skip
+        stalled = False
+        while not self._stop.is_set() and self.failure is None:
+            due, now = self._urgent_due_us, self._clock()
+            wait_us = self._max_wait_us if due is None else min(self._max_wait_us, due - now)
+            if wait_us > 0 and self._stop.wait(wait_us / 1e6):
+                return
+            now = self._clock()
+            if self._urgent_due_us is None or now < self._urgent_due_us:
+                continue
+            stuck_us = now - self._progress_us
+            if stuck_us > self._stall_us:
+                if not stalled:
+                    stalled = True
+                    with self._lock:
+                        self._stats.stalls += 1
+                    logger.error(
+                        "%s: its thread has made no progress for %.1f s: heartbeat withheld "
+                        "until it does (the nodes' consumers will time out)",
+                        self._name,
+                        stuck_us / 1e6,
+                    )
+                self._stop.wait(PACER_STALL_POLL_S)
+                continue
+            stalled = False
+            with self._urgent_lock:
+                out = self._advance_urgent(now)
+            for frame, _, _ in out:
+                self._send_paced(frame)
+                self.submit(frame, to_bus=False)  # the devices hear it at their next step
+            if out:
+                with self._lock:
+                    self._stats.urgent_paced += 1
+            due = self._urgent_due_us
+            if due is not None and due <= self._clock():
+                self._stop.wait(0.001)  # a device that failed: never spin at this priority
+
+    def _send_paced(self, frame: Frame) -> None:
+        """Send from the pacer thread: outages are the runner's to notice and handle."""
+        if self._outage is not None or self.failure is not None:
+            with self._lock:
+                self._stats.offline_drops += 1
+            return
+        try:
+            with self._send_lock:
+                self.bus.send(frame_to_message(frame))
+        except Exception as exc:
+            with self._lock:
+                self._stats.send_errors += 1
+            logger.debug("%s: pacer sending 0x%03X failed: %s", self._name, frame.can_id, exc)
+            return
+        with self._lock:
+            self._stats.frames_tx += 1
+            self._stats.tx_by_cob_id[frame.can_id] += 1
 
     def _effective_deadline(self, device: SansIoDevice) -> int | None:
         """The device's deadline, held back for a while after the device raised."""
@@ -412,7 +553,8 @@ class NodeRunner:
             self._last_bus_error = str(exc) or type(exc).__name__
             self._attempt_failed(outage, now)
             return
-        old, self.bus = self.bus, bus
+        with self._send_lock:
+            old, self.bus = self.bus, bus
         if self._owned is old:
             try:
                 old.shutdown()
@@ -478,7 +620,8 @@ class NodeRunner:
                 self._stats.offline_drops += 1
             return
         try:
-            self.bus.send(frame_to_message(frame))
+            with self._send_lock:
+                self.bus.send(frame_to_message(frame))
         except BusDisconnected as exc:
             with self._lock:
                 self._stats.send_errors += 1
@@ -581,6 +724,8 @@ class MultiRunner:
     def start(self, timeout: float = 5.0) -> MultiRunner:
         """Start the thread; returns once every runner's devices have booted."""
         self._thread = _start_thread(self, self._run, timeout)
+        for runner in self.runners:
+            runner._start_pacer()
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
@@ -630,6 +775,8 @@ class MultiRunner:
             if runner.failure is not None and id(runner) in self._registered:
                 self._unregister(runner)  # its bus may stay readable (EOF) for ever
         live = [r for r in self.runners if r.failure is None]
+        for runner in live:  # this thread is alive for each of them (their pacers look)
+            runner._progress_us = runner._clock()
         polled = [r for r in live if not self._watch(r)]
         timeout = self._poll_s if polled else self._max_wait_s
         due: list[NodeRunner] = []

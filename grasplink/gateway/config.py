@@ -30,6 +30,7 @@ from grasplink.gateway.levels import (
     force_table,
     slip_table,
 )
+from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
@@ -103,8 +104,11 @@ class GatewayConfig:
     source: str = "<defaults>"
     node_id: int = obj.GATEWAY_NODE_ID
     heartbeat_ms: int = 100
-    # A node's heartbeat is lost after this many of its periods (the master's consumer time).
+    # The nodes' consumer time of the gateway's heartbeat (1016h): this many of its periods
+    # plus `consumer_allowance_ms` for a host's scheduling (CiA 301 practice: comfortably
+    # more than the producer time); 3 x 100 ms + 200 ms = 500 ms by default.
     consumer_factor: float = 3.0
+    consumer_allowance_ms: int = CONSUMER_ALLOWANCE_MS
     sdo_timeout_ms: int = 500
     status_period_s: float = 5.0
     nodes: dict[str, NodeConfig] = field(default_factory=dict)
@@ -114,6 +118,15 @@ class GatewayConfig:
 
     def node(self, kind: str) -> NodeConfig | None:
         return self.nodes.get(kind)
+
+    @property
+    def consumer_ms(self) -> int:
+        """The consumer time the gateway provisions into every node's 1016h:01 for its own
+        heartbeat: factor x period + allowance, and always more than one period."""
+        return max(
+            round(self.heartbeat_ms * self.consumer_factor) + self.consumer_allowance_ms,
+            self.heartbeat_ms + 1,
+        )
 
 
 def load_config(path: str | Path | None) -> GatewayConfig:
@@ -142,6 +155,9 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     config.node_id = gw.integer("node_id", obj.GATEWAY_NODE_ID, low=1, high=127)
     config.heartbeat_ms = gw.integer("heartbeat_ms", 100, low=10, high=10_000)
     config.consumer_factor = gw.number("consumer_factor", 3.0, low=1.5, high=20.0)
+    config.consumer_allowance_ms = gw.integer(
+        "consumer_allowance_ms", CONSUMER_ALLOWANCE_MS, low=0, high=10_000
+    )
     config.sdo_timeout_ms = gw.integer("sdo_timeout_ms", 500, low=10, high=10_000)
     config.status_period_s = gw.number("status_period_s", 5.0, low=0.1, high=3600.0)
     gw.finish()

@@ -5,6 +5,16 @@ the embedded bus, optionally the four device nodes beside it), reopens a
 lost bus with back-off, and offers the gateway's latest snapshot and a
 one-line status for whoever watches (the CLI, telemetry).
 
+Start-up comes in two steps so a failure sends nothing: `open` opens every bus and
+readies the decoder without a frame, the caller binds its surfaces (Modbus, MQTT), and
+only `go` starts the runners - the reset, provisioning and heartbeat that follow are
+what a running gateway owes its nodes. `start` does both.
+
+The gateway's own heartbeat is served apart from its decoding: the master hands it to
+the runner as an urgent timer (`NmtMaster.detach_heartbeat`), which a pacer thread at
+real-time priority (where the host allows it) sends on time while the runner's thread
+decodes, and which that thread also serves between two received frames.
+
 It can master several buses at once (``more_buses``): one `Gateway` per bus,
 each its own CANopen network with the configured node-IDs, all served by one
 thread (`MultiRunner`) rather than one thread per bus, so gateways sharing a
@@ -22,6 +32,7 @@ import can
 
 from grasplink.bus import MultiRunner, NodeRunner, open_bus
 from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S
+from grasplink.bus.runner import DEFAULT_STALL_LIMIT_S
 from grasplink.devices.factory import build_node
 from grasplink.errors import BusError
 from grasplink.gateway.config import GatewayConfig
@@ -57,6 +68,7 @@ class LiveGateway:
         with_nodes: bool = False,
         reconnect_timeout_s: float = DEFAULT_RECONNECT_TIMEOUT_S,
         more_buses: Sequence[str] = (),
+        stall_limit_s: float = DEFAULT_STALL_LIMIT_S,
     ):
         self.bus_url = bus_url
         self.bus_urls = [bus_url, *more_buses]
@@ -67,6 +79,9 @@ class LiveGateway:
         self.gateway = self.gateways[0]
         self.with_nodes = with_nodes
         self.reconnect_timeout_s = reconnect_timeout_s
+        self.stall_limit_s = stall_limit_s
+        self._opened = False
+        self._node_runners: list[NodeRunner] = []
         self._buses: list[can.BusABC] = []
         self._runners: list[NodeRunner | MultiRunner] = []
         self._gateway_runners: list[NodeRunner] = []
@@ -83,7 +98,22 @@ class LiveGateway:
         self.stop()
 
     def start(self) -> None:
-        node_runners: list[NodeRunner] = []
+        """`open`, then `go`."""
+        self.open()
+        self.go()
+
+    @property
+    def up(self) -> bool:
+        """Whether `go` has started the runners (the network is being mastered)."""
+        return bool(self._runners)
+
+    def open(self) -> None:
+        """Open every bus and ready the gateways to go live, sending no frame: a BusError
+        here (or anything the caller fails at before `go`) leaves the network untouched."""
+        if self._opened:
+            raise RuntimeError("LiveGateway.open() twice")
+        self._opened = True
+        node_runners = self._node_runners
         for url, gateway in zip(self.bus_urls, self.gateways, strict=True):
             bus = open_bus(url)
             self._buses.append(bus)
@@ -100,9 +130,20 @@ class LiveGateway:
                     name=f"grasplink-gateway {url}",
                     reopen=functools.partial(open_bus, url),
                     reconnect_timeout_s=self.reconnect_timeout_s,
+                    urgent=[gateway.detach_heartbeat()],
+                    pace_urgent=True,
+                    stall_limit_s=self.stall_limit_s,
                 )
             )
         prepare_to_go_live(self.gateways)
+
+    def go(self) -> None:
+        """Start the runners: the gateway resets, provisions and starts its nodes."""
+        if not self._opened:
+            raise RuntimeError("LiveGateway.go() before open()")
+        if self._runners:
+            raise RuntimeError("LiveGateway.go() twice")
+        node_runners = self._node_runners
         if len(self.bus_urls) == 1:
             self._runners += [r.start() for r in node_runners]
             self._runners.append(self._gateway_runners[0].start())
@@ -118,12 +159,18 @@ class LiveGateway:
             bus.shutdown()
         self._runners.clear()
         self._gateway_runners.clear()
+        self._node_runners.clear()
         self._buses.clear()
 
     @property
     def failure(self) -> BusError | None:
         """Why a gateway's runner gave up on its bus (the first such), or None."""
         return next((r.failure for r in self._gateway_runners if r.failure is not None), None)
+
+    @property
+    def heartbeat_priority(self) -> str | None:
+        """What the host granted the thread sending the gateway's heartbeat (None: not yet)."""
+        return next((r.pacer_priority for r in self._gateway_runners if r.pacer_priority), None)
 
     def snapshot(self) -> dict[str, Any] | None:
         return self.gateway.latest
@@ -165,6 +212,12 @@ def status_of(gateway: Gateway) -> str:
         f"reflex {hand['reflex']}",
         f"loop p99 {latency:.0f} us" if latency is not None else "loop -",
     ]
+    beat = snap.get("heartbeat")
+    if beat and beat["late"]:
+        parts.append(
+            f"own heartbeat late {beat['late']}x (max {beat['late_max_ms']:.0f} ms, "
+            f"{beat['over_consumer']} over {beat['consumer_ms']:.0f} ms)"
+        )
     if snap["alarms"]:
         parts.append("ALARMS " + "; ".join(f"{k}: {v}" for k, v in snap["alarms"].items()))
     return " | ".join(parts)

@@ -25,13 +25,22 @@ Two rules keep a node's safe state from being undone by the master:
 
 from __future__ import annotations
 
+import logging
+from collections import deque
 from dataclasses import dataclass, field
+from typing import Any
 
 from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, NODE_ID_MASK, Frame
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.profiles import objects as obj
 
+logger = logging.getLogger(__name__)
+
 LOST_AFTER_PERIODS = 3
+# What the nodes' consumer of the master's heartbeat (1016h) allows beyond a multiple of its
+# period: a host's scheduling (a loaded gateway thread, a bus relay) must not fault a node.
+CONSUMER_ALLOWANCE_MS = 200
+LATE_LOG_EVERY_US = 10_000_000  # late beats after the first are logged at most this often
 
 # CiA 301 EMCY error codes the master acts on.
 EMCY_ERROR_RESET = 0x0000  # "error reset or no error"
@@ -124,6 +133,110 @@ class NodeStatus:
         self.active_emcy.clear()
 
 
+class HeartbeatProducer:
+    """The master's own heartbeat (sans-IO): a beat every period on a fixed grid, and how
+    late each one went out.
+
+    Kept apart from the rest of the master so a live edge can serve it on a schedule of
+    its own (a real-time thread, or between two received frames), never behind decoding;
+    its state is its own, so serving it from another thread touches nothing else.
+
+    Lateness is time past the beat's grid slot. A beat is *late* when it is more than a
+    quarter of the nodes' margin (consumer time - period) behind; an interval longer than
+    the nodes' consumer time would have faulted them (EMCY 8130h) and is counted apart.
+    The first late beat is logged at once, later ones at most every 10 s, with counts.
+    """
+
+    def __init__(self, node_id: int, period_us: int, consumer_us: int, history: int = 1000):
+        if period_us <= 0 or consumer_us <= period_us:
+            raise ValueError("a heartbeat needs period_us > 0 and consumer_us > period_us")
+        self.node_id = node_id
+        self.period_us = period_us
+        self.consumer_us = consumer_us
+        self.late_after_us = (consumer_us - period_us) // 4
+        self.frame = Frame(HEARTBEAT_BASE + node_id, bytes([NmtState.OPERATIONAL]))
+        self.beats = 0
+        self.late = 0
+        self.over_consumer = 0  # intervals longer than the nodes' consumer time
+        self.max_late_us = 0
+        self.max_interval_us = 0
+        self.intervals_us: deque[int] = deque(maxlen=history)  # the latest, for percentiles
+        self._next_us: int | None = None
+        self._last_us: int | None = None
+        self._logged_us: int | None = None  # when late beats were last logged
+        self._unlogged = 0  # late beats since then
+
+    def start(self, t_us: int) -> list[Frame]:
+        """Start the grid at `t_us` (the boot-up heartbeat the master sends then is beat 0)."""
+        self._next_us = t_us + self.period_us
+        self._last_us = t_us
+        return []
+
+    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
+        return []
+
+    def next_deadline_us(self) -> int | None:
+        return self._next_us
+
+    def advance(self, t_us: int) -> list[Frame]:
+        due = self._next_us
+        if due is None or t_us < due:
+            return []
+        self._next_us = due + self.period_us * (1 + (t_us - due) // self.period_us)
+        self._count(t_us, t_us - due)
+        return [self.frame]
+
+    def _count(self, t_us: int, late_us: int) -> None:
+        self.beats += 1
+        self.max_late_us = max(self.max_late_us, late_us)
+        if self._last_us is not None:
+            interval = t_us - self._last_us
+            self.intervals_us.append(interval)
+            self.max_interval_us = max(self.max_interval_us, interval)
+            if interval > self.consumer_us:
+                self.over_consumer += 1
+        self._last_us = t_us
+        if late_us <= self.late_after_us:
+            return
+        self.late += 1
+        self._unlogged += 1
+        if self._logged_us is None or t_us - self._logged_us >= LATE_LOG_EVERY_US:
+            logger.warning(
+                "own heartbeat 0x%03X went out %.0f ms late (%d late beats of %d so far, "
+                "%d since the last report; %d intervals over the nodes' %d ms consumer time)",
+                self.frame.can_id,
+                late_us / 1000,
+                self.late,
+                self.beats,
+                self._unlogged,
+                self.over_consumer,
+                self.consumer_us // 1000,
+            )
+            self._logged_us = t_us
+            self._unlogged = 0
+
+    def stats(self) -> dict[str, Any]:
+        """For the snapshot: counts, lateness and the recent intervals' p50/p99/max (ms)."""
+        recent = sorted(tuple(self.intervals_us))  # a copy first: another thread may beat
+
+        def pick(share: float) -> float | None:
+            if not recent:
+                return None
+            return recent[min(len(recent) - 1, int(share * len(recent)))] / 1000
+
+        return {
+            "period_ms": self.period_us / 1000,
+            "consumer_ms": self.consumer_us / 1000,
+            "beats": self.beats,
+            "late": self.late,
+            "late_max_ms": self.max_late_us / 1000,
+            "over_consumer": self.over_consumer,
+            "interval_p50_ms": pick(0.5),
+            "interval_p99_ms": pick(0.99),
+            "interval_max_ms": self.max_interval_us / 1000,
+        }
+
+
 class NmtMaster:
     def __init__(
         self,
@@ -133,6 +246,7 @@ class NmtMaster:
         node_heartbeat_ms: int = 100,
         autostart: bool = True,
         interval_history: int = 1000,
+        consumer_ms: int | None = None,
     ):
         self.node_id = node_id
         self.heartbeat_us = heartbeat_ms * 1000
@@ -140,11 +254,22 @@ class NmtMaster:
         self.autostart = autostart
         self.interval_history = interval_history
         self.nodes: dict[int, NodeStatus] = {}
-        self._next_beat_us: int | None = None
+        # the nodes' consumer time of our heartbeat (1016h): 3 periods and an allowance
+        if consumer_ms is None:
+            consumer_ms = LOST_AFTER_PERIODS * heartbeat_ms + CONSUMER_ALLOWANCE_MS
+        self.heartbeat = HeartbeatProducer(node_id, self.heartbeat_us, consumer_ms * 1000)
+        self._own_heartbeat = True  # False once a live edge serves `heartbeat` itself
+
+    def detach_heartbeat(self) -> HeartbeatProducer:
+        """Hand the heartbeat to the caller, who serves it (start, advance) on a schedule of
+        its own; `advance` and `next_deadline_us` then leave it out. Before `start`."""
+        self._own_heartbeat = False
+        return self.heartbeat
 
     # -- SansIoDevice --------------------------------------------------------------
     def start(self, t_us: int) -> list[Frame]:
-        self._next_beat_us = t_us + self.heartbeat_us
+        if self._own_heartbeat:
+            self.heartbeat.start(t_us)
         return [
             Frame(HEARTBEAT_BASE + self.node_id, bytes([NmtState.INITIALISING])),
             self.command(NmtCommand.RESET_COMMUNICATION, 0),
@@ -248,12 +373,7 @@ class NmtMaster:
         )
 
     def advance(self, t_us: int) -> list[Frame]:
-        frames = []
-        if self._next_beat_us is not None and t_us >= self._next_beat_us:
-            frames.append(Frame(HEARTBEAT_BASE + self.node_id, bytes([NmtState.OPERATIONAL])))
-            self._next_beat_us += self.heartbeat_us * (
-                1 + (t_us - self._next_beat_us) // self.heartbeat_us
-            )
+        frames = self.heartbeat.advance(t_us) if self._own_heartbeat else []
         for status in self.nodes.values():
             deadline = self._lost_deadline_us(status)
             if deadline is not None and t_us >= deadline:
@@ -262,7 +382,7 @@ class NmtMaster:
 
     def next_deadline_us(self) -> int | None:
         # asked after every frame: a running minimum (no list, map or generator)
-        best = self._next_beat_us
+        best = self.heartbeat.next_deadline_us() if self._own_heartbeat else None
         for status in self.nodes.values():
             deadline = self._lost_deadline_us(status)
             if deadline is not None and (best is None or deadline < best):

@@ -80,10 +80,7 @@ class Provisioner:
 
     # -- what is written -------------------------------------------------------------------
     def _heartbeats(self) -> list[SdoWrite]:
-        consumer_ms = max(
-            round(self.config.heartbeat_ms * self.config.consumer_factor),
-            self.config.heartbeat_ms + 1,
-        )
+        consumer_ms = self.config.consumer_ms
         return [
             self._write(obj.HEARTBEAT_PRODUCER_MS, 0, self.node.heartbeat_ms, "heartbeat time"),
             self._write(

@@ -124,6 +124,7 @@ class Gateway(NmtMaster):
             config.node_id,
             heartbeat_ms=config.heartbeat_ms,
             node_heartbeat_ms=max(skin_hb),
+            consumer_ms=config.consumer_ms,
         )
         self.config = config
         self.links: dict[int, NodeLink] = {}
@@ -516,6 +517,7 @@ class Gateway(NmtMaster):
                 "latency_p99_us": _percentile(latencies, 0.99),
                 "percepts": self.counters["percepts"],
             },
+            "heartbeat": self.heartbeat.stats(),  # our own: how late it went out
             "alarms": dict(self.alarms),
         }
 
