@@ -5,8 +5,16 @@ Each test names what a user sees; each failed on the code before its fix.
 
 from __future__ import annotations
 
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
 from pathlib import Path
 
+import can
 import pytest
 
 from grasplink.errors import ConfigError
@@ -139,3 +147,119 @@ def test_a_hub_host_that_does_not_resolve_is_named_not_no_hub_there() -> None:
     message = str(caught.value)
     assert "cannot resolve hub host 'nohost.invalid'" in message
     assert "start one" not in message
+
+
+# -- 4. the hub: a client that drops is one line, not tracebacks --------------------------------
+
+# Joins, then leaves what the hub sends it unread: killed so, its socket closes with a reset
+# (data unread), as a crashed or unplugged client's does, not with an orderly end of stream.
+DROPPING_CLIENT = """
+import select, sys
+from grasplink.bus.url import open_bus
+bus = open_bus(sys.argv[1])
+print("joined", flush=True)
+select.select([bus.fileno()], [], [], 30)
+print("hearing", flush=True)
+sys.stdin.readline()  # the test kills this process here, without a goodbye
+"""
+
+
+def _child_env() -> dict[str, str]:
+    import os
+
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+def _lines_of(stream, sink) -> threading.Thread:  # type: ignore[no-untyped-def]
+    thread = threading.Thread(target=lambda: [sink.put(line) for line in stream], daemon=True)
+    thread.start()
+    return thread
+
+
+def _wait_line(lines: queue.Queue[str], pattern: str, timeout_s: float, seen: list[str]) -> str:
+    deadline = time.monotonic() + timeout_s
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            line = lines.get(timeout=left)
+        except queue.Empty:
+            break
+        seen.append(line)
+        if re.search(pattern, line):
+            return line
+    pytest.fail(f"no line matching {pattern!r} within {timeout_s} s; got {seen!r}")
+
+
+@pytest.mark.slow
+def test_a_hub_client_that_drops_is_one_line_on_stderr_and_the_hub_serves_on() -> None:
+    """A killed client made `grasplink bus hub` print two third-party tracebacks (the
+    session's send thread: BrokenPipeError; its receive loop: ConnectionResetError)."""
+    from grasplink.bus.url import open_bus
+
+    hub = subprocess.Popen(
+        [sys.executable, "-m", "grasplink.cli", "bus", "hub", "--port", "0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=_child_env(),
+    )
+    out: queue.Queue[str] = queue.Queue()
+    err: queue.Queue[str] = queue.Queue()
+    readers = [_lines_of(hub.stdout, out), _lines_of(hub.stderr, err)]
+    client = None
+    seen_out: list[str] = []
+    seen_err: list[str] = []
+    try:
+        url = re.search(
+            r"remote:ws://\S+", _wait_line(out, r"--bus remote:ws://", 30, seen_out)
+        ).group(0)  # type: ignore[union-attr]
+        client = subprocess.Popen(
+            [sys.executable, "-c", DROPPING_CLIENT, url],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            env=_child_env(),
+        )
+        client_out: queue.Queue[str] = queue.Queue()
+        readers.append(_lines_of(client.stdout, client_out))
+        _wait_line(client_out, "joined", 30, [])
+        sender, other = open_bus(url), open_bus(url)
+        try:
+            frame = can.Message(arbitration_id=0x181, data=b"\x01" * 8, is_extended_id=False)
+            sender.send(frame)
+            _wait_line(client_out, "hearing", 30, [])
+            client.kill()  # no websocket goodbye: the hub's next send meets a dead socket
+            client.wait(timeout=30)
+            deadline = time.monotonic() + 30
+            while err.empty() and time.monotonic() < deadline:
+                sender.send(frame)  # keep the hub writing to the dead client
+                time.sleep(0.01)
+            line = _wait_line(err, r"CAN hub: client 127\.0\.0\.1:\d+ dropped \(", 30, seen_err)
+            # The hub serves on: the two clients left still hear each other.
+            while other.recv(0) is not None:
+                pass
+            sender.send(can.Message(arbitration_id=0x202, data=b"on", is_extended_id=False))
+            deadline = time.monotonic() + 30
+            heard = None
+            while time.monotonic() < deadline and (heard is None or heard.arbitration_id != 0x202):
+                heard = other.recv(1.0)
+            assert heard is not None and heard.arbitration_id == 0x202
+        finally:
+            sender.shutdown()
+            other.shutdown()
+        hub.send_signal(signal.SIGTERM)
+        hub.wait(timeout=30)
+    finally:
+        for proc in (client, hub):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        for reader in readers:
+            reader.join(timeout=10)
+    while not err.empty():
+        seen_err.append(err.get())
+    stderr = "".join(seen_err)
+    assert "Traceback" not in stderr, stderr
+    assert "dropped" in line and stderr.count("dropped") == 1, stderr
+    assert hub.returncode == 0, stderr

@@ -5,6 +5,12 @@
 channel private to the hub, so every frame a client sends reaches all the
 other clients (and not the sender, like a real CAN controller). The server's
 bus config overrides whatever the client asks for.
+
+A client that drops (killed, unplugged, reset) is normal for a hub: it logs one
+line naming the client and why, and serves the others on. python-can-remote
+0.3.0 let the dropped socket's errors escape both of a session's threads (two
+tracebacks a client); `_HubSession` and `_HubRequestHandler` serve a session
+the same way, ending it quietly instead.
 """
 
 from __future__ import annotations
@@ -15,13 +21,22 @@ import logging
 import signal
 import socket
 import socketserver
+import sys
 import threading
 import time
 import uuid
 from collections.abc import Callable
 from typing import Any
 
-from can_remote.server import RemoteServer
+import can
+from can_remote.protocol import RemoteError
+from can_remote.server import (
+    ClientRequestHandler,
+    RemoteServer,
+    RemoteServerError,
+    RemoteServerProtocol,
+)
+from can_remote.websocket import WebSocket, WebsocketClosed, get_accept_key
 
 from grasplink.bus.url import DEFAULT_HUB_PORT
 from grasplink.errors import BusError
@@ -29,6 +44,134 @@ from grasplink.errors import BusError
 logger = logging.getLogger(__name__)
 
 DEFAULT_HUB_HOST = "127.0.0.1"
+
+
+# What a client that went away looks like from its socket (reset, broken pipe, closed fd).
+_GONE = (OSError, ValueError, WebsocketClosed, RemoteError)
+# Close codes of a client that said goodbye (normal closure, going away).
+_GOODBYE = (1000, 1001)
+
+
+def _address(client_address: Any) -> str:
+    """HOST:PORT of a client (its socket's peer address)."""
+    host, port = tuple(client_address)[:2]
+    return f"[{host}]:{port}" if ":" in str(host) else f"{host}:{port}"
+
+
+def _why(exc: BaseException) -> str:
+    """A client's departure in a few words."""
+    if isinstance(exc, WebsocketClosed):
+        if exc.code == 1006:  # python-can-remote's code for a socket that just closed
+            return "connection closed without a goodbye"
+        return f"closed with code {exc.code}{': ' + exc.reason if exc.reason else ''}"
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror.lower()
+    return str(exc) or type(exc).__name__
+
+
+class _HubSession(RemoteServerProtocol):
+    """One client's session: RemoteServerProtocol's loops, ending quietly when the client goes.
+
+    The receiving loop (the handler's thread) and the sending loop (a thread of
+    its own) are python-can-remote 0.3.0's, except that a dead socket in either
+    ends the session for both, and its reason is kept for one log line.
+    """
+
+    def __init__(self, config: dict[str, Any], websocket: WebSocket, address: str) -> None:
+        self.websocket = websocket
+        self.address = address
+        self.ended: BaseException | None = None  # why the session ended (first seen)
+        super().__init__(config, websocket)
+
+    def run(self) -> None:
+        self._send_thread.start()
+        try:
+            self._receive_from_client()
+        except _GONE as exc:
+            self._end(exc)
+        finally:
+            self._end(None)
+            if self._send_thread.is_alive():
+                self._send_thread.join(3)
+
+    def _end(self, why: BaseException | None) -> None:
+        """Stop both loops; the first reason given is the one logged."""
+        if why is not None and self.ended is None:
+            self.ended = why
+        self.running = False
+        with contextlib.suppress(OSError):  # wakes the receiving loop out of its select()
+            self.websocket.socket.shutdown(socket.SHUT_RDWR)
+
+    def _send_to_client(self) -> None:
+        try:
+            while self.running:
+                msg = self.bus.recv(0.5)
+                if msg is not None:
+                    self.send_msg(msg)
+        except _GONE as exc:
+            self._end(exc)
+        finally:
+            self.bus.shutdown()
+
+    def _receive_from_client(self) -> None:
+        while self.running:
+            event = self.recv()
+            if event is None:
+                continue
+            if isinstance(event, can.Message):
+                self.bus.send(event)
+            elif event["type"] == "periodic_start":
+                msg = can.Message(**event["payload"]["msg"])
+                task = self._send_tasks.get(msg.arbitration_id)
+                if task is not None:
+                    task.modify_data(msg)
+                else:
+                    self._send_tasks[msg.arbitration_id] = self.bus.send_periodic(
+                        msg, event["payload"]["period"], event["payload"].get("duration")
+                    )
+            elif event["type"] == "periodic_stop":
+                stopped = self._send_tasks.pop(event["payload"], None)
+                if stopped is not None:
+                    stopped.stop()
+
+
+class _HubRequestHandler(ClientRequestHandler):
+    """python-can-remote's handler with `_HubSession`: one line when a client goes."""
+
+    def start_websocket(self) -> None:
+        # ClientRequestHandler.start_websocket as in python-can-remote 0.3.0, with our session.
+        self.send_response(101)
+        self.send_header("Upgrade", "WebSocket")
+        self.send_header("Connection", "Upgrade")
+        self.send_header("Sec-WebSocket-Accept", get_accept_key(self.headers["Sec-WebSocket-Key"]))
+        offered = [p.strip() for p in self.headers.get("Sec-WebSocket-Protocol", "").split(",")]
+        protocol = "can.binary+json.v1" if "can.binary+json.v1" in offered else "can.json.v1"
+        self.send_header("Sec-WebSocket-Protocol", protocol)
+        self.end_headers()
+        address = _address(self.client_address)
+        server = self.server
+        assert isinstance(server, _HubServer)
+        try:
+            session = _HubSession(
+                server.config, WebSocket(None, protocol, sock=self.request), address
+            )
+        except _GONE as exc:
+            logger.warning("CAN hub: client %s left before joining (%s)", address, _why(exc))
+            return
+        except RemoteServerError as exc:  # spoke websocket, but not python-can-remote
+            logger.warning("CAN hub: refused client %s (%s)", address, exc)
+            return
+        logger.info("CAN hub: client %s joined", address)
+        server.clients.append(session)
+        try:
+            session.run()
+        finally:
+            server.clients.remove(session)
+        why = session.ended
+        if why is None or (isinstance(why, WebsocketClosed) and why.code in _GOODBYE):
+            logger.info("CAN hub: client %s left", address)
+        else:
+            logger.warning("CAN hub: client %s dropped (%s)", address, _why(why))
 
 
 class _HubServer(RemoteServer):
@@ -41,6 +184,7 @@ class _HubServer(RemoteServer):
         self._conns: dict[threading.Thread, socket.socket] = {}
         self._conns_lock = threading.Lock()
         super().__init__(host, port, **config)
+        self.RequestHandlerClass = _HubRequestHandler  # socketserver's documented attribute
 
     def server_bind(self) -> None:
         # HTTPServer.server_bind resolves the host's FQDN, which can stall
@@ -68,13 +212,20 @@ class _HubServer(RemoteServer):
                 self._conns.pop(threading.current_thread(), None)
 
     def handle_error(self, request: Any, client_address: Any) -> None:
-        logger.warning("CAN hub: connection from %s failed", client_address, exc_info=True)
+        """A connection that failed outside a session: one line if the client went away,
+        a traceback only for what would be a bug."""
+        exc = sys.exc_info()[1]
+        address = _address(client_address)
+        if isinstance(exc, _GONE):
+            logger.warning("CAN hub: connection from %s dropped (%s)", address, _why(exc))
+        else:
+            logger.warning("CAN hub: connection from %s failed", address, exc_info=True)
 
     def close_clients(self, timeout: float) -> None:
         """Say goodbye to every client, then cut what is left and join the threads."""
-        for protocol in list(self.clients):
+        for session in list(self.clients):
             with contextlib.suppress(Exception):
-                protocol._ws.close(1001, "CAN hub stopped")
+                session.websocket.close(1001, "CAN hub stopped")
         deadline = time.monotonic() + timeout
         self._join_handlers(time.monotonic() + min(0.5, timeout / 2))
         with self._conns_lock:
