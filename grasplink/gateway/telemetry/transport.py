@@ -42,6 +42,7 @@ from typing import Any, Protocol
 
 import aiomqtt
 import paho.mqtt.client as paho
+from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from grasplink.errors import BrokerError
 from grasplink.gateway.commands import Command, CommandResult
@@ -70,7 +71,11 @@ FIRST_SNAPSHOT_S = 1.0  # the first connection waits at most this for the gatewa
 WATCH_S = 2.0  # a session checks its acknowledgements this often (CONNECT_TIMEOUT_S)
 READ_EVERY_S = 0.2  # steady state: the socket read this often (sooner, the window half full)
 SNAPSHOT_PERIOD_S = SNAPSHOT_PERIOD_US / 1e6
-PUBACK_TYPE = 0x40  # MQTT 3.1.1 fixed header of a PUBACK (remaining length 2: the ID)
+PUBACK_TYPE = 0x40  # fixed header of a PUBACK (then its length: 2 the ID, 3-4 with a reason)
+PROTOCOL = aiomqtt.ProtocolVersion.V5  # for retain-as-published on the command topics
+# Commands: the retain flag as the publisher set it, also on a message forwarded live (MQTT
+# 5; MQTT 3.1.1 clears it), so a retained command is refused however it arrives.
+COMMAND_OPTIONS = SubscribeOptions(qos=1, retainAsPublished=True)
 TOPIC_CACHE = 256  # encoded topics kept (gateway topics, and replies to commands' names)
 # what the fast write and read paths use of paho's client (paho-mqtt 2.1/2.2, with aiomqtt 2.5.1)
 PAHO_INTERNALS = (
@@ -217,6 +222,10 @@ class MqttLink:
         self._steady = False  # set up, not stopping: the pump's ticks may read the socket
         self._polled: int | None = None  # the fd the ticks read (the loop does not watch it)
         self._polled_at = 0.0
+        # messages in flight at most: WINDOW, or fewer if the broker's CONNACK says it
+        # takes fewer unacknowledged (MQTT 5 Receive Maximum; paho does not apply it)
+        self.window = WINDOW
+        self._v5 = False  # the session speaks MQTT 5 (PUBLISH packets carry properties)
 
     def push(self, messages: list[Message]) -> None:
         """Queue messages and, connected, publish at once (on this thread, no task switch).
@@ -228,7 +237,7 @@ class MqttLink:
         if (
             not self.outbox
             and self._inner is not None
-            and len(self._inflight) + len(messages) <= WINDOW
+            and len(self._inflight) + len(messages) <= self.window
             and not self.protocol.holding
             and not self._reconnect
         ):
@@ -271,7 +280,7 @@ class MqttLink:
         if self.outbox or not self._steady:
             self._watch_reads()
             return
-        if len(self._inflight) >= WINDOW // 2 or now - self._polled_at >= READ_EVERY_S:
+        if len(self._inflight) >= self.window // 2 or now - self._polled_at >= READ_EVERY_S:
             self._polled_at = now
             self._read_if_readable(always=True)
 
@@ -332,7 +341,10 @@ class MqttLink:
                 # Small messages in a row: without this, Nagle holds each behind the broker's
                 # delayed ACK (40 ms on Linux).
                 socket_options=((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),),
-                clean_session=True,
+                protocol=PROTOCOL,
+                # MQTT 5 (Sparkplug 3.0 asks the same of an edge node): a new session at
+                # every connection, none kept after it (session expiry interval 0: unset)
+                clean_start=True,
                 max_inflight_messages=WINDOW,
             )
             client.pending_calls_threshold = 4 * WINDOW
@@ -424,7 +436,7 @@ class MqttLink:
 
     async def _session(self, client: aiomqtt.Client) -> None:
         for topic in self.protocol.subscriptions():
-            await client.subscribe(topic, qos=1)
+            await client.subscribe(topic, options=COMMAND_OPTIONS)
         self._reconnect = ""
         self._inner = client._client  # aiomqtt 2.5.1 (pinned) keeps its paho client here
         self._client = client
@@ -513,6 +525,17 @@ class MqttLink:
             self._taken(args[2])
 
         inner.on_publish = on_publish
+        aiomqtt_on_connect = inner.on_connect
+        assert aiomqtt_on_connect is not None
+
+        def on_connect(*args: Any) -> None:
+            properties = args[4] if len(args) > 4 else None
+            receive_maximum = getattr(properties, "ReceiveMaximum", None)
+            self.window = min(WINDOW, receive_maximum or WINDOW)
+            aiomqtt_on_connect(*args)
+
+        inner.on_connect = on_connect
+        self.window = WINDOW
         # aiomqtt registers the socket for writing through call_soon_threadsafe (paho may
         # ask from the thread that connects): a registration that lands after `_flush` has
         # written everything leaves a writer paho no longer knows of, woken on every turn
@@ -553,10 +576,8 @@ class MqttLink:
         self._register_write = register_write
         inner.on_socket_register_write = on_socket_register_write
         # The fast paths below use paho 2.x internals; another paho keeps its own paths.
-        self._fast = (
-            all(hasattr(inner, name) for name in PAHO_INTERNALS)
-            and inner._protocol != paho.MQTTv5  # the packets built here are MQTT 3.1.1's
-        )
+        self._fast = all(hasattr(inner, name) for name in PAHO_INTERNALS)
+        self._v5 = getattr(inner, "_protocol", None) == paho.MQTTv5
         if self._fast:
             self._buffer_reads(inner)
 
@@ -564,17 +585,29 @@ class MqttLink:
         """paho reads a packet a few bytes per system call (type, length, rest: three for a
         PUBACK); read what the socket has in one and hand it out from memory. Whatever is
         left in memory when paho's read loop stops is read at once, not when the socket
-        next becomes readable (it may not). PUBACKs (MQTT 3.1.1: 40 02 and the message ID)
+        next becomes readable (it may not). PUBACKs (40 02 and the message ID; MQTT 5 may
+        add a success reason code below 0x80 and an empty property length: 40 03, 40 04)
         are taken here, at a packet boundary, as paho's own handler would (the message
         leaves paho's in-flight table, its info says published, the window moves on),
         without the reason-code and properties objects paho builds for each."""
         sock_recv, loop_read = inner._sock_recv, inner.loop_read
         pending = bytearray()
 
+        def puback_size() -> int:
+            """Bytes of the successful PUBACK at the front of `pending` (0: none there)."""
+            if len(pending) < 4 or pending[0] != PUBACK_TYPE:
+                return 0
+            size = pending[1] + 2
+            if size == 4:
+                return 4
+            if size in (5, 6) and len(pending) >= size and pending[4] < 0x80:
+                return size if size == 5 or pending[5] == 0 else 0  # no properties
+            return 0  # an error reason, or properties: paho reads it
+
         def acknowledgements() -> None:
-            while len(pending) >= 4 and pending[0] == PUBACK_TYPE and pending[1] == 2:
+            while size := puback_size():
                 mid = pending[2] << 8 | pending[3]
-                del pending[:4]
+                del pending[:size]
                 inner._last_bytes_received = time.monotonic()  # paho's keep-alive clock
                 with inner._out_message_mutex:
                     message = inner._out_messages.pop(mid, None)
@@ -638,7 +671,7 @@ class MqttLink:
         self._progress_at = time.monotonic()
         if not self._inflight and (self._settling or self.stopping.is_set()):
             self._wake.set()  # only when someone waits for it: a wake-up is a task step
-        if self.outbox and self._refill is None and len(self._inflight) <= WINDOW // 2:
+        if self.outbox and self._refill is None and len(self._inflight) <= self.window // 2:
             # not from inside paho's callback: on the loop's next turn
             self._refill = asyncio.get_running_loop().call_soon(self._drain)
 
@@ -647,7 +680,7 @@ class MqttLink:
         self._refill = None
         if self._inner is None or self.protocol.holding or self._reconnect:
             return
-        room = WINDOW - len(self._inflight)
+        room = self.window - len(self._inflight)
         if room > 0 and self.outbox:
             self._publish_now(self.outbox.take(room))
 
@@ -681,7 +714,7 @@ class MqttLink:
         self._flush(inner)
 
     def _queue_packets(self, inner: paho.Client, messages: list[Message]) -> None:
-        """What `paho.Client.publish` does for a message (MQTT 3.1.1: the PUBLISH packet,
+        """What `paho.Client.publish` does for a message (the MQTT 5 PUBLISH packet,
         an ID from paho's own sequence, the packet in paho's write queue), without the
         message and info objects, the lock, the checks and the log call it makes for each:
         the link tracks its messages itself (`_inflight`), and PUBACKs are read by
@@ -691,6 +724,8 @@ class MqttLink:
             self._wake.set()  # _watch sees the lost receiver
             return
         queue, topics, mid_generate = inner._out_packet, self._topics, inner._mid_generate
+        v5 = int(self._v5)  # MQTT 5: a property length (0, none) before the payload
+        properties = b"\x00" if v5 else b""
         for message in messages:
             final = self.protocol.finalize(message)
             if final is None:
@@ -704,7 +739,7 @@ class MqttLink:
                     raise ValueError(f"invalid topic for a publication: {final.topic!r}")
                 topic = topics[final.topic] = len(encoded).to_bytes(2, "big") + encoded
             qos, mid = final.qos, mid_generate()
-            length = len(topic) + len(final.payload) + (2 if qos else 0)
+            length = len(topic) + len(final.payload) + (2 if qos else 0) + v5
             command = paho.PUBLISH | qos << 1 | bool(final.retain)
             packet = b"".join(
                 (
@@ -712,6 +747,7 @@ class MqttLink:
                     _remaining_length(length),
                     topic,
                     mid.to_bytes(2, "big") if qos else b"",
+                    properties,
                     final.payload,
                 )
             )
