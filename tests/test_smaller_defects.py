@@ -263,3 +263,69 @@ def test_a_hub_client_that_drops_is_one_line_on_stderr_and_the_hub_serves_on() -
     assert "Traceback" not in stderr, stderr
     assert "dropped" in line and stderr.count("dropped") == 1, stderr
     assert hub.returncode == 0, stderr
+
+
+# -- 5. a python-canopen slave on the hub ---------------------------------------------------------
+
+
+def _wait(condition, timeout_s: float = 30.0) -> bool:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+@pytest.mark.slow
+def test_a_canopen_local_nodes_heartbeat_on_the_hub_is_heard_by_another_client() -> None:
+    """python-can-remote's periodic task broke python-canopen's heartbeat producer: the
+    first state change raised "TypeError: super() argument 1 must be a type, not
+    CyclicSendTask" (its modify_data), so no python-canopen slave could join a hub."""
+    import canopen
+
+    from grasplink.bus import CanHub
+    from grasplink.bus.url import open_bus
+
+    eds = str(ROOT / "grasplink" / "profiles" / "belt.eds")
+    with CanHub("127.0.0.1", 0) as hub:
+        slave_net = canopen.Network(open_bus(hub.url)).connect()
+        master_net = canopen.Network(open_bus(hub.url)).connect()
+        try:
+            slave = canopen.LocalNode(0x05, eds)
+            slave_net.add_node(slave)
+            watched = master_net.add_node(canopen.RemoteNode(0x05, eds))
+            slave.nmt.state = "PRE-OPERATIONAL"
+            slave.nmt.start_heartbeat(50)
+            assert _wait(lambda: watched.nmt.state == "PRE-OPERATIONAL")
+            slave.nmt.state = "OPERATIONAL"  # the heartbeat's data changes: modify_data
+            assert _wait(lambda: watched.nmt.state == "OPERATIONAL")
+            slave.nmt.stop_heartbeat()
+        finally:
+            slave_net.disconnect()
+            master_net.disconnect()
+
+
+@pytest.mark.slow
+def test_network_send_periodic_on_the_hub_sends_updated_data() -> None:
+    import canopen
+
+    from grasplink.bus import CanHub
+    from grasplink.bus.url import open_bus
+
+    with CanHub("127.0.0.1", 0) as hub:
+        network = canopen.Network(open_bus(hub.url)).connect()
+        listener = open_bus(hub.url)
+        try:
+            task = network.send_periodic(0x181, b"\x01", 0.02)
+            task.update(b"\x02")
+            deadline = time.monotonic() + 30
+            data = None
+            while time.monotonic() < deadline and data != b"\x02":
+                msg = listener.recv(1.0)
+                data = None if msg is None else bytes(msg.data)
+            assert data == b"\x02"
+            task.stop()
+        finally:
+            network.disconnect()
+            listener.shutdown()

@@ -22,13 +22,16 @@ import contextlib
 import errno
 import os
 import socket
+import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from http.client import HTTPConnection, HTTPException, HTTPSConnection
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
 import can
+from can.broadcastmanager import ThreadBasedCyclicSendTask
 from can_remote import DEFAULT_PORT as CAN_REMOTE_DEFAULT_PORT
 from can_remote.client import DEFAULT_SSL_CONTEXT, RemoteBus, RemoteClientProtocol
 from can_remote.protocol import RemoteError
@@ -319,7 +322,36 @@ class HubClientBus(RemoteBus):
         self.socket = websocket.socket
         self.channel_info = self.remote_protocol.channel_info
         self.channel = channel
+        self._periodic_lock = threading.Lock()
         can.BusABC.__init__(self, channel)
+
+    def _send_periodic_internal(
+        self,
+        msgs: Sequence[can.Message] | can.Message,
+        period: float,
+        duration: float | None = None,
+        autostart: bool = True,
+        modifier_callback: Callable[[can.Message], None] | None = None,
+    ) -> can.broadcastmanager.CyclicSendTaskABC:
+        """Periodic frames sent from this process by python-can's own thread task.
+
+        python-can-remote 0.3.0 asks the hub to send them instead, and its task's
+        modify_data raises TypeError (``super(self)``): python-canopen calls it on every
+        change of a heartbeat's state byte, so a canopen LocalNode's heartbeat producer
+        (or ``network.send_periodic``) could not run on a hub. Sent from here, a heartbeat
+        also stops when this process hangs or dies, which is what it vouches for; the hub
+        sending it would keep a hung node looking alive. This is BusABC's own
+        implementation (the hook python-can documents for backends to override).
+        """
+        return ThreadBasedCyclicSendTask(
+            bus=self,
+            lock=self._periodic_lock,
+            messages=msgs,
+            period=period,
+            duration=duration,
+            autostart=autostart,
+            modifier_callback=modifier_callback,
+        )
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         try:
@@ -338,6 +370,7 @@ class HubClientBus(RemoteBus):
     def shutdown(self) -> None:
         if self._is_shutdown:
             return
+        self.stop_all_periodic_tasks()  # before the socket closes under their threads
         ws = self.remote_protocol._ws
         try:
             if not ws.closed:
