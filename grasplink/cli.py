@@ -483,6 +483,23 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _speed_text(simulated_s: float, wall_s: float) -> str:
+    """How fast a run went against the wall clock, in two significant digits at least:
+    "38x real time", "2.5x real time", "0.42x real time (2.4x slower)"."""
+    if simulated_s <= 0 or wall_s <= 0:
+        return "no time simulated" if simulated_s <= 0 else "faster than the clock resolves"
+    speed = simulated_s / wall_s
+    text = f"{_figure(speed)}x real time"
+    if speed < 0.95:
+        text += f" ({_figure(1 / speed)}x slower)"
+    return text
+
+
+def _figure(x: float) -> str:
+    """Two significant digits, never an exponent: 0.042, 2.5, 38, 1200."""
+    return f"{x:.0f}" if x >= 10 else f"{x:.2g}"
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from grasplink.controllers import build_controllers
     from grasplink.simulators.engine import Simulation
@@ -503,10 +520,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             progress.close()
     states = ", ".join(f"{k} {v['state'].lower()}" for k, v in summary["nodes"].items())
     simulated_s = summary["simulated_s"]
-    speed = simulated_s / max(sim.wall_s, 1e-9)
     print(
         f"{scene.name}: {simulated_s:g} s simulated in {sim.wall_s:.2f} s "
-        f"({speed:.0f}x real time{', paced' if realtime else ''})"
+        f"({_speed_text(simulated_s, sim.wall_s)}{', paced' if realtime else ''})"
     )
     print(f"  nodes: {states or 'none'}; effects: {', '.join(summary['effects']) or 'none'}")
     print(f"  wrote {out}/ ({', '.join(sorted(p.name for p in out.iterdir()))})")

@@ -329,3 +329,36 @@ def test_network_send_periodic_on_the_hub_sends_updated_data() -> None:
         finally:
             network.disconnect()
             listener.shutdown()
+
+
+# -- 6. `grasplink run`: how fast a scene ran -----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("wall_per_simulated_s", "says"),
+    [
+        (2.5, "(0.4x real time (2.5x slower))"),  # said "(0x real time)"
+        (1 / 2.5, "(2.5x real time)"),  # said "(2x real time)"
+        (1 / 38, "(38x real time)"),
+        (250.0, "(0.004x real time (250x slower))"),
+    ],
+)
+def test_run_prints_the_speed_with_two_significant_digits_even_below_real_time(
+    tmp_path: Path, monkeypatch, capsys, wall_per_simulated_s: float, says: str
+) -> None:
+    from grasplink import cli
+    from grasplink.simulators.engine import Simulation
+
+    scene = tmp_path / "belt.toml"
+    scene.write_text('[scene]\nname = "belt"\nduration_s = 0.2\n[nodes.belt]\n')
+    run = Simulation.run
+
+    def run_on_a_slow_machine(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        summary = run(self, *args, **kwargs)
+        self.wall_s = summary["simulated_s"] * wall_per_simulated_s  # what the clock said
+        return summary
+
+    monkeypatch.setattr(Simulation, "run", run_on_a_slow_machine)
+    assert cli.main(["run", str(scene), "--out", str(tmp_path / "out")]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith("belt: 0.2 s simulated in ") and first.endswith(says), first
