@@ -7,6 +7,7 @@ non-zero; tracebacks are for bugs only.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -114,7 +115,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration",
         type=positive_seconds,
         default=None,
-        help="stop after this many seconds (default: run until Ctrl-C)",
+        help="stop this many seconds after the gateway is up (default: run until Ctrl-C)",
+    )
+    gateway.add_argument(
+        "--ready-file",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="write this file once the gateway is up (every surface bound, the bus open, "
+        "its heartbeat running) and remove it on exit: for scripts to wait on",
     )
     gateway.add_argument(
         "--reconnect-timeout",
@@ -684,25 +693,31 @@ def cmd_gateway(args: argparse.Namespace) -> int:
         unit_ids(modbus_url, len(buses))  # a unit per bus: too many for the address space
     telemetry = telemetry_options(args)  # and bad --mqtt options
     telemetry_ids = mqtt_ids(args.mqtt_id, len(buses))
-    deadline = None if args.duration is None else time.monotonic() + args.duration
-    with (
-        StopSignals() as stop,
-        LiveGateway(
+    ready_file = args.ready_file
+    if ready_file is not None:
+        _clear_ready_file(ready_file)  # a stale one must not say "up" for this run
+    # Start-up order: every surface is bound or connected before the network is touched,
+    # so a failure (port taken, broker unreachable) exits having sent no frame.
+    with StopSignals() as stop, ExitStack() as running:
+        live = LiveGateway(
             buses[0],
             config,
             with_nodes=args.with_nodes,
             reconnect_timeout_s=args.reconnect_timeout,
             more_buses=buses[1:],
-        ) as live,
-        _modbus_server(live.gateways, modbus_url) as modbus,
-        ExitStack() as publishing,
-    ):
-        publishers = [
-            publishing.enter_context(telemetry(gateway, config, gateway_id))
-            for gateway, gateway_id in zip(live.gateways, telemetry_ids, strict=True)
-        ]
+        )
+        running.callback(live.stop)
+        live.open()  # the buses open and the decoder ready: no frame yet
+        modbus = running.enter_context(_modbus_server(live.gateways, modbus_url))
         if modbus is not None:
             print(modbus.describe(), flush=True)
+        publishers = [
+            running.enter_context(telemetry(gateway, config, gateway_id))
+            for gateway, gateway_id in zip(live.gateways, telemetry_ids, strict=True)
+        ]
+        live.go()  # the first frame: reset, provisioning, heartbeat
+        up_at = time.monotonic()
+        deadline = None if args.duration is None else up_at + args.duration
         kinds = ", ".join(f"{k} 0x{n.node_id:02X}" for k, n in config.nodes.items())
         reflex = config.reflex
         print(
@@ -711,6 +726,15 @@ def cmd_gateway(args: argparse.Namespace) -> int:
             f"reflex {f'above {reflex.threshold_mm_s:g} mm/s' if reflex.enabled else 'off'}",
             flush=True,
         )
+        _wait_for_heartbeat(live)
+        print(
+            f"up: heartbeat every {config.heartbeat_ms} ms ({live.heartbeat_priority}), "
+            f"the nodes' consumer time {config.consumer_ms} ms",
+            flush=True,
+        )
+        if ready_file is not None:
+            _write_ready_file(ready_file)
+            running.callback(_clear_ready_file, ready_file)
         next_status = time.monotonic() + min(1.0, config.status_period_s)
         while not stop():
             if live.failure is not None:
@@ -728,6 +752,32 @@ def cmd_gateway(args: argparse.Namespace) -> int:
         final = live.status_line()
     print(f"stopped: {final}", flush=True)
     return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
+
+
+def _wait_for_heartbeat(live: Any, timeout_s: float = 5.0) -> None:
+    """Until the heartbeat thread runs (it says what priority it got), or the timeout."""
+    deadline = time.monotonic() + timeout_s
+    while live.heartbeat_priority is None and time.monotonic() < deadline:
+        if live.failure is not None:
+            raise live.failure
+        time.sleep(0.005)
+
+
+def _write_ready_file(path: Path) -> None:
+    """The ready file, whole or not at all (written aside, then renamed into place)."""
+    partial = path.with_name(path.name + ".partial")
+    try:
+        partial.write_text(f"up pid {os.getpid()}\n")
+        partial.replace(path)
+    except OSError as exc:
+        raise ConfigError(f"--ready-file {path}: cannot write: {exc.strerror}") from None
+
+
+def _clear_ready_file(path: Path) -> None:
+    try:
+        path.unlink(missing_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--ready-file {path}: cannot remove: {exc.strerror}") from None
 
 
 def _modbus_server(gateways: list[Any], url: object) -> AbstractContextManager[Any]:
@@ -801,6 +851,7 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
             log=lambda line: print(line, flush=True),
             primary_host_id=host_id,
             state_dir=Path(config.telemetry.state_dir).expanduser(),
+            first_snapshot_s=0.0,  # connected before the gateway runs: none is coming yet
         )
 
     return start

@@ -904,6 +904,7 @@ class TelemetryPublisher:
         backoff_s: tuple[float, float] = (BACKOFF_MIN_S, BACKOFF_MAX_S),
         primary_host_id: str | None = None,
         state_dir: Path | None = None,
+        first_snapshot_s: float = FIRST_SNAPSHOT_S,
     ):
         if not rate_hz > 0:
             raise ValueError("rate_hz must be positive")
@@ -929,6 +930,8 @@ class TelemetryPublisher:
                 )
             )
         self.backoff_s = backoff_s
+        # 0 for a gateway not yet running (connected before the network is touched)
+        self.first_snapshot_s = first_snapshot_s
         self.queue = SnapshotQueue()
         self.clock = SnapshotClock()
         self.links: list[MqttLink] = []
@@ -1067,7 +1070,7 @@ class TelemetryPublisher:
         """Before the first connection: wait (at most FIRST_SNAPSHOT_S; a gateway makes one
         every 50 ms from its start) for the gateway's first snapshot and prime the Sparkplug
         session with it, so the first NBIRTH reports the gateway's values and controls."""
-        deadline = time.monotonic() + FIRST_SNAPSHOT_S
+        deadline = time.monotonic() + self.first_snapshot_s
         while self.gateway.latest is None and time.monotonic() < deadline:
             await asyncio.sleep(POLL_S * 10)
         snapshot = self.gateway.latest
