@@ -5,6 +5,7 @@ Each test names what a user sees; each failed on the code before its fix.
 
 from __future__ import annotations
 
+import itertools
 import queue
 import re
 import signal
@@ -362,3 +363,111 @@ def test_run_prints_the_speed_with_two_significant_digits_even_below_real_time(
     assert cli.main(["run", str(scene), "--out", str(tmp_path / "out")]) == 0
     first = capsys.readouterr().out.splitlines()[0]
     assert first.startswith("belt: 0.2 s simulated in ") and first.endswith(says), first
+
+
+# -- 7. the commands the docs show still work as written ------------------------------------------
+
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+COMMAND = re.compile(r"^\s*(?:\$\s+)?(?:\.venv/bin/)?grasplink\s+(.*)$")
+# A synopsis, not a command: optional parts, choices, repetition or a placeholder (URL, FILE).
+SYNOPSIS = re.compile(r"[\[{|]|\.\.\.|(?<![\w.:/=-])[A-Z][A-Z0-9_]*(?:\.[a-z{][\w,}]*)?(?![\w:/])")
+
+
+def _doc_commands() -> list[tuple[str, str, str]]:
+    """(where, the command after `grasplink`, the next line of its block) for every command
+    line in a fenced block of README.md and docs/*.md (continuation lines joined)."""
+    found = []
+    for path in DOCS:
+        lines = path.read_text().splitlines()
+        fenced = False
+        i = 0
+        while i < len(lines):
+            line = lines[i]
+            if line.lstrip().startswith("```"):
+                fenced = not fenced
+            elif fenced and (match := COMMAND.match(line)):
+                where = f"{path.relative_to(ROOT)}:{i + 1}"
+                text = match.group(1)
+                while text.rstrip().endswith("\\") and i + 1 < len(lines):
+                    i += 1
+                    text = text.rstrip()[:-1] + " " + lines[i].strip()
+                following = lines[i + 1] if i + 1 < len(lines) else ""
+                found.append((where, text, following))
+            i += 1
+    return found
+
+
+def _words(text: str) -> list[str]:
+    import shlex
+
+    words = shlex.split(text, comments=True)
+    return words[:-1] if words and words[-1] == "&" else words
+
+
+def _help_of(words: list[str]) -> str:
+    """The --help text of the (sub)command the words start with."""
+    import contextlib
+    import io
+
+    from grasplink.cli import build_parser
+
+    path = []
+    for word in words[:2]:
+        if not re.fullmatch(r"[a-z]+", word):
+            break
+        path.append(word)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), pytest.raises(SystemExit) as exited:
+        build_parser().parse_args([*path, "--help"])
+    assert exited.value.code == 0, path
+    return out.getvalue()
+
+
+def test_the_docs_show_commands() -> None:
+    assert len(_doc_commands()) > 40
+
+
+@pytest.mark.parametrize(("where", "text", "following"), _doc_commands())
+def test_a_command_in_the_docs_parses_and_its_urls_are_valid(
+    where: str, text: str, following: str, capsys
+) -> None:
+    """Every `grasplink ...` line of README.md and docs/*.md: a synopsis names only options
+    its subcommand has; a command parses, and its --bus/--modbus/--mqtt URLs parse (or fail
+    with the error the docs print beside them)."""
+    from grasplink.bus.url import parse_bus_url
+    from grasplink.cli import build_parser
+    from grasplink.errors import GrasplinkError
+    from grasplink.gateway.modbus.url import parse_modbus_url
+    from grasplink.gateway.telemetry.url import parse_broker_url
+
+    words = _words(text)  # without a trailing comment or `&`
+    if SYNOPSIS.search(" ".join(words)):
+        help_text = _help_of(words)
+        for flag in re.findall(r"(?<![\w-])--[a-z][a-z-]*", " ".join(words)):
+            assert flag in help_text, f"{where}: {flag} is not an option of grasplink {words[0]}"
+        return
+    try:
+        build_parser().parse_args(words)
+    except SystemExit:
+        pytest.fail(f"{where}: grasplink {text}: {capsys.readouterr().err.strip()}")
+    shown_error = re.search(r"error: (.*)$", following)
+    parsers = {"--bus": parse_bus_url, "--modbus": parse_modbus_url, "--mqtt": parse_broker_url}
+    for flag, value in itertools.pairwise(words):
+        if flag not in parsers:
+            continue
+        if shown_error:
+            with pytest.raises(GrasplinkError) as caught:
+                parsers[flag](value)
+            assert shown_error.group(1) in str(caught.value), where
+        else:
+            parsers[flag](value)
+
+
+def test_python_examples_in_the_docs_name_valid_bus_urls() -> None:
+    """docs/buses.md showed parse_bus_url("socketcan:can0?bitrate=1000000"), which raises:
+    SocketCAN takes its bitrate from `ip link`, not from the URL."""
+    from grasplink.bus.url import parse_bus_url
+
+    for path in DOCS:
+        for url in re.findall(r"(?:parse_bus_url|open_bus)\(\"([^\"]+)\"\)", path.read_text()):
+            parse_bus_url(url)
