@@ -31,6 +31,7 @@ from grasplink.gateway.levels import (
     slip_table,
 )
 from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
+from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
@@ -115,6 +116,7 @@ class GatewayConfig:
     feedback: FeedbackSettings = field(default_factory=FeedbackSettings)
     reflex: ReflexConfig = field(default_factory=ReflexConfig)
     telemetry: TelemetrySettings = field(default_factory=TelemetrySettings)
+    plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
 
     def node(self, kind: str) -> NodeConfig | None:
         return self.nodes.get(kind)
@@ -186,6 +188,8 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     crush_n = hand.crush_limit_n if isinstance(hand, HandConfig) else 40.0
     config.reflex = _reflex(top.table_of("reflex", {}), crush_n)
     config.telemetry = _telemetry(top.table_of("telemetry", {}))
+    grip_rate_n_s = hand.grip_rate_n_s if isinstance(hand, HandConfig) else 50.0
+    config.plausibility = _plausibility(top.table_of("plausibility", {}), grip_rate_n_s)
     top.finish()
     return config
 
@@ -267,6 +271,23 @@ def _reflex(p: Params, crush_limit_n: float) -> ReflexConfig:
     reflex = _checked(p, "threshold_mm_s", lambda: ReflexConfig(**values))
     p.finish()
     return reflex
+
+
+def _plausibility(p: Params, grip_rate_n_s: float) -> PlausibilityConfig:
+    """Limits on what the loop follows; the grip slew defaults to the hand's own rate."""
+    d = PlausibilityConfig()
+    config = PlausibilityConfig(
+        grip_slew_n_s=p.number("grip_slew_n_s", grip_rate_n_s, low=0.1, high=1000.0),
+        belt_slew_mrad_s2=p.number("belt_slew_mrad_s2", d.belt_slew_mrad_s2, low=100.0, high=1e6),
+        command_interval_ms=p.number("command_interval_ms", d.command_interval_ms, low=1, high=100),
+        emg_max_amplitude_uv=p.number(
+            "emg_max_amplitude_uv", d.emg_max_amplitude_uv, low=100.0, high=65535.0
+        ),
+        hand_grip_margin_n=p.number("hand_grip_margin_n", d.hand_grip_margin_n, low=0.0, high=10.0),
+        hand_slew_factor=p.number("hand_slew_factor", d.hand_slew_factor, low=1.0, high=100.0),
+    )
+    p.finish()
+    return config
 
 
 def _telemetry(p: Params) -> TelemetrySettings:

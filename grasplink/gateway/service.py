@@ -26,6 +26,7 @@
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import time
 from collections import Counter, deque
@@ -36,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.core.frames import EMCY_BASE, Frame, function_of
+from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, Frame, function_of
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError, PdoError
@@ -45,6 +46,7 @@ from grasplink.gateway.config import (
     KINDS,
     EmgConfig,
     GatewayConfig,
+    HandConfig,
     NodeConfig,
     SkinConfig,
     parse_config,
@@ -53,6 +55,7 @@ from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.gateway.decoding.registry import make_decoder
 from grasplink.gateway.drives import DriveHandshake
 from grasplink.gateway.emg import (
+    ENVELOPE_FULL_SCALE_UV,
     CalibrationRecorder,
     EmgCalibration,
     EmgIntent,
@@ -61,6 +64,13 @@ from grasplink.gateway.emg import (
 from grasplink.gateway.feedback import FeedbackController, FeedbackOutput
 from grasplink.gateway.master import NmtMaster
 from grasplink.gateway.percept import Percept
+from grasplink.gateway.plausibility import (
+    CommandRamp,
+    EnvelopeCheck,
+    GripCheck,
+    Rejections,
+    judge_emcy,
+)
 from grasplink.gateway.provisioning import Provisioner, SdoWrite
 from grasplink.gateway.reflex import GripArbiter, GripCommand
 from grasplink.gateway.sdo_client import SdoClient, Transfer
@@ -69,7 +79,10 @@ from grasplink.profiles import load_profile, object_limits, od_default
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import Key, PdoCodec
 
+log = logging.getLogger(__name__)
+
 LATENCY_HISTORY = 2000
+SECOND_MASTER_CLEAR_US = 5_000_000  # the second-master alarm clears after this long unheard
 COMMAND_REFRESH_US = 100_000  # RPDOs repeat at least this often (drive handshake, deadlines)
 SNAPSHOT_PERIOD_US = 50_000  # 20 Hz, the default telemetry rate
 PROVISION_RETRY_US = 2_000_000
@@ -82,6 +95,7 @@ STATIC_FORCE_KEY = (obj.SKIN_STATIC_FORCE_MN, 0)
 ENVELOPE_KEY = (obj.EMG_ENVELOPE_UV, 0)
 STATUSWORD_KEY = (obj.STATUSWORD, 0)
 CONTROLWORD_KEY = (obj.CONTROLWORD, 0)
+HAND_GRIP_KEY = (obj.HAND_ACTUAL_GRIP_MN, 0)
 
 
 @dataclass
@@ -151,6 +165,7 @@ class Gateway(NmtMaster):
         self.last_estimate: SlipEstimate | None = None
         self.last_intent: EmgIntent | None = None
         self.counters: Counter[str] = Counter()
+        self._plausibility_setup()
         self.inbox = Inbox()  # commands from MQTT/Modbus threads, executed in advance()
         self.calibration = CalibrationRecorder()
         # Called with (t_us, estimate) for every skin decoder update (telemetry, replays).
@@ -215,6 +230,43 @@ class Gateway(NmtMaster):
         full = (1 << bits) - 1
         self._skin_n_per_count = full_scale_mn / (full - self._skin_zero) / 1e3
 
+    def _plausibility_setup(self) -> None:
+        """What the loop refuses to follow, and how fast its commands may move
+        (plausibility.py; limits from `[plausibility]` and the nodes' EDS)."""
+        plaus = self.config.plausibility
+        self.rejected = Rejections()
+        self.grip_ramp = CommandRamp(plaus.grip_slew_n_s * MN_PER_N, plaus.command_interval_us)
+        self.belt_ramp = CommandRamp(plaus.belt_slew_mrad_s2, plaus.command_interval_us)
+        self._second_master_us: int | None = None
+        self._eds_limits: dict[tuple[str, Key], tuple[float, float] | None] = {}
+        self._skin_max_counts: int | None = None
+        self._static_force_mn = (0.0, 0.0)
+        skin = self.by_kind.get("skin")
+        if skin is not None:
+            od = load_profile("skin", skin.node_id)
+            self._skin_max_counts = (1 << od_default(od, obj.SKIN_FSR_CALIBRATION, ADC_BITS)) - 1
+            zero = od_default(od, obj.SKIN_FSR_CALIBRATION, ZERO_COUNTS)
+            full_mn = od_default(od, obj.SKIN_FSR_CALIBRATION, FULL_SCALE_MN)
+            per_count = full_mn / (self._skin_max_counts - zero)
+            self._static_force_mn = (-zero * per_count - 1, full_mn + 1)  # +-1: rounding
+        emg, hand = self.by_kind.get("emg"), self.by_kind.get("hand")
+        self._envelope_check = None
+        if emg is not None and isinstance(emg.config, EmgConfig):
+            self._envelope_check = EnvelopeCheck(
+                plaus.emg_max_amplitude_uv,
+                emg.config.window_ms,
+                emg.config.envelope_period_ms,
+                ENVELOPE_FULL_SCALE_UV,
+            )
+        self._grip_check = None
+        if hand is not None and isinstance(hand.config, HandConfig):
+            self._grip_check = GripCheck(
+                hand.config.crush_limit_n,
+                hand.config.grip_rate_n_s,
+                plaus.hand_grip_margin_n,
+                plaus.hand_slew_factor,
+            )
+
     def _emg_setup(self) -> None:
         link = self.by_kind.get("emg")
         self.emg_decoder: EmgIntentDecoder | None = None
@@ -239,6 +291,8 @@ class Gateway(NmtMaster):
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
         self.now_us = t_us
+        if frame.can_id == NMT_COB_ID or frame.can_id == HEARTBEAT_BASE + self.node_id:
+            return self._second_master(frame, t_us)
         function, node_id = function_of(frame.can_id)
         link = self.links.get(node_id)
         if function == "heartbeat":
@@ -277,12 +331,15 @@ class Gateway(NmtMaster):
         if deadline is not None and t_us >= deadline:
             self._advance_control(t_us)
             frames += self._commands(t_us)
+        elif self._ramp_deadline(t_us):
+            frames += self._commands(t_us)
         if self._next_refresh_us is not None and t_us >= self._next_refresh_us:
             self._next_refresh_us += COMMAND_REFRESH_US * (
                 1 + (t_us - self._next_refresh_us) // COMMAND_REFRESH_US
             )
             frames += self._commands(t_us, refresh=True)
         if self._next_snapshot_us is not None and t_us >= self._next_snapshot_us:
+            self._second_master_quiet(t_us)
             self._next_snapshot_us = t_us + SNAPSHOT_PERIOD_US
             self.latest = self.snapshot()
         return frames
@@ -295,6 +352,8 @@ class Gateway(NmtMaster):
             self._next_refresh_us,
             self.feedback.next_deadline_us(),
             self.arbiter.next_deadline_us(),
+            self.grip_ramp.next_deadline_us(),
+            self.belt_ramp.next_deadline_us(),
             self._next_snapshot_us,
         ):
             if c is not None and (best is None or c < best):
@@ -396,14 +455,50 @@ class Gateway(NmtMaster):
             link.pdos_dropped["emcy length"] += 1
             return []
         code = int.from_bytes(frame.data[:2], "little")
+        verdict = judge_emcy(link.kind, code, frame.data[2])
+        if not verdict.trusted:  # no CiA 301 error class, or no generic bit: not an EMCY
+            self.rejected["emcy_invalid"] += 1
+            return []
+        if not verdict.known:  # a real class, not a code this node declares: not named
+            self.rejected["emcy_unknown_code"] += 1
         link.emcy.append((t_us, code))
         del link.emcy[:-32]
         key = f"{link.kind}.emcy"
         if code == 0:
             self.alarms.pop(key, None)
         else:
-            self.alarms[key] = f"EMCY 0x{code:04X} register 0x{frame.data[2]:02X}"
+            self.alarms[key] = verdict.text
         return []
+
+    def _second_master(self, frame: Frame, t_us: int) -> list[Frame]:
+        """NMT commands and heartbeats at our node-ID come from the master only, and a bus
+        never echoes our own: these are another master's. An alarm, a log line, counted."""
+        if frame.rtr:
+            return []
+        if frame.can_id == NMT_COB_ID:
+            self.rejected["foreign_nmt"] += 1
+            data = bytes(frame.data).hex(" ")
+            what = f"NMT command {data or '(empty)'} we did not send"
+        else:
+            self.rejected["second_master_heartbeat"] += 1
+            what = f"a heartbeat at our node-ID 0x{self.node_id:02X}"
+        if self._second_master_us is None:
+            log.warning("gateway 0x%02X: another master on the bus: %s", self.node_id, what)
+        self._second_master_us = t_us
+        self.alarms["gateway.second_master"] = (
+            f"another master on the bus: {self.rejected['foreign_nmt']} NMT commands, "
+            f"{self.rejected['second_master_heartbeat']} heartbeats at our node-ID; "
+            f"last: {what}"
+        )
+        return []
+
+    def _second_master_quiet(self, t_us: int) -> None:
+        """The alarm clears once no other master has been heard for SECOND_MASTER_CLEAR_US."""
+        if self._second_master_us is not None and (
+            t_us - self._second_master_us >= SECOND_MASTER_CLEAR_US
+        ):
+            self._second_master_us = None
+            self.alarms.pop("gateway.second_master", None)
 
     # -- process data ----------------------------------------------------------------------
     def _on_tpdo(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
@@ -411,6 +506,10 @@ class Gateway(NmtMaster):
             values = link.codec.decode(frame.can_id, frame.data)
         except PdoError:
             link.pdos_dropped["does not fit its mapping"] += 1
+            return []
+        rejected = self._implausible(link, values, t_us)
+        if rejected is not None:  # counted; the frame changes nothing
+            self.rejected[rejected] += 1
             return []
         link.pdos_rx += 1
         link.values.update(values)
@@ -420,13 +519,49 @@ class Gateway(NmtMaster):
             return self._on_emg(float(values[ENVELOPE_KEY]), t_us)
         if link.kind in self.drives and STATUSWORD_KEY in values:
             self.drives[link.kind].on_statusword(int(values[STATUSWORD_KEY]))
-            if link.kind == "hand" and (obj.HAND_ACTUAL_GRIP_MN, 0) in values:
-                self.hand_grip_n = float(values[(obj.HAND_ACTUAL_GRIP_MN, 0)]) / MN_PER_N
+            if link.kind == "hand" and HAND_GRIP_KEY in values:
+                self.hand_grip_n = float(values[HAND_GRIP_KEY]) / MN_PER_N
                 if self.emg_decoder is None and not self._voluntary_known:
                     # No EMG: the wearer's grip is whatever the hand holds when we start.
                     self._voluntary_known = True
                     self.grip_command = self.arbiter.set_voluntary(t_us, self.hand_grip_n)
         return []
+
+    def _implausible(self, link: NodeLink, values: dict[Key, int | float], t_us: int) -> str | None:
+        """Why a decoded TPDO cannot be true (a `REJECTION_KEYS` key), None if it can."""
+        for key, value in values.items():
+            limits = self._eds_limit(link, key)
+            if limits is not None and not limits[0] <= value <= limits[1]:
+                return "tpdo_out_of_range"
+        kind = link.kind
+        if kind == "skin":
+            top = self._skin_max_counts
+            if top is not None and any(values.get(k, 0) > top for k in SAMPLE_SLOT_KEYS):
+                return "skin_sample_out_of_range"
+            low, high = self._static_force_mn
+            if STATIC_FORCE_KEY in values and not low <= values[STATIC_FORCE_KEY] <= high:
+                return "skin_sample_out_of_range"
+        elif kind == "emg" and ENVELOPE_KEY in values and self._envelope_check is not None:
+            return self._envelope_check.check(t_us, float(values[ENVELOPE_KEY]))
+        elif kind == "hand" and HAND_GRIP_KEY in values and self._grip_check is not None:
+            return self._grip_check.check(t_us, float(values[HAND_GRIP_KEY]) / MN_PER_N)
+        return None
+
+    def _eds_limit(self, link: NodeLink, key: Key) -> tuple[float, float] | None:
+        """The EDS LowLimit/HighLimit of a mapped object (None: only its type bounds it)."""
+        cache_key = (link.kind, key)
+        if cache_key not in self._eds_limits:
+            entry = link.codec_od_entry(*key)
+            low, high = entry.min, entry.max
+            self._eds_limits[cache_key] = (
+                None
+                if low is None and high is None
+                else (
+                    -math.inf if low is None else float(low),
+                    math.inf if high is None else float(high),
+                )
+            )
+        return self._eds_limits[cache_key]
 
     def _on_skin(self, values: dict[Key, int | float], t_us: int) -> list[Frame]:
         if self.skin_stream is None or self.decoder is None:
@@ -518,6 +653,11 @@ class Gateway(NmtMaster):
                 "percepts": self.counters["percepts"],
             },
             "heartbeat": self.heartbeat.stats(),  # our own: how late it went out
+            "rejected": {
+                **self.rejected.as_dict(),
+                "hand_command_slew_limited": self.grip_ramp.limited,
+                "belt_command_slew_limited": self.belt_ramp.limited,
+            },
             "alarms": dict(self.alarms),
         }
 
@@ -617,13 +757,31 @@ class Gateway(NmtMaster):
         belt = self.by_kind.get("belt")
         if belt is not None and self._commandable(belt):
             velocity = self._belt_velocity()
+            if velocity == 0:  # a stop is never slowed (the belt decelerates at 6084h)
+                self.belt_ramp.start_from(0)
+            else:  # at most the belt's acceleration, one change per command interval
+                velocity = round(self.belt_ramp.output(velocity, t_us))
             frames += self._rpdo(belt, (obj.BELT_TARGET_VELOCITY_MRAD_S, 0), velocity, refresh)
         hand = self.by_kind.get("hand")
         if hand is not None and self._commandable(hand):
             grip_mn = self._hand_grip_mn()
             if grip_mn is not None:
+                # held while sensing is lost: where the ramp is, not where it was going
+                at = self.grip_ramp.value
+                held = at is not None and bool(self._sensing_lost())
+                grip_mn = round(
+                    at if at is not None and held else self.grip_ramp.output(grip_mn, t_us)
+                )
                 frames += self._rpdo(hand, (obj.HAND_TARGET_GRIP_MN, 0), grip_mn, refresh)
         return frames
+
+    def _ramp_deadline(self, t_us: int) -> bool:
+        """Whether a command on its way (slew-limited) is due for its next step."""
+        for ramp in (self.grip_ramp, self.belt_ramp):
+            deadline = ramp.next_deadline_us()
+            if deadline is not None and t_us >= deadline:
+                return True
+        return False
 
     def _commandable(self, link: NodeLink) -> bool:
         """Operational in our eyes and the master's: not lost, not held by a consumer fault."""

@@ -224,6 +224,7 @@ class JsonTree:
             "loop_latency_p99_us": loop["latency_p99_us"],
             "percepts": loop["percepts"],
             "alarm_count": len(snap["alarms"]),
+            "rejected": dict(snap.get("rejected") or {}),  # what the loop refused to follow
             "own_heartbeat": snap.get("heartbeat"),  # how late the gateway's own went out
             "telemetry": dict(self._extra.get("telemetry", {})),
         }

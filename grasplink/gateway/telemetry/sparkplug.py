@@ -46,6 +46,7 @@ from typing import Any
 from google.protobuf.message import DecodeError
 
 from grasplink.gateway.commands import Command, CommandResult, shown
+from grasplink.gateway.plausibility import REJECTION_KEYS
 from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
 from grasplink.gateway.telemetry.buffer import Message, Sample
 from grasplink.gateway.telemetry.protocol import (
@@ -207,6 +208,13 @@ NODE_GROUPS: tuple[MetricGroup, ...] = (
             MetricSpec("Telemetry/historical_dropped", UINT64, _telemetry("historical_dropped")),
         ),
         lambda s, e: e.get("telemetry"),
+    ),
+    MetricGroup(  # what the loop refused to follow (docs/gateway.md, Plausibility)
+        tuple(
+            MetricSpec(f"Rejected/{key}", UINT64, _snap(("rejected", key), 0))
+            for key in REJECTION_KEYS
+        ),
+        lambda s, e: s.get("rejected") if s else None,  # on change: rare but news
     ),
 )
 NODE_METRICS: tuple[MetricSpec, ...] = tuple(spec for group in NODE_GROUPS for spec in group.specs)
