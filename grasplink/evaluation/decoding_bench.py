@@ -88,7 +88,7 @@ CAN_COUNTS = (
     "republished",
     "malformed",
     "out_of_order",
-    "behind",
+    "stray",
 )
 
 
@@ -647,7 +647,7 @@ def render_can_path(can: dict) -> list[str]:
         f"can observe); skipped: {skipped}. CAN logs: {stats['frames']} skin TPDO1 frames, "
         f"{stats['packets']} used, {stats['republished']} re-publishes skipped, "
         f"{stats['malformed']} malformed, {stats['out_of_order']} too late, "
-        f"{stats['behind']} behind in time; "
+        f"{stats['stray']} far from their sequence number's place in time; "
         f"{stats['lost_packets']} packets lost.",
         "",
     ]

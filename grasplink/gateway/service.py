@@ -62,7 +62,7 @@ from grasplink.gateway.emg import (
     EmgIntentDecoder,
 )
 from grasplink.gateway.feedback import FeedbackController, FeedbackOutput
-from grasplink.gateway.master import NmtMaster
+from grasplink.gateway.master import LOST_AFTER_PERIODS, NmtMaster
 from grasplink.gateway.percept import Percept
 from grasplink.gateway.plausibility import (
     CommandRamp,
@@ -74,7 +74,7 @@ from grasplink.gateway.plausibility import (
 from grasplink.gateway.provisioning import Provisioner, SdoWrite
 from grasplink.gateway.reflex import GripArbiter, GripCommand
 from grasplink.gateway.sdo_client import SdoClient, Transfer
-from grasplink.gateway.streams import SampleStream
+from grasplink.gateway.streams import LIVE_SETTLE_US, SampleStream
 from grasplink.profiles import load_profile, object_limits, od_default
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import Key, PdoCodec
@@ -221,7 +221,14 @@ class Gateway(NmtMaster):
             return
         skin = link.config
         assert isinstance(skin, SkinConfig)
-        self.skin_stream = SampleStream(skin.sample_rate_hz, skin.samples_per_pdo)
+        # Sample times come from the packet sequence; a packet may arrive as late as the
+        # heartbeat consumer time (a stalled host, the burst after it) without a reset.
+        self.skin_stream = SampleStream(
+            skin.sample_rate_hz,
+            skin.samples_per_pdo,
+            late_us=self.node_heartbeat_us * LOST_AFTER_PERIODS,
+            settle_us=LIVE_SETTLE_US,
+        )
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
         od = load_profile("skin", skin.node_id)
         bits = od_default(od, obj.SKIN_FSR_CALIBRATION, ADC_BITS)

@@ -110,8 +110,10 @@ def test_stream_repeated_packet_gives_no_samples_and_a_late_one_resyncs():
     times, _ = stream.feed(11_000, 5, np.ones(3))
     assert len(times) == 0 and stream.stats.repeated_packets == 1
     times, _ = stream.feed(5_000_000, 6, np.ones(3))  # 5 s later: the node restarted or stalled
+    assert len(times) == 0  # one packet off the grid: a stray, or a new stream's first?
+    times, _ = stream.feed(5_007_500, 7, np.ones(3))  # the next follows it: a new stream
     assert stream.stats.resyncs == 1
-    assert times[-1] == pytest.approx(5.0)
+    assert times[2] == pytest.approx(5.0) and times[-1] == pytest.approx(5.0075)
 
 
 def test_stream_sequence_wraps():

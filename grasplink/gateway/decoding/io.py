@@ -14,21 +14,23 @@
   the U8 packet sequence 0x2101), samples per PDO (0x2121), sample rate
   (0x2120) and the FSR calibration defaults (0x2130: resolution, full scale
   in mN, zero offset), force_mN = (counts - zero) x full_scale_mN /
-  (2^bits - 1 - zero). A packet's last sample is at its frame's time stamp,
-  the samples before it 1/fs apart.
+  (2^bits - 1 - zero).
+
+Frames become samples through the live gateway's own front end
+(`packets.SampleStream`): sample times from the packet sequence, anchored on
+the earliest time stamps of the first `SETTLE_US` and rounded to a sample
+period, so time-stamp jitter changes nothing; a frame up to `REORDER_PACKETS`
+packets late is put back in place by its sequence number (held frames take
+the held time stamps in increasing order); the node's boot-up message starts
+the sample times anew.
 
 What a CAN log loses is counted in `CanStats` (`CanStats.summary()` is the
 line `grasplink decode` prints): frames of the wrong length; frames that
-repeat a sequence number already seen (a re-publish) or whose samples would
-overlap the next packet's (the node publishes its current, not new, samples
-on entering OPERATIONAL); frames arriving more than `REORDER_PACKETS`
-packets late; frames whose time stamp puts all their samples before the
-previous packet's; packets missing from the sequence numbers. A frame up to
-`REORDER_PACKETS` packets late is put back in place by its sequence number:
-the frames held meanwhile are released in sequence order and take the held
-time stamps in increasing order (the bus delivered them in those slots).
-A log where fewer than `MIN_USABLE_SHARE` of the skin frames are usable is
-refused by `CanStats.check_usable`.
+repeat a sequence number already seen (a re-publish); frames arriving more
+than `REORDER_PACKETS` packets late; frames whose time stamp is far from
+their number's place and that no frame follows (stray); packets missing from
+the sequence numbers. A log where fewer than `MIN_USABLE_SHARE` of the skin
+frames are usable is refused by `CanStats.check_usable`.
 
 Every problem is a `RecordingError` naming the file and the line, key or
 value, so `grasplink decode` can print one line and exit 1.
@@ -36,17 +38,17 @@ value, so `grasplink decode` can print one line and exit 1.
 
 from __future__ import annotations
 
-import heapq
 import json
 import math
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from grasplink.core.frames import HEARTBEAT_BASE
 from grasplink.errors import ConfigError, RecordingError
 from grasplink.gateway.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
+from grasplink.gateway.decoding.packets import SEQUENCE_MODULO, SampleStream
 
 CSV_HEADER = ("t_s", "force_n")
 #: The force column of a CSV: ours, or the skin.csv of `grasplink run`
@@ -61,7 +63,12 @@ TPDO1_COMM, TPDO1_MAP = 0x1800, 0x1A00
 #: How late (in packets) a frame may arrive and still be put back in place: 8 packets
 #: are 60 ms at 400 Hz, far more than any reordering of a CAN bus or adapter queue.
 REORDER_PACKETS = 8
-SEQUENCE_MODULUS = 256  # the U8 packet sequence (0x2101) wraps
+#: Arrivals gathered to anchor the sample times (packets.SampleStream): 250 ms, some 33
+#: packets at 400 Hz; the earliest of them sets the anchor, so time-stamp jitter of a
+#: USB adapter or a loaded host (a few ms) moves no sample time.
+SETTLE_US = 250_000
+SEQUENCE_MODULUS = SEQUENCE_MODULO  # the U8 packet sequence (0x2101) wraps
+BOOT_UP_DATA = b"\x00"  # a heartbeat carrying state 0: the node (re)booted
 REAL_KINDS = "iuf"  # numpy kinds of a real number: signed, unsigned, floating point
 
 
@@ -69,18 +76,19 @@ REAL_KINDS = "iuf"  # numpy kinds of a real number: signed, unsigned, floating p
 class CanStats:
     """What a CAN log held and what became of the skin's TPDO1 frames.
 
-    frames = packets + malformed + republished + out_of_order + behind.
+    frames = packets + malformed + republished + out_of_order + stray.
     """
 
     frames: int = 0  # skin TPDO1 frames seen
-    packets: int = 0  # of them, used: at least one sample decoded
+    packets: int = 0  # of them, used: their samples decoded
     malformed: int = 0  # dropped: wrong data length
-    republished: int = 0  # dropped: repeated sequence number, or stale samples
+    republished: int = 0  # dropped: a sequence number already seen (a re-publish)
     out_of_order: int = 0  # dropped: more than REORDER_PACKETS packets late
-    behind: int = 0  # dropped: every sample before the previous packet's (time stamps)
+    stray: int = 0  # dropped: time stamp far from its number's place, no frame following it
     reordered: int = 0  # used, put back in place by their sequence number
     lost_packets: int = 0  # sequence numbers never seen (the frames are not in the log)
-    samples_behind: int = 0  # samples dropped because time went back (all frames)
+    restarts: int = 0  # the node's boot-up messages amid its frames: sample times anew
+    resyncs: int = 0  # new anchors where the time stamps contradict the sequence
     frames_read: int = 0  # every frame in the log
     other_frames: int = 0  # frames of other CAN-IDs, remote and error frames
     rate_hz: float = 0.0  # the sample rate the times were built with
@@ -89,7 +97,7 @@ class CanStats:
 
     @property
     def dropped(self) -> int:
-        return self.malformed + self.republished + self.out_of_order + self.behind
+        return self.malformed + self.republished + self.out_of_order + self.stray
 
     @property
     def usable_share(self) -> float:
@@ -98,14 +106,14 @@ class CanStats:
     def reasons(self) -> str:
         parts = [
             (self.malformed, "wrong data length"),
-            (self.republished, "repeated sequence number or stale re-publish"),
+            (self.republished, "repeated sequence number (a re-publish)"),
             (self.out_of_order, f"more than {REORDER_PACKETS} packets late"),
-            (self.behind, "time stamp before the previous packet's samples"),
+            (self.stray, "time stamp far from its sequence number's place"),
         ]
         return ", ".join(f"{n} {why}" for n, why in parts if n) or "none"
 
     def summary(self, source: str) -> str:
-        """One line: frames read, used, dropped by reason, lost, reordered, other IDs."""
+        """One line: frames read, used, dropped by reason, lost, reordered, anchors, other IDs."""
         ids = sorted(self.other_ids)
         shown = ", ".join(f"0x{i:03X}" for i in ids[:8]) + (", ..." if len(ids) > 8 else "")
         text = (
@@ -116,8 +124,13 @@ class CanStats:
         if self.reordered:
             text += f"; {self.reordered} put back in order by sequence number"
         text += f"; {self.lost_packets} packets missing from the sequence numbers"
-        if self.samples_behind:
-            text += f"; {self.samples_behind} samples dropped where time went back"
+        if self.restarts:
+            text += f"; {self.restarts} node restarts (boot-up), sample times anew"
+        if self.resyncs:
+            text += (
+                f"; {self.resyncs} new time anchors (a silence, or time stamps "
+                "contradicting the sequence)"
+            )
         if self.other_frames:
             text += f"; {self.other_frames} frames of other CAN-IDs ({shown or 'remote/error'})"
         return text
@@ -418,13 +431,16 @@ def skin_pdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinPdo:
     )
 
 
-Packet = tuple[float, int | None, list[int]]  # (frame time stamp, sequence number, counts)
-
-
 def read_can_log(
     path: str | Path, *, node_id: int = DEFAULT_SKIN_NODE_ID, fs_hz: float | None = None
 ) -> tuple[np.ndarray, np.ndarray, CanStats]:
-    """Skin TPDO1 samples from a python-can log: (t_s, force_n, stats)."""
+    """Skin TPDO1 samples from a python-can log: (t_s, force_n, stats).
+
+    Frames go through the live gateway's front end (`packets.SampleStream`) in log
+    order: sample times from the packet sequence, a reorder window of REORDER_PACKETS
+    packets, the anchor settled over SETTLE_US of arrivals; the node's boot-up message
+    starts a new anchor.
+    """
     import can
 
     p = Path(path)
@@ -433,10 +449,20 @@ def read_can_log(
     pdo = skin_pdo(node_id)
     rate = check_sample_rate(pdo.rate_hz if fs_hz is None else fs_hz)
     stats = CanStats(rate_hz=rate, cob_id=pdo.cob_id)
-    packets: list[Packet] = []
+    stream = SampleStream(
+        rate, pdo.samples_per_pdo, reorder_packets=REORDER_PACKETS, settle_us=SETTLE_US
+    )
+    boot_up = HEARTBEAT_BASE + node_id
+    times: list[np.ndarray] = []
+    counts: list[np.ndarray] = []
+
+    def keep(released: tuple[np.ndarray, np.ndarray]) -> None:
+        if len(released[0]):
+            times.append(released[0])
+            counts.append(released[1])
+
     try:
-        reader = can.LogReader(str(p))
-        for msg in reader:
+        for msg in can.LogReader(str(p)):
             stats.frames_read += 1
             if msg.is_error_frame or msg.is_remote_frame:
                 stats.other_frames += 1
@@ -444,115 +470,44 @@ def read_can_log(
             if msg.arbitration_id != pdo.cob_id or msg.is_extended_id:
                 stats.other_frames += 1
                 stats.other_ids.add(msg.arbitration_id)
+                if msg.arbitration_id == boot_up and bytes(msg.data) == BOOT_UP_DATA:
+                    before = stream.stats.resyncs
+                    stream.restart()  # the node rebooted: its numbers start again
+                    stats.restarts += stream.stats.resyncs - before
                 continue
             stats.frames += 1
             data = bytes(msg.data)
             if len(data) != pdo.length:
                 stats.malformed += 1
                 continue
-            counts = [int.from_bytes(data[o : o + s], "little") for o, s in pdo.slots]
+            slots = [int.from_bytes(data[o : o + s], "little") for o, s in pdo.slots]
             seq = None
             if pdo.sequence is not None:
                 o, s = pdo.sequence
                 seq = int.from_bytes(data[o : o + s], "little") % SEQUENCE_MODULUS
-            packets.append((float(msg.timestamp), seq, counts))
+            keep(stream.feed(float(msg.timestamp) * 1e6, seq, np.array(slots, dtype=np.float64)))
     except RecordingError:
         raise
     except Exception as exc:  # python-can raises assorted errors on a corrupt log
         raise RecordingError(
             f"{p}: cannot read as a CAN log ({type(exc).__name__}: {exc})"
         ) from None
+    keep(stream.flush())
     if not stats.frames:
         seen = ", ".join(f"0x{i:03X}" for i in sorted(stats.other_ids)[:12]) or "none"
         raise RecordingError(
             f"{p}: no skin TPDO1 frames (COB-ID 0x{pdo.cob_id:03X}, node-ID "
             f"0x{node_id:02X}, {pdo.length} data bytes); CAN-IDs seen: {seen}"
         )
-    t, samples = _assemble(_in_sequence(packets, stats), pdo, rate, stats)
-    if not len(t):
+    got = stream.stats
+    stats.packets = got.released
+    stats.republished = got.repeated_packets
+    stats.out_of_order = got.late_packets
+    stats.stray = got.stray_packets
+    stats.reordered = got.reordered
+    stats.lost_packets = got.lost_packets
+    stats.resyncs = got.resyncs - stats.restarts
+    if not times:
         raise RecordingError(f"{p}: no usable skin samples: {stats.reasons()}")
-    return t, pdo.to_newton(samples), stats
-
-
-def _in_sequence(packets: list[Packet], stats: CanStats) -> list[Packet]:
-    """Packets in sequence order, through a reorder window of REORDER_PACKETS packets.
-
-    Sequence numbers are unwrapped against the newest one seen (a step of
-    -128..127). A packet is held until one REORDER_PACKETS newer arrives;
-    held packets leave in sequence order, taking the held time stamps in
-    increasing order. Repeats of a held or recently released number are
-    re-publishes; a packet older than the last released one is too late.
-    Without a sequence number in the mapping, the log order stands.
-    """
-    if packets and packets[0][1] is None:
-        return packets
-    out: list[Packet] = []
-    held: dict[int, list[int]] = {}
-    stamps: list[float] = []  # min-heap of the held packets' time stamps
-    recent: deque[int] = deque(maxlen=SEQUENCE_MODULUS)  # numbers released lately
-    newest: int | None = None
-    first: int | None = None  # the first number released
-    last: int | None = None  # the last number released
-
-    def release() -> None:
-        nonlocal first, last
-        n = min(held)
-        if last is not None:
-            stats.lost_packets += n - last - 1
-        first = n if first is None else first
-        last = n
-        recent.append(n)
-        out.append((heapq.heappop(stamps), n, held.pop(n)))
-
-    for stamp, seq, counts in packets:
-        assert seq is not None  # a mapping either has a sequence number or not
-        if newest is None:
-            n = seq
-        else:
-            n = newest + (seq - newest + SEQUENCE_MODULUS // 2) % SEQUENCE_MODULUS
-            n -= SEQUENCE_MODULUS // 2
-        if n in held or n in recent:
-            stats.republished += 1
-            continue
-        if last is not None and n < last:
-            stats.out_of_order += 1
-            if first is not None and n > first:
-                stats.lost_packets -= 1  # counted missing when the numbers skipped it
-            continue
-        if newest is not None and n < newest:
-            stats.reordered += 1
-        newest = n if newest is None else max(newest, n)
-        held[n] = counts
-        heapq.heappush(stamps, stamp)
-        while held and min(held) <= newest - REORDER_PACKETS:
-            release()
-    while held:
-        release()
-    return out
-
-
-def _assemble(
-    packets: list[Packet], pdo: SkinPdo, rate: float, stats: CanStats
-) -> tuple[np.ndarray, np.ndarray]:
-    per = pdo.samples_per_pdo
-    period = 1.0 / rate
-    kept: list[Packet] = []
-    for packet in packets:
-        if kept and packet[0] - kept[-1][0] < (per - 0.5) * period:
-            # the previous packet's samples would overlap these: it was a re-publish of
-            # stale slot values (as on entering OPERATIONAL), not `per` new samples
-            stats.republished += 1
-            kept.pop()
-        kept.append(packet)
-    if not kept:
-        return np.zeros(0), np.zeros(0, dtype=np.int64)
-    offsets = (np.arange(per) - (per - 1)) * period
-    t = (np.array([k[0] for k in kept])[:, None] + offsets[None, :]).ravel()
-    counts = np.array([k[2] for k in kept], dtype=np.int64).ravel()
-    # time-stamp jitter or disorder: drop what would go back in time
-    keep = t > np.maximum.accumulate(np.concatenate([[-np.inf], t[:-1]]))
-    stats.samples_behind += int(np.count_nonzero(~keep))
-    used = keep.reshape(len(kept), per).any(axis=1)
-    stats.packets = int(np.count_nonzero(used))
-    stats.behind += len(kept) - stats.packets
-    return t[keep], counts[keep]
+    t = np.concatenate(times)
+    return t, pdo.to_newton(np.concatenate(counts)), stats
