@@ -471,9 +471,7 @@ def read_can_log(
                 stats.other_frames += 1
                 stats.other_ids.add(msg.arbitration_id)
                 if msg.arbitration_id == boot_up and bytes(msg.data) == BOOT_UP_DATA:
-                    before = stream.stats.resyncs
                     stream.restart()  # the node rebooted: its numbers start again
-                    stats.restarts += stream.stats.resyncs - before
                 continue
             stats.frames += 1
             data = bytes(msg.data)
@@ -506,7 +504,8 @@ def read_can_log(
     stats.stray = got.stray_packets
     stats.reordered = got.reordered
     stats.lost_packets = got.lost_packets
-    stats.resyncs = got.resyncs - stats.restarts
+    stats.resyncs = got.resyncs
+    stats.restarts = got.restarts
     if not times:
         raise RecordingError(f"{p}: no usable skin samples: {stats.reasons()}")
     t = np.concatenate(times)

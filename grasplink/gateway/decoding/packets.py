@@ -92,7 +92,8 @@ class StreamStats:
     late_packets: int = 0  # behind what was given out already, beyond the window (dropped)
     reordered: int = 0  # arrived after a newer one, put back in place
     stray_packets: int = 0  # off the grid, and the next packet did not follow it (dropped)
-    resyncs: int = 0  # new anchors: node restart, long silence, arrival off the grid
+    resyncs: int = 0  # new anchors the data asked for: a long silence, arrival off the grid
+    restarts: int = 0  # new anchors the caller asked for (restart(): boot-up, node lost)
     slewed_us: float = 0.0  # drift correction applied to the grid so far (signed)
 
 
@@ -165,10 +166,18 @@ class SampleStream:
             self.stats.stray_packets += 1
         if self._newest is not None:
             self._release_all()
-            self.stats.resyncs += 1
+            self.stats.restarts += 1
         self._forget()
 
     reset = restart
+
+    @property
+    def anchor_s(self) -> float | None:
+        """Where the sample grid lies: the time of the anchor's packet 0's first sample
+        (with the drift correction so far); None until a packet anchored it."""
+        if self._tick0 is None:
+            return None
+        return self._tick0 / self.rate_hz + self._shift_s
 
     def flush(self) -> Released:
         """End of input: every packet still held, in order."""
