@@ -60,30 +60,44 @@ demo: setup
 # to it, the loop headline's CAN log replayed onto the hub as the nodes (--nodes-only: the
 # gateway masters what it hears), mosquitto_sub recording both topic trees; then the topics,
 # a few messages and the slip as telemetry carried it. Needs out/loop_headline (make demo).
+# Nothing waits a fixed time: mosquitto and the hub are waited for until they accept a
+# connection, the gateway until its --ready-file says it is up (surfaces bound, bus open,
+# heartbeat running), each with a timeout and a message naming the log to read.
 TELEMETRY_OUT := out/telemetry
 FREE_PORT := $(PY) -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'
+# WAIT_PORT NAME PORT LOG: until 127.0.0.1:PORT accepts a connection (20 s at most)
+WAIT_PORT := $(PY) -c 'import socket, sys, time; name, port, log = sys.argv[1:]; end = time.monotonic() + 20; up = lambda: socket.socket().connect_ex(("127.0.0.1", int(port))) == 0; [time.sleep(0.05) for _ in iter(lambda: up() or time.monotonic() > end, True)]; up() or sys.exit(f"telemetry-demo: {name} did not accept connections on 127.0.0.1:{port} within 20 s; see {log}")'
+GATEWAY_READY_S := 60
 telemetry-demo: setup
 	@set -e; out=$(TELEMETRY_OUT); rm -rf $$out; mkdir -p $$out; \
+	test -f out/loop_headline/can.asc || { echo "telemetry-demo: no out/loop_headline/can.asc; run make demo first"; exit 1; }; \
 	mq=$$($(FREE_PORT)); hub=$$($(FREE_PORT)); pids=""; \
 	trap 'kill $$pids 2>/dev/null || true; wait 2>/dev/null || true' EXIT; \
 	printf 'listener %s 127.0.0.1\nallow_anonymous true\nuser %s\n' $$mq "$$(id -un)" > $$out/mosquitto.conf; \
 	mosquitto -c $$out/mosquitto.conf > $$out/mosquitto.log 2>&1 & pids="$$pids $$!"; \
 	$(VENV)/bin/grasplink bus hub --port $$hub > $$out/hub.log 2>&1 & pids="$$pids $$!"; \
-	sleep 1; \
+	$(WAIT_PORT) mosquitto $$mq $$out/mosquitto.log; \
+	$(WAIT_PORT) "the CAN hub" $$hub $$out/hub.log; \
 	mosquitto_sub -p $$mq -v -t 'grasplink/#' > $$out/json.txt & pids="$$pids $$!"; \
 	mosquitto_sub -p $$mq -t 'spBv1.0/#' -F '%t %l bytes' > $$out/sparkplug.txt & pids="$$pids $$!"; \
 	echo "== mosquitto on 127.0.0.1:$$mq, hub on 127.0.0.1:$$hub; gateway with --mqtt, the loop headline's nodes replayed"; \
 	printf '[telemetry]\nstate_dir = "%s/state"\n' $$out > $$out/gateway.toml; \
-	$(VENV)/bin/grasplink gateway --bus remote:ws://127.0.0.1:$$hub/ --duration 12 \
-	  --config $$out/gateway.toml --mqtt mqtt://127.0.0.1:$$mq --mqtt-id demo & gw=$$!; \
-	sleep 2; \
+	$(VENV)/bin/grasplink gateway --bus remote:ws://127.0.0.1:$$hub/ --duration 10 \
+	  --config $$out/gateway.toml --mqtt mqtt://127.0.0.1:$$mq --mqtt-id demo \
+	  --ready-file $$out/gateway.ready & gw=$$!; pids="$$pids $$gw"; \
+	waited=0; until [ -f $$out/gateway.ready ]; do \
+	  if ! kill -0 $$gw 2>/dev/null; then echo "telemetry-demo: the gateway exited before it was up (its error is above)"; exit 1; fi; \
+	  if [ $$waited -ge $$(( $(GATEWAY_READY_S) * 20 )) ]; then echo "telemetry-demo: the gateway was not up within $(GATEWAY_READY_S) s"; exit 1; fi; \
+	  sleep 0.05; waited=$$((waited + 1)); done; \
 	$(VENV)/bin/grasplink replay out/loop_headline/can.asc --bus remote:ws://127.0.0.1:$$hub/ --nodes-only; \
-	wait $$gw; sleep 0.5; \
+	wait $$gw; \
+	waited=0; until grep -q NDEATH $$out/sparkplug.txt || [ $$waited -ge 100 ]; do sleep 0.05; waited=$$((waited + 1)); done; \
 	echo "== JSON topics (messages):"; cut -d' ' -f1 $$out/json.txt | sort | uniq -c; \
 	echo "== Sparkplug B topics (messages):"; cut -d' ' -f1 $$out/sparkplug.txt | sort | uniq -c; \
 	echo "== the first messages:"; head -n 6 $$out/json.txt | cut -c1-160; \
-	echo "== the slip as telemetry carried it (skin values, belt values):"; \
-	grep -m 3 '"slip":true' $$out/json.txt | cut -c1-200 || echo "(no slip decoded)"; \
+	echo "== the slip as telemetry carried it (skin values: the first, the first with its speed; belt values):"; \
+	grep -m 1 '"slip":true' $$out/json.txt | cut -c1-200 || echo "(no slip decoded)"; \
+	grep '"slip":true' $$out/json.txt | grep -m 2 -v '"slip_speed_mm_s":null' | cut -c1-200 || echo "(no slip speed decoded)"; \
 	grep -m 2 '"belt":"slip"' $$out/json.txt | cut -c1-200 || true; \
 	echo "== the end of the log: nodes lost, alarms retained:"; grep '/alarms ' $$out/json.txt | tail -n 1 | cut -c1-200; \
 	echo "all of it: $$out/json.txt, $$out/sparkplug.txt"

@@ -729,7 +729,8 @@ def cmd_gateway(args: argparse.Namespace) -> int:
         _wait_for_heartbeat(live)
         print(
             f"up: heartbeat every {config.heartbeat_ms} ms ({live.heartbeat_priority}), "
-            f"the nodes' consumer time {config.consumer_ms} ms",
+            f"the nodes' consumer time {config.consumer_ms} ms; gateway thread at "
+            f"{live.runner_priority}",
             flush=True,
         )
         if ready_file is not None:

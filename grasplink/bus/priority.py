@@ -32,6 +32,17 @@ def raise_thread_priority(rt_priority: int = RT_PRIORITY, nice: int = NICE) -> t
         return False, f"normal priority: {refused}, nice {nice} refused ({_why(exc)})"
 
 
+def raise_thread_nice(nice: int = NICE) -> tuple[bool, str]:
+    """Lower the calling thread's nice value to `nice` (ahead of ordinary work, still
+    sharing the CPU: for a thread whose work can grow, like decoding, real-time would let
+    it starve the host). Returns (granted, what the thread got, for a log line)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
+        return True, f"nice {nice}"
+    except (OSError, AttributeError) as exc:
+        return False, f"normal priority: nice {nice} refused ({_why(exc)})"
+
+
 def _why(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.strerror:
         return exc.strerror

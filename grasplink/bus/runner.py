@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import can
 
-from grasplink.bus.priority import raise_thread_priority
+from grasplink.bus.priority import raise_thread_nice, raise_thread_priority
 from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S, FIRST_DELAY_US, Backoff
 from grasplink.bus.url import BusDisconnected, frame_to_message, message_to_frame
 from grasplink.core.frames import Frame
@@ -69,7 +69,8 @@ class NodeRunner:
     runner's other devices (a bus never echoes a sender's own frames, yet
     devices sharing a runner must hear each other). Frames from the bus go to
     every device. Timers run from ``clock_us`` (default: monotonic µs); the
-    thread waits on ``bus.recv`` until the earliest device deadline, at most
+    thread (at ``nice``, if given and the host allows it) waits on ``bus.recv`` until the
+    earliest device deadline, at most
     ``max_wait_s``, which also bounds how late a `submit`-ted frame goes out.
     Each step delivers every frame that has already arrived (up to
     ``max_batch``, each one's replies sent before the next is read) before it
@@ -123,6 +124,7 @@ class NodeRunner:
         urgent: Sequence[SansIoDevice] = (),
         pace_urgent: bool = False,
         stall_limit_s: float = DEFAULT_STALL_LIMIT_S,
+        nice: int | None = None,
     ) -> None:
         if not devices:
             raise ValueError("NodeRunner needs at least one device")
@@ -141,7 +143,8 @@ class NodeRunner:
         # Submitted frames: appended under `_submit_lock` (any thread, bounded), taken by
         # the runner's thread alone without a lock (deque appends and pops are atomic), so
         # a step with nothing submitted costs a truth test, not a queue's mutex and Empty.
-        self._submitted: deque[tuple[Frame, bool]] = deque()
+        # (frame, to the bus, the device it comes from: it does not hear it back)
+        self._submitted: deque[tuple[Frame, bool, SansIoDevice | None]] = deque()
         self._submit_size = submit_queue_size
         self._submit_lock = threading.Lock()
         self._stats = RunnerStats()
@@ -163,6 +166,12 @@ class NodeRunner:
         self._owned: can.BusABC | None = None  # the bus reopen() gave us, ours to shut down
         self.failure: BusError | None = None  # why the runner gave up on its bus
         self.urgent = list(urgent)
+        # An urgent device is part of the device with its node-ID (the master's heartbeat):
+        # that one does not hear its frames, as no CAN node hears its own.
+        self._owner = {
+            id(u): next((d for d in self.devices if _node_id(d) == _node_id(u)), u)
+            for u in self.urgent
+        }
         self._urgent_lock = threading.Lock()  # urgent devices: the runner's or the pacer's
         self._send_lock = threading.Lock()  # bus.send from the runner's and the pacer's thread
         self._urgent_due_us: int | None = None  # earliest urgent deadline
@@ -171,6 +180,8 @@ class NodeRunner:
         self._progress_us = 0  # when the runner's thread last stepped or delivered a frame
         self._pacer: threading.Thread | None = None
         self.pacer_priority: str | None = None  # what the host granted the pacer thread
+        self._nice = nice  # the thread's nice value, if it should run ahead of ordinary work
+        self.priority: str | None = None  # what the host granted the runner's thread
 
     # -- control (any thread) -------------------------------------------------
 
@@ -211,9 +222,12 @@ class NodeRunner:
         """
         if not isinstance(frame, Frame):
             raise TypeError(f"submit() takes a Frame, not {type(frame).__name__}")
+        return self._enqueue(frame, to_bus, None)
+
+    def _enqueue(self, frame: Frame, to_bus: bool, source: SansIoDevice | None) -> bool:
         with self._submit_lock:
             if len(self._submitted) < self._submit_size:
-                self._submitted.append((frame, to_bus))
+                self._submitted.append((frame, to_bus, source))
                 return True
         with self._lock:
             self._stats.dropped += 1
@@ -267,6 +281,7 @@ class NodeRunner:
 
     def _run(self) -> None:
         try:
+            self.priority = _raise_nice(self._name, self._nice)
             self._power_on()
         finally:
             self._booted.set()
@@ -319,8 +334,8 @@ class NodeRunner:
         work: list[tuple[Frame, SansIoDevice | None, bool]] = []
         submitted = self._submitted
         while submitted:  # this thread alone takes: not empty, popleft cannot fail
-            frame, to_bus = submitted.popleft()
-            work.append((frame, None, to_bus))
+            frame, to_bus, source = submitted.popleft()
+            work.append((frame, source, to_bus))
         if work:
             with self._lock:
                 self._stats.injected += len(work)
@@ -405,7 +420,8 @@ class NodeRunner:
         for device in self.urgent:
             deadline = self._effective_deadline(device)
             if deadline is not None and deadline <= now:
-                out += [(f, device, True) for f in self._call(device, "advance", now)]
+                owner = self._owner[id(device)]
+                out += [(f, owner, True) for f in self._call(device, "advance", now)]
         self._urgent_due_us = self._urgent_deadline()
         return out
 
@@ -448,9 +464,10 @@ class NodeRunner:
             stalled = False
             with self._urgent_lock:
                 out = self._advance_urgent(now)
-            for frame, _, _ in out:
+            for frame, owner, _ in out:
                 self._send_paced(frame)
-                self.submit(frame, to_bus=False)  # the devices hear it at their next step
+                if any(d is not owner for d in self.devices):
+                    self._enqueue(frame, False, owner)  # the others hear it at their next step
             if out:
                 with self._lock:
                     self._stats.urgent_paced += 1
@@ -703,6 +720,7 @@ class MultiRunner:
         max_wait_s: float = 0.02,
         poll_s: float = 0.001,
         tick_s: float = 0.0,
+        nice: int | None = None,
     ) -> None:
         if not runners:
             raise ValueError("MultiRunner needs at least one runner")
@@ -715,6 +733,8 @@ class MultiRunner:
         self._max_wait_s = max_wait_s
         self._poll_s = poll_s
         self._tick_us = round(tick_s * 1e6)
+        self._nice = nice
+        self.priority: str | None = None  # what the host granted the thread
         self._selector = selectors.DefaultSelector()
         self._registered: dict[int, int] = {}  # id(runner) -> the fd registered for it
         self._stop = threading.Event()
@@ -759,6 +779,7 @@ class MultiRunner:
 
     def _run(self) -> None:
         try:
+            self.priority = _raise_nice(self._name, self._nice)
             for runner in self.runners:
                 runner._power_on()
         finally:
@@ -823,6 +844,15 @@ class MultiRunner:
         if old >= 0:
             with contextlib.suppress(KeyError, ValueError, OSError):
                 self._selector.unregister(old)
+
+
+def _raise_nice(name: str, nice: int | None) -> str:
+    """The calling runner thread at `nice` (None: left as it is); what it got, logged."""
+    if nice is None:
+        return "normal priority"
+    granted, what = raise_thread_nice(nice)
+    (logger.info if granted else logger.warning)("%s: thread at %s", name, what)
+    return what
 
 
 def on_tick(now_us: int, wait_s: float, tick_us: int) -> float:

@@ -13,7 +13,8 @@ what a running gateway owes its nodes. `start` does both.
 The gateway's own heartbeat is served apart from its decoding: the master hands it to
 the runner as an urgent timer (`NmtMaster.detach_heartbeat`), which a pacer thread at
 real-time priority (where the host allows it) sends on time while the runner's thread
-decodes, and which that thread also serves between two received frames.
+decodes, and which that thread also serves between two received frames. The runner's
+thread itself runs at nice -10 where allowed, so decoding keeps up beside busy processes.
 
 It can master several buses at once (``more_buses``): one `Gateway` per bus,
 each its own CANopen network with the configured node-IDs, all served by one
@@ -37,6 +38,10 @@ from grasplink.devices.factory import build_node
 from grasplink.errors import BusError
 from grasplink.gateway.config import GatewayConfig
 from grasplink.gateway.service import Gateway
+
+# The gateway's runner thread runs ahead of ordinary work (decoding must keep up with the
+# bus on a busy host), but not real-time: its work grows with the traffic it is sent.
+GATEWAY_NICE = -10
 
 
 def prepare_to_go_live(gateways: Iterable[Gateway]) -> None:
@@ -133,6 +138,7 @@ class LiveGateway:
                     urgent=[gateway.detach_heartbeat()],
                     pace_urgent=True,
                     stall_limit_s=self.stall_limit_s,
+                    nice=GATEWAY_NICE,
                 )
             )
         prepare_to_go_live(self.gateways)
@@ -150,7 +156,9 @@ class LiveGateway:
             return
         if node_runners:
             self._runners.append(MultiRunner(node_runners, name="grasplink-nodes").start())
-        self._runners.append(MultiRunner(self._gateway_runners, name="grasplink-gateways").start())
+        self._runners.append(
+            MultiRunner(self._gateway_runners, name="grasplink-gateways", nice=GATEWAY_NICE).start()
+        )
 
     def stop(self) -> None:
         for runner in reversed(self._runners):
@@ -171,6 +179,11 @@ class LiveGateway:
     def heartbeat_priority(self) -> str | None:
         """What the host granted the thread sending the gateway's heartbeat (None: not yet)."""
         return next((r.pacer_priority for r in self._gateway_runners if r.pacer_priority), None)
+
+    @property
+    def runner_priority(self) -> str | None:
+        """What the host granted the thread running the gateway (None: not started)."""
+        return self._runners[-1].priority if self._runners else None  # the gateways' is last
 
     def snapshot(self) -> dict[str, Any] | None:
         return self.gateway.latest

@@ -8,6 +8,7 @@ bus queues a frame in the other handle the moment it is sent. No thread, no slee
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 import uuid
@@ -17,6 +18,7 @@ import can
 import pytest
 
 from grasplink.bus import NodeRunner
+from grasplink.bus.priority import raise_thread_nice, raise_thread_priority
 from grasplink.bus.url import frame_to_message
 from grasplink.core.frames import HEARTBEAT_BASE, Frame
 from grasplink.gateway.config import parse_config
@@ -132,6 +134,41 @@ def test_urgent_timers_do_not_break_frames_first_for_the_loss_check(buses):
     runner.step()
     assert not master.nodes[5].lost
     assert master.heartbeat.beats == 1  # the grid slots missed meanwhile: one beat, not ten
+
+
+class Recorder:
+    """A device that keeps what it hears."""
+
+    def __init__(self, node_id: int) -> None:
+        self.node_id = node_id
+        self.heard: list[int] = []
+
+    def start(self, t_us: int) -> list[Frame]:
+        return []
+
+    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
+        self.heard.append(frame.can_id)
+        return []
+
+    def advance(self, t_us: int) -> list[Frame]:
+        return []
+
+    def next_deadline_us(self) -> int | None:
+        return None
+
+
+def test_the_heartbeats_owner_does_not_hear_it_back_and_the_other_devices_do(buses):
+    # A master hearing its own heartbeat would take it for a second master on the bus.
+    runner_bus, node_bus = buses
+    clock = Clock()
+    owner, node = Recorder(obj.GATEWAY_NODE_ID), Recorder(0x20)
+    producer = HeartbeatProducer(obj.GATEWAY_NODE_ID, period_us=100 * MS, consumer_us=500 * MS)
+    runner = NodeRunner(runner_bus, [owner, node], clock_us=clock, urgent=[producer])
+    runner.power_on()
+    clock.now_us = 100 * MS
+    runner.step()
+    assert node_bus.recv(0).arbitration_id == BEAT
+    assert node.heard == [BEAT] and owner.heard == []
 
 
 # -- the producer's own account of lateness ------------------------------------------------
@@ -257,3 +294,38 @@ def test_heartbeat_stops_when_the_runner_thread_is_stuck_beyond_the_stall_limit(
     # consumers can see a gateway whose loop is dead. The last beat comes well before the end.
     arrivals, ended_at = _beats_while_busy(buses, busy_s=2.5, stall_limit_s=0.3)
     assert all(ended_at - t >= 1.0 for t in arrivals)
+
+
+# -- what the host grants -------------------------------------------------------------------
+def _in_a_thread(call):
+    """Run `call` in a fresh thread (its priority dies with it); its result and the
+    thread's scheduling policy and nice value afterwards."""
+    out = []
+
+    def run() -> None:
+        result = call()
+        tid = threading.get_native_id()
+        out.append((result, os.sched_getscheduler(0), os.getpriority(os.PRIO_PROCESS, tid)))
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    thread.join()
+    return out[0]
+
+
+def test_heartbeat_thread_gets_real_time_or_says_why_not():
+    (granted, what), policy, _ = _in_a_thread(raise_thread_priority)
+    if granted:
+        assert policy == os.SCHED_FIFO and what == "SCHED_FIFO priority 10"
+    else:  # an unprivileged host: a nice value or nothing, and the reason in the note
+        assert policy != os.SCHED_FIFO and "refused" in what
+
+
+def test_gateway_thread_gets_a_raised_nice_or_says_why_not():
+    before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    (granted, what), policy, nice = _in_a_thread(lambda: raise_thread_nice(-5))
+    assert policy == os.SCHED_OTHER  # never real-time: decoding work can grow
+    if granted:
+        assert nice == -5 and what == "nice -5"
+    else:
+        assert nice == before and "refused" in what
