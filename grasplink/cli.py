@@ -214,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
         "file",
         type=Path,
         help="CSV (header t_s,force_n or t_s,skin.force_n), NPZ (t_s, force_n), a CAN log "
-        "of the skin node (.asc, .blf, .log) or a folder written by `grasplink run`",
+        "of the skin node (.asc, .blf, .log, .trc) or a folder written by `grasplink run`",
     )
     decode.add_argument(
         "--skin",
@@ -322,8 +322,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_log_commands(sub: argparse._SubParsersAction, default_bus: str) -> None:
     """`record` and `replay`: CAN logs in the formats analysers read (docs/can_tools.md)."""
-    record = sub.add_parser("record", help="record a bus to a CAN log (.asc, .blf, .log)")
-    record.add_argument("out", type=Path, metavar="OUT", help="OUT.asc, OUT.blf or OUT.log")
+    record = sub.add_parser("record", help="record a bus to a CAN log (.asc, .blf, .log, .trc)")
+    record.add_argument(
+        "out", type=Path, metavar="OUT", help="OUT.asc, OUT.blf, OUT.log or OUT.trc"
+    )
     record.add_argument("--bus", default=default_bus, help=f"bus URL (default {default_bus})")
     record.add_argument(
         "--duration",
@@ -333,7 +335,7 @@ def _add_log_commands(sub: argparse._SubParsersAction, default_bus: str) -> None
     )
     record.add_argument("--force", action="store_true", help="overwrite OUT if it exists")
     replay = sub.add_parser("replay", help="replay a CAN log onto a bus at its timestamps")
-    replay.add_argument("log", type=Path, metavar="LOG", help="a .asc, .blf or .log file")
+    replay.add_argument("log", type=Path, metavar="LOG", help="a .asc, .blf, .log or .trc file")
     replay.add_argument("--bus", default=default_bus, help=f"bus URL (default {default_bus})")
     replay.add_argument(
         "--speed",
@@ -892,6 +894,8 @@ def cmd_record(args: argparse.Namespace) -> int:
         finally:
             bus.shutdown()
     errors = f", {stats.error_frames} error frames" if stats.error_frames else ""
+    if stats.left_out:  # a TRC log holds data frames only (python-can's TRCWriter)
+        errors += f", {stats.left_out} error/remote frames left out ({name} holds data frames)"
     print(f"wrote {args.out}: {stats.frames} frames{errors} in {stats.wall_s:.1f} s", flush=True)
     return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
 

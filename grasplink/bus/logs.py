@@ -1,7 +1,10 @@
 """Record a bus to a log file, and replay a log onto a bus or into sans-IO devices.
 
 Logs are the formats CAN tools already read and write, through python-can:
-Vector ASC (.asc), Vector BLF (.blf) and can-utils `candump -L` (.log).
+Vector ASC (.asc), Vector BLF (.blf), can-utils `candump -L` (.log) and PEAK
+PCAN-View traces (.trc, python-can's TRCReader/TRCWriter; a TRC log written here
+holds data frames only: python-can's TRCWriter cannot write error or remote
+frames, so a recording leaves them out and counts them).
 
 The timing of a replay is a sans-IO object, `ReplaySchedule`: it turns a log
 into (due time, message) pairs honouring the timestamps, a speed factor and
@@ -38,7 +41,11 @@ LOG_FORMATS = {
     ".asc": "Vector ASC",
     ".blf": "Vector BLF",
     ".log": "can-utils candump -L",
+    ".trc": "PEAK PCAN-View trace",
 }
+#: Formats whose python-can writer holds data frames only (TRCWriter skips error and
+#: remote frames with a warning each): a recording leaves those out and counts them.
+DATA_FRAMES_ONLY = frozenset({".trc"})
 RECV_POLL_S = 0.1  # how often a recording notices a stop request or its deadline
 MAX_SLEEP_S = 0.1  # a replay waiting for a distant frame still notices a stop request
 NODE_SERVICES = frozenset({"EMCY", "TPDO1", "TPDO2", "TPDO3", "TPDO4", "SDO tx", "heartbeat"})
@@ -46,6 +53,11 @@ NODE_SERVICES = frozenset({"EMCY", "TPDO1", "TPDO2", "TPDO3", "TPDO4", "SDO tx",
 
 def _formats() -> str:
     return ", ".join(f"{s} ({name})" for s, name in LOG_FORMATS.items())
+
+
+def _suffixes() -> str:
+    names = list(LOG_FORMATS)
+    return ", ".join(names[:-1]) + f" or {names[-1]}"
 
 
 def log_format(path: Path) -> str:
@@ -297,7 +309,7 @@ def check_record_path(path: Path, *, force: bool = False) -> str:
     path = Path(path)
     name = log_format(path)
     if path.is_dir():
-        raise ConfigError(f"{path}: is a directory; give a file name ending in .asc, .blf or .log")
+        raise ConfigError(f"{path}: is a directory; give a file name ending in {_suffixes()}")
     if path.exists() and not force:
         raise ConfigError(f"{path} already exists; use --force to overwrite it")
     if not path.parent.is_dir():
@@ -312,6 +324,7 @@ class RecordStats:
     error_frames: int = 0
     wall_s: float = 0.0
     by_can_id: dict[int, int] = field(default_factory=dict)
+    left_out: int = 0  # error and remote frames a data-frames-only format cannot hold
 
 
 def record_bus(
@@ -331,6 +344,7 @@ def record_bus(
     path = Path(path)
     check_record_path(path, force=force)
     stats = RecordStats(path)
+    data_only = path.suffix.lower() in DATA_FRAMES_ONLY
     try:
         writer = can.Logger(str(path))
     except OSError as exc:
@@ -359,6 +373,9 @@ def record_bus(
                 continue
             if not msg.timestamp:
                 msg.timestamp = time.time()
+            if data_only and (msg.is_error_frame or msg.is_remote_frame):
+                stats.left_out += 1
+                continue
             writer.on_message_received(msg)
             if msg.is_error_frame:
                 stats.error_frames += 1

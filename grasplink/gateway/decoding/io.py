@@ -8,10 +8,11 @@
   are refused rather than silently converted).
 * A folder written by `grasplink run`: its skin.csv, with the layout and the
   sample rate from its summary.json (`read_run_folder`).
-* CAN logs of the skin node (``.asc``, ``.blf``, ``.log`` candump, read by
-  python-can's LogReader): TPDO1 frames decoded through the skin EDS - the
-  COB-ID (0x1800:01), the mapping (0x1A00: three U16 sample slots 0x2100 and
-  the U8 packet sequence 0x2101), samples per PDO (0x2121), sample rate
+* CAN logs of the skin node (``.asc``, ``.blf``, ``.log`` candump, ``.trc``
+  PCAN-View trace: `bus.logs.LOG_FORMATS`, read by python-can's LogReader):
+  TPDO1 frames decoded through the skin EDS - the COB-ID (0x1800:01), the
+  mapping (0x1A00: three U16 sample slots 0x2100 and the U8 packet sequence
+  0x2101), samples per PDO (0x2121), sample rate
   (0x2120) and the FSR calibration defaults (0x2130: resolution, full scale
   in mN, zero offset), force_mN = (counts - zero) x full_scale_mN /
   (2^bits - 1 - zero).
@@ -45,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from grasplink.bus.logs import LOG_FORMATS
 from grasplink.core.frames import HEARTBEAT_BASE
 from grasplink.errors import ConfigError, RecordingError
 from grasplink.gateway.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
@@ -54,7 +56,7 @@ CSV_HEADER = ("t_s", "force_n")
 #: The force column of a CSV: ours, or the skin.csv of `grasplink run`
 #: (the recorder's SKIN_FORCE_N signal name; a test ties the two).
 FORCE_COLUMNS = ("force_n", "skin.force_n")
-CAN_EXTENSIONS = (".asc", ".blf", ".log")
+CAN_EXTENSIONS = tuple(LOG_FORMATS)  # the formats grasplink record/replay take
 RUN_SUMMARY = "summary.json"
 DEFAULT_SKIN_NODE_ID = 0x10
 SAMPLE_SLOTS, PACKET_SEQUENCE = 0x2100, 0x2101
