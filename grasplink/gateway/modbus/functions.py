@@ -21,14 +21,17 @@ execution (04) are the register map's and the gateway's.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from importlib.metadata import version
 
-from grasplink import __version__
 from grasplink.gateway.modbus.registers import MAX_READ, ExceptionCode, RegisterError
 
 #: Registers one write may carry (function 16) and the write half of function 23 (spec 6.12, 6.17).
 MAX_WRITE = 123
 MAX_READ_WRITE_WRITE = 121
 MEI_DEVICE_IDENTIFICATION = 0x0E
+#: The installed distribution's version (the package's metadata, not the top-level module,
+#: which the gateway layer must not import).
+__version__ = version("grasplink")
 #: Read Device Identification: the objects this server reports (spec 6.21), by object id.
 IDENTIFICATION = {
     0x00: "grasplink",  # VendorName
