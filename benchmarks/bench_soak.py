@@ -9,8 +9,8 @@ watches the bus for the whole window, from the moment the gateway says it is up:
 - the gateway's heartbeat intervals as they arrive (p50/p99/p99.9/max), and how many
   exceeded the nodes' consumer time (500 ms) and the old one (300 ms);
 - EMCY 8130h (a node's heartbeat consumer timed out: it quick-stopped), per node;
-- re-provisionings (an SDO write of 1017h to a node after its first provisioning), NMT
-  resets and node boot-ups after the start;
+- re-provisionings (an SDO write of 1017h, the first of a provisioning, to a node the
+  gateway had already started), NMT resets and node boot-ups after the start;
 - the gateway's own account of its heartbeat (the status line it prints at the end).
 
 The hub, the nodes and the analyser stand for hardware of their own (a CAN controller,
@@ -71,6 +71,7 @@ STAND_IN_PRIORITY = {
     "normal": "the default, as the busy loops",
 }
 START_TIMEOUT_S = 120.0
+NMT_START = 0x01
 NMT_RESETS = (0x81, 0x82)  # reset node, reset communication
 SDO_DOWNLOAD_REQUESTS = frozenset({0x21, 0x22, 0x23, 0x27, 0x2B, 0x2F})
 
@@ -85,8 +86,8 @@ class BusWatch:
     stop: threading.Event = field(default_factory=threading.Event)
     beats_s: list[float] = field(default_factory=list)  # arrival (monotonic s) of each beat
     faults: Counter[str] = field(default_factory=Counter)  # EMCY 8130h per node kind
-    provisionings: Counter[str] = field(default_factory=Counter)  # 1017h writes, all run
-    provisionings_counted: Counter[str] = field(default_factory=Counter)  # in the window
+    started: set[str] = field(default_factory=set)  # nodes the gateway has NMT-started
+    reprovisioned: Counter[str] = field(default_factory=Counter)  # 1017h written after that
     resets: int = 0
     boots: Counter[str] = field(default_factory=Counter)
     frames: int = 0
@@ -115,16 +116,19 @@ class BusWatch:
         node_id = can_id & 0x7F
         kind = self.node_ids.get(node_id)
         base = can_id - node_id
+        # 1017h is the first write of every provisioning: a re-provisioning once the node ran
         if (
             base == SDO_RX_BASE
-            and kind
+            and kind in self.started
+            and self.counting.is_set()
             and len(data) >= 3
             and data[0] in SDO_DOWNLOAD_REQUESTS
             and int.from_bytes(data[1:3], "little") == obj.HEARTBEAT_PRODUCER_MS
         ):
-            self.provisionings[kind] += 1  # the first write of every provisioning
-            if self.counting.is_set():
-                self.provisionings_counted[kind] += 1
+            self.reprovisioned[kind] += 1
+        if can_id == NMT_COB_ID and len(data) == 2 and data[0] == NMT_START:
+            targets = self.node_ids.values() if data[1] == 0 else [self.node_ids.get(data[1])]
+            self.started.update(k for k in targets if k)
         if not self.counting.is_set():
             return
         self.frames += 1
@@ -277,10 +281,7 @@ def summarise(
     runner = re.search(r"gateway thread at (.*)", up_line)
     stopped = next((ln for ln in gateway_log.splitlines() if ln.startswith("stopped:")), "")
     own = re.search(r"own heartbeat late [^|]*", stopped)
-    reprovisioned = {
-        kind: count - (1 if watch.provisionings[kind] == count else 0)
-        for kind, count in watch.provisionings_counted.items()
-    }
+    reprovisioned = dict(watch.reprovisioned)
     return {
         "minutes": window_s / 60,
         "busy": args.busy,

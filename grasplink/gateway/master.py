@@ -4,7 +4,9 @@ On start it resets communication on every node so nodes already running
 boot again, then starts each node when its boot-up arrives - or when a
 heartbeat shows a node back in PRE-OPERATIONAL, since a boot-up frame can
 be lost like any other. It produces its own heartbeat (the nodes' 1016h
-consumers watch it) and consumes every node's heartbeat and EMCY.
+consumers watch it: `HeartbeatProducer`, which a live edge may take over
+and serve on a schedule of its own, `detach_heartbeat`) and consumes every
+node's heartbeat and EMCY.
 
 Two rules keep a node's safe state from being undone by the master:
 
