@@ -70,12 +70,17 @@ class Ops:
     or - inside `perturbed` - each result moved by a random share (sign and size, per
     element) of a bound: `ulps` ulps of the value for exp, log and erf; for a matrix
     product A B, `terms` x eps x (|A| |B|), the rounding bound of a `terms`-term dot
-    product in any order, fused or not."""
+    product in any order, fused or not. `rnd` marks an intermediate of the Kalman update
+    computed from such results: once its inputs differ, its own rounding may fall the
+    other way (1 ulp; there the update cancels: P - K P0 is small beside its terms).
+    `magnify` scales every move, so that first-order effects stand out above the
+    rounding of the outputs (their excursion divided by `magnify`)."""
 
     def __init__(self) -> None:
         self._rng: np.random.Generator | None = None
         self.ulps = 0.0
         self.terms = 0
+        self.magnify = 1.0
         self.marks: list = []  # the decisions `_posterior` took (`mark`), in order
 
     def mark(self, decision):
@@ -88,8 +93,10 @@ class Ops:
         return decision
 
     @contextmanager
-    def perturbed(self, rng: np.random.Generator, ulps: float, terms: int) -> Iterator[None]:
-        self._rng, self.ulps, self.terms = rng, ulps, terms
+    def perturbed(
+        self, rng: np.random.Generator, ulps: float, terms: int, magnify: float = 1.0
+    ) -> Iterator[None]:
+        self._rng, self.ulps, self.terms, self.magnify = rng, ulps, terms, magnify
         try:
             yield
         finally:
@@ -98,13 +105,16 @@ class Ops:
     def _nudge(self, value, scale):
         if self._rng is None:
             return value
-        share = self._rng.uniform(-1.0, 1.0, np.shape(value))
+        share = self._rng.uniform(-1.0, 1.0, np.shape(value)) * self.magnify
         with np.errstate(invalid="ignore"):  # (an infinity or NaN stays as it is)
             moved = value + share * scale
         return np.where(np.isfinite(value) & np.isfinite(scale), moved, value)
 
     def _fn(self, value):
         return self._nudge(value, self.ulps * EPS * np.abs(value))
+
+    def rnd(self, value):
+        return self._nudge(value, EPS * np.abs(value))
 
     def exp(self, x):
         return self._fn(np.exp(x))
@@ -520,9 +530,9 @@ class NumpyTracker:
         if chg.any():
             qj = np.where(chg, (self.JERK_PER_S2 * v) ** 2, 0.0)
             flat[:, _QJ_AT] += qj[:, None] * powers[:, _QJ_POW1] * powers[:, _QJ_POW2] / _QJ_DIV
-        Pp = flat.reshape(N, 4, 4)
-        var = Pp[:, 0, 0] + self._meas_var(v, ev.sigma_s) + skip * self.SIGMA_POS_MM**2
-        resid = target - Xp[:, 0]
+        Pp = ops.rnd(flat.reshape(N, 4, 4))
+        var = ops.rnd(Pp[:, 0, 0] + self._meas_var(v, ev.sigma_s) + skip * self.SIGMA_POS_MM**2)
+        resid = ops.rnd(target - Xp[:, 0])
         inlier = (
             (1.0 - self.ROBUST_FLOOR)
             * v
@@ -531,11 +541,11 @@ class NumpyTracker:
         )
         outlier = self.ROBUST_FLOOR * v / (4.0 * np.maximum(target - X[:, 0], 1.0))
         like = ops.log(inlier + outlier)
-        K = Pp[:, :, 0] / var[:, None]
-        Xn = Xp + K * resid[:, None]
+        K = ops.rnd(Pp[:, :, 0] / var[:, None])
+        Xn = ops.rnd(Xp + ops.rnd(K * resid[:, None]))
         Xn[:, 3] = _clip(Xn[:, 3], 0.0, self.DIP_MAX_MM)
-        Pn = Pp - K[:, :, None] * Pp[:, None, 0, :]
-        Pn = 0.5 * (Pn + Pn.transpose(0, 2, 1))
+        Pn = ops.rnd(Pp - ops.rnd(K[:, :, None] * Pp[:, None, 0, :]))
+        Pn = ops.rnd(0.5 * (Pn + Pn.transpose(0, 2, 1)))
         good = (inlier >= outlier) & (Xn[:, 1] >= V_MIN_MM_S) & (Xn[:, 1] <= V_MAX_MM_S)
         out = _Bank.empty()
         sel = _nz(good)
