@@ -13,7 +13,7 @@ from grasplink.bus.url import frame_to_message
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.devices.factory import build_node
-from grasplink.gateway.master import NmtMaster
+from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS, NmtMaster
 from grasplink.gateway.scripted import ScriptedMaster
 from grasplink.profiles import objects as obj
 
@@ -183,7 +183,7 @@ def test_powered_off_belt_gets_no_rpdos_until_it_boots_again():
     net.run_for(1000 * MS)
     assert master.nodes[belt.node_id].lost
     last_beat_us = max(t for t, f in log if f.can_id == 0x720 and t <= off_us)
-    lost_us = last_beat_us + 3 * 100 * MS
+    lost_us = last_beat_us + 3 * 100 * MS + CONSUMER_ALLOWANCE_MS * MS
     assert not [t for t in _rpdo_times(log, belt.node_id) if t > lost_us]
     net.start_device(belt)
     boot_us = net.t_us
@@ -206,7 +206,7 @@ def test_lost_node_that_reappears_without_boot_up_is_reset_before_it_gets_comman
     net.start()
     net.run_for(1000 * MS)
     net.inject(_sdo_write_u16(belt.node_id, obj.HEARTBEAT_PRODUCER_MS, 0, 0))  # falls silent
-    net.run_for(500 * MS)
+    net.run_for(700 * MS)
     assert master.nodes[belt.node_id].lost
     silent_rpdos = len(_rpdo_times(log, belt.node_id))
     net.inject(_sdo_write_u16(belt.node_id, obj.HEARTBEAT_PRODUCER_MS, 0, 100))
@@ -236,6 +236,32 @@ def _heartbeat(node_id: int, state: NmtState) -> Frame:
     return Frame(0x700 + node_id, bytes([state]))
 
 
+def test_a_node_heard_late_within_the_scheduling_allowance_is_not_lost():
+    """The master's consumer of a node's heartbeat allows 3 periods plus the same scheduling
+    allowance the nodes' consumers of ours get (a loaded host reads frames late)."""
+    master = NmtMaster()
+    master.start(0)
+    master.receive(_heartbeat(0x20, NmtState.INITIALISING), 1000)
+    master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 100 * MS)
+    silent_until_us = 100 * MS + 3 * 100 * MS + CONSUMER_ALLOWANCE_MS * MS
+    assert master.next_deadline_us() is not None
+    master.advance(silent_until_us)
+    assert not master.nodes[0x20].lost
+    master.advance(silent_until_us + 1)
+    assert master.nodes[0x20].lost
+
+
+def test_a_master_without_allowance_loses_a_node_after_three_periods():
+    master = NmtMaster(loss_allowance_ms=0)
+    master.start(0)
+    master.receive(_heartbeat(0x20, NmtState.INITIALISING), 1000)
+    master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 100 * MS)
+    master.advance(400 * MS)
+    assert not master.nodes[0x20].lost
+    master.advance(400 * MS + 1)
+    assert master.nodes[0x20].lost
+
+
 def test_reset_of_a_returning_lost_node_is_repeated_until_it_takes():
     master = NmtMaster()
     master.start(0)
@@ -243,14 +269,14 @@ def test_reset_of_a_returning_lost_node_is_repeated_until_it_takes():
     start = NmtMaster.command(NmtCommand.START, 0x20)
     assert master.receive(_heartbeat(0x20, NmtState.INITIALISING), 1000) == [start]
     master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 100 * MS)
-    master.advance(500 * MS)
+    master.advance(700 * MS)
     assert master.nodes[0x20].lost
-    assert master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 600 * MS) == [reset]
+    assert master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 800 * MS) == [reset]
     # The reset was lost: the node still says OPERATIONAL, so it is sent again.
-    assert master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 700 * MS) == [reset]
+    assert master.receive(_heartbeat(0x20, NmtState.OPERATIONAL), 900 * MS) == [reset]
     assert not master.commandable(0x20)
     # It reset, but its boot-up was lost: PRE-OPERATIONAL after the reset counts as booted.
-    assert master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 800 * MS) == [start]
+    assert master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 1000 * MS) == [start]
     assert not master.nodes[0x20].lost and master.nodes[0x20].boots == 2
 
 
@@ -260,11 +286,11 @@ def test_lost_node_in_consumer_fault_is_reset_only_once_the_fault_clears():
     master.receive(_heartbeat(0x20, NmtState.INITIALISING), 1000)
     master.receive(_emcy(0x20, 0x8130, 0x11), 2000)
     master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 100 * MS)
-    master.advance(500 * MS)
+    master.advance(700 * MS)
     assert master.nodes[0x20].lost
     # A reset would wipe the fault (and the node's unarmed consumer would let it run).
-    assert master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 600 * MS) == []
-    assert master.receive(_emcy(0x20, 0x0000, 0x00), 650 * MS) == [
+    assert master.receive(_heartbeat(0x20, NmtState.PRE_OPERATIONAL), 800 * MS) == []
+    assert master.receive(_emcy(0x20, 0x0000, 0x00), 850 * MS) == [
         NmtMaster.command(NmtCommand.RESET_COMMUNICATION, 0x20)
     ]
 

@@ -17,9 +17,9 @@ Two rules keep a node's safe state from being undone by the master:
   error register without the communication bit says the fault is gone, the
   master starts it, and the drive walks its enable sequence afresh.
 - **Lost node**: a node whose heartbeat is overdue (`LOST_AFTER_PERIODS`
-  periods since it was last heard) is lost and gets no commands until it
-  boots again. A lost node that reappears without a boot-up is in an unknown
-  state: it is sent NMT reset communication (as a CiA 302 master boots a
+  periods and the scheduling allowance since it was last heard) is lost and
+  gets no commands until it boots again. A lost node that reappears without
+  a boot-up is in an unknown state: it is sent NMT reset communication (as a CiA 302 master boots a
   slave that comes back) and counts as booted once its boot-up - or, if that
   is lost, a PRE-OPERATIONAL heartbeat - arrives. A lost node in a consumer
   fault is reset only once the fault clears: the reset would wipe the fault.
@@ -249,10 +249,14 @@ class NmtMaster:
         autostart: bool = True,
         interval_history: int = 1000,
         consumer_ms: int | None = None,
+        loss_allowance_ms: int = CONSUMER_ALLOWANCE_MS,
     ):
         self.node_id = node_id
         self.heartbeat_us = heartbeat_ms * 1000
         self.node_heartbeat_us = node_heartbeat_ms * 1000
+        # Our own consumer of the nodes' heartbeats keeps the same scheduling allowance we
+        # give theirs of ours: a loaded host that reads a heartbeat late has not lost a node.
+        self.loss_allowance_us = loss_allowance_ms * 1000
         self.autostart = autostart
         self.interval_history = interval_history
         self.nodes: dict[int, NodeStatus] = {}
@@ -395,7 +399,12 @@ class NmtMaster:
         """When the node counts as lost if nothing is heard from it (None: lost already)."""
         if status.lost or status.last_seen_us is None:
             return None
-        return status.last_seen_us + self.node_heartbeat_us * LOST_AFTER_PERIODS + 1
+        return (
+            status.last_seen_us
+            + self.node_heartbeat_us * LOST_AFTER_PERIODS
+            + self.loss_allowance_us
+            + 1
+        )
 
     # -- commands ------------------------------------------------------------------
     @staticmethod

@@ -139,6 +139,7 @@ class Gateway(NmtMaster):
             heartbeat_ms=config.heartbeat_ms,
             node_heartbeat_ms=max(skin_hb),
             consumer_ms=config.consumer_ms,
+            loss_allowance_ms=config.consumer_allowance_ms,
         )
         self.config = config
         self.links: dict[int, NodeLink] = {}

@@ -16,6 +16,7 @@ from grasplink.cli import main as cli_main
 from grasplink.controllers import simulation
 from grasplink.core.params import SceneError
 from grasplink.devices.emg import EmgApp
+from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.simulators.effects.emg import SurfaceEmg
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import load_scene, parse_scene
@@ -391,7 +392,8 @@ def test_powered_off_belt_gets_no_rpdos_until_it_boots_again(tmp_path):
     belt_id = sim.nodes["belt"].node_id
     sim.run()
     beats = [t for t, _ in can_frames(tmp_path, 0x700 + belt_id)]
-    lost_s = max(t for t in beats if t <= 1.0) + 0.3  # three 100 ms heartbeat periods
+    # three 100 ms heartbeat periods and the scheduling allowance
+    lost_s = max(t for t in beats if t <= 1.0) + 0.3 + CONSUMER_ALLOWANCE_MS / 1000
     rpdos = [t for t, _ in can_frames(tmp_path, 0x200 + belt_id)]
     assert not [t for t in rpdos if lost_s < t < 2.5]
     assert [t for t in rpdos if t > 2.5]
