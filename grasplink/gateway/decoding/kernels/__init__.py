@@ -15,6 +15,9 @@ Rules every kernel here keeps:
   from LLVM's), which the decoders' tests and the accuracy benchmark check.
 - Plain arrays and scalars in and out: no Python objects, so the sans-IO decoder stays
   the owner of its state.
+- `nogil`: a kernel releases the GIL for its call (it touches no Python object), so the
+  live gateway's heartbeat thread (`bus.runner`, the pacer) runs while the decoder is in
+  a contact step instead of waiting for the call to end.
 """
 
 from __future__ import annotations
@@ -29,7 +32,12 @@ __all__ = ["jit"]
 
 def jit(*signature: Any) -> Callable[[Callable[..., Any]], Any]:
     """numba.njit with the package's settings; `signature` (optional) compiles eagerly."""
-    options: dict[str, Any] = {"cache": True, "error_model": "numpy", "fastmath": False}
+    options: dict[str, Any] = {
+        "cache": True,
+        "error_model": "numpy",
+        "fastmath": False,
+        "nogil": True,
+    }
     if signature:
         return numba.njit(*signature, **options)
     return numba.njit(**options)
