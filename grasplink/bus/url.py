@@ -320,6 +320,7 @@ class HubClientBus(RemoteBus):
                 websocket.socket.close()
             raise
         self.socket = websocket.socket
+        self.websocket = websocket  # ours: built here, so no need to reach into the protocol
         self.channel_info = self.remote_protocol.channel_info
         self.channel = channel
         self._periodic_lock = threading.Lock()
@@ -360,7 +361,7 @@ class HubClientBus(RemoteBus):
             raise BusDisconnected(f"connection to CAN hub {self.channel} closed ({exc})") from exc
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        if self.remote_protocol._ws.closed:
+        if self.websocket.closed:
             raise BusDisconnected(f"connection to CAN hub {self.channel} is closed")
         try:
             super().send(msg, timeout)
@@ -371,7 +372,7 @@ class HubClientBus(RemoteBus):
         if self._is_shutdown:
             return
         self.stop_all_periodic_tasks()  # before the socket closes under their threads
-        ws = self.remote_protocol._ws
+        ws = self.websocket
         try:
             if not ws.closed:
                 ws.close()
