@@ -154,6 +154,7 @@ bench: setup
 	$(PY) benchmarks/bench_loop.py
 	$(PY) benchmarks/bench_telemetry.py
 	$(PY) benchmarks/bench_modbus.py
+	$(PY) benchmarks/bench_soak.py
 
 clean:
 	rm -rf $(VENV) $(CHECK_VENV) .pytest_cache .ruff_cache .mypy_cache

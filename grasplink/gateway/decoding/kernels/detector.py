@@ -9,7 +9,8 @@ returns only the few indices the Python state machines must look at.
 Bit-identity with the numpy code they replace: the FIR loop is scipy's `lfilter`
 (direct form II transposed, `a` = [1, 0, ...]) operation for operation, and the rest is
 + - * / abs and comparisons in numpy's order, so the detector's events do not change by
-a bit (tests/decoding/test_detector_kernels.py, against golden outputs of the numpy code).
+a bit (tests/decoding/test_detector_kernels.py, against the numpy code it replaced, run in
+the same process: tests/decoding/reference/).
 """
 
 from __future__ import annotations
