@@ -399,12 +399,12 @@ class NmtMaster:
         """When the node counts as lost if nothing is heard from it (None: lost already)."""
         if status.lost or status.last_seen_us is None:
             return None
-        return (
-            status.last_seen_us
-            + self.node_heartbeat_us * LOST_AFTER_PERIODS
-            + self.loss_allowance_us
-            + 1
-        )
+        return status.last_seen_us + self.node_consumer_us + 1
+
+    @property
+    def node_consumer_us(self) -> int:
+        """Our consumer time of a node's heartbeat: silent this long, the node is lost."""
+        return self.node_heartbeat_us * LOST_AFTER_PERIODS + self.loss_allowance_us
 
     # -- commands ------------------------------------------------------------------
     @staticmethod

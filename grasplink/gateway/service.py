@@ -62,7 +62,7 @@ from grasplink.gateway.emg import (
     EmgIntentDecoder,
 )
 from grasplink.gateway.feedback import FeedbackController, FeedbackOutput
-from grasplink.gateway.master import LOST_AFTER_PERIODS, NmtMaster
+from grasplink.gateway.master import NmtMaster
 from grasplink.gateway.percept import Percept
 from grasplink.gateway.plausibility import (
     CommandRamp,
@@ -227,7 +227,7 @@ class Gateway(NmtMaster):
         self.skin_stream = SampleStream(
             skin.sample_rate_hz,
             skin.samples_per_pdo,
-            late_us=self.node_heartbeat_us * LOST_AFTER_PERIODS,
+            late_us=self.node_consumer_us,
             settle_us=LIVE_SETTLE_US,
         )
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)

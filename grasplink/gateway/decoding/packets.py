@@ -62,9 +62,10 @@ from grasplink.gateway.decoding.base import GAP_PERIODS
 
 SEQUENCE_MODULO = 256  # the skin's U8 packet sequence (0x2101) wraps
 HALF_WRAP = SEQUENCE_MODULO // 2
-#: Lateness tolerated when none is given: the heartbeat consumer time of a node at
-#: the default 100 ms heartbeat (3 periods, master.LOST_AFTER_PERIODS).
-DEFAULT_LATE_US = 300_000
+#: Lateness tolerated when none is given: the gateway's consumer time of a node's
+#: heartbeat at the default 100 ms (3 periods and the 200 ms scheduling allowance,
+#: master.NmtMaster.node_consumer_us; the live gateway passes its own).
+DEFAULT_LATE_US = 500_000
 #: How long after a new anchor's first packet arrivals are gathered to set it: a few
 #: packet periods live (a delay at start), longer offline (holding costs nothing).
 LIVE_SETTLE_US = 30_000
