@@ -142,6 +142,11 @@ class LiveGateway:
                 )
             )
         prepare_to_go_live(self.gateways)
+        for gateway in self.gateways:
+            # What a surface connected before `go` reports first (a Sparkplug NBIRTH, the
+            # Modbus registers): the gateway as configured, no node live yet - not nulls.
+            if gateway.latest is None:
+                gateway.latest = gateway.snapshot()
 
     def go(self) -> None:
         """Start the runners: the gateway resets, provisions and starts its nodes."""
