@@ -60,6 +60,7 @@ OBJECT_CHOICES: dict[tuple[int, int], dict[int, str]] = {
 EMCY_CODES = {
     0x0000: "error reset or no error",
     0x8130: "life guard or heartbeat error",
+    0x8150: "CAN-ID collision",
     0x8210: "PDO not processed: length error",
     0x8220: "PDO length exceeded",
     0x8250: "RPDO timeout",
