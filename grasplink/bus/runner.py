@@ -465,7 +465,7 @@ class NodeRunner:
             with self._urgent_lock:
                 out = self._advance_urgent(now)
             for frame, owner, _ in out:
-                self._send_paced(frame)
+                self._send(frame, paced=True)
                 if any(d is not owner for d in self.devices):
                     self._enqueue(frame, False, owner)  # the others hear it at their next step
             if out:
@@ -474,24 +474,6 @@ class NodeRunner:
             due = self._urgent_due_us
             if due is not None and due <= self._clock():
                 self._stop.wait(0.001)  # a device that failed: never spin at this priority
-
-    def _send_paced(self, frame: Frame) -> None:
-        """Send from the pacer thread: outages are the runner's to notice and handle."""
-        if self._outage is not None or self.failure is not None:
-            with self._lock:
-                self._stats.offline_drops += 1
-            return
-        try:
-            with self._send_lock:
-                self.bus.send(frame_to_message(frame))
-        except Exception as exc:
-            with self._lock:
-                self._stats.send_errors += 1
-            logger.debug("%s: pacer sending 0x%03X failed: %s", self._name, frame.can_id, exc)
-            return
-        with self._lock:
-            self._stats.frames_tx += 1
-            self._stats.tx_by_cob_id[frame.can_id] += 1
 
     def _effective_deadline(self, device: SansIoDevice) -> int | None:
         """The device's deadline, held back for a while after the device raised."""
@@ -631,7 +613,9 @@ class NodeRunner:
                     replies += [(f, device, True) for f in out]
         return replies
 
-    def _send(self, frame: Frame) -> None:
+    def _send(self, frame: Frame, *, paced: bool = False) -> None:
+        """Send one frame; `paced` from the pacer thread, whose failures are only counted:
+        outages are the runner's thread's to notice and handle."""
         if self._outage is not None or self.failure is not None:
             with self._lock:
                 self._stats.offline_drops += 1
@@ -639,19 +623,20 @@ class NodeRunner:
         try:
             with self._send_lock:
                 self.bus.send(frame_to_message(frame))
-        except BusDisconnected as exc:
-            with self._lock:
-                self._stats.send_errors += 1
-            self._bus_failed(exc)
-            return
         except Exception as exc:
             with self._lock:
                 self._stats.send_errors += 1
-            log = logger.debug if self._send_failing else logger.warning
-            log("%s: sending 0x%03X failed: %s", self._name, frame.can_id, exc)
-            self._send_failing = True
+            if paced:
+                logger.debug("%s: pacer sending 0x%03X failed: %s", self._name, frame.can_id, exc)
+            elif isinstance(exc, BusDisconnected):
+                self._bus_failed(exc)
+            else:
+                log = logger.debug if self._send_failing else logger.warning
+                log("%s: sending 0x%03X failed: %s", self._name, frame.can_id, exc)
+                self._send_failing = True
             return
-        self._send_failing = False
+        if not paced:
+            self._send_failing = False
         with self._lock:
             self._stats.frames_tx += 1
             self._stats.tx_by_cob_id[frame.can_id] += 1
