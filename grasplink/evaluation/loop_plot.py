@@ -16,7 +16,7 @@ from pathlib import Path
 import can
 import numpy as np
 
-from grasplink.core.frames import RPDO_BASES, Frame
+from grasplink.core.frames import RPDO_BASES, Frame, node_cob_ids
 from grasplink.errors import RecordingError
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.decoding.base import SlipEstimate
@@ -67,7 +67,9 @@ def replay_skin(path: Path, skin: dict, layout: str) -> list[SlipEstimate]:
     """The gateway's skin decoder updates, replayed from a CAN log through a `Gateway`.
 
     Frames reach the gateway at their logged times, as they reached it live, so its
-    sample timing and its decoder give the same updates it acted on.
+    sample timing and its decoder give the same updates it acted on. Only the skin
+    node's own frames: this gateway listens to a recording, it masters nothing, and the
+    recorded master's NMT commands and heartbeat would be a second master to it.
     """
     settings = {"node_id": skin["node_id"], "layout": layout}
     if "sample_rate_hz" in skin:
@@ -76,9 +78,12 @@ def replay_skin(path: Path, skin: dict, layout: str) -> list[SlipEstimate]:
     gateway = Gateway(parse_config(data, str(path)))
     estimates: list[SlipEstimate] = []
     gateway.estimate_listeners.append(lambda t_us, estimate: estimates.append(estimate))
+    skin_cob_ids = frozenset(node_cob_ids(skin["node_id"]))
     started = False
     for msg in can.LogReader(str(path)):
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+            continue
+        if msg.arbitration_id not in skin_cob_ids:
             continue
         t_us = round(msg.timestamp * 1e6)
         if not started:
@@ -194,6 +199,24 @@ def plot_loop(folder: Path) -> Path:
     return out
 
 
+#: A grip command rises in steps at the hand's slew rate (gateway plausibility limits,
+#: a step every 10 ms); no higher value within this long ends the raise.
+RAISE_STEP_GAP_S = 0.05
+
+
+def _end_of_raise(t_s: np.ndarray, grip_n: np.ndarray, first: int) -> int:
+    """The RPDO where the ramp that begins at `first` reaches its grip (repeated RPDOs of
+    one value, the 100 ms refresh, do not end it; a later raise, the wearer's, is apart)."""
+    k = first
+    while True:
+        higher = np.flatnonzero(
+            (t_s > t_s[k]) & (t_s <= t_s[k] + RAISE_STEP_GAP_S) & (grip_n > grip_n[k])
+        )
+        if not len(higher):
+            return k
+        k = int(higher[0])
+
+
 def describe_loop(folder: Path) -> list[str]:
     """What happened in a closed-loop recording, in a few lines a person reads."""
     folder = Path(folder)
@@ -219,9 +242,10 @@ def describe_loop(folder: Path) -> list[str]:
     raised = np.flatnonzero((trace.hand_t_s >= onset) & (trace.hand_target_n > grip0 + 0.5))
     if len(raised):
         i = raised[0]
+        j = _end_of_raise(trace.hand_t_s, trace.hand_target_n, i)
         lines.append(
             f"{trace.hand_t_s[i]:.2f} s  hand RPDO: grip raised {grip0:.1f} -> "
-            f"{trace.hand_target_n[i]:.1f} N"
+            f"{trace.hand_target_n[j]:.1f} N (reached at {trace.hand_t_s[j]:.2f} s)"
         )
     if sig.WEARER_LEVEL in truth:
         level = truth[sig.WEARER_LEVEL]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import tomllib
 from pathlib import Path
 
@@ -252,7 +253,7 @@ def test_posted_restart_resets_the_node_and_the_gateway_brings_it_back():
     assert gateway.by_kind["hand"].phase == "operational"
 
 
-def test_loop_headline_recording_shows_the_loop_on_the_bus(tmp_path):
+def test_loop_headline_recording_shows_the_loop_on_the_bus(tmp_path, caplog):
     """The shipped closed-loop scene: belt and hand RPDOs react to the slip, the object held."""
     from grasplink.evaluation.loop_plot import describe_loop, read_loop
 
@@ -267,4 +268,12 @@ def test_loop_headline_recording_shows_the_loop_on_the_bus(tmp_path):
     position = trace.truth["object.position_mm"]
     assert position[-1] < 84.0, "held before it crossed the skin"
     assert trace.truth["object.slipping"][-1] == 0
-    assert any("held" in line for line in describe_loop(out))
+    with caplog.at_level(logging.WARNING):
+        lines = describe_loop(out)
+    assert any("held" in line for line in lines)
+    # the raise is told up to the grip the ramp reached, not its first 0.5 N step
+    (raised,) = [line for line in lines if "grip raised" in line]
+    reached_n = float(raised.split("-> ")[1].split(" N")[0])
+    assert reached_n > np.max(grip_before) + 3
+    # the replay listens to the skin: the recorded master is no second master to it
+    assert not [r for r in caplog.records if "another master" in r.getMessage()]
