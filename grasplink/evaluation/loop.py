@@ -351,8 +351,14 @@ def outcome(
     force_belt = belt_v[(belt_t >= onset_s) & (belt_v > 0)]
     force_belt_max = float(np.max(force_belt)) if len(force_belt) else None
     hand_t, hand_n = hand
+    # a command that rose above the wearer's grip: the grip command is slew-limited, so a
+    # command still ramping down to a grip the wearer relaxed to is above it, yet no reflex
+    previous_n = np.concatenate([[-np.inf], hand_n[:-1]])
     raised = np.flatnonzero(
-        (hand_t >= onset_s) & np.isfinite(voluntary_n) & (hand_n > voluntary_n + 0.5 / MN_PER_N)
+        (hand_t >= onset_s)
+        & np.isfinite(voluntary_n)
+        & (hand_n > voluntary_n + 0.5 / MN_PER_N)
+        & (hand_n > previous_n)
     )
     reflex_latency = float(hand_t[raised[0]] - onset_s) if len(raised) else None
     return Outcome(
@@ -839,7 +845,7 @@ def render(results: dict) -> str:
         "and *success/effort* = stopped share / I_EMG (the thesis's success-to-EMG-intensity",
         "ratio); *belt*: first belt RPDO after onset changing the display (*slip belt*: the",
         "first one running the slip belt), median latency; *reflex*: share",
-        "of trials with a hand RPDO after onset above the grip the wearer's EMG asked for",
+        "of trials with a hand RPDO after onset rising above the grip the wearer's EMG asked for",
         "(the EMG TPDOs replayed through the gateway's calibration) and its median latency.",
         "Belt and hand RPDOs and EMG TPDOs are unpacked through the nodes' EDS mappings.",
         f"Speed bands: the wearer's ≤ {g['wearer_limit_mm_s']:.0f} mm/s (slip shown at the "

@@ -156,6 +156,17 @@ def test_reflex_is_a_hand_command_above_the_wearers_grip_not_a_voluntary_rise():
     assert out.reflex_latency_s is None
 
 
+def test_a_grip_command_ramping_down_after_the_wearer_relaxed_is_no_reflex():
+    # The gateway slews the grip command at the hand's rate: when the wearer relaxes from
+    # e3 (11 N) to e2 (8 N) the commands step down over 60 ms, above what the wearer asks.
+    truth = physics(profile((1.0, 0.0), (1.0, 20.0), (2.0, 0.0)))
+    hand_t = np.array([1.20, 1.30, 1.31, 1.32, 1.33, 1.34, 1.35, 1.36])
+    hand_n = np.array([11.0, 11.0, 10.5, 10.0, 9.5, 9.0, 8.5, 8.0])
+    voluntary = np.array([11.0, 8.0, 8.0, 8.0, 8.0, 8.0, 8.0, 8.0])
+    out = judged(truth, hand=(hand_t, hand_n), voluntary=voluntary)
+    assert out.reflex_latency_s is None
+
+
 def test_i_emg_is_the_thesis_mean_normalised_intensity_from_the_onset_on():
     truth = physics(profile((1.0, 0.0), (1.0, 20.0), (2.0, 0.0)))
     env_t = np.array([0.5, 1.0, 2.0, 3.0])
