@@ -218,6 +218,8 @@ class Gateway(NmtMaster):
         link = self.by_kind.get("skin")
         self.skin_stream: SampleStream | None = None
         self.decoder = None
+        self._skin_max_counts: int | None = None
+        self._static_force_mn = (0.0, 0.0)
         if link is None:
             return
         skin = link.config
@@ -237,6 +239,11 @@ class Gateway(NmtMaster):
         full_scale_mn = od_default(od, obj.SKIN_FSR_CALIBRATION, FULL_SCALE_MN)
         full = (1 << bits) - 1
         self._skin_n_per_count = full_scale_mn / (full - self._skin_zero) / 1e3
+        # what the sensor can report (plausibility): ADC counts up to full, a static force
+        # from the zero offset's negative to full scale (+-1 mN: rounding)
+        self._skin_max_counts = full
+        per_count_mn = full_scale_mn / (full - self._skin_zero)
+        self._static_force_mn = (-self._skin_zero * per_count_mn - 1, full_scale_mn + 1)
 
     def _plausibility_setup(self) -> None:
         """What the loop refuses to follow, and how fast its commands may move
@@ -247,16 +254,6 @@ class Gateway(NmtMaster):
         self.belt_ramp = CommandRamp(plaus.belt_slew_mrad_s2, plaus.command_interval_us)
         self._second_master_us: int | None = None
         self._eds_limits: dict[tuple[str, Key], tuple[float, float] | None] = {}
-        self._skin_max_counts: int | None = None
-        self._static_force_mn = (0.0, 0.0)
-        skin = self.by_kind.get("skin")
-        if skin is not None:
-            od = load_profile("skin", skin.node_id)
-            self._skin_max_counts = (1 << od_default(od, obj.SKIN_FSR_CALIBRATION, ADC_BITS)) - 1
-            zero = od_default(od, obj.SKIN_FSR_CALIBRATION, ZERO_COUNTS)
-            full_mn = od_default(od, obj.SKIN_FSR_CALIBRATION, FULL_SCALE_MN)
-            per_count = full_mn / (self._skin_max_counts - zero)
-            self._static_force_mn = (-zero * per_count - 1, full_mn + 1)  # +-1: rounding
         emg, hand = self.by_kind.get("emg"), self.by_kind.get("hand")
         self._envelope_check = None
         if emg is not None and isinstance(emg.config, EmgConfig):
