@@ -22,7 +22,10 @@ BASELINES = ("fft", "ratio", "mmse", "dtw")
 POSITIONAL = ("ratio", "mmse", "dtw")  # decoders that tell direction and position
 HOME = {"fft": "uniform4", "ratio": "alpha0.1", "mmse": "alpha0.1", "dtw": "alpha0.1"}
 ALL_AVAILABLE = [name for name in DECODERS if available(name)]
-FIELDS = {"t_s", "slip", "speed_mm_s", "position_mm", "force_n", "confidence"}
+FIELDS = {
+    "t_s", "slip", "speed_mm_s", "speed_low_mm_s", "speed_high_mm_s", "direction",
+    "direction_confidence", "position_mm", "force_n", "confidence",
+}  # fmt: skip
 
 
 def run(

@@ -35,7 +35,7 @@ RUNS = [f"signal{k}" for k in range(10)] + ["railed0", "railed1"]
 def told(out: tuple) -> tuple[tuple, np.ndarray]:
     """A posterior's decisions (None, or the chosen track's numbers, stopped, the ridge it
     has not reached) and its numbers (valid until, P(slip), agreement, odds)."""
-    until, chosen, p_slip, agree, odds = out
+    until, chosen, p_slip, agree, odds = out[:5]  # the magnitude (issue 22) after them
     if chosen is None:
         choice: tuple = (None,)
     else:

@@ -63,20 +63,82 @@ SMALL_CHUNK = 8
 
 @dataclass(frozen=True, slots=True)
 class SlipEstimate:
-    """One decoder update (the output contract of `grasplink decode`)."""
+    """One decoder update (the output contract of `grasplink decode`).
+
+    Speed and direction are separate outputs (issue 22): the belt and the reflex act on
+    the speed, which two contacts often determine, while the direction may take more
+    contacts or never be told (a uniform skin reads the same both ways).
+
+    * `speed_mm_s`: |speed| (>= 0), None while the contacts do not determine it;
+    * `speed_low_mm_s`, `speed_high_mm_s`: the range of speeds the contacts still allow
+      while slipping (both None when nothing bounds it yet); with a speed, its range;
+    * `direction`: +1 from the first ridge towards the last, -1 back, None when not told;
+    * `direction_confidence`: P(the object moves that way), None without a direction;
+    * `position_mm`: the leading edge, from the first ridge (needs the direction);
+    * `confidence`: 0..1, of the whole estimate.
+    """
 
     t_s: float
     slip: bool
-    speed_mm_s: float | None  # signed: + from the first ridge towards the last
-    position_mm: float | None  # the leading edge, from the first ridge
+    speed_mm_s: float | None
+    position_mm: float | None
     force_n: float | None  # static grip force
-    confidence: float  # 0..1
+    confidence: float
+    direction: int | None = None
+    direction_confidence: float | None = None
+    speed_low_mm_s: float | None = None
+    speed_high_mm_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.speed_mm_s is not None and self.speed_mm_s < 0:
+            raise ValueError(
+                f"speed_mm_s is a magnitude, got {self.speed_mm_s}: give the sign as "
+                "`direction` (SlipEstimate.from_velocity)"
+            )
+        if self.direction not in (None, 1, -1):
+            raise ValueError(f"direction must be +1, -1 or None, got {self.direction!r}")
+        if (self.direction is None) != (self.direction_confidence is None):
+            raise ValueError("a direction comes with its confidence, and none without")
+
+    @classmethod
+    def from_velocity(
+        cls,
+        t_s: float,
+        slip: bool,
+        velocity_mm_s: float | None,
+        position_mm: float | None,
+        force_n: float | None,
+        confidence: float,
+        direction_confidence: float | None = None,
+    ) -> SlipEstimate:
+        """An estimate from a signed speed (decoders that estimate the direction with the
+        speed): its sign is the direction, told with `direction_confidence` (default: the
+        estimate's confidence). A zero or unknown velocity tells no direction."""
+        if velocity_mm_s is None or not math.isfinite(velocity_mm_s) or velocity_mm_s == 0:
+            speed = None if velocity_mm_s is None else abs(velocity_mm_s)
+            return cls(t_s, slip, speed, position_mm, force_n, confidence)
+        p_way = confidence if direction_confidence is None else direction_confidence
+        return cls(
+            t_s, slip, abs(velocity_mm_s), position_mm, force_n, confidence,
+            1 if velocity_mm_s > 0 else -1, min(1.0, max(0.0, float(p_way))),
+        )  # fmt: skip
+
+    @property
+    def velocity_mm_s(self) -> float | None:
+        """The signed speed, when both speed and direction are told."""
+        if self.speed_mm_s is None or self.direction is None:
+            return None
+        return self.direction * self.speed_mm_s
 
     def as_dict(self) -> dict:
         return {
             "t_s": round(self.t_s, 6),
             "slip": self.slip,
             "speed_mm_s": _clean(self.speed_mm_s),
+            "speed_low_mm_s": _clean(self.speed_low_mm_s),
+            "speed_high_mm_s": _clean(self.speed_high_mm_s),
+            "direction": self.direction,
+            "direction_confidence": _clean(self.direction_confidence),
             "position_mm": _clean(self.position_mm),
             "force_n": _clean(self.force_n),
             "confidence": round(float(self.confidence), 4),

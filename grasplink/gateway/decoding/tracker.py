@@ -59,11 +59,12 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from functools import cached_property
 
 import numpy as np
 
+from grasplink.errors import ConfigError
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.gateway.decoding.contacts import (
     STEP_IDS,
@@ -322,10 +323,18 @@ class TrackerDecoder(Decoder):
     # moving the other way; the confidence carries P(this way), the logistic of those odds
     DIRECTION_CONTACTS = 3
     LOG_REPORT_ODDS = math.log(9.0)
+    # the speed whichever way: given when this share of the slipping posterior agrees on
+    # it within AGREE_SPEED (or the likeliest track has three contacts); else the range of
+    # the speeds of the tracks holding BOUND_SHARE of it
+    SPEED_AGREE_SHARE = 0.8
+    BOUND_SHARE = 0.01
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
     MEMO = 8  # contacts whose branches are kept for a replay on the same inputs (`_step`)
+    # a track silent this long has stopped or left the skin (None: the slowest slip's time
+    # to cross the skin and the coast past it, (length + coast) / V_MIN_MM_S)
+    STALE_S: float | None = None
 
     def __init__(
         self,
@@ -337,8 +346,20 @@ class TrackerDecoder(Decoder):
         history: int = 8,
         detect_block_s: float | None = None,
         detector: ContactDetector | None = None,
+        tuning: Mapping[str, float] | None = None,
     ):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
+        for key, value in (tuning or {}).items():  # the trade-off curves' settings
+            known = key.isupper() and isinstance(getattr(type(self), key, None), float | int)
+            if not (known or key == "STALE_S"):
+                raise ConfigError(f"tracker tuning: no model constant {key!r}")
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                raise ConfigError(f"tracker tuning {key} = {value!r} is not a number") from None
+            if not math.isfinite(number):
+                raise ConfigError(f"tracker tuning {key} = {value!r} is not finite")
+            setattr(self, key, number)
         geometry = self.geometry
         x = geometry.ridges_mm
         self.length = geometry.length_mm
@@ -374,7 +395,9 @@ class TrackerDecoder(Decoder):
         # the slowest slip a track takes crosses the whole skin and the coast past it in this
         # time: a track silent for longer has stopped or left the skin, so a later contact is
         # no part of its slip (a new one starts there); such tracks retire (`_retire`)
-        self._stale_s = (self.length + self._coast) / V_MIN_MM_S
+        self._stale_s = (
+            (self.length + self._coast) / V_MIN_MM_S if self.STALE_S is None else self.STALE_S
+        )
         # per (direction, start ridge): log distance to each ridge ahead, and P(all missed
         # from the next one up to it); rows padded with +inf / 1
         # and the coast end after them: past it the slip has stopped (missed = 0 there)
@@ -766,31 +789,63 @@ class TrackerDecoder(Decoder):
         # the agreement (confidence) is refreshed every REFRESH_S
         if self._cache is None or g >= self._cache[0]:
             self._cache = self._posterior(g)
-        _, chosen, p_slip, agree, odds = self._cache
+        _, chosen, p_slip, agree, odds, magnitude = self._cache
         if chosen is None:
             return SlipEstimate(g, False, None, None, force, min(1.0, max(0.0, 1.0 - p_slip)))
         h, stopped, limit = chosen
         n, run = h.n, h.run
-        if not stopped and run == 1:  # restarted: where is known, the speed is not yet
-            known = n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
-            conf = min(1.0, max(0.0, p_slip))
-            x = self._on_skin(self._x1(h, h.s)) if known else None
-            return SlipEstimate(g, True, None, x, force, conf)
-        if not stopped and (n < self.DIRECTION_CONTACTS or odds < self.LOG_REPORT_ODDS):
-            # a slip, but its direction is not told yet (two contacts fit any alignment
-            # either way; a third may fit both): say so rather than guess a sign
-            return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)))
-        s, speed, sigma = self._where(h, g, stopped, limit)
-        maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
-        direction = 1.0 / (1.0 + math.exp(-odds))  # P(this way)
-        conf = agree * maturity * direction / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
-        if not stopped:  # told at the last contact: since then the slip may have turned
+        if stopped:
+            s, _, sigma = self._where(h, g, True, limit)
+            maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
+            conf = agree * maturity / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
+            x = self._on_skin(self._x1(h, s))
+            return SlipEstimate(g, False, 0.0, x, force, min(1.0, max(0.0, conf)))
+        # the direction is told once the chosen track has an interval ratio (three
+        # contacts) and the tracks moving its way outweigh the others by LOG_REPORT_ODDS
+        told = run > 1 and n >= self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
+        if told:
+            s, speed, sigma = self._where(h, g, False, limit)
+            maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
+            p_way = 1.0 / (1.0 + math.exp(-odds))  # P(this way)
+            conf = agree * maturity * p_way / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
+            # told at the last contact: since then the slip may have turned
             conf *= math.exp(-max(0.0, g - h.t) * self.TURN_PER_S)
-        x = self._x1(h, s)  # slipping past an end: extrapolated with the speed (coast)
-        conf = min(1.0, max(0.0, conf))
-        if not stopped:
-            return SlipEstimate(g, True, h.dirn * speed, x, force, conf)
-        return SlipEstimate(g, False, 0.0, self._on_skin(x), force, conf)
+            x = self._x1(h, s)  # slipping past an end: extrapolated with the speed (coast)
+            low, high = self._speed_range(magnitude, speed)
+            return SlipEstimate(
+                g, True, max(0.0, speed), x, force, min(1.0, max(0.0, conf)), h.dirn,
+                p_way, low, high,
+            )  # fmt: skip
+        # no direction yet (or never, on a symmetric skin): the speed whichever way, when
+        # the slipping tracks agree on it, else the range they allow
+        fast, share, low, high = magnitude
+        known = run == 1 and n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
+        x = self._on_skin(self._x1(h, h.s)) if known else None  # restarted: where, not speed
+        conf = min(1.0, max(0.0, p_slip))
+        # the speed is given when the hypotheses agree on it, or when the likeliest has an
+        # interval ratio to go by (three contacts): then with the agreement as confidence
+        if fast is None or (share < self.SPEED_AGREE_SHARE and fast.n < self.DIRECTION_CONTACTS):
+            if fast is None:
+                return SlipEstimate(g, True, None, x, force, conf)
+            return SlipEstimate(g, True, None, x, force, conf, speed_low_mm_s=low,
+                                speed_high_mm_s=high)  # fmt: skip
+        _, speed, _ = self._where(fast, g, False, self.count)
+        maturity = 1.0 - math.exp(-(fast.n - 1) / self.CONF_CONTACTS)
+        conf = share * maturity * math.exp(-max(0.0, g - fast.t) * self.TURN_PER_S)
+        low, high = self._speed_range(magnitude, speed)
+        return SlipEstimate(
+            g, True, max(0.0, speed), x, force, min(1.0, max(0.0, conf)),
+            speed_low_mm_s=low, speed_high_mm_s=high,
+        )  # fmt: skip
+
+    @staticmethod
+    def _speed_range(magnitude: tuple, speed: float) -> tuple[float | None, float | None]:
+        """The range of speeds the slipping tracks allow, widened to hold the reported
+        speed (extrapolated from the last contact, it may lie outside the tracks' own)."""
+        _, _, low, high = magnitude
+        if not (math.isfinite(low) and math.isfinite(high)):
+            return None, None
+        return min(low, max(0.0, speed)), max(high, max(0.0, speed))
 
     def _x1(self, h: _One, s: float) -> float:
         return s if h.dirn > 0 else self.length - s
@@ -811,7 +866,8 @@ class TrackerDecoder(Decoder):
 
     def _posterior(self, g: float):
         """(valid until, chosen (index, stopped, limit) or None, P(slip), agreement,
-        direction log odds) at g.
+        direction log odds, magnitude) at g; magnitude: (the best slipping track with a
+        speed or None, the share agreeing on its speed either way, the speed range).
 
         Agreement: the share of the posterior that puts the edge within AGREE_MM of
         the chosen track's position (and, slipping, its speed within AGREE_SPEED).
@@ -823,15 +879,18 @@ class TrackerDecoder(Decoder):
         due, adj_t, stop_t, limit_t = self._schedule(B)
         blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
         ahead_log, ahead_finite, ahead_before = self._waiting_tables
-        until, i, is_stopped, lim, p_slip, agree, odds = posterior_kernels.posterior(
-            g, self._null, B.score, B.X, B.P, B.m, B.t, B.stop, B.dirn, B.ridge, B.run, B.n,
-            due, adj_t, stop_t, limit_t, _NO_BLIND if blind is None else blind,
-            blind is not None, B.ids, self._ring, self._ring_id, self._evidence_tables,
-            ahead_log, ahead_finite, ahead_before, self._pos, self._K,
+        (until, i, is_stopped, lim, p_slip, agree, odds, fast, share, low, high) = (
+            posterior_kernels.posterior(
+                g, self._null, B.score, B.X, B.P, B.m, B.t, B.stop, B.dirn, B.ridge, B.run,
+                B.n, due, adj_t, stop_t, limit_t, _NO_BLIND if blind is None else blind,
+                blind is not None, B.ids, self._ring, self._ring_id, self._evidence_tables,
+                ahead_log, ahead_finite, ahead_before, self._pos, self._K,
+            )
         )  # fmt: skip
+        magnitude = (_One(B, fast) if fast >= 0 else None, share, low, high)
         if i < 0:
-            return (until, None, p_slip, 0.0, -math.inf)
-        return (until, (_One(B, i), is_stopped, lim), p_slip, agree, odds)
+            return (until, None, p_slip, 0.0, -math.inf, magnitude)
+        return (until, (_One(B, i), is_stopped, lim), p_slip, agree, odds, magnitude)
 
     def _blind(self, t: np.ndarray, g: float) -> np.ndarray | None:
         """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there);
@@ -883,6 +942,7 @@ class TrackerDecoder(Decoder):
             log_report_odds=self.LOG_REPORT_ODDS,
             speed_prior_mm_s=self.SPEED_PRIOR_MM_S,
             erf_scale=self._erf_scale,
+            bound_share=self.BOUND_SHARE,
         )
 
     @cached_property

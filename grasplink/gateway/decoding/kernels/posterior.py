@@ -37,6 +37,7 @@ NAMES = (
     "log_report_odds",
     "speed_prior_mm_s",
     "erf_scale",
+    "bound_share",
 )
 (
     NEGLIGIBLE,
@@ -57,6 +58,7 @@ NAMES = (
     LOG_REPORT_ODDS,
     SPEED_PRIOR,
     ERF_SCALE,
+    BOUND_SHARE,
 ) = range(len(NAMES))
 
 
@@ -301,12 +303,13 @@ def posterior(
     ahead_before: np.ndarray,
     pos: np.ndarray,
     K: np.ndarray,
-) -> tuple[float, int, bool, int, float, float, float]:
+) -> tuple[float, int, bool, int, float, float, float, int, float, float, float]:
     """(valid until, chosen track or -1, stopped, its limit, P(slip), agreement, direction
-    log odds) at g: `TrackerDecoder._posterior`. `ids`: each track's recent contacts,
-    whose pulse verdicts (`ring`, `ring_id`, `evidence_t`: see `_evidence`) tell a slip;
-    `blind` (if `has_blind`) the time each track's contact has spent on
-    the sensor's rail since."""
+    log odds, then the speed whichever way (`_magnitude`): its track or -1, the share
+    agreeing on it, the range of speeds) at g: `TrackerDecoder._posterior`. `ids`: each
+    track's recent contacts, whose pulse verdicts (`ring`, `ring_id`, `evidence_t`: see
+    `_evidence`) tell a slip; `blind` (if `has_blind`) the time each track's contact has
+    spent on the sensor's rail since."""
     N = len(score)
     R = pos.shape[1] - 1
     J = due.shape[1]
@@ -367,8 +370,11 @@ def posterior(
         if cand >= 0 and total[cand] >= null:
             chosen, is_stopped = cand, True
     if chosen < 0:
-        return until, -1, False, 0, p_slip, 0.0, -np.inf
+        return until, -1, False, 0, p_slip, 0.0, -np.inf, -1, 0.0, np.nan, np.nan
     lim = limit[chosen]
+    fast, share, low, high = -1, 0.0, np.nan, np.nan
+    if not is_stopped:
+        fast, share, low, high = _magnitude(slipping, run, total, weight, X, K)
     odds = np.inf
     if not is_stopped:
         # the direction: the posterior mass moving each way - slipping tracks, and tracks
@@ -379,7 +385,7 @@ def posterior(
         other = pairwise_sum(weight[moving & ~way])
         odds = math.log(this / other) if other > 0 else np.inf
         if run[chosen] == 1 or n[chosen] < K[DIRECTION_CONTACTS] or odds < K[LOG_REPORT_ODDS]:
-            return until, chosen, is_stopped, lim, p_slip, 0.0, odds
+            return until, chosen, is_stopped, lim, p_slip, 0.0, odds, fast, share, low, high
     c = chosen
     x_ref = where(
         X[c, 0], X[c, 1], X[c, 2], X[c, 3], m[c], t[c], stop[c],
@@ -410,4 +416,41 @@ def posterior(
             agreeing[count] = weight[u]
             count += 1
     agree = pairwise_sum(agreeing[:count]) / mass
-    return until, chosen, is_stopped, lim, p_slip, agree, odds
+    return until, chosen, is_stopped, lim, p_slip, agree, odds, fast, share, low, high
+
+
+@jit()
+def _magnitude(
+    slipping: np.ndarray,
+    run: np.ndarray,
+    total: np.ndarray,
+    weight: np.ndarray,
+    X: np.ndarray,
+    K: np.ndarray,
+) -> tuple[int, float, float, float]:
+    """The slip's speed whichever way it goes (issue 22: the belt and the reflex need no
+    direction): the best slipping track with a measured speed (-1 if none), the share of
+    the slipping mass whose speed is within AGREE_SPEED of its speed (either way), and the
+    range of speeds the slipping tracks holding at least BOUND_SHARE of it still allow."""
+    fast, best = -1, -np.inf
+    for i in range(len(total)):
+        if slipping[i] and run[i] >= 2 and total[i] > best:
+            fast, best = i, total[i]
+    if fast < 0:
+        return -1, 0.0, np.nan, np.nan
+    v_ref = abs(X[fast, 1])
+    moving = np.zeros(len(total))
+    close = np.zeros(len(total))
+    for i in range(len(total)):
+        if slipping[i]:
+            moving[i] = weight[i]
+            if run[i] >= 2 and abs(abs(X[i, 1]) - v_ref) <= K[AGREE_SPEED] * v_ref:
+                close[i] = weight[i]
+    mass = pairwise_sum(moving)
+    share = pairwise_sum(close) / mass
+    low, high = np.inf, -np.inf
+    for i in range(len(total)):
+        if slipping[i] and run[i] >= 2 and weight[i] >= K[BOUND_SHARE] * mass:
+            low = min(low, abs(X[i, 1]))
+            high = max(high, abs(X[i, 1]))
+    return fast, share, low, high
