@@ -811,32 +811,31 @@ class TrackerDecoder(Decoder):
             # told at the last contact: since then the slip may have turned
             conf *= math.exp(-max(0.0, g - h.t) * self.TURN_PER_S)
             x = self._x1(h, s)  # slipping past an end: extrapolated with the speed (coast)
-            low, high = self._speed_range(magnitude, speed)
+            bound = self._speed_range(magnitude, speed)
             return SlipEstimate(
                 g, True, max(0.0, speed), x, force, min(1.0, max(0.0, conf)), h.dirn,
-                p_way, low, high,
+                p_way, *bound,
             )  # fmt: skip
         # no direction yet (or never, on a symmetric skin): the speed whichever way, when
         # the slipping tracks agree on it, else the range they allow
         fast, share, low, high = magnitude
         known = run == 1 and n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
-        x = self._on_skin(self._x1(h, h.s)) if known else None  # restarted: where, not speed
+        held = self._on_skin(self._x1(h, h.s)) if known else None  # restarted: where, not speed
         conf = min(1.0, max(0.0, p_slip))
         # the speed is given when the hypotheses agree on it, or when the likeliest has an
         # interval ratio to go by (three contacts): then with the agreement as confidence
         if fast is None or (share < self.SPEED_AGREE_SHARE and fast.n < self.DIRECTION_CONTACTS):
             if fast is None:
-                return SlipEstimate(g, True, None, x, force, conf)
-            return SlipEstimate(g, True, None, x, force, conf, speed_low_mm_s=low,
+                return SlipEstimate(g, True, None, held, force, conf)
+            return SlipEstimate(g, True, None, held, force, conf, speed_low_mm_s=low,
                                 speed_high_mm_s=high)  # fmt: skip
         _, speed, _ = self._where(fast, g, False, self.count)
         maturity = 1.0 - math.exp(-(fast.n - 1) / self.CONF_CONTACTS)
         conf = share * maturity * math.exp(-max(0.0, g - fast.t) * self.TURN_PER_S)
-        low, high = self._speed_range(magnitude, speed)
+        bound = self._speed_range(magnitude, speed)
         return SlipEstimate(
-            g, True, max(0.0, speed), x, force, min(1.0, max(0.0, conf)),
-            speed_low_mm_s=low, speed_high_mm_s=high,
-        )  # fmt: skip
+            g, True, max(0.0, speed), held, force, min(1.0, max(0.0, conf)), None, None, *bound
+        )
 
     @staticmethod
     def _speed_range(magnitude: tuple, speed: float) -> tuple[float | None, float | None]:
