@@ -6,7 +6,9 @@ never both (thesis ch. 8.2), so the belt shows one quantity at a time. Modes:
 
 - off: the belt stands still;
 - slip occurrence: the slip belt at one fixed speed while slipping;
-- slip speed: the slip belt at the level of the slip speed while slipping;
+- slip speed: the slip belt at the level of the slip speed while slipping (while the
+  decoder knows only a range of speeds, at the level of its lower end: a bound is shown,
+  never overstated, and the first speed known replaces it at once);
 - grip force: the force belt at the level of the grip force;
 - force and slip: grip force, overridden by slip speed while the object slips;
   force returns once the slip has stopped for `force_return_us`.
@@ -79,6 +81,7 @@ class Reason(StrEnum):
     NO_GRIP = "no grip"
     FORCE_UNKNOWN = "grip force unknown"
     SLIP_ENDED = "slip ended, force returns after the hold"
+    SLIP_SPEED_AT_LEAST = "slip, at least this speed"  # a bound's lower end (codes: add last)
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,8 +90,10 @@ class BeltCommand:
 
     `velocity_mrad_s`: > 0 force belt, < 0 slip belt, 0 stop. `level`: the display
     level 1..n shown (None when stopped or when a slip of unknown speed is shown at
-    the occurrence speed). `clamped`: the velocity was limited to what the belt can
-    do (an alarm: the tables or the belt's max profile velocity are inconsistent).
+    the occurrence speed; the level of the lower bound, reason `SLIP_SPEED_AT_LEAST`,
+    while the decoder knows only a range of speeds). `clamped`: the velocity was limited
+    to what the belt can do (an alarm: the tables or the belt's max profile velocity are
+    inconsistent).
     """
 
     t_us: int
@@ -210,6 +215,7 @@ class _Shown:
     level: int | None = None
     since_us: int = 0
     pending: bool = False  # a different level is due but the dwell holds it back
+    floor: bool = False  # the slip level shown is a bound's lower end, not a speed
 
 
 class FeedbackController:
@@ -230,7 +236,8 @@ class FeedbackController:
         self._force_levels = LevelQuantizer(self.config.force_table)
         self._speed_levels = LevelQuantizer(self.config.slip_table)
         self._force_known_us: int | None = None  # last percept with a usable grip force
-        self._speed_mm_s: float | None = None  # |speed| last known in this slip
+        self._speed_mm_s: float | None = None  # |speed| (or a bound's low end) last known
+        self._speed_bound = False  # _speed_mm_s is the lower end of a range, not a speed
         self._shown = _Shown()
 
     # --- inputs -----------------------------------------------------------------
@@ -244,11 +251,13 @@ class FeedbackController:
             self._force_levels.update(p.grip_force_n)
         self._slip.at(t_us)  # a slip that ended before this percept is over first
         self._slip.observe(t_us, p.slipping)
-        if p.slipping:
-            speed = percept.speed_magnitude_mm_s(self.config.min_speed_confidence)
-            if speed is not None:
-                self._speed_mm_s = speed
-                self._speed_levels.update(speed)
+        if p.slipping:  # the speed, or while only a range is known its lower end
+            min_confidence = self.config.min_speed_confidence
+            floor = p.speed_floor_mm_s(min_confidence)
+            if floor is not None:
+                self._speed_mm_s = floor
+                self._speed_bound = p.speed_magnitude_mm_s(min_confidence) is None
+                self._speed_levels.update(floor)
         return self._evaluate(t_us)
 
     def advance(self, t_us: int) -> FeedbackOutput:
@@ -287,11 +296,14 @@ class FeedbackController:
         slipping = self._slip.at(t_us)
         if not slipping:  # the next slip starts from an unknown speed
             self._speed_mm_s = None
+            self._speed_bound = False
             self._speed_levels.reset()
         channel, chosen, reason = self._choose(t_us, slipping)
         level = self._dwell(t_us, channel, chosen)
         if level != chosen:  # the dwell holds the previous level: say so
             reason = Reason.SLIP_SPEED if channel == "slip" else Reason.GRIP_FORCE
+            if channel == "slip" and self._shown.floor:
+                reason = Reason.SLIP_SPEED_AT_LEAST
             if channel == "force" and not level:
                 reason = Reason.NO_GRIP
         if channel == "off" or (channel == "force" and not level):
@@ -323,7 +335,8 @@ class FeedbackController:
             level = self._speed_levels.level
             if level is None:
                 return "slip", None, Reason.SLIP_SPEED_UNKNOWN
-            return "slip", max(level, 1), Reason.SLIP_SPEED
+            reason = Reason.SLIP_SPEED_AT_LEAST if self._speed_bound else Reason.SLIP_SPEED
+            return "slip", max(level, 1), reason
         if mode == FeedbackMode.SLIP_SPEED:
             return "off", None, Reason.NO_SLIP
         ended = self._slip.ended_us
@@ -343,17 +356,20 @@ class FeedbackController:
     def _dwell(self, t_us: int, channel: str, level: int | None) -> int | None:
         """Hold a shown level for `level_dwell_us` before showing another on the same
         channel; a new channel (mode change, slip start, slip end) is shown at once, and
-        so is a slip's first known speed after a start at unknown speed."""
+        so is a slip's first known speed after a start at unknown speed or at a bound
+        (which understated it)."""
         shown = self._shown
+        floor = channel == "slip" and self._speed_bound
         if channel != shown.channel:
-            self._shown = _Shown(channel, level, t_us)
+            self._shown = _Shown(channel, level, t_us, floor=floor)
             return level
         if level == shown.level:
             shown.pending = False
+            shown.floor = floor
             return level
-        first_speed = channel == "slip" and shown.level is None
+        first_speed = channel == "slip" and (shown.level is None or (shown.floor and not floor))
         if first_speed or t_us - shown.since_us >= self.config.level_dwell_us:
-            self._shown = _Shown(channel, level, t_us)
+            self._shown = _Shown(channel, level, t_us, floor=floor)
             return level
         shown.pending = True
         return shown.level

@@ -213,10 +213,7 @@ def status_of(gateway: Gateway) -> str:
         for kind, n in snap["nodes"].items()
     )
     skin, belt, hand, loop = snap["skin"], snap["belt"], snap["hand"], snap["loop"]
-    slip = "-"
-    if skin["slip"]:
-        speed = skin["slip_speed_mm_s"]
-        slip = f"SLIP {speed:+.0f} mm/s" if speed is not None else "SLIP (speed ?)"
+    slip = "-" if not skin["slip"] else f"SLIP {slip_text(skin)}"
     force = skin["grip_force_n"]
     grip = hand["setpoint_n"]
     latency = loop["latency_p99_us"]
@@ -239,3 +236,16 @@ def status_of(gateway: Gateway) -> str:
     if snap["alarms"]:
         parts.append("ALARMS " + "; ".join(f"{k}: {v}" for k, v in snap["alarms"].items()))
     return " | ".join(parts)
+
+
+def slip_text(skin: dict[str, Any]) -> str:
+    """A slip's speed for the status line: "40 mm/s +" (speed, direction), ">= 12 mm/s"
+    (only a bound: its lower end), "(speed ?)"; the direction "+" towards the last ridge,
+    "-" back, "?" not told."""
+    speed, low = skin.get("slip_speed_mm_s"), skin.get("slip_speed_low_mm_s")
+    direction = {1: "+", -1: "-"}.get(skin.get("slip_direction"), "?")  # type: ignore[arg-type]
+    if speed is not None:
+        return f"{speed:.0f} mm/s {direction}"
+    if low is not None:
+        return f">= {low:.0f} mm/s {direction}"
+    return "(speed ?)"

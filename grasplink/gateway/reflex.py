@@ -6,7 +6,11 @@ can act. Above `threshold_mm_s` the gateway raises the grip itself, by
 `gain_n_per_mm_s` per mm/s of slip speed over the grip it had when the slip
 began, never beyond the hand's crush limit, and says so (the command carries
 the reflex state for the gateway to publish). Below the threshold the
-wearer decides through EMG.
+wearer decides through EMG. While the decoder knows only a range of speeds
+the reflex acts on its lower end (`Percept.speed_floor_mm_s`): a range
+wholly above the threshold fires it, one straddling the threshold does not,
+and the slip counts as slowed only once the range's upper end is below
+threshold - hysteresis. The direction plays no part.
 
 `GripArbiter` combines both: grip = min(crush limit, max(voluntary, reflex)).
 After the fast slip stops the reflex grip is held for `hold_us` (longer than
@@ -64,7 +68,7 @@ class ReflexConfig:
     """The reflex's thresholds, gain and timing (defaults and reasons: docs/feedback.md)."""
 
     threshold_mm_s: float = 45.0  # human limit on an 80 mm skin (ch. 2.4.4, 9.3)
-    hysteresis_mm_s: float = 5.0  # active until |v| < threshold - hysteresis
+    hysteresis_mm_s: float = 5.0  # active until |v| (or its upper bound) < threshold - h
     gain_n_per_mm_s: float = 0.1  # grip added per mm/s of slip speed
     crush_limit_n: float = DEFAULT_CRUSH_LIMIT_N
     hold_us: int = 2_000_000  # > the wearer's 1.51-1.75 s reaction time
@@ -179,10 +183,12 @@ class GripReflex:
         self._last_percept_us = t
         self._slipping = p.slipping
         cfg = self.config
-        speed = percept.speed_magnitude_mm_s(cfg.min_confidence) if p.slipping else None
+        # the speed, or while only a range is known: at least `speed`, at most `ceiling`
+        speed = p.speed_floor_mm_s(cfg.min_confidence) if p.slipping else None
+        ceiling = p.speed_ceiling_mm_s(cfg.min_confidence) if p.slipping else None
         fast = speed is not None and speed >= cfg.threshold_mm_s
         slowed = not p.slipping or (
-            speed is not None and speed < cfg.threshold_mm_s - cfg.hysteresis_mm_s
+            ceiling is not None and ceiling < cfg.threshold_mm_s - cfg.hysteresis_mm_s
         )
         if fast and self.enabled and self.state == ReflexState.IDLE:
             self.base_n = max(0.0, base_grip_n)

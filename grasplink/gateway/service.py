@@ -628,7 +628,11 @@ class Gateway(NmtMaster):
             "nodes": nodes,
             "skin": {
                 "slip": est.slip if est else None,
-                "slip_speed_mm_s": _finite(est.speed_mm_s) if est else None,
+                "slip_speed_mm_s": _finite(est.speed_mm_s) if est else None,  # |speed|
+                "slip_speed_low_mm_s": _finite(est.speed_low_mm_s) if est else None,
+                "slip_speed_high_mm_s": _finite(est.speed_high_mm_s) if est else None,
+                "slip_direction": est.direction if est else None,  # +1, -1, None: not told
+                "slip_direction_confidence": _finite(est.direction_confidence) if est else None,
                 "position_mm": _finite(est.position_mm) if est else None,
                 "grip_force_n": _finite(est.force_n) if est else None,
                 "confidence": est.confidence if est else None,

@@ -31,8 +31,23 @@ def percept(
     slipping: bool = False,
     speed_mm_s: float | None = None,
     confidence: float = 0.9,
+    *,
+    direction: int | None = None,
+    low_mm_s: float | None = None,
+    high_mm_s: float | None = None,
 ) -> Percept:
-    return Percept(round(t_ms * MS), force_n, slipping, speed_mm_s, confidence)
+    way = None if direction is None else 0.9
+    return Percept(
+        round(t_ms * MS),
+        force_n,
+        slipping,
+        speed_mm_s,
+        confidence,
+        low_mm_s,
+        high_mm_s,
+        direction,
+        way,
+    )
 
 
 def feed(controller: FeedbackController, percepts: Iterable[Percept]) -> list[BeltCommand]:
@@ -251,10 +266,10 @@ def test_a_speed_lost_mid_slip_keeps_the_last_level():
     assert {(b.velocity_mrad_s, b.level) for b in commands} == {(-5300, 3)}
 
 
-@pytest.mark.parametrize("speed_mm_s", [-40.0, 40.0])
-def test_a_reverse_slip_is_shown_by_its_speed_magnitude(speed_mm_s):
+@pytest.mark.parametrize("direction", [-1, 1, None])
+def test_a_slip_is_shown_by_its_speed_whatever_its_direction(direction):
     c = FeedbackController(mode="slip_speed")
-    output = c.update(percept(0, slipping=True, speed_mm_s=speed_mm_s))
+    output = c.update(percept(0, slipping=True, speed_mm_s=40.0, direction=direction))
     assert (output.belt.velocity_mrad_s, output.belt.level) == (-5300, 3)
     assert output.stimuli.electrotactile_speed.frequency_hz == 100.0
 
@@ -411,9 +426,10 @@ def test_stimuli_are_computed_from_the_same_slip_state_as_the_belt():
 
 
 def test_a_decoder_estimate_becomes_a_percept_in_gateway_microseconds():
-    estimate = SlipEstimate(1.25, True, -31.5, 12.0, 4.5, 0.8)
+    estimate = SlipEstimate.from_velocity(1.25, True, -31.5, 12.0, 4.5, 0.8)
     p = Percept.from_estimate(estimate, t0_us=2_000_000)
-    assert p == Percept(3_250_000, 4.5, True, -31.5, 0.8)
+    assert p == Percept(3_250_000, 4.5, True, 31.5, 0.8, None, None, -1, 0.8)
+    assert p.velocity_mm_s == -31.5
 
 
 def test_cleaning_a_percept_makes_unusable_numbers_unknown():

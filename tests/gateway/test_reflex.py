@@ -82,8 +82,11 @@ def test_the_raise_is_proportional_to_slip_speed():
     assert holding(5.0, config).update(slip(10, 50.0)).grip_n == pytest.approx(15.0)
 
 
-def test_a_reverse_slip_triggers_the_reflex_by_its_speed_magnitude():
-    command = holding(5.0).update(slip(10, -60.0))
+@pytest.mark.parametrize("direction", [-1, 1, None])
+def test_a_slip_triggers_the_reflex_by_its_speed_whatever_its_direction(direction):
+    way = None if direction is None else 0.9
+    fast = Percept(10 * MS, 5.0, True, 60.0, 0.9, None, None, direction, way)
+    command = holding(5.0).update(fast)
     assert command.grip_n == pytest.approx(11.0)
 
 

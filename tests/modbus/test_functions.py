@@ -15,6 +15,7 @@ from pymodbus.client import ModbusTcpClient
 from grasplink import __version__
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.modbus.functions import CODES, check_request
+from grasplink.gateway.modbus.registers import MAP_VERSION
 from grasplink.gateway.modbus.server import ModbusServer
 from grasplink.gateway.service import Gateway
 
@@ -139,8 +140,9 @@ def test_the_server_refuses_read_counts_outside_1_to_125_with_exception_03(serve
 def test_writes_with_bad_quantities_are_exception_03_and_good_requests_still_work(server):
     assert raw(server, write_multiple(124)) == b"\x90\x03"
     assert raw(server, read_write(126, 1)) == b"\x97\x03"
-    assert raw(server, read(0x04, 1)) == b"\x04\x02\x00\x01"  # map_version 1
-    assert raw(server, read(0x04, 1), unit=200) == b"\x04\x02\x00\x01"  # one gateway: any unit
+    version = MAP_VERSION.to_bytes(2, "big")
+    assert raw(server, read(0x04, 1)) == b"\x04\x02" + version  # map_version
+    assert raw(server, read(0x04, 1), unit=200) == b"\x04\x02" + version  # one gateway: any unit
 
 
 @pytest.mark.slow
@@ -157,7 +159,7 @@ def test_a_pymodbus_client_gets_illegal_function_for_diagnostics_and_server_id(s
         ):
             assert response.isError() and response.exception_code == 0x01, response
         # not put in listen-only mode: it still answers
-        assert client.read_input_registers(0, count=1).registers == [1]
+        assert client.read_input_registers(0, count=1).registers == [MAP_VERSION]
 
 
 @pytest.mark.slow

@@ -39,6 +39,10 @@ def test_first_update_publishes_state_values_and_health_with_units_in_names() ->
         "slip_speed_mm_s": None,
         "position_mm": None,
         "confidence": None,
+        "slip_speed_low_mm_s": None,
+        "slip_speed_high_mm_s": None,
+        "slip_direction": None,
+        "slip_direction_confidence": None,
     }
     state = topics[f"{base}/node/skin/state"]
     assert state["live"] is True and state["phase"] == "operational" and state["node_id"] == 0x10

@@ -10,6 +10,7 @@ from grasplink.gateway.config import KINDS
 from grasplink.gateway.modbus.functions import FUNCTIONS, MAX_READ_WRITE_WRITE, MAX_WRITE
 from grasplink.gateway.modbus.registers import (
     COMMAND_TIMEOUT_S,
+    MAP_CHANGES,
     MAP_VERSION,
     MAX_READ,
     ExceptionCode,
@@ -44,6 +45,7 @@ def render_modbus_markdown(rmap: RegisterMap | None = None) -> str:
         "",
         *_connection(rmap),
         *_conventions(),
+        *_versions(),
         "## Input registers (function 04, read-only)",
         "",
         f"Addresses 0..{rmap.input_count - 1}: one read of {rmap.input_count} registers "
@@ -185,6 +187,21 @@ def _conventions() -> list[str]:
     lines += [
         f"| {name} | {layout} | `{sentinel}` | {known} |" for name, layout, sentinel, known in TYPES
     ]
+    return [*lines, ""]
+
+
+def _versions() -> list[str]:
+    """What each map version changed: a client reads `map_version` (input register 0)."""
+    lines = [
+        "## Map versions",
+        "",
+        "`map_version` (input register 0) tells a client which map it reads. Registers are "
+        "only ever added at the end of a table, so an address, once given, keeps its value.",
+        "",
+        "| version | what changed |",
+        "|---|---|",
+    ]
+    lines += [f"| {version} | {change} |" for version, change in MAP_CHANGES]
     return [*lines, ""]
 
 
@@ -333,6 +350,7 @@ def _holding(rmap: RegisterMap) -> list[str]:
 def _examples(rmap: RegisterMap) -> list[str]:
     uptime = rmap["uptime_ms"]
     speed = rmap["skin.slip_speed_mm_s"]
+    low = rmap["skin.slip_speed_low_mm_s"]
     mode = rmap["feedback_mode"]
     threshold = rmap["reflex_threshold_mm_s"]
     pair = rmap["emg_e_min_uv"]
@@ -344,8 +362,10 @@ def _examples(rmap: RegisterMap) -> list[str]:
         "input map",
         f"mbpoll -0 -1 -t 3:int -B -r {uptime.address} -p 1502 127.0.0.1        # uptime_ms "
         "(u32, high word first)",
-        f"mbpoll -0 -1 -t 3 -r {speed.address} -p 1502 127.0.0.1 # slip speed, raw × 0.1 "
-        "mm/s (mbpoll adds the signed reading in brackets)",
+        f"mbpoll -0 -1 -t 3 -r {speed.address} -p 1502 127.0.0.1 # slip speed (magnitude), "
+        "raw × 0.1 mm/s",
+        f"mbpoll -0 -1 -t 3 -r {low.address} -c 4 -p 1502 127.0.0.1 # its range, direction "
+        "(mbpoll adds the signed reading in brackets) and direction confidence",
         f"mbpoll -0 -1 -t 4 -r {mode.address} -p 1502 127.0.0.1 2         # feedback mode 2 "
         "(slip_speed)",
         f"mbpoll -0 -1 -t 4 -r {threshold.address} -p 1502 127.0.0.1 400       # reflex "

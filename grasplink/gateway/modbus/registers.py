@@ -47,8 +47,23 @@ from grasplink.gateway.reflex import GripSource, ReflexState
 from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
 
-#: Bumped whenever an address, type or scale changes; readable at input register 0.
-MAP_VERSION = 1
+#: Bumped whenever an address, type, scale or a value's meaning changes, or registers are
+#: added (at the end of a table: no address moves); readable at input register 0.
+MAP_VERSION = 2
+#: What each map version changed, for docs/modbus.md (a client checks `map_version`).
+MAP_CHANGES: tuple[tuple[int, str], ...] = (
+    (1, "the first map"),
+    (
+        2,
+        "`skin.slip_speed_mm_s` (address unchanged, still i16) is the slip speed's "
+        "magnitude, never negative: the direction is no longer its sign but "
+        "`skin.slip_direction`. Added at the end of the input table (no address moved): "
+        "`skin.slip_speed_low_mm_s`, `skin.slip_speed_high_mm_s` (the range of speeds the "
+        "decoder still allows: a bound while the speed is unknown), `skin.slip_direction` "
+        "(+1, -1, sentinel: not told) and `skin.slip_direction_confidence`; belt reason "
+        "code 9, `slip, at least this speed` (the belt shows a bound's lower end).",
+    ),
+)
 #: Registers one read (function 03/04) may ask for, by the Modbus specification.
 MAX_READ = 125
 #: How long a write waits for the gateway's CommandResult (its runner wakes every 20 ms).
@@ -767,7 +782,8 @@ def _inputs() -> tuple[Register, ...]:
     t.add(
         "skin.slip_speed_mm_s",
         I16,
-        "signed slip speed (sentinel: slip of unknown speed, or no slip)",
+        "slip speed, a magnitude (>= 0 since map version 2; sentinel: slip of unknown "
+        "speed, or no slip; its range and direction: the registers at the end)",
         unit="mm/s",
         scale=0.1,
         path=("skin", "slip_speed_mm_s"),
@@ -937,6 +953,37 @@ def _inputs() -> tuple[Register, ...]:
         path=("loop", "percepts"),
         counter=True,
         source="snapshot loop.percepts",
+    )
+
+    # map version 2: added after the rest, so no earlier address moved
+    t.section = "skin speed range and direction (map version 2)"
+    for end, what in (("low", "slowest"), ("high", "fastest")):
+        t.add(
+            f"skin.slip_speed_{end}_mm_s",
+            U16,
+            f"the {what} slip speed the decoder still allows (sentinel: not bounded; "
+            f"while the speed is unknown a bound, which the belt and reflex act on at "
+            f"its low end)",
+            unit="mm/s",
+            scale=0.1,
+            path=("skin", f"slip_speed_{end}_mm_s"),
+            source=f"snapshot skin.slip_speed_{end}_mm_s",
+        )
+    t.add(
+        "skin.slip_direction",
+        I16,
+        "slip direction: +1 from the first ridge towards the last, -1 back "
+        "(sentinel: not told, e.g. a uniform skin)",
+        path=("skin", "slip_direction"),
+        source="snapshot skin.slip_direction",
+    )
+    t.add(
+        "skin.slip_direction_confidence",
+        U16,
+        "P(the object moves that way) 0..1 (sentinel: no direction)",
+        scale=0.001,
+        path=("skin", "slip_direction_confidence"),
+        source="snapshot skin.slip_direction_confidence",
     )
     return tuple(t.registers)
 

@@ -31,7 +31,17 @@ LIVE_PHASE = "operational"  # a node is live (a Sparkplug device born) only whil
 
 #: per node kind: the snapshot section and its decoded values (units in the names)
 VALUE_FIELDS: dict[str, tuple[str, ...]] = {
-    "skin": ("grip_force_n", "slip", "slip_speed_mm_s", "position_mm", "confidence"),
+    "skin": (
+        "grip_force_n",
+        "slip",
+        "slip_speed_mm_s",  # |speed|; its range and direction follow (docs/telemetry.md)
+        "position_mm",
+        "confidence",
+        "slip_speed_low_mm_s",
+        "slip_speed_high_mm_s",
+        "slip_direction",
+        "slip_direction_confidence",
+    ),
     "emg": ("envelope_uv", "level", "grip_intent_n", "saturated"),
     "belt": ("mode", "belt", "level", "velocity_mrad_s", "reason"),
     "hand": ("grip_n", "setpoint_n", "reflex", "source"),

@@ -225,6 +225,10 @@ FIELD_TYPES: dict[str, int] = {
     "slip_speed_mm_s": DOUBLE,
     "position_mm": DOUBLE,
     "confidence": DOUBLE,
+    "slip_speed_low_mm_s": DOUBLE,
+    "slip_speed_high_mm_s": DOUBLE,
+    "slip_direction": INT32,  # +1, -1; null: not told
+    "slip_direction_confidence": DOUBLE,
     "envelope_uv": DOUBLE,
     "level": INT32,
     "grip_intent_n": DOUBLE,
