@@ -191,6 +191,7 @@ class _Watch:
     room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
     plain: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level - base (to the hold)
     rise: int = 0  # a probe: the rise of its scale (samples)
+    long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
 
 
 @dataclass
@@ -252,6 +253,7 @@ class ContactDetector:
         long_step_window_s: float = 0.04,
         step_threshold: float = 6.0,
         revise_s: float = 0.35,
+        long_trend_s: float = 0.6,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -328,6 +330,8 @@ class ContactDetector:
         self.revise = max(self.step_hold + 1, round(revise_s * self.fs_hz))
         self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
         self.trend_n = max(1, round(trend_s * self.fs_hz))
+        self.long_trend_n = max(self.trend_n + 1, round(long_trend_s * self.fs_hz))
+        self.slip_fall = 6.0  # noise units (`_fell_in_slip`)
 
     # ------------------------------------------------------------------ feeding
     def feed(self, t: np.ndarray, x: np.ndarray) -> tuple[list[ContactEvent], list[PulseCheck]]:
@@ -799,6 +803,9 @@ class ContactDetector:
         trend = fall = 0.0
         if base is not None and earlier is not None:  # rising trend before the onset
             trend = max(0.0, (base - earlier) / self.trend_n)
+        long = None
+        if emit is not None and base is not None:
+            long = self._long_trend(index, emit, base)
         recent = self._level_at(before - self.fall_n)
         floor = self._level_floor(before)
         if base is not None and recent is not None and floor is not None:
@@ -814,6 +821,7 @@ class ContactDetector:
         if emit is not None and base is not None:
             watch.slope = self._level_slope(before)
             watch.room = self._tail_room(index, emit, base)
+            watch.long = 0.0 if long is None else long
             self._bases.append((index, emit, base))
         return watch
 
@@ -827,6 +835,24 @@ class ContactDetector:
         y = self._level[i0:i1]
         x = np.arange(len(y)) - (len(y) - 1) / 2.0
         return float(np.dot(x, y) / np.dot(x, x))
+
+    def _long_trend(self, index: int, emit: int, base: float) -> float | None:
+        """The slip's rising trend (N/sample, >= 0) from the base of the latest earlier contact
+        between `trend_n` and `long_trend_n` samples before this one to this base (None:
+        no such contact). While an object slips on, the level between
+        ridge contacts is the rising trend (more of the object over the sensor) plus
+        pulse tails, and under FSR hysteresis a falling tail reads flat: over the trend_s
+        before an onset it may show no trend at all though the slip goes on (issue 22:
+        the headline's ridge pulses told steps). From base to base the tails cancel and
+        the trend shows. Only contacts decided by `emit` count (chunking cannot change it).
+        """
+        for n, e, level in reversed(self._bases):
+            if e > emit or n > index - self.trend_n:
+                continue
+            if n < index - self.long_trend_n:
+                return None
+            return max(0.0, (base - level) / (index - n))
+        return None
 
     def _tail_room(self, index: int, emit: int, base: float) -> float:
         """How far the level can still fall under a contact at `index`: down to where it
@@ -958,7 +984,7 @@ class ContactDetector:
             if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
                 if self._is_small_step(watch) if small else self._is_step(watch):
                     return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
-                if watch.fell:
+                if watch.fell or (not small and self._fell_on_slip_trend(watch)):
                     return PulseCheck(watch.id, hold + h, True)
             if len(hit):
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
@@ -1004,7 +1030,58 @@ class ContactDetector:
                 return False
             return float(levels[rise:].min()) >= (1.0 - self.drop_fraction) * top
 
-        return self._stayed_up(watch, stays) or self._tail_step(watch)
+        if self._tail_step(watch):
+            return True
+        if self._fell_in_slip(watch):
+            return False
+        return self._stayed_up(watch, stays) or self._rose_on(watch)
+
+    def _rose_on(self, watch: _Watch) -> bool:
+        """A sharp rise after which the level never fell back from its running top (by 3
+        noise units and 5 % of the rise) by the hold: it rose on, not back - the stop of a
+        slip while the grip rises (the reflex), which the tests above, with the trend
+        taken out, see as a slow rise. A pulse falls back from its top. Only where the
+        rise is resolved (step_rise of 4 samples or more: 200 Hz and up): at 100 Hz a
+        ridge pulse's rise is a sample or two, and its fall is not told from noise."""
+        level, r, noise = watch.plain, self.step_rise, watch.noise
+        if r < 4 or len(level) < 4 * r + 2 or self._train_follows(watch):
+            return False
+        first = float(_mean(level[r : 2 * r + 1]))
+        if first < 6.0 * noise or int(np.argmax(level >= 0.8 * first)) > r:
+            return False
+        after = level[r:]
+        fell = float((np.maximum.accumulate(after) - after).max())
+        if fell > 3.0 * noise + 0.05 * first:
+            return False
+        # a step, not a ramp's start: the jump is well above what the level rises after it
+        # over as long (a slip's trend resuming after a plateau is a kink onto a ramp)
+        rate = (float(_mean(level[-r:])) - first) / (len(level) - 2 * r)
+        return first >= 2.5 * max(rate, 0.0) * (1.5 * r)
+
+    def _fell_on_slip_trend(self, watch: _Watch) -> bool:
+        """At the hold, not a step: did it fall back like a pulse from the slip's trend
+        (`_long_trend`, when the trend_s before the onset hid it) - by drop_fraction of its
+        top with that trend out, or by `slip_fall` noise units on the level itself?"""
+        if watch.long <= watch.trend or not len(watch.levels):
+            return False
+        k = np.arange(len(watch.levels)) + 2 * self.level_half + 1
+        detrended = watch.levels - watch.long * k
+        top = float(detrended.max())
+        if top >= 4.0 * watch.noise and top - float(detrended[-1]) >= self.drop_fraction * top:
+            return True
+        return self._fell_in_slip(watch)
+
+    def _fell_in_slip(self, watch: _Watch) -> bool:
+        """In a slip whose level rises (the base-to-base trend over the hold at least
+        `slip_fall` noise units), has the level itself fallen from its top by `slip_fall`
+        noise units by the hold? A ridge pulse on that trend: its fall is held up by the
+        trend and the FSR's hysteresis (the 30 % drop may never show), while a stop leaves
+        the level flat and a grip change raises it."""
+        if watch.long * self.step_hold < self.slip_fall * watch.noise:
+            return False
+        level = watch.plain
+        end = float(_mean(level[-min(len(level), 2 * self.level_half + 1) :]))
+        return float(level.max()) - end >= self.slip_fall * watch.noise
 
     def _tail_step(self, watch: _Watch) -> bool:
         """A sharp rise on the falling tail of the pulse before it that stays up over that
@@ -1052,15 +1129,23 @@ class ContactDetector:
         out, or on the level itself once that is flat by the hold."""
         if self._train_follows(watch):
             return False
-        if stays(watch.detrended):
+        detrended = watch.detrended
+        if watch.long > watch.trend:  # the slip's trend, hidden before the onset (`_long_trend`)
+            k = np.arange(len(watch.levels)) + 2 * self.level_half + 1
+            detrended = watch.levels - watch.long * k
+        if stays(detrended):
             return True
         if watch.trend <= 0.0 or not stays(watch.levels):
             return False
         tail = watch.levels[len(watch.levels) // 2 :]  # flat by the hold?
         m = len(tail)
         x = np.arange(m) - (m - 1) / 2.0
-        change = abs(float(np.dot(x, tail) / np.dot(x, x))) * m
-        return change <= 0.2 * float(watch.levels.max()) + 3.0 * watch.noise
+        change = float(np.dot(x, tail) / np.dot(x, x)) * m
+        top = float(watch.levels.max())
+        # (falling by more than noise is no stopped level: a pulse on a rising trend
+        # whose fall the hysteresis and the trend hold up - the tail step judges a
+        # stop on a relaxing tail)
+        return -(0.1 * top + 3.0 * watch.noise) <= change <= 0.2 * top + 3.0 * watch.noise
 
     def _train_follows(self, watch: _Watch) -> bool:
         """Did more contacts come before the hold? Pulses after short spacings start on the

@@ -1,0 +1,112 @@
+"""The contact detector against the simulator's truth (issue 22): first verdicts on the
+headline loop's rising level, detection at 10 dB SNR, and the detector's cost.
+
+1. Headline (`contact_truth.headline_replica`, seeds 1-12): the ridge contacts found
+   mid-slip (after the first, 0.15 s or more before the stop) and how many are told a
+   pulse at their first verdict; the stop's first verdict.
+2. 10 dB SNR (`nonstationary` category "snr10", every signal: all layouts, both
+   directions, both seeds): true ridge crossings found within +-20 ms, false contacts,
+   timing error, per variant and in all.
+3. Cost: µs per sample over a 60 s slip-and-rest signal fed 3 samples at a time (wall
+   time, best of 3: a figure to compare within one run, not a target).
+
+Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr]`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections import defaultdict
+
+import numpy as np
+
+from grasplink.evaluation import nonstationary as ns
+from grasplink.evaluation.contact_truth import (
+    HEADLINE_STOP_S,
+    MATCH_S,
+    detect,
+    headline_replica,
+    match,
+)
+from grasplink.gateway.decoding.contacts import ContactDetector
+from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
+
+
+def headline() -> None:
+    found = pulses = steps = stop_steps = 0
+    for seed in range(1, 13):
+        rec = headline_replica(seed)
+        told = detect(rec.t_s, rec.force_n, rec.fs_hz)
+        for crossing in rec.contact_times_s:
+            if not 1.3 < crossing < HEADLINE_STOP_S - 0.15:
+                continue
+            near = [e for e in told.contacts if abs(e.t_s - crossing) <= MATCH_S]
+            if near:
+                found += 1
+                verdict = told.first_verdict.get(near[0].id)
+                pulses += verdict is not None and verdict.pulse is True
+                steps += verdict is not None and verdict.pulse is False
+        stop = [e for e in told.contacts if abs(e.t_s - HEADLINE_STOP_S) <= 0.01]
+        if stop:
+            verdict = told.first_verdict.get(stop[0].id)
+            stop_steps += verdict is not None and verdict.pulse is False
+    print("headline replica, 12 seeds:")
+    print(f"  mid-slip ridge contacts found {found}: first verdict pulse {pulses}, step {steps}")
+    print(f"  stop told a step at its first verdict: {stop_steps} of 12")
+
+
+def snr10() -> None:
+    by_variant: dict[str, list] = defaultdict(lambda: [0, 0, 0, []])
+    for signal in ns.signals(False):
+        if signal.category != "snr10":
+            continue
+        rec = signal.make()
+        told = detect(rec.t_s, rec.force_n, rec.fs_hz, chunk=256)  # (chunking changes nothing)
+        m = match(rec.truth.contact_times_s, told)
+        for key in (f"{signal.variant} {signal.layout}", "all"):
+            row = by_variant[key]
+            row[0] += m.true_count
+            row[1] += m.found
+            row[2] += m.false
+            row[3] += list(m.errors_s)
+    print(f"10 dB SNR (snr10, every signal), found within +-{MATCH_S * 1e3:.0f} ms:")
+    for key, (true, found, false, errors) in by_variant.items():
+        err = np.abs(np.array(errors)) * 1e3
+        timing = f"|error| median {np.median(err):.1f} ms, p90 {np.percentile(err, 90):.1f}"
+        print(
+            f"  {key:28s} true {true:4d}  found {found:4d} ({found / true:5.1%})  "
+            f"false {false:3d}  {timing if len(err) else ''}"
+        )
+
+
+def cost() -> None:
+    layout = LAYOUTS_MM["alpha0.1"]
+    slip = synth.slip_recording(layout, 40.0, seed=3).force_n
+    rest = synth.static_recording(layout, [[0.0, 5.0]], duration_s=6.0, seed=4).force_n
+    x = np.resize(np.concatenate([slip, rest]), 60 * 400)
+    t = np.arange(len(x)) / 400.0
+    best = np.inf
+    for _ in range(3):
+        detector = ContactDetector(400.0)
+        start = time.perf_counter()
+        for i in range(0, len(x), 3):
+            detector.feed(t[i : i + 3], x[i : i + 3])
+        best = min(best, time.perf_counter() - start)
+    print(f"cost: {1e6 * best / len(x):.1f} µs/sample (60 s at 400 Hz, 3-sample chunks)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--skip-snr", action="store_true", help="no 10 dB SNR figures")
+    args = parser.parse_args(argv)
+    headline()
+    if not args.skip_snr:
+        snr10()
+    cost()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
