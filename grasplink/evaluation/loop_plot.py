@@ -35,12 +35,15 @@ class LoopTrace:
 
     truth: dict[str, np.ndarray]
     decoded_t_s: np.ndarray
-    decoded_speed_mm_s: np.ndarray  # NaN where the decoder saw no slip or had no speed
+    decoded_speed_mm_s: np.ndarray  # |speed|; NaN where the decoder saw no slip or no speed
     decoded_slip: np.ndarray
     belt_t_s: np.ndarray
     belt_target_mrad_s: np.ndarray
     hand_t_s: np.ndarray
     hand_target_n: np.ndarray
+    # the lower bound while the decoder reports slip with a range but no speed (else NaN):
+    # what the belt shows and the reflex acts on then
+    decoded_speed_low_mm_s: np.ndarray
 
 
 def read_loop(folder: Path) -> LoopTrace:
@@ -58,9 +61,17 @@ def read_loop(folder: Path) -> LoopTrace:
     speed = np.array(
         [e.speed_mm_s if e.slip and e.speed_mm_s is not None else np.nan for e in estimates]
     )
+    low = np.array(
+        [
+            e.speed_low_mm_s
+            if e.slip and e.speed_mm_s is None and e.speed_low_mm_s is not None
+            else np.nan
+            for e in estimates
+        ]
+    )
     slip = np.array([e.slip for e in estimates], dtype=bool)
     belt_t, belt_v, hand_t, hand_n = _commands(folder / "can.asc", nodes)
-    return LoopTrace(truth, decoded_t, speed, slip, belt_t, belt_v, hand_t, hand_n)
+    return LoopTrace(truth, decoded_t, speed, slip, belt_t, belt_v, hand_t, hand_n, low)
 
 
 def replay_skin(path: Path, skin: dict, layout: str) -> list[SlipEstimate]:
@@ -133,7 +144,8 @@ def plot_loop(folder: Path) -> Path:
     t = truth["t_s"]
     fig, axes = plt.subplots(3, 1, figsize=(10, 9), dpi=110, sharex=True)
     ax = axes[0]
-    ax.plot(t, truth[sig.OBJECT_SPEED_MM_S], color="0.3", lw=1.2, label="true slip speed")
+    true_speed = np.abs(truth[sig.OBJECT_SPEED_MM_S])
+    ax.plot(t, true_speed, color="0.3", lw=1.2, label="true slip speed (magnitude)")
     ax.plot(
         trace.decoded_t_s,
         trace.decoded_speed_mm_s,
@@ -142,6 +154,15 @@ def plot_loop(folder: Path) -> Path:
         color="tab:red",
         label="decoded by the gateway's decoder (while it reports slip)",
     )
+    if np.isfinite(trace.decoded_speed_low_mm_s).any():
+        ax.plot(
+            trace.decoded_t_s,
+            trace.decoded_speed_low_mm_s,
+            "^",
+            ms=2.5,
+            color="tab:orange",
+            label="lower bound, while it knows only a range (what the belt shows)",
+        )
     slipping = trace.decoded_slip.astype(float)
     ax.fill_between(
         trace.decoded_t_s,
@@ -153,7 +174,7 @@ def plot_loop(folder: Path) -> Path:
         lw=0,
         label="decoder's slip flag",
     )
-    ax.set_ylabel("slip speed [mm/s]")
+    ax.set_ylabel("slip speed |v| [mm/s]")
     ax.legend(loc="upper right", fontsize=8)
     ax = axes[1]
     ax.step(

@@ -29,6 +29,7 @@ from typing import Any, Literal
 import numpy as np
 
 from grasplink.evaluation.decoders import make_decoder
+from grasplink.evaluation.scoring import along_truth
 from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import SkinRecording, scripted_recording
@@ -381,7 +382,7 @@ class Score:
     position_err_mm: np.ndarray  # scored updates with a position estimate
     scored: int = 0
     missing: int = 0  # scored updates without a speed estimate
-    directed: int = 0  # updates with a signed estimate while the truth moves >= 5 mm/s
+    directed: int = 0  # updates telling a direction while the truth moves >= 5 mm/s
     wrong_direction: int = 0
     confidence_right: np.ndarray = field(default_factory=lambda: np.zeros(5, int))
     confidence_total: np.ndarray = field(default_factory=lambda: np.zeros(5, int))
@@ -487,11 +488,11 @@ def score(estimates: Sequence[SlipEstimate], rec: Recorded) -> Score:
     if not estimates:
         return out
     t_upd = np.array([e.t_s for e in estimates])
-    v_est = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
     x_est = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
     flags = np.array([e.slip for e in estimates])
     confidence = np.array([e.confidence for e in estimates])
     v_true = np.interp(t_upd, truth.t_s, truth.speed_mm_s)
+    v_est, direction = along_truth(estimates, v_true)  # no direction: |v|, the truth's way
     x_true = truth.position_mm[_nearest(truth.t_s, t_upd)]  # the edge jumps at a reversal
     m = motion(truth)
     skin_mm = float(sum(truth.layout_mm))
@@ -514,8 +515,8 @@ def score(estimates: Sequence[SlipEstimate], rec: Recorded) -> Score:
     out.scored = int(scored.sum())
     out.missing = int((scored & ~np.isfinite(v_est)).sum())
 
-    directed = (np.abs(v_true) >= V_DIRECTION_MM_S) & np.isfinite(v_est) & (v_est != 0)
-    right = np.sign(v_est) == np.sign(v_true)
+    directed = (np.abs(v_true) >= V_DIRECTION_MM_S) & (direction != 0)  # a told direction
+    right = direction == np.sign(v_true)
     out.directed = int(directed.sum())
     out.wrong_direction = int((directed & ~right).sum())
     bins = np.clip(np.digitize(confidence, CONFIDENCE_BINS) - 1, 0, len(CONFIDENCE_BINS) - 2)

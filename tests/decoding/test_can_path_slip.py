@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from grasplink.cli import main
+from grasplink.evaluation.scoring import along_truth
 from grasplink.gateway.decoding.io import read_can_log, read_csv
 from grasplink.gateway.decoding.tracker import TrackerDecoder
 from grasplink.profiles.layouts import LAYOUTS_MM
@@ -41,13 +42,14 @@ def decode(layout, t: np.ndarray, x: np.ndarray, chunk: int = 3):
 
 
 def judged(estimates, true: dict[str, np.ndarray]) -> tuple[int, int, float, float]:
-    """(speeds given while slipping, of which wrong sign, median error, largest |speed|)."""
+    """(speeds given while slipping, of which a wrong direction, median error, largest
+    |speed|); a speed without a direction counts as its magnitude (scoring.along_truth)."""
     t = np.array([e.t_s for e in estimates])
-    v = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
     slipping = np.interp(t, true["t_s"], true["slipping"]) > 0.5
     v_true = np.interp(t, true["t_s"], true["speed_mm_s"])
+    v, direction = along_truth(estimates, v_true)
     given = slipping & np.isfinite(v) & (v != 0) & (np.abs(v_true) > 1.0)
-    wrong = int(np.count_nonzero(given & (np.sign(v) != np.sign(v_true))))
+    wrong = int(np.count_nonzero(given & (direction != 0) & (direction != np.sign(v_true))))
     error = np.abs(v[given] - v_true[given]) / np.abs(v_true[given])
     return int(given.sum()), wrong, float(np.median(error)), float(np.nanmax(np.abs(v)))
 

@@ -15,7 +15,10 @@ from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 
 ROOT = Path(__file__).resolve().parents[2]
-FIELDS = {"t_s", "slip", "speed_mm_s", "position_mm", "force_n", "confidence"}
+FIELDS = {  # the output contract (SlipEstimate.as_dict): speed and direction apart
+    "t_s", "slip", "speed_mm_s", "speed_low_mm_s", "speed_high_mm_s", "direction",
+    "direction_confidence", "position_mm", "force_n", "confidence",
+}  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -55,6 +58,9 @@ def assert_slip_decoded(lines: list[dict], duration_s: float) -> None:
     assert abs(np.median(speeds) - 40.0) <= 4.0
     for d in lines:
         assert isinstance(d["slip"], bool) and 0.0 <= d["confidence"] <= 1.0
+        assert d["speed_mm_s"] is None or d["speed_mm_s"] >= 0  # a magnitude
+        assert d["direction"] in (None, 1, -1)
+        assert (d["direction"] is None) == (d["direction_confidence"] is None)
 
 
 # -- CSV and NPZ ---------------------------------------------------------------------------

@@ -105,7 +105,18 @@ class ConstantSpeed(Decoder):
 
     def process(self, t, x):
         return [
-            SlipEstimate(g, True, self.speed_mm_s, 0.0, 0.0, 1.0) for _, g in self.update_points(t)
+            SlipEstimate.from_velocity(g, True, self.speed_mm_s, 0.0, 0.0, 1.0)
+            for _, g in self.update_points(t)
+        ]
+
+
+class Undirected(ConstantSpeed):
+    """Reports |speed| and no direction (a uniform skin, or before the direction is known)."""
+
+    def process(self, t, x):
+        return [
+            SlipEstimate(g, True, abs(self.speed_mm_s), 0.0, 0.0, 1.0)
+            for _, g in self.update_points(t)
         ]
 
 
@@ -117,6 +128,20 @@ def test_wrong_sign_counts_only_estimates_pointing_the_other_way(speed, wrong):
     assert estimated > 0
     assert score.wrong_sign == (estimated if wrong else 0)
     assert scoring.summarise([score])["wrong_sign_pct"] == (100.0 if wrong else 0.0)
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_a_speed_without_a_direction_is_scored_as_a_speed_and_never_a_wrong_sign(reverse):
+    """Issue 22: speed and direction are separate outputs. |speed| without a direction
+    counts for the speed error and against missing speed, as its magnitude; only a told
+    direction can be the wrong one."""
+    rec = synth.slip_recording(LAYOUTS_MM["alpha0.1"], 40.0, reverse=reverse, seed=3)
+    score = scoring.score(lambda: Undirected(rec.layout_mm, rec.fs_hz, 40.0), rec)
+    assert len(score.speed_rel_err) == score.scored > 0 and score.missing == 0
+    assert np.median(score.speed_rel_err) < 0.05  # |40| against |-40|: right, not 200 %
+    assert score.wrong_sign == 0
+    told = scoring.score(lambda: ConstantSpeed(rec.layout_mm, rec.fs_hz, 40.0), rec)
+    assert told.wrong_sign == (len(told.speed_rel_err) if reverse else 0)
 
 
 # -- where the benchmark writes ------------------------------------------------------------

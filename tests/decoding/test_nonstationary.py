@@ -28,7 +28,9 @@ def one(category: str, layout: str = "alpha0.1", reverse: bool = False, variant:
 
 
 def oracle(rec: ns.Recorded, period_s: float = 0.01, **override) -> list[SlipEstimate]:
-    """Estimates that are the truth itself, on a decoder's 10 ms grid."""
+    """Estimates that are the truth itself, on a decoder's 10 ms grid (`velocity_mm_s`: the
+    signed speed, its sign the direction told; `direction=False`: the speed without one)."""
+    tell_direction = override.pop("direction", True)
     truth = rec.truth
     grid = np.arange(0.0, truth.t_s[-1], period_s)
     v = np.interp(grid, truth.t_s, truth.speed_mm_s)
@@ -39,13 +41,16 @@ def oracle(rec: ns.Recorded, period_s: float = 0.01, **override) -> list[SlipEst
         fields = {
             "t_s": float(t),
             "slip": moving,
-            "speed_mm_s": float(speed) if moving else 0.0,
+            "velocity_mm_s": float(speed) if moving else 0.0,
             "position_mm": float(position),
             "force_n": 1.0,
             "confidence": 1.0,
         }
         fields.update({k: f(t, speed) if callable(f) else f for k, f in override.items()})
-        out.append(SlipEstimate(**fields))
+        estimate = SlipEstimate.from_velocity(**fields)
+        if not tell_direction:
+            estimate = dataclasses.replace(estimate, direction=None, direction_confidence=None)
+        out.append(estimate)
     return out
 
 
@@ -176,7 +181,7 @@ def test_a_flag_that_never_clears_fails_every_stop_and_every_rest():
 
 def test_the_opposite_direction_is_wrong_only_while_the_truth_moves_at_5_mm_s_or_more():
     rec = one("reversal").make()
-    score = ns.score(oracle(rec, speed_mm_s=lambda t, v: -v if v else 1.0), rec)
+    score = ns.score(oracle(rec, velocity_mm_s=lambda t, v: -v if v else 1.0), rec)
     truth_v = np.abs(
         np.interp(np.arange(0, rec.truth.t_s[-1], 0.01), rec.truth.t_s, rec.truth.speed_mm_s)
     )
@@ -208,9 +213,23 @@ def test_positions_off_the_skin_are_counted_beyond_a_millimetre():
 
 def test_missing_speeds_are_counted_not_scored():
     rec = one("accelerating").make()
-    score = ns.score(oracle(rec, speed_mm_s=None), rec)
+    score = ns.score(oracle(rec, velocity_mm_s=None), rec)
     assert score.missing == score.scored > 0 and len(score.speed_rel_err) == 0
     assert ns.summarise([score])["missing_pct"] == 100.0
+
+
+@pytest.mark.parametrize("category", ["reversal", "constant"])
+def test_a_speed_without_a_direction_is_a_speed_and_never_a_wrong_direction(category):
+    """Issue 22: a decoder may tell |speed| before (or without) the direction. It counts
+    for the speed error and against missing speed, and only a told direction can be
+    wrong; this reverse slip's direction is not told at all."""
+    rec = one(category, reverse=True).make()
+    told = ns.score(oracle(rec), rec)
+    untold = ns.score(oracle(rec, direction=False), rec)
+    assert untold.scored == told.scored > 0 and untold.missing == told.missing == 0
+    assert np.allclose(untold.speed_rel_err, 0.0) and np.allclose(untold.speed_mag_err, 0.0)
+    assert told.directed > 0 and told.wrong_direction == 0
+    assert untold.directed == untold.wrong_direction == 0
 
 
 def test_a_signal_job_runs_each_decoder_in_3_and_256_sample_chunks_alike():

@@ -29,6 +29,7 @@ import pytest
 
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.decoders import make_decoder
+from grasplink.evaluation.scoring import along_truth
 from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
 from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
@@ -160,19 +161,22 @@ def truth(rec: synth.SkinRecording, estimates: list[SlipEstimate]):
     return t, np.interp(t, rec.t_s, rec.speed_mm_s), np.interp(t, rec.t_s, rec.position_mm)
 
 
-def speeds(estimates: list[SlipEstimate]) -> np.ndarray:
-    return np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
+def speeds(rec: synth.SkinRecording, estimates: list[SlipEstimate]) -> np.ndarray:
+    """Each speed signed by its told direction; one without a direction as its magnitude,
+    the truth's way (a speed all the same, never a wrong direction: scoring.along_truth)."""
+    _, v_true, _ = truth(rec, estimates)
+    return along_truth(estimates, v_true)[0]
 
 
 def confidently_wrong(rec, estimates) -> tuple[int, int]:
     """(confident estimates with a direction, those pointing the wrong way), as the benchmark
-    counts them: confidence >= 0.8, a non-zero speed, the truth moving >= 5 mm/s."""
+    counts them: confidence >= 0.8, a told direction, the truth moving >= 5 mm/s."""
     _, v_true, _ = truth(rec, estimates)
-    v = speeds(estimates)
+    _, direction = along_truth(estimates, v_true)
     confidence = np.array([e.confidence for e in estimates])
-    directed = (np.abs(v_true) >= ns.V_DIRECTION_MM_S) & np.isfinite(v) & (v != 0)
+    directed = (np.abs(v_true) >= ns.V_DIRECTION_MM_S) & (direction != 0)
     confident = directed & (confidence >= ns.CONFIDENT)
-    return int(confident.sum()), int((confident & (np.sign(v) != np.sign(v_true))).sum())
+    return int(confident.sum()), int((confident & (direction != np.sign(v_true))).sum())
 
 
 # -- a stop exactly on a ridge ----------------------------------------------------------------
@@ -247,7 +251,7 @@ def test_two_contacts_within_one_sample_keep_the_speed_finite_and_right(name, fs
     estimates = decode(name, rec)
     assert_clean(estimates)
     t, v_true, _ = truth(rec, estimates)
-    v = speeds(estimates)
+    v = speeds(rec, estimates)
     known = np.isfinite(v)
     assert np.all(np.abs(v[known]) <= 1.5 * 60.0), np.max(np.abs(v[known]))
     # from the third contact on (direction and speed are observable) to the stop
@@ -290,7 +294,7 @@ def test_a_reversal_exactly_at_a_contact_keeps_the_edge_where_it_was_at_a_physic
     for ridge, reverse in REVERSALS:
         rec, _ = reversal_at_ridge(ridge, reverse)
         estimates = decode(name, rec)
-        v = speeds(estimates)
+        v = speeds(rec, estimates)
         x = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
         fastest = np.max(np.abs(rec.speed_mm_s))
         low = np.min(rec.position_mm) - ns.OFF_SKIN_TOLERANCE_MM
@@ -434,7 +438,7 @@ def test_a_slip_hidden_on_the_rail_is_picked_up_again_after_it(name):
         estimates = decode(name, rec)
         assert_clean(estimates)
         t, v_true, _ = truth(rec, estimates)
-        v = speeds(estimates)
+        v = speeds(rec, estimates)
         scored = (t >= after[1]) & (np.abs(v_true) >= MOVING_MM_S)
         flags = np.array([e.slip for e in estimates])[scored]
         known = scored & np.isfinite(v)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from grasplink.evaluation.scoring import along_truth
 from grasplink.gateway.decoding import filters
 from grasplink.gateway.decoding.contacts import ContactDetector
 from grasplink.gateway.decoding.io import skin_pdo
@@ -40,13 +41,14 @@ def decode(layout, t: np.ndarray, x: np.ndarray, chunk: int = 3):
 
 
 def signs_and_errors(rec: synth.SkinRecording, estimates) -> tuple[int, int, float, int]:
-    """(signed speeds while slipping, of which wrong sign, median speed error, false slips)."""
+    """(speeds while slipping, of which a wrong direction, median speed error, false slips);
+    a speed without a direction counts as its magnitude (scoring.along_truth)."""
     t = np.array([e.t_s for e in estimates])
-    v = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
     slipping = np.interp(t, rec.t_s, rec.slipping) > 0.5
     truth = np.interp(t, rec.t_s, rec.speed_mm_s)
+    v, direction = along_truth(estimates, truth)
     given = slipping & np.isfinite(v) & (v != 0)
-    wrong = int(np.count_nonzero(given & (np.sign(v) != np.sign(truth))))
+    wrong = int(np.count_nonzero(given & (direction != 0) & (direction != np.sign(truth))))
     error = float(np.median(np.abs(v[given] - truth[given]) / np.abs(truth[given])))
     false = sum(1 for e, s in zip(estimates, slipping, strict=True) if e.slip and not s)
     return int(given.sum()), wrong, error, false

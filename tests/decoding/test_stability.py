@@ -68,9 +68,9 @@ def test_reversed_direction(name):
     rec = synth.slip_recording(home(name), 60.0, reverse=True, seed=8)
     estimates = run(name, rec)
     assert_clean(estimates)
-    confident = [e for e in estimates if e.confidence >= 0.5 and e.speed_mm_s is not None]
+    confident = [e for e in estimates if e.confidence >= 0.5 and e.velocity_mm_s is not None]
     assert confident
-    assert np.mean([e.speed_mm_s < 0 for e in confident]) >= 0.9
+    assert np.mean([e.velocity_mm_s < 0 for e in confident]) >= 0.9
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -139,7 +139,7 @@ def test_ambiguous_layout_no_confident_wrong_answer(name, reverse):
     for e, v, x in zip(estimates, v_true, x_true, strict=True):
         if e.confidence >= 0.5:
             assert e.position_mm is None or abs(e.position_mm - x) <= 10.0, e
-            assert e.speed_mm_s is None or np.sign(e.speed_mm_s) == np.sign(v), e
+            assert e.velocity_mm_s is None or np.sign(e.velocity_mm_s) == np.sign(v), e
     if name == "ratio":
         assert all(e.confidence < 0.5 for e in estimates)
 

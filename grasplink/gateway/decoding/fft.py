@@ -218,6 +218,7 @@ class FftDecoder(Decoder):
         step = self.freqs[1] - self.freqs[0]
         f = float(self.freqs[self.band[i]] + delta * step)
         confidence = self.cap * float(np.clip(1.0 - self.on_ratio / ratio, 0.0, 1.0))
+        # a spectrum line tells the speed, never the direction (None)
         return SlipEstimate(g, True, f * self.spacing_mm, None, self._force, confidence)
 
     def _prominence(self, power: np.ndarray, raw: np.ndarray, i: int) -> float:

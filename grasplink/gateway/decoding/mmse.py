@@ -273,7 +273,8 @@ class WindowDecoder(Decoder):
         speed, position, confidence, t_end = m
         if position is not None:
             position = position + speed * (g - t_end)
-        return SlipEstimate(g, True, speed, position, self._force, confidence)
+        # the sign of the best match is its direction, told with the match's confidence
+        return SlipEstimate.from_velocity(g, True, speed, position, self._force, confidence)
 
 
 def _segment_starts(segments):

@@ -21,8 +21,8 @@ Additions the thesis leaves open, kept minimal:
   match quality x chain support / number of distinct answers still tied,
   so an ambiguous layout (repeated ratios such as 5,10,5,10,5, or a uniform
   skin) gives low confidence, never a confident wrong answer. When tied
-  answers disagree on the direction, the speed is reported as a magnitude
-  (positive) and the position as unknown if more than two positions tie.
+  answers disagree on the direction, the speed is reported without a
+  direction (None) and the position as unknown if more than two positions tie.
 * Between ridges the estimate is held: position extrapolated at the
   decoded speed from where the edge was at the last peak (the band-passed
   pulse peaks a little past the ridge; `filters.PeakLag` says how far),
@@ -33,7 +33,7 @@ Additions the thesis leaves open, kept minimal:
   `slip_evidence` (a barely matching ratio from grip changes or drift is
   reported with its low confidence but does not raise the flag).
 * A layout of one spacing has no ratios: speed from two consecutive peaks
-  (D / T, magnitude only, confidence <= 0.4), position unknown.
+  (D / T, no direction, confidence <= 0.4), position unknown.
 * Speeds outside [`v_min`, `v_max`] mm/s are not plausible matches (they
   come from grip changes or drift, not ridges).
 
@@ -69,6 +69,7 @@ class Answer:
 
     t_peak: float
     speed: float | None  # signed mm/s (positive when the direction is unknown)
+    directed: bool  # the sign of `speed` is the direction the peaks told (else not told)
     position_at_peak: float | None  # leading edge at t_peak, mm
     confidence: float
     hold_s: float
@@ -177,7 +178,8 @@ class RatioDecoder(Decoder):
         speed = float(self._spacings[0]) / interval
         if not self.v_min <= speed <= self.v_max:
             return
-        self._answer = Answer(peaks[-1], speed, None, 0.4, self._hold(None, None, interval), True)
+        hold = self._hold(None, None, interval)
+        self._answer = Answer(peaks[-1], speed, False, None, 0.4, hold, True)
 
     def _triple_answer(self) -> None:
         p = self._peaks
@@ -214,7 +216,8 @@ class RatioDecoder(Decoder):
         confidence = max(0.0, min(1.0, quality * support / len(answers)))
         speed = best[4]
         position: float | None = best[5]
-        if len({c[3] for c in tied}) > 1:
+        directed = len({c[3] for c in tied}) == 1
+        if not directed:
             speed = abs(speed)  # direction unknown: a magnitude, by convention positive
         if len({round(c[5], 1) for c in tied}) > 2:
             position = None
@@ -226,6 +229,7 @@ class RatioDecoder(Decoder):
         self._answer = Answer(
             self._peaks[-1],
             speed,
+            directed,
             at_peak,
             confidence,
             self._hold(ridge, direction, t2),
@@ -242,6 +246,7 @@ class RatioDecoder(Decoder):
         self._answer = Answer(
             answer.t_peak,
             answer.speed,
+            answer.directed,
             answer.position_at_peak,
             answer.confidence * KEEP_ALIVE_TRUST,
             hold,
@@ -274,7 +279,12 @@ class RatioDecoder(Decoder):
             if answer.position_at_peak is not None and answer.speed is not None:
                 position = answer.position_at_peak + answer.speed * (g - answer.t_peak)
             slipping = answer.slip or g <= self._onset_until
-            return SlipEstimate(g, slipping, answer.speed, position, force, answer.confidence)
+            if answer.directed:  # the direction told with the answer's confidence
+                return SlipEstimate.from_velocity(
+                    g, slipping, answer.speed, position, force, answer.confidence
+                )
+            speed = None if answer.speed is None else abs(answer.speed)
+            return SlipEstimate(g, slipping, speed, position, force, answer.confidence)
         if answer is not None:
             self._answer = None
         slipping = g <= self._onset_until
