@@ -208,7 +208,9 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("recording", type=Path, help="folder written by grasplink run")
 
     decode = sub.add_parser(
-        "decode", help="decode slip, speed, position and grip force from a skin recording"
+        "decode",
+        help="decode slip, speed (and its range), direction, position and grip force from a "
+        "skin recording: JSON lines of the decoders' output contract (docs/decoding.md)",
     )
     decode.add_argument(
         "file",

@@ -12,8 +12,11 @@ alongside the belt command from the same (debounced) slip state:
   trains of constant pulse width.
 
 Every encoder is a pure function of (slipping, speed); a frequency of 0 Hz
-means the stimulator is off. docs/feedback.md gives the formulas and what
-happens outside the thesis's ranges.
+means the stimulator is off. The speed is a magnitude: the slip speed, or
+while the decoder knows only a range of speeds its lower end (what the belt
+shows, `FeedbackController`); no encoding needs the direction.
+docs/feedback.md gives the formulas and what happens outside the thesis's
+ranges.
 """
 
 from __future__ import annotations
