@@ -961,8 +961,9 @@ def render(results: dict, default: str, before: dict | None, now: dict | None) -
         "TPDO1) and scored on that output; the same signals fed in 256-sample chunks give",
         "the second cost figure. Truth is compared at each update's time; speed and",
         "position are scored from each motion's physical limit (3 contacts after the slip",
-        "starts or reverses, 2 after a restart); *wrong dir*: share of signed speed",
-        f"estimates pointing the wrong way while the object moves at ≥ {V_DIRECTION_MM_S:g} mm/s;",
+        "starts or reverses, 2 after a restart; a speed without a direction is a speed);",
+        f"*wrong dir*: share of told directions that are wrong while the object moves at ≥ "
+        f"{V_DIRECTION_MM_S:g} mm/s;",
         f"*stops cleared*: stops (≥ {STOP_MIN_S:g} s below {V_MOVING_MM_S:g} mm/s) whose slip",
         f"flag cleared within {CLEAR_WITHIN_S:g} s, all and those with the leading edge over",
         "the skin; *false slip at rest*: updates flagged slip 0.3 s or more into a rest.",
