@@ -539,6 +539,8 @@ def render(results: dict) -> str:
         "11-118 mm/s, both directions, 400 Hz, thesis-like noise. The [CAN path](#can-path)",
         "runs the shipped slip scenes through the skin node and decodes what went over the bus;",
         "[non-stationary slips](#non-stationary-slips) speed up, stop, restart and reverse.",
+        "Issue 22's figures (a speed without its direction, stops, the headline loop) and the",
+        "trade-off curves of the tracker's constants: [slip_reporting.md](slip_reporting.md).",
         "",
         f"**Recommended default: `{results['recommended_default']}`** (at default settings, "
         f"lowest speed p90 % + position p90 mm on the target set within "

@@ -1186,10 +1186,11 @@ def render_sweeps(figures: dict) -> list[str]:
         "",
         "## Trade-off curves",
         "",
-        f"Each constant swept alone over its range on a reduced set ({figures['sweep_cases']}",
-        "cases:",
-        "constant, accelerating, stick-slip, 10 dB and held signals and more, on a few layouts,",
-        "both directions), every point in the same run and worker pool; the shipped point is",
+        "Each constant swept alone over its range on a reduced set "
+        f"({figures['sweep_cases']} cases: the",
+        "plan's `sweep_variants` of constant, accelerating, stick-slip, 10 dB, held and other",
+        "signals on `sweep_layouts`, both directions, one seed; slip_reporting.json), every",
+        "point in the same run and worker pool; the shipped point is",
         "the default decoder (★). Missing and wrong direction pool the moving cases, false slip",
         "the held ones (flagged ≥ 0.15 s into the rest), µs/sample every case.",
     ]
@@ -1300,6 +1301,7 @@ def run_benchmark(
     """Run `plan` (and the headline loop, when the plan asks and `controllers_for` is given),
     write the page into `out`; returns the figures. `root`: the checkout (scenes, git)."""
     started = time.monotonic()
+    measured = git_state(root)  # before the workers import the decoder
     raw = run(plan, decoder, workers, log)
     figures = aggregate(raw, plan, decoder)
     if plan.headline and controllers_for is not None:
@@ -1308,7 +1310,7 @@ def run_benchmark(
         log(f"headline loop: first speed {hl['first_speed_s']} s, last {hl['last_speed_s']} s")
     meta = {
         "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        "git": git_state(root),
+        "git": measured,
         "plan": asdict(plan),
         "decoder": decoder,
         "workers": raw["workers"],
