@@ -30,13 +30,8 @@ MISSING_MAX = 0.15
 DIPS_DEFECT = (
     "speed dips at every ridge (thesis ch. 5.5.1) are tracked less well than by the "
     "constant-speed tracker: its dip prior is narrow (0.1 mm), as a wider one costs the "
-    "non-stationary set more (decelerating median 11 -> 15 %, wrong direction 5.3 -> 5.7 %)"
-)
-DIRECTION_LATER = (
-    "the direction is told once the posterior odds of ALL tracks moving that way (a reversal "
-    "just begun included) reach 9:1, not the best track against the best other one: first good "
-    "speed and missing a little later/higher than before (wrong direction on the "
-    "non-stationary set 5.3 % at 9:1, 7.2 % at 4:1)"
+    "non-stationary set more (decelerating median 11 -> 15 %, wrong direction 5.3 -> 5.7 %); "
+    "the curve over its range: docs/benchmarks/slip_reporting.md, DIP_PRIOR_MM"
 )
 
 
