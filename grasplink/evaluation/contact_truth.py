@@ -24,7 +24,7 @@ from grasplink.gateway.decoding.contacts import ContactDetector, ContactEvent, P
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import harness
 from grasplink.simulators.effects import actuators, kinematics, noise, skin
-from grasplink.simulators.synth import SkinRecording
+from grasplink.simulators.synth import SkinRecording, run_recording
 
 MATCH_S = 0.02  # a contact within this of a true ridge crossing found it
 CHUNK = 3  # samples per skin TPDO1
@@ -74,19 +74,7 @@ def headline_replica(seed: int = 7, duration_s: float = 3.5, fs_hz: int = 400) -
         harness.make(noise.Drift, ctx, std=0.05, corner_hz=0.3),
         harness.make(skin.Saturation, ctx),
     ]
-    times = harness.sample_times_us(fs_hz, duration_s)
-    out = harness.run(effects, times, chunk=4096)
-    return SkinRecording(
-        times / 1e6,
-        out["skin.force_n"],
-        out["object.position_mm"],
-        out["object.speed_mm_s"],
-        out["object.slipping"],
-        out["hand.grip_n"],
-        np.array([c.time_s for c in contacts.contacts if not c.tip]),
-        layout,
-        fs_hz,
-    )
+    return run_recording(effects, contacts, layout, fs_hz, duration_s)
 
 
 def stick_time_s(rec: SkinRecording) -> float | None:

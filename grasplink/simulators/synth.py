@@ -11,7 +11,9 @@ when asked for.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -212,9 +214,17 @@ def _record(
         ]
     if full_scale_n is not None:
         effects.append(harness.make(skin.Saturation, ctx, full_scale_n=full_scale_n))
+    return run_recording(effects, contacts, layout_mm, fs_hz, duration_s)
+
+
+def run_recording(
+    effects: list, contacts: Any, layout_mm: Sequence[float], fs_hz: int, duration_s: float
+) -> SkinRecording:
+    """Run `effects` at `fs_hz` for `duration_s` and keep what a decoder is judged on: the
+    force, the object's truth and the ridge contacts (`contacts`: the skin.ridge_contacts
+    effect among them; its tip contacts are no ridge contacts)."""
     times = harness.sample_times_us(fs_hz, duration_s)
     out = harness.run(effects, times, chunk=4096)
-    true_contacts = np.array([c.time_s for c in contacts.contacts if not c.tip])
     return SkinRecording(
         times / 1e6,
         out["skin.force_n"],
@@ -222,7 +232,7 @@ def _record(
         out["object.speed_mm_s"],
         out["object.slipping"],
         out["hand.grip_n"],
-        true_contacts,
+        np.array([c.time_s for c in contacts.contacts if not c.tip]),
         tuple(layout_mm),
         fs_hz,
     )
