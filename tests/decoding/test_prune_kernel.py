@@ -46,7 +46,7 @@ def pools() -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nda
     reversing) three samples at a time, as the gateway does: (score, stop, int columns,
     recent and held contact ids)."""
     out = []
-    for sig in nonstationary.signals(True)[:8]:
+    for sig in nonstationary.signals(True)[:10]:
         rec = sig.make()
         dec = tr.TrackerDecoder(rec.truth.layout_mm, rec.fs_hz)
         prune = dec._prune
