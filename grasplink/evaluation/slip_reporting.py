@@ -202,7 +202,7 @@ FULL = Plan(
         "held-grip": (0,),
         "held-noise": (0,),
     },
-    sweeps=("LOG_REPORT_ODDS", "DIP_PRIOR_MM", "STALE_S", "threshold"),
+    sweeps=("LOG_REPORT_ODDS", "DIP_PRIOR_MM", "STALE_S", "SPEED_AGREE_SHARE", "threshold"),
     sweep_values=None,
     cost_cases=8,
     headline=True,
@@ -225,7 +225,7 @@ QUICK = Plan(
         "snr10": (0,),
         "held-grip": (0,),
     },
-    sweeps=("LOG_REPORT_ODDS", "DIP_PRIOR_MM", "STALE_S", "threshold"),
+    sweeps=("LOG_REPORT_ODDS", "DIP_PRIOR_MM", "STALE_S", "SPEED_AGREE_SHARE", "threshold"),
     sweep_values=2,
     cost_cases=2,
     headline=True,
@@ -604,6 +604,13 @@ SWEEPS: dict[str, Sweep] = {
         "s",
         True,
     ),
+    "SPEED_AGREE_SHARE": Sweep(
+        "SPEED_AGREE_SHARE",
+        "speed agreement (the speed given when this share of the slipping posterior agrees)",
+        (0.1, 0.2, 0.3, 0.5, 0.8),
+        "share",
+        False,
+    ),
     "threshold": Sweep(
         "threshold",
         "contact detector threshold (noise units)",
@@ -629,6 +636,8 @@ def shipped_value(name: str, layouts: Sequence[str] = ()) -> float:
             for x in layouts or ["alpha0.1"]
         ]
         return float(np.median(derived))
+    if name == "SPEED_AGREE_SHARE":
+        return float(tr.TrackerDecoder.SPEED_AGREE_SHARE)
     if name == "threshold":
         return float(inspect.signature(ContactDetector).parameters["threshold"].default)
     raise KeyError(name)
@@ -642,6 +651,8 @@ def settings_for(name: str, value: float) -> dict:
         return {"tuning": {"DIP_PRIOR_MM": value, "DIP_PRIOR_CHANGING_MM": value}}
     if name == "STALE_S":
         return {"tuning": {"STALE_S": value}}
+    if name == "SPEED_AGREE_SHARE":
+        return {"tuning": {"SPEED_AGREE_SHARE": value}}
     if name == "threshold":
         return {"detector_threshold": value}
     raise KeyError(name)

@@ -1,0 +1,77 @@
+"""Try tracker settings on the slip-reporting sets: one line of issue 22's figures each.
+
+`slip_reporting`'s full benchmark runs every figure on every set (9 minutes); this runs
+its quick set (or a chosen share of the full one) with the shipped tracker and with each
+`--try NAME=VALUE[,NAME=VALUE]` setting (`TrackerDecoder(tuning=...)`) in the same
+worker pool, so a change's cost and gain are read side by side in one run.
+
+Run: `.venv/bin/python benchmarks/tune_tracker.py --try LOG_STOP=-0.69 [--full]`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+
+from grasplink.evaluation import nonstationary as ns
+from grasplink.evaluation import slip_reporting as sr
+from grasplink.gateway.decoding.tracker import TrackerDecoder
+
+COLUMNS = (
+    ("missing_from3_pct", "miss%"),
+    ("speed_err_median_pct", "med%"),
+    ("speed_err_p90_pct", "p90%"),
+    ("first_good_by_third_pct", "by3rd%"),
+    ("wrong_direction_pct", "wrongdir%"),
+    ("stops_cleared_pct", "stops%"),
+    ("speed_after_observable_pct", "afterobs%"),
+    ("flagged_at_rest_pct", "rest%"),
+)
+
+
+def job(args: tuple[sr.Case, dict]) -> tuple[str, sr.CaseScore]:
+    case, tuning = args
+    rec = sr.make_case(case)
+    decoder = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
+    estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
+    return case.kind, sr.score(estimates, rec.truth)
+
+
+def parse(text: str) -> dict:
+    out = {}
+    for item in text.split(","):
+        name, _, value = item.partition("=")
+        out[name.strip()] = float(value)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--try", dest="tries", action="append", default=[], type=parse)
+    parser.add_argument("--full", action="store_true", help="the full plan's cases, one seed")
+    args = parser.parse_args(argv)
+    plan = replace(sr.FULL if args.full else sr.QUICK, seeds=1)
+    todo = sr.cases(plan)
+    configs = [{}, *args.tries]
+    with ProcessPoolExecutor(2) as pool:
+        results = list(pool.map(job, [(c, t) for t in configs for c in todo], chunksize=4))
+    n = len(todo)
+    print(f"{n} cases ({plan.name} plan, one seed)")
+    header = "setting".ljust(28) + " ".join(f"{label:>9s}" for _, label in COLUMNS)
+    for kinds, title in ((sr.MOVING, "moving"), (("constant",), "constant"), (sr.HELD, "held")):
+        print(f"-- {title}\n{header}")
+        for k, tuning in enumerate(configs):
+            scores = [s for kind, s in results[k * n : (k + 1) * n] if kind in kinds]
+            fig = sr.summarise(scores)
+            name = ",".join(f"{a}={b:g}" for a, b in tuning.items()) or "shipped"
+            cells = " ".join(
+                f"{fig[key]:9.1f}" if fig[key] is not None else f"{'-':>9s}" for key, _ in COLUMNS
+            )
+            print(f"{name[:28]:28s}{cells}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
