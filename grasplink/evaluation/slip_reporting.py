@@ -202,7 +202,14 @@ FULL = Plan(
         "held-grip": (0,),
         "held-noise": (0,),
     },
-    sweeps=("LOG_REPORT_ODDS", "DIP_PRIOR_MM", "STALE_S", "SPEED_AGREE_SHARE", "threshold"),
+    sweeps=(
+        "LOG_REPORT_ODDS",
+        "DIP_PRIOR_MM",
+        "STALE_S",
+        "SPEED_AGREE_SHARE",
+        "LOG_STOP_REPORT",
+        "threshold",
+    ),
     sweep_values=None,
     cost_cases=8,
     headline=True,
@@ -225,7 +232,14 @@ QUICK = Plan(
         "snr10": (0,),
         "held-grip": (0,),
     },
-    sweeps=("LOG_REPORT_ODDS", "DIP_PRIOR_MM", "STALE_S", "SPEED_AGREE_SHARE", "threshold"),
+    sweeps=(
+        "LOG_REPORT_ODDS",
+        "DIP_PRIOR_MM",
+        "STALE_S",
+        "SPEED_AGREE_SHARE",
+        "LOG_STOP_REPORT",
+        "threshold",
+    ),
     sweep_values=2,
     cost_cases=2,
     headline=True,
@@ -611,6 +625,13 @@ SWEEPS: dict[str, Sweep] = {
         "share",
         False,
     ),
+    "LOG_STOP_REPORT": Sweep(
+        "LOG_STOP_REPORT",
+        "stop report (silence reported as a stop once P(every due ridge missed) is below this)",
+        (0.2, 0.3, 0.4, 0.45, 0.55),
+        "P(missed)",
+        False,
+    ),
     "threshold": Sweep(
         "threshold",
         "contact detector threshold (noise units)",
@@ -638,6 +659,9 @@ def shipped_value(name: str, layouts: Sequence[str] = ()) -> float:
         return float(np.median(derived))
     if name == "SPEED_AGREE_SHARE":
         return float(tr.TrackerDecoder.SPEED_AGREE_SHARE)
+    if name == "LOG_STOP_REPORT":
+        report = tr.TrackerDecoder.LOG_STOP_REPORT
+        return math.exp(tr.TrackerDecoder.LOG_STOP if report is None else report)
     if name == "threshold":
         return float(inspect.signature(ContactDetector).parameters["threshold"].default)
     raise KeyError(name)
@@ -653,6 +677,8 @@ def settings_for(name: str, value: float) -> dict:
         return {"tuning": {"STALE_S": value}}
     if name == "SPEED_AGREE_SHARE":
         return {"tuning": {"SPEED_AGREE_SHARE": value}}
+    if name == "LOG_STOP_REPORT":
+        return {"tuning": {"LOG_STOP_REPORT": math.log(value)}}
     if name == "threshold":
         return {"detector_threshold": value}
     raise KeyError(name)

@@ -272,6 +272,9 @@ class TrackerDecoder(Decoder):
     TIP_GAP_MM = 10.0  # (the edge tips over a long gap, never right before the next ridge)
     TIP_S = 0.3  # ... or, speed unknown, within this time
     LOG_STOP = math.log(0.2)  # a slip stops before the next ridge (silence)
+    # silence is *reported* as a stop once P(all due ridges missed) falls below this (None:
+    # LOG_STOP); the hypotheses' scores keep LOG_STOP, so a later contact resumes the slip
+    LOG_STOP_REPORT: float | None = None
     LOG_RESTART = math.log(0.05)  # a slip stopped unseen and restarted before this contact
     RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
@@ -354,7 +357,7 @@ class TrackerDecoder(Decoder):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         for key, value in (tuning or {}).items():  # the trade-off curves' settings
             known = key.isupper() and isinstance(getattr(type(self), key, None), float | int)
-            if not (known or key == "STALE_S"):
+            if not (known or key in ("STALE_S", "LOG_STOP_REPORT")):
                 raise ConfigError(f"tracker tuning: no model constant {key!r}")
             try:
                 number = float(value)
@@ -746,6 +749,8 @@ class TrackerDecoder(Decoder):
         kk = np.minimum(k, R)
         miss = np.cumsum(self._log_miss[di[:, None], kk], axis=1)
         go_on = miss >= self.LOG_STOP
+        # reported as still slipping (`LOG_STOP_REPORT`): the score keeps LOG_STOP
+        told = miss >= (self.LOG_STOP if self.LOG_STOP_REPORT is None else self.LOG_STOP_REPORT)
         ended = np.logical_or.accumulate(~go_on | (k >= R), axis=1)
         done = np.zeros(ended.shape, bool)  # active tracks: done before each ridge ahead
         done[:, 1:] = ended[:, :-1]
@@ -755,10 +760,10 @@ class TrackerDecoder(Decoder):
         adj = np.zeros((2 * rows, J))
         adj[rows:, 1:] = np.where(done, 0.0, np.where(go_on, miss, self.LOG_STOP))
         stopped = np.zeros((2 * rows, J), bool)
-        stopped[rows:, 1:] = ~(go_on | done)
+        stopped[rows:, 1:] = ~((go_on & told) | done)
         limit = np.zeros((2 * rows, J), np.int64)
         limit[:, 0] = np.tile(np.minimum(ridge + 1, R), 2)
-        limit[rows:, 1:] = np.where(done, 0, kk + go_on)
+        limit[rows:, 1:] = np.where(done, 0, kk + (go_on & told))
         return {
             "due": due,
             "adj": adj,
