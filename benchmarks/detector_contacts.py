@@ -7,8 +7,9 @@ headline loop's rising level, detection at 10 dB SNR, and the detector's cost.
 2. 10 dB SNR (`nonstationary` category "snr10", every signal: all layouts, both
    directions, both seeds): true ridge crossings found within +-20 ms, false contacts,
    timing error, per variant and in all.
-3. Cost: µs per sample over a 60 s slip-and-rest signal fed 3 samples at a time (wall
-   time, best of 3: a figure to compare within one run, not a target).
+3. Cost: µs per sample over 60 s fed 3 samples at a time, with and without the pulse
+   probe, of a clean slip and rest and of a 10 dB SNR slip (wall time, best of 3: figures
+   to compare within one run, not a target).
 
 Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr]`.
 """
@@ -29,7 +30,7 @@ from grasplink.evaluation.contact_truth import (
     headline_replica,
     match,
 )
-from grasplink.gateway.decoding.contacts import ContactDetector
+from grasplink.gateway.decoding.contacts import PULSE_SCALES_S, ContactDetector
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 
@@ -65,7 +66,7 @@ def snr10() -> None:
         rec = signal.make()
         told = detect(rec.t_s, rec.force_n, rec.fs_hz, chunk=256)  # (chunking changes nothing)
         m = match(rec.truth.contact_times_s, told)
-        for key in (f"{signal.variant} {signal.layout}", "all"):
+        for key in (f"{signal.variant} {signal.layout}", f"every speed {signal.layout}", "all"):
             row = by_variant[key]
             row[0] += m.true_count
             row[1] += m.found
@@ -82,19 +83,28 @@ def snr10() -> None:
 
 
 def cost() -> None:
+    """The detector with and without the pulse probe, in one run: a clean slip and rest (the
+    probe's gate stays shut) and a 10 dB SNR slip (it opens)."""
     layout = LAYOUTS_MM["alpha0.1"]
     slip = synth.slip_recording(layout, 40.0, seed=3).force_n
     rest = synth.static_recording(layout, [[0.0, 5.0]], duration_s=6.0, seed=4).force_n
-    x = np.resize(np.concatenate([slip, rest]), 60 * 400)
-    t = np.arange(len(x)) / 400.0
-    best = np.inf
-    for _ in range(3):
-        detector = ContactDetector(400.0)
-        start = time.perf_counter()
-        for i in range(0, len(x), 3):
-            detector.feed(t[i : i + 3], x[i : i + 3])
-        best = min(best, time.perf_counter() - start)
-    print(f"cost: {1e6 * best / len(x):.1f} µs/sample (60 s at 400 Hz, 3-sample chunks)")
+    noisy = next(s for s in ns.signals(True) if s.category == "snr10").make().force_n
+    inputs = {
+        "clean": np.resize(np.concatenate([slip, rest]), 60 * 400),
+        "10 dB": np.resize(noisy, 60 * 400),
+    }
+    for name, x in inputs.items():
+        t = np.arange(len(x)) / 400.0
+        best = {"pulse probe": np.inf, "without": np.inf}
+        for _ in range(3):
+            for label, scales in (("pulse probe", PULSE_SCALES_S), ("without", ())):
+                detector = ContactDetector(400.0, pulse_scales_s=scales)
+                start = time.perf_counter()
+                for i in range(0, len(x), 3):
+                    detector.feed(t[i : i + 3], x[i : i + 3])
+                best[label] = min(best[label], time.perf_counter() - start)
+        figures = ", ".join(f"{k} {1e6 * v / len(x):.1f}" for k, v in best.items())
+        print(f"cost, {name}: {figures} µs/sample (60 s at 400 Hz, 3-sample chunks)")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -47,7 +47,13 @@ channel: `kernels.detector`):
   While the object slips on, the level rises and FSR hysteresis flattens a
   pulse's fall, so the trend before an onset is also taken from base to base
   (`_long_trend`) and a level that fell from its top in such a slip is a
-  pulse (`_fell_in_slip`); a sharp rise that rises on is a step (`_rose_on`).
+  pulse (`_fell_in_slip`); a sharp rise that rises on is a step (`_rose_on`);
+* where the kink bank is blind - heavy noise, the pulses told so far under `pulse_snr`
+  white-noise units high at their median - a *pulse probe* measures the SIZE of each rise
+  (after-minus-before means over 10-40 ms, ramps out): at 10 dB SNR a ridge pulse is 5-7
+  noise units of that and 2 of its kink. Its candidates the watch tells pulses are ridge
+  contacts (onset half the placing window before the rise's middle), unless the kink bank
+  or the step probe has them (`_run_pulses`). A clean signal never opens it.
 
 Events carry `emit_index`, the index of the sample whose arrival decided
 them, so a caller can replay them exactly in step with its own updates.
@@ -105,6 +111,8 @@ NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ide
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
 STEP_IDS = 1_000_000_000  # ids of the small steps found by the step probe (their own series)
+PULSE_SCALES_S = (0.01, 0.02, 0.04)  # the pulse probe's windows (`_run_pulses`)
+PULSE_RAMP = 0.5  # the pulse probe takes out this share of the differences 2 w either side
 
 
 class ContactEvent(NamedTuple):
@@ -433,6 +441,9 @@ class ContactDetector:
         step_threshold: float = 6.0,
         revise_s: float = 0.35,
         long_trend_s: float = 0.6,
+        pulse_scales_s: tuple[float, ...] = PULSE_SCALES_S,
+        pulse_threshold: float = 4.5,
+        pulse_snr: float = 10.0,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -528,6 +539,18 @@ class ContactDetector:
         self.trend_n = max(1, round(trend_s * self.fs_hz))
         self.long_trend_n = max(self.trend_n + 1, round(long_trend_s * self.fs_hz))
         self.slip_fall = 6.0  # noise units (`_fell_in_slip`)
+        # the pulse probe (`_run_pulses`): the size of a rise where the kink bank is blind
+        self.pulse_widths = sorted({max(2, round(s * self.fs_hz)) for s in pulse_scales_s})
+        self.pulse_threshold = float(pulse_threshold)
+        self.pulse_snr = float(pulse_snr)
+        self._pulse_next = 0  # next centre the pulse probe tests
+        self._pulse_watches: list[tuple[_Watch, float, int]] = []  # (watch, z, placing w)
+        self._pulse_onsets: deque[tuple[int, int]] = deque(maxlen=32)  # emitted: (index, emit)
+        # told pulses, to be emitted: (emit, index, z, placing w, height)
+        self._pulse_ready: list[tuple[int, int, float, int, float]] = []
+        # heights of the contacts told pulses (N above their base): (emit, height)
+        self._heights: deque[tuple[int, float]] = deque(maxlen=32)
+        self._gates: dict[int, float | None] = {}  # block -> `_pulse_gate`, once known
 
     # ------------------------------------------------------------------ feeding
     def feed(self, t: np.ndarray, x: np.ndarray) -> tuple[list[ContactEvent], list[PulseCheck]]:
@@ -576,6 +599,10 @@ class ContactDetector:
         self._onsets.extend((ev.index, ev.emit_index) for ev in events)
         checks = self._check_pulses(events)
         steps, step_checks = self._step_events()
+        if self.pulse_widths:
+            pulses, pulse_checks = self._run_pulses()
+            steps += pulses
+            step_checks += pulse_checks
         self._trim()
         # block noises still needed: the last noise_blocks before the slowest channel's block
         oldest = (
@@ -1075,6 +1102,138 @@ class ContactDetector:
         self._confirmed = keep
         return events, checks
 
+    # ------------------------------------------------------------------ pulse probe
+    def _run_pulses(self) -> tuple[list[ContactEvent], list[PulseCheck]]:
+        """Ridge pulses the kink bank is blind to (issue 22, 10 dB SNR): the SIZE of a rise.
+
+        In heavy noise a ridge pulse's kink (a slope jump) is a couple of noise units at
+        its best scale, while the rise itself - the mean after less the mean before, over
+        10-40 ms, less half the same difference 2 w earlier and later (a ramp is no rise;
+        a quarter each: a pulse's own fall after it adds) - is 5-7. Local maxima (over
+        +-w, best scale per centre) above `pulse_threshold` noise units, placed coarse to
+        fine, the onset half the placing window before the centre (the rise's middle);
+        watched like a contact, and told a ridge contact only when it falls back like a
+        pulse. Only where the kink bank is blind (`_pulse_gate`): a clean signal's
+        contacts are the kink bank's alone.
+        """
+        events: list[ContactEvent] = []
+        checks: list[PulseCheck] = []
+        ws = self.pulse_widths
+        W = ws[-1]
+        hi = self._n - 1 - 4 * W  # z known over +-W: samples to centre + 4 W - 1
+        lo = max(self._pulse_next, 4 * W)
+        lo = max(lo, self._t_start + 4 * W)  # (samples held: always, as the history is kept)
+        if hi - lo + 1 >= 4 * ws[0]:  # (in batches: the sums' cost is mostly per call)
+            self._pulse_next = hi + 1
+            blocks = range((lo - W) // self.block, (hi + W) // self.block + 1)
+            gates = {b: self._pulse_gate(b) for b in blocks}
+            if any(gates[b] is not None for b in range(lo // self.block, hi // self.block + 1)):
+                self._pulse_candidates(lo, hi, gates)
+        still = []
+        for watch, z, w in self._pulse_watches:
+            done = self._advance(watch)
+            if done is None:
+                still.append((watch, z, w))
+            elif done.pulse is True:
+                # told when a step probe near it would have been judged: a stop's step in
+                # noise may look like a pulse early on, and the step probe tells it better
+                emit = max(done.emit_index, watch.index + self.step_hold + self.level_half + 2 * W)
+                height = float(watch.history[watch.hist_n - 1]) if watch.hist_n else 0.0
+                self._pulse_ready.append((emit, watch.index, z, w, height))
+        self._pulse_watches = still
+        waiting = []
+        for emit, index, z, w, height in sorted(self._pulse_ready):
+            if emit >= self._n:
+                waiting.append((emit, index, z, w, height))
+                continue
+            if (
+                any(abs(index - n) <= 2 * w + 2 for n, e in self._onsets if e <= emit)
+                or any(abs(index - n) <= w + v + 2 for n, _, v in self._probe_onsets)
+                or any(abs(index - n) <= w + v + 2 for _, v, n, _, _, _ in self._confirmed)
+            ):
+                continue  # the kink bank or the step probe has it
+            self._pulse_onsets.append((index, emit))
+            self._onsets.append((index, emit))
+            self._heights.append((emit, height))
+            cid = self._next_id
+            self._next_id += 1
+            sigma = (0.25 * w + 0.3) / self.fs_hz
+            t = self._time(index, 0.0)
+            events.append(ContactEvent(cid, t, index, emit, z, 0.0, w / self.fs_hz, sigma))
+            checks.append(PulseCheck(cid, emit, True))
+        self._pulse_ready = waiting
+        return events, checks
+
+    def _pulse_gate(self, block: int) -> float | None:
+        """The white noise (N per sample) for the pulse probe's centres in `block`, or None
+        where it stays off: the noise unknown, or the contacts told pulses (decided before
+        the block, over the last `history_s`) rising to `pulse_snr` noise units or more at
+        their median - the kink bank sees such pulses."""
+        if block in self._gates:
+            return self._gates[block]
+        white = self._white(block)
+        if white is None:
+            return None
+        white_n = max(white[0], NOISE_FLOOR_N)
+        start = block * self.block
+        recent = sorted(
+            h for e, h in self._heights if start - self.history_blocks * self.block <= e < start
+        )
+        blind = bool(recent) and recent[(len(recent) - 1) // 2] < self.pulse_snr * white_n
+        sigma = white_n if blind else None
+        if block < self._n // self.block:  # (its white noise final by then: kept)
+            self._gates[block] = sigma
+            for old in [b for b in self._gates if b < block - 4]:
+                del self._gates[old]
+        return sigma
+
+    def _pulse_candidates(self, lo: int, hi: int, gates: dict[int, float | None]) -> None:
+        """The pulse probe's candidates among centres lo .. hi (see `_run_pulses`), watched."""
+        ws = self.pulse_widths
+        W = ws[-1]
+        i0 = lo - 4 * W - self._t_start  # samples lo - 4W .. hi + 4W - 1
+        x = self._x[i0 : hi + 4 * W - self._t_start]
+        m = hi - lo + 1 + 2 * W  # centres lo - W .. hi + W
+        B = self.block
+        sigma = np.array([gates[c // B] or math.inf for c in range(lo - W, hi + W + 1)])
+        z = np.empty((len(ws), m))
+        size = np.empty((len(ws), m))
+        for si, w in enumerate(ws):
+            # sums of w samples, each in one order (chunking cannot change a bit)
+            count = len(x) - w + 1
+            sums = x[0:count].copy()
+            for k in range(1, w):
+                sums += x[k : k + count]
+            d = (sums[w:] - sums[: len(sums) - w]) / w  # d[j]: centre lo - 4W + w + j
+            j0 = 3 * W - w  # centre lo - W in d
+            c = d[j0 : j0 + m]
+            adj = c - PULSE_RAMP * (d[j0 - 2 * w : j0 - 2 * w + m] + d[j0 + 2 * w : j0 + 2 * w + m])
+            z[si] = adj / (sigma * math.sqrt(2.0 / w * (1.0 + 2.0 * PULSE_RAMP * PULSE_RAMP)))
+            size[si] = c
+        best = z.max(axis=0)
+        which = z.argmax(axis=0)
+        for j in np.flatnonzero(best[W : W + hi - lo + 1] >= self.pulse_threshold).tolist():
+            j += W
+            si = int(which[j])
+            w = ws[si]
+            if best[j] < best[j - w : j + w + 1].max() or best[j - w : j].max() == best[j]:
+                continue  # not the local maximum (the first of equals)
+            sig = sigma[j]
+            if size[si, j] >= self.pulse_snr * sig:
+                continue  # a rise the kink bank sees
+            # coarse to fine: the finest scale that still sees it places it
+            k, reach, placed = j, w, w
+            for fi in range(si - 1, -1, -1):
+                a, b = max(0, k - reach), min(m - 1, k + reach)
+                q = a + int(np.argmax(z[fi, a : b + 1]))
+                if z[fi, q] < self.refine_z or q in (a, b):
+                    break
+                k, reach, placed = q, ws[fi], ws[fi]
+            onset = lo - W + k - placed // 2
+            watch = self._watch(-1, onset)
+            if watch is not None:
+                self._pulse_watches.append((watch, float(best[j]), placed))
+
     # ------------------------------------------------------------------ pulse checks
     def _run_level(self, x: np.ndarray) -> None:
         # y[m] is the mean of x[m - 2h .. m]: the level centred on m - h.
@@ -1186,6 +1345,8 @@ class ContactDetector:
                 still.append(watch)
             else:
                 checks.append(done)
+                if done.pulse is True and watch.hist_n:
+                    self._heights.append((done.emit_index, float(watch.history[watch.hist_n - 1])))
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
                     watch.top = float(watch.detrended.max()) if len(watch.detrended) else 0.0
                     watch.next_k = max(watch.next_k, done.emit_index - self.level_half + 1)
@@ -1522,7 +1683,7 @@ class ContactDetector:
         if len(self._level) > 2 * keep:  # (under that it is under 2 lv_keep too)
             oldest_watch = min(
                 [w.next_k for w in self._watches + self._stepped]
-                + [w.next_k for w, _, _ in self._probes],
+                + [w.next_k for w, _, _ in self._probes + self._pulse_watches],
                 default=None,
             )
             lv_keep = keep
