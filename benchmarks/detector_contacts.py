@@ -11,7 +11,10 @@ headline loop's rising level, detection at 10 dB SNR, and the detector's cost.
    probe, of a clean slip and rest and of a 10 dB SNR slip (wall time, best of 3: figures
    to compare within one run, not a target).
 
-Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr]`.
+4. With `--decoder`: the default decoder's speed missing (from each run's 3rd contact,
+   `slip_reporting.score`) on the snr10 signals, with and without the pulse probe.
+
+Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr] [--decoder]`.
 """
 
 from __future__ import annotations
@@ -82,6 +85,32 @@ def snr10() -> None:
         )
 
 
+def decoder_snr10() -> None:
+    """The default decoder on the same snr10 signals, with and without the pulse probe:
+    speed missing from each run's 3rd ridge contact (`slip_reporting.score`)."""
+    from grasplink.evaluation import slip_reporting as sr
+    from grasplink.gateway.decoding.registry import DEFAULT_DECODER
+
+    rows: dict[tuple[str, str], list[int]] = defaultdict(lambda: [0, 0])
+    for signal in ns.signals(False):
+        if signal.category != "snr10":
+            continue
+        rec = signal.make()
+        for label, scales in (("pulse probe", PULSE_SCALES_S), ("without", ())):
+            detector = ContactDetector(rec.fs_hz, pulse_scales_s=scales)
+            decoding = sr.build_decoder(
+                DEFAULT_DECODER, rec.truth.layout_mm, rec.fs_hz, {"detector": detector}
+            )
+            estimates, _ = ns.feed(decoding, rec.t_s, rec.force_n, sr.CHUNK)
+            scored = sr.score(estimates, rec.truth)
+            for key in (signal.layout, "all"):
+                rows[(key, label)][0] += scored.moving_from3
+                rows[(key, label)][1] += scored.missing_from3
+    print(f"10 dB SNR, {DEFAULT_DECODER} decoder: speed missing from the 3rd contact")
+    for (key, label), (moving, missing) in sorted(rows.items()):
+        print(f"  {key:10s} {label:12s} {missing:5d} of {moving:5d} ({missing / moving:5.1%})")
+
+
 def cost() -> None:
     """The detector with and without the pulse probe, in one run: a clean slip and rest (the
     probe's gate stays shut) and a 10 dB SNR slip (it opens)."""
@@ -110,10 +139,15 @@ def cost() -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--skip-snr", action="store_true", help="no 10 dB SNR figures")
+    parser.add_argument(
+        "--decoder", action="store_true", help="and the decoder's speed missing at 10 dB"
+    )
     args = parser.parse_args(argv)
     headline()
     if not args.skip_snr:
         snr10()
+        if args.decoder:
+            decoder_snr10()
     cost()
     return 0
 

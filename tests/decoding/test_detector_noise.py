@@ -19,7 +19,7 @@ SIGNALS = [
     and s.repeat == 0
     and not s.reverse
 ]
-# measured (benchmarks/detector_contacts.py's matching): 30 of 60 found (50 %) with 15 false
+# measured (benchmarks/detector_contacts.py's matching): 29 of 60 found (48 %) with 15 false
 # contacts; the kink bank alone found 19 (31.7 %) with 14 false
 FOUND_SHARE_MIN = 0.42
 FALSE_MAX = 20

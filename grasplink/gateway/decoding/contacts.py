@@ -1221,6 +1221,8 @@ class ContactDetector:
             sig = sigma[j]
             if size[si, j] >= self.pulse_snr * sig:
                 continue  # a rise the kink bank sees
+            if size[si, j] < self.pulse_threshold * sig * math.sqrt(2.0 / w):
+                continue  # no rise of its own: the end of a fall (a grip released)
             # coarse to fine: the finest scale that still sees it places it
             k, reach, placed = j, w, w
             for fi in range(si - 1, -1, -1):
