@@ -25,6 +25,7 @@ COLUMNS = (
     ("speed_err_p90_pct", "p90%"),
     ("first_good_by_third_pct", "by3rd%"),
     ("wrong_direction_pct", "wrongdir%"),
+    ("direction_told_pct", "told%"),
     ("stops_cleared_pct", "stops%"),
     ("speed_after_observable_pct", "afterobs%"),
     ("flagged_at_rest_pct", "rest%"),

@@ -326,13 +326,16 @@ class TrackerDecoder(Decoder):
     # moving the other way; the confidence carries P(this way), the logistic of those odds
     DIRECTION_CONTACTS = 3
     LOG_REPORT_ODDS = math.log(9.0)
+    LOG_KEEP_ODDS = math.log(3.0)  # a direction told is kept down to these odds (flicker)
     # the speed whichever way: given when this share of the slipping posterior agrees on
-    # it within AGREE_SPEED (or the likeliest track has three contacts); else the range of
-    # the speeds of the tracks holding BOUND_SHARE of it
-    # 0.3: constant-speed missing 9.6 -> 4.0 %, first within 10 % by the 3rd contact 20 ->
-    # 70 % of runs, speed p90 0.8 -> 1.4 % (benchmarks/tune_tracker.py --full; 0.8 at first).
-    # A 2-contact speed's confidence is share x 0.39: under the reflex's 0.25 below 0.64
-    SPEED_AGREE_SHARE = 0.3
+    # it within AGREE_SPEED, or SPEED_NARROW_SHARE does and every track holding BOUND_SHARE
+    # of it lies within SPEED_RANGE_MAX (or the likeliest track has three contacts); else
+    # the range of the speeds of those tracks. A share of 0.3 alone halves the missing
+    # speed at constant speed (8.9 -> 4.0 %) but gives guesses from ranges like 7-94 mm/s
+    # (54 mm/s for 20: tests/decoding/test_can_path_slip.py); the range rule keeps them out
+    SPEED_AGREE_SHARE = 0.8
+    SPEED_NARROW_SHARE = 0.3
+    SPEED_RANGE_MAX = 5.0
     BOUND_SHARE = 0.01
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
@@ -454,6 +457,7 @@ class TrackerDecoder(Decoder):
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
         self._force: float | None = None
         self._cache: tuple | None = None
+        self._told_way = 0  # the direction the last update told (0: none)
         # what every contact's one-contact tracks share: a bank that `_births` copies and
         # fills in (the contact's id, time, sigma and the score)
         dirn = np.repeat(np.array([1, -1]), R)
@@ -792,6 +796,7 @@ class TrackerDecoder(Decoder):
     def _report(self, g: float) -> SlipEstimate:
         force = self._force
         if not len(self._tracks):
+            self._told_way = 0
             return SlipEstimate(g, False, None, None, force, 1.0)
         # the posterior changes only when a contact or verdict arrives or silence lasts;
         # the agreement (confidence) is refreshed every REFRESH_S
@@ -799,10 +804,12 @@ class TrackerDecoder(Decoder):
             self._cache = self._posterior(g)
         _, chosen, p_slip, agree, odds, magnitude = self._cache
         if chosen is None:
+            self._told_way = 0
             return SlipEstimate(g, False, None, None, force, min(1.0, max(0.0, 1.0 - p_slip)))
         h, stopped, limit = chosen
         n, run = h.n, h.run
         if stopped:
+            self._told_way = 0
             s, _, sigma = self._where(h, g, True, limit)
             maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
             conf = agree * maturity / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
@@ -810,7 +817,11 @@ class TrackerDecoder(Decoder):
             return SlipEstimate(g, False, 0.0, x, force, min(1.0, max(0.0, conf)))
         # the direction is told once the chosen track has an interval ratio (three
         # contacts) and the tracks moving its way outweigh the others by LOG_REPORT_ODDS
-        told = run > 1 and n >= self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
+        # once told, the direction is kept while the odds stay above LOG_KEEP_ODDS: silence
+        # between contacts moves the odds, not the evidence for a way
+        bar = self.LOG_KEEP_ODDS if h.dirn == self._told_way else self.LOG_REPORT_ODDS
+        told = run > 1 and n >= self.DIRECTION_CONTACTS and odds >= bar
+        self._told_way = h.dirn if told else 0
         if told:
             s, speed, sigma = self._where(h, g, False, limit)
             maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
@@ -830,9 +841,12 @@ class TrackerDecoder(Decoder):
         known = run == 1 and n > self.DIRECTION_CONTACTS and odds >= self.LOG_REPORT_ODDS
         held = self._on_skin(self._x1(h, h.s)) if known else None  # restarted: where, not speed
         conf = min(1.0, max(0.0, p_slip))
-        # the speed is given when the hypotheses agree on it, or when the likeliest has an
-        # interval ratio to go by (three contacts): then with the agreement as confidence
-        if fast is None or (share < self.SPEED_AGREE_SHARE and fast.n < self.DIRECTION_CONTACTS):
+        # the speed is given when the hypotheses agree on it (or enough of them do, and
+        # none of the others is far off), or when the likeliest has an interval ratio to go
+        # by (three contacts): then with the agreement as confidence
+        narrow = share >= self.SPEED_NARROW_SHARE and high <= self.SPEED_RANGE_MAX * low
+        agreed = share >= self.SPEED_AGREE_SHARE or narrow
+        if fast is None or (not agreed and fast.n < self.DIRECTION_CONTACTS):
             if fast is None:
                 return SlipEstimate(g, True, None, held, force, conf)
             return SlipEstimate(g, True, None, held, force, conf, speed_low_mm_s=low,
