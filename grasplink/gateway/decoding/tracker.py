@@ -300,6 +300,9 @@ class TrackerDecoder(Decoder):
     DIP_MAX_MM = 0.8  # a 15 mm/s dip recovering over 50 ms costs 0.75 mm (thesis ch. 5.5.1)
     SPEED_INIT_REL = 0.1  # relative speed uncertainty from two contacts (besides timing)
     LATE_REL = 0.15  # a contact may come this share of its interval late (speed changes)
+    # the next contact's timing spread (3 sigma) counts at most this share of its interval:
+    # a braking hypothesis with an unsure acceleration otherwise waits seconds for it
+    SPAN_MAX_REL = 0.5
     LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
     LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
@@ -964,6 +967,7 @@ class TrackerDecoder(Decoder):
             speed_prior_mm_s=self.SPEED_PRIOR_MM_S,
             erf_scale=self._erf_scale,
             bound_share=self.BOUND_SHARE,
+            span_max_rel=self.SPAN_MAX_REL,
         )
 
     @cached_property

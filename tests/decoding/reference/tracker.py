@@ -681,7 +681,7 @@ class NumpyTracker:
             v_k = np.maximum(v + a_p * tau, 0.2 * v)
             tt = tau * tau  # tau**2 too: numpy squares exactly so
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
-            span = np.sqrt(np.maximum(var, 0.0)) / v_k
+            span = np.minimum(np.sqrt(np.maximum(var, 0.0)) / v_k, self.SPAN_MAX_REL * tau)
             latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
             t_due = B.t[act, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
             due[act, 1:] = np.where(T["done"][ra], np.inf, t_due)

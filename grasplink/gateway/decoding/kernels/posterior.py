@@ -38,6 +38,7 @@ NAMES = (
     "speed_prior_mm_s",
     "erf_scale",
     "bound_share",
+    "span_max_rel",
 )
 (
     NEGLIGIBLE,
@@ -59,6 +60,7 @@ NAMES = (
     SPEED_PRIOR,
     ERF_SCALE,
     BOUND_SHARE,
+    SPAN_MAX_REL,
 ) = range(len(NAMES))
 
 
@@ -162,7 +164,7 @@ def schedule(
             v_k = np.maximum(v + a_p * tau, 0.2 * v)
             tt = tau * tau
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
-            span = math.sqrt(np.maximum(var, 0.0)) / v_k
+            span = min(math.sqrt(np.maximum(var, 0.0)) / v_k, K[SPAN_MAX_REL] * tau)
             latency = np.minimum(K[MAX_LATENCY], np.maximum(K[MIN_LATENCY], K[DETECT_MM] / v_k))
             t_due = t[n] + tau + 3.0 * span + K[LATE_REL] * tau + latency
             due[n, j + 1] = np.inf if done_t[row, j] else t_due
