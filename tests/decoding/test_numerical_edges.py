@@ -547,11 +547,13 @@ def test_an_hour_held_still_keeps_memory_and_state_bounded(name):
     decoders(
         **known_defect(
             "a held object over alpha0.1 with thesis-like noise (0.02 N white, 0.05 N drift) "
-            "is flagged slipping for 4.2 s from 228.6 s (423 of 60000 updates, no speed): two "
-            "noise contacts 1.05 s apart, both falling back like pulses, which a fresh decoder "
-            "started at 200 s or 225 s flags too; over an hour 6528 of 360000 updates in 14 "
-            "episodes, the longest 23 s (tracks retire after 58.5 s of silence: chains of noise "
-            "contacts 40-50 s apart still revive them)"
+            "is flagged slipping for 1.8 s from 228.55 s (182 of 60000 updates, 2 with a "
+            "speed; 423 updates for 4.2 s at 99c7ab3): two noise contacts 1.05 s apart at "
+            "z 4.8 and 4.6 (threshold 4.5), both falling back like pulses - the pulse bonus "
+            "outweighs the strength's; slow hypotheses (11-18 mm/s) wait for their next ridge; "
+            "over an hour at 99c7ab3 6528 of 360000 updates in 14 episodes, the longest 23 s "
+            "(tracks retire after 58.5 s of silence: chains of noise contacts 40-50 s apart "
+            "still revive them)"
         )
     ),
 )

@@ -338,7 +338,7 @@ class TrackerDecoder(Decoder):
     # (54 mm/s for 20: tests/decoding/test_can_path_slip.py); the range rule keeps them out
     SPEED_AGREE_SHARE = 0.8
     SPEED_NARROW_SHARE = 0.3
-    SPEED_RANGE_MAX = 5.0
+    SPEED_RANGE_MAX = 2.0  # 5 gave a speed on two noise contacts of a held object
     BOUND_SHARE = 0.01
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
