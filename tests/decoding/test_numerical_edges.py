@@ -553,7 +553,8 @@ def test_an_hour_held_still_keeps_memory_and_state_bounded(name):
             "outweighs the strength's; slow hypotheses (11-18 mm/s) wait for their next ridge; "
             "over an hour at 99c7ab3 6528 of 360000 updates in 14 episodes, the longest 23 s "
             "(tracks retire after 58.5 s of silence: chains of noise contacts 40-50 s apart "
-            "still revive them)"
+            "still revive them; the stale-track age's curve: docs/benchmarks/"
+            "slip_reporting.md, STALE_S)"
         )
     ),
 )

@@ -113,6 +113,7 @@ def test_adc_noise_alone_is_no_slip():
 DIPS_DEFECT = (
     "speed median 5.6-7.9 % > 5 % with speed dips at every ridge: the tracker that replaced "
     "the constant-speed one (issue 9) has a narrow dip prior (0.1 mm); no wrong sign, no false slip"
+    " (the dip prior's curve: docs/benchmarks/slip_reporting.md, DIP_PRIOR_MM)"
 )
 
 
