@@ -11,21 +11,34 @@ headline loop's rising level, detection at 10 dB SNR, and the detector's cost.
    probe, of a clean slip and rest and of a 10 dB SNR slip (wall time, best of 3: figures
    to compare within one run, not a target).
 
-4. With `--decoder`: the default decoder's speed missing (from each run's 3rd contact,
+4. By spacing (`--spacings`): true ridge contacts found within +-20 ms by the spacing
+   crossed BEFORE the contact and by speed band, and why the others were missed (the
+   same contact again, under the threshold, no kink: `contact_truth.by_contact`), on
+   constant-speed slips (`synth.slip_recording`: every layout, 8-120 mm/s, both
+   directions, seeds 1-2, thesis-like noise) and on slip_reporting's constant, stop and
+   stick-slip cases (every layout, both directions, one seed). The tracker's P_DETECT
+   model reads this table.
+
+5. With `--decoder`: the default decoder's speed missing (from each run's 3rd contact,
    `slip_reporting.score`) on the snr10 signals, with and without the pulse probe.
 
-Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr] [--decoder]`.
+Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr] [--decoder]
+[--spacings [--only-spacings] [--json FILE]]`.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 
+from grasplink.evaluation import contact_truth as ct
 from grasplink.evaluation import nonstationary as ns
+from grasplink.evaluation import slip_reporting as sr
 from grasplink.evaluation.contact_truth import (
     HEADLINE_STOP_S,
     MATCH_S,
@@ -85,6 +98,76 @@ def snr10() -> None:
         )
 
 
+SPACING_SPEEDS_MM_S = (8, 12, 20, 35, 60, 90, 120)
+SPACING_SEEDS = (1, 2)
+REASONS = (ct.AGAIN, ct.UNDER, ct.NO_KINK)
+
+
+def spacing_signals() -> list[tuple[str, ns.Recorded]]:
+    """(set name, signal): constant slips of every layout 8-120 mm/s both ways, seeds 1-2;
+    slip_reporting's constant, stop and stick-slip cases (every layout, both ways, 1 seed)."""
+    out = []
+    for layout in LAYOUTS_MM.values():
+        for v in SPACING_SPEEDS_MM_S:
+            for reverse in (False, True):
+                for seed in SPACING_SEEDS:
+                    rec = synth.slip_recording(layout, float(v), reverse=reverse, seed=seed)
+                    out.append(("constant 8-120", ns.Recorded(rec, rec.t_s, rec.force_n, 400)))
+    plan = sr.Plan(
+        name="spacings",
+        layouts=tuple(LAYOUTS_MM),
+        seeds=1,
+        variants={k: tuple(range(len(sr.VARIANTS[k]))) for k in ("constant", "stop", "stick-slip")},
+        sweep_layouts=(),
+        sweep_variants={},
+        sweeps=(),
+        sweep_values=None,
+        cost_cases=0,
+        headline=False,
+    )
+    out += [(f"slip_reporting {case.kind}", case.make()) for case in sr.cases(plan)]
+    return out
+
+
+def spacings(json_path: str | None = None) -> dict:
+    """Found share by the spacing before each true ridge contact (see the module doc)."""
+    rows: dict[str, dict[str, list[int]]] = defaultdict(lambda: defaultdict(lambda: [0, 0]))
+    why: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    for set_name, rec in spacing_signals():
+        told = ct.by_contact(rec.truth, rec.t_s, rec.force_n, rec.fs_hz)
+        for d, band, hit, reason in zip(told.spacing, told.band, told.found, told.why, strict=True):
+            for key in ("all", set_name, band):
+                rows[d][key][0] += 1
+                rows[d][key][1] += hit
+            if reason is not None:
+                why[d][reason] += 1
+    order = sorted(
+        rows, key=lambda d: (d == ct.FIRST, float(d.rstrip("+")) if d != ct.FIRST else 0.0)
+    )
+    bands = [ct.speed_band(lo) for lo, _ in ct.SPEED_BANDS_MM_S]
+    sets = sorted({k for d in rows for k in rows[d] if k != "all" and k not in bands})
+    print("Ridge contacts found within +-20 ms by the spacing before them (mm):")
+    head = ["spacing", "true", "found", *bands, *sets, *REASONS]
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+
+    def share(cell: list[int]) -> str:
+        return f"{cell[1] / cell[0]:.0%} ({cell[0]})" if cell[0] else "-"
+
+    for d in order:
+        cells = rows[d]
+        total, hit = cells["all"]
+        line = [d, str(total), f"{hit / total:.1%}"]
+        line += [share(cells[b]) for b in bands] + [share(cells[k]) for k in sets]
+        line += [str(why[d][r]) for r in REASONS]
+        print("| " + " | ".join(line) + " |")
+    figures = {d: {k: list(v) for k, v in rows[d].items()} for d in order}
+    result = {"found": figures, "why": {d: dict(why[d]) for d in order}}
+    if json_path:
+        Path(json_path).write_text(json.dumps(result, indent=1))
+    return result
+
+
 def decoder_snr10() -> None:
     """The default decoder on the same snr10 signals, with and without the pulse probe:
     speed missing from each run's 3rd ridge contact (`slip_reporting.score`)."""
@@ -139,10 +222,17 @@ def cost() -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--skip-snr", action="store_true", help="no 10 dB SNR figures")
+    parser.add_argument("--spacings", action="store_true", help="found by spacing before")
+    parser.add_argument("--only-spacings", action="store_true", help="only that table")
+    parser.add_argument("--json", help="write the spacing table's figures here")
     parser.add_argument(
         "--decoder", action="store_true", help="and the decoder's speed missing at 10 dB"
     )
     args = parser.parse_args(argv)
+    if args.spacings or args.only_spacings:
+        spacings(args.json)
+        if args.only_spacings:
+            return 0
     headline()
     if not args.skip_snr:
         snr10()

@@ -16,7 +16,9 @@ over alpha0.1 with speed dips, stopping at 2.426 s while the reflex raises the g
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -24,6 +26,7 @@ from grasplink.gateway.decoding.contacts import ContactDetector, ContactEvent, P
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import harness
 from grasplink.simulators.effects import actuators, kinematics, noise, skin
+from grasplink.simulators.effects.skin import ridge_positions_mm
 from grasplink.simulators.synth import SkinRecording, run_recording
 
 MATCH_S = 0.02  # a contact within this of a true ridge crossing found it
@@ -143,3 +146,132 @@ def match(truth_s: np.ndarray, told: Told) -> Matched:
         if j not in used and not np.any(np.abs(truth_s - t) <= MATCH_S)
     )
     return Matched(len(truth_s), len(errors), false, np.array(errors), pulse_first, step_first)
+
+
+# -- detection by the spacing before a contact (issue 22: silence tells a stop) ---------------
+FIRST = "first"  # the first ridge met (skin.ridge_contacts' lead-in before it)
+WIDE_MM = 34.0  # spacings from this on pooled ("34+")
+SPEED_BANDS_MM_S = ((0.0, 20.0), (20.0, 50.0), (50.0, math.inf))
+LOW_THRESHOLD = 2.5  # a miss with a kink at least this high (noise units) was under threshold
+# why a true contact was missed (`missed_why`)
+AGAIN = "same contact again"  # a candidate over the threshold, dropped by the merge rule
+UNDER = "under threshold"  # a kink, but under the threshold
+NO_KINK = "no kink"  # not even that: merged into the previous pulse's decay
+
+
+def spacing_label(spacing_mm: float | None) -> str:
+    """A spacing's row label: the spacing (mm), "34+" from WIDE_MM on, FIRST for None."""
+    if spacing_mm is None:
+        return FIRST
+    if spacing_mm >= WIDE_MM:
+        return f"{WIDE_MM:g}+"
+    return f"{spacing_mm:g}"
+
+
+def speed_band(speed_mm_s: float) -> str:
+    for lo, hi in SPEED_BANDS_MM_S:
+        if lo <= abs(speed_mm_s) < hi:
+            return f"{lo:g}-{hi:g} mm/s" if math.isfinite(hi) else f"{lo:g}+ mm/s"
+    return "?"
+
+
+def spacings_before_mm(truth: SkinRecording) -> list[float | None]:
+    """Per true ridge contact: the spacing the edge crossed before reaching that ridge, in
+    its direction of travel (None: the first ridge met, after the lead-in). The ridge is the
+    one at the edge's position at the contact's time; the direction is the speed's sign."""
+    ridges = ridge_positions_mm(truth.layout_mm)
+    spacings = truth.layout_mm
+    out: list[float | None] = []
+    for t in truth.contact_times_s:
+        x = float(np.interp(t, truth.t_s, truth.position_mm))
+        i = int(np.argmin(np.abs(ridges - x)))
+        k = int(np.searchsorted(truth.t_s, t))
+        v = float(truth.speed_mm_s[min(k, len(truth.t_s) - 1)])
+        if v == 0.0 and k > 0:
+            v = float(truth.speed_mm_s[k - 1])
+        if v >= 0:
+            out.append(None if i == 0 else float(spacings[i - 1]))
+        else:
+            out.append(None if i == len(spacings) else float(spacings[i]))
+    return out
+
+
+def speeds_at_mm_s(truth: SkinRecording) -> np.ndarray:
+    """|speed| at each true ridge contact (the fastest of the samples either side)."""
+    k = np.clip(np.searchsorted(truth.t_s, truth.contact_times_s), 1, len(truth.t_s) - 1)
+    return np.maximum(np.abs(truth.speed_mm_s[k]), np.abs(truth.speed_mm_s[k - 1]))
+
+
+class _Traced(ContactDetector):
+    """A detector that keeps every kink candidate it merged away (`_merge`): their times and
+    the scale that found them. For the measurement only: the same contacts as the plain one."""
+
+    def __init__(self, fs_hz: float, **kwargs: Any):
+        super().__init__(fs_hz, **kwargs)
+        self.candidates: list[tuple[float, float, float]] = []  # (t_s, scale_s, z) all
+        self.dropped: list[tuple[float, float, float]] = []  # ... merged away
+
+    def _merge(self, candidates: list) -> list[ContactEvent]:
+        told = [(self._time(c[2], c[3]), c[1] / self.fs_hz, c[4]) for c in candidates]
+        events = super()._merge(candidates)
+        kept = {e.t_s for e in events}
+        self.candidates += told
+        self.dropped += [c for c in told if c[0] not in kept]
+        return events
+
+
+def _traced(
+    t_s: np.ndarray, force_n: np.ndarray, fs_hz: float, **kwargs: Any
+) -> tuple[_Traced, np.ndarray]:
+    """A traced detector fed the whole signal (chunking changes nothing), and the times of
+    every contact it told (kink, step probe, pulse probe)."""
+    detector = _Traced(fs_hz, **kwargs)
+    events, _ = detector.feed(t_s, force_n)
+    return detector, np.array([e.t_s for e in events])
+
+
+@dataclass
+class ByContact:
+    """Per true ridge contact of one signal: found (within MATCH_S), and if not, why."""
+
+    spacing: list[str]  # `spacing_label` of the spacing before it
+    band: list[str]  # `speed_band` of its speed
+    found: list[bool]
+    why: list[str | None]  # AGAIN, UNDER, NO_KINK for a miss (None: found)
+
+
+def by_contact(
+    truth: SkinRecording,
+    t_s: np.ndarray,
+    force_n: np.ndarray,
+    fs_hz: float,
+    **kwargs: Any,
+) -> ByContact:
+    """Every true ridge contact of a signal: found or not, and why not (`AGAIN`: the
+    detector had a candidate over its threshold within MATCH_S and took it for an earlier
+    contact seen again; `UNDER`: a kink of `LOW_THRESHOLD` noise units or more was there;
+    `NO_KINK`: none - the pulse merged into the previous one's decay). `kwargs` go to the
+    detector (the low-threshold one takes the same, threshold apart)."""
+    plain, events = _traced(t_s, force_n, fs_hz, **kwargs)
+    low: _Traced | None = None
+    spacing: list[str] = []
+    band: list[str] = []
+    found: list[bool] = []
+    why: list[str | None] = []
+    for c, d, v in zip(
+        truth.contact_times_s, spacings_before_mm(truth), speeds_at_mm_s(truth), strict=True
+    ):
+        spacing.append(spacing_label(d))
+        band.append(speed_band(v))
+        hit = bool(len(events)) and bool(np.min(np.abs(events - c)) <= MATCH_S)
+        found.append(hit)
+        if hit:
+            why.append(None)
+        elif any(abs(t - c) <= MATCH_S for t, _, _ in plain.dropped):
+            why.append(AGAIN)
+        else:
+            if low is None:
+                low, _ = _traced(t_s, force_n, fs_hz, **{**kwargs, "threshold": LOW_THRESHOLD})
+            near = any(abs(t - c) <= MATCH_S for t, _, _ in low.candidates)
+            why.append(UNDER if near else NO_KINK)
+    return ByContact(spacing, band, found, why)
