@@ -41,10 +41,12 @@ def job(args: tuple[sr.Case, dict]) -> tuple[str, sr.CaseScore]:
 
 
 def parse(text: str) -> dict:
-    out = {}
+    """NAME=VALUE[,NAME=VALUE]; a table as NAME=V1/V2/V3 (e.g. DETECT_P=0.5/0.6/0.7)."""
+    out: dict = {}
     for item in text.split(","):
         name, _, value = item.partition("=")
-        out[name.strip()] = float(value)
+        numbers = tuple(float(v) for v in value.split("/"))
+        out[name.strip()] = numbers if len(numbers) > 1 else numbers[0]
     return out
 
 
@@ -66,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
         for k, tuning in enumerate(configs):
             scores = [s for kind, s in results[k * n : (k + 1) * n] if kind in kinds]
             fig = sr.summarise(scores)
-            name = ",".join(f"{a}={b:g}" for a, b in tuning.items()) or "shipped"
+            name = ",".join(f"{a}={b}" for a, b in tuning.items()) or "shipped"
             cells = " ".join(
                 f"{fig[key]:9.1f}" if fig[key] is not None else f"{'-':>9s}" for key, _ in COLUMNS
             )

@@ -61,6 +61,7 @@ import bisect
 import math
 from collections.abc import Mapping, Sequence
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -261,8 +262,12 @@ class TrackerDecoder(Decoder):
     name = "tracker"
 
     # model constants (see module doc); all times in s, distances in mm
-    P_DETECT_MAX = 0.9  # chance a ridge contact is detected, after a long spacing
-    P_DETECT_MIN = 0.5  # ... after a very short one (its pulse is small and merges)
+    # chance a ridge contact is detected, by the spacing crossed before it (its pulse is
+    # 1 - exp(-spacing / 10 mm) high and starts on the previous one's decay): measured by
+    # benchmarks/detector_contacts.py --spacings (211e4c0: 3 mm 17 %, 4 mm 72 %, 5 mm 99 %,
+    # 6-34 mm 100 % of 3964 contacts, 8-120 mm/s); interpolated between, flat beyond
+    DETECT_SPACINGS_MM = (3.0, 4.0, 5.0)
+    DETECT_P = (0.2, 0.7, 0.97)
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
     LOG_NEW_TRACK = math.log(0.01)  # slips starting per s
     LOG_REVERSE = math.log(0.2)  # a contact while slipping is the first after a reversal
@@ -358,20 +363,11 @@ class TrackerDecoder(Decoder):
         history: int = 8,
         detect_block_s: float | None = None,
         detector: ContactDetector | None = None,
-        tuning: Mapping[str, float] | None = None,
+        tuning: Mapping[str, float | tuple[float, ...]] | None = None,
     ):
         super().__init__(layout_mm, fs_hz, update_period_s=update_period_s)
         for key, value in (tuning or {}).items():  # the trade-off curves' settings
-            known = key.isupper() and isinstance(getattr(type(self), key, None), float | int)
-            if not (known or key in ("STALE_S", "LOG_STOP_REPORT")):
-                raise ConfigError(f"tracker tuning: no model constant {key!r}")
-            try:
-                number = float(value)
-            except (TypeError, ValueError):
-                raise ConfigError(f"tracker tuning {key} = {value!r} is not a number") from None
-            if not math.isfinite(number):
-                raise ConfigError(f"tracker tuning {key} = {value!r} is not finite")
-            setattr(self, key, number)
+            setattr(self, key, self._tuning_value(key, value))
         geometry = self.geometry
         x = geometry.ridges_mm
         self.length = geometry.length_mm
@@ -498,6 +494,21 @@ class TrackerDecoder(Decoder):
             self._birth._i,
         )
 
+    @classmethod
+    def _tuning_value(cls, key: str, value: Any) -> float | tuple[float, ...]:
+        """A model constant's tuned value, checked: a number for a number, a table of
+        numbers for a table (DETECT_P); ConfigError naming the key otherwise."""
+        default = getattr(cls, key, None) if key.isupper() else None
+        if not (isinstance(default, float | int | tuple) or key in ("STALE_S", "LOG_STOP_REPORT")):
+            raise ConfigError(f"tracker tuning: no model constant {key!r}")
+        try:
+            numbers = [float(x) for x in value] if isinstance(default, tuple) else [float(value)]
+        except (TypeError, ValueError):
+            raise ConfigError(f"tracker tuning {key} = {value!r} is not a number") from None
+        if not all(math.isfinite(x) for x in numbers):
+            raise ConfigError(f"tracker tuning {key} = {value!r} is not finite")
+        return tuple(numbers) if isinstance(default, tuple) else numbers[0]
+
     def warm_up(self) -> None:
         """Load (or compile) the kernels: a throwaway decoder on this one's layout and rate
         decodes a slip's ridge pulses (`warm_up_signal`: every kernel and argument type a
@@ -512,8 +523,7 @@ class TrackerDecoder(Decoder):
         _WARM = True
 
     def _detect_probability(self, spacing_before: float) -> float:
-        share = min(1.0, max(0.0, (spacing_before - 3.0) / 5.0))
-        return self.P_DETECT_MIN + (self.P_DETECT_MAX - self.P_DETECT_MIN) * share
+        return float(np.interp(spacing_before, self.DETECT_SPACINGS_MM, self.DETECT_P))
 
     # ------------------------------------------------------------------ streaming
     def process(self, t: np.ndarray, x: np.ndarray) -> list[SlipEstimate]:
