@@ -143,10 +143,14 @@ def test_a_stop_past_the_last_ridge_is_not_judged():
     assert sr.summarise([score])["stops_past_last_ridge"] == 1
 
 
-def test_speed_at_rest_and_after_the_stop_became_observable():
+def test_speed_at_rest_and_after_the_stop_report_was_due():
+    """After the stop became observable (4.0 s) its report is due within 0.15 s (target
+    4); a speed after that is a speed at rest."""
     score = sr.score(told(clear_s=4.05), truth())
-    assert score.after_observable == 99  # 4.01 ... 4.99 s
-    assert score.after_observable_speed == 4  # 4.01 ... 4.04 s
+    assert score.after_observable == 84  # 4.16 ... 4.99 s
+    assert score.after_observable_speed == 0  # gone at 4.05 s: in time
+    lingering = sr.score(told(clear_s=4.3), truth())
+    assert lingering.after_observable_speed == 14  # 4.16 ... 4.29 s
     assert score.rest_speed == 70  # 3.35 ... 4.04 s: 0.15 s or more into the rest
     assert score.rest_updates == 35 + 165  # 0.15-0.5 s and 3.35-5.0 s
 
@@ -165,9 +169,11 @@ def test_headline_figures_from_the_truth_ridge_crossings():
     assert good["first_speed_s"] == pytest.approx(2.0) and good["first_ok"] is True
     assert good["last_speed_s"] == pytest.approx(4.04)
     assert good["last_ok"] is True  # 0.84 s after the stop: within one interval (1 s)
-    assert good["rest_ok"] is False and good["speed_after_observable_updates"] == 4
+    assert good["rest_ok"] is True and good["speed_after_observable_updates"] == 0
     lingering = sr.headline_figures(told(clear_s=4.5), rec)
     assert lingering["last_ok"] is False  # 1.29 s after the stop
+    assert lingering["rest_ok"] is False  # 4.16 ... 4.49 s: after the report was due
+    assert lingering["speed_after_observable_updates"] == 34
     late = sr.headline_figures(stream(lambda t: (True, 10.0 if t >= 3.3 else None, 1)), rec)
     assert late["first_ok"] is False  # 0.3 s after the 3rd contact: beyond the detector's delay
 
