@@ -61,3 +61,22 @@ def test_the_stop_of_the_headline_slip_is_a_step_at_its_first_verdict(told):
         assert verdict is not None and verdict.pulse is False, (verdict, near[0])
         # told within the hold (0.1 s) and a little: soon enough for the stop report
         assert verdict.emit_index / rec.fs_hz - near[0].t_s <= 0.12
+
+
+def test_a_stop_on_the_falling_tail_of_a_short_spacings_pulse_is_a_step():
+    """uniform4 at 12 mm/s, reversed, stopping where the next 4 mm ridge was due
+    (slip_reporting's stop case, seed 96011): the level relaxes on with the last pulse's
+    tail, which the slip-fall rule read as a pulse falling back (told a pulse before)."""
+    from grasplink.evaluation import slip_reporting as sr
+    from grasplink.evaluation.contact_truth import stick_time_s
+
+    layout = "uniform4"
+    label, numbers = sr.VARIANTS["stop"][0]
+    rec = sr.Case("stop", label, numbers, layout, True, 96011).make()
+    stop = stick_time_s(rec.truth)
+    assert stop is not None
+    result = detect(rec.t_s, rec.force_n, rec.fs_hz)
+    near = [e for e in result.contacts if abs(e.t_s - stop) <= 0.01]
+    assert near, [round(e.t_s - stop, 3) for e in result.contacts]
+    verdict = result.first_verdict.get(near[0].id)
+    assert verdict is not None and verdict.pulse is False, (verdict, near[0])

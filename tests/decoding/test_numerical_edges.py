@@ -224,12 +224,6 @@ def test_a_stop_exactly_on_a_ridge_is_placed_no_further_than_the_next_ridge(name
 
 
 # -- two contacts within one sample -----------------------------------------------------------
-TWO_IN_ONE_SAMPLE_80_HZ = known_defect(
-    "80 Hz, 60 mm/s forward, the contacts at 31 and 31.5 mm 8 ms apart between two samples: "
-    "after the contact at 51 mm it reports the object stopped (slip false, speed 0) for 0.5 s "
-    "while it crosses the 33 mm spacing at 60 mm/s; slip flagged in 47 % of the updates from "
-    "the third contact, speed median error 100 %"
-)
 TIGHT = (19.0, 12.0, 0.5, 8.0, 4.0, 3.0, 33.0)  # alpha0.1, its 5 mm spacing cut to 0.5 mm (EDS min)
 
 
@@ -239,7 +233,7 @@ def tight_slip(fs_hz: int, speed_mm_s: float, reverse: bool) -> synth.SkinRecord
 
 @pytest.mark.parametrize(
     "name, fs_hz, reverse",
-    [*decoders(80, False, **TWO_IN_ONE_SAMPLE_80_HZ), *decoders(100, True)],
+    [*decoders(80, False), *decoders(100, True)],
 )
 def test_two_contacts_within_one_sample_keep_the_speed_finite_and_right(name, fs_hz, reverse):
     """0.5 mm at 60 mm/s is 8 ms: both contacts fall between the same two samples. The

@@ -1,6 +1,8 @@
 """REFERENCE (tests only): the numpy contact detector as it was at 0858d90, before its
-per-block numeric path was compiled (`kernels.detector`), with one later behaviour change
-ported (35f4b94: a chunk longer than a block is fed a block at a time). The compiled
+per-block numeric path was compiled (`kernels.detector`), with later behaviour changes
+ported (35f4b94: a chunk longer than a block is fed a block at a time; a80cd9a: the first
+verdicts on a slip's rising level; issue 22: a block a ridge contact touched tells no
+coloured noise, `_mark_busy`). The compiled
 detector is checked against it in the same process (tests/decoding/test_detector_kernels.py).
 
 Streaming ridge-contact detector: finds the ONSET of every ridge pulse in the FSR signal.
@@ -67,6 +69,8 @@ from grasplink.gateway.decoding.filters import RAIL_SHARE, lattice_median, on_ra
 from tests.decoding.reference.filters import SosFilter
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
+BUSY_MAX_S = 0.06  # ... in the hinge scales under this (s); wider ones count every block
+BUSY_SNR = 10.0  # a pulse this many white-noise units high marks its blocks busy (`_noise`)
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
@@ -309,6 +313,7 @@ class ContactDetector:
         self._raw_n = 0  # ... so far
         self._raw_blocks = 0  # raw blocks completed
         self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
+        self._busy: dict[int, int] = {}  # block -> earliest emit of a contact touching it
         self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
         self._white_by_block: dict[int, tuple[float, int]] = {}  # `_white` of final blocks
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
@@ -387,7 +392,7 @@ class ContactDetector:
         )
         if oldest > self._kept_from:  # a block fell out of the history: forget it
             self._kept_from = oldest
-            caches: list[dict[int, Any]] = [self._censored, self._floor]
+            caches: list[dict[int, Any]] = [self._censored, self._floor, self._busy]
             for cache in caches + [
                 c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
             ]:
@@ -563,15 +568,32 @@ class ContactDetector:
                 return v, 1
         return None
 
+    def _mark_busy(self, index: int, emit: int, height: float) -> None:
+        """A contact at `index` told a pulse at `emit`, `height` N above its base (the
+        running peak by the level sample that told it): when the pulse stands out of the
+        white noise (`BUSY_SNR` units or more), the blocks it
+        touches in the hinge (from half the decision lag before its onset to the lag
+        after it) show the pulse, not the noise (`_noise`). Pulses in heavy noise (10 dB:
+        the pulse probe's domain) mark nothing: there the hinge's median is the noise's."""
+        B = self.block
+        white = self._white(index // B)
+        if white is None or height < BUSY_SNR * max(white[0], NOISE_FLOOR_N):
+            return
+        busy = self._busy
+        for b in range((index - self.lag // 2) // B, (index + self.lag) // B + 1):
+            if busy.get(b, emit) >= emit:
+                busy[b] = emit
+
     def _noise(self, ch: _Channel, block: int) -> float | None:
         """Noise of the hinge for centres of `block` (None: not known yet).
 
         The larger of: the white noise seen by the finest scale (`_white`)
         times this scale's gain, and the median of this scale's own blocks
-        over the last `history_s` (those not on a rail) - coloured noise
-        that the white estimate misses; the long history keeps a slip over
-        dense ridges (which keeps the long scales busy) from hiding its own
-        pulses for a while.
+        over the last `history_s` (those not on a rail, and no ridge contact's:
+        `_mark_busy`) - coloured noise that the white estimate misses. A slip
+        over dense ridges keeps the long scales busy with its own pulses (on
+        uniform4 their median |h| read 10-22 times the noise): counted as noise,
+        they hid the pulses after short spacings (issue 22).
         """
         cached = ch.noise_by_block.get(block)
         if cached is not None:
@@ -582,10 +604,25 @@ class ContactDetector:
         sigma, known = white
         noise = max(sigma, NOISE_FLOOR_N) * _hinge_gain(ch.width)
         if ch is not self.channels[0]:
-            history = range(max(0, block - self.history_blocks), block)
+            # blocks a ridge pulse touched show the pulse, not the noise (`_mark_busy`):
+            # they do not count, as known before the block before this one (a feed spans
+            # at most a block: whatever the chunking). The blocks since the last settled
+            # one (every pulse near it told by then) count unless the pulses went on to it
+            told = (block - 1) * self.block
+            busy = self._busy
+            settled = (told - self.lag - self.lag // 2 - self.step_hold) // self.block
+            going = any(busy.get(b, told) < told for b in (settled - 2, settled - 1))
+            end = min(block, settled) if going else block
+            if ch.width >= BUSY_MAX_S * self.fs_hz:  # (the widest: the slow bends of dips)
+                busy, end = {}, block
+            history = range(max(0, block - self.history_blocks), end)
             known_noise, censored = ch.block_noise, self._censored
             own = sorted(
-                [known_noise[b] for b in history if b in known_noise and not censored.get(b, True)]
+                [
+                    known_noise[b]
+                    for b in history
+                    if b in known_noise and not censored.get(b, True) and busy.get(b, told) >= told
+                ]
             )
             if own:
                 noise = max(noise, own[(len(own) - 1) // 2])
@@ -877,6 +914,11 @@ class ContactDetector:
                 still.append(watch)
             else:
                 checks.append(done)
+                if done.pulse is True and len(watch.history):
+                    told = done.emit_index - self.level_half - watch.index
+                    told = min(told, len(watch.history) - 1)
+                    height = float(watch.history[told]) if told >= 0 else 0.0
+                    self._mark_busy(watch.index, done.emit_index, height)
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
                     watch.top = float(watch.detrended.max()) if len(watch.detrended) else 0.0
                     watch.next_k = max(watch.next_k, done.emit_index - self.level_half + 1)
@@ -1076,10 +1118,16 @@ class ContactDetector:
         `slip_fall` noise units), has the level itself fallen from its top by `slip_fall`
         noise units by the hold? A ridge pulse on that trend: its fall is held up by the
         trend and the FSR's hysteresis (the 30 % drop may never show), while a stop leaves
-        the level flat and a grip change raises it."""
+        the level flat and a grip change raises it. A falling tail under the onset (the
+        pulse before, relaxing on: `_tail_step`'s slope and room) is taken out first: a
+        slip that stops on it, right where the next ridge was due, relaxes with it and
+        is no pulse (issue 22: uniform4's stops, once its 4 mm contacts are found)."""
         if watch.long * self.step_hold < self.slip_fall * watch.noise:
             return False
         level = watch.plain
+        if watch.slope < 0.0 and watch.room > 0.0:
+            k = np.arange(len(level)) + 2 * self.level_half + 1  # samples since `before`
+            level = level + np.minimum(-watch.slope * k, watch.room)
         end = float(_mean(level[-min(len(level), 2 * self.level_half + 1) :]))
         return float(level.max()) - end >= self.slip_fall * watch.noise
 
