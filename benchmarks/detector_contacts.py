@@ -133,8 +133,10 @@ def spacings(json_path: str | None = None) -> dict:
     """Found share by the spacing before each true ridge contact (see the module doc)."""
     rows: dict[str, dict[str, list[int]]] = defaultdict(lambda: defaultdict(lambda: [0, 0]))
     why: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    false: dict[str, int] = defaultdict(int)
     for set_name, rec in spacing_signals():
         told = ct.by_contact(rec.truth, rec.t_s, rec.force_n, rec.fs_hz)
+        false[set_name] += told.false
         for d, band, hit, reason in zip(told.spacing, told.band, told.found, told.why, strict=True):
             for key in ("all", set_name, band):
                 rows[d][key][0] += 1
@@ -161,8 +163,10 @@ def spacings(json_path: str | None = None) -> dict:
         line += [share(cells[b]) for b in bands] + [share(cells[k]) for k in sets]
         line += [str(why[d][r]) for r in REASONS]
         print("| " + " | ".join(line) + " |")
+    told = ", ".join(f"{k} {v}" for k, v in sorted(false.items()))
+    print(f"False contacts (within +-20 ms of no true ridge contact): {told}")
     figures = {d: {k: list(v) for k, v in rows[d].items()} for d in order}
-    result = {"found": figures, "why": {d: dict(why[d]) for d in order}}
+    result = {"found": figures, "why": {d: dict(why[d]) for d in order}, "false": dict(false)}
     if json_path:
         Path(json_path).write_text(json.dumps(result, indent=1))
     return result

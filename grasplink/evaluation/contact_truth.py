@@ -238,6 +238,7 @@ class ByContact:
     band: list[str]  # `speed_band` of its speed
     found: list[bool]
     why: list[str | None]  # AGAIN, UNDER, NO_KINK for a miss (None: found)
+    false: int = 0  # contacts told within MATCH_S of no true ridge contact
 
 
 def by_contact(
@@ -274,4 +275,6 @@ def by_contact(
                 low, _ = _traced(t_s, force_n, fs_hz, **{**kwargs, "threshold": LOW_THRESHOLD})
             near = any(abs(t - c) <= MATCH_S for t, _, _ in low.candidates)
             why.append(UNDER if near else NO_KINK)
-    return ByContact(spacing, band, found, why)
+    truth_s = truth.contact_times_s
+    false = sum(1 for t in events if not np.any(np.abs(truth_s - t) <= MATCH_S))
+    return ByContact(spacing, band, found, why, false)
