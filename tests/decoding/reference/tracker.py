@@ -755,7 +755,17 @@ class NumpyTracker:
         rows = np.arange(len(B))
         adj = adj_t[rows, j]
         running = np.isnan(B.stop)
-        stopped = stop_t[rows, j] | ~running
+        # braked to rest: even braking BRAKE_Z sigma gentler, the track's own motion brought
+        # it below the slowest slip by now
+        a_hi = B.X[:, 2] + self.BRAKE_Z * np.sqrt(np.maximum(B.P[:, 2, 2], 0.0))
+        braking = running & (B.run >= 2) & (a_hi < 0)
+        t_rest = np.full(len(B), np.inf)
+        t_rest[braking] = B.t[braking] + (V_MIN_MM_S - B.X[braking, 1]) / a_hi[braking]
+        braked = ops.mark(t_rest <= g)
+        soon = t_rest[ops.mark(live & ~braked & (t_rest < np.inf))]
+        if len(soon):
+            until = min(until, float(soon.min()))
+        stopped = stop_t[rows, j] | ~running | braked
         limit = limit_t[rows, j]
         upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)]
         if blind is not None:

@@ -39,6 +39,7 @@ NAMES = (
     "erf_scale",
     "bound_share",
     "span_max_rel",
+    "brake_z",
 )
 (
     NEGLIGIBLE,
@@ -61,6 +62,7 @@ NAMES = (
     ERF_SCALE,
     BOUND_SHARE,
     SPAN_MAX_REL,
+    BRAKE_Z,
 ) = range(len(NAMES))
 
 
@@ -334,7 +336,18 @@ def posterior(
                 j += 1
         adj = adj_t[i, j]
         running = np.isnan(stop[i])
-        stopped[i] = stop_t[i, j] or not running
+        # braked to rest: even braking BRAKE_Z sigma gentler than its estimate, the track's
+        # own motion brought it below the slowest slip by now (`_braked`)
+        braked = False
+        if running and run[i] >= 2:
+            a_hi = X[i, 2] + K[BRAKE_Z] * math.sqrt(max(P[i, 2, 2], 0.0))
+            if a_hi < 0:
+                t_rest = t[i] + (K[V_MIN] - X[i, 1]) / a_hi
+                if t_rest <= g:
+                    braked = True
+                elif live[i]:
+                    until = min(until, t_rest)
+        stopped[i] = stop_t[i, j] or not running or braked
         limit[i] = limit_t[i, j]
         if j + 1 < J:
             upcoming = due[i, j + 1] + blind[i] if has_blind else due[i, j + 1]
