@@ -201,7 +201,8 @@ def test_a_jittered_log_decodes_to_the_same_samples_and_slips(tmp_path, headline
     np.testing.assert_array_equal(x, x0)
     estimates, reference = decode_all(t, x), decode_all(t0, x0)
     assert estimates == reference
-    assert sum(e.slip and e.speed_mm_s is not None for e in estimates) > 100
+    # the reflex stops the headline slip after two ridge contacts: ~0.4 s with a speed
+    assert sum(e.slip and e.speed_mm_s is not None for e in estimates) >= 30
 
 
 def test_a_boot_up_in_the_log_starts_the_samples_anew(tmp_path):
@@ -281,4 +282,5 @@ def test_the_gateway_keeps_its_decoder_through_a_stall_and_a_burst(headline):
     assert gateway.decoder is not None and gateway.decoder.stats.gaps == 0
     assert gateway.skin_stream is not None and gateway.skin_stream.stats.resyncs == 0
     assert estimates == reference
-    assert sum(e.slip and e.speed_mm_s is not None for e in estimates) > 100
+    # the reflex stops the headline slip after two ridge contacts: ~0.4 s with a speed
+    assert sum(e.slip and e.speed_mm_s is not None for e in estimates) >= 30
