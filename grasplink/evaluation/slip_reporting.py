@@ -901,6 +901,8 @@ def aggregate(raw: dict, plan: Plan, decoder: str = DEFAULT_DECODER) -> dict:
                     "key": key,
                     "shipped": key == "shipped",
                     "missing_from3_pct": mov["missing_from3_pct"],
+                    "speed_err_p90_pct": mov["speed_err_p90_pct"],
+                    "speed_after_observable_pct": mov["speed_after_observable_pct"],
                     "wrong_direction_pct": mov["wrong_direction_pct"],
                     "first_good_median_intervals": mov["first_good_median_intervals"],
                     "first_good_by_third_pct": mov["first_good_by_third_pct"],
@@ -1239,7 +1241,9 @@ def render_sweeps(figures: dict) -> list[str]:
         "plan's `sweep_variants` of constant, accelerating, stick-slip, 10 dB, held and other",
         "signals on `sweep_layouts`, both directions, one seed; slip_reporting.json), every",
         "point in the same run and worker pool; the shipped point is",
-        "the default decoder (★). Missing and wrong direction pool the moving cases, false slip",
+        "the default decoder (★). Missing, speed p90 (what a looser rule costs in wrong",
+        "speeds), wrong direction and speed after a stop's report was due pool the moving",
+        "cases, false slip",
         "the held ones (flagged ≥ 0.15 s into the rest), µs/sample every case.",
     ]
     for name, rows in figures["sweeps"].items():
@@ -1250,9 +1254,10 @@ def render_sweeps(figures: dict) -> list[str]:
             "",
             f"![{name}](slip_reporting_{name}.png)",
             "",
-            f"| {name} [{sweep.unit}] | missing % from 3rd | wrong dir % | first ≤ 10 %: med "
-            "intervals / by 3rd % | false slip % | stops cleared % | µs/sample |",
-            "|---|---:|---:|---:|---:|---:|---:|",
+            f"| {name} [{sweep.unit}] | missing % from 3rd | speed p90 % | wrong dir % | "
+            "first ≤ 10 %: med intervals / by 3rd % | false slip % | stops cleared % | "
+            "speed after due % | µs/sample |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
         ]
         for r in rows:
             mark = " (shipped)" if r["shipped"] else ""
@@ -1263,9 +1268,10 @@ def render_sweeps(figures: dict) -> list[str]:
             )
             lines.append(
                 f"| {r['value']:g}{mark} | {_fmt(r['missing_from3_pct'])} | "
-                f"{_fmt(r['wrong_direction_pct'])} | "
+                f"{_fmt(r.get('speed_err_p90_pct'))} | {_fmt(r['wrong_direction_pct'])} | "
                 f"{first} / {_fmt(r['first_good_by_third_pct'], 0)} | "
                 f"{_fmt(r['false_slip_pct'])} | {_fmt(r['stops_cleared_pct'], 0)} | "
+                f"{_fmt(r.get('speed_after_observable_pct'))} | "
                 f"{_fmt(r['cpu_us_per_sample'])} |"
             )
     return lines
