@@ -184,6 +184,15 @@ def _all(kind: str) -> tuple[int, ...]:
     return tuple(range(len(VARIANTS[kind])))
 
 
+#: The trade-off constants every plan sweeps (`SWEEPS` says how).
+SWEPT = (
+    "LOG_REPORT_ODDS",
+    "DIP_PRIOR_MM",
+    "STALE_S",
+    "SPEED_AGREE_SHARE",
+    "LOG_STOP_REPORT",
+    "threshold",
+)
 FULL = Plan(
     name="full",
     layouts=tuple(LAYOUTS_MM),
@@ -202,14 +211,7 @@ FULL = Plan(
         "held-grip": (0,),
         "held-noise": (0,),
     },
-    sweeps=(
-        "LOG_REPORT_ODDS",
-        "DIP_PRIOR_MM",
-        "STALE_S",
-        "SPEED_AGREE_SHARE",
-        "LOG_STOP_REPORT",
-        "threshold",
-    ),
+    sweeps=SWEPT,
     sweep_values=None,
     cost_cases=8,
     headline=True,
@@ -232,14 +234,7 @@ QUICK = Plan(
         "snr10": (0,),
         "held-grip": (0,),
     },
-    sweeps=(
-        "LOG_REPORT_ODDS",
-        "DIP_PRIOR_MM",
-        "STALE_S",
-        "SPEED_AGREE_SHARE",
-        "LOG_STOP_REPORT",
-        "threshold",
-    ),
+    sweeps=SWEPT,
     sweep_values=2,
     cost_cases=2,
     headline=True,
