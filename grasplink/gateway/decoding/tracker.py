@@ -348,7 +348,10 @@ class TrackerDecoder(Decoder):
     # (54 mm/s for 20: tests/decoding/test_can_path_slip.py); the range rule keeps them out
     SPEED_AGREE_SHARE = 0.8
     SPEED_NARROW_SHARE = 0.3
-    SPEED_RANGE_MAX = 2.0  # 5 gave a speed on two noise contacts of a held object
+    SPEED_RATIO_SHARE = 0.5  # ... and with three contacts, at least this share
+    # 5 gave a speed on two noise contacts of a held object; 2 (inclusive) one of a missed
+    # ridge's alias (23-47 mm/s: 47 at rest fired a 45 mm/s reflex, loop_slow_wearer)
+    SPEED_RANGE_MAX = 1.5
     BOUND_SHARE = 0.01
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
@@ -862,10 +865,11 @@ class TrackerDecoder(Decoder):
         # the speed is given when the hypotheses agree on it (or enough of them do, and
         # none of the others is far off), or when the likeliest has an interval ratio to go
         # by (three contacts): then with the agreement as confidence
-        narrow = share >= self.SPEED_NARROW_SHARE and high <= self.SPEED_RANGE_MAX * low
+        narrow = share >= self.SPEED_NARROW_SHARE and high < self.SPEED_RANGE_MAX * low
         agreed = share >= self.SPEED_AGREE_SHARE or narrow
-        if fast is None or (not agreed and fast.n < self.DIRECTION_CONTACTS):
-            if fast is None:
+        ratio = fast is not None and fast.n >= self.DIRECTION_CONTACTS
+        if fast is None or not (agreed or (ratio and share >= self.SPEED_RATIO_SHARE)):
+            if fast is None or not (math.isfinite(low) and math.isfinite(high)):
                 return SlipEstimate(g, True, None, held, force, conf)
             return SlipEstimate(g, True, None, held, force, conf, speed_low_mm_s=low,
                                 speed_high_mm_s=high)  # fmt: skip

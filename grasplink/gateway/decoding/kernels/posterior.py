@@ -463,7 +463,7 @@ def _magnitude(
                 close[i] = weight[i]
     mass = pairwise_sum(moving)
     share = pairwise_sum(close) / mass
-    low, high = np.inf, -np.inf
+    low, high = v_ref, v_ref  # the track the speed would come from bounds it too
     for i in range(len(total)):
         if slipping[i] and run[i] >= 2 and weight[i] >= K[BOUND_SHARE] * mass:
             low = min(low, abs(X[i, 1]))
