@@ -357,8 +357,7 @@ class Gateway(NmtMaster):
             self._next_refresh_us,
             self.feedback.next_deadline_us(),
             self.arbiter.next_deadline_us(),
-            self.grip_ramp.next_deadline_us(),
-            self.belt_ramp.next_deadline_us(),
+            *self._ramp_deadlines(),
             self._next_snapshot_us,
         ):
             if c is not None and (best is None or c < best):
@@ -784,13 +783,20 @@ class Gateway(NmtMaster):
                 frames += self._rpdo(hand, (obj.HAND_TARGET_GRIP_MN, 0), grip_mn, refresh)
         return frames
 
+    def _ramp_deadlines(self) -> list[int | None]:
+        """When each command on its way (slew-limited) takes its next step - only while its
+        node takes commands: a ramp towards a node that is lost or held cannot step, and
+        its deadline would stand still at the current time."""
+        out = []
+        for kind, ramp in (("hand", self.grip_ramp), ("belt", self.belt_ramp)):
+            link = self.by_kind.get(kind)
+            if link is not None and self._commandable(link):
+                out.append(ramp.next_deadline_us())
+        return out
+
     def _ramp_deadline(self, t_us: int) -> bool:
         """Whether a command on its way (slew-limited) is due for its next step."""
-        for ramp in (self.grip_ramp, self.belt_ramp):
-            deadline = ramp.next_deadline_us()
-            if deadline is not None and t_us >= deadline:
-                return True
-        return False
+        return any(d is not None and t_us >= d for d in self._ramp_deadlines())
 
     def _commandable(self, link: NodeLink) -> bool:
         """Operational in our eyes and the master's: not lost, not held by a consumer fault."""
