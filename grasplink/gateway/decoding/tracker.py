@@ -41,18 +41,21 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
 * Output: posterior over hypotheses (plus "no slip": every contact is
   clutter). Slip is flagged when slipping tracks with two or more contacts
   (one of which fell back like a pulse, or four or more contacts) hold half
-  the mass. Speed and position come from the best such track, extrapolated
-  with its speed and acceleration. Its direction must be told by the
-  contacts: speed and position are given when the track has three contacts
-  and explains them better than the best track moving the other way by at
-  least `LOG_REPORT_ODDS`; the confidence grows with that margin (and with
-  how much of the posterior agrees), so an early answer is a low-confidence
-  one. On a symmetric skin both ways explain the contacts equally: no speed.
+  the mass. The speed needs no direction (the belt and the reflex act on
+  it): it is given when the slipping tracks agree on it whichever way they
+  go, else the range of speeds they allow (`_report`: SPEED_* constants).
+  The direction (and the position, which needs it) is told when the best
+  track has three contacts and every track moving its way explains them
+  better than those moving the other way by at least `LOG_REPORT_ODDS`, and
+  kept down to `LOG_KEEP_ODDS`; the confidence grows with that margin (and
+  with how much of the posterior agrees), so an early answer is a
+  low-confidence one. On a symmetric skin both ways explain the contacts
+  equally: a speed, never a direction.
 
 Contacts are decided with a delay (longest detector scale), sometimes out of
 time order, and a step is told ~0.1 s after its onset; the tracker keeps
 snapshots of its last few steps and replays them, so results do not depend
-on how the input is chunked. Figures: docs/benchmarks/decoding.md.
+on how the input is chunked. Figures: docs/benchmarks/decoding.md, slip_reporting.md.
 """
 
 from __future__ import annotations
