@@ -345,10 +345,10 @@ class TrackerDecoder(Decoder):
     LOG_KEEP_ODDS = math.log(3.0)  # a direction told is kept down to these odds (flicker)
     # the speed whichever way: given when this share of the slipping posterior agrees on
     # it within AGREE_SPEED, or SPEED_NARROW_SHARE does and every track holding BOUND_SHARE
-    # of it lies within SPEED_RANGE_MAX (or the likeliest track has three contacts); else
-    # the range of the speeds of those tracks. A share of 0.3 alone halves the missing
-    # speed at constant speed (8.9 -> 4.0 %) but gives guesses from ranges like 7-94 mm/s
-    # (54 mm/s for 20: tests/decoding/test_can_path_slip.py); the range rule keeps them out
+    # of it lies within SPEED_RANGE_MAX, or the likeliest track has three contacts and
+    # SPEED_RATIO_SHARE agrees; else the range of the speeds of those tracks. A share of
+    # 0.3 alone halves the missing speed at constant speed (8.9 -> 4.0 %) but gives guesses
+    # from ranges like 7-94 mm/s (54 mm/s for 20: tests/decoding/test_can_path_slip.py)
     SPEED_AGREE_SHARE = 0.8
     SPEED_NARROW_SHARE = 0.3
     SPEED_RATIO_SHARE = 0.5  # ... and with three contacts, at least this share
@@ -835,8 +835,7 @@ class TrackerDecoder(Decoder):
         if stopped:
             self._told_way = 0
             s, _, sigma = self._where(h, g, True, limit)
-            maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
-            conf = agree * maturity / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
+            conf = agree * self._maturity(n) / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
             x = self._on_skin(self._x1(h, s))
             return SlipEstimate(g, False, 0.0, x, force, min(1.0, max(0.0, conf)))
         # the direction is told once the chosen track has an interval ratio (three
@@ -848,9 +847,8 @@ class TrackerDecoder(Decoder):
         self._told_way = h.dirn if told else 0
         if told:
             s, speed, sigma = self._where(h, g, False, limit)
-            maturity = 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
             p_way = 1.0 / (1.0 + math.exp(-odds))  # P(this way)
-            conf = agree * maturity * p_way / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
+            conf = agree * self._maturity(n) * p_way / (1.0 + (sigma / self.CONF_POS_MM) ** 2)
             # told at the last contact: since then the slip may have turned
             conf *= math.exp(-max(0.0, g - h.t) * self.TURN_PER_S)
             x = self._x1(h, s)  # slipping past an end: extrapolated with the speed (coast)
@@ -872,25 +870,31 @@ class TrackerDecoder(Decoder):
         agreed = share >= self.SPEED_AGREE_SHARE or narrow
         ratio = fast is not None and fast.n >= self.DIRECTION_CONTACTS
         if fast is None or not (agreed or (ratio and share >= self.SPEED_RATIO_SHARE)):
-            if fast is None or not (math.isfinite(low) and math.isfinite(high)):
-                return SlipEstimate(g, True, None, held, force, conf)
-            return SlipEstimate(g, True, None, held, force, conf, speed_low_mm_s=low,
-                                speed_high_mm_s=high)  # fmt: skip
+            bound = self._speed_range(magnitude)
+            return SlipEstimate(g, True, None, held, force, conf, None, None, *bound)
         _, speed, _ = self._where(fast, g, False, self.count)
-        maturity = 1.0 - math.exp(-(fast.n - 1) / self.CONF_CONTACTS)
-        conf = share * maturity * math.exp(-max(0.0, g - fast.t) * self.TURN_PER_S)
+        conf = share * self._maturity(fast.n) * math.exp(-max(0.0, g - fast.t) * self.TURN_PER_S)
         bound = self._speed_range(magnitude, speed)
         return SlipEstimate(
             g, True, max(0.0, speed), held, force, min(1.0, max(0.0, conf)), None, None, *bound
         )
 
+    def _maturity(self, n: int) -> float:
+        """How far n contacts make an estimate (the confidence grows as 1 - exp(...))."""
+        return 1.0 - math.exp(-(n - 1) / self.CONF_CONTACTS)
+
     @staticmethod
-    def _speed_range(magnitude: tuple, speed: float) -> tuple[float | None, float | None]:
-        """The range of speeds the slipping tracks allow, widened to hold the reported
-        speed (extrapolated from the last contact, it may lie outside the tracks' own)."""
+    def _speed_range(
+        magnitude: tuple, speed: float | None = None
+    ) -> tuple[float | None, float | None]:
+        """The range of speeds the slipping tracks allow (None, None without one), widened
+        to hold a reported speed (extrapolated from the last contact, it may lie outside
+        the tracks' own)."""
         _, _, low, high = magnitude
         if not (math.isfinite(low) and math.isfinite(high)):
             return None, None
+        if speed is None:
+            return low, high
         return min(low, max(0.0, speed)), max(high, max(0.0, speed))
 
     def _x1(self, h: _One, s: float) -> float:

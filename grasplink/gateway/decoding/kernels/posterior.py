@@ -337,7 +337,7 @@ def posterior(
         adj = adj_t[i, j]
         running = np.isnan(stop[i])
         # braked to rest: even braking BRAKE_Z sigma gentler than its estimate, the track's
-        # own motion brought it below the slowest slip by now (`_braked`)
+        # own motion brought it below the slowest slip by now (`TrackerDecoder.BRAKE_Z`)
         braked = False
         if running and run[i] >= 2:
             a_hi = X[i, 2] + K[BRAKE_Z] * math.sqrt(max(P[i, 2, 2], 0.0))
@@ -388,10 +388,9 @@ def posterior(
         return until, -1, False, 0, p_slip, 0.0, -np.inf, -1, 0.0, np.nan, np.nan
     lim = limit[chosen]
     fast, share, low, high = -1, 0.0, np.nan, np.nan
-    if not is_stopped:
-        fast, share, low, high = _magnitude(slipping, run, total, weight, X, K)
     odds = np.inf
     if not is_stopped:
+        fast, share, low, high = _magnitude(slipping, run, total, weight, X, K)
         # the direction: the posterior mass moving each way - slipping tracks, and tracks
         # just started at a contact (a slip starting or reversing)
         moving = (slipping | (waiting & live)) & np.isfinite(total)
