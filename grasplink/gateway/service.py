@@ -357,7 +357,7 @@ class Gateway(NmtMaster):
             self._next_refresh_us,
             self.feedback.next_deadline_us(),
             self.arbiter.next_deadline_us(),
-            *self._ramp_deadlines(),
+            self._next_ramp_us(),
             self._next_snapshot_us,
         ):
             if c is not None and (best is None or c < best):
@@ -783,20 +783,25 @@ class Gateway(NmtMaster):
                 frames += self._rpdo(hand, (obj.HAND_TARGET_GRIP_MN, 0), grip_mn, refresh)
         return frames
 
-    def _ramp_deadlines(self) -> list[int | None]:
-        """When each command on its way (slew-limited) takes its next step - only while its
-        node takes commands: a ramp towards a node that is lost or held cannot step, and
-        its deadline would stand still at the current time."""
-        out = []
+    def _next_ramp_us(self) -> int | None:
+        """When the next command on its way (slew-limited) takes its next step - only while
+        its node takes commands: a ramp towards a node that is lost or held cannot step,
+        and its deadline would stand still at the current time. (Asked after every frame:
+        the node is looked at only for a ramp under way, no list is built.)"""
+        best = None
         for kind, ramp in (("hand", self.grip_ramp), ("belt", self.belt_ramp)):
+            due = ramp.next_deadline_us()
+            if due is None or (best is not None and due >= best):
+                continue
             link = self.by_kind.get(kind)
             if link is not None and self._commandable(link):
-                out.append(ramp.next_deadline_us())
-        return out
+                best = due
+        return best
 
     def _ramp_deadline(self, t_us: int) -> bool:
         """Whether a command on its way (slew-limited) is due for its next step."""
-        return any(d is not None and t_us >= d for d in self._ramp_deadlines())
+        due = self._next_ramp_us()
+        return due is not None and t_us >= due
 
     def _commandable(self, link: NodeLink) -> bool:
         """Operational in our eyes and the master's: not lost, not held by a consumer fault."""
