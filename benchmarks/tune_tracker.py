@@ -1,7 +1,7 @@
 """Try tracker settings on the slip-reporting sets: one line of issue 22's figures each.
 
-`slip_reporting`'s full benchmark runs every figure on every set (9 minutes); this runs
-its quick set (or a chosen share of the full one) with the shipped tracker and with each
+`slip_reporting`'s full benchmark runs every figure on every set (~4 min); this runs
+its quick set (or the full one, one seed) with the shipped tracker and with each
 `--try NAME=VALUE[,NAME=VALUE]` setting (`TrackerDecoder(tuning=...)`) in the same
 worker pool, so a change's cost and gain are read side by side in one run.
 
@@ -15,9 +15,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 
-from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
-from grasplink.gateway.decoding.tracker import TrackerDecoder
 
 COLUMNS = (
     ("missing_from3_pct", "miss%"),
@@ -32,12 +30,9 @@ COLUMNS = (
 )
 
 
-def job(args: tuple[sr.Case, dict]) -> tuple[str, sr.CaseScore]:
-    case, tuning = args
-    rec = sr.make_case(case)
-    decoder = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
-    estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
-    return case.kind, sr.score(estimates, rec.truth)
+def job(case: sr.Case, configs: dict[str, dict]) -> dict[str, sr.CaseScore]:
+    """One case, made once, decoded under every setting (`slip_reporting.case_job`)."""
+    return sr.case_job(case, "tracker", configs, baseline=False)["scores"]
 
 
 def parse(text: str) -> dict:
@@ -57,16 +52,17 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     plan = replace(sr.FULL if args.full else sr.QUICK, seeds=1)
     todo = sr.cases(plan)
-    configs = [{}, *args.tries]
+    tunings = [{}, *args.tries]
+    configs = {str(k): {"tuning": t} for k, t in enumerate(tunings)}
     with ProcessPoolExecutor(2) as pool:
-        results = list(pool.map(job, [(c, t) for t in configs for c in todo], chunksize=4))
+        results = list(pool.map(job, todo, [configs] * len(todo), chunksize=4))
     n = len(todo)
     print(f"{n} cases ({plan.name} plan, one seed)")
     header = "setting".ljust(28) + " ".join(f"{label:>9s}" for _, label in COLUMNS)
     for kinds, title in ((sr.MOVING, "moving"), (("constant",), "constant"), (sr.HELD, "held")):
         print(f"-- {title}\n{header}")
-        for k, tuning in enumerate(configs):
-            scores = [s for kind, s in results[k * n : (k + 1) * n] if kind in kinds]
+        for k, tuning in enumerate(tunings):
+            scores = [r[str(k)] for r in results if r[str(k)].kind in kinds]
             fig = sr.summarise(scores)
             name = ",".join(f"{a}={b}" for a, b in tuning.items()) or "shipped"
             cells = " ".join(
