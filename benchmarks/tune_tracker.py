@@ -19,6 +19,7 @@ from grasplink.evaluation import slip_reporting as sr
 
 COLUMNS = (
     ("missing_from3_pct", "miss%"),
+    ("dropped_from2_pct", "drop%"),
     ("speed_err_median_pct", "med%"),
     ("speed_err_p90_pct", "p90%"),
     ("first_good_by_third_pct", "by3rd%"),
@@ -59,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     n = len(todo)
     print(f"{n} cases ({plan.name} plan, one seed)")
     header = "setting".ljust(28) + " ".join(f"{label:>9s}" for _, label in COLUMNS)
-    for kinds, title in ((sr.MOVING, "moving"), (("constant",), "constant"), (sr.HELD, "held")):
+    groups = ((sr.MOVING, "moving"), (("constant",), "constant"), (("loop",), "loop"))
+    for kinds, title in (*groups, (sr.HELD, "held")):
         print(f"-- {title}\n{header}")
         for k, tuning in enumerate(tunings):
             scores = [r[str(k)] for r in results if r[str(k)].kind in kinds]

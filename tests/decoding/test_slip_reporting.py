@@ -100,11 +100,43 @@ def test_a_told_direction_the_wrong_way_counts_and_the_right_way_does_not():
     assert right["wrong_direction_pct"] == 0.0
 
 
-def test_the_speed_error_is_of_magnitudes_and_zero_counts_in_full():
+def test_the_speed_error_is_of_magnitudes():
     half = sr.score(stream(lambda t: (True, 5.0, -1)), truth())  # -1: the wrong way
     assert np.allclose(half.speed_err, 0.5)
-    stopped = sr.score(stream(lambda t: (True, 0.0, None)), truth())
-    assert np.allclose(stopped.speed_err, 1.0) and stopped.missing_from3 == 0
+
+
+def test_a_stop_reported_while_the_object_slides_is_missing_speed_and_a_dropped_flag():
+    """The belt and the reflex get nothing from "stopped, 0 mm/s" while the object moves:
+    it counts as missing (not as a speed with a 100 % error), and the flag as dropped."""
+    stopped = sr.score(stream(lambda t: (False, 0.0, None)), truth())
+    assert stopped.missing_from3 == stopped.moving_from3 == 20
+    assert stopped.dropped_from2 == stopped.moving_from2 == 120
+    assert len(stopped.speed_err) == 0
+    flagged = sr.score(told(), truth())
+    assert flagged.dropped_from2 == 0
+    blinking = sr.summarise([sr.score(stream(lambda t: (t >= 1.0 and t % 0.5 < 0.25, 10.0,
+                                                        None)), truth())])  # fmt: skip
+    assert 40.0 <= blinking["dropped_from2_pct"] <= 60.0
+
+
+def test_the_loop_kind_slides_onto_the_skin_and_stops_or_slides_off():
+    """The loop set: the edge starts 8 mm before the skin (either end), ridges are met at
+    the case's speed, and each case ends at rest: on the skin (a stop) or past its far end
+    (slid off); seeds draw both."""
+    skin_mm = sum(sr.LAYOUTS_MM["alpha0.1"])
+    ends = []
+    for seed in range(1, 9):
+        reverse = seed % 2 == 0
+        case = sr.Case("loop", "30 mm/s", (30,), "alpha0.1", reverse, seed)
+        rec = case.make().truth
+        moving = np.abs(rec.speed_mm_s) > 1.0
+        assert np.abs(rec.speed_mm_s[moving]).max() == pytest.approx(30.0, abs=0.5)
+        assert rec.t_s[moving][0] == pytest.approx(sr.LOOP_ONSET_S, abs=0.01)
+        assert len(rec.contact_times_s) >= 3 and not moving[-1]
+        travel = rec.position_mm[-1] if not reverse else skin_mm - rec.position_mm[-1]
+        assert 0.0 < travel < skin_mm or travel > skin_mm + sr.LOOP_OBJECT_MM / 2, travel
+        ends.append(travel < skin_mm)
+    assert any(ends) and not all(ends)
 
 
 def test_first_estimate_within_10_percent_in_intervals_after_the_third_contact():
