@@ -34,6 +34,7 @@ from grasplink.errors import ConfigError
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import scenes as sc
 from grasplink.evaluation import scoring as ev
+from grasplink.evaluation import slip_reporting as sr
 from grasplink.evaluation.decoders import make_decoder
 from grasplink.gateway.decoding.registry import DECODERS, DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
@@ -254,8 +255,53 @@ def run(
     (out / "decoding.json").write_text(json.dumps(results, indent=2, sort_keys=True) + "\n")
     plot_pareto(results, out / "decoding_pareto.png")
     ns.plot(results["nonstationary"], DEFAULT_DECODER, out / ns.PLOT_NAME)
-    (out / "decoding.md").write_text(render(results))
+    write_page(results, out)
     return results
+
+
+def write_page(results: dict, out: Path) -> None:
+    """decoding.md from `results`, with the default decoder's trade-off curves of the
+    slip-reporting run in `out` (slip_reporting.json and its plots), if there is one."""
+    (out / "decoding.md").write_text(render(results, tradeoffs(out)))
+
+
+def render_from_files(out: Path) -> Path:
+    """Rewrite decoding.md from the decoding.json (and slip_reporting.json) `out` holds:
+    no decoding; for a page change or a new slip-reporting run."""
+    try:
+        results = json.loads((out / "decoding.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{out / 'decoding.json'}: cannot re-render without it ({exc})") from exc
+    try:
+        write_page(results, out)
+    except (KeyError, TypeError) as exc:
+        raise ConfigError(
+            f"{out / 'decoding.json'} is from an older benchmark (no {exc} in it): run it again"
+        ) from exc
+    return out / "decoding.md"
+
+
+def tradeoffs(out: Path) -> list[str]:
+    """The trade-off section of the slip-reporting run whose files `out` holds (issue 22:
+    the decisions that trade one figure for another, one curve each), or nothing."""
+    try:
+        saved = json.loads((out / sr.RAW).read_text())
+        figures, meta = saved["figures"], saved["meta"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    lines = sr.render_sweeps(figures)
+    if not lines:
+        return []
+    commit = meta.get("git", {}).get("commit", "?")
+    lines[1:3] = [
+        "## Trade-off curves of the default decoder (issue 22)",
+        "",
+        f"From the slip-reporting run of {meta.get('date', '?')} at commit {commit} "
+        f"([slip_reporting.md](slip_reporting.md), its figures and definitions), not from "
+        f"this page's run.",
+        "",
+    ]
+    return lines
 
 
 def run_benchmark(
@@ -515,7 +561,7 @@ def _fmt(value, digits: int = 1) -> str:
     return str(value)
 
 
-def render(results: dict) -> str:
+def render(results: dict, tradeoff_lines: Sequence[str] = ()) -> str:
     decoders = results["decoders"]
     baseline = next(
         (
@@ -622,6 +668,7 @@ def render(results: dict) -> str:
         lines += ns.render(
             moving, DEFAULT_DECODER, moving.get("constant_before"), default_target_figures(results)
         )
+    lines += tradeoff_lines
     return "\n".join(lines)
 
 

@@ -43,3 +43,35 @@ def test_scoring_counts_missing_estimates_and_the_physical_limit():
     assert score.physical_limit_s == contacts[2] - onset
     assert score.scored > 0 and 0 <= score.missing <= score.scored
     assert len(score.speed_rel_err) == score.scored - score.missing
+
+
+def test_the_decoding_page_shows_the_slip_reporting_trade_off_curves(tmp_path: Path):
+    """Issue 22 asks for the trade-off curves in decoding.md: the page takes them from the
+    slip-reporting run in the same folder (its json and plots), says which run, and shows
+    nothing when there is none."""
+    from grasplink.evaluation import decoding_bench as db
+    from grasplink.evaluation import slip_reporting as sr
+
+    assert db.tradeoffs(tmp_path) == []
+    row = {
+        "missing_from3_pct": 4.0, "dropped_from2_pct": 0.5, "speed_err_p90_pct": 9.0,
+        "wrong_direction_pct": 3.0, "first_good_median_intervals": 0.1,
+        "first_good_by_third_pct": 80.0, "false_slip_pct": 0.0, "stops_cleared_pct": 95.0,
+        "speed_after_observable_pct": 0.0, "cpu_us_per_sample": 40.0,
+    }  # fmt: skip
+    sweeps = {
+        "LOG_REPORT_ODDS": [
+            {**row, "value": 3.0, "key": "x", "shipped": False},
+            {**row, "value": 9.0, "key": "shipped", "shipped": True},
+        ]
+    }
+    saved = {
+        "meta": {"date": "2026-11-28 10:00 UTC", "git": {"commit": "abc1234"}},
+        "figures": {"sweeps": sweeps, "sweep_cases": 12},
+    }
+    (tmp_path / sr.RAW).write_text(json.dumps(saved))
+    page = "\n".join(db.tradeoffs(tmp_path))
+    assert "## Trade-off curves of the default decoder (issue 22)" in page
+    assert "abc1234" in page and "2026-11-28 10:00 UTC" in page
+    assert "![LOG_REPORT_ODDS](slip_reporting_LOG_REPORT_ODDS.png)" in page
+    assert "| 9 (shipped) | 4.0 | 0.5 |" in page
