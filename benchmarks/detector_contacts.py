@@ -22,8 +22,18 @@ headline loop's rising level, detection at 10 dB SNR, and the detector's cost.
 5. With `--decoder`: the default decoder's speed missing (from each run's 3rd contact,
    `slip_reporting.score`) on the snr10 signals, with and without the pulse probe.
 
+6. The ceiling at 10 dB SNR (`--snr-ceiling`, alone): on slip_reporting's snr10 cases
+   (the full plan's: every layout, both directions, 3 seeds) each true ridge contact's own
+   rise (the simulator's pulse rebuilt, `contact_truth.pulse_train`: from the previous
+   pulse's tail to its alpha) in white-noise units, and its matched-filter SNR with the
+   pulse's shape and time known and a linear (or quadratic) background unknown
+   (`contact_truth.ideal_snr`) - detectable at `DETECTABLE_SNR` or more - by layout and by
+   the spacing before, beside what the detector finds now; and of the slipping updates
+   from each run's 3rd contact, the share with 2 detectable contacts before them in the
+   run (an upper bound for "speed given") and among the run's last 3 contacts.
+
 Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr] [--decoder]
-[--spacings [--only-spacings] [--json FILE]]`.
+[--spacings [--only-spacings] [--json FILE]] [--snr-ceiling]`.
 """
 
 from __future__ import annotations
@@ -198,6 +208,94 @@ def decoder_snr10() -> None:
         print(f"  {key:10s} {label:12s} {missing:5d} of {moving:5d} ({missing / moving:5.1%})")
 
 
+def ceiling_cases() -> list:
+    """slip_reporting's snr10 cases of the full plan (the issue's target is judged on)."""
+    return [c for c in sr.cases(sr.FULL) if c.kind == "snr10"]
+
+
+def snr_ceiling() -> None:
+    """The detection ceiling at 10 dB SNR (see the module doc, 6)."""
+    rows: dict[str, list[list[float]]] = defaultdict(list)
+    updates: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
+    for case in ceiling_cases():
+        rec = case.make()
+        truth = rec.truth
+        white = ns.pulse_height_n(truth.layout_mm) / 10 ** (ns.SNR_DB / 20)
+        train = ct.pulse_train(truth, case.seed)
+        snr = ct.ideal_snr(train, truth.t_s, white)
+        snr2 = ct.ideal_snr(train, truth.t_s, white, background=2)
+        found = ct.by_contact(truth, rec.t_s, rec.force_n, rec.fs_hz).found
+        spacing = [ct.spacing_label(d) for d in ct.spacings_before_mm(truth)]
+        for i in range(len(train.times_s)):
+            cell = [train.step_n[i] / white, snr[i], snr2[i], float(found[i])]
+            for key in (case.layout, f"spacing {spacing[i]}", "all"):
+                rows[key].append(cell)
+        # slipping updates (one per 3-sample packet) from each run's 3rd contact
+        t_upd = truth.t_s[sr.CHUNK - 1 :: sr.CHUNK]
+        moving = np.abs(np.interp(t_upd, truth.t_s, truth.speed_mm_s)) >= sr.V_MOVING_MM_S
+        ok = snr >= ct.DETECTABLE_SNR
+        for start, end, _ in ns.motion(truth).runs:
+            mine = np.flatnonzero((train.times_s >= start) & (train.times_s < end))
+            if len(mine) < 3:
+                continue
+            for t in t_upd[moving & (t_upd >= train.times_s[mine[2]]) & (t_upd < end)]:
+                before = mine[train.times_s[mine] <= t]
+                any2 = int(ok[before].sum()) >= 2
+                last2 = int(ok[before[-3:]].sum()) >= 2
+                now = int(np.asarray(found)[before].sum()) >= 2
+                for key in (case.layout, "all"):
+                    updates[key][0] += 1
+                    updates[key][1] += any2
+                    updates[key][2] += last2
+                    updates[key][3] += now
+    print(
+        f"10 dB SNR ceiling, slip_reporting's snr10 cases ({len(ceiling_cases())}): "
+        f"detectable = matched-filter SNR >= {ct.DETECTABLE_SNR:g}"
+    )
+    head = [
+        "set",
+        "contacts",
+        "rise/sigma median",
+        "SNR median",
+        "SNR >= 4",
+        "SNR >= 5",
+        "SNR >= 5 (quadratic bg)",
+        "found now",
+    ]
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    order = sorted(rows, key=lambda k: (k == "all", k.startswith("spacing"), _spacing_key(k)))
+    for key in order:
+        a = np.array(rows[key])
+        line = [
+            key,
+            str(len(a)),
+            f"{np.median(a[:, 0]):.1f}",
+            f"{np.median(a[:, 1]):.1f}",
+            f"{np.mean(a[:, 1] >= 4):.0%}",
+            f"{np.mean(a[:, 1] >= 5):.0%}",
+            f"{np.mean(a[:, 2] >= 5):.0%}",
+            f"{np.mean(a[:, 3]):.0%}",
+        ]
+        print("| " + " | ".join(line) + " |")
+    print("Slipping updates from each run's 3rd contact with 2 contacts detectable before them:")
+    print("| set | updates | in the run | among its last 3 | 2 found now (in the run) |")
+    print("|---|---|---|---|---|")
+    for key in sorted(updates, key=lambda k: k == "all"):
+        n, in_run, in_last3, found_now = updates[key]
+        print(f"| {key} | {n} | {in_run / n:.0%} | {in_last3 / n:.0%} | {found_now / n:.0%} |")
+
+
+def _spacing_key(key: str) -> tuple[int, float, str]:
+    label = key.removeprefix("spacing ")
+    if label == ct.FIRST:
+        return (0, 0.0, key)
+    try:
+        return (1, float(label.rstrip("+")), key)
+    except ValueError:
+        return (2, 0.0, key)
+
+
 def cost() -> None:
     """The detector with and without the pulse probe, in one run: a clean slip and rest (the
     probe's gate stays shut) and a 10 dB SNR slip (it opens)."""
@@ -232,7 +330,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--decoder", action="store_true", help="and the decoder's speed missing at 10 dB"
     )
+    parser.add_argument(
+        "--snr-ceiling", action="store_true", help="only the detection ceiling at 10 dB SNR"
+    )
     args = parser.parse_args(argv)
+    if args.snr_ceiling:
+        snr_ceiling()
+        return 0
     if args.spacings or args.only_spacings:
         spacings(args.json)
         if args.only_spacings:

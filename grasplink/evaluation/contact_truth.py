@@ -278,3 +278,111 @@ def by_contact(
     truth_s = truth.contact_times_s
     false = sum(1 for t in events if not np.any(np.abs(truth_s - t) <= MATCH_S))
     return ByContact(spacing, band, found, why, false)
+
+
+# -- the detection ceiling (issue 22 item 3: is 10 dB SNR a detection or a physics limit?) ---
+CEILING_WINDOW_RISES = (1.0, 2.0, 3.0, 5.0)  # `ideal_snr`: spans after the onset tried
+DETECTABLE_SNR = 5.0  # a scanning detector's threshold for few false contacts (noise units)
+
+
+@dataclass
+class PulseTrain:
+    """The simulator's own ridge pulses of a signal, rebuilt without the FSR level or noise:
+    per true ridge contact its height `alpha_n`, the level of the previous pulse it starts
+    on (`start_n`), its rise (`rise_s`), and the pulse train itself (`pulses_n`, per sample).
+    """
+
+    times_s: np.ndarray
+    alpha_n: np.ndarray
+    start_n: np.ndarray
+    rise_s: np.ndarray
+    pulses_n: np.ndarray
+
+    @property
+    def step_n(self) -> np.ndarray:
+        """Each pulse's own rise: from the previous pulse's tail to its alpha (N)."""
+        return self.alpha_n - self.start_n
+
+
+def pulse_train(truth: SkinRecording, seed: int, tips: float = 0.0) -> PulseTrain:
+    """Rebuild `truth`'s ridge pulses: skin.ridge_contacts draws from its own stream of the
+    signal's `seed` (`Context.rng`), so run alone on the truth's edge position and speed it
+    makes the same contacts with the same heights (checked against `contact_times_s`)."""
+    ctx = harness.context(seed=seed, rate_hz=truth.fs_hz, layout_mm=tuple(truth.layout_mm))
+    contacts = harness.make(skin.RidgeContacts, ctx, tip_probability=tips)
+    times_us = harness.sample_times_us(truth.fs_hz, len(truth.t_s) / truth.fs_hz)
+    out = harness.run(
+        [contacts],
+        times_us,
+        {
+            "skin.force_n": np.zeros(len(times_us)),
+            "object.position_mm": truth.position_mm,
+            "object.speed_mm_s": truth.speed_mm_s,
+        },
+        chunk=4096,
+    )
+    ridge = [c for c in contacts.contacts if not c.tip]
+    every = list(contacts.contacts)
+    times = np.array([c.time_s for c in ridge])
+    if len(times) != len(truth.contact_times_s) or not np.allclose(times, truth.contact_times_s):
+        raise ValueError(
+            f"pulse_train: seed {seed} does not rebuild the signal's ridge contacts "
+            f"({len(times)} vs {len(truth.contact_times_s)})"
+        )
+    level, starts = 0.0, []  # the level each segment starts from: the previous one's
+    for j, c in enumerate(every):
+        if j:
+            p = every[j - 1]
+            level = float(skin.pulse(c.time_s - p.time_s, p.alpha_n, p.rise_s, level))
+        starts.append(level)
+    keep = [j for j, c in enumerate(every) if not c.tip]
+    return PulseTrain(
+        times,
+        np.array([every[j].alpha_n for j in keep]),
+        np.array([starts[j] for j in keep]),
+        np.array([every[j].rise_s for j in keep]),
+        out["skin.force_n"],
+    )
+
+
+def ideal_snr(
+    train: PulseTrain, t_s: np.ndarray, white_n: float, background: int = 1
+) -> np.ndarray:
+    """Per true contact: the matched-filter (GLRT) SNR of its pulse against white noise of
+    `white_n` with an unknown polynomial background of degree `background` (drift, the
+    object covering the sensor; 2: a previous tail's bend unknown too) - the best a
+    detector that knows the pulse's shape and time could do. The signal is what the pulse
+    adds to the previous segment continued, over +-span around the onset for each span of
+    CEILING_WINDOW_RISES rises (not past the next contact), background projected out;
+    the best span's ||d|| / white_n."""
+    out = np.zeros(len(train.times_s))
+    for i, t0 in enumerate(train.times_s):
+        rise = float(train.rise_s[i])
+        gap = float(train.times_s[i + 1] - t0) if i + 1 < len(train.times_s) else math.inf
+        previous = None if i == 0 else i - 1
+        best = 0.0
+        for m in CEILING_WINDOW_RISES:
+            span = min(m * rise, gap)
+            k = np.flatnonzero((t_s >= t0 - span) & (t_s < t0 + span))
+            if len(k) < background + 3:
+                continue
+            tau = t_s[k] - t0
+            after = tau >= 0
+            d = np.zeros(len(k))
+            d[after] = skin.pulse(
+                tau[after], train.alpha_n[i], rise, train.start_n[i]
+            ) - _continued(train, previous, t_s[k][after])
+            basis = np.vander(tau / max(span, 1e-9), background + 1)
+            coef, *_ = np.linalg.lstsq(basis, d, rcond=None)
+            best = max(best, float(np.linalg.norm(d - basis @ coef)) / white_n)
+        out[i] = best
+    return out
+
+
+def _continued(train: PulseTrain, i: int | None, t: np.ndarray) -> np.ndarray:
+    """Ridge contact i's segment continued past the next contact (0 before any)."""
+    if i is None:
+        return np.zeros(len(t))
+    return np.asarray(
+        skin.pulse(t - train.times_s[i], train.alpha_n[i], train.rise_s[i], train.start_n[i])
+    )
