@@ -406,6 +406,7 @@ class CaseScore:
     moving_from2: int = 0  # slipping updates from the 2nd contact of their run
     missing_from2: int = 0
     dropped_from2: int = 0  # ... with the slip flag down (a stop reported while it moves)
+    beyond_last: int = 0  # moving updates with the edge past the last ridge (not scored)
     speed_err: np.ndarray = field(default_factory=lambda: np.zeros(0))  # from3, with a speed
     first_good: list[float] = field(default_factory=list)  # per run: intervals after c3
     first_good_s: list[float] = field(default_factory=list)  # the same in seconds
@@ -458,7 +459,9 @@ def score(estimates: Sequence[SlipEstimate], truth: SkinRecording) -> CaseScore:
     - *runs*: motion of one sign between standstills (`nonstationary.motion`); each
       run's ridge contacts are the truth's (`contact_times_s`) inside it.
     - *speed missing* (from 3rd / from 2nd): of the updates while the truth moves
-      (>= 1 mm/s) from its run's 3rd (2nd) ridge contact on, the share with no
+      (>= 1 mm/s) from its run's 3rd (2nd) ridge contact on, until the edge passes the
+      last ridge ahead (from there no contact can come: unobservable, as a stop there
+      is not judged; counted apart as `beyond_last`), the share with no
       speed above 0: none, or a stop reported while the object moves (the belt and
       the reflex get nothing either way). A magnitude without a direction is a speed.
     - *slip dropped* (from 2nd): of those updates from the 2nd contact, the share with
@@ -499,9 +502,13 @@ def score(estimates: Sequence[SlipEstimate], truth: SkinRecording) -> CaseScore:
     good = has_speed & (
         np.abs(np.nan_to_num(speed) - np.abs(v_true)) <= GOOD_SPEED * np.abs(v_true)
     )
-    for start, end, _sign in m.runs:
+    edge = np.interp(t_upd, truth.t_s, truth.position_mm)
+    skin = ridges_mm(truth.layout_mm)
+    beyond = np.zeros(len(t_upd), bool)  # past the last ridge ahead: no contact can come
+    for start, end, sign in m.runs:
         mine = contacts[(contacts >= start) & (contacts < end)]
         inside = (t_upd >= start) & (t_upd < end)
+        beyond |= inside & ((edge >= skin[-1]) if sign > 0 else (edge <= skin[0]))
         if len(mine) >= 2:
             from2 |= inside & (t_upd >= mine[1])
         if len(mine) >= 3:
@@ -511,8 +518,9 @@ def score(estimates: Sequence[SlipEstimate], truth: SkinRecording) -> CaseScore:
             late = float(t_upd[hit[0]] - mine[2]) if len(hit) else math.inf
             out.first_good_s.append(late)
             out.first_good.append(late / interval)
-    from3 &= moving
-    from2 &= moving
+    from3 &= moving & ~beyond
+    from2 &= moving & ~beyond
+    out.beyond_last = int((moving & beyond).sum())
     out.moving_from3 = int(from3.sum())
     out.missing_from3 = int((from3 & ~moving_speed).sum())
     out.moving_from2 = int(from2.sum())
@@ -887,6 +895,7 @@ def summarise(scores: Sequence[CaseScore], decoder: str = DEFAULT_DECODER) -> di
         "missing_from2_pct": _pct(sum(c.missing_from2 for c in s), sum(c.moving_from2 for c in s)),
         "dropped_from2_pct": _pct(sum(c.dropped_from2 for c in s), sum(c.moving_from2 for c in s)),
         "slipping_updates_from3": sum(c.moving_from3 for c in s),
+        "beyond_last_updates": sum(c.beyond_last for c in s),
         "speed_err_median_pct": _q(errors, 50, 100.0),
         "speed_err_p90_pct": _q(errors, 90, 100.0),
         "first_good_median_intervals": _q(first, 50),
@@ -1362,7 +1371,9 @@ DEFINITIONS = [
     "direction counts as a speed.",
     "",
     "- **speed missing %** (from 3rd / from 2nd): of the updates while the truth moves, from",
-    "  their run's 3rd (2nd) ridge contact on, the share with no speed above 0 (none, or a",
+    "  their run's 3rd (2nd) ridge contact on until the edge passes the last ridge ahead (no",
+    "  contact can come from there: unobservable, as a stop there is not judged), the share",
+    "  with no speed above 0 (none, or a",
     "  stop reported while the object moves: the belt and the reflex get nothing either way).",
     "- **slip dropped %**: of those updates from the 2nd contact, the share with the slip flag",
     "  down: the belt goes quiet while the object slides (the loop's wearer loses the cue).",

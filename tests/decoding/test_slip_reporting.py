@@ -254,3 +254,16 @@ def test_the_benchmark_runs_end_to_end_on_a_tiny_plan(tmp_path: Path):
     assert [r["value"] for r in rows] == [3.0, 4.5, 7.0] and rows[1]["shipped"]
     assert figures["kinds"]["stop"]["stops_judged"] == 2
     assert figures["headline"]["contacts_s"]  # the loop's slip met ridges
+
+
+def test_motion_past_the_last_ridge_is_not_scored():
+    """Past the last ridge ahead no contact can come: a decoder cannot tell that the object
+    still slides, so those updates count neither as missing nor as dropped (as a stop
+    there is not judged), and are counted apart."""
+    rec = truth(stop_s=4.8)  # at 10 mm/s the edge passes the last ridge (40 mm) at 5.0 s ...
+    rec.position_mm[:] = rec.position_mm + 5.0  # ... moved on 5 mm: at 4.5 s
+    quiet = sr.score(told(clear_s=4.5), rec)  # slip and speed end as the edge passes it
+    assert quiet.beyond_last == 30  # 4.5-4.8 s
+    assert quiet.dropped_from2 == 0 and quiet.missing_from3 == 0
+    inside = sr.score(told(clear_s=4.4), rec)  # ... 0.1 s before it: counted
+    assert inside.dropped_from2 == 10 and inside.missing_from3 == 10
