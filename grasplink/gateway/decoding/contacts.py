@@ -120,8 +120,6 @@ PULSE_RAMP = 0.5  # the pulse probe takes out this share of the differences 2 w 
 # the pulse probe's gate before any pulse is told (`_pulse_gate`): a ridge pulse's height on
 # the thesis skin (alpha 0.8-1.2 N times 1 - e^(-D / 10 mm): 0.8 N for D = 16 mm)
 PULSE_PRIOR_N = 0.8
-RAMP_CHECKS = (1, 2, 4)  # a pulse on a ramp is looked for at these multiples of the hold
-RAMP_RISE = 3.0  # ... where the level rises this many noise units over it (`_fell_on_ramp`)
 
 
 class ContactEvent(NamedTuple):
@@ -335,7 +333,6 @@ class _Watch:
     room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
     rise: int = 0  # a probe: the rise of its scale (samples)
     long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
-    ramp_top: float = -1.0  # told a pulse on a ramp: its top above the ramp (N; `_fell_on_ramp`)
 
     @property
     def plain(self) -> np.ndarray:
@@ -456,7 +453,6 @@ class ContactDetector:
         pulse_snr: float = 10.0,
         pulse_prior_n: float = PULSE_PRIOR_N,
         pulse_first_threshold: float = 5.5,
-        ramp_checks: tuple[int, ...] = RAMP_CHECKS,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -549,9 +545,6 @@ class ContactDetector:
         # stay up past the hold and fall back later - then the verdict is revised to a pulse
         self._stepped: list[_Watch] = []
         self.revise = max(self.step_hold + 1, round(revise_s * self.fs_hz))
-        # a kink contact on a ramp (the object sliding onto the skin): spans after the onset
-        # at which it is judged against the level's trend after it (`_fell_on_ramp`)
-        self.ramp_spans = sorted({min(self.watch, m * self.step_hold) for m in ramp_checks})
         self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
         self.trend_n = max(1, round(trend_s * self.fs_hz))
         self.long_trend_n = max(self.trend_n + 1, round(long_trend_s * self.fs_hz))
@@ -1423,8 +1416,6 @@ class ContactDetector:
                 checks.append(done)
                 if done.pulse is True and watch.hist_n:
                     height = self._told_height(watch, done.emit_index)
-                    if watch.ramp_top >= 0.0:  # (its running peak has the ramp's rise in it)
-                        height = watch.ramp_top
                     self._heights.append((done.emit_index, height))
                     self._mark_busy(watch.index, done.emit_index, height)
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
@@ -1532,9 +1523,6 @@ class ContactDetector:
                     return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
                 if watch.fell or (not small and self._fell_on_slip_trend(watch)):
                     return PulseCheck(watch.id, hold + h, True)
-            ramp = -1 if small or watch.id < 0 else self._ramp_pulse(watch, end)
-            if ramp >= 0 and (hit < 0 or ramp < watch.next_k + hit):
-                return PulseCheck(watch.id, ramp + h, True)
             if hit >= 0:
                 return PulseCheck(watch.id, watch.next_k + hit + h, True)
             early = min(len(level), watch.index + self.watch // 4 - watch.next_k + 1)
@@ -1546,50 +1534,6 @@ class ContactDetector:
             flat = watch.peak <= 1.5 * watch.early
             return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
         return None
-
-    def _ramp_pulse(self, watch: _Watch, end: int) -> int:
-        """The first of the spans after a kink contact's onset (`ramp_spans`) ending in
-        watch.next_k .. end at which the level fell back like a pulse from the trend it rises
-        on (`_fell_on_ramp`): that span's last sample, or -1."""
-        for span in self.ramp_spans:
-            k = watch.index + span
-            if k > end:
-                break
-            if k >= watch.next_k and self._fell_on_ramp(watch, span):
-                return k
-        return -1
-
-    def _fell_on_ramp(self, watch: _Watch, span: int) -> bool:
-        """Over `span` samples after the onset, did the level rise and fall back from the
-        trend it rises on? While the object slides onto the skin (or more of it covers the
-        sensor) the level ramps up, and a ridge pulse on that ramp rises and falls back to
-        it, while the level itself may never fall: the watch's fall test - the trend before
-        the onset out, a pulse's tail hiding it - sees a level that keeps rising and decides
-        nothing (issue 22: the alpha0.3 skin's first contacts, in the first 7 mm). Measured
-        from the level at the onset (the kink's foot: a pulse replaces the tail it starts
-        on, thesis ch. 5.3.1), with the trend out - the level's slope over the span's last
-        third, after the pulse - the pulse's top over the rest must stand 6 noise units up
-        and the last
-        third (the same trend out) have fallen back from it by drop_fraction. A grip step
-        with or without a ramp after it stays up from the ramp; a ramp's start never rose
-        above it. Only where the level rises over the span by `RAMP_RISE` noise units or
-        more: on a level without a ramp the watch's own tests judge."""
-        i0 = watch.index + self.level_half - self._level_start
-        if i0 < 0 or i0 + span + 1 > len(self._level):
-            return False
-        since = np.arange(span + 1, dtype=np.float64)
-        raw = self._level[i0 : i0 + span + 1] - self._level[i0]  # from the kink's foot
-        late = span - span // 3
-        x = since[late:] - (span + late) / 2.0
-        slope = float(np.dot(x, raw[late:]) / np.dot(x, x))
-        if slope * span < RAMP_RISE * watch.noise:
-            return False
-        off = raw - slope * since
-        top = float(off[:late].max())
-        if top < 6.0 * watch.noise or top - float(_mean(off[late:])) < self.drop_fraction * top:
-            return False
-        watch.ramp_top = top
-        return True
 
     def _level_floor(self, before: int) -> float | None:
         """The lowest level over the trend window up to `before` (under an earlier pulse)."""
