@@ -149,8 +149,8 @@ docs: setup
 bench: setup
 	$(PY) benchmarks/bench_network.py
 	$(PY) benchmarks/bench_scenes.py
-	$(PY) benchmarks/bench_decoding.py
 	$(PY) benchmarks/bench_slip_reporting.py
+	$(PY) benchmarks/bench_decoding.py  # shows slip_reporting's trade-off curves
 	$(PY) benchmarks/bench_gateway.py
 	$(PY) benchmarks/bench_loop.py
 	$(PY) benchmarks/bench_telemetry.py
