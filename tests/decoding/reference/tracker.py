@@ -774,7 +774,8 @@ class NumpyTracker:
         )
         braking = running & (B.run >= 2) & (a_hi < 0)
         t_rest = np.full(len(B), np.inf)
-        t_rest[braking] = B.t[braking] + (V_MIN_MM_S - B.X[braking, 1]) / a_hi[braking]
+        rest = np.maximum(V_MIN_MM_S, self.REST_SHARE * B.X[braking, 1])
+        t_rest[braking] = B.t[braking] + (rest - B.X[braking, 1]) / a_hi[braking]
         braked = ops.mark(t_rest <= g)
         soon = t_rest[ops.mark(live & ~braked & (t_rest < np.inf))]
         if len(soon):

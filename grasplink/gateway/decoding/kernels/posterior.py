@@ -41,6 +41,7 @@ NAMES = (
     "span_max_rel",
     "brake_z",
     "last_brake_z",
+    "rest_share",
 )
 (
     NEGLIGIBLE,
@@ -65,6 +66,7 @@ NAMES = (
     SPAN_MAX_REL,
     BRAKE_Z,
     LAST_BRAKE_Z,
+    REST_SHARE,
 ) = range(len(NAMES))
 
 
@@ -358,7 +360,8 @@ def posterior(
                 X[i, 2] + K[BRAKE_Z] * math.sqrt(max(P[i, 2, 2], 0.0)), P[i, 2, 2], ridge[i], R, K
             )
             if a_hi < 0:
-                t_rest = t[i] + (K[V_MIN] - X[i, 1]) / a_hi
+                rest = max(K[V_MIN], K[REST_SHARE] * X[i, 1])
+                t_rest = t[i] + (rest - X[i, 1]) / a_hi
                 if t_rest <= g:
                     braked = True
                 elif live[i]:
