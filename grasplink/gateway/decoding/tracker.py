@@ -287,6 +287,12 @@ class TrackerDecoder(Decoder):
     RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
     STOP_STEP_PER_S = 1.0
+    # ... a stop there is told once the next ridge due after the step, had the slip gone
+    # on, would have been decided (its time at the speed before the step plus the
+    # detector's latency, times this; 0: at once; none past the last ridge): a ridge told
+    # a step (hysteresis holds a pulse's fall) is confirmed by the contact due, a stop by
+    # the silence where it was due
+    STEP_STOP_WAIT = 0.0
     GRIP_STEP_PER_S = 0.3
     LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
     PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
@@ -995,6 +1001,7 @@ class TrackerDecoder(Decoder):
             bound_share=self.BOUND_SHARE,
             span_max_rel=self.SPAN_MAX_REL,
             brake_z=self.BRAKE_Z,
+            step_stop_wait=self.STEP_STOP_WAIT,
         )
 
     @cached_property
