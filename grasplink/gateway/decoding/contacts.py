@@ -53,7 +53,9 @@ channel: `kernels.detector`):
   (after-minus-before means over 10-40 ms, ramps out): at 10 dB SNR a ridge pulse is 5-7
   noise units of that and 2 of its kink. Its candidates the watch tells pulses are ridge
   contacts (onset half the placing window before the rise's middle), unless the kink bank
-  or the step probe has them (`_run_pulses`). A clean signal never opens it.
+  or the step probe has them (`_run_pulses`). Before any pulse is told it takes
+  `pulse_prior_n` for their height (open at 10 dB from a slip's first contact, at a
+  stricter threshold); a clean signal never opens it.
 
 Events carry `emit_index`, the index of the sample whose arrival decided
 them, so a caller can replay them exactly in step with its own updates.
@@ -115,8 +117,9 @@ STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single blo
 STEP_IDS = 1_000_000_000  # ids of the small steps found by the step probe (their own series)
 PULSE_SCALES_S = (0.01, 0.02, 0.04)  # the pulse probe's windows (`_run_pulses`)
 PULSE_RAMP = 0.5  # the pulse probe takes out this share of the differences 2 w either side
-RAMP_CHECKS = (1, 2, 4)  # a pulse on a ramp is looked for at these multiples of the hold
-RAMP_RISE = 3.0  # ... where the level rises this many noise units over it (`_fell_on_ramp`)
+# the pulse probe's gate before any pulse is told (`_pulse_gate`): a ridge pulse's height on
+# the thesis skin (alpha 0.8-1.2 N times 1 - e^(-D / 10 mm): 0.8 N for D = 16 mm)
+PULSE_PRIOR_N = 0.8
 
 
 class ContactEvent(NamedTuple):
@@ -330,7 +333,6 @@ class _Watch:
     room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
     rise: int = 0  # a probe: the rise of its scale (samples)
     long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
-    ramp_top: float = -1.0  # told a pulse on a ramp: its top above the ramp (N; `_fell_on_ramp`)
 
     @property
     def plain(self) -> np.ndarray:
@@ -449,7 +451,8 @@ class ContactDetector:
         pulse_scales_s: tuple[float, ...] = PULSE_SCALES_S,
         pulse_threshold: float = 4.5,
         pulse_snr: float = 10.0,
-        ramp_checks: tuple[int, ...] = RAMP_CHECKS,
+        pulse_prior_n: float = PULSE_PRIOR_N,
+        pulse_first_threshold: float = 5.5,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -542,9 +545,6 @@ class ContactDetector:
         # stay up past the hold and fall back later - then the verdict is revised to a pulse
         self._stepped: list[_Watch] = []
         self.revise = max(self.step_hold + 1, round(revise_s * self.fs_hz))
-        # a kink contact on a ramp (the object sliding onto the skin): spans after the onset
-        # at which it is judged against the level's trend after it (`_fell_on_ramp`)
-        self.ramp_spans = sorted({min(self.watch, m * self.step_hold) for m in ramp_checks})
         self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
         self.trend_n = max(1, round(trend_s * self.fs_hz))
         self.long_trend_n = max(self.trend_n + 1, round(long_trend_s * self.fs_hz))
@@ -553,6 +553,8 @@ class ContactDetector:
         self.pulse_widths = sorted({max(2, round(s * self.fs_hz)) for s in pulse_scales_s})
         self.pulse_threshold = float(pulse_threshold)
         self.pulse_snr = float(pulse_snr)
+        self.pulse_prior_n = float(pulse_prior_n)
+        self.pulse_first_threshold = float(pulse_first_threshold)
         self._pulse_next = 0  # next centre the pulse probe tests
         self._pulse_watches: list[tuple[_Watch, float, int]] = []  # (watch, z, placing w)
         self._pulse_onsets: deque[tuple[int, int]] = deque(maxlen=32)  # emitted: (index, emit)
@@ -560,7 +562,7 @@ class ContactDetector:
         self._pulse_ready: list[tuple[int, int, float, int, float]] = []
         # heights of the contacts told pulses (N above their base): (emit, height)
         self._heights: deque[tuple[int, float]] = deque(maxlen=32)
-        self._gates: dict[int, float | None] = {}  # block -> `_pulse_gate`, once known
+        self._gates: dict[int, tuple[float, float] | None] = {}  # block -> `_pulse_gate`
 
     # ------------------------------------------------------------------ feeding
     def feed(self, t: np.ndarray, x: np.ndarray) -> tuple[list[ContactEvent], list[PulseCheck]]:
@@ -1213,11 +1215,18 @@ class ContactDetector:
         self._pulse_ready = waiting
         return events, checks
 
-    def _pulse_gate(self, block: int) -> float | None:
-        """The white noise (N per sample) for the pulse probe's centres in `block`, or None
+    def _pulse_gate(self, block: int) -> tuple[float, float] | None:
+        """The white noise (N per sample) for the pulse probe's centres in `block` and their
+        threshold (noise units), or None
         where it stays off: the noise unknown, or the contacts told pulses (decided before
         the block, over the last `history_s`) rising to `pulse_snr` noise units or more at
-        their median - the kink bank sees such pulses."""
+        their median - the kink bank sees such pulses. With none told yet the median is
+        `pulse_prior_n`'s: in heavy noise the probe finds a slip's first contacts too (at
+        10 dB SNR a full first pulse is 3-4 noise units: the kink bank misses half), while
+        a thesis-like noise (0.02 N) keeps it shut on a held object. Until a pulse is told
+        its threshold is `pulse_first_threshold`: a slip's first pulses are full ones (9
+        units of the probe at their median), and one noise contact told a pulse on a held
+        object would open the gate at the plain threshold for `history_s`."""
         if block in self._gates:
             return self._gates[block]
         white = self._white(block)
@@ -1228,15 +1237,21 @@ class ContactDetector:
         recent = sorted(
             h for e, h in self._heights if start - self.history_blocks * self.block <= e < start
         )
-        blind = bool(recent) and recent[(len(recent) - 1) // 2] < self.pulse_snr * white_n
-        sigma = white_n if blind else None
+        threshold = self.pulse_threshold
+        if not recent:  # none told yet (the slip's first contacts, or none at all)
+            recent = [self.pulse_prior_n]
+            threshold = max(threshold, self.pulse_first_threshold)
+        blind = recent[(len(recent) - 1) // 2] < self.pulse_snr * white_n
+        sigma = (white_n, threshold) if blind else None
         if block < self._n // self.block:  # (its white noise final by then: kept)
             self._gates[block] = sigma
             for old in [b for b in self._gates if b < block - 4]:
                 del self._gates[old]
         return sigma
 
-    def _pulse_candidates(self, lo: int, hi: int, gates: dict[int, float | None]) -> None:
+    def _pulse_candidates(
+        self, lo: int, hi: int, gates: dict[int, tuple[float, float] | None]
+    ) -> None:
         """The pulse probe's candidates among centres lo .. hi (see `_run_pulses`), watched."""
         ws = self.pulse_widths
         W = ws[-1]
@@ -1244,7 +1259,9 @@ class ContactDetector:
         x = self._x[i0 : hi + 4 * W - self._t_start]
         m = hi - lo + 1 + 2 * W  # centres lo - W .. hi + W
         B = self.block
-        sigma = np.array([gates[c // B] or math.inf for c in range(lo - W, hi + W + 1)])
+        gated = [gates[c // B] or (math.inf, math.inf) for c in range(lo - W, hi + W + 1)]
+        sigma = np.array([g[0] for g in gated])
+        threshold = np.array([g[1] for g in gated])
         z = np.empty((len(ws), m))
         size = np.empty((len(ws), m))
         for si, w in enumerate(ws):
@@ -1261,7 +1278,8 @@ class ContactDetector:
             size[si] = c
         best = z.max(axis=0)
         which = z.argmax(axis=0)
-        for j in np.flatnonzero(best[W : W + hi - lo + 1] >= self.pulse_threshold).tolist():
+        inside = slice(W, W + hi - lo + 1)
+        for j in np.flatnonzero(best[inside] >= threshold[inside]).tolist():
             j += W
             si = int(which[j])
             w = ws[si]
@@ -1398,8 +1416,6 @@ class ContactDetector:
                 checks.append(done)
                 if done.pulse is True and watch.hist_n:
                     height = self._told_height(watch, done.emit_index)
-                    if watch.ramp_top >= 0.0:  # (its running peak has the ramp's rise in it)
-                        height = watch.ramp_top
                     self._heights.append((done.emit_index, height))
                     self._mark_busy(watch.index, done.emit_index, height)
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
@@ -1507,9 +1523,6 @@ class ContactDetector:
                     return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
                 if watch.fell or (not small and self._fell_on_slip_trend(watch)):
                     return PulseCheck(watch.id, hold + h, True)
-            ramp = -1 if small or watch.id < 0 else self._ramp_pulse(watch, end)
-            if ramp >= 0 and (hit < 0 or ramp < watch.next_k + hit):
-                return PulseCheck(watch.id, ramp + h, True)
             if hit >= 0:
                 return PulseCheck(watch.id, watch.next_k + hit + h, True)
             early = min(len(level), watch.index + self.watch // 4 - watch.next_k + 1)
@@ -1521,50 +1534,6 @@ class ContactDetector:
             flat = watch.peak <= 1.5 * watch.early
             return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
         return None
-
-    def _ramp_pulse(self, watch: _Watch, end: int) -> int:
-        """The first of the spans after a kink contact's onset (`ramp_spans`) ending in
-        watch.next_k .. end at which the level fell back like a pulse from the trend it rises
-        on (`_fell_on_ramp`): that span's last sample, or -1."""
-        for span in self.ramp_spans:
-            k = watch.index + span
-            if k > end:
-                break
-            if k >= watch.next_k and self._fell_on_ramp(watch, span):
-                return k
-        return -1
-
-    def _fell_on_ramp(self, watch: _Watch, span: int) -> bool:
-        """Over `span` samples after the onset, did the level rise and fall back from the
-        trend it rises on? While the object slides onto the skin (or more of it covers the
-        sensor) the level ramps up, and a ridge pulse on that ramp rises and falls back to
-        it, while the level itself may never fall: the watch's fall test - the trend before
-        the onset out, a pulse's tail hiding it - sees a level that keeps rising and decides
-        nothing (issue 22: the alpha0.3 skin's first contacts, in the first 7 mm). Measured
-        from the level at the onset (the kink's foot: a pulse replaces the tail it starts
-        on, thesis ch. 5.3.1), with the trend out - the level's slope over the span's last
-        third, after the pulse - the pulse's top over the rest must stand 6 noise units up
-        and the last
-        third (the same trend out) have fallen back from it by drop_fraction. A grip step
-        with or without a ramp after it stays up from the ramp; a ramp's start never rose
-        above it. Only where the level rises over the span by `RAMP_RISE` noise units or
-        more: on a level without a ramp the watch's own tests judge."""
-        i0 = watch.index + self.level_half - self._level_start
-        if i0 < 0 or i0 + span + 1 > len(self._level):
-            return False
-        since = np.arange(span + 1, dtype=np.float64)
-        raw = self._level[i0 : i0 + span + 1] - self._level[i0]  # from the kink's foot
-        late = span - span // 3
-        x = since[late:] - (span + late) / 2.0
-        slope = float(np.dot(x, raw[late:]) / np.dot(x, x))
-        if slope * span < RAMP_RISE * watch.noise:
-            return False
-        off = raw - slope * since
-        top = float(off[:late].max())
-        if top < 6.0 * watch.noise or top - float(_mean(off[late:])) < self.drop_fraction * top:
-            return False
-        watch.ramp_top = top
-        return True
 
     def _level_floor(self, before: int) -> float | None:
         """The lowest level over the trend window up to `before` (under an earlier pulse)."""

@@ -50,7 +50,9 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   kept down to `LOG_KEEP_ODDS`; the confidence grows with that margin (and
   with how much of the posterior agrees), so an early answer is a
   low-confidence one. On a symmetric skin both ways explain the contacts
-  equally: a speed, never a direction.
+  equally: a speed, never a direction. Past the last ridge no contact can come: a
+  braking there goes on only as far as the contacts made it certain (`LAST_BRAKE_Z`),
+  else the speed last measured is held until a step tells the stop or the coast ends.
 
 Contacts are decided with a delay (longest detector scale), sometimes out of
 time order, and a step is told ~0.1 s after its onset; the tracker keeps
@@ -322,6 +324,14 @@ class TrackerDecoder(Decoder):
     # estimated - the headline's speed at rest after the reflex stopped the object ends at
     # 2.13 s, not 2.79 (1 sigma: 2.32, 2: 2.79); the full slip-reporting set unchanged
     BRAKE_Z = 0.0
+    # past the last ridge no contact can come, so no later contact can confirm a braking
+    # and no silence can refute it: a braking track carries on there only with the braking
+    # its contacts made certain, this many sigma gentler than estimated (none left: its
+    # speed at the last contact held, until a step tells the stop or the coast ends).
+    # 0: braked on as estimated, to a "stop" nothing observed while the object may slide
+    # off. Cost: an alias that wrongly puts itself there lingers at its low speed
+    # (accelerating speed missing +1.4 %: benchmarks/tune_tracker_kinds.py)
+    LAST_BRAKE_Z = 2.0
     LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
     LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
@@ -1002,6 +1012,7 @@ class TrackerDecoder(Decoder):
             span_max_rel=self.SPAN_MAX_REL,
             brake_z=self.BRAKE_Z,
             step_stop_wait=self.STEP_STOP_WAIT,
+            last_brake_z=self.LAST_BRAKE_Z,
         )
 
     @cached_property

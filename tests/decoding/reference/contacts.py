@@ -75,8 +75,6 @@ NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ide
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
 STEP_IDS = 1_000_000_000  # ids of the small steps found by the step probe (their own series)
-RAMP_CHECKS = (1, 2, 4)  # a pulse on a ramp is looked for at these multiples of the hold
-RAMP_RISE = 3.0  # ... where the level rises by this many noise units over the span
 
 
 class ContactEvent(NamedTuple):
@@ -198,7 +196,6 @@ class _Watch:
     plain: np.ndarray = field(default_factory=lambda: np.zeros(0))  # level - base (to the hold)
     rise: int = 0  # a probe: the rise of its scale (samples)
     long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
-    ramp_top: float = -1.0  # told a pulse on a ramp: its top above the ramp (N)
 
 
 @dataclass
@@ -261,7 +258,6 @@ class ContactDetector:
         step_threshold: float = 6.0,
         revise_s: float = 0.35,
         long_trend_s: float = 0.6,
-        ramp_checks: tuple[int, ...] = RAMP_CHECKS,
     ):
         self.fs_hz = float(fs_hz)
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
@@ -337,7 +333,6 @@ class ContactDetector:
         # stay up past the hold and fall back later - then the verdict is revised to a pulse
         self._stepped: list[_Watch] = []
         self.revise = max(self.step_hold + 1, round(revise_s * self.fs_hz))
-        self.ramp_spans = sorted({min(self.watch, m * self.step_hold) for m in ramp_checks})
         self.lag = 2 * max(widths)  # a contact is decided at most this many samples late
         self.trend_n = max(1, round(trend_s * self.fs_hz))
         self.long_trend_n = max(self.trend_n + 1, round(long_trend_s * self.fs_hz))
@@ -923,8 +918,6 @@ class ContactDetector:
                     told = done.emit_index - self.level_half - watch.index
                     told = min(told, len(watch.history) - 1)
                     height = float(watch.history[told]) if told >= 0 else 0.0
-                    if watch.ramp_top >= 0.0:
-                        height = watch.ramp_top
                     self._mark_busy(watch.index, done.emit_index, height)
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
                     watch.top = float(watch.detrended.max()) if len(watch.detrended) else 0.0
@@ -1035,9 +1028,6 @@ class ContactDetector:
                     return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
                 if watch.fell or (not small and self._fell_on_slip_trend(watch)):
                     return PulseCheck(watch.id, hold + h, True)
-            ramp = -1 if small or watch.id < 0 else self._ramp_pulse(watch, end)
-            if ramp >= 0 and (not len(hit) or ramp < int(k[hit[0]])):
-                return PulseCheck(watch.id, ramp + h, True)
             if len(hit):
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             early = min(len(k), watch.index + self.watch // 4 - watch.next_k + 1)  # k rises
@@ -1049,38 +1039,6 @@ class ContactDetector:
             flat = watch.peak <= 1.5 * watch.early
             return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
         return None
-
-    def _ramp_pulse(self, watch: _Watch, end: int) -> int:
-        """The first span after the onset (`ramp_spans`) ending in watch.next_k .. end at
-        which the level fell back from the trend it rises on (`_fell_on_ramp`), or -1."""
-        for span in self.ramp_spans:
-            k = watch.index + span
-            if k > end:
-                break
-            if k >= watch.next_k and self._fell_on_ramp(watch, span):
-                return k
-        return -1
-
-    def _fell_on_ramp(self, watch: _Watch, span: int) -> bool:
-        """From the level at the onset, with the trend out (the slope over the span's last
-        third), did the level stand 6 noise units up before and fall back by drop_fraction
-        over that last third? Only where the level rises by RAMP_RISE noise units."""
-        i0 = watch.index + self.level_half - self._level_start
-        if i0 < 0 or i0 + span + 1 > len(self._level):
-            return False
-        since = np.arange(span + 1, dtype=np.float64)
-        raw = self._level[i0 : i0 + span + 1] - self._level[i0]
-        late = span - span // 3
-        x = since[late:] - (span + late) / 2.0
-        slope = float(np.dot(x, raw[late:]) / np.dot(x, x))
-        if slope * span < RAMP_RISE * watch.noise:
-            return False
-        off = raw - slope * since
-        top = float(off[:late].max())
-        if top < 6.0 * watch.noise or top - float(_mean(off[late:])) < self.drop_fraction * top:
-            return False
-        watch.ramp_top = top
-        return True
 
     def _level_floor(self, before: int) -> float | None:
         """The lowest level over the trend window up to `before` (under an earlier pulse)."""

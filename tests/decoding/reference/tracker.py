@@ -634,14 +634,24 @@ class NumpyTracker:
         chosen = order.take(_nz(keep))
         return chosen
 
-    def _travel(self, B: _Bank, g: float) -> np.ndarray:
+    def _travel(self, B: _Bank, g: float, past_last: bool = False) -> np.ndarray:
         """Travel of slipping tracks B extrapolated to g: speed changing at the track's
-        acceleration (bounded to 0.25-4x), less the ridge dip still recovering."""
+        acceleration (bounded to 0.25-4x; `past_last`: as carried on past the last ridge),
+        less the ridge dip still recovering."""
         tau = np.maximum(0.0, g - B.t)
         v, a, d = B.X[:, 1], B.X[:, 2], B.X[:, 3]
+        if past_last:
+            a = self._acceleration(a, B.P[:, 2, 2], B.ridge)
         v_end = _clip(v + a * tau, 0.25 * v, 4.0 * v)
         decay = ops.exp(-tau / self.DIP_RECOVERY_S)
         return B.X[:, 0] + 0.5 * (v + v_end) * tau - d * B.m * (1.0 - decay)
+
+    def _acceleration(self, a, p22, ridge):
+        """The acceleration tracks at `ridge` carry on with (variance p22): past the last
+        ridge no contact can confirm a braking, so only as much of it as the contacts
+        before made certain, LAST_BRAKE_Z sigma gentler (added after 0858d90)."""
+        gentler = np.minimum(0.0, a + self.LAST_BRAKE_Z * np.sqrt(np.maximum(p22, 0.0)))
+        return np.where((ridge == self.count - 1) & (a < 0), gentler, a)
 
     def _schedule(self, B: _Bank):
         """Silence of slipping tracks with a speed: per track and ridge ahead (time due,
@@ -663,7 +673,8 @@ class NumpyTracker:
             # one ridge after the other, in a third of the numpy calls
             ra = row[act]
             X, P = B.X[act], B.P[act]
-            s0, v, a, d = X[:, 0], np.maximum(X[:, 1], V_MIN_MM_S), X[:, 2], X[:, 3]
+            s0, v, d = X[:, 0], np.maximum(X[:, 1], V_MIN_MM_S), X[:, 3]
+            a = self._acceleration(X[:, 2], P[:, 2, 2], B.ridge[act])
             p00, p01, p11, p02, p12, p22 = (P[:, i, j, None] for i, j in _VAR_AT)
             coast = self._coast_end(di[act], v)[:, None]
             target = np.where(T["coast"][ra], coast, T["target"][ra])
@@ -711,7 +722,8 @@ class NumpyTracker:
             return min(h.s + h.v * max(0.0, g - h.stop), ahead), h.v, held
         tau = max(0.0, g - h.t)
         v = h.v
-        v_end = min(max(v + h.a * tau, 0.25 * v), 4.0 * v)
+        a = float(self._acceleration(h.a, h.p22, h.ridge))
+        v_end = min(max(v + a * tau, 0.25 * v), 4.0 * v)
         decay = ops.mexp(-tau / self.DIP_RECOVERY_S)
         s = h.s + 0.5 * (v + v_end) * tau - h.d * h.m * (1.0 - decay)
         speed = max(0.0, v_end - h.d * h.m * decay / self.DIP_RECOVERY_S)
@@ -780,7 +792,9 @@ class NumpyTracker:
         running = np.isnan(B.stop)
         # braked to rest: even braking BRAKE_Z sigma gentler, the track's own motion brought
         # it below the slowest slip by now
-        a_hi = B.X[:, 2] + self.BRAKE_Z * np.sqrt(np.maximum(B.P[:, 2, 2], 0.0))
+        a_hi = self._acceleration(
+            B.X[:, 2] + self.BRAKE_Z * np.sqrt(np.maximum(B.P[:, 2, 2], 0.0)), B.P[:, 2, 2], B.ridge
+        )
         braking = running & (B.run >= 2) & (a_hi < 0)
         t_rest = np.full(len(B), np.inf)
         t_rest[braking] = B.t[braking] + (V_MIN_MM_S - B.X[braking, 1]) / a_hi[braking]
@@ -860,7 +874,7 @@ class NumpyTracker:
         agree = 0.0
         if len(idx):
             Bu = B.take(idx)
-            s = self._travel(Bu, g)
+            s = self._travel(Bu, g, past_last=True)
             # held where the ridge not reached is, or where they stopped
             di = (1 - Bu.dirn) // 2
             ahead = np.minimum(limit[idx], self.count)

@@ -41,6 +41,7 @@ NAMES = (
     "span_max_rel",
     "brake_z",
     "step_stop_wait",
+    "last_brake_z",
 )
 (
     NEGLIGIBLE,
@@ -65,6 +66,7 @@ NAMES = (
     SPAN_MAX_REL,
     BRAKE_Z,
     STEP_STOP_WAIT,
+    LAST_BRAKE_Z,
 ) = range(len(NAMES))
 
 
@@ -97,6 +99,16 @@ def pairwise_sum(x: np.ndarray) -> float:
     half = n // 2
     half -= half % 8
     return pairwise_sum(x[:half]) + pairwise_sum(x[half:])
+
+
+@jit()
+def acceleration(a: float, p22: float, ridge: int, R: int, K: np.ndarray) -> float:
+    """The acceleration a track at `ridge` carries on with (variance p22): past the last
+    ridge (R - 1) no contact can confirm a braking, so only as much of it as the contacts
+    before made certain, LAST_BRAKE_Z sigma gentler (`TrackerDecoder.LAST_BRAKE_Z`)."""
+    if ridge == R - 1 and a < 0:
+        return min(0.0, a + K[LAST_BRAKE_Z] * math.sqrt(max(p22, 0.0)))
+    return a
 
 
 @jit()
@@ -148,7 +160,8 @@ def schedule(
         limit[n] = limit_t[at]
         if not active:
             continue
-        s0, v, a, d = X[n, 0], np.maximum(X[n, 1], K[V_MIN]), X[n, 2], X[n, 3]
+        s0, v, d = X[n, 0], np.maximum(X[n, 1], K[V_MIN]), X[n, 3]
+        a = acceleration(X[n, 2], P[n, 2, 2], ridge[n], R, K)
         p00, p01, p11 = P[n, 0, 0], P[n, 0, 1], P[n, 1, 1]
         p02, p12, p22 = P[n, 0, 2], P[n, 1, 2], P[n, 2, 2]
         coast = coast_end(pos, di, v, K)
@@ -237,6 +250,7 @@ def where(
         # not yet told stopped (its next ridge not yet due): moving on as before it
         return min(s + v * max(0.0, g - stop), pos[di, min(ridge + 1, R)]), v, held
     tau = max(0.0, g - t)
+    a = acceleration(a, p22, ridge, R, K)
     v_end = min(max(v + a * tau, 0.25 * v), 4.0 * v)
     decay = math.exp(-tau / K[DIP_S])
     x = s + 0.5 * (v + v_end) * tau - d * m * (1.0 - decay)
@@ -373,7 +387,9 @@ def posterior(
         # own motion brought it below the slowest slip by now (`TrackerDecoder.BRAKE_Z`)
         braked = False
         if running and run[i] >= 2:
-            a_hi = X[i, 2] + K[BRAKE_Z] * math.sqrt(max(P[i, 2, 2], 0.0))
+            a_hi = acceleration(
+                X[i, 2] + K[BRAKE_Z] * math.sqrt(max(P[i, 2, 2], 0.0)), P[i, 2, 2], ridge[i], R, K
+            )
             if a_hi < 0:
                 t_rest = t[i] + (K[V_MIN] - X[i, 1]) / a_hi
                 if t_rest <= g:
@@ -463,7 +479,8 @@ def posterior(
     count = 0
     for u in idx:
         if np.isnan(stop[u]):
-            s = travel(X[u, 0], X[u, 1], X[u, 2], X[u, 3], m[u], t[u], g, K[DIP_S])
+            a_u = acceleration(X[u, 2], P[u, 2, 2], ridge[u], R, K)
+            s = travel(X[u, 0], X[u, 1], a_u, X[u, 3], m[u], t[u], g, K[DIP_S])
             di = (1 - dirn[u]) // 2
             ahead = min(limit[u], R)
             end = pos[di, ahead] if ahead < R else coast_end(pos, di, X[u, 1], K)
