@@ -694,6 +694,7 @@ class NumpyTracker:
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             span = np.minimum(np.sqrt(np.maximum(var, 0.0)) / v_k, self.SPAN_MAX_REL * tau)
             latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
+            latency = np.maximum(latency, self._latency_floor(B)[act, None])
             t_due = B.t[act, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
             due[act, 1:] = np.where(T["done"][ra], np.inf, t_due)
         return due, adj, stopped, limit

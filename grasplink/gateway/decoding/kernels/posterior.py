@@ -137,10 +137,12 @@ def schedule(
     target_t: np.ndarray,
     pos: np.ndarray,
     K: np.ndarray,
+    floor: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per track and ridge ahead: time due, score adjustment, stopped, next ridge not
     reached, from then on (`TrackerDecoder._schedule`): the tables' rows, and for the
-    slipping tracks with a speed the times due computed."""
+    slipping tracks with a speed the times due computed. `floor`: each track's least
+    latency (`TrackerDecoder._latency_floor`)."""
     N = len(t)
     R = pos.shape[1] - 1
     S = done_t.shape[1]
@@ -183,6 +185,7 @@ def schedule(
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             span = min(math.sqrt(np.maximum(var, 0.0)) / v_k, K[SPAN_MAX_REL] * tau)
             latency = np.minimum(K[MAX_LATENCY], np.maximum(K[MIN_LATENCY], K[DETECT_MM] / v_k))
+            latency = max(latency, floor[n])
             t_due = t[n] + tau + 3.0 * span + K[LATE_REL] * tau + latency
             due[n, j + 1] = np.inf if done_t[row, j] else t_due
     return due, adj, stopped, limit
