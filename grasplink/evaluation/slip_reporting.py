@@ -255,6 +255,7 @@ SWEPT = (
     "STALE_S",
     "SPEED_AGREE_SHARE",
     "LOG_STOP_REPORT",
+    "STEP_STOP_WAIT",
     "threshold",
 )
 FULL = Plan(
@@ -712,6 +713,13 @@ SWEEPS: dict[str, Sweep] = {
         "P(missed)",
         False,
     ),
+    "STEP_STOP_WAIT": Sweep(
+        "STEP_STOP_WAIT",
+        "stop at a step told once the next ridge is due (share of that wait; 0: at once)",
+        (0.0, 0.25, 0.5, 1.0),
+        "share",
+        False,
+    ),
     "threshold": Sweep(
         "threshold",
         "contact detector threshold (noise units)",
@@ -742,6 +750,8 @@ def shipped_value(name: str, layouts: Sequence[str] = ()) -> float:
     if name == "LOG_STOP_REPORT":
         report = tr.TrackerDecoder.LOG_STOP_REPORT
         return math.exp(tr.TrackerDecoder.LOG_STOP if report is None else report)
+    if name == "STEP_STOP_WAIT":
+        return float(tr.TrackerDecoder.STEP_STOP_WAIT)
     if name == "threshold":
         return float(inspect.signature(ContactDetector).parameters["threshold"].default)
     raise KeyError(name)
@@ -759,6 +769,8 @@ def settings_for(name: str, value: float) -> dict:
         return {"tuning": {"SPEED_AGREE_SHARE": value}}
     if name == "LOG_STOP_REPORT":
         return {"tuning": {"LOG_STOP_REPORT": math.log(value)}}
+    if name == "STEP_STOP_WAIT":
+        return {"tuning": {"STEP_STOP_WAIT": value}}
     if name == "threshold":
         return {"detector_threshold": value}
     raise KeyError(name)

@@ -17,7 +17,7 @@ from functools import cache
 import numpy as np
 import pytest
 
-from grasplink.evaluation import nonstationary
+from grasplink.evaluation import nonstationary, slip_reporting
 from grasplink.gateway.decoding import tracker
 from grasplink.gateway.decoding.kernels.posterior import constants, pairwise_sum
 from tests.decoding.reference import tracker as reference
@@ -29,7 +29,10 @@ from tests.decoding.reference.compare import (
 )
 from tests.decoding.test_numerical_edges import railed_slip
 
-RUNS = [f"signal{k}" for k in range(10)] + ["railed0", "railed1"]
+RUNS = [f"signal{k}" for k in range(10)] + ["railed0", "railed1", "loopwait"]
+# a loop-physics slip whose ridges are told steps, decoded with STEP_STOP_WAIT on: the
+# stops at steps told only once the next ridge is due (kernels.posterior.stop_seen)
+LOOP_WAIT = {"STEP_STOP_WAIT": 1.0}
 
 
 def told(out: tuple) -> tuple[tuple, np.ndarray]:
@@ -51,6 +54,9 @@ def same_marks(a: list, b: list) -> bool:
 
 
 def signal(name: str) -> tuple[np.ndarray, np.ndarray, list[float], float]:
+    if name == "loopwait":
+        rec = slip_reporting.Case("loop", "30 mm/s", (30,), "alpha0.1", True, 7002).make()
+        return np.asarray(rec.t_s), np.asarray(rec.force_n), rec.truth.layout_mm, rec.fs_hz
     if name.startswith("railed"):
         rec = railed_slip(60.0, name == "railed1")
         return rec.t_s, rec.force_n, rec.layout_mm, rec.fs_hz
@@ -63,7 +69,7 @@ def compared(name: str) -> dict[str, int]:
     """Decode run `name` three samples at a time (as the gateway does), checking every
     posterior against the numpy code's; what the calls covered."""
     t, x, layout_mm, fs_hz = signal(name)
-    dec = tracker.TrackerDecoder(layout_mm, fs_hz)
+    dec = tracker.TrackerDecoder(layout_mm, fs_hz, tuning=LOOP_WAIT if name == "loopwait" else None)
     compiled: Callable = dec._posterior
     seen = {"calls": 0, "near": 0, "blind": 0, "chosen": 0, "none": 0, "stopped": 0}
 

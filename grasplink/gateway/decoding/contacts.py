@@ -554,6 +554,13 @@ class ContactDetector:
         self.pulse_threshold = float(pulse_threshold)
         self.pulse_snr = float(pulse_snr)
         self.pulse_prior_n = float(pulse_prior_n)
+        # the probes tell a contact later than the kink bank: a step probe once every contact
+        # near it is decided (`_step_events`), a pulse probe once a step probe would have
+        # judged it (`_run_pulses`); the tracker waits this long for the contacts they find
+        self.probe_lag = max(
+            self.lag + max(scale_widths),
+            self.step_hold + self.level_half + 2 * max(self.pulse_widths, default=0),
+        )
         self.pulse_first_threshold = float(pulse_first_threshold)
         self._pulse_next = 0  # next centre the pulse probe tests
         self._pulse_watches: list[tuple[_Watch, float, int]] = []  # (watch, z, placing w)

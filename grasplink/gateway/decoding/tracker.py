@@ -289,8 +289,17 @@ class TrackerDecoder(Decoder):
     RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
     STOP_STEP_PER_S = 1.0
+    # ... a stop there is told once the next ridge due after the step, had the slip gone
+    # on, would have been decided (its time at the speed before the step plus the
+    # detector's latency, times this; 0: at once; none past the last ridge): a ridge told
+    # a step (hysteresis holds a pulse's fall) is confirmed by the contact due, a stop by
+    # the silence where it was due
+    STEP_STOP_WAIT = 0.0
     GRIP_STEP_PER_S = 0.3
     LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
+    # a track whose last contact came from a probe waits this share of the probes' latency
+    # for its next (`_latency_floor`; 0: the kink bank's latency for every track)
+    PROBE_WAIT = 1.0
     PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
     LOG_PROBE_RIDGE = math.log(0.3)  # ... and a ridge contact (merged pulses) sometimes
     PROBE_SIGMA_S = 0.02  # its timing (mid-rise of an unresolved pulse train)
@@ -471,6 +480,8 @@ class TrackerDecoder(Decoder):
         self._block = max(1, round(block_s * self.fs_hz))  # latency against CPU
         # a contact is known this late: the detector's own delay, then the block's end
         self._max_latency = (self.detector.lag + self._block) / self.fs_hz
+        # a contact found by the probes comes later (`ContactDetector.probe_lag`)
+        self._probe_latency = (self.detector.probe_lag + self._block) / self.fs_hz
         self._min_latency = (2.0 * self.detector.channels[0].width + self._block / 2) / self.fs_hz
         self._static = StaticForce(fs_hz)
         self._n_in = 0  # samples taken by the detector
@@ -839,8 +850,21 @@ class TrackerDecoder(Decoder):
             B._sched = posterior_kernels.schedule(
                 B.X, B.P, B.m, B.t, B.stop, B.dirn, B.ridge, B.run, T["due"], T["adj"],
                 T["stopped"], T["limit"], T["done"], T["coast"], T["target"], self._pos, self._K,
+                self._latency_floor(B),
             )  # fmt: skip
         return B._sched
+
+    def _latency_floor(self, B: _Bank) -> np.ndarray:
+        """How late each track's next contact may still be told, at least: the probes'
+        latency where its last contact came from a probe (told later than the kink bank
+        tells any), else 0. Where the FSR's hysteresis holds the ridge pulses' fall (the
+        loop scenes) the kink bank misses many ridges and the probes find them ~0.2 s
+        late; a track waits for them as long before its silence is taken for a stop."""
+        late = {c.id for c in self._contacts if c.emit_index - c.index > self.detector.lag}
+        if not late or not len(B):
+            return np.zeros(len(B))
+        slow = np.fromiter((int(k) in late for k in B._i[:, I_LAST]), bool, len(B))
+        return np.where(slow, self.PROBE_WAIT * self._probe_latency, 0.0)
 
     # ------------------------------------------------------------------ reporting
     def _report(self, g: float) -> SlipEstimate:
@@ -1021,6 +1045,7 @@ class TrackerDecoder(Decoder):
             bound_share=self.BOUND_SHARE,
             span_max_rel=self.SPAN_MAX_REL,
             brake_z=self.BRAKE_Z,
+            step_stop_wait=self.STEP_STOP_WAIT,
             last_brake_z=self.LAST_BRAKE_Z,
             rest_share=self.REST_SHARE,
         )

@@ -319,7 +319,7 @@ class NumpyTracker:
         prior = math.log(self.STOP_STEP_PER_S) if log_prior is None else log_prior
         floats = B._f.copy()
         floats[:, _S] = np.minimum(s, limit - 0.1)
-        floats[:, _V] = floats[:, _A] = 0.0
+        floats[:, _A] = 0.0  # the speed kept: when its next ridge was due
         floats[:, _STOP] = tc
         floats[:, _SCORE] = B.score + prior
         return _Bank(floats, B._i)
@@ -694,6 +694,7 @@ class NumpyTracker:
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             span = np.minimum(np.sqrt(np.maximum(var, 0.0)) / v_k, self.SPAN_MAX_REL * tau)
             latency = _clip(self.DETECT_MM / v_k, self._min_latency, self._max_latency)
+            latency = np.maximum(latency, self._latency_floor(B)[act, None])
             t_due = B.t[act, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
             due[act, 1:] = np.where(T["done"][ra], np.inf, t_due)
         return due, adj, stopped, limit
@@ -714,7 +715,12 @@ class NumpyTracker:
         if h.stop == h.stop:  # stopped at a step: where it was then
             r = h.ridge
             gap = float(pos[min(r + 1, self.count)] - pos[r])
-            return h.s, 0.0, max(math.sqrt(max(h.p00, 0.0)), 0.1 * gap)
+            held = max(math.sqrt(max(h.p00, 0.0)), 0.1 * gap)
+            if stopped:
+                return h.s, 0.0, held
+            # not yet told stopped (its next ridge not yet due): moving on as before it
+            ahead = float(pos[min(r + 1, self.count)])
+            return min(h.s + h.v * max(0.0, g - h.stop), ahead), h.v, held
         tau = max(0.0, g - h.t)
         v = h.v
         a = float(self._acceleration(h.a, h.p22, h.ridge))
@@ -738,6 +744,24 @@ class NumpyTracker:
         if h.ridge == self.count - 1:
             sigma += 0.2 * max(0.0, s - float(pos[self.count - 1]))
         return s, speed, sigma
+
+    def _stop_seen(self, B: _Bank, i: int) -> float:
+        """When track i's stop at a step is told: the time of the next ridge due after the
+        step at the speed it had (the one after the next when the step lies within 3 sigma
+        of the next: it may be that ridge's contact), plus the detector's latency there,
+        times STEP_STOP_WAIT."""
+        v, s = float(B.X[i, 1]), float(B.X[i, 0])
+        tau = float(B.stop[i] - B.t[i])
+        P = B.P[i]
+        sigma = math.sqrt(max(P[0, 0] + 2 * tau * P[0, 1] + tau * tau * P[1, 1], 0.0))
+        pos = self._pos[(1 - B.dirn[i]) // 2]
+        k = min(int(B.ridge[i]) + 1, self.count)
+        if pos[k] - s <= 3.0 * sigma:
+            k = min(k + 1, self.count)
+        if k >= self.count:  # past the last ridge no contact is due: told at once
+            return float(B.stop[i])
+        latency = min(self._max_latency, max(self._min_latency, self.DETECT_MM / v))
+        return float(B.stop[i]) + self.STEP_STOP_WAIT * (max(float(pos[k]) - s, 0.0) / v + latency)
 
     def _x(self, B: _Bank, s: np.ndarray) -> np.ndarray:
         return np.where(B.dirn > 0, s, self.length - s)
@@ -780,7 +804,17 @@ class NumpyTracker:
         soon = t_rest[ops.mark(live & ~braked & (t_rest < np.inf))]
         if len(soon):
             until = min(until, float(soon.min()))
-        stopped = stop_t[rows, j] | ~running | braked
+        # a stop at a step is told once the next ridge, had the slip gone on, would have
+        # been decided (`TrackerDecoder.STEP_STOP_WAIT`): before that it is slipping on
+        pending = np.zeros(len(B), bool)
+        if self.STEP_STOP_WAIT > 0:
+            for i in _nz(~running & (B.X[:, 1] > 0)):
+                t_seen = self._stop_seen(B, int(i))
+                if g < t_seen:
+                    pending[i] = True
+                    if live[i]:
+                        until = min(until, t_seen)
+        stopped = (stop_t[rows, j] | ~running | braked) & ~pending
         limit = limit_t[rows, j]
         upcoming = due[rows, np.minimum(j + 1, due.shape[1] - 1)]
         if blind is not None:

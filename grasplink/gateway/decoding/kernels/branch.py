@@ -144,14 +144,14 @@ def _stopped_at(
     pos: np.ndarray,
 ) -> None:
     """out[j]: slipping track src[r] stopped at tc (a step), where it was then (short of
-    its next ridge)."""
+    its next ridge), keeping the speed it had: when its next ridge was due (the stop
+    reported no sooner: `kernels.posterior`)."""
     R = pos.shape[1] - 1
     s = _travel(src_f, r, tc, c[DIP_RECOVERY_S])
     di = (1 - src_i[r, I_DIRN]) // 2
     limit = pos[di, min(src_i[r, I_RIDGE] + 1, R)]
     out_f[j, :] = src_f[r, :]
     out_f[j, F_S] = _minimum(s, limit - 0.1)
-    out_f[j, F_V] = 0.0
     out_f[j, F_A] = 0.0
     out_f[j, F_STOP] = tc
     out_f[j, F_SCORE] = src_f[r, F_SCORE] + log_prior

@@ -40,6 +40,7 @@ NAMES = (
     "bound_share",
     "span_max_rel",
     "brake_z",
+    "step_stop_wait",
     "last_brake_z",
     "rest_share",
 )
@@ -65,6 +66,7 @@ NAMES = (
     BOUND_SHARE,
     SPAN_MAX_REL,
     BRAKE_Z,
+    STEP_STOP_WAIT,
     LAST_BRAKE_Z,
     REST_SHARE,
 ) = range(len(NAMES))
@@ -137,10 +139,12 @@ def schedule(
     target_t: np.ndarray,
     pos: np.ndarray,
     K: np.ndarray,
+    floor: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per track and ridge ahead: time due, score adjustment, stopped, next ridge not
     reached, from then on (`TrackerDecoder._schedule`): the tables' rows, and for the
-    slipping tracks with a speed the times due computed."""
+    slipping tracks with a speed the times due computed. `floor`: each track's least
+    latency (`TrackerDecoder._latency_floor`)."""
     N = len(t)
     R = pos.shape[1] - 1
     S = done_t.shape[1]
@@ -183,9 +187,37 @@ def schedule(
             var = p00 + 2 * tau * p01 + tt * p11 + tt * (p02 + tau * p12 + 0.25 * tau * tau * p22)
             span = min(math.sqrt(np.maximum(var, 0.0)) / v_k, K[SPAN_MAX_REL] * tau)
             latency = np.minimum(K[MAX_LATENCY], np.maximum(K[MIN_LATENCY], K[DETECT_MM] / v_k))
+            latency = max(latency, floor[n])
             t_due = t[n] + tau + 3.0 * span + K[LATE_REL] * tau + latency
             due[n, j + 1] = np.inf if done_t[row, j] else t_due
     return due, adj, stopped, limit
+
+
+@jit()
+def stop_seen(
+    s: float,
+    v: float,
+    stop: float,
+    sigma: float,
+    dirn: int,
+    ridge: int,
+    pos: np.ndarray,
+    K: np.ndarray,
+) -> float:
+    """When a track's stop at a step (at `stop`, travel s, speed v before it, s's sigma
+    then) is told: the time of the next ridge due after the step at that speed - the one
+    after the next when the step lies within 3 sigma of the next (it may be that ridge's
+    contact) -, plus the detector's latency there, times STEP_STOP_WAIT
+    (`TrackerDecoder.STEP_STOP_WAIT`); at once when no ridge is ahead."""
+    R = pos.shape[1] - 1
+    di = (1 - dirn) // 2
+    k = min(ridge + 1, R)
+    if pos[di, k] - s <= 3.0 * sigma:
+        k = min(k + 1, R)
+    if k >= R:  # past the last ridge no contact is due: told at once
+        return stop
+    latency = min(K[MAX_LATENCY], max(K[MIN_LATENCY], K[DETECT_MM] / v))
+    return stop + K[STEP_STOP_WAIT] * (max(pos[di, k] - s, 0.0) / v + latency)
 
 
 @jit()
@@ -217,7 +249,11 @@ def where(
     di = (1 - dirn) // 2
     if stop == stop:  # stopped at a step: where it was then
         gap = pos[di, min(ridge + 1, R)] - pos[di, ridge]
-        return s, 0.0, max(math.sqrt(max(p00, 0.0)), 0.1 * gap)
+        held = max(math.sqrt(max(p00, 0.0)), 0.1 * gap)
+        if stopped:
+            return s, 0.0, held
+        # not yet told stopped (its next ridge not yet due): moving on as before it
+        return min(s + v * max(0.0, g - stop), pos[di, min(ridge + 1, R)]), v, held
     tau = max(0.0, g - t)
     a = acceleration(a, p22, ridge, R, K)
     v_end = min(max(v + a * tau, 0.25 * v), 4.0 * v)
@@ -366,7 +402,19 @@ def posterior(
                     braked = True
                 elif live[i]:
                     until = min(until, t_rest)
-        stopped[i] = stop_t[i, j] or not running or braked
+        # a stop at a step is told once the next ridge, had the slip gone on, would have
+        # been decided (`TrackerDecoder.STEP_STOP_WAIT`): before that it is slipping on
+        pending = False
+        if K[STEP_STOP_WAIT] > 0 and not running and X[i, 1] > 0:
+            tau = stop[i] - t[i]
+            var = P[i, 0, 0] + 2 * tau * P[i, 0, 1] + tau * tau * P[i, 1, 1]
+            sigma = math.sqrt(max(var, 0.0))
+            t_seen = stop_seen(X[i, 0], X[i, 1], stop[i], sigma, dirn[i], ridge[i], pos, K)
+            if g < t_seen:
+                pending = True
+                if live[i]:
+                    until = min(until, t_seen)
+        stopped[i] = (stop_t[i, j] or not running or braked) and not pending
         limit[i] = limit_t[i, j]
         if j + 1 < J:
             upcoming = due[i, j + 1] + blind[i] if has_blind else due[i, j + 1]
