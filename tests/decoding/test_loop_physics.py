@@ -15,11 +15,12 @@ from grasplink.evaluation import slip_reporting as sr
 
 LOOP_DEFECT = (
     "on the loop's physics (alpha0.1, 20 and 30 mm/s, seeds 7001-7004) the slip flag is down "
-    "in 41.2 % of the observable slipping updates from the 2nd contact and the speed missing "
-    "in 51.2 % from the 3rd (at 14b2ad2): of the ridge contacts found 41 % are told steps "
-    "(the FSR's 0.2 N hysteresis holds the pulse's fall; 8 % on the constant set) and 21 % "
-    "only by the slow probes (0.2 s late; the tracker waits 0.17 s at most), 24 % are missed; "
-    "the tracker takes a step for a stop"
+    "in 48.6 % of the observable slipping updates from the 2nd contact and the speed missing "
+    "in 59.6 % from the 3rd (at a47a6c4; 41.2 / 51.2 % with 14b2ad2's ramp check, reverted): "
+    "of the ridge contacts found 41 % are told steps (the FSR's 0.2 N hysteresis holds the "
+    "pulse's fall; 8 % on the constant set) and 21 % only by the slow probes, 24 % are "
+    "missed; a step's 'stopped here' outweighs the ridge (STEP_STOP_WAIT's curve: "
+    "docs/benchmarks/slip_reporting.md), a missed 2nd ridge leaves one-contact tracks"
 )
 
 
