@@ -288,10 +288,10 @@ class TrackerDecoder(Decoder):
     LOG_RESTART = math.log(0.05)  # a slip stopped unseen and restarted before this contact
     RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
     # a restarted track (speed unknown until its next contact) is no slip yet while its
-    # restart contact is told a step or unclear (1), or also while not yet told (2); 0:
-    # a slip at once. After a stop the level steps (static friction), and that step read
-    # as the restart at the next ridge held the flag up with no speed through the stop
-    # (issue 22 item 4)
+    # restart contact is told a step (1), or also unclear (2), or also not yet told (3);
+    # 0: a slip at once. After a stop the level steps (static friction), and that step
+    # read as the restart at the next ridge held the flag up with no speed through the
+    # stop (issue 22 item 4; figures: docs/decoding.md, tracker section)
     RESTART_CONFIRM = 1.0
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
     STOP_STEP_PER_S = 1.0
@@ -1027,8 +1027,9 @@ class TrackerDecoder(Decoder):
         n = np.arange(5)[:, None]
         evident = (n >= 2) & ((pulses > 0) | ((n >= 4) & (steps == 0)))
         hold = np.zeros(len(weight), np.bool_)
-        hold[[STEP, UNCLEAR]] = self.RESTART_CONFIRM >= 1
-        hold[UNKNOWN] = self.RESTART_CONFIRM >= 2
+        hold[STEP] = self.RESTART_CONFIRM >= 1
+        hold[UNCLEAR] = self.RESTART_CONFIRM >= 2
+        hold[UNKNOWN] = self.RESTART_CONFIRM >= 3
         return weight, bonus, np.concatenate([evident, np.zeros_like(evident)]), hold
 
     @cached_property
