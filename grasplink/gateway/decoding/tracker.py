@@ -287,6 +287,12 @@ class TrackerDecoder(Decoder):
     LOG_STOP_REPORT: float | None = None
     LOG_RESTART = math.log(0.05)  # a slip stopped unseen and restarted before this contact
     RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
+    # a restarted track (speed unknown until its next contact) is no slip yet while its
+    # restart contact is told a step (1), or also unclear (2), or also not yet told (3);
+    # 0: a slip at once. After a stop the level steps (static friction), and that step
+    # read as the restart at the next ridge held the flag up with no speed through the
+    # stop (issue 22 item 4; figures: docs/decoding.md, tracker section)
+    RESTART_CONFIRM = 1.0
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
     STOP_STEP_PER_S = 1.0
     # ... a stop there is told once the next ridge due after the step, had the slip gone
@@ -1005,12 +1011,14 @@ class TrackerDecoder(Decoder):
         return out
 
     @cached_property
-    def _evidence_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _evidence_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What the pulse verdicts on a track's recent contacts say (is it a slip, a score
         bonus; kernels.posterior), read off their counts packed as pulses + 256 steps: the
         weight of each verdict in such a count, the bonus per count, and whether it is
-        evident per count and min(n, 4) contacts. (A ring slot never written holds id -1
-        and no verdict: an unused id, -1, reads no verdict there.)"""
+        evident per count and min(n, 4) contacts (rows 5-9: none, a restart held by its
+        contact's verdict), and which verdicts of a restart contact hold it
+        (RESTART_CONFIRM). (A ring slot never written holds id -1 and no verdict: an
+        unused id, -1, reads no verdict there.)"""
         weight = np.zeros(max(UNKNOWN, PULSE, STEP, UNCLEAR) + 1, np.int64)
         weight[PULSE], weight[STEP] = 1, 256
         packed = np.arange(256 * IDS + IDS + 1)
@@ -1018,7 +1026,11 @@ class TrackerDecoder(Decoder):
         bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
         n = np.arange(5)[:, None]
         evident = (n >= 2) & ((pulses > 0) | ((n >= 4) & (steps == 0)))
-        return weight, bonus, evident
+        hold = np.zeros(len(weight), np.bool_)
+        hold[STEP] = self.RESTART_CONFIRM >= 1
+        hold[UNCLEAR] = self.RESTART_CONFIRM >= 2
+        hold[UNKNOWN] = self.RESTART_CONFIRM >= 3
+        return weight, bonus, np.concatenate([evident, np.zeros_like(evident)]), hold
 
     @cached_property
     def _K(self) -> np.ndarray:

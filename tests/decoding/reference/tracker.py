@@ -904,12 +904,14 @@ class NumpyTracker:
         """Is it a slip (a contact fell back like a pulse, or many contacts and no step)?
         And the score bonus of the pulse verdicts on its recent contacts. (A slot never
         written holds id -1 and no verdict: an unused id, -1, reads no verdict there.)"""
-        weight, bonus, evident = self._evidence_tables
+        weight, bonus, evident, hold = self._evidence_tables
         ids = B.ids
         slot = ids % RING
-        counted = weight.take(self._ring.take(slot))
-        packed = np.add.reduce(np.where(self._ring_id.take(slot) == ids, counted, 0), axis=1)
-        return evident[np.minimum(B.n, 4), packed], bonus.take(packed)
+        verdicts = np.where(self._ring_id.take(slot) == ids, self._ring.take(slot), 0)
+        packed = np.add.reduce(weight.take(verdicts), axis=1)
+        # speed unknown (restarted) and its last contact's verdict holds it: no slip yet
+        held = (B.run == 1) & hold.take(verdicts[:, -1])
+        return evident[np.minimum(B.n, 4) + 5 * held, packed], bonus.take(packed)
 
     def _log_waiting(
         self, B: _Bank, w: np.ndarray, g: float, blind: np.ndarray | None

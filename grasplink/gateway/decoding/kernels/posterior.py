@@ -307,15 +307,19 @@ def _log_waiting(
 def _evidence(
     ids: np.ndarray,
     n: np.ndarray,
+    run: np.ndarray,
     ring: np.ndarray,
     ring_id: np.ndarray,
     weight_t: np.ndarray,
     bonus_t: np.ndarray,
     evident_t: np.ndarray,
+    hold_t: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per track: is it evidently a slip, and its score bonus, from the pulse verdicts on
     its recent contacts (`TrackerDecoder._evidence_tables`): a contact's verdict counts
-    where the ring of verdicts still holds that contact's id."""
+    where the ring of verdicts still holds that contact's id. A track whose speed is
+    unknown (run 1) reads rows 5-9 (not evident) when its last contact's verdict holds it
+    (`hold_t`: a restart on a contact told a step is no slip yet)."""
     N, R = ids.shape[0], len(ring)
     evident = np.empty(N, np.bool_)
     bonus = np.empty(N)
@@ -325,7 +329,11 @@ def _evidence(
             slot = ids[i, c] % R
             if ring_id[slot] == ids[i, c]:
                 packed += weight_t[ring[slot]]
-        evident[i] = evident_t[min(n[i], 4), packed]
+        last = ids[i, ids.shape[1] - 1]
+        slot = last % R
+        verdict = ring[slot] if ring_id[slot] == last else 0
+        held = run[i] == 1 and hold_t[verdict]
+        evident[i] = evident_t[min(n[i], 4) + 5 * held, packed]
         bonus[i] = bonus_t[packed]
     return evident, bonus
 
@@ -353,7 +361,7 @@ def posterior(
     ids: np.ndarray,
     ring: np.ndarray,
     ring_id: np.ndarray,
-    evidence_t: tuple[np.ndarray, np.ndarray, np.ndarray],
+    evidence_t: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     ahead_log: np.ndarray,
     ahead_finite: np.ndarray,
     ahead_before: np.ndarray,
@@ -370,7 +378,7 @@ def posterior(
     R = pos.shape[1] - 1
     J = due.shape[1]
     until = g + K[REFRESH_S]
-    evident, bonus = _evidence(ids, n, ring, ring_id, *evidence_t)
+    evident, bonus = _evidence(ids, n, run, ring, ring_id, *evidence_t)
     best = -np.inf
     for i in range(N):
         best = max(best, score[i])
