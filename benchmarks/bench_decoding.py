@@ -14,9 +14,7 @@ docs/benchmarks/ of the checkout the current folder is in (or `--out DIR`):
 The work lives in `grasplink.evaluation.decoding_bench` (also `grasplink
 bench decode`); this driver only parses arguments.
 
-Run: `make bench` or `.venv/bin/python benchmarks/bench_decoding.py [--quick] [--out DIR]`;
-`--render` rewrites decoding.md from the JSON files alone (e.g. after a slip-reporting
-run, whose trade-off curves the page shows).
+Run: `make bench` or `.venv/bin/python benchmarks/bench_decoding.py [--quick] [--out DIR]`.
 """
 
 from __future__ import annotations
@@ -27,7 +25,7 @@ from pathlib import Path
 
 from grasplink.controllers import build_controllers
 from grasplink.errors import GrasplinkError
-from grasplink.evaluation.decoding_bench import default_out_dir, render_from_files, run_benchmark
+from grasplink.evaluation.decoding_bench import run_benchmark
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,21 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--scenes", type=Path, default=None, help="default: scenes/ of the checkout"
     )
-    parser.add_argument(
-        "--render",
-        action="store_true",
-        help="only rewrite decoding.md from the decoding.json and slip_reporting.json in the "
-        "out folder (no decoding)",
-    )
     args = parser.parse_args(argv)
-    if args.render:
-        try:
-            page = render_from_files(args.out if args.out is not None else default_out_dir())
-        except GrasplinkError as exc:
-            print(f"bench_decoding: error: {exc}", file=sys.stderr)
-            return 1
-        print(f"wrote {page}")
-        return 0
     try:
         results, out = run_benchmark(
             quick=args.quick,

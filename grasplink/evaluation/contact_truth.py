@@ -33,6 +33,7 @@ MATCH_S = 0.02  # a contact within this of a true ridge crossing found it
 CHUNK = 3  # samples per skin TPDO1
 
 HEADLINE_LAYOUT = "alpha0.1"
+LOOP_OBJECT_MM = 90.0  # loop_headline.toml's object
 HEADLINE_START_S = 1.0
 HEADLINE_STOP_S = 2.426
 # the grip the reflex reached in the shipped loop run (hand.grip_n of its truth.csv)
@@ -53,8 +54,6 @@ HEADLINE_GRIP_N = [
 def headline_replica(seed: int = 7, duration_s: float = 3.5, fs_hz: int = 400) -> SkinRecording:
     """The headline loop's skin signal, open loop (see the module doc); `seed` draws the
     pulses, dips and noise."""
-    layout = tuple(LAYOUTS_MM[HEADLINE_LAYOUT])
-    ctx = harness.context(seed=seed, rate_hz=fs_hz, layout_mm=layout)
     speed = [
         [0.0, 0.0],
         [HEADLINE_START_S, 0.0],
@@ -62,15 +61,37 @@ def headline_replica(seed: int = 7, duration_s: float = 3.5, fs_hz: int = 400) -
         [HEADLINE_STOP_S - 1e-3, 40.0],
         [HEADLINE_STOP_S, 0.0],
     ]
+    layout = tuple(LAYOUTS_MM[HEADLINE_LAYOUT])
+    return loop_recording(layout, speed, -8.0, HEADLINE_GRIP_N, seed, duration_s, fs_hz)
+
+
+def loop_recording(
+    layout: tuple[float, ...],
+    speed_mm_s: list[list[float]],
+    start_mm: float,
+    grip_n: list[list[float]],
+    seed: int,
+    duration_s: float,
+    fs_hz: int = 400,
+) -> SkinRecording:
+    """The closed-loop scenes' skin physics, open loop: a 90 mm object on a scripted signed
+    speed (`object.scripted` points) from `start_mm`, speed dips at every ridge, the grip
+    scripted (linear between points), 0.2 kg load, FSR model, ridge pulses, hysteresis,
+    0.02 N white noise, 0.05 N drift, saturation; `seed` draws the pulses, dips and noise."""
+    ctx = harness.context(seed=seed, rate_hz=fs_hz, layout_mm=layout)
     contacts = harness.make(skin.RidgeContacts, ctx)
     effects = [
         harness.make(
-            kinematics.ScriptedObject, ctx, speed_mm_s=speed, start_mm=-8.0, object_length_mm=90.0
+            kinematics.ScriptedObject,
+            ctx,
+            speed_mm_s=speed_mm_s,
+            start_mm=start_mm,
+            object_length_mm=LOOP_OBJECT_MM,
         ),
         harness.make(kinematics.RidgeDips, ctx),
-        harness.make(actuators.ScriptedGrip, ctx, grip_n=HEADLINE_GRIP_N),
+        harness.make(actuators.ScriptedGrip, ctx, grip_n=grip_n),
         harness.make(actuators.ScriptedLoad, ctx, mass_kg=0.2),
-        harness.make(skin.FsrForce, ctx, object_length_mm=90.0),
+        harness.make(skin.FsrForce, ctx, object_length_mm=LOOP_OBJECT_MM),
         contacts,
         harness.make(skin.Hysteresis, ctx),
         harness.make(noise.WhiteNoise, ctx, std=0.02),

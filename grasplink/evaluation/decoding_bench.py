@@ -265,22 +265,6 @@ def write_page(results: dict, out: Path) -> None:
     (out / "decoding.md").write_text(render(results, tradeoffs(out)))
 
 
-def render_from_files(out: Path) -> Path:
-    """Rewrite decoding.md from the decoding.json (and slip_reporting.json) `out` holds:
-    no decoding; for a page change or a new slip-reporting run."""
-    try:
-        results = json.loads((out / "decoding.json").read_text())
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{out / 'decoding.json'}: cannot re-render without it ({exc})") from exc
-    try:
-        write_page(results, out)
-    except (KeyError, TypeError) as exc:
-        raise ConfigError(
-            f"{out / 'decoding.json'} is from an older benchmark (no {exc} in it): run it again"
-        ) from exc
-    return out / "decoding.md"
-
-
 def tradeoffs(out: Path) -> list[str]:
     """The trade-off section of the slip-reporting run whose files `out` holds (issue 22:
     the decisions that trade one figure for another, one curve each), or nothing."""
@@ -289,19 +273,14 @@ def tradeoffs(out: Path) -> list[str]:
         figures, meta = saved["figures"], saved["meta"]
     except (OSError, ValueError, KeyError, TypeError):
         return []
-    lines = sr.render_sweeps(figures)
-    if not lines:
-        return []
     commit = meta.get("git", {}).get("commit", "?")
-    lines[1:3] = [
+    return sr.render_sweeps(
+        figures,
         "## Trade-off curves of the default decoder (issue 22)",
-        "",
         f"From the slip-reporting run of {meta.get('date', '?')} at commit {commit} "
         f"([slip_reporting.md](slip_reporting.md), its figures and definitions), not from "
         f"this page's run.",
-        "",
-    ]
-    return lines
+    )
 
 
 def run_benchmark(

@@ -37,15 +37,14 @@ from typing import Any
 import numpy as np
 
 from grasplink.evaluation import nonstationary as ns
+from grasplink.evaluation.contact_truth import LOOP_OBJECT_MM, loop_recording
 from grasplink.evaluation.decoders import make_decoder
 from grasplink.gateway.decoding import tracker as tr
 from grasplink.gateway.decoding.base import Decoder, SlipEstimate
 from grasplink.gateway.decoding.contacts import ContactDetector
 from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
-from grasplink.simulators import harness
-from grasplink.simulators.effects import actuators, kinematics, noise, skin
-from grasplink.simulators.synth import SkinRecording, run_recording, scripted_recording
+from grasplink.simulators.synth import SkinRecording, scripted_recording
 
 # -- definitions ----------------------------------------------------------------------------
 V_MOVING_MM_S = ns.V_MOVING_MM_S  # slipping: the truth moves at least this fast
@@ -67,7 +66,6 @@ LOOP_SPEEDS = (10, 20, 30, 45)  # the wearer's band, its limit and the reflex's 
 LOOP_ONSET_S = 1.0
 LOOP_FS_HZ = 400  # the skin node's default rate
 LOOP_LEAD_MM = 8.0  # loop_headline.toml: the edge starts this far before the first ridge
-LOOP_OBJECT_MM = 90.0
 LOOP_GRIP_N = (5.0, 8.8)  # held, then raised (the wearer or the reflex) as the slip stops
 LOOP_GRIP_RISE_S = 0.6
 STOP_REST_S = 1.0  # at rest after a stop mid-skin, beyond the time the next contact is due
@@ -160,7 +158,7 @@ def _loop_signal(case: Case) -> ns.Recorded:
     seed: the 90 mm object slides on from 8 mm before the skin (its level rises under the
     first ridges), the speed dips at every ridge, hysteresis, 0.02 N white noise and
     0.05 N drift; half the seeds stop with the edge at 40-95 % of the skin while the grip
-    rises 5 -> 8.8 N, the others slide off the skin's far end."""
+    rises 5 -> 8.8 N, the others slide off the skin's far end (`contact_truth.loop_recording`)."""
     layout = tuple(LAYOUTS_MM[case.layout])
     skin_mm = float(sum(layout))
     rng = np.random.default_rng(case.seed)
@@ -180,27 +178,8 @@ def _loop_signal(case: Case) -> ns.Recorded:
     grip = [[0.0, LOOP_GRIP_N[0]]]
     if stops:
         grip += [[stop_s - LOOP_GRIP_RISE_S, LOOP_GRIP_N[0]], [stop_s, LOOP_GRIP_N[1]]]
-    ctx = harness.context(seed=case.seed, rate_hz=LOOP_FS_HZ, layout_mm=layout)
-    contacts = harness.make(skin.RidgeContacts, ctx)
-    effects = [
-        harness.make(
-            kinematics.ScriptedObject,
-            ctx,
-            speed_mm_s=profile,
-            start_mm=skin_mm + LOOP_LEAD_MM if case.reverse else -LOOP_LEAD_MM,
-            object_length_mm=LOOP_OBJECT_MM,
-        ),
-        harness.make(kinematics.RidgeDips, ctx),
-        harness.make(actuators.ScriptedGrip, ctx, grip_n=grip),
-        harness.make(actuators.ScriptedLoad, ctx, mass_kg=0.2),
-        harness.make(skin.FsrForce, ctx, object_length_mm=LOOP_OBJECT_MM),
-        contacts,
-        harness.make(skin.Hysteresis, ctx),
-        harness.make(noise.WhiteNoise, ctx, std=0.02),
-        harness.make(noise.Drift, ctx, std=0.05, corner_hz=0.3),
-        harness.make(skin.Saturation, ctx),
-    ]
-    rec = run_recording(effects, contacts, layout, LOOP_FS_HZ, duration_s)
+    start_mm = skin_mm + LOOP_LEAD_MM if case.reverse else -LOOP_LEAD_MM
+    rec = loop_recording(layout, profile, start_mm, grip, case.seed, duration_s, LOOP_FS_HZ)
     return ns.Recorded(rec, rec.t_s, rec.force_n, rec.fs_hz)
 
 
@@ -1323,13 +1302,17 @@ def render_grid(figures: dict) -> list[str]:
     return lines
 
 
-def render_sweeps(figures: dict) -> list[str]:
+def render_sweeps(
+    figures: dict, heading: str = "## Trade-off curves", source: str = ""
+) -> list[str]:
+    """The trade-off section; `source`, if given, a line saying which run it comes from."""
     if not figures["sweeps"]:
         return []
     lines = [
         "",
-        "## Trade-off curves",
+        heading,
         "",
+        *([source, ""] if source else []),
         "Each constant swept alone over its range on a reduced set "
         f"({figures['sweep_cases']} cases: the",
         "plan's `sweep_variants` of constant, accelerating, stick-slip, 10 dB, held and other",
