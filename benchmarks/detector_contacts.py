@@ -31,9 +31,13 @@ headline loop's rising level, detection at 10 dB SNR, and the detector's cost.
    the spacing before, beside what the detector finds now; and of the slipping updates
    from each run's 3rd contact, the share with 2 detectable contacts before them in the
    run (an upper bound for "speed given") and among the run's last 3 contacts.
+   `--ceiling KIND` does the same on another kind's cases (their own white noise; the
+   loop kind's hysteresis is not in the rebuilt pulses, so its ceiling is an upper bound),
+   with the default decoder's speed missing beside it: over all those updates, and over
+   those with 2 detectable contacts among the run's last 3 (what the contacts determine).
 
 Run: `.venv/bin/python benchmarks/detector_contacts.py [--skip-snr] [--decoder]
-[--spacings [--only-spacings] [--json FILE]] [--snr-ceiling]`.
+[--spacings [--only-spacings] [--json FILE]] [--snr-ceiling | --ceiling KIND]`.
 """
 
 from __future__ import annotations
@@ -51,12 +55,14 @@ from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 from grasplink.evaluation.contact_truth import (
     HEADLINE_STOP_S,
+    LOOP_WHITE_N,
     MATCH_S,
     detect,
     headline_replica,
     match,
 )
 from grasplink.gateway.decoding.contacts import PULSE_SCALES_S, ContactDetector
+from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 
@@ -186,7 +192,6 @@ def decoder_snr10() -> None:
     """The default decoder on the same snr10 signals, with and without the pulse probe:
     speed missing from each run's 3rd ridge contact (`slip_reporting.score`)."""
     from grasplink.evaluation import slip_reporting as sr
-    from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 
     rows: dict[tuple[str, str], list[int]] = defaultdict(lambda: [0, 0])
     for signal in ns.signals(False):
@@ -208,19 +213,28 @@ def decoder_snr10() -> None:
         print(f"  {key:10s} {label:12s} {missing:5d} of {moving:5d} ({missing / moving:5.1%})")
 
 
-def ceiling_cases() -> list:
-    """slip_reporting's snr10 cases of the full plan (the issue's target is judged on)."""
-    return [c for c in sr.cases(sr.FULL) if c.kind == "snr10"]
+def ceiling_cases(kind: str = "snr10") -> list:
+    """slip_reporting's cases of one kind in the full plan (the targets are judged on)."""
+    return [c for c in sr.cases(sr.FULL) if c.kind == kind]
 
 
-def snr_ceiling() -> None:
-    """The detection ceiling at 10 dB SNR (see the module doc, 6)."""
+def white_noise_n(kind: str, layout_mm) -> float:
+    """The white noise of a kind's signals (N): 10 dB under the median pulse for snr10,
+    the closed-loop scenes' 0.02 N for loop, `synth.NOISE_WHITE_N` for the others."""
+    if kind == "snr10":
+        return ns.pulse_height_n(layout_mm) / 10 ** (ns.SNR_DB / 20)
+    return LOOP_WHITE_N if kind == "loop" else synth.NOISE_WHITE_N
+
+
+def snr_ceiling(kind: str = "snr10") -> None:
+    """The detection ceiling on one kind's signals (see the module doc, 6)."""
     rows: dict[str, list[list[float]]] = defaultdict(list)
-    updates: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
-    for case in ceiling_cases():
+    updates: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0, 0, 0])
+    todo = ceiling_cases(kind)
+    for case in todo:
         rec = case.make()
         truth = rec.truth
-        white = ns.pulse_height_n(truth.layout_mm) / 10 ** (ns.SNR_DB / 20)
+        white = white_noise_n(kind, truth.layout_mm)
         train = ct.pulse_train(truth, case.seed)
         snr = ct.ideal_snr(train, truth.t_s, white)
         snr2 = ct.ideal_snr(train, truth.t_s, white, background=2)
@@ -230,27 +244,39 @@ def snr_ceiling() -> None:
             cell = [train.step_n[i] / white, snr[i], snr2[i], float(found[i])]
             for key in (case.layout, f"spacing {spacing[i]}", "all"):
                 rows[key].append(cell)
-        # slipping updates (one per 3-sample packet) from each run's 3rd contact
-        t_upd = truth.t_s[sr.CHUNK - 1 :: sr.CHUNK]
+        # the default decoder's updates, scored as slip_reporting scores them
+        decoder = sr.build_decoder(DEFAULT_DECODER, truth.layout_mm, rec.fs_hz, {})
+        estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
+        t_upd = np.array([e.t_s for e in estimates])
+        speed = np.array([0.0 if e.speed_mm_s is None else abs(e.speed_mm_s) for e in estimates])
         moving = np.abs(np.interp(t_upd, truth.t_s, truth.speed_mm_s)) >= sr.V_MOVING_MM_S
-        ok = snr >= ct.DETECTABLE_SNR
-        for start, end, _ in ns.motion(truth).runs:
+        edge = np.interp(t_upd, truth.t_s, truth.position_mm)
+        skin = sr.ridges_mm(truth.layout_mm)
+        ok = (snr >= ct.DETECTABLE_SNR) & (train.step_n > 0)  # it rises, and clearly
+        for start, end, sign in ns.motion(truth).runs:
             mine = np.flatnonzero((train.times_s >= start) & (train.times_s < end))
             if len(mine) < 3:
                 continue
-            for t in t_upd[moving & (t_upd >= train.times_s[mine[2]]) & (t_upd < end)]:
+            beyond = (edge >= skin[-1]) if sign > 0 else (edge <= skin[0])
+            scored = moving & ~beyond & (t_upd >= train.times_s[mine[2]]) & (t_upd < end)
+            for t, v in zip(t_upd[scored], speed[scored], strict=True):
                 before = mine[train.times_s[mine] <= t]
                 any2 = int(ok[before].sum()) >= 2
                 last2 = int(ok[before[-3:]].sum()) >= 2
                 now = int(np.asarray(found)[before].sum()) >= 2
                 for key in (case.layout, "all"):
-                    updates[key][0] += 1
-                    updates[key][1] += any2
-                    updates[key][2] += last2
-                    updates[key][3] += now
+                    cell = updates[key]
+                    cell[0] += 1
+                    cell[1] += any2
+                    cell[2] += last2
+                    cell[3] += now
+                    cell[4] += v <= 0  # speed missing (slip_reporting's missing from 3rd)
+                    cell[5] += last2 and v <= 0
     print(
-        f"10 dB SNR ceiling, slip_reporting's snr10 cases ({len(ceiling_cases())}): "
+        f"Detection ceiling, slip_reporting's {kind} cases ({len(todo)}, white noise "
+        f"{'10 dB under the pulse' if kind == 'snr10' else f'{white_noise_n(kind, ()):g} N'}): "
         f"detectable = matched-filter SNR >= {ct.DETECTABLE_SNR:g}"
+        + (" (hysteresis not modelled: an upper bound)" if kind == "loop" else "")
     )
     head = [
         "set",
@@ -260,6 +286,7 @@ def snr_ceiling() -> None:
         "SNR >= 4",
         "SNR >= 5",
         "SNR >= 5 (quadratic bg)",
+        "rises, SNR >= 5",
         "found now",
     ]
     print("| " + " | ".join(head) + " |")
@@ -275,15 +302,26 @@ def snr_ceiling() -> None:
             f"{np.mean(a[:, 1] >= 4):.0%}",
             f"{np.mean(a[:, 1] >= 5):.0%}",
             f"{np.mean(a[:, 2] >= 5):.0%}",
+            f"{np.mean((a[:, 1] >= 5) & (a[:, 0] > 0)):.0%}",
             f"{np.mean(a[:, 3]):.0%}",
         ]
         print("| " + " | ".join(line) + " |")
-    print("Slipping updates from each run's 3rd contact with 2 contacts detectable before them:")
-    print("| set | updates | in the run | among its last 3 | 2 found now (in the run) |")
-    print("|---|---|---|---|---|")
+    print(
+        "Scored slipping updates (from each run's 3rd contact, before the last ridge) with 2"
+        " contacts detectable (rising, SNR >= 5) before them, and the default decoder's"
+        " speed missing:"
+    )
+    print(
+        "| set | updates | 2 detectable in the run | among its last 3 | 2 found now |"
+        " speed missing | missing where 2 of the last 3 are detectable |"
+    )
+    print("|---|---|---|---|---|---|---|")
     for key in sorted(updates, key=lambda k: k == "all"):
-        n, in_run, in_last3, found_now = updates[key]
-        print(f"| {key} | {n} | {in_run / n:.0%} | {in_last3 / n:.0%} | {found_now / n:.0%} |")
+        n, in_run, in_last3, found_now, missing, missing_det = updates[key]
+        print(
+            f"| {key} | {n} | {in_run / n:.0%} | {in_last3 / n:.0%} | {found_now / n:.0%} |"
+            f" {missing / n:.1%} | {missing_det / max(in_last3, 1):.1%} |"
+        )
 
 
 def _spacing_key(key: str) -> tuple[int, float, str]:
@@ -333,9 +371,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--snr-ceiling", action="store_true", help="only the detection ceiling at 10 dB SNR"
     )
+    parser.add_argument(
+        "--ceiling", metavar="KIND", help="only the detection ceiling on another kind's cases"
+    )
     args = parser.parse_args(argv)
-    if args.snr_ceiling:
-        snr_ceiling()
+    if args.snr_ceiling or args.ceiling:
+        snr_ceiling(args.ceiling or "snr10")
         return 0
     if args.spacings or args.only_spacings:
         spacings(args.json)

@@ -34,6 +34,7 @@ CHUNK = 3  # samples per skin TPDO1
 
 HEADLINE_LAYOUT = "alpha0.1"
 LOOP_OBJECT_MM = 90.0  # loop_headline.toml's object
+LOOP_WHITE_N = 0.02  # the closed-loop scenes' FSR white noise (N)
 HEADLINE_START_S = 1.0
 HEADLINE_STOP_S = 2.426
 # the grip the reflex reached in the shipped loop run (hand.grip_n of its truth.csv)
@@ -94,7 +95,7 @@ def loop_recording(
         harness.make(skin.FsrForce, ctx, object_length_mm=LOOP_OBJECT_MM),
         contacts,
         harness.make(skin.Hysteresis, ctx),
-        harness.make(noise.WhiteNoise, ctx, std=0.02),
+        harness.make(noise.WhiteNoise, ctx, std=LOOP_WHITE_N),
         harness.make(noise.Drift, ctx, std=0.05, corner_hz=0.3),
         harness.make(skin.Saturation, ctx),
     ]
