@@ -144,6 +144,9 @@ class PulseCheck(NamedTuple):
     # a step: the level's rising trend (the object covering more of the sensor) went on
     # after it (True: the object still moves), stopped (False), or no trend to tell (None)
     trend_on: bool | None = None
+    # a pulse the kink bank found: its height above its base in white-noise units (noise
+    # that crosses the threshold falls back like a pulse too, but stands a few units high)
+    height_snr: float | None = None
 
 
 class _Series:
@@ -870,14 +873,15 @@ class ContactDetector:
         new[1], new[2], new[3] = seg_h, seg_a, ready
         ch.refresh_views()
 
-    def _white(self, block: int) -> tuple[float, int] | None:
+    def _white(self, block: int, keep: bool = True) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
 
         The median of the finest scale's noise over the last `noise_blocks`
         blocks that showed their noise (not on a rail), each at least its
         quantisation floor (ADC step / sqrt(12)). None if none did: then the
         first later block that does (the block itself, at the start) - or
-        None while there is none yet.
+        None while there is none yet. `keep`: remember a final value (what it is told
+        depends on when: callers that only read it, `_check_pulses`, pass False).
         """
         fine = self.channels[0]
         gain = _hinge_gain(fine.width)
@@ -900,7 +904,7 @@ class ContactDetector:
         if values:
             values.sort()
             told = values[(len(values) - 1) // 2], len(values)
-            if block <= fine.done:  # every block before it complete: final
+            if keep and block <= fine.done:  # every block before it complete: final
                 self._white_by_block[block] = told
             return told
         for b in range(block, fine.done):
@@ -1420,11 +1424,15 @@ class ContactDetector:
             if done is None:
                 still.append(watch)
             else:
-                checks.append(done)
                 if done.pulse is True and watch.hist_n:
                     height = self._told_height(watch, done.emit_index)
                     self._heights.append((done.emit_index, height))
                     self._mark_busy(watch.index, done.emit_index, height)
+                    white = self._white(watch.index // self.block, keep=False)
+                    if white is not None:
+                        snr = height / max(white[0], NOISE_FLOOR_N)
+                        done = done._replace(height_snr=snr)
+                checks.append(done)
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
                     watch.top = float(watch.detrended.max()) if len(watch.detrended) else 0.0
                     watch.next_k = max(watch.next_k, done.emit_index - self.level_half + 1)

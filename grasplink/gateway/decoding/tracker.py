@@ -358,6 +358,11 @@ class TrackerDecoder(Decoder):
     # (accelerating speed missing +1.4 %: benchmarks/tune_tracker_kinds.py)
     LAST_BRAKE_Z = 2.0
     LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
+    # ... unless it stands under this many white-noise units above its base: noise that
+    # crosses the kink threshold falls back like a pulse too (a held object's two noise
+    # contacts a second apart, 1.9-2.4 units high, were a slip; 1.6 % of the ridge pulses
+    # told stand under 3, mostly merged ones mid-train); 0: every pulse verdict counts
+    WEAK_PULSE_SNR = 3.0
     LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
@@ -620,7 +625,15 @@ class TrackerDecoder(Decoder):
     def _add_check(self, check: PulseCheck) -> None:
         slot = check.id % RING
         self._ring_id[slot] = check.id
-        self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[check.pulse]
+        pulse, snr = check.pulse, check.height_snr
+        if (
+            pulse is True
+            and snr is not None
+            and self.WEAK_PULSE_SNR > 0
+            and snr < self.WEAK_PULSE_SNR
+        ):
+            pulse = None  # noise falls back like this too
+        self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[pulse]
         self._cache = None
         if check.pulse is True and check.id in self._steps:  # a step revised: a slow pulse
             del self._steps[check.id]
