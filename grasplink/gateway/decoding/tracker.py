@@ -50,7 +50,10 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   kept down to `LOG_KEEP_ODDS`; the confidence grows with that margin (and
   with how much of the posterior agrees), so an early answer is a
   low-confidence one. On a symmetric skin both ways explain the contacts
-  equally: a speed, never a direction. Past the last ridge no contact can come: a
+  equally: a speed, never a direction. Between contacts the speed is extrapolated with
+  the track's acceleration only as far as silence allows: a track whose next ridge is
+  not told by now has not reached it, so its mean speed since its contact is bounded
+  (`SILENCE_REACH`). Past the last ridge no contact can come: a
   braking there goes on only as far as the contacts made it certain (`LAST_BRAKE_Z`),
   else the speed last measured is held until a step tells the stop or the coast ends.
 
@@ -357,6 +360,12 @@ class TrackerDecoder(Decoder):
     # off. Cost: an alias that wrongly puts itself there lingers at its low speed
     # (accelerating speed missing +1.4 %: benchmarks/tune_tracker_kinds.py)
     LAST_BRAKE_Z = 2.0
+    # silence bounds the speed shown (`_where`): its next ridge not told by now, a track
+    # travelled less than this x the distance to it (misses weighted in); 0: no bound
+    SILENCE_REACH = 1.0
+    # ... below the speed at the contact too: 0 no (it undoes a speeding up), 1 to the mean
+    # it allows, 2 braking; 0 as noise misses more ridges than DETECT_P says
+    SILENCE_BRAKE = 0.0
     LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
     # ... unless it stands under this many white-noise units above its base: noise that
     # crosses the kink threshold falls back like a pulse too (a held object's two noise
@@ -977,11 +986,41 @@ class TrackerDecoder(Decoder):
     def _where(self, h: _One, g: float, stopped: bool, limit: int) -> tuple[float, float, float]:
         """(travel of the edge from the first ridge met, speed, sigma) of one track at g:
         extrapolated with its speed and acceleration, less the dip still recovering; held
-        where it stopped (kernels.posterior.where)."""
+        where it stopped (kernels.posterior.where). Its acceleration is capped so that it
+        has not yet reached where its next contact would have been told by now
+        (`SILENCE_REACH`, `_reach_mm`): the contact's latency and time on the rail
+        (`_blind`) show nothing."""
+        reach, silent = math.inf, 0.0
+        if self.SILENCE_REACH > 0 and not stopped and math.isnan(h.stop):
+            reach = self.SILENCE_REACH * float(self._reach_mm[(1 - h.dirn) // 2, h.ridge])
+            blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
+            silent = g - h.t - self._silence_latency - (0.0 if blind is None else float(blind[0]))
         return posterior_kernels.where(
             h.s, h.v, h.a, h.d, h.m, h.t, h.stop, h.p00, h.p01, h.p11, h.p02, h.p12, h.p22,
-            h.dirn, h.ridge, g, stopped, limit, self._pos, self._K,
+            h.dirn, h.ridge, g, stopped, limit, self._pos, self._K, reach, silent,
         )  # fmt: skip
+
+    @cached_property
+    def _silence_latency(self) -> float:
+        """The longest a ridge contact takes to be told (the kink bank's or the probes')."""
+        return max(self._max_latency, self._probe_latency)
+
+    @cached_property
+    def _reach_mm(self) -> np.ndarray:
+        """Per (direction, ridge of the last contact): how far a track may travel unseen
+        from there - the distance to the next ridge, plus each further one's spacing times
+        P(all ridges before it missed), the coast past the last (never seen) so weighted
+        too; inf from the last ridge (no contact can come)."""
+        R = self.count
+        out = np.full((2, R), np.inf)
+        for di in range(2):
+            for r in range(R - 1):
+                reach, unseen = 0.0, 1.0
+                for k in range(r + 1, R + 1):
+                    reach += unseen * float(self._pos[di, k] - self._pos[di, k - 1])
+                    unseen *= 1.0 - float(self._pd[di, k])
+                out[di, r] = reach
+        return out
 
     def _posterior(self, g: float):
         """(valid until, chosen (index, stopped, limit) or None, P(slip), agreement,
@@ -1073,6 +1112,7 @@ class TrackerDecoder(Decoder):
             step_stop_wait=self.STEP_STOP_WAIT,
             last_brake_z=self.LAST_BRAKE_Z,
             rest_share=self.REST_SHARE,
+            silence_brake=self.SILENCE_BRAKE,
         )
 
     @cached_property

@@ -43,6 +43,7 @@ NAMES = (
     "step_stop_wait",
     "last_brake_z",
     "rest_share",
+    "silence_brake",
 )
 (
     NEGLIGIBLE,
@@ -69,6 +70,7 @@ NAMES = (
     STEP_STOP_WAIT,
     LAST_BRAKE_Z,
     REST_SHARE,
+    SILENCE_BRAKE,
 ) = range(len(NAMES))
 
 
@@ -242,9 +244,13 @@ def where(
     limit: int,
     pos: np.ndarray,
     K: np.ndarray,
+    reach: float,
+    silent: float,
 ) -> tuple[float, float, float]:
     """(travel of the edge from the first ridge met, speed, sigma) of one track at g
-    (`TrackerDecoder._where`)."""
+    (`TrackerDecoder._where`). Silence bounds it: no contact told in the `silent` s after
+    the track's contact, so by then it travelled less than `reach` mm (inf: no bound) -
+    its acceleration is capped to keep it there (`TrackerDecoder.SILENCE_REACH`)."""
     R = pos.shape[1] - 1
     di = (1 - dirn) // 2
     if stop == stop:  # stopped at a step: where it was then
@@ -256,7 +262,19 @@ def where(
         return min(s + v * max(0.0, g - stop), pos[di, min(ridge + 1, R)]), v, held
     tau = max(0.0, g - t)
     a = acceleration(a, p22, ridge, R, K)
+    mean = np.inf  # the mean speed silence allows since t
+    if silent > 0 and reach < np.inf:
+        # from v at t on with a constant acceleration, travel (less the dip lost by then)
+        # stays below reach until t + silent; below v only as `SILENCE_BRAKE` allows
+        lost = d * m * (1.0 - math.exp(-silent / K[DIP_S]))
+        mean = (reach + lost) / silent
+        a_max = 2.0 * (mean - v) / silent
+        if K[SILENCE_BRAKE] < 2:
+            a_max = max(a_max, min(a, 0.0))
+        a = min(a, a_max)
     v_end = min(max(v + a * tau, 0.25 * v), 4.0 * v)
+    # the speed shown: at most that mean, unless below v (SILENCE_BRAKE 0) or v / 4 (1)
+    v_end = min(v_end, max(mean, (1.0 if K[SILENCE_BRAKE] < 1 else 0.25) * v))
     decay = math.exp(-tau / K[DIP_S])
     x = s + 0.5 * (v + v_end) * tau - d * m * (1.0 - decay)
     speed = max(0.0, v_end - d * m * decay / K[DIP_S])
@@ -479,7 +497,7 @@ def posterior(
     x_ref = where(
         X[c, 0], X[c, 1], X[c, 2], X[c, 3], m[c], t[c], stop[c],
         P[c, 0, 0], P[c, 0, 1], P[c, 1, 1], P[c, 0, 2], P[c, 1, 2], P[c, 2, 2],
-        dirn[c], ridge[c], g, is_stopped, lim, pos, K,
+        dirn[c], ridge[c], g, is_stopped, lim, pos, K, np.inf, 0.0,
     )[0]  # fmt: skip
     if dirn[c] < 0:
         x_ref = K[LENGTH_MM] - x_ref
