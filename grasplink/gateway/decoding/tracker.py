@@ -101,11 +101,12 @@ from grasplink.gateway.decoding.kernels.branch import (
     branch,
     pack_constants,
 )
+from grasplink.gateway.decoding.kernels.common import ring_slot
 from grasplink.gateway.decoding.kernels.prune import prune_choice
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
-# pulse verdicts in the ring of recent contacts
+# pulse verdicts in the ring of recent contacts (RING slots per id series: `ring_slot`)
 UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
 RING = 256
 
@@ -501,8 +502,9 @@ class TrackerDecoder(Decoder):
         self._contacts: list[ContactEvent] = []  # processed, in time order (last `history`)
         self._snapshots: list[tuple[float, _Bank]] = []  # state before each of them
         self._history = int(history)
-        self._ring_id = np.full(RING, -1, np.int64)  # pulse verdicts of recent contacts
-        self._ring = np.zeros(RING, np.int64)
+        # pulse verdicts of recent contacts: the kink bank's, then the probes' (`ring_slot`)
+        self._ring_id = np.full(2 * RING, -1, np.int64)
+        self._ring = np.zeros(2 * RING, np.int64)
         # contacts told to be steps (replayed as such): id -> did the trend go on after it
         self._steps: dict[int, bool | None] = {}
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
@@ -618,7 +620,7 @@ class TrackerDecoder(Decoder):
                 self._add_check(item)  # type: ignore[arg-type]
 
     def _add_check(self, check: PulseCheck) -> None:
-        slot = check.id % RING
+        slot = ring_slot(check.id, len(self._ring))
         self._ring_id[slot] = check.id
         self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[check.pulse]
         self._cache = None
