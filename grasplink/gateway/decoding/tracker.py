@@ -40,7 +40,7 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   not missed.
 * Output: posterior over hypotheses (plus "no slip": every contact is
   clutter). Slip is flagged when slipping tracks with two or more contacts
-  (one of which fell back like a pulse, or four or more contacts) hold half
+  (one of which fell back like a pulse, or three or more whatever their verdicts) hold half
   the mass. The speed needs no direction (the belt and the reflex act on
   it): it is given when the slipping tracks agree on it whichever way they
   go, else the range of speeds they allow (`_report`: SPEED_* constants).
@@ -360,6 +360,10 @@ class TrackerDecoder(Decoder):
     LAST_BRAKE_Z = 2.0
     LOG_PULSE = math.log(8.0)  # a contact that fell back like a pulse: likelier a slip
     LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
+    # a track is evidently a slip with two contacts one of which fell back like a pulse, or
+    # with this many whatever their verdicts: under the FSR's hysteresis (the loop) a ridge
+    # often reads as a step or unclear, and three contacts a track's timing fits are a slip
+    EVIDENT_CONTACTS = 3
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -1027,7 +1031,7 @@ class TrackerDecoder(Decoder):
         pulses, steps = packed & 255, packed >> 8
         bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
         n = np.arange(5)[:, None]
-        evident = (n >= 2) & ((pulses > 0) | ((n >= 4) & (steps == 0)))
+        evident = (n >= 2) & ((pulses > 0) | (n >= self.EVIDENT_CONTACTS))
         hold = np.zeros(len(weight), np.bool_)
         hold[STEP] = self.RESTART_CONFIRM >= 1
         hold[UNCLEAR] = self.RESTART_CONFIRM >= 2
