@@ -79,6 +79,7 @@ from grasplink.gateway.decoding.filters import (
     on_rail,
     resolution,
 )
+from grasplink.gateway.decoding.kernels.common import PROBE_IDS
 from grasplink.gateway.decoding.kernels.detector import (
     BLOCK_DONE,
     CH_ABS_N,
@@ -114,7 +115,7 @@ BUSY_SNR = 10.0  # a pulse this many white-noise units high marks its blocks bus
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
-STEP_IDS = 1_000_000_000  # ids of the small steps found by the step probe (their own series)
+STEP_IDS = PROBE_IDS  # ids of the small steps found by the step probe (their own series)
 PULSE_SCALES_S = (0.01, 0.02, 0.04)  # the pulse probe's windows (`_run_pulses`)
 PULSE_RAMP = 0.5  # the pulse probe takes out this share of the differences 2 w either side
 # the pulse probe's gate before any pulse is told (`_pulse_gate`): a ridge pulse's height on

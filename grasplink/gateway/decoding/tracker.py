@@ -40,7 +40,7 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   not missed.
 * Output: posterior over hypotheses (plus "no slip": every contact is
   clutter). Slip is flagged when slipping tracks with two or more contacts
-  (one of which fell back like a pulse, or four or more contacts) hold half
+  (one of which fell back like a pulse, or three or more whatever their verdicts) hold half
   the mass. The speed needs no direction (the belt and the reflex act on
   it): it is given when the slipping tracks agree on it whichever way they
   go, else the range of speeds they allow (`_report`: SPEED_* constants).
@@ -104,11 +104,12 @@ from grasplink.gateway.decoding.kernels.branch import (
     branch,
     pack_constants,
 )
+from grasplink.gateway.decoding.kernels.common import ring_slot
 from grasplink.gateway.decoding.kernels.prune import prune_choice
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
-# pulse verdicts in the ring of recent contacts
+# pulse verdicts in the ring of recent contacts (RING slots per id series: `ring_slot`)
 UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
 RING = 256
 
@@ -373,6 +374,10 @@ class TrackerDecoder(Decoder):
     # told stand under 3, mostly merged ones mid-train); 0: every pulse verdict counts
     WEAK_PULSE_SNR = 3.0
     LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
+    # a track is evidently a slip with two contacts one of which fell back like a pulse, or
+    # with this many whatever their verdicts: under the FSR's hysteresis (the loop) a ridge
+    # often reads as a step or unclear, and three contacts a track's timing fits are a slip
+    EVIDENT_CONTACTS = 3
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -515,8 +520,9 @@ class TrackerDecoder(Decoder):
         self._contacts: list[ContactEvent] = []  # processed, in time order (last `history`)
         self._snapshots: list[tuple[float, _Bank]] = []  # state before each of them
         self._history = int(history)
-        self._ring_id = np.full(RING, -1, np.int64)  # pulse verdicts of recent contacts
-        self._ring = np.zeros(RING, np.int64)
+        # pulse verdicts of recent contacts: the kink bank's, then the probes' (`ring_slot`)
+        self._ring_id = np.full(2 * RING, -1, np.int64)
+        self._ring = np.zeros(2 * RING, np.int64)
         # contacts told to be steps (replayed as such): id -> did the trend go on after it
         self._steps: dict[int, bool | None] = {}
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
@@ -632,7 +638,7 @@ class TrackerDecoder(Decoder):
                 self._add_check(item)  # type: ignore[arg-type]
 
     def _add_check(self, check: PulseCheck) -> None:
-        slot = check.id % RING
+        slot = ring_slot(check.id, len(self._ring))
         self._ring_id[slot] = check.id
         pulse, snr = check.pulse, check.height_snr
         if (
@@ -1077,7 +1083,7 @@ class TrackerDecoder(Decoder):
         pulses, steps = packed & 255, packed >> 8
         bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
         n = np.arange(5)[:, None]
-        evident = (n >= 2) & ((pulses > 0) | ((n >= 4) & (steps == 0)))
+        evident = (n >= 2) & ((pulses > 0) | (n >= self.EVIDENT_CONTACTS))
         hold = np.zeros(len(weight), np.bool_)
         hold[STEP] = self.RESTART_CONFIRM >= 1
         hold[UNCLEAR] = self.RESTART_CONFIRM >= 2

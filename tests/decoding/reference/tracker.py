@@ -906,7 +906,7 @@ class NumpyTracker:
         written holds id -1 and no verdict: an unused id, -1, reads no verdict there.)"""
         weight, bonus, evident, hold = self._evidence_tables
         ids = B.ids
-        slot = ids % RING
+        slot = ids % RING + np.where(ids >= STEP_IDS, RING, 0)  # (`kernels.common.ring_slot`)
         verdicts = np.where(self._ring_id.take(slot) == ids, self._ring.take(slot), 0)
         packed = np.add.reduce(weight.take(verdicts), axis=1)
         # speed unknown (restarted) and its last contact's verdict holds it: no slip yet

@@ -9,6 +9,9 @@ import numpy as np
 
 from grasplink.gateway.decoding.kernels import jit
 
+# ids of the small steps the detector's step probe finds (their own series, from here on)
+PROBE_IDS = 1_000_000_000
+
 
 def pack(names: tuple[str, ...], values: Mapping[str, float], kernel: str) -> np.ndarray:
     """A kernel's constants as one float array in the order of `names` (one argument, read
@@ -52,3 +55,13 @@ def travel(
     v_end = minimum(maximum(v + a * tau, 0.25 * v), 4.0 * v)
     decay = np.exp(-tau / dip_recovery_s)
     return s + 0.5 * (v + v_end) * tau - d * m * (1.0 - decay)
+
+
+@jit()
+def ring_slot(contact_id: int, ring_len: int) -> int:
+    """Where a contact's pulse verdict sits in the tracker's ring of verdicts: the kink
+    bank's contacts in its first half, the probes' in its second (the two id series run
+    at their own pace: one shared slot number let a probe's verdict overwrite a recent
+    kink contact's - PROBE_IDS is a multiple of 256 - and a slip lost its pulse)."""
+    half = ring_len // 2
+    return contact_id % half + (half if contact_id >= PROBE_IDS else 0)

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from grasplink.gateway.decoding.kernels import jit
-from grasplink.gateway.decoding.kernels.common import pack, travel
+from grasplink.gateway.decoding.kernels.common import pack, ring_slot, travel
 
 NAMES = (
     "negligible",
@@ -344,11 +344,11 @@ def _evidence(
     for i in range(N):
         packed = 0
         for c in range(ids.shape[1]):
-            slot = ids[i, c] % R
+            slot = ring_slot(ids[i, c], R)
             if ring_id[slot] == ids[i, c]:
                 packed += weight_t[ring[slot]]
         last = ids[i, ids.shape[1] - 1]
-        slot = last % R
+        slot = ring_slot(last, R)
         verdict = ring[slot] if ring_id[slot] == last else 0
         held = run[i] == 1 and hold_t[verdict]
         evident[i] = evident_t[min(n[i], 4) + 5 * held, packed]
