@@ -110,7 +110,8 @@ from grasplink.gateway.decoding.kernels.prune import prune_choice
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0
 # pulse verdicts in the ring of recent contacts (RING slots per id series: `ring_slot`)
-UNKNOWN, PULSE, STEP, UNCLEAR = 0, 1, 2, 3
+# NOISE: told a pulse, but standing no higher than noise does (`WEAK_PULSE_SNR`)
+UNKNOWN, PULSE, STEP, UNCLEAR, NOISE = 0, 1, 2, 3, 4
 RING = 256
 
 
@@ -375,9 +376,10 @@ class TrackerDecoder(Decoder):
     WEAK_PULSE_SNR = 3.0
     LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
     # a track is evidently a slip with two contacts one of which fell back like a pulse, or
-    # with this many whatever their verdicts: under the FSR's hysteresis (the loop) a ridge
-    # often reads as a step or unclear, and three contacts a track's timing fits are a slip
-    EVIDENT_CONTACTS = 3
+    # with this many whatever their verdicts, none a noise pulse (`WEAK_PULSE_SNR`): under
+    # the FSR's hysteresis (the loop) a ridge often reads as a step or unclear. 3 flagged
+    # an hour held for 0.49 s (a chain of unclear noise contacts over 29 s)
+    EVIDENT_CONTACTS = 4
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -640,15 +642,12 @@ class TrackerDecoder(Decoder):
     def _add_check(self, check: PulseCheck) -> None:
         slot = ring_slot(check.id, len(self._ring))
         self._ring_id[slot] = check.id
-        pulse, snr = check.pulse, check.height_snr
-        if (
-            pulse is True
-            and snr is not None
-            and self.WEAK_PULSE_SNR > 0
-            and snr < self.WEAK_PULSE_SNR
-        ):
-            pulse = None  # noise falls back like this too
-        self._ring[slot] = {True: PULSE, False: STEP, None: UNCLEAR}[pulse]
+        verdict = {True: PULSE, False: STEP, None: UNCLEAR}[check.pulse]
+        snr = check.height_snr
+        weak = self.WEAK_PULSE_SNR > 0 and snr is not None and snr < self.WEAK_PULSE_SNR
+        if verdict == PULSE and weak:
+            verdict = NOISE  # noise falls back like this too
+        self._ring[slot] = verdict
         self._cache = None
         if check.pulse is True and check.id in self._steps:  # a step revised: a slow pulse
             del self._steps[check.id]
@@ -1071,21 +1070,22 @@ class TrackerDecoder(Decoder):
     @cached_property
     def _evidence_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What the pulse verdicts on a track's recent contacts say (is it a slip, a score
-        bonus; kernels.posterior), read off their counts packed as pulses + 256 steps: the
+        bonus; kernels.posterior), read off their counts packed as pulses + 8 steps + 64 noise: the
         weight of each verdict in such a count, the bonus per count, and whether it is
         evident per count and min(n, 4) contacts (rows 5-9: none, a restart held by its
         contact's verdict), and which verdicts of a restart contact hold it
         (RESTART_CONFIRM). (A ring slot never written holds id -1 and no verdict: an
         unused id, -1, reads no verdict there.)"""
-        weight = np.zeros(max(UNKNOWN, PULSE, STEP, UNCLEAR) + 1, np.int64)
-        weight[PULSE], weight[STEP] = 1, 256
-        packed = np.arange(256 * IDS + IDS + 1)
-        pulses, steps = packed & 255, packed >> 8
+        weight = np.zeros(max(UNKNOWN, PULSE, STEP, UNCLEAR, NOISE) + 1, np.int64)
+        weight[PULSE], weight[STEP], weight[NOISE] = 1, 8, 64  # counts <= IDS < 8 each
+        packed = np.arange(64 * IDS + 8 * IDS + IDS + 1)
+        pulses, steps, noise = packed & 7, (packed >> 3) & 7, packed >> 6
         bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
         n = np.arange(5)[:, None]
-        evident = (n >= 2) & ((pulses > 0) | (n >= self.EVIDENT_CONTACTS))
+        # contacts that fit a track are a slip whatever their verdicts - unless noise's
+        evident = (n >= 2) & ((pulses > 0) | ((n >= self.EVIDENT_CONTACTS) & (noise == 0)))
         hold = np.zeros(len(weight), np.bool_)
-        hold[STEP] = self.RESTART_CONFIRM >= 1
+        hold[STEP] = hold[NOISE] = self.RESTART_CONFIRM >= 1
         hold[UNCLEAR] = self.RESTART_CONFIRM >= 2
         hold[UNKNOWN] = self.RESTART_CONFIRM >= 3
         return weight, bonus, np.concatenate([evident, np.zeros_like(evident)]), hold
