@@ -148,6 +148,9 @@ class PulseCheck(NamedTuple):
     # a pulse the kink bank found: its height above its base in white-noise units (noise
     # that crosses the threshold falls back like a pulse too, but stands a few units high)
     height_snr: float | None = None
+    # a step told at the sure hold (`ContactDetector.sure_hold`): sharp, tall and flat
+    # (`sharp_flat_step`), which ridge pulses seldom are
+    sure: bool = False
 
 
 class _Series:
@@ -417,6 +420,28 @@ def _hinge_gain(width: int) -> float:
     return math.sqrt(2.0 / s + width * width / (2.0 * s * s))
 
 
+def sharp_flat_step(
+    detrended: np.ndarray, noise: float, rise: int, snr: float, drop: float
+) -> bool:
+    """A level (base and trend out, from the onset) that is a step beyond doubt: at least
+    `snr` level-noise units high, at 80 % of its top within `rise` samples and never
+    fallen by more than `drop` of the top (and 2 noise units) after that, nor at its
+    end. The end of a slip (thesis ch. 4.3) and a grip change jump like this; a ridge
+    pulse sharp enough to rise that fast is falling back by then, and one on a
+    hysteretic skin rises slowly (the full plan's stop steps: 5-95 % rise 6-10 ms;
+    ridge pulses told steps at the hold: 9-22 ms, falling 15-30 % within 40 ms)."""
+    if not len(detrended):
+        return False
+    top = float(detrended.max())
+    if top < snr * noise:
+        return False
+    up = int(np.argmax(detrended >= 0.8 * top))
+    if up > rise:
+        return False
+    low = float(detrended[up:].min())
+    return top - low <= drop * top + 2.0 * noise and float(detrended[-1]) >= (1.0 - drop) * top
+
+
 def _slope_taps(width: int) -> np.ndarray:
     """FIR taps whose output at m is the LS slope of x[m - w .. m] (N/sample)."""
     k = np.arange(width + 1, dtype=np.float64) - width / 2.0
@@ -447,6 +472,10 @@ class ContactDetector:
         decay_rises: float = 5.0,
         step_rise_s: float = 0.02,
         step_hold_s: float = 0.1,
+        sure_hold_s: float = 0.05,
+        sure_rise_s: float = 0.01,
+        sure_snr: float = 20.0,
+        sure_drop: float = 0.3,
         step_window_s: float = 0.02,
         long_step_window_s: float = 0.04,
         step_threshold: float = 6.0,
@@ -487,6 +516,15 @@ class ContactDetector:
         # a sharp rise that stays: judged a step early (a stop, a grip change), see _advance
         self.step_rise = max(1, round(step_rise_s * self.fs_hz))
         self.step_hold = max(self.step_rise + 1, round(step_hold_s * self.fs_hz))
+        # ... and a sharp, tall step that stays flat (`sharp_flat_step`) sooner still: the
+        # stop of a slip told before the next ridge is due (issue 22 item 4); 0: off
+        self.sure_rise = max(1, round(sure_rise_s * self.fs_hz))
+        # only where that rise is resolved (2 samples: 200 Hz and up); at 100 Hz a ridge
+        # pulse rises in a sample or two too (2 % of those judged at the hold passed)
+        self.sure_hold = min(self.step_hold, round(sure_hold_s * self.fs_hz))
+        self.sure_hold = self.sure_hold if self.sure_rise >= 2 else 0
+        self.sure_snr = float(sure_snr)  # level-noise units (`_Watch.noise`)
+        self.sure_drop = float(sure_drop)  # share of its top it may fall back by then
         # small steps the kink bank misses: a difference of means over +-step_w samples
         self.step_w = max(2, round(step_window_s * self.fs_hz))
         self.small_rise = max(1, round(0.6 * step_window_s * self.fs_hz))
@@ -1532,6 +1570,11 @@ class ContactDetector:
             if watch.next_k <= hold:
                 watch.held_n += min(len(level), hold - watch.next_k + 1)
             watch.fell = watch.fell or fell
+            if not small and self._sure_step(watch, end, hit):
+                sure = watch.index + self.sure_hold
+                watch.held_n = self.sure_hold + 1  # what the verdict saw (chunking)
+                # (no trend_on: half the sure hold is too short to tell it)
+                return PulseCheck(watch.id, sure + h, False, None, sure=True)
             if hit >= 0 and watch.next_k + hit < hold:
                 return PulseCheck(watch.id, watch.next_k + hit + h, True)
             if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
@@ -1550,6 +1593,23 @@ class ContactDetector:
             flat = watch.peak <= 1.5 * watch.early
             return PulseCheck(watch.id, watch.index + self.watch + h, False if flat else None)
         return None
+
+    def _sure_step(self, watch: _Watch, end: int, hit: int) -> bool:
+        """At `sure_hold` after the onset, in the level samples next_k .. end just
+        examined (the first fall like a pulse at offset `hit`, -1: none): not fallen
+        back before, no contact since, not clipped, and a sharp, flat, tall step
+        (`sharp_flat_step`) - told a step then, not at the hold."""
+        sure = watch.index + self.sure_hold
+        if not self.sure_hold or not watch.next_k <= sure <= end:
+            return False
+        if hit >= 0 and watch.next_k + hit <= sure:
+            return False
+        if self._train_follows(watch, sure) or self._clipped(watch.index, sure):
+            return False
+        detrended = watch.detrended[: self.sure_hold + 1]
+        return sharp_flat_step(
+            detrended, watch.noise, self.sure_rise, self.sure_snr, self.sure_drop
+        )
 
     def _level_floor(self, before: int) -> float | None:
         """The lowest level over the trend window up to `before` (under an earlier pulse)."""
@@ -1706,12 +1766,12 @@ class ContactDetector:
         # stop on a relaxing tail)
         return -(0.1 * top + 3.0 * watch.noise) <= change <= 0.2 * top + 3.0 * watch.noise
 
-    def _train_follows(self, watch: _Watch) -> bool:
-        """Did more contacts come before the hold? Pulses after short spacings start on the
-        one before (thesis ch. 5.3.1): a train of them keeps the level up like a step, and
-        a slip that stopped makes no more contacts. Only contacts decided by the verdict's
-        sample count (chunking cannot change the verdict)."""
-        hold = watch.index + self.step_hold
+    def _train_follows(self, watch: _Watch, hold: int | None = None) -> bool:
+        """Did more contacts come before the hold (or `hold`)? Pulses after short spacings
+        start on the one before (thesis ch. 5.3.1): a train of them keeps the level up like
+        a step, and a slip that stopped makes no more contacts. Only contacts decided by
+        the verdict's sample count (chunking cannot change the verdict)."""
+        hold = watch.index + self.step_hold if hold is None else hold
         told = hold + self.level_half
         return any(watch.index + 2 < n <= hold and e <= told for n, e in self._onsets)
 

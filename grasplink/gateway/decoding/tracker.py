@@ -307,6 +307,10 @@ class TrackerDecoder(Decoder):
     # the silence where it was due
     STEP_STOP_WAIT = 0.0
     GRIP_STEP_PER_S = 0.3
+    # a contact told a step at the detector's sure hold (sharp, tall, flat: `PulseCheck.sure`,
+    # which ridge pulses seldom are) taken as a ridge the slip went on from: else a stop right
+    # where the next ridge was due is that ridge by its timing (issue 22 item 4); 0: any step
+    LOG_SURE_STEP_RIDGE = math.log(0.01)
     LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
     # a track whose last contact came from a probe waits this share of the probes' latency
     # for its next (`_latency_floor`; 0: the kink bank's latency for every track)
@@ -527,6 +531,7 @@ class TrackerDecoder(Decoder):
         self._ring = np.zeros(2 * RING, np.int64)
         # contacts told to be steps (replayed as such): id -> did the trend go on after it
         self._steps: dict[int, bool | None] = {}
+        self._sure: set[int] = set()  # ... of which told at the sure hold (`PulseCheck.sure`)
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
@@ -651,13 +656,17 @@ class TrackerDecoder(Decoder):
         self._cache = None
         if check.pulse is True and check.id in self._steps:  # a step revised: a slow pulse
             del self._steps[check.id]
+            self._sure.discard(check.id)
             for at, c in enumerate(self._contacts):
                 if c.id == check.id:
                     self._replay(at, [])
                     break
         if check.pulse is False:
             self._steps[check.id] = check.trend_on
+            if check.sure:
+                self._sure.add(check.id)
             while len(self._steps) > 64:
+                self._sure.discard(next(iter(self._steps)))
                 del self._steps[next(iter(self._steps))]
             # replay from that contact, now a step (stop or grip change)
             for at, c in enumerate(self._contacts):
@@ -700,7 +709,7 @@ class TrackerDecoder(Decoder):
         same bank object - banks are immutable -, null score, contact and step verdict):
         a step told and then revised to a pulse replays the very contacts first taken,
         and only the pruning can differ (a replay holds one contact fewer)."""
-        key = (ev, self._null, ev.id in self._steps, self._steps.get(ev.id))
+        key = (ev, self._null, ev.id in self._steps, self._steps.get(ev.id), ev.id in self._sure)
         known = self._memo.get(key)
         if known is not None and known[0] is self._tracks:
             self._null, pool = known[1], known[2]
@@ -743,6 +752,9 @@ class TrackerDecoder(Decoder):
             self._branch_constants,
             self._branch_tables,
         )
+        if ev.id in self._sure:  # a step beyond doubt: seldom a ridge the slip went on from
+            ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_N] >= 2) & np.isnan(floats[:, F_STOP])
+            floats[ridge, F_SCORE] += self.LOG_SURE_STEP_RIDGE
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
 
     def _branch_constant_values(self) -> dict[str, float]:

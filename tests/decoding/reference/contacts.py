@@ -65,6 +65,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from grasplink.gateway.decoding.contacts import sharp_flat_step
 from grasplink.gateway.decoding.filters import RAIL_SHARE, lattice_median, on_rail, resolution
 from tests.decoding.reference.filters import SosFilter
 
@@ -99,6 +100,7 @@ class PulseCheck(NamedTuple):
     # a step: the level's rising trend (the object covering more of the sensor) went on
     # after it (True: the object still moves), stopped (False), or no trend to tell (None)
     trend_on: bool | None = None
+    sure: bool = False  # a step told at the sure hold (`sharp_flat_step`)
 
 
 class _Series:
@@ -253,6 +255,10 @@ class ContactDetector:
         decay_rises: float = 5.0,
         step_rise_s: float = 0.02,
         step_hold_s: float = 0.1,
+        sure_hold_s: float = 0.05,
+        sure_rise_s: float = 0.01,
+        sure_snr: float = 20.0,
+        sure_drop: float = 0.3,
         step_window_s: float = 0.02,
         long_step_window_s: float = 0.04,
         step_threshold: float = 6.0,
@@ -280,6 +286,14 @@ class ContactDetector:
         # a sharp rise that stays: judged a step early (a stop, a grip change), see _advance
         self.step_rise = max(1, round(step_rise_s * self.fs_hz))
         self.step_hold = max(self.step_rise + 1, round(step_hold_s * self.fs_hz))
+        # ... and a sharp, tall step that stays flat (`sharp_flat_step`) sooner still
+        self.sure_rise = max(1, round(sure_rise_s * self.fs_hz))
+        # only where that rise is resolved (2 samples: 200 Hz and up); at 100 Hz a ridge
+        # pulse rises in a sample or two too (2 % of those judged at the hold passed)
+        self.sure_hold = min(self.step_hold, round(sure_hold_s * self.fs_hz))
+        self.sure_hold = self.sure_hold if self.sure_rise >= 2 else 0
+        self.sure_snr = float(sure_snr)
+        self.sure_drop = float(sure_drop)
         # small steps the kink bank misses: a difference of means over +-step_w samples
         self.step_w = max(2, round(step_window_s * self.fs_hz))
         self.small_rise = max(1, round(0.6 * step_window_s * self.fs_hz))
@@ -1021,6 +1035,24 @@ class ContactDetector:
                 hit = (ok & ~deferred).nonzero()[0]
             else:  # past the hold: nothing deferred
                 hit = ok.nonzero()[0]
+            sure = watch.index + self.sure_hold
+            if (
+                not small
+                and self.sure_hold
+                and watch.next_k <= sure <= end
+                and not (len(hit) and k[hit[0]] <= sure)
+                and not self._train_follows(watch, sure)
+                and not self._clipped(watch.index, sure)
+            ):
+                head = slice(0, self.sure_hold + 1)
+                if sharp_flat_step(
+                    watch.detrended[head], watch.noise, self.sure_rise, self.sure_snr,
+                    self.sure_drop,
+                ):  # fmt: skip
+                    watch.plain = watch.plain[head]
+                    watch.levels = watch.levels[head]
+                    watch.detrended = watch.detrended[head]
+                    return PulseCheck(watch.id, sure + h, False, None, sure=True)
             if len(hit) and k[hit[0]] < hold:
                 return PulseCheck(watch.id, int(k[hit[0]]) + h, True)
             if watch.next_k <= hold <= end and not self._clipped(watch.index, hold):
@@ -1195,12 +1227,12 @@ class ContactDetector:
         # stop on a relaxing tail)
         return -(0.1 * top + 3.0 * watch.noise) <= change <= 0.2 * top + 3.0 * watch.noise
 
-    def _train_follows(self, watch: _Watch) -> bool:
-        """Did more contacts come before the hold? Pulses after short spacings start on the
-        one before (thesis ch. 5.3.1): a train of them keeps the level up like a step, and
-        a slip that stopped makes no more contacts. Only contacts decided by the verdict's
-        sample count (chunking cannot change the verdict)."""
-        hold = watch.index + self.step_hold
+    def _train_follows(self, watch: _Watch, hold: int | None = None) -> bool:
+        """Did more contacts come before the hold (or `hold`)? Pulses after short spacings
+        start on the one before (thesis ch. 5.3.1): a train of them keeps the level up like
+        a step, and a slip that stopped makes no more contacts. Only contacts decided by
+        the verdict's sample count (chunking cannot change the verdict)."""
+        hold = watch.index + self.step_hold if hold is None else hold
         told = hold + self.level_half
         return any(watch.index + 2 < n <= hold and e <= told for n, e in self._onsets)
 
