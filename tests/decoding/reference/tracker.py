@@ -219,7 +219,18 @@ class NumpyTracker:
         return getattr(self._dec, name)
 
     def _branch(self, ev: ContactEvent) -> _Bank:
-        """Every track's children for contact ev (updates the null score), unpruned."""
+        """Every track's children for contact ev (updates the null score), unpruned; a step
+        told at the sure hold is seldom a ridge the slip went on from (LOG_SURE_STEP_RIDGE)."""
+        pool = self._children(ev)
+        if ev.id not in self._sure or not len(pool):
+            return pool
+        floats, ints = pool._f.copy(), pool._i.copy()
+        ridge = (ints[:, _IDS.stop - 1] == ev.id) & (ints[:, _N] >= 2) & np.isnan(floats[:, _STOP])
+        floats[ridge, _SCORE] += self.LOG_SURE_STEP_RIDGE
+        return _Bank(floats, ints)
+
+    def _children(self, ev: ContactEvent) -> _Bank:
+        """`_branch` before the sure-step weighting."""
         tc = ev.t_s
         B = self._retire(self._tracks, tc)
         step = ev.id in self._steps
