@@ -380,9 +380,9 @@ class TrackerDecoder(Decoder):
     WEAK_PULSE_SNR = 3.0
     LOG_STEP = math.log(3.0)  # a contact that rose and stayed (a grip step): likelier not
     # a track is evidently a slip with two contacts one of which fell back like a pulse, or
-    # with this many whatever their verdicts, none a noise pulse (`WEAK_PULSE_SNR`): under
-    # the FSR's hysteresis (the loop) a ridge often reads as a step or unclear. 3 flagged
-    # an hour held for 0.49 s (a chain of unclear noise contacts over 29 s)
+    # with this many, none told a step or a noise pulse (`WEAK_PULSE_SNR`): under the FSR's
+    # hysteresis a ridge often reads unclear; 3 flagged an hour held (unclear noise
+    # contacts), steps allowed made periodic grip ramps a slip (docs/decoding.md)
     EVIDENT_CONTACTS = 4
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
@@ -1095,7 +1095,7 @@ class TrackerDecoder(Decoder):
         bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
         n = np.arange(5)[:, None]
         # contacts that fit a track are a slip whatever their verdicts - unless noise's
-        evident = (n >= 2) & ((pulses > 0) | ((n >= self.EVIDENT_CONTACTS) & (noise == 0)))
+        evident = (n >= 2) & ((pulses > 0) | ((n >= self.EVIDENT_CONTACTS) & (steps + noise == 0)))
         hold = np.zeros(len(weight), np.bool_)
         hold[STEP] = hold[NOISE] = self.RESTART_CONFIRM >= 1
         hold[UNCLEAR] = self.RESTART_CONFIRM >= 2
