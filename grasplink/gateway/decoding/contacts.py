@@ -522,7 +522,8 @@ class ContactDetector:
         # only where that rise is resolved (2 samples: 200 Hz and up); at 100 Hz a ridge
         # pulse rises in a sample or two too (2 % of those judged at the hold passed)
         self.sure_hold = min(self.step_hold, round(sure_hold_s * self.fs_hz))
-        self.sure_hold = self.sure_hold if self.sure_rise >= 2 else 0
+        if self.sure_rise < 2:
+            self.sure_hold = 0
         self.sure_snr = float(sure_snr)  # level-noise units (`_Watch.noise`)
         self.sure_drop = float(sure_drop)  # share of its top it may fall back by then
         # small steps the kink bank misses: a difference of means over +-step_w samples
@@ -912,15 +913,14 @@ class ContactDetector:
         new[1], new[2], new[3] = seg_h, seg_a, ready
         ch.refresh_views()
 
-    def _white(self, block: int, keep: bool = True) -> tuple[float, int] | None:
+    def _white(self, block: int) -> tuple[float, int] | None:
         """White input noise (N per sample) for centres of `block`, and how many blocks tell it.
 
         The median of the finest scale's noise over the last `noise_blocks`
         blocks that showed their noise (not on a rail), each at least its
         quantisation floor (ADC step / sqrt(12)). None if none did: then the
         first later block that does (the block itself, at the start) - or
-        None while there is none yet. `keep`: remember a final value (what it is told
-        depends on when: callers that only read it, `_check_pulses`, pass False).
+        None while there is none yet.
         """
         fine = self.channels[0]
         gain = _hinge_gain(fine.width)
@@ -943,7 +943,7 @@ class ContactDetector:
         if values:
             values.sort()
             told = values[(len(values) - 1) // 2], len(values)
-            if keep and block <= fine.done:  # every block before it complete: final
+            if block <= fine.done:  # every block before it complete: final
                 self._white_by_block[block] = told
             return told
         for b in range(block, fine.done):
@@ -1467,7 +1467,7 @@ class ContactDetector:
                     height = self._told_height(watch, done.emit_index)
                     self._heights.append((done.emit_index, height))
                     self._mark_busy(watch.index, done.emit_index, height)
-                    white = self._white(watch.index // self.block, keep=False)
+                    white = self._white(watch.index // self.block)
                     if white is not None:
                         snr = height / max(white[0], NOISE_FLOOR_N)
                         done = done._replace(height_snr=snr)

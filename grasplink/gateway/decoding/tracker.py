@@ -40,10 +40,11 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   not missed.
 * Output: posterior over hypotheses (plus "no slip": every contact is
   clutter). Slip is flagged when slipping tracks with two or more contacts
-  (one of which fell back like a pulse, or three or more whatever their verdicts) hold half
-  the mass. The speed needs no direction (the belt and the reflex act on
-  it): it is given when the slipping tracks agree on it whichever way they
-  go, else the range of speeds they allow (`_report`: SPEED_* constants).
+  (one of which fell back like a pulse, or `EVIDENT_CONTACTS` with no step and no
+  pulse as low as noise among them) hold half the mass. The speed needs no
+  direction (the belt and the reflex act on it): it is given when the slipping
+  tracks agree on it whichever way they go, else the range of speeds they allow
+  (`_report`: SPEED_* constants).
   The direction (and the position, which needs it) is told when the best
   track has three contacts and every track moving its way explains them
   better than those moving the other way by at least `LOG_REPORT_ODDS`, and
@@ -666,8 +667,9 @@ class TrackerDecoder(Decoder):
             if check.sure:
                 self._sure.add(check.id)
             while len(self._steps) > 64:
-                self._sure.discard(next(iter(self._steps)))
-                del self._steps[next(iter(self._steps))]
+                oldest = next(iter(self._steps))
+                del self._steps[oldest]
+                self._sure.discard(oldest)
             # replay from that contact, now a step (stop or grip change)
             for at, c in enumerate(self._contacts):
                 if c.id == check.id:
@@ -1094,7 +1096,7 @@ class TrackerDecoder(Decoder):
         pulses, steps, noise = packed & 7, (packed >> 3) & 7, packed >> 6
         bonus = np.minimum(pulses, 2) * self.LOG_PULSE - steps * self.LOG_STEP
         n = np.arange(5)[:, None]
-        # contacts that fit a track are a slip whatever their verdicts - unless noise's
+        # enough contacts that fit a track are a slip when none is a step or noise's pulse
         evident = (n >= 2) & ((pulses > 0) | ((n >= self.EVIDENT_CONTACTS) & (steps + noise == 0)))
         hold = np.zeros(len(weight), np.bool_)
         hold[STEP] = hold[NOISE] = self.RESTART_CONFIRM >= 1
