@@ -372,7 +372,9 @@ def main(argv: list[str] | None = None) -> int:
         "--snr-ceiling", action="store_true", help="only the detection ceiling at 10 dB SNR"
     )
     parser.add_argument(
-        "--ceiling", metavar="KIND", help="only the detection ceiling on another kind's cases"
+        "--ceiling",
+        choices=[k for k in sr.KINDS if not k.startswith("held")],
+        help="only the detection ceiling on another kind's cases",
     )
     args = parser.parse_args(argv)
     if args.snr_ceiling or args.ceiling:
