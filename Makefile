@@ -13,7 +13,7 @@ STAMP_SYS := $(VENV)/.stamp-system
 # The decoders' compiled kernels: compiled on a machine's first run (and after a kernel
 # changes), loaded from numba's cache after that.
 setup: $(STAMP_PY) $(STAMP_SYS)
-	@$(PY) -m grasplink.gateway.decoding.warm_up
+	@$(PY) -m grasplink.decoding.warm_up
 
 # Debian packages the test-suite and the integration surfaces use (MQTT broker, Modbus client).
 $(STAMP_SYS): | $(VENV)/bin/python
@@ -137,7 +137,7 @@ format: setup
 # The Sparkplug B payload classes, generated from the committed schema (grpcio-tools' protoc;
 # the protobuf runtime pinned in pyproject.toml matches its generator's version), and their
 # typed stub for mypy (mypy-protobuf's plugin).
-SPARKPLUG := grasplink/gateway/telemetry
+SPARKPLUG := grasplink/surfaces/telemetry
 proto: setup
 	cd $(SPARKPLUG) && ../../../$(PY) -m grpc_tools.protoc -I. --python_out=. \
 	  --plugin=protoc-gen-mypy=../../../$(VENV)/bin/protoc-gen-mypy --mypy_out=. sparkplug_b.proto

@@ -56,13 +56,13 @@ from grasplink.bus.faults import ErrorFrame
 from grasplink.bus.lockstep import LockstepNetwork
 from grasplink.controllers import simulation
 from grasplink.core.frames import RPDO_BASES, TPDO_BASES, Frame
+from grasplink.decoding.contacts import ContactDetector
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.devices.factory import build_node
 from grasplink.devices.node import DeviceNode
 from grasplink.devices.sources import ConstantSource, SampleSource
 from grasplink.gateway import provisioning as provisioning_module
 from grasplink.gateway.config import GatewayConfig, parse_config
-from grasplink.gateway.decoding.contacts import ContactDetector
-from grasplink.gateway.decoding.tracker import TrackerDecoder
 from grasplink.gateway.live import prepare_to_go_live
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import load_profile
@@ -1420,7 +1420,7 @@ def diagnosis(figures: dict, mem: dict, mem_b: dict, bus: list[float]) -> list[s
             f"{fmt(parts.get('new contact'))} µs branching and updating every hypothesis, "
             f"{fmt(parts.get('detector'))} µs in the contact",
             f"detector, {fmt(parts.get('estimate'))} µs for the estimate "
-            "(grasplink/gateway/decoding/, not the gateway's own code).",
+            "(grasplink/decoding/, not the gateway's own code).",
             f"Bus p99 {fmt(bus_p99 / 1e3, 1)} ms against that own p99 of "
             f"{fmt(own_p99 / 1e3, 1)} ms: the bus and the threads add little; the own time",
             "itself is the step's CPU plus preemption on the shared cores (load average "

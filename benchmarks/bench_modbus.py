@@ -39,8 +39,8 @@ from bench_telemetry import since, thread_cpu_s, thread_sleeps  # noqa: E402  (t
 
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402
-from grasplink.gateway.modbus.registers import register_map  # noqa: E402
-from grasplink.gateway.modbus.server import ModbusServer  # noqa: E402
+from grasplink.surfaces.modbus.registers import register_map  # noqa: E402
+from grasplink.surfaces.modbus.server import ModbusServer  # noqa: E402
 
 WARMUP_S = 3.0
 GATEWAY_THREAD = "grasplink-gateway"
@@ -83,7 +83,7 @@ def run_gateway(
         pollers: list[subprocess.Popen[bytes]] = []
         try:
             if broker_port is not None:
-                from grasplink.gateway.telemetry import TelemetryPublisher, parse_broker_url
+                from grasplink.surfaces.telemetry import TelemetryPublisher, parse_broker_url
 
                 publisher = TelemetryPublisher(
                     live.gateway,

@@ -53,15 +53,15 @@ from grasplink.bus.logs import (  # noqa: E402
 from grasplink.core.frames import function_of  # noqa: E402
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402
-from grasplink.gateway.telemetry import (  # noqa: E402
+from grasplink.surfaces.telemetry import (  # noqa: E402
     TelemetryPublisher,
     json_tree,
     parse_broker_url,
 )
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb  # noqa: E402
-from grasplink.gateway.telemetry.buffer import Message, Outbox, Sample  # noqa: E402
-from grasplink.gateway.telemetry.json_tree import JsonTree  # noqa: E402
-from grasplink.gateway.telemetry.sparkplug import SparkplugSession  # noqa: E402
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb  # noqa: E402
+from grasplink.surfaces.telemetry.buffer import Message, Outbox, Sample  # noqa: E402
+from grasplink.surfaces.telemetry.json_tree import JsonTree  # noqa: E402
+from grasplink.surfaces.telemetry.sparkplug import SparkplugSession  # noqa: E402
 from tests.telemetry.snapshots import snapshot  # noqa: E402
 
 WARMUP_S = 3.0

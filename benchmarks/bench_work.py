@@ -40,7 +40,7 @@ LENGTHS = {"decoder": (2, 6), "gateway": (6.0, 18.0)}
 UNITS = {"decoder": "skin sample", "gateway": "simulated second"}
 # numba's target CPU for every run, in valgrind or not: one cache key for both
 CHILD_ENV = {**os.environ, "NUMBA_CPU_NAME": "generic"}
-WARM_UP = Path("grasplink/gateway/decoding/warm_up.py")  # trees with compiled kernels have it
+WARM_UP = Path("grasplink/decoding/warm_up.py")  # trees with compiled kernels have it
 
 
 def compile_kernels(tree: Path) -> None:
@@ -48,7 +48,7 @@ def compile_kernels(tree: Path) -> None:
     if not (tree / WARM_UP).exists():
         return  # a tree from before the kernels
     subprocess.run(
-        [sys.executable, "-m", "grasplink.gateway.decoding.warm_up"],
+        [sys.executable, "-m", "grasplink.decoding.warm_up"],
         cwd=tree,
         env={**CHILD_ENV, "PYTHONPATH": str(tree)},
         check=True,
@@ -68,7 +68,7 @@ def run_workload(tree: Path, workload: str, amount: float) -> None:
     if workload == "decoder":
         import numpy as np
 
-        from grasplink.gateway.decoding.tracker import TrackerDecoder
+        from grasplink.decoding.tracker import TrackerDecoder
         from grasplink.profiles.layouts import LAYOUTS_MM
 
         x = np.concatenate([bg.SlipCycle().values] * int(amount))

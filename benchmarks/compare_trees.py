@@ -29,7 +29,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from grasplink.evaluation import decoding_bench as db
 from grasplink.evaluation import nonstationary as ns
-from grasplink.gateway.decoding.tracker import TrackerDecoder
+from grasplink.decoding.tracker import TrackerDecoder
 
 QUICK, OUT = sys.argv[1] == "1", sys.argv[2]
 

@@ -50,6 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
+from grasplink.decoding.contacts import PULSE_SCALES_S, ContactDetector
+from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import contact_truth as ct
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
@@ -61,8 +63,6 @@ from grasplink.evaluation.contact_truth import (
     headline_replica,
     match,
 )
-from grasplink.gateway.decoding.contacts import PULSE_SCALES_S, ContactDetector
-from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 

@@ -576,9 +576,9 @@ def cmd_decode(args: argparse.Namespace) -> int:
     """
     import json
 
+    from grasplink.decoding import io, registry
+    from grasplink.decoding.base import SkinGeometry, check_sample_rate
     from grasplink.evaluation.decoders import make_decoder
-    from grasplink.gateway.decoding import io, registry
-    from grasplink.gateway.decoding.base import SkinGeometry, check_sample_rate
     from grasplink.profiles.layouts import parse_layout
 
     layout = None if args.skin is None else parse_layout(args.skin)
@@ -680,19 +680,19 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     from grasplink.terminal import StopSignals
 
     if args.print_register_map:
-        from grasplink.gateway.modbus.docgen import render_modbus_markdown
+        from grasplink.surfaces.modbus.docgen import render_modbus_markdown
 
         sys.stdout.write(render_modbus_markdown())
         return 0
     config = load_config(args.config)  # a bad file fails here, before the bus is touched
     modbus_url = None
     if args.modbus is not None:
-        from grasplink.gateway.modbus.url import parse_modbus_url
+        from grasplink.surfaces.modbus.url import parse_modbus_url
 
         modbus_url = parse_modbus_url(args.modbus)  # a bad URL too
     buses = args.bus or [DEFAULT_BUS_URL]
     if modbus_url is not None:
-        from grasplink.gateway.modbus.url import unit_ids
+        from grasplink.surfaces.modbus.url import unit_ids
 
         unit_ids(modbus_url, len(buses))  # a unit per bus: too many for the address space
     telemetry = telemetry_options(args)  # and bad --mqtt options
@@ -790,7 +790,7 @@ def _modbus_server(gateways: list[Any], url: object) -> AbstractContextManager[A
     of None without one."""
     if url is None:
         return nullcontext()
-    from grasplink.gateway.modbus.server import ModbusServer
+    from grasplink.surfaces.modbus.server import ModbusServer
 
     return ModbusServer(gateways, url)  # type: ignore[arg-type]
 
@@ -798,7 +798,7 @@ def _modbus_server(gateways: list[Any], url: object) -> AbstractContextManager[A
 def mqtt_ids(given: list[str] | None, buses: int) -> list[str]:
     """Each bus's telemetry ID: as given, one per bus; one ID (or the default) for several
     buses becomes ID-1, ID-2, ... Checked before the bus or broker is touched."""
-    from grasplink.gateway.telemetry.url import check_id
+    from grasplink.surfaces.telemetry.url import check_id
 
     ids = list(given or ["gateway"])
     if len(ids) == 1 and buses > 1:
@@ -824,7 +824,7 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
         if given:
             raise ConfigError(f"--{given[0].replace('_', '-')} needs --mqtt URL")
         return lambda gateway, config, gateway_id: nullcontext()
-    from grasplink.gateway.telemetry import (
+    from grasplink.surfaces.telemetry import (
         DEFAULT_RATE_HZ,
         TelemetryPublisher,
         check_id,

@@ -29,12 +29,14 @@ RANKS: dict[str, int] = {
     "errors": 0,
     "core": 0,
     "profiles": 1,
+    "decoding": 2,
     "devices": 2,
     "bus": 3,
     "simulators": 4,
-    "gateway": 4,
-    "evaluation": 5,
-    TOP: 6,
+    "gateway": 5,
+    "surfaces": 6,
+    "evaluation": 7,
+    TOP: 8,
 }
 # The one edge between layers of the same rank: core may raise user errors.
 SAME_RANK_ALLOWED = {("core", "errors")}
@@ -191,7 +193,7 @@ def test_every_package_has_a_rank() -> None:
         ("grasplink.devices.node", "from ..bus import hub", "grasplink.bus.hub"),
         ("grasplink.devices.node", "from ..bus.hub import CanHub", "grasplink.bus.hub"),
         ("grasplink.devices.node", "from . import store", "grasplink.devices.store"),
-        ("grasplink.gateway.decoding.io", "from ...bus import url", "grasplink.bus.url"),
+        ("grasplink.decoding.kernels.branch", "from ...bus import url", "grasplink.bus.url"),
         ("grasplink.devices.node", "from grasplink import bus", "grasplink.bus"),
         ("grasplink.devices.node", "from grasplink import __version__", "grasplink"),
         ("grasplink.devices.node", "import grasplink", "grasplink"),
@@ -235,7 +237,8 @@ def test_checker_ignores_other_packages_and_plain_strings() -> None:
         ("grasplink.controllers", TOP),
         ("grasplink.errors", "errors"),
         ("grasplink.core.frames", "core"),
-        ("grasplink.gateway.decoding.io", "gateway"),
+        ("grasplink.decoding.io", "decoding"),
+        ("grasplink.surfaces.modbus.server", "surfaces"),
         ("grasplink.evaluation.anything", "evaluation"),
     ],
 )
@@ -253,7 +256,14 @@ def test_modules_map_to_their_layer(module, layer) -> None:
         ("core", "profiles", False),
         ("profiles", "devices", False),
         ("simulators", "gateway", False),
-        ("gateway", "simulators", False),
+        ("gateway", "simulators", True),
+        ("decoding", "devices", False),
+        ("devices", "decoding", False),
+        ("gateway", "decoding", True),
+        ("decoding", "gateway", False),
+        ("surfaces", "gateway", True),
+        ("gateway", "surfaces", False),
+        ("evaluation", "surfaces", True),
         ("evaluation", "simulators", True),
         ("evaluation", "gateway", True),
         ("gateway", "evaluation", False),
@@ -268,12 +278,18 @@ def test_rule_allows_only_lower_ranks(source, target, allowed) -> None:
 
 
 def test_violation_message_names_file_line_import_and_rule() -> None:
-    source = '"""doc"""\n\ndef f():\n    from ..gateway import scripted\n'
-    assert module_violations(
-        "grasplink/simulators/x.py", "grasplink.simulators.x", False, source
-    ) == [
-        "grasplink/simulators/x.py:4: `from ..gateway import scripted` — simulators (rank 4) "
-        "must not import its sibling gateway (rank 4): move what both need down a rank"
+    source = '"""doc"""\n\ndef f():\n    from ..devices import skin\n'
+    assert module_violations("grasplink/decoding/x.py", "grasplink.decoding.x", False, source) == [
+        "grasplink/decoding/x.py:4: `from ..devices import skin` — decoding (rank 2) "
+        "must not import its sibling devices (rank 2): move what both need down a rank"
+    ]
+
+
+def test_violation_message_names_an_upward_import() -> None:
+    source = "from grasplink.surfaces.telemetry import json_tree\n"
+    assert module_violations("grasplink/gateway/x.py", "grasplink.gateway.x", False, source) == [
+        "grasplink/gateway/x.py:1: `from grasplink.surfaces.telemetry import json_tree` — "
+        "gateway (rank 5) must not import surfaces (rank 6): a layer imports lower ranks only"
     ]
 
 

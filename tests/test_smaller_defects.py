@@ -18,9 +18,9 @@ from pathlib import Path
 import can
 import pytest
 
+from grasplink.decoding import registry
 from grasplink.errors import ConfigError
 from grasplink.gateway.config import load_config
-from grasplink.gateway.decoding import registry
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -73,7 +73,7 @@ def test_the_reference_decoders_named_in_the_registry_are_those_whose_class_says
 @pytest.mark.parametrize("text", ["tcp://", "tcp://127.0.0.1", "tcp://0.0.0.0"])
 def test_a_modbus_tcp_url_without_a_port_is_refused_not_bound_to_502(text: str) -> None:
     """`--modbus tcp://` bound the privileged port 502 silently (as root) before."""
-    from grasplink.gateway.modbus.url import parse_modbus_url
+    from grasplink.surfaces.modbus.url import parse_modbus_url
 
     with pytest.raises(ConfigError) as caught:
         parse_modbus_url(text)
@@ -82,7 +82,7 @@ def test_a_modbus_tcp_url_without_a_port_is_refused_not_bound_to_502(text: str) 
 
 
 def test_modbus_port_502_is_taken_when_named() -> None:
-    from grasplink.gateway.modbus.url import parse_modbus_url
+    from grasplink.surfaces.modbus.url import parse_modbus_url
 
     assert parse_modbus_url("tcp://127.0.0.1:502").port == 502
 
@@ -97,14 +97,14 @@ BAD_HOSTS = [
 @pytest.mark.parametrize(("host", "says"), BAD_HOSTS)
 def test_a_malformed_modbus_host_is_named_not_unknown_error_2(host: str, says: str) -> None:
     """`tcp://256.1.1.1:1502` said "cannot listen on ...: Unknown error -2" at bind time."""
-    from grasplink.gateway.modbus.url import parse_modbus_url
+    from grasplink.surfaces.modbus.url import parse_modbus_url
 
     with pytest.raises(ConfigError, match=f"^modbus URL 'tcp://{host}:1502': {says}"):
         parse_modbus_url(f"tcp://{host}:1502")
 
 
 def test_a_modbus_host_that_does_not_resolve_is_named() -> None:
-    from grasplink.gateway.modbus.url import parse_modbus_url
+    from grasplink.surfaces.modbus.url import parse_modbus_url
 
     # .invalid never resolves (RFC 2606); the resolver answers from its own rules.
     with pytest.raises(ConfigError, match=r"cannot resolve host 'nohost\.invalid' \("):
@@ -115,7 +115,7 @@ def test_a_modbus_host_that_does_not_resolve_is_named() -> None:
     "text", ["tcp://127.0.0.1:1502", "tcp://localhost:1502", "tcp://[::1]:1502", "tcp://:0"]
 )
 def test_modbus_hosts_that_are_addresses_or_local_names_are_accepted(text: str) -> None:
-    from grasplink.gateway.modbus.url import parse_modbus_url
+    from grasplink.surfaces.modbus.url import parse_modbus_url
 
     assert parse_modbus_url(text).scheme == "tcp"
 
@@ -123,7 +123,7 @@ def test_modbus_hosts_that_are_addresses_or_local_names_are_accepted(text: str) 
 @pytest.mark.parametrize(("host", "says"), BAD_HOSTS)
 def test_a_malformed_broker_host_is_named_before_connecting(host: str, says: str) -> None:
     """`mqtt://256.1.1.1` got as far as connecting: "Name or service not known"."""
-    from grasplink.gateway.telemetry.url import parse_broker_url
+    from grasplink.surfaces.telemetry.url import parse_broker_url
 
     with pytest.raises(ConfigError, match=f"^--mqtt 'mqtt://{host}:1883': {says}"):
         parse_broker_url(f"mqtt://{host}:1883")
@@ -437,8 +437,8 @@ def test_a_command_in_the_docs_parses_and_its_urls_are_valid(
     from grasplink.bus.url import parse_bus_url
     from grasplink.cli import build_parser
     from grasplink.errors import GrasplinkError
-    from grasplink.gateway.modbus.url import parse_modbus_url
-    from grasplink.gateway.telemetry.url import parse_broker_url
+    from grasplink.surfaces.modbus.url import parse_modbus_url
+    from grasplink.surfaces.telemetry.url import parse_broker_url
 
     words = _words(text)  # without a trailing comment or `&`
     if SYNOPSIS.search(" ".join(words)):

@@ -17,7 +17,7 @@ from grasplink.bus import open_bus
 from grasplink.bus.logs import read_log, record_bus, scan_log
 from grasplink.cli import main
 from grasplink.core.frames import TPDO_BASES
-from grasplink.gateway.decoding import io
+from grasplink.decoding import io
 from tests.decoding.test_decode_cli import decode, skin_frames, write_log
 
 _channels = count()

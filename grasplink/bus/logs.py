@@ -35,14 +35,9 @@ import can
 
 from grasplink.bus.url import BusDisconnected, message_to_frame
 from grasplink.core.frames import Frame, function_of
+from grasplink.core.log_formats import LOG_FORMATS
 from grasplink.errors import BusError, ConfigError, RecordingError
 
-LOG_FORMATS = {
-    ".asc": "Vector ASC",
-    ".blf": "Vector BLF",
-    ".log": "can-utils candump -L",
-    ".trc": "PEAK PCAN-View trace",
-}
 #: Formats whose python-can writer holds data frames only (TRCWriter skips error and
 #: remote frames with a warning each): a recording leaves those out and counts them.
 DATA_FRAMES_ONLY = frozenset({".trc"})

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.gateway.decoding.contacts import ContactDetector, ContactEvent, PulseCheck
+from grasplink.decoding.contacts import ContactDetector, ContactEvent, PulseCheck
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import harness
 from grasplink.simulators.effects import actuators, kinematics, noise, skin

@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from functools import lru_cache
 
-from grasplink.gateway.decoding import registry
-from grasplink.gateway.decoding.base import Decoder, SkinGeometry, check_sample_rate
-from grasplink.gateway.decoding.mmse import ReferenceSlip
+from grasplink.decoding import registry
+from grasplink.decoding.base import Decoder, SkinGeometry, check_sample_rate
+from grasplink.decoding.mmse import ReferenceSlip
 from grasplink.simulators import synth
 
 REFERENCE_SPEED_MM_S = 20.0  # the thesis' reference: a slow slip resolves every ridge

@@ -30,13 +30,13 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from grasplink.decoding.registry import DECODERS, DEFAULT_DECODER
 from grasplink.errors import ConfigError
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import scenes as sc
 from grasplink.evaluation import scoring as ev
 from grasplink.evaluation import slip_reporting as sr
 from grasplink.evaluation.decoders import make_decoder
-from grasplink.gateway.decoding.registry import DECODERS, DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import SkinRecording, slip_recording, static_recording
 
@@ -663,7 +663,7 @@ def render_can_path(can: dict) -> list[str]:
         "the simulation engine with its nodes and controller, as `grasplink run` does. The",
         "skin node samples the FSR signal with its 12-bit ADC and sends 3 samples per TPDO1",
         "at its own timing; the CAN log (`can.asc`) is decoded through the gateway's reader",
-        "(`grasplink/gateway/decoding/io.py`) exactly as `grasplink decode R/can.asc --skin",
+        "(`grasplink/decoding/io.py`) exactly as `grasplink decode R/can.asc --skin",
         "LAYOUT` does. *skin.csv*: the same runs' float signal as the node sampled it. Each",
         "decoder at its default settings, scored as above; *wrong sign*: share of the",
         "speed estimates whose direction is wrong; *mostly wrong*: scenes where that share",

@@ -17,9 +17,9 @@ import can
 import numpy as np
 
 from grasplink.core.frames import RPDO_BASES, Frame, node_cob_ids
+from grasplink.decoding.base import SlipEstimate
 from grasplink.errors import RecordingError
 from grasplink.gateway.config import parse_config
-from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import PdoCodec

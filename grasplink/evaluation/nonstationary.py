@@ -28,9 +28,9 @@ from typing import Any, Literal
 
 import numpy as np
 
+from grasplink.decoding.base import SlipEstimate
 from grasplink.evaluation.decoders import make_decoder
 from grasplink.evaluation.scoring import along_truth
-from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import SkinRecording, scripted_recording
 

@@ -5,7 +5,7 @@ controller (exactly as `grasplink run` does) into a folder, then reads the
 skin signal twice:
 
 - *CAN*: the skin node's TPDO1 frames from `can.asc`, through the gateway's
-  CAN-log reader (`gateway.decoding.io.read_can_log` and its usability
+  CAN-log reader (`decoding.io.read_can_log` and its usability
   check, what `grasplink decode R/can.asc --skin LAYOUT` reads): quantised
   by the node's 12-bit ADC, three samples per PDO, stamped with the node's
   own timing;
@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from grasplink.core.protocol import SansIoDevice
+from grasplink.decoding.io import CanStats, read_can_log, read_csv
 from grasplink.errors import RecordingError
-from grasplink.gateway.decoding.io import CanStats, read_can_log, read_csv
 from grasplink.simulators import signals as sig
 from grasplink.simulators.effects.skin import RidgeContacts
 from grasplink.simulators.engine import Simulation

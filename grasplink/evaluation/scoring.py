@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grasplink.gateway.decoding.base import Decoder, SlipEstimate
+from grasplink.decoding.base import Decoder, SlipEstimate
 from grasplink.simulators.synth import SkinRecording
 
 CHUNK = 256  # samples per feed(): the streaming path, as a gateway would call it

@@ -36,13 +36,13 @@ from typing import Any
 
 import numpy as np
 
+from grasplink.decoding import tracker as tr
+from grasplink.decoding.base import Decoder, SlipEstimate
+from grasplink.decoding.contacts import ContactDetector
+from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import LOOP_OBJECT_MM, loop_recording
 from grasplink.evaluation.decoders import make_decoder
-from grasplink.gateway.decoding import tracker as tr
-from grasplink.gateway.decoding.base import Decoder, SlipEstimate
-from grasplink.gateway.decoding.contacts import ContactDetector
-from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import SkinRecording, scripted_recording
 
@@ -1044,7 +1044,7 @@ def git_state(root: Path) -> dict:
             return ""
         return done.stdout
 
-    changed = git("status", "--porcelain", "--", "grasplink/gateway/decoding")
+    changed = git("status", "--porcelain", "--", "grasplink/decoding")
     return {
         "commit": git("rev-parse", "--short", "HEAD").strip() or None,
         "decoder_changes": [line[3:] for line in changed.splitlines() if line.strip()],

@@ -19,8 +19,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from grasplink.core.params import Params
+from grasplink.decoding.registry import DEFAULT_DECODER, check_live_decoder
 from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.registry import DEFAULT_DECODER, check_live_decoder
 from grasplink.gateway.feedback import FeedbackConfig, FeedbackMode
 from grasplink.gateway.levels import (
     DEFAULT_FORCE_ENTRIES,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from grasplink.gateway.decoding.base import SlipEstimate
+from grasplink.decoding.base import SlipEstimate
 
 US_PER_S = 1_000_000
 

@@ -40,6 +40,8 @@ import numpy as np
 from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, Frame, function_of
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.core.params import Params
+from grasplink.decoding.base import SlipEstimate
+from grasplink.decoding.registry import make_decoder
 from grasplink.errors import ConfigError, PdoError
 from grasplink.gateway.commands import Command, CommandError, CommandResult, Inbox, parse_value
 from grasplink.gateway.config import (
@@ -51,8 +53,6 @@ from grasplink.gateway.config import (
     SkinConfig,
     parse_config,
 )
-from grasplink.gateway.decoding.base import SlipEstimate
-from grasplink.gateway.decoding.registry import make_decoder
 from grasplink.gateway.drives import DriveHandshake
 from grasplink.gateway.emg import (
     ENVELOPE_FULL_SCALE_UV,

@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
+from grasplink.decoding.base import Decoder, SlipEstimate
+from grasplink.decoding.registry import DECODERS, available
 from grasplink.evaluation.decoders import make_decoder, reference_slips
-from grasplink.gateway.decoding.base import Decoder, SlipEstimate
-from grasplink.gateway.decoding.registry import DECODERS, available
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 
@@ -179,7 +179,7 @@ def test_noise_alone_is_no_slip(name):
 def test_peak_threshold_from_rice_matches_the_measured_rate():
     """White noise through the ratio band-pass: peaks above the threshold come about as
     often as asked (Rice's formula is a bound: a few times fewer, never more)."""
-    from grasplink.gateway.decoding import filters
+    from grasplink.decoding import filters
 
     fs = 400.0
     sos = filters.bandpass_sos(0.5, 30.0, fs, order=1)
@@ -216,8 +216,8 @@ def test_ratio_needs_three_peaks():
 
 
 def test_registry_names_and_errors():
+    from grasplink.decoding import registry
     from grasplink.errors import ConfigError
-    from grasplink.gateway.decoding import registry
 
     assert set(BASELINES) | {"tracker"} == set(registry.DECODERS)
     with pytest.raises(ConfigError, match="valid decoders: fft, ratio, mmse, dtw, tracker"):
@@ -228,7 +228,7 @@ def test_registry_names_and_errors():
 
 def test_mmse_search_is_the_thesis_brute_force():
     """The vectorised search gives the thesis loop's MSE at every offset it scores."""
-    from grasplink.gateway.decoding.mmse import ReferenceSearch, mse_profile_bruteforce
+    from grasplink.decoding.mmse import ReferenceSearch, mse_profile_bruteforce
 
     rec = synth.slip_recording(LAYOUTS_MM["alpha0.1"], 30.0, seed=17)
     search = ReferenceSearch(

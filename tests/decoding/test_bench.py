@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from grasplink.decoding.registry import DEFAULT_DECODER, make_decoder
 from grasplink.evaluation import scoring as ev
 from grasplink.evaluation.decoding_bench import COST_BUDGET_US, recommend
-from grasplink.gateway.decoding.registry import DEFAULT_DECODER, make_decoder
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import slip_recording
 

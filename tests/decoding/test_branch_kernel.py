@@ -17,10 +17,10 @@ from functools import cache
 import numpy as np
 import pytest
 
+from grasplink.decoding.contacts import STEP_IDS, ContactEvent
+from grasplink.decoding.kernels import branch as kernel
+from grasplink.decoding.tracker import _F_WIDTH, _I_WIDTH, TrackerDecoder, _Bank
 from grasplink.evaluation import nonstationary
-from grasplink.gateway.decoding.contacts import STEP_IDS, ContactEvent
-from grasplink.gateway.decoding.kernels import branch as kernel
-from grasplink.gateway.decoding.tracker import _F_WIDTH, _I_WIDTH, TrackerDecoder, _Bank
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 from tests.decoding.reference import tracker as reference

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from grasplink.cli import main
-from grasplink.gateway.decoding import io
-from grasplink.gateway.decoding.base import MIN_USABLE_SHARE
+from grasplink.decoding import io
+from grasplink.decoding.base import MIN_USABLE_SHARE
 from tests.decoding.test_decode_cli import decode, skin_frames, write_log
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from grasplink.cli import main
+from grasplink.decoding.io import read_can_log, read_csv
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation.scoring import along_truth
-from grasplink.gateway.decoding.io import read_can_log, read_csv
-from grasplink.gateway.decoding.tracker import TrackerDecoder
 from grasplink.profiles.layouts import LAYOUTS_MM
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"

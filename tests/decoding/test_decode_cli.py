@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from grasplink.cli import main
-from grasplink.gateway.decoding import io, registry
+from grasplink.decoding import io, registry
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 
@@ -239,7 +239,7 @@ def test_option_errors(tmp_path, capsys, recording):
 
 def test_missing_decoder_module_is_a_clear_error(monkeypatch, tmp_path, capsys, recording):
     monkeypatch.setitem(
-        registry.DECODERS, "tracker", "grasplink.gateway.decoding.no_such_module:TrackerDecoder"
+        registry.DECODERS, "tracker", "grasplink.decoding.no_such_module:TrackerDecoder"
     )
     path = write_csv(tmp_path / "rec.csv", recording.t_s[:100], recording.force_n[:100])
     assert_error(

@@ -12,9 +12,9 @@ held object in heavy noise gets no more noise contacts.
 
 from __future__ import annotations
 
+from grasplink.decoding.contacts import ContactDetector
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import MATCH_S
-from grasplink.gateway.decoding.contacts import ContactDetector
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import scripted_recording
 

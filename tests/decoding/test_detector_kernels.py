@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from grasplink.gateway.decoding.contacts import ContactDetector
-from grasplink.gateway.decoding.filters import SosFilter
-from grasplink.gateway.decoding.kernels.detector import (
+from grasplink.decoding.contacts import ContactDetector
+from grasplink.decoding.filters import SosFilter
+from grasplink.decoding.kernels.detector import (
     channel_hinge,
     fir_run,
     hinge_maxima,
@@ -291,7 +291,7 @@ def test_a_deep_copy_of_a_detector_runs_on_alone() -> None:
 def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
     """A channel whose next centres leave the block of its known noise (or with no noise
     known) is the Python path's: the kernel changes nothing of it."""
-    from grasplink.gateway.decoding.kernels.detector import NOT_TAKEN, channels_fast
+    from grasplink.decoding.kernels.detector import NOT_TAKEN, channels_fast
 
     x = SIGNALS["slip"][:400]
     detector = ContactDetector(FS_HZ)
@@ -314,7 +314,7 @@ def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
 def test_step_scales_the_kernel_has_no_room_for_are_left_as_they_were() -> None:
     """A scale whose store is full is the Python path's (it grows the store there): the
     kernel changes nothing of it, and says so (-1)."""
-    from grasplink.gateway.decoding.kernels.detector import scales_fast
+    from grasplink.decoding.kernels.detector import scales_fast
 
     x = SIGNALS["slip"][:400]
     detector = ContactDetector(FS_HZ)
@@ -378,7 +378,7 @@ def _scan_as_numpy_had_it(
 @pytest.mark.parametrize("seed", range(12))
 def test_compiled_watch_scan_matches_the_numpy_watch(seed: int) -> None:
     """Pulses, steps and ramps under a watch, looked at a few samples at a time."""
-    from grasplink.gateway.decoding.kernels.detector import watch_scan
+    from grasplink.decoding.kernels.detector import watch_scan
 
     rng = np.random.default_rng(seed)
     n, index, hold = 120, 50, 50 + int(rng.integers(5, 60))
@@ -442,8 +442,8 @@ def test_the_decoders_warm_up_loads_every_detector_kernel() -> None:
     tracker's warm-up (a throwaway decoder on a synthetic slip) reaches every one."""
     child = (
         "import json\n"
-        "from grasplink.gateway.decoding.kernels import detector\n"
-        "from grasplink.gateway.decoding.tracker import TrackerDecoder\n"
+        "from grasplink.decoding.kernels import detector\n"
+        "from grasplink.decoding.tracker import TrackerDecoder\n"
         "from grasplink.profiles.layouts import LAYOUTS_MM\n"
         "TrackerDecoder(LAYOUTS_MM['alpha0.1'], 400).warm_up()\n"
         "print(json.dumps({n: len(getattr(detector, n).signatures) for n in detector.__all__}))\n"

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grasplink.gateway.decoding.contacts import ContactDetector
+from grasplink.decoding.contacts import ContactDetector
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 

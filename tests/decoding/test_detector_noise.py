@@ -4,9 +4,9 @@ part of the detector it tells the same whatever the chunking."""
 
 from __future__ import annotations
 
+from grasplink.decoding.contacts import STEP_IDS
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import detect, match
-from grasplink.gateway.decoding.contacts import STEP_IDS
 
 # forward, first seed, the layouts whose pulses differ in height (uniform4's 4 mm pulses
 # merge at 10 dB: see docs/decoding.md), slow, fast and accelerating slips

@@ -16,15 +16,15 @@ import pytest
 
 from grasplink.cli import main
 from grasplink.controllers import build_controllers
+from grasplink.decoding import registry
+from grasplink.decoding.base import Decoder, SlipEstimate
+from grasplink.decoding.io import skin_pdo
+from grasplink.decoding.mmse import ReferenceSlip
 from grasplink.errors import ConfigError
 from grasplink.evaluation import decoding_bench as bench
 from grasplink.evaluation import scoring
 from grasplink.evaluation.decoders import make_decoder, reference_slips
 from grasplink.evaluation.scenes import record_scene
-from grasplink.gateway.decoding import registry
-from grasplink.gateway.decoding.base import Decoder, SlipEstimate
-from grasplink.gateway.decoding.io import skin_pdo
-from grasplink.gateway.decoding.mmse import ReferenceSlip
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 

@@ -14,16 +14,16 @@ import time
 import numpy as np
 import pytest
 
-from grasplink.errors import ConfigError
-from grasplink.evaluation.decoders import make_decoder
-from grasplink.gateway.decoding import base
-from grasplink.gateway.decoding.base import (
+from grasplink.decoding import base
+from grasplink.decoding.base import (
     GAP_PERIODS,
     MIN_STEP_PERIODS,
     SkinGeometry,
     check_sample_rate,
     skin_limits,
 )
+from grasplink.errors import ConfigError
+from grasplink.evaluation.decoders import make_decoder
 from grasplink.profiles import load_profile
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.profiles.objects import (

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from grasplink.gateway.decoding.kernels.detector import sos_run
+from grasplink.decoding.kernels.detector import sos_run
 
 
 @pytest.mark.slow

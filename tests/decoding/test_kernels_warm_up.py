@@ -9,7 +9,7 @@ import textwrap
 
 import numpy as np
 
-from grasplink.gateway.decoding import tracker
+from grasplink.decoding import tracker
 from grasplink.profiles.layouts import LAYOUTS_MM
 
 # In a fresh interpreter: warm up, count every kernel's compiled signatures, decode slips
@@ -19,9 +19,9 @@ CHILD = textwrap.dedent(
     """
     import json, pkgutil, importlib
     import numpy as np
-    import grasplink.gateway.decoding.kernels as kernels
+    import grasplink.decoding.kernels as kernels
     from grasplink.evaluation import nonstationary
-    from grasplink.gateway.decoding.tracker import TrackerDecoder
+    from grasplink.decoding.tracker import TrackerDecoder
     from grasplink.profiles.layouts import LAYOUTS_MM
     from tests.decoding.test_numerical_edges import railed_slip
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from grasplink.decoding.base import SlipEstimate
 from grasplink.evaluation import decoding_bench as bench
 from grasplink.evaluation import nonstationary as ns
-from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.profiles.layouts import LAYOUTS_MM
 
 QUICK = ns.signals(quick=True)

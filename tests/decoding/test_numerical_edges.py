@@ -27,11 +27,11 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import pytest
 
+from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
+from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.decoders import make_decoder
 from grasplink.evaluation.scoring import along_truth
-from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
-from grasplink.gateway.decoding.registry import DEFAULT_DECODER
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 from tests.decoding.test_baselines import assert_clean, feed

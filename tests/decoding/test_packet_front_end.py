@@ -17,10 +17,10 @@ import pytest
 
 from grasplink.cli import main
 from grasplink.core.frames import Frame
+from grasplink.decoding import io
+from grasplink.decoding.packets import DRIFT_DEADBAND_US, SampleStream
+from grasplink.decoding.registry import DEFAULT_DECODER, make_decoder
 from grasplink.gateway.config import parse_config
-from grasplink.gateway.decoding import io
-from grasplink.gateway.decoding.packets import DRIFT_DEADBAND_US, SampleStream
-from grasplink.gateway.decoding.registry import DEFAULT_DECODER, make_decoder
 from grasplink.gateway.service import Gateway
 from grasplink.profiles.layouts import LAYOUTS_MM
 from tests.decoding.test_decode_cli import skin_frames, write_log

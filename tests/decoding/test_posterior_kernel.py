@@ -17,9 +17,9 @@ from functools import cache
 import numpy as np
 import pytest
 
+from grasplink.decoding import tracker
+from grasplink.decoding.kernels.posterior import constants, pairwise_sum
 from grasplink.evaluation import nonstationary, slip_reporting
-from grasplink.gateway.decoding import tracker
-from grasplink.gateway.decoding.kernels.posterior import constants, pairwise_sum
 from tests.decoding.reference import tracker as reference
 from tests.decoding.reference.compare import (
     MAGNIFY,

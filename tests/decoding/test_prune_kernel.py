@@ -14,9 +14,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from grasplink.decoding import tracker as tr
+from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.evaluation import nonstationary
-from grasplink.gateway.decoding import tracker as tr
-from grasplink.gateway.decoding.kernels.prune import prune_choice
 from tests.decoding.reference import tracker as reference
 
 NEGLIGIBLE, MAX_HYPOTHESES, PER_START = (

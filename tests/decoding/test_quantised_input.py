@@ -14,11 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from grasplink.decoding import filters
+from grasplink.decoding.contacts import ContactDetector
+from grasplink.decoding.io import skin_pdo
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation.scoring import along_truth
-from grasplink.gateway.decoding import filters
-from grasplink.gateway.decoding.contacts import ContactDetector
-from grasplink.gateway.decoding.io import skin_pdo
-from grasplink.gateway.decoding.tracker import TrackerDecoder
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from grasplink.decoding.base import SlipEstimate
 from grasplink.evaluation import slip_reporting as sr
-from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.simulators.synth import SkinRecording
 
 FS = 400

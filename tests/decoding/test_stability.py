@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from grasplink.decoding import filters
 from grasplink.evaluation.decoders import make_decoder
-from grasplink.gateway.decoding import filters
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 from tests.decoding.test_baselines import (

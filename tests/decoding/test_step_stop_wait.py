@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.errors import ConfigError
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
-from grasplink.gateway.decoding.tracker import TrackerDecoder
 
 # alpha0.1 at 30 mm/s backwards (test_loop_physics' set): a ridge contact at 3.543 s is
 # told a step at 3.65 s; the next ridge is crossed at 4.202 s

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from grasplink.decoding.contacts import ContactDetector
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.decoders import make_decoder
-from grasplink.gateway.decoding.contacts import ContactDetector
 
 FS_HZ = 400.0
 PULSE_S = 0.5  # the last ridge pulse (thesis ch. 5.3.1 shape: alpha u e^(1 - u))

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from grasplink.gateway.decoding import filters
-from grasplink.gateway.decoding.base import StaticForce
-from grasplink.gateway.decoding.filters import SosFilter
+from grasplink.decoding import filters
+from grasplink.decoding.base import StaticForce
+from grasplink.decoding.filters import SosFilter
 
 DECODING = Path(filters.__file__).parent
 

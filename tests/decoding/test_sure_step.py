@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from grasplink.decoding.contacts import ContactDetector
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
-from grasplink.gateway.decoding.contacts import ContactDetector
 
 FS_HZ = 400.0
 ONSET_S = 0.8

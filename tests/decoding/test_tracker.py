@@ -14,9 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from grasplink.gateway.decoding.base import SlipEstimate
-from grasplink.gateway.decoding.contacts import ContactDetector
-from grasplink.gateway.decoding.tracker import TrackerDecoder
+from grasplink.decoding.base import SlipEstimate
+from grasplink.decoding.contacts import ContactDetector
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 

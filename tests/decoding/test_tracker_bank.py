@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grasplink.gateway.decoding.tracker import IDS, _Bank
+from grasplink.decoding.tracker import IDS, _Bank
 
 N = 5
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grasplink.gateway.decoding.registry import make_decoder
+from grasplink.decoding.registry import make_decoder
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from grasplink.gateway.decoding.base import SlipEstimate
-from grasplink.gateway.decoding.contacts import ContactEvent
-from grasplink.gateway.decoding.tracker import TrackerDecoder, _Bank
+from grasplink.decoding.base import SlipEstimate
+from grasplink.decoding.contacts import ContactEvent
+from grasplink.decoding.tracker import TrackerDecoder, _Bank
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 

@@ -9,10 +9,10 @@ for a stop and dropped the slip flag until the late contact came.
 
 from __future__ import annotations
 
+from grasplink.decoding.contacts import ContactDetector
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
-from grasplink.gateway.decoding.contacts import ContactDetector
-from grasplink.gateway.decoding.tracker import TrackerDecoder
 
 # uniform4 at 30 mm/s, forward: ridges from 1.27 s every ~0.145 s; from 2.33 s on the probes
 # find them (pulses told steps), each ~0.18 s late

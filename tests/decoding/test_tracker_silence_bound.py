@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from grasplink.decoding.kernels.branch import IDS
+from grasplink.decoding.tracker import TrackerDecoder, _Bank, _One
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 from grasplink.evaluation.decoders import make_decoder
-from grasplink.gateway.decoding.kernels.branch import IDS
-from grasplink.gateway.decoding.tracker import TrackerDecoder, _Bank, _One
 
 ALPHA05_MM = (5.0, 12.0, 67.0)  # ridges at 0, 5, 17, 84 mm
 

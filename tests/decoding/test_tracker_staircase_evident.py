@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from grasplink.gateway.decoding.contacts import PulseCheck
-from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
-from grasplink.gateway.decoding.tracker import TrackerDecoder
+from grasplink.decoding.contacts import PulseCheck
+from grasplink.decoding.kernels import posterior as posterior_kernels
+from grasplink.decoding.tracker import TrackerDecoder
 
 
 def evident(dec: TrackerDecoder, ids: list[int]) -> bool:

@@ -12,9 +12,9 @@ import math
 
 import numpy as np
 
-from grasplink.gateway.decoding.contacts import STEP_IDS, PulseCheck
-from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
-from grasplink.gateway.decoding.tracker import TrackerDecoder
+from grasplink.decoding.contacts import STEP_IDS, PulseCheck
+from grasplink.decoding.kernels import posterior as posterior_kernels
+from grasplink.decoding.tracker import TrackerDecoder
 
 
 def test_a_probe_verdict_leaves_the_kink_contact_with_the_same_number_its_own():

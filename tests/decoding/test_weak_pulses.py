@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import MATCH_S, detect
-from grasplink.gateway.decoding.tracker import TrackerDecoder
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import scripted_recording
 

@@ -8,8 +8,8 @@ from collections.abc import Iterable
 
 import pytest
 
+from grasplink.decoding.base import SlipEstimate
 from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.gateway.feedback import (
     BeltCommand,
     FeedbackConfig,

@@ -214,9 +214,9 @@ def test_plausibility_config_names_the_key_and_defaults_to_the_hand_rate():
 
 
 def test_rejections_reach_the_json_health_topic_and_sparkplug_metrics():
-    from grasplink.gateway.telemetry.buffer import Sample
-    from grasplink.gateway.telemetry.json_tree import JsonTree
-    from grasplink.gateway.telemetry.sparkplug import ALIASES
+    from grasplink.surfaces.telemetry.buffer import Sample
+    from grasplink.surfaces.telemetry.json_tree import JsonTree
+    from grasplink.surfaces.telemetry.sparkplug import ALIASES
 
     sim, gateway = loop_gateway(seconds=0.5)
     sim.network.inject(Frame(EMCY_BASE + EMG, bytes([0xE9, 0xDD, 0xCB, 0, 0, 0, 0, 0])))

@@ -9,17 +9,17 @@ import math
 
 import pytest
 
+from grasplink.decoding.base import SlipEstimate
 from grasplink.gateway.config import load_config
-from grasplink.gateway.decoding.base import SlipEstimate
 from grasplink.gateway.feedback import FeedbackConfig, FeedbackController, Reason
 from grasplink.gateway.live import slip_text
-from grasplink.gateway.modbus.registers import register_map
 from grasplink.gateway.percept import Percept
 from grasplink.gateway.reflex import GripArbiter, ReflexConfig, ReflexState
 from grasplink.gateway.service import Gateway
-from grasplink.gateway.telemetry.buffer import Sample
-from grasplink.gateway.telemetry.json_tree import JsonTree
-from grasplink.gateway.telemetry.sparkplug import DOUBLE, INT32, SparkplugSession
+from grasplink.surfaces.modbus.registers import register_map
+from grasplink.surfaces.telemetry.buffer import Sample
+from grasplink.surfaces.telemetry.json_tree import JsonTree
+from grasplink.surfaces.telemetry.sparkplug import DOUBLE, INT32, SparkplugSession
 from tests.telemetry.host import SparkplugHost
 from tests.telemetry.snapshots import snapshot
 

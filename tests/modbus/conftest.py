@@ -14,8 +14,8 @@ import pytest
 
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.live import LiveGateway
-from grasplink.gateway.modbus.registers import register_map
-from grasplink.gateway.modbus.server import ModbusServer
+from grasplink.surfaces.modbus.registers import register_map
+from grasplink.surfaces.modbus.server import ModbusServer
 from tests.live import operational, wait_until
 
 RMAP = register_map()

@@ -14,10 +14,10 @@ from pymodbus.client import ModbusTcpClient
 
 from grasplink import __version__
 from grasplink.gateway.config import parse_config
-from grasplink.gateway.modbus.functions import CODES, check_request
-from grasplink.gateway.modbus.registers import MAP_VERSION
-from grasplink.gateway.modbus.server import ModbusServer
 from grasplink.gateway.service import Gateway
+from grasplink.surfaces.modbus.functions import CODES, check_request
+from grasplink.surfaces.modbus.registers import MAP_VERSION
+from grasplink.surfaces.modbus.server import ModbusServer
 
 UNSUPPORTED = (0x01, 0x02, 0x05, 0x07, 0x08, 0x0B, 0x0C, 0x0F, 0x11, 0x14, 0x15, 0x16, 0x18, 0x41)
 READ_COUNTS_REFUSED = (0, 126, 65535)

@@ -16,8 +16,8 @@ import pytest
 
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.live import LiveGateway
-from grasplink.gateway.modbus.registers import MAP_VERSION, PHASE_CODES, settings_of
-from grasplink.gateway.modbus.server import ModbusServer
+from grasplink.surfaces.modbus.registers import MAP_VERSION, PHASE_CODES, settings_of
+from grasplink.surfaces.modbus.server import ModbusServer
 from tests.modbus.conftest import ALL_NODES, RMAP, mbpoll, mbpoll_values, operational, wait_until
 
 pytestmark = [

@@ -11,7 +11,11 @@ from pymodbus.client import ModbusTcpClient
 from grasplink.controllers import simulation
 from grasplink.gateway.commands import Command, parse_value
 from grasplink.gateway.config import parse_config
-from grasplink.gateway.modbus.registers import (
+from grasplink.gateway.service import Gateway
+from grasplink.profiles import load_profile, object_limits
+from grasplink.profiles import objects as obj
+from grasplink.simulators.scene import load_scene
+from grasplink.surfaces.modbus.registers import (
     I16,
     I32,
     MAP_VERSION,
@@ -26,10 +30,6 @@ from grasplink.gateway.modbus.registers import (
     settings_of,
     to_words,
 )
-from grasplink.gateway.service import Gateway
-from grasplink.profiles import load_profile, object_limits
-from grasplink.profiles import objects as obj
-from grasplink.simulators.scene import load_scene
 from tests.gateway.test_service import ROOT, go_on
 
 RMAP = register_map()

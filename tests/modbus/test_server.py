@@ -15,10 +15,10 @@ from pymodbus.client import ModbusTcpClient
 from grasplink.errors import BusError
 from grasplink.gateway.commands import INBOX_SIZE, Command
 from grasplink.gateway.config import parse_config
-from grasplink.gateway.modbus.registers import MAP_VERSION, PHASE_CODES, settings_of
-from grasplink.gateway.modbus.server import ModbusServer
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import objects as obj
+from grasplink.surfaces.modbus.registers import MAP_VERSION, PHASE_CODES, settings_of
+from grasplink.surfaces.modbus.server import ModbusServer
 from tests.modbus.conftest import ALL_NODES, RMAP, node_of, operational, wait_until
 
 pytestmark = pytest.mark.slow

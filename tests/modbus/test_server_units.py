@@ -14,8 +14,8 @@ from pymodbus.client import ModbusTcpClient
 from grasplink.errors import BusError
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.live import LiveGateway
-from grasplink.gateway.modbus.server import ModbusServer
-from grasplink.gateway.modbus.url import parse_modbus_url, unit_ids
+from grasplink.surfaces.modbus.server import ModbusServer
+from grasplink.surfaces.modbus.url import parse_modbus_url, unit_ids
 from tests.modbus.conftest import RMAP, mbpoll, mbpoll_values, operational, wait_until
 
 

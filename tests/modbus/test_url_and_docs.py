@@ -8,9 +8,9 @@ import pytest
 
 from grasplink import cli
 from grasplink.errors import ConfigError
-from grasplink.gateway.modbus.docgen import render_modbus_markdown
-from grasplink.gateway.modbus.registers import register_map
-from grasplink.gateway.modbus.url import ModbusUrl, parse_modbus_url
+from grasplink.surfaces.modbus.docgen import render_modbus_markdown
+from grasplink.surfaces.modbus.registers import register_map
+from grasplink.surfaces.modbus.url import ModbusUrl, parse_modbus_url
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -12,8 +12,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
-from grasplink.gateway.telemetry.sparkplug import metric_value
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
+from grasplink.surfaces.telemetry.sparkplug import metric_value
 
 
 @dataclass

@@ -16,14 +16,14 @@ import pytest
 
 from grasplink import cli
 from grasplink.errors import BrokerError
-from grasplink.gateway.telemetry import (
+from grasplink.surfaces.telemetry import (
     TelemetryPublisher,
     parse_broker_url,
     tls_context,
     transport,
 )
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
-from grasplink.gateway.telemetry.sparkplug import BOOLEAN, STRING, metric_value, set_value
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
+from grasplink.surfaces.telemetry.sparkplug import BOOLEAN, STRING, metric_value, set_value
 from tests.live import wait_until
 from tests.telemetry.broker import (
     PASSWORDS,

@@ -7,15 +7,15 @@ from pathlib import Path
 import pytest
 
 from grasplink.errors import ConfigError
-from grasplink.gateway.telemetry.buffer import (
+from grasplink.surfaces.telemetry.buffer import (
     MESSAGE_OVERHEAD_BYTES,
     Message,
     Outbox,
     Sample,
     SnapshotQueue,
 )
-from grasplink.gateway.telemetry.transport import SnapshotClock
-from grasplink.gateway.telemetry.url import check_id, parse_broker_url, tls_context
+from grasplink.surfaces.telemetry.transport import SnapshotClock
+from grasplink.surfaces.telemetry.url import check_id, parse_broker_url, tls_context
 
 
 def message(k: int, size: int = 100) -> Message:

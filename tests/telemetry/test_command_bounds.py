@@ -7,15 +7,15 @@ from __future__ import annotations
 import json
 
 from grasplink.gateway.commands import Command, parse_value
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
-from grasplink.gateway.telemetry.json_tree import JsonTree
-from grasplink.gateway.telemetry.protocol import (
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
+from grasplink.surfaces.telemetry.json_tree import JsonTree
+from grasplink.surfaces.telemetry.protocol import (
     MAX_COMMAND_BYTES,
     MAX_COMMAND_METRICS,
     MAX_JSON_DEPTH,
     nesting_error,
 )
-from grasplink.gateway.telemetry.sparkplug import (
+from grasplink.surfaces.telemetry.sparkplug import (
     ALIASES,
     BOOLEAN,
     DOUBLE,

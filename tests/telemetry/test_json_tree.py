@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 
 from grasplink.gateway.commands import Command, CommandResult
-from grasplink.gateway.telemetry.buffer import Sample
-from grasplink.gateway.telemetry.json_tree import JsonTree
+from grasplink.surfaces.telemetry.buffer import Sample
+from grasplink.surfaces.telemetry.json_tree import JsonTree
 from tests.telemetry.snapshots import snapshot
 
 EXTRA = {"controls": {"reflex_enabled": True}, "telemetry": {"snapshots_dropped": 0}}

@@ -9,9 +9,9 @@ import json
 
 import pytest
 
-from grasplink.gateway.telemetry import TelemetryPublisher, parse_broker_url
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
-from grasplink.gateway.telemetry.sparkplug import STRING, set_value
+from grasplink.surfaces.telemetry import TelemetryPublisher, parse_broker_url
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
+from grasplink.surfaces.telemetry.sparkplug import STRING, set_value
 from tests.telemetry.broker import FakeGateway, Mosquitto, Recorder
 from tests.telemetry.host import SparkplugHost
 

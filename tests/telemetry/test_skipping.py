@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from grasplink.gateway.telemetry.buffer import Sample
-from grasplink.gateway.telemetry.json_tree import JsonTree
-from grasplink.gateway.telemetry.protocol import same_report
-from grasplink.gateway.telemetry.sparkplug import SparkplugSession
+from grasplink.surfaces.telemetry.buffer import Sample
+from grasplink.surfaces.telemetry.json_tree import JsonTree
+from grasplink.surfaces.telemetry.protocol import same_report
+from grasplink.surfaces.telemetry.sparkplug import SparkplugSession
 from tests.telemetry.snapshots import snapshot
 
 EXTRA = {"controls": {"reflex_enabled": True}, "telemetry": {}}

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from grasplink.gateway.commands import Command, CommandResult
 from grasplink.gateway.config import KINDS
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
-from grasplink.gateway.telemetry.buffer import Message, Sample
-from grasplink.gateway.telemetry.protocol import Incoming
-from grasplink.gateway.telemetry.sparkplug import (
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
+from grasplink.surfaces.telemetry.buffer import Message, Sample
+from grasplink.surfaces.telemetry.protocol import Incoming
+from grasplink.surfaces.telemetry.sparkplug import (
     BOOLEAN,
     DOUBLE,
     INT32,

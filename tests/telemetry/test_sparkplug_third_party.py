@@ -19,8 +19,8 @@ from typing import Any
 
 import pytest
 
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
-from grasplink.gateway.telemetry.sparkplug import ALIASES, SparkplugSession
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
+from grasplink.surfaces.telemetry.sparkplug import ALIASES, SparkplugSession
 from tests.telemetry.broker import Mosquitto, Recorder
 
 pytestmark = pytest.mark.slow

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from grasplink.gateway.telemetry.state import BdSeqFile
+from grasplink.surfaces.telemetry.state import BdSeqFile
 
 
 def test_a_saved_bdseq_is_read_back_by_the_next_run_and_no_temporary_file_stays(

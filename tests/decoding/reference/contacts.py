@@ -65,8 +65,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from grasplink.gateway.decoding.contacts import sharp_flat_step
-from grasplink.gateway.decoding.filters import RAIL_SHARE, lattice_median, on_rail, resolution
+from grasplink.decoding.contacts import sharp_flat_step
+from grasplink.decoding.filters import RAIL_SHARE, lattice_median, on_rail, resolution
 from tests.decoding.reference.filters import SosFilter
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)

@@ -27,8 +27,8 @@ from contextlib import contextmanager
 import numpy as np
 from scipy.special import erf
 
-from grasplink.gateway.decoding.contacts import STEP_IDS, ContactEvent
-from grasplink.gateway.decoding.tracker import (
+from grasplink.decoding.contacts import STEP_IDS, ContactEvent
+from grasplink.decoding.tracker import (
     RING,
     V_MAX_MM_S,
     V_MIN_MM_S,

@@ -74,16 +74,15 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
-from grasplink.gateway.decoding.contacts import (
+from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
+from grasplink.decoding.contacts import (
     STEP_IDS,
     ContactDetector,
     ContactEvent,
     PulseCheck,
 )
-from grasplink.gateway.decoding.kernels import posterior as posterior_kernels
-from grasplink.gateway.decoding.kernels.branch import (
+from grasplink.decoding.kernels import posterior as posterior_kernels
+from grasplink.decoding.kernels.branch import (
     F_D,
     F_M,
     F_S,
@@ -105,8 +104,9 @@ from grasplink.gateway.decoding.kernels.branch import (
     branch,
     pack_constants,
 )
-from grasplink.gateway.decoding.kernels.common import ring_slot
-from grasplink.gateway.decoding.kernels.prune import prune_choice
+from grasplink.decoding.kernels.common import ring_slot
+from grasplink.decoding.kernels.prune import prune_choice
+from grasplink.errors import ConfigError
 
 V_MIN_MM_S = 2.0
 V_MAX_MM_S = 400.0

@@ -57,14 +57,14 @@ from typing import ClassVar
 
 import numpy as np
 
-from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
-from grasplink.gateway.decoding.filters import (
+from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
+from grasplink.decoding.filters import (
     PeakActivity,
     PulseFrontEnd,
     interleave,
     pulse_events,
 )
+from grasplink.errors import ConfigError
 
 FLAT_N = 1e-4  # a segment with a std below this (N) is flat: it z-normalises to zeros
 

@@ -9,7 +9,7 @@
 * A folder written by `grasplink run`: its skin.csv, with the layout and the
   sample rate from its summary.json (`read_run_folder`).
 * CAN logs of the skin node (``.asc``, ``.blf``, ``.log`` candump, ``.trc``
-  PCAN-View trace: `bus.logs.LOG_FORMATS`, read by python-can's LogReader):
+  PCAN-View trace: `core.log_formats.LOG_FORMATS`, read by python-can's LogReader):
   TPDO1 frames decoded through the skin EDS - the COB-ID (0x1800:01), the
   mapping (0x1A00: three U16 sample slots 0x2100 and the U8 packet sequence
   0x2101), samples per PDO (0x2121), sample rate
@@ -46,11 +46,11 @@ from pathlib import Path
 
 import numpy as np
 
-from grasplink.bus.logs import LOG_FORMATS
 from grasplink.core.frames import HEARTBEAT_BASE
+from grasplink.core.log_formats import LOG_FORMATS
+from grasplink.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
+from grasplink.decoding.packets import SEQUENCE_MODULO, SampleStream
 from grasplink.errors import ConfigError, RecordingError
-from grasplink.gateway.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
-from grasplink.gateway.decoding.packets import SEQUENCE_MODULO, SampleStream
 
 CSV_HEADER = ("t_s", "force_n")
 #: The force column of a CSV: ours, or the skin.csv of `grasplink run`

@@ -46,15 +46,15 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.base import (
+from grasplink.decoding.base import (
     DEFAULT_UPDATE_S,
     GAP_PERIODS,
     Decoder,
     SlipEstimate,
     StaticForce,
 )
-from grasplink.gateway.decoding.filters import NoiseEstimator
+from grasplink.decoding.filters import NoiseEstimator
+from grasplink.errors import ConfigError
 
 
 class FftDecoder(Decoder):

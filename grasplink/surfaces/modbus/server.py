@@ -66,16 +66,16 @@ from pymodbus.transaction import TransactionManager
 
 from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
-from grasplink.gateway.modbus.functions import IDENTIFICATION, check_request
-from grasplink.gateway.modbus.registers import (
+from grasplink.gateway.service import Gateway
+from grasplink.surfaces.modbus.functions import IDENTIFICATION, check_request
+from grasplink.surfaces.modbus.registers import (
     COMMAND_TIMEOUT_S,
     RegisterError,
     RegisterMap,
     register_map,
     settings_of,
 )
-from grasplink.gateway.modbus.url import ModbusUrl, parse_modbus_url, unit_ids
-from grasplink.gateway.service import Gateway
+from grasplink.surfaces.modbus.url import ModbusUrl, parse_modbus_url, unit_ids
 
 logger = logging.getLogger(__name__)
 # pymodbus logs what it does (a failed listen as a warning); without a handler of the

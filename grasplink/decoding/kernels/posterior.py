@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from grasplink.gateway.decoding.kernels import jit
-from grasplink.gateway.decoding.kernels.common import pack, ring_slot, travel
+from grasplink.decoding.kernels import jit
+from grasplink.decoding.kernels.common import pack, ring_slot, travel
 
 NAMES = (
     "negligible",

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from grasplink.gateway.decoding.kernels import jit
+from grasplink.decoding.kernels import jit
 
 __all__ = [
     "all_finite",

@@ -72,15 +72,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from grasplink.gateway.decoding.filters import (
+from grasplink.decoding.filters import (
     RAIL_SHARE,
     SosFilter,
     lattice_median,
     on_rail,
     resolution,
 )
-from grasplink.gateway.decoding.kernels.common import PROBE_IDS
-from grasplink.gateway.decoding.kernels.detector import (
+from grasplink.decoding.kernels.common import PROBE_IDS
+from grasplink.decoding.kernels.detector import (
     BLOCK_DONE,
     CH_ABS_N,
     CH_HELD,

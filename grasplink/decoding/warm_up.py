@@ -1,5 +1,5 @@
 """Load, or compile on a machine's first run, the decoders' kernels: `python -m
-grasplink.gateway.decoding.warm_up` (`make` runs it in set-up).
+grasplink.decoding.warm_up` (`make` runs it in set-up).
 
 numba caches what it compiles beside the kernels' sources; compiling takes tens of seconds
 the first time on a machine (and after a kernel changes), loading a second or two. Done
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 
-from grasplink.gateway.decoding.registry import DEFAULT_DECODER, make_decoder
+from grasplink.decoding.registry import DEFAULT_DECODER, make_decoder
 from grasplink.profiles.layouts import LAYOUTS_MM
 
 WARM_UP_LAYOUT = "alpha0.1"

@@ -9,8 +9,8 @@
 See docs/telemetry.md for the topics, metrics and commands.
 """
 
-from grasplink.gateway.telemetry.transport import DEFAULT_RATE_HZ, TelemetryPublisher
-from grasplink.gateway.telemetry.url import BrokerUrl, check_id, parse_broker_url, tls_context
+from grasplink.surfaces.telemetry.transport import DEFAULT_RATE_HZ, TelemetryPublisher
+from grasplink.surfaces.telemetry.url import BrokerUrl, check_id, parse_broker_url, tls_context
 
 __all__ = [
     "DEFAULT_RATE_HZ",

@@ -20,10 +20,10 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from grasplink.gateway.decoding.kernels import jit
-from grasplink.gateway.decoding.kernels.common import maximum as _maximum
-from grasplink.gateway.decoding.kernels.common import minimum as _minimum
-from grasplink.gateway.decoding.kernels.common import pack, travel
+from grasplink.decoding.kernels import jit
+from grasplink.decoding.kernels.common import maximum as _maximum
+from grasplink.decoding.kernels.common import minimum as _minimum
+from grasplink.decoding.kernels.common import pack, travel
 
 __all__ = ["CONSTANTS", "branch", "pack_constants"]
 

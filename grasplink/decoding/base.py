@@ -513,7 +513,7 @@ class StaticForce:
     def __init__(self, fs_hz: float, corner_hz: float = 2.0):
         from scipy.signal import butter
 
-        from grasplink.gateway.decoding.filters import SosFilter
+        from grasplink.decoding.filters import SosFilter
 
         corner = min(corner_hz, 0.45 * fs_hz)
         self._filter = SosFilter(butter(2, corner, fs=fs_hz, output="sos"))

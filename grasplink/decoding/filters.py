@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
+from grasplink.decoding.kernels.detector import fir_run, sos_run
 from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.kernels.detector import fir_run, sos_run
 
 MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
 
@@ -504,7 +504,7 @@ class PulseFrontEnd:
         lasting_s: float = 30.0,
         gap_periods: float | None = None,
     ):
-        from grasplink.gateway.decoding.base import GAP_PERIODS, StaticForce
+        from grasplink.decoding.base import GAP_PERIODS, StaticForce
 
         self.fs_hz = float(fs_hz)
         self._static_factory = lambda: StaticForce(self.fs_hz, static_corner_hz)

@@ -25,8 +25,8 @@ from collections import Counter
 from typing import Any
 
 from grasplink.gateway.commands import Command, CommandResult
-from grasplink.gateway.telemetry.buffer import Message, Sample
-from grasplink.gateway.telemetry.protocol import (
+from grasplink.surfaces.telemetry.buffer import Message, Sample
+from grasplink.surfaces.telemetry.protocol import (
     LIVE_PHASE,
     STATE_FIELDS,
     VALUE_FIELDS,

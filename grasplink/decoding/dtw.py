@@ -55,9 +55,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S
-from grasplink.gateway.decoding.mmse import (
+from grasplink.decoding.base import DEFAULT_UPDATE_S
+from grasplink.decoding.mmse import (
     Candidate,
     ReferenceSearch,
     ReferenceSlip,
@@ -68,6 +67,7 @@ from grasplink.gateway.decoding.mmse import (
     rivalry,
     warp_window,
 )
+from grasplink.errors import ConfigError
 
 INF = np.inf
 # The slowest admissible speed moves with the window (min_mm of travel): an answer

@@ -54,9 +54,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
+from grasplink.decoding.filters import PeakLag, PulseFrontEnd, interleave, pulse_events
 from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate
-from grasplink.gateway.decoding.filters import PeakLag, PulseFrontEnd, interleave, pulse_events
 
 RIDGE_SIDE_MM = 2.5  # skin node 0x2142 default (thesis ch. 5: L = 2.5 mm)
 PEAK_HISTORY = 8

@@ -7,8 +7,8 @@ output, so the document cannot drift from what the server serves.
 from __future__ import annotations
 
 from grasplink.gateway.config import KINDS
-from grasplink.gateway.modbus.functions import FUNCTIONS, MAX_READ_WRITE_WRITE, MAX_WRITE
-from grasplink.gateway.modbus.registers import (
+from grasplink.surfaces.modbus.functions import FUNCTIONS, MAX_READ_WRITE_WRITE, MAX_WRITE
+from grasplink.surfaces.modbus.registers import (
     COMMAND_TIMEOUT_S,
     MAP_CHANGES,
     MAP_VERSION,
@@ -19,7 +19,7 @@ from grasplink.gateway.modbus.registers import (
     WordType,
     register_map,
 )
-from grasplink.gateway.modbus.url import DEFAULT_BAUD, EXAMPLE_TCP_PORT, MODBUS_TCP_PORT
+from grasplink.surfaces.modbus.url import DEFAULT_BAUD, EXAMPLE_TCP_PORT, MODBUS_TCP_PORT
 
 TYPES = (
     ("u16", "one register, 0..65535", "0xFFFF", "0..65534"),
@@ -35,10 +35,10 @@ def render_modbus_markdown(rmap: RegisterMap | None = None) -> str:
     out = [
         "# Modbus register map",
         "",
-        "<!-- Generated file: edit grasplink/gateway/modbus/registers.py, then run "
+        "<!-- Generated file: edit grasplink/surfaces/modbus/registers.py, then run "
         "`grasplink gateway --print-register-map > docs/modbus.md` or `make docs`. -->",
         "",
-        "Generated from `grasplink/gateway/modbus/registers.py` (map version "
+        "Generated from `grasplink/surfaces/modbus/registers.py` (map version "
         f"{MAP_VERSION}); do not edit by hand. Registers that carry a node's object take "
         "their type, raw unit and limits from that object in the node's EDS "
         "(docs/profiles.md), named in the *source* column.",

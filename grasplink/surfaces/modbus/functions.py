@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib.metadata import version
 
-from grasplink.gateway.modbus.registers import MAX_READ, ExceptionCode, RegisterError
+from grasplink.surfaces.modbus.registers import MAX_READ, ExceptionCode, RegisterError
 
 #: Registers one write may carry (function 16) and the write half of function 23 (spec 6.12, 6.17).
 MAX_WRITE = 123

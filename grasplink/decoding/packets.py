@@ -58,7 +58,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grasplink.gateway.decoding.base import GAP_PERIODS
+from grasplink.decoding.base import GAP_PERIODS
 
 SEQUENCE_MODULO = 256  # the skin's U8 packet sequence (0x2101) wraps
 HALF_WRAP = SEQUENCE_MODULO // 2

@@ -47,9 +47,9 @@ from google.protobuf.message import DecodeError
 
 from grasplink.gateway.commands import Command, CommandResult, shown
 from grasplink.gateway.plausibility import REJECTION_KEYS
-from grasplink.gateway.telemetry import sparkplug_b_pb2 as pb
-from grasplink.gateway.telemetry.buffer import Message, Sample
-from grasplink.gateway.telemetry.protocol import (
+from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
+from grasplink.surfaces.telemetry.buffer import Message, Sample
+from grasplink.surfaces.telemetry.protocol import (
     LIVE_PHASE,
     MAX_COMMAND_METRICS,
     VALUE_FIELDS,

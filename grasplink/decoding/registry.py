@@ -11,16 +11,16 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from grasplink.core.registry import load_class
+from grasplink.decoding.base import Decoder
 from grasplink.errors import ConfigError
-from grasplink.gateway.decoding.base import Decoder
 
 #: name -> "module:Class"
 DECODERS: dict[str, str] = {
-    "fft": "grasplink.gateway.decoding.fft:FftDecoder",
-    "ratio": "grasplink.gateway.decoding.ratio:RatioDecoder",
-    "mmse": "grasplink.gateway.decoding.mmse:MmseDecoder",
-    "dtw": "grasplink.gateway.decoding.dtw:DtwDecoder",
-    "tracker": "grasplink.gateway.decoding.tracker:TrackerDecoder",
+    "fft": "grasplink.decoding.fft:FftDecoder",
+    "ratio": "grasplink.decoding.ratio:RatioDecoder",
+    "mmse": "grasplink.decoding.mmse:MmseDecoder",
+    "dtw": "grasplink.decoding.dtw:DtwDecoder",
+    "tracker": "grasplink.decoding.tracker:TrackerDecoder",
 }
 
 #: The decoder `grasplink decode` uses unless told otherwise (set from the benchmark).

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from grasplink.gateway.decoding.kernels import jit
+from grasplink.decoding.kernels import jit
 
 # ids of the small steps the detector's step probe finds (their own series, from here on)
 PROBE_IDS = 1_000_000_000

@@ -47,17 +47,17 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 from grasplink.errors import BrokerError
 from grasplink.gateway.commands import Command, CommandResult
 from grasplink.gateway.service import SNAPSHOT_PERIOD_US
-from grasplink.gateway.telemetry.buffer import Message, Outbox, Sample, SnapshotQueue
-from grasplink.gateway.telemetry.json_tree import JsonTree
-from grasplink.gateway.telemetry.protocol import (
+from grasplink.surfaces.telemetry.buffer import Message, Outbox, Sample, SnapshotQueue
+from grasplink.surfaces.telemetry.json_tree import JsonTree
+from grasplink.surfaces.telemetry.protocol import (
     CommandRequest,
     TelemetryProtocol,
     apply_result,
     same_report,
 )
-from grasplink.gateway.telemetry.sparkplug import SparkplugSession
-from grasplink.gateway.telemetry.state import BdSeqFile
-from grasplink.gateway.telemetry.url import BrokerUrl
+from grasplink.surfaces.telemetry.sparkplug import SparkplugSession
+from grasplink.surfaces.telemetry.state import BdSeqFile
+from grasplink.surfaces.telemetry.url import BrokerUrl
 
 DEFAULT_RATE_HZ = 20.0
 CONNECT_TIMEOUT_S = 5.0

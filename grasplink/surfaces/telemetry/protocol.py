@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from grasplink.gateway.commands import Command, CommandResult
-from grasplink.gateway.telemetry.buffer import Message, Sample
+from grasplink.surfaces.telemetry.buffer import Message, Sample
 
 LIVE_PHASE = "operational"  # a node is live (a Sparkplug device born) only while operational
 

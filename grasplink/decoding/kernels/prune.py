@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from grasplink.gateway.decoding.kernels import jit
-from grasplink.gateway.decoding.kernels.branch import (
+from grasplink.decoding.kernels import jit
+from grasplink.decoding.kernels.branch import (
     I_DIRN,
     I_FIRST,
     I_LAST,
