@@ -25,6 +25,7 @@ valgrind; ~10 minutes on two cores, plus up to a minute per tree to compile its 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import re
 import shutil
@@ -33,6 +34,9 @@ import sys
 import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from types import ModuleType
+
+from markdown import signed, table
 
 ROOT = Path(__file__).resolve().parents[1]
 # (short, long) lengths: decoder in slip cycles, gateway in simulated seconds
@@ -59,7 +63,7 @@ def compile_kernels(tree: Path) -> None:
 def run_workload(tree: Path, workload: str, amount: float) -> None:
     """The workload itself, in this interpreter, importing grasplink from `tree`."""
     sys.path[:0] = [str(tree), str(tree / "benchmarks")]
-    import bench_gateway as bg
+    bg = gateway_workload()
 
     import grasplink
 
@@ -77,8 +81,8 @@ def run_workload(tree: Path, workload: str, amount: float) -> None:
         for i in range(0, len(t), 3):
             decoder.process(t[i : i + 3], x[i : i + 3])
     else:
-        # built here, not with bench_gateway's `lockstep_set`: the base tree's
-        # bench_gateway is imported, and older ones do not have it
+        # built here, not with the gateway benchmark's `lockstep_set`: the base tree's
+        # module is imported, and older ones do not have it
         config = bg.gateway_config()
         net = bg.LockstepNetwork([bg.Gateway(config), *bg.set_nodes(config)])
         net.start()
@@ -107,9 +111,18 @@ def per_unit(tree: Path, workload: str) -> float:
 
 def len_cycle_samples() -> int:
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    import bench_gateway as bg
+    return len(gateway_workload().SlipCycle().values)
 
-    return len(bg.SlipCycle().values)
+
+def gateway_workload() -> ModuleType:
+    """The gateway benchmark's measuring module on `sys.path`: `gateway_measure` since the
+    measure/render split, `bench_gateway` itself in trees from before it."""
+    try:
+        return importlib.import_module("gateway_measure")
+    except ModuleNotFoundError as exc:
+        if exc.name != "gateway_measure":
+            raise
+        return importlib.import_module("bench_gateway")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,14 +160,11 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)])
     print(f"instructions per unit, base {rev.stdout.strip()} against this tree (callgrind)\n")
-    print("| workload | unit | base | this tree | change |")
-    print("|---|---|---:|---:|---:|")
-    for i, workload in enumerate(LENGTHS):
-        before, after = results[2 * i], results[2 * i + 1]
-        print(
-            f"| {workload} | {UNITS[workload]} | {before:,.0f} | {after:,.0f} | "
-            f"{100 * (after / before - 1):+.1f} % |"
-        )
+    rows = [
+        [w, UNITS[w], f"{before:,.0f}", f"{after:,.0f}", signed(100 * (after / before - 1), 1, "%")]
+        for w, before, after in zip(LENGTHS, results[::2], results[1::2], strict=True)
+    ]
+    print("\n".join(table(["workload", "unit", "base", "this tree", "change"], rows, "llrrr")))
     return 0
 
 
