@@ -1,4 +1,5 @@
-"""Modbus benchmark -> docs/benchmarks/modbus.md.
+"""Modbus benchmark -> docs/benchmarks/modbus.json (the figures) -> modbus.md (rendered
+from that JSON alone: `--report-only docs/benchmarks/modbus.json` renders it again).
 
 1. CPU: the live gateway with its four nodes on the embedded bus, run without a Modbus
    server, then with one polled by mbpoll (another process, a real peer) for the whole
@@ -13,6 +14,7 @@
 3. Encoding: one snapshot to the 77 input registers, the pure function alone.
 
 Usage: .venv/bin/python benchmarks/bench_modbus.py [--quick] [--out docs/benchmarks]
+       [--report-only JSON]
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ import argparse
 import contextlib
 import json
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -35,7 +36,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+import figures_json  # noqa: E402
 from bench_telemetry import since, thread_cpu_s, thread_sleeps  # noqa: E402  (the same clocks)
+from markdown import table  # noqa: E402
 
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402
@@ -214,16 +217,10 @@ def percentile(values: list[float], share: float) -> float:
     return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="short runs (a smoke test)")
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks")
-    args = parser.parse_args()
-    if shutil.which("mbpoll") is None:
-        print("mbpoll is not installed (make setup installs it)", file=sys.stderr)
-        return 1
-    run_s = 5.0 if args.quick else 30.0
-    scene_rounds = 1 if args.quick else SCENE_ROUNDS
+def measure(quick: bool) -> dict:
+    """Every run: the figures."""
+    run_s = 5.0 if quick else 30.0
+    scene_rounds = 1 if quick else SCENE_ROUNDS
     load = os.getloadavg()[0]
     runs = {
         "no Modbus server": run_gateway(run_s, None),
@@ -258,60 +255,85 @@ def main() -> int:
                     }
             finally:
                 broker.stop()
-    lat = latency(100 if args.quick else 1000, 20 if args.quick else 200)
-    encode_us = encode_cost(200 if args.quick else 2000, 30 if args.quick else 200)
-    load = max(load, os.getloadavg()[0])
-    text = render(run_s, runs, lat, encode_us, load, scene_rounds)
+    lat = latency(100 if quick else 1000, 20 if quick else 200)
+    encode_us = encode_cost(200 if quick else 2000, 30 if quick else 200)
+    rmap = register_map()
+    return {
+        "run_s": run_s,
+        "warmup_s": WARMUP_S,
+        "scene_rounds": scene_rounds,
+        "runs": runs,
+        "latency": lat,
+        "encode_us": {"back_to_back": encode_us[0], "paced": encode_us[1]},
+        "loadavg_max": max(load, os.getloadavg()[0]),
+        "registers": {"input": rmap.input_count, "holding": rmap.holding_count},
+        "target_share": TARGET_SHARE,
+        "quick": quick,
+        "environment": figures_json.environment(),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="short runs (a smoke test)")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks")
+    parser.add_argument("--figures", type=Path, help="figures JSON (default: OUT/modbus.json)")
+    parser.add_argument("--report-only", type=Path, metavar="JSON", help="render, no runs")
+    args = parser.parse_args(argv)
+    if args.report_only:
+        figures = figures_json.read(args.report_only)
+    else:
+        if shutil.which("mbpoll") is None:
+            print("mbpoll is not installed (make setup installs it)", file=sys.stderr)
+            return 1
+        figures = figures_json.write(args.figures or args.out / "modbus.json", measure(args.quick))
+    text = render(figures)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "modbus.md").write_text(text)
     print(text)
     return 0
 
 
-def render(
-    run_s: float,
-    runs: dict,
-    lat: dict,
-    encode_us: tuple[float, float],
-    load: float,
-    scene_rounds: int,
-) -> str:
-    warm_us, paced_us = encode_us
-    rmap = register_map()
-    cpu = os.cpu_count()
+def render(figures: dict) -> str:
+    """modbus.md from the figures alone."""
+    env, runs, lat = figures["environment"], figures["runs"], figures["latency"]
+    run_s, scene_rounds = figures["run_s"], figures["scene_rounds"]
+    warm_us, paced_us = figures["encode_us"]["back_to_back"], figures["encode_us"]["paced"]
+    inputs, holding = figures["registers"]["input"], figures["registers"]["holding"]
+    target_share = figures["target_share"]
     lines = [
         "# Modbus benchmark",
         "",
         "<!-- Generated by benchmarks/bench_modbus.py; rerun it rather than editing. -->",
         "",
-        f"Machine: {platform.machine()}, {cpu} cores (shared), Python "
-        f"{platform.python_version()}, load average up to {load:.1f} while it ran (other "
+        f"Machine: {env['machine']}, {env['cpu_count']} cores (shared), Python "
+        f"{env['python']}, load average up to {figures['loadavg_max']:.1f} while it ran (other "
         "work shares the machine: latency tails are the scheduler's as much as ours). "
         "The live gateway with its four nodes on the embedded "
         f"bus (at rest: no scene drives the skin; the last two runs replay a slipping scene "
         f"instead, {scene_rounds} round(s) of the pair interleaved, each figure the median "
-        f"of the rounds), {run_s:g} s per run after {WARMUP_S:g} s "
+        f"of the rounds), {run_s:g} s per run after {figures['warmup_s']:g} s "
         "of warm-up; CPU per thread from the kernel's thread clocks. The pollers are mbpoll "
         "processes (a real peer) polling the whole input map "
-        f"({rmap.input_count} registers, function 04) and, in one run, the holding table "
-        f"({rmap.holding_count} registers, function 03) too, at the rate given.",
+        f"({inputs} registers, function 04) and, in one run, the holding table "
+        f"({holding} registers, function 03) too, at the rate given.",
         "",
         "## CPU",
         "",
-        "| run | requests/s | gateway thread % | nodes thread % | Modbus thread % | "
-        "telemetry thread % | Modbus / gateway | (Modbus + telemetry) / gateway |",
-        "|---|---|---|---|---|---|---|---|",
+        *table(
+            [
+                "run",
+                "requests/s",
+                "gateway thread %",
+                "nodes thread %",
+                "Modbus thread %",
+                "telemetry thread %",
+                "Modbus / gateway",
+                "(Modbus + telemetry) / gateway",
+            ],
+            [_cpu_row(name, share) for name, share in runs.items()],
+        ),
     ]
-    for name, share in runs.items():
-        gateway = share.get(GATEWAY_THREAD, 0.0)
-        modbus = share.get(MODBUS_THREAD)
-        telemetry = share.get(TELEMETRY_THREAD)
-        lines.append(
-            f"| {name} | {share['requests_per_s']:.0f} | {gateway:.2f} | "
-            f"{share.get(NODES_THREAD, 0.0):.2f} | {_pct(modbus)} | {_pct(telemetry)} | "
-            f"{_ratio(modbus, gateway)} | "
-            f"{_ratio((modbus or 0) + telemetry, gateway) if telemetry is not None else '—'} |"
-        )
     ten = runs[REALISTIC]
     ten_ratio = 100 * ten.get(MODBUS_THREAD, 0.0) / max(ten.get(GATEWAY_THREAD, 0.0), 1e-9)
     # CPU per request: % of a core over requests per second (the whole input map each)
@@ -324,11 +346,11 @@ def render(
         "",
         "% is of one core. At a realistic polling rate (the whole input map 10 times a "
         f"second) the Modbus server costs {ten_ratio:.1f} % of the gateway's own CPU. The "
-        f"budget, {TARGET_SHARE:g} %, is for telemetry and Modbus together. At rest, "
-        + _verdict(runs.get(WITH_TELEMETRY))
+        f"budget, {target_share:g} %, is for telemetry and Modbus together. At rest, "
+        + _verdict(runs.get(WITH_TELEMETRY), target_share)
         + " Decoding a slipping scene (the loop headline's recorded CAN log replayed in "
         "real time onto the gateway's bus as its nodes, looped; docs/benchmarks/telemetry.md), "
-        + _verdict(runs.get(SCENE_BOTH), scene=True)
+        + _verdict(runs.get(SCENE_BOTH), target_share, scene=True)
         + " The Modbus cost does not depend on what the gateway measures: a read is "
         "answered in the connection's data callback (one event-loop wake-up, pymodbus's "
         "framing, the snapshot encoded whole once, cached per snapshot, one socket write), "
@@ -360,23 +382,17 @@ def render(
         "threshold re-set to its own value) at 10 Hz, which are answered only once the "
         "gateway's thread has executed the command (its runner wakes at least every 20 ms).",
         "",
-        "| request | samples | p50 | p99 | max |",
-        "|---|---|---|---|---|",
-    ]
-    for label, key in (
-        (f"read {rmap.input_count} input registers (04)", "read_us"),
-        ("write one command (06)", "write_us"),
-    ):
-        values = lat[key]
-        lines.append(
-            f"| {label} | {len(values)} | {percentile(values, 0.5) / 1000:.2f} ms | "
-            f"{percentile(values, 0.99) / 1000:.2f} ms | {max(values) / 1000:.2f} ms |"
-        )
-    lines += [
+        *table(
+            ["request", "samples", "p50", "p99", "max"],
+            [
+                _latency_row(f"read {inputs} input registers (04)", lat["read_us"]),
+                _latency_row("write one command (06)", lat["write_us"]),
+            ],
+        ),
         "",
         "## Encoding",
         "",
-        f"One snapshot into the {rmap.input_count} input registers (the pure function, "
+        f"One snapshot into the {inputs} input registers (the pure function, "
         f"`RegisterMap.encode_inputs`): {warm_us:.0f} µs back to back (a loop, the mean); "
         f"{paced_us:.0f} µs paced as a 10 Hz poll (one every 100 ms, the thread asleep in "
         "between; the median of its thread CPU time).",
@@ -387,6 +403,30 @@ def render(
     return "\n".join(lines)
 
 
+def _latency_row(label: str, values: list[float]) -> list[object]:
+    """Round trips [µs] as p50, p99 and max in ms."""
+    ms = (percentile(values, 0.5), percentile(values, 0.99), max(values))
+    return [label, len(values), *(f"{us / 1000:.2f} ms" for us in ms)]
+
+
+def _cpu_row(name: str, share: dict[str, float]) -> list[object]:
+    """One run's CPU: per thread, and the surfaces' against the gateway's."""
+    gateway = share.get(GATEWAY_THREAD, 0.0)
+    modbus = share.get(MODBUS_THREAD)
+    telemetry = share.get(TELEMETRY_THREAD)
+    both = _ratio((modbus or 0) + telemetry, gateway) if telemetry is not None else "—"
+    return [
+        name,
+        f"{share['requests_per_s']:.0f}",
+        f"{gateway:.2f}",
+        f"{share.get(NODES_THREAD, 0.0):.2f}",
+        _pct(modbus),
+        _pct(telemetry),
+        _ratio(modbus, gateway),
+        both,
+    ]
+
+
 def _pct(value: float | None) -> str:
     return "—" if value is None else f"{value:.2f}"
 
@@ -395,13 +435,13 @@ def _ratio(part: float | None, whole: float) -> str:
     return "—" if part is None or not whole else f"{100 * part / whole:.1f} %"
 
 
-def _verdict(run: dict[str, float] | None, *, scene: bool = False) -> str:
+def _verdict(run: dict[str, float] | None, target_share: float, *, scene: bool = False) -> str:
     if run is None:
         return "mosquitto was not installed, so the run beside telemetry is missing."
     gateway = run.get(GATEWAY_THREAD, 0.0)
     modbus = 100 * run.get(MODBUS_THREAD, 0.0) / gateway
     telemetry = 100 * run.get(TELEMETRY_THREAD, 0.0) / gateway
-    verdict = "met" if modbus + telemetry <= TARGET_SHARE else "missed"
+    verdict = "met" if modbus + telemetry <= target_share else "missed"
     text = (
         f"beside the telemetry at its defaults the two take {modbus + telemetry:.1f} % "
         f"(Modbus {modbus:.1f} %, telemetry {telemetry:.1f} %): budget {verdict}."

@@ -1,4 +1,4 @@
-"""Soak under load -> docs/benchmarks/soak.md (issue 21, item 5).
+"""Soak under load -> docs/benchmarks/soak.json (the figures) -> soak.md (issue 21, item 5).
 
 The system as deployed, on one machine: a `grasplink bus hub` (the wire), the four
 `grasplink node` processes (the nodes' firmware) and a `grasplink gateway` process, beside
@@ -23,6 +23,7 @@ Target: 0 consumer faults (EMCY 8130h) in 10 minutes beside 6 busy loops.
 
 Usage: .venv/bin/python benchmarks/bench_soak.py [--minutes 10] [--quick] [--busy 6]
        [--stand-ins realtime|normal] [--out docs/benchmarks/soak.md]
+       [--report-only docs/benchmarks/soak.json] (renders soak.md again from its figures)
 """
 
 from __future__ import annotations
@@ -31,7 +32,6 @@ import argparse
 import contextlib
 import itertools
 import os
-import platform
 import re
 import signal
 import socket
@@ -44,9 +44,13 @@ import time
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+import figures_json  # noqa: E402
+from markdown import table  # noqa: E402
 
 from grasplink.bus import open_bus  # noqa: E402
 from grasplink.bus.priority import raise_thread_priority  # noqa: E402
@@ -309,28 +313,46 @@ def summarise(
     }
 
 
-def render(r: dict[str, object], commit: str) -> str:
-    faults = sum(r["faults"].values())  # type: ignore[attr-defined]
+def render(r: dict[str, Any]) -> str:
+    """soak.md from the figures alone."""
+    env = r["environment"]
+    faults = sum(r["faults"].values())
     verdict = "MET" if faults == 0 else "MISSED"
-    full = r["minutes"] >= 10 and r["busy"] >= 6  # type: ignore[operator]
+    full = r["minutes"] >= 10 and r["busy"] >= 6
     scope = "" if full else " (a shorter or lighter run than the target's: indicative only)"
 
     def ms(key: str) -> str:
         value = r[key]
         return "-" if value is None else f"{value:.1f}"
 
-    def per_kind(counts: object) -> str:
-        assert isinstance(counts, dict)
+    def per_kind(counts: dict[str, int]) -> str:
         return ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none"
 
     intervals = " / ".join(ms(k) for k in ("p50_ms", "p99_ms", "p999_ms", "max_ms"))
+    rows = [
+        [
+            "load average (1 min) during the run, mean / max",
+            f"{r['load_mean']:.1f} / {r['load_max']:.1f}",
+        ],
+        ["gateway up after (its start under the same load)", f"{r['up_s']:.1f} s"],
+        ["gateway heartbeats seen on the bus", r["beats"]],
+        ["interval p50 / p99 / p99.9 / max", f"{intervals} ms"],
+        [f"intervals over the nodes' consumer time ({r['consumer_ms']} ms)", r["over_consumer"]],
+        [f"intervals over the old consumer time ({r['old_consumer_ms']} ms)", r["over_old"]],
+        ["consumer faults (EMCY 8130h)", f"{faults} ({per_kind(r['faults'])})"],
+        ["re-provisionings", per_kind(r["reprovisioned"])],
+        ["NMT resets / node boot-ups after the start", f"{r['resets']} / {per_kind(r['boots'])}"],
+        ["the gateway's own account (its final status line)", r["gateway_own"]],
+        ["frames seen in the window", r["frames"]],
+    ]
+    summary = "\n".join(table(["what", "value"], rows))
     return f"""# Soak under load
 
 `benchmarks/bench_soak.py` (issue 21, item 5). The gateway, the hub and the four nodes as
 separate processes, as deployed, beside {r["busy"]} busy loops (python processes spinning)
-on {os.cpu_count()} cores; a bus analyser on the hub counts for {r["minutes"]:g} min from
-the moment the gateway is up. Commit {commit}, {platform.machine()}, Python
-{platform.python_version()}, {time.strftime("%Y-%m-%d %H:%M")}. The hub, the nodes and
+on {env["cpu_count"]} cores; a bus analyser on the hub counts for {r["minutes"]:g} min from
+the moment the gateway is up. Commit {r["commit"]}, {env["machine"]}, Python
+{env["python"]}, {r["date"]}. The hub, the nodes and
 the analyser stand for hardware of their own, so they run ahead of the busy loops:
 {STAND_IN_PRIORITY[str(r["stand_ins"])]} (the analyser's thread: {r["analyser_priority"]}).
 The gateway runs as a user starts it; its heartbeat thread got {r["gateway_priority"]},
@@ -338,19 +360,7 @@ its runner thread {r["runner_priority"]}.
 
 **Target: 0 consumer faults (EMCY 8130h) in 10 minutes beside 6 busy loops: {verdict}**{scope}.
 
-| what | value |
-|---|---|
-| load average (1 min) during the run, mean / max | {r["load_mean"]:.1f} / {r["load_max"]:.1f} |
-| gateway up after (its start under the same load) | {r["up_s"]:.1f} s |
-| gateway heartbeats seen on the bus | {r["beats"]} |
-| interval p50 / p99 / p99.9 / max | {intervals} ms |
-| intervals over the nodes' consumer time ({r["consumer_ms"]} ms) | {r["over_consumer"]} |
-| intervals over the old consumer time ({OLD_CONSUMER_MS} ms) | {r["over_old"]} |
-| consumer faults (EMCY 8130h) | {faults} ({per_kind(r["faults"])}) |
-| re-provisionings | {per_kind(r["reprovisioned"])} |
-| NMT resets / node boot-ups after the start | {r["resets"]} / {per_kind(r["boots"])} |
-| the gateway's own account (its final status line) | {r["gateway_own"]} |
-| frames seen in the window | {r["frames"]} |
+{summary}
 
 The intervals are measured where the nodes are: at a hub client (the analyser), so they
 include the hub's relay. Before issue 21 the heartbeat was one of the master's timers,
@@ -363,21 +373,12 @@ at real-time priority where the host allows it, and the nodes' consumer time is
 
 Rerun: `.venv/bin/python benchmarks/bench_soak.py` (10 min; `--quick`: 1 min;
 `--stand-ins realtime|normal` for the hub's and nodes' priority; `--logs DIR` keeps
-every process's output).
+every process's output; `--report-only docs/benchmarks/soak.json` renders again).
 """
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--minutes", type=float, default=10.0)
-    parser.add_argument("--quick", action="store_true", help="1 minute")
-    parser.add_argument("--busy", type=int, default=6, help="busy loops beside the system")
-    parser.add_argument("--stand-ins", choices=tuple(STAND_IN_PRIORITY), default="nice")
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks" / "soak.md")
-    parser.add_argument("--logs", type=Path, default=None, help="keep the processes' logs here")
-    args = parser.parse_args()
-    if args.quick:
-        args.minutes = 1.0
+def code_version() -> str:
+    """The commit measured, and whether the tree differs from it."""
     commit = subprocess.run(
         ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
     ).stdout.strip()
@@ -387,18 +388,44 @@ def main() -> int:
         capture_output=True,
         text=True,
     ).stdout.strip()
-    commit += " (with uncommitted changes in the tree)" if dirty else ""
-    if args.logs is not None:
-        args.logs.mkdir(parents=True, exist_ok=True)
-        result = soak(args, args.logs)
+    return commit + (" (with uncommitted changes in the tree)" if dirty else "")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--quick", action="store_true", help="1 minute")
+    parser.add_argument("--busy", type=int, default=6, help="busy loops beside the system")
+    parser.add_argument("--stand-ins", choices=tuple(STAND_IN_PRIORITY), default="nice")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks" / "soak.md")
+    parser.add_argument("--figures", type=Path, help="figures JSON (default: OUT, .json)")
+    parser.add_argument("--report-only", type=Path, metavar="JSON", help="render, no runs")
+    parser.add_argument("--logs", type=Path, default=None, help="keep the processes' logs here")
+    args = parser.parse_args()
+    if args.quick:
+        args.minutes = 1.0
+    if args.report_only:
+        figures = figures_json.read(args.report_only)
     else:
-        with tempfile.TemporaryDirectory(prefix="bench-soak-") as tmp:
-            result = soak(args, Path(tmp))
-    text = render(result, commit)
+        context = {
+            "commit": code_version(),
+            "date": time.strftime("%Y-%m-%d %H:%M"),
+            "old_consumer_ms": OLD_CONSUMER_MS,
+            "environment": figures_json.environment(),
+        }
+        if args.logs is not None:
+            args.logs.mkdir(parents=True, exist_ok=True)
+            result = soak(args, args.logs)
+        else:
+            with tempfile.TemporaryDirectory(prefix="bench-soak-") as tmp:
+                result = soak(args, Path(tmp))
+        path = args.figures or args.out.with_suffix(".json")
+        figures = figures_json.write(path, {**result, **context})
+    text = render(figures)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
     print(text)
-    faults = sum(result["faults"].values())  # type: ignore[attr-defined]
+    faults = sum(figures["faults"].values())
     print(f"wrote {args.out}; consumer faults: {faults}")
     return 0
 

@@ -40,6 +40,7 @@ CHANGED: dict[str, list[tuple[str, str]]] = {
             r"gateway.json; do not edit by hand",
         ),
     ],
+    "soak": [(r"every process's output\)\.", r"every process's output; `--report-only docs/")],
 }
 
 # The base tree's render of the figures in sys.argv[1], written to sys.argv[2]: run in a
@@ -48,6 +49,37 @@ BASE_RENDER = {
     "gateway": """
 import bench_gateway as b
 b.write_doc(figures, out)
+""",
+    "scenes": """
+import bench_scenes as b
+rows = [
+    (r["name"], r["chunk_ms"], r["effects"], r["wall_s"], r["x_real_time"], r["cpu_s"],
+     r["simulated_s"])
+    for r in figures["scenes"]
+]
+b.write_doc(rows, figures["costs"], out)
+""",
+    "network": """
+import bench_network as b
+resolution = [
+    {"rate": r["rate_hz"], 1: r["load_per_pdo"][0], 2: r["load_per_pdo"][1],
+     3: r["load_per_pdo"][2], "raw": r["load_emg_raw"]}
+    for r in figures["resolution"]
+]
+b.write_doc(figures["nodes"], figures["prosthesis"], resolution, figures["realtime"],
+            figures["seconds"], out)
+""",
+    "modbus": """
+import bench_modbus as b
+encode_us = (figures["encode_us"]["back_to_back"], figures["encode_us"]["paced"])
+out.write_text(b.render(figures["run_s"], figures["runs"], figures["latency"], encode_us,
+                        figures["loadavg_max"], figures["scene_rounds"]))
+""",
+    "soak": """
+import time
+import bench_soak as b
+time.strftime = lambda *_: figures["date"]  # the base read the clock when rendering
+out.write_text(b.render(figures, figures["commit"]))
 """,
 }
 BASE_PRELUDE = """
@@ -66,8 +98,36 @@ def this_gateway(figures: dict[str, Any]) -> str:
     return gateway_render.render(figures)
 
 
+def this_scenes(figures: dict[str, Any]) -> str:
+    import bench_scenes
+
+    return bench_scenes.render(figures)
+
+
+def this_network(figures: dict[str, Any]) -> str:
+    import bench_network
+
+    return bench_network.render(figures)
+
+
+def this_modbus(figures: dict[str, Any]) -> str:
+    import bench_modbus
+
+    return bench_modbus.render(figures)
+
+
+def this_soak(figures: dict[str, Any]) -> str:
+    import bench_soak
+
+    return bench_soak.render(figures)
+
+
 THIS_RENDER: dict[str, Callable[[dict[str, Any]], str]] = {
     "gateway": this_gateway,
+    "scenes": this_scenes,
+    "network": this_network,
+    "modbus": this_modbus,
+    "soak": this_soak,
 }
 
 

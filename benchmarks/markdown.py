@@ -2,7 +2,7 @@
 
 Every benchmark renders its doc from its figures JSON with these, so a table is a list
 of rows in the code, never a hand-built `| a | b |` line, and the number formats (a
-dash for what was not measured, thin thousands) are the same in every doc.
+dash for what was not measured, spaces between thousands) are the same in every doc.
 """
 
 from __future__ import annotations
@@ -57,16 +57,7 @@ def signed(value: float | None, digits: int = 0, unit: str = "") -> str:
     return f"{text} {unit}" if unit else text
 
 
-def percent(value: float | None, digits: int = 0) -> str:
-    """A share in percent: "12 %"."""
-    return number(value, digits, "%")
-
-
-def bullets(items: Iterable[str], numbered: bool = False) -> list[str]:
-    """A list's lines: "- item", or "1. item" numbered."""
-    return [f"{i}. {item}" if numbered else f"- {item}" for i, item in enumerate(items, start=1)]
-
-
-def lines(block: str) -> list[str]:
-    """A prose block's lines: a triple-quoted string's text without its first newline."""
-    return block.removeprefix("\n").splitlines()
+def block(text: str) -> list[str]:
+    """A prose block's lines: a triple-quoted string written flush left, without its
+    first newline (so the source reads as the doc does)."""
+    return text.removeprefix("\n").splitlines()
