@@ -10,8 +10,9 @@ for the lines this tree changed on purpose (`CHANGED`), which are shown and allo
 FIGURES is a figures JSON of this tree's measure (for gateway also the JSON a base's
 `bench_gateway.py --figures` saved: what the base read when rendering, the machine, the
 setup and the decoder's delays, is read here where it lacks them, on this machine as the
-base's render would). A base from before the split has no render from JSON for the
-other benchmarks: `BASE_RENDER` calls its render function with the JSON's figures.
+base's render would). A base that renders from JSON is run with `--report-only`; one from
+before the split (6cc14c2 and older) has its render function called with the JSON's
+figures (`BASE_RENDER`).
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-# Lines changed on purpose, per benchmark: (the base's line, this tree's), as patterns.
+# Lines changed on purpose since 6cc14c2, per benchmark: (the base's line, this tree's) as
+# patterns; a render that changes a line on purpose adds it here.
 CHANGED: dict[str, list[tuple[str, str]]] = {
     "gateway": [
         (
@@ -132,15 +134,31 @@ THIS_RENDER: dict[str, Callable[[dict[str, Any]], str]] = {
 
 
 def base_render(name: str, base: Path, figures: Path, out: Path) -> str:
-    """The base tree's doc for `name`, rendered from `figures` in a child interpreter."""
+    """The base tree's doc for `name`, rendered from `figures`: by its `--report-only` if
+    the base renders from JSON, else by `BASE_RENDER` in a child interpreter."""
     paths = os.pathsep.join([str(base), str(base / "benchmarks")])
+    env = {**os.environ, "PYTHONPATH": paths}
+    if (base / "benchmarks" / "figures_json.py").exists():
+        doc = out / f"{name}.md"
+        target = doc if name == "soak" else out  # soak's --out is the doc itself
+        command = [f"benchmarks/bench_{name}.py", "--report-only", str(figures)]
+        subprocess.run(
+            [sys.executable, *command, "--out", str(target)],
+            cwd=base,
+            env=env,
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+        return doc.read_text()
+    doc = out / f"{name}.md"
+    out.mkdir(parents=True, exist_ok=True)
     subprocess.run(
-        [sys.executable, "-c", BASE_PRELUDE + BASE_RENDER[name], str(figures), str(out)],
+        [sys.executable, "-c", BASE_PRELUDE + BASE_RENDER[name], str(figures), str(doc)],
         cwd=base,
-        env={**os.environ, "PYTHONPATH": paths},
+        env=env,
         check=True,
     )
-    return out.read_text()
+    return doc.read_text()
 
 
 def compare(name: str, before: str, after: str) -> bool:
@@ -179,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
             check=True,
         )
         try:
-            before = base_render(args.benchmark, base, figures, Path(tmp) / "base.md")
+            before = base_render(args.benchmark, base, figures, Path(tmp) / "out")
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)])
     after = THIS_RENDER[args.benchmark](json.loads(figures.read_text()))
