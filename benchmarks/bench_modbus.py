@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import figures_json  # noqa: E402
 from bench_telemetry import since, thread_cpu_s, thread_sleeps  # noqa: E402  (the same clocks)
-from markdown import table  # noqa: E402
+from doc_tables import table  # noqa: E402
 
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402

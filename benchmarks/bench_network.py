@@ -30,7 +30,7 @@ from pathlib import Path
 import can
 import canopen
 import figures_json
-from markdown import table
+from doc_tables import table
 
 from grasplink.bus import NodeRunner, frame_bits_worst_case, message_to_frame, open_bus
 from grasplink.bus.lockstep import LockstepNetwork

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 import figures_json
-from markdown import block, table
+from doc_tables import block, table
 
 from grasplink.controllers import simulation
 from grasplink.simulators.scene import load_scene

@@ -50,7 +50,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import figures_json  # noqa: E402
-from markdown import table  # noqa: E402
+from doc_tables import table  # noqa: E402
 
 from grasplink.bus import open_bus  # noqa: E402
 from grasplink.bus.priority import raise_thread_priority  # noqa: E402

@@ -36,7 +36,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
 
-from markdown import signed, table
+from doc_tables import signed, table
 
 ROOT = Path(__file__).resolve().parents[1]
 # (short, long) lengths: decoder in slip cycles, gateway in simulated seconds

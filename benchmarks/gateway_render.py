@@ -14,8 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from doc_tables import block, number, table
 from figures_json import percentile, slope_per_min
-from markdown import block, number, table
 
 # The bus runner's own CPU per frame (NodeRunner and python-can, code the decoder and the
 # gateway do not touch) in the full run of e457141, the run of record before the decoder's
