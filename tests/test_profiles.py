@@ -13,7 +13,7 @@ import pytest
 from grasplink.errors import ConfigError, EdsError
 from grasplink.profiles import eds_path, load_profile, objects, validate_eds
 from grasplink.profiles.docgen import render_profiles_markdown
-from grasplink.profiles.edsgen import render_eds
+from grasplink.profiles.edsgen import DEVICES, render_eds
 from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.layouts import LAYOUTS_MM, PRESET_CODES, parse_layout, spacings_um
 
@@ -92,13 +92,27 @@ def test_shipped_eds_imports_with_cob_ids_resolved_to_node_id(kind: str) -> None
             assert od[objects.RPDO_COMM + n][2].default == 255
 
 
+# 1018h sub 2 of each shipped EDS (edsgen.DEVICES): one code per kind, never reused.
+PRODUCT_CODES = {kind: description[0] for kind, description in DEVICES.items()}
+
+
+def test_product_codes_are_todays_and_distinct() -> None:
+    assert {k: PRODUCT_CODES[k] for k in ("skin", "belt", "emg", "hand")} == {
+        "skin": 1,
+        "belt": 2,
+        "emg": 3,
+        "hand": 4,
+    }
+    assert len(set(PRODUCT_CODES.values())) == len(PRODUCT_CODES)
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_shipped_eds_common_values(kind: str) -> None:
     od = load_profile(kind, objects.DEFAULT_NODE_IDS[kind])
     expected_type = 0x00020192 if kind in DRIVES else 0x00000194
     assert od[objects.DEVICE_TYPE].default == expected_type
     assert od[objects.IDENTITY][1].default == 0x00000ABC
-    assert od[objects.IDENTITY][2].default == {"skin": 1, "belt": 2, "emg": 3, "hand": 4}[kind]
+    assert od[objects.IDENTITY][2].default == PRODUCT_CODES[kind]
     assert od[objects.IDENTITY][3].default == 0x00010000
     assert od[objects.HEARTBEAT_CONSUMER][1].default == 0x000101F4
     assert od[objects.HEARTBEAT_PRODUCER_MS].default == 100
@@ -142,7 +156,7 @@ def test_ridge_spacing_defaults_are_the_alpha01_layout() -> None:
 
 def _expected_indices(kind: str) -> dict[str, int]:
     """objects.py names that must exist in this kind's EDS."""
-    prefix = {"skin": "SKIN_", "emg": "EMG_", "belt": "BELT_", "hand": "HAND_"}[kind]
+    prefix = f"{kind.upper()}_"
     names = [*COMMON_NAMES, *(("RPDO_COMM", "RPDO_MAP", *CIA402_NAMES) if kind in DRIVES else ())]
     names += [name for name in vars(objects) if name.startswith(prefix)]
     return {name: getattr(objects, name) for name in names}
