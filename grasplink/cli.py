@@ -59,13 +59,13 @@ def positive_hz(text: str) -> float:
 def build_parser() -> argparse.ArgumentParser:
     from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S
     from grasplink.bus.url import DEFAULT_BUS_URL, DEFAULT_HUB_PORT
-    from grasplink.profiles import DEVICE_KINDS
+    from grasplink.profiles.kinds import KINDS
 
     parser = argparse.ArgumentParser(prog="grasplink", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     node = sub.add_parser("node", help="run one device node as its own process")
-    node.add_argument("kind", choices=DEVICE_KINDS, help="which device")
+    node.add_argument("kind", choices=KINDS, help="which device")
     node.add_argument(
         "--bus",
         default=DEFAULT_BUS_URL,
@@ -315,7 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="KIND=ID",
-        help="node-ID of a node kind (skin, emg, belt, hand, gateway), e.g. skin=0x11; "
+        help=f"node-ID of a node kind ({', '.join(KINDS)}, gateway), e.g. skin=0x11; "
         "repeatable (default: the profiles' node-IDs and the gateway's 1)",
     )
     _add_log_commands(sub, DEFAULT_BUS_URL)

@@ -1,7 +1,7 @@
 """`grasplink demo`: boot a whole prosthesis network and report what the bus carried.
 
-Four device nodes and an NMT master run on one bus (the embedded virtual
-bus by default). The master resets and starts the nodes, then drives the
+A device node of each kind and an NMT master run on one bus (the embedded
+virtual bus by default). The master resets and starts the nodes, then drives the
 belt and the hand through their RPDOs, stepping through the thesis display
 levels, while a separate bus handle watches like a bus analyser: node
 states, PDO rates, heartbeat jitter, and bus load with worst-case stuffing.
@@ -25,6 +25,7 @@ from grasplink.core.frames import function_of
 from grasplink.devices.factory import build_node
 from grasplink.gateway.scripted import ScriptedMaster
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import BY_NODE_ID, node_kind
 
 BITRATE = 1_000_000
 COMMAND_PERIOD_US = 50_000
@@ -94,7 +95,7 @@ def run_demo(
 ) -> dict:
     """Run the demo; returns the figures it printed (for tests)."""
     url = bus_url or f"virtual:grasplink-demo-{os.getpid()}"
-    kinds = {obj.DEFAULT_NODE_IDS[k]: k for k in ("skin", "belt", "emg", "hand")}
+    kinds = {node_kind(k).node_id: k for k in BY_NODE_ID}
     nodes = [build_node(kind, node_id) for node_id, kind in kinds.items()]
     master = demo_master(kinds)
     watch, stop = BusWatch(), threading.Event()

@@ -21,7 +21,6 @@ from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, SDO_RX_BASE, SDO_TX
 from grasplink.core.nmt import NmtState
 from grasplink.devices import emcy
 from grasplink.errors import ConfigError
-from grasplink.profiles import DEVICE_KINDS
 from grasplink.profiles import objects as obj
 from grasplink.profiles.dbc import (
     EMCY_CODES,
@@ -32,6 +31,7 @@ from grasplink.profiles.dbc import (
     node_ids_with,
     pdo_messages,
 )
+from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.objects import DEFAULT_NODE_IDS
 from grasplink.profiles.pdo_codec import PdoCodec
 
@@ -77,10 +77,10 @@ def test_every_frame_of_a_recorded_run_decodes_as_pdo_codec_decodes_it(dbc_file,
     import can
 
     db = cantools.database.load_file(str(dbc_file), database_format="dbc")
-    codecs = {kind: PdoCodec(kind, DEFAULT_NODE_IDS[kind]) for kind in DEVICE_KINDS}
+    codecs = {kind: PdoCodec(kind, DEFAULT_NODE_IDS[kind]) for kind in KINDS}
     # (CAN-ID) -> (codec, RPDO number or None for a TPDO, {signal name: (index, sub)})
     pdos = {}
-    for kind in DEVICE_KINDS:
+    for kind in KINDS:
         for pdo in pdo_messages(kind, DEFAULT_NODE_IDS[kind]):
             keys = {s.name: s.key for s in pdo.signals}
             number = pdo.number if pdo.direction == "RPDO" else None
@@ -113,7 +113,7 @@ def test_every_frame_of_a_recorded_run_decodes_as_pdo_codec_decodes_it(dbc_file,
 
 def test_signals_sit_where_the_eds_mapping_puts_them(dbc_file):
     db = cantools.database.load_file(str(dbc_file), database_format="dbc")
-    for kind in DEVICE_KINDS:
+    for kind in KINDS:
         for pdo in pdo_messages(kind, DEFAULT_NODE_IDS[kind]):
             message = db.get_message_by_frame_id(pdo.can_id)
             assert message.length == pdo.length_bytes

@@ -11,9 +11,10 @@ from pathlib import Path
 import pytest
 
 from grasplink.errors import ConfigError, EdsError
-from grasplink.profiles import DEVICE_KINDS, eds_path, load_profile, objects, validate_eds
+from grasplink.profiles import eds_path, load_profile, objects, validate_eds
 from grasplink.profiles.docgen import render_profiles_markdown
-from grasplink.profiles.edsgen import render_eds
+from grasplink.profiles.edsgen import DEVICES, render_eds
+from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.layouts import LAYOUTS_MM, PRESET_CODES, parse_layout, spacings_um
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,7 +52,7 @@ CIA402_NAMES = (
 
 
 # --- shipped files -----------------------------------------------------------
-@pytest.mark.parametrize("kind", DEVICE_KINDS)
+@pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("node_id", ["default", 127])
 def test_shipped_eds_passes_dcfchk_without_errors(kind: str, node_id: int | str) -> None:
     # dcfchk 2.4.2 needs -n: without it, it crashes on any $NODEID PDO COB-ID.
@@ -69,7 +70,7 @@ def test_shipped_eds_passes_dcfchk_without_errors(kind: str, node_id: int | str)
     assert "warning" not in output.lower(), output
 
 
-@pytest.mark.parametrize("kind", DEVICE_KINDS)
+@pytest.mark.parametrize("kind", KINDS)
 def test_shipped_eds_imports_with_cob_ids_resolved_to_node_id(kind: str) -> None:
     node_id = 0x22
     od = load_profile(kind, node_id)
@@ -91,13 +92,27 @@ def test_shipped_eds_imports_with_cob_ids_resolved_to_node_id(kind: str) -> None
             assert od[objects.RPDO_COMM + n][2].default == 255
 
 
-@pytest.mark.parametrize("kind", DEVICE_KINDS)
+# 1018h sub 2 of each shipped EDS (edsgen.DEVICES): one code per kind, never reused.
+PRODUCT_CODES = {kind: description[0] for kind, description in DEVICES.items()}
+
+
+def test_product_codes_are_todays_and_distinct() -> None:
+    assert {k: PRODUCT_CODES[k] for k in ("skin", "belt", "emg", "hand")} == {
+        "skin": 1,
+        "belt": 2,
+        "emg": 3,
+        "hand": 4,
+    }
+    assert len(set(PRODUCT_CODES.values())) == len(PRODUCT_CODES)
+
+
+@pytest.mark.parametrize("kind", KINDS)
 def test_shipped_eds_common_values(kind: str) -> None:
     od = load_profile(kind, objects.DEFAULT_NODE_IDS[kind])
     expected_type = 0x00020192 if kind in DRIVES else 0x00000194
     assert od[objects.DEVICE_TYPE].default == expected_type
     assert od[objects.IDENTITY][1].default == 0x00000ABC
-    assert od[objects.IDENTITY][2].default == DEVICE_KINDS.index(kind) + 1
+    assert od[objects.IDENTITY][2].default == PRODUCT_CODES[kind]
     assert od[objects.IDENTITY][3].default == 0x00010000
     assert od[objects.HEARTBEAT_CONSUMER][1].default == 0x000101F4
     assert od[objects.HEARTBEAT_PRODUCER_MS].default == 100
@@ -141,13 +156,13 @@ def test_ridge_spacing_defaults_are_the_alpha01_layout() -> None:
 
 def _expected_indices(kind: str) -> dict[str, int]:
     """objects.py names that must exist in this kind's EDS."""
-    prefix = {"skin": "SKIN_", "emg": "EMG_", "belt": "BELT_", "hand": "HAND_"}[kind]
+    prefix = f"{kind.upper()}_"
     names = [*COMMON_NAMES, *(("RPDO_COMM", "RPDO_MAP", *CIA402_NAMES) if kind in DRIVES else ())]
     names += [name for name in vars(objects) if name.startswith(prefix)]
     return {name: getattr(objects, name) for name in names}
 
 
-@pytest.mark.parametrize("kind", DEVICE_KINDS)
+@pytest.mark.parametrize("kind", KINDS)
 def test_every_named_index_exists_in_its_eds(kind: str) -> None:
     od = load_profile(kind, objects.DEFAULT_NODE_IDS[kind])
     expected = _expected_indices(kind)
@@ -156,13 +171,13 @@ def test_every_named_index_exists_in_its_eds(kind: str) -> None:
     assert not missing
 
 
-@pytest.mark.parametrize("kind", DEVICE_KINDS)
+@pytest.mark.parametrize("kind", KINDS)
 def test_shipped_eds_is_ascii_and_matches_generator(kind: str) -> None:
     text = eds_path(kind).read_bytes().decode("ascii")
     assert text == render_eds(kind), "run: python -m grasplink.profiles.edsgen"
 
 
-@pytest.mark.parametrize("kind", DEVICE_KINDS)
+@pytest.mark.parametrize("kind", KINDS)
 def test_every_parameter_name_unit_is_bracketed(kind: str) -> None:
     text = eds_path(kind).read_text(encoding="ascii")
     for name in re.findall(r"^ParameterName=(.*)$", text, re.MULTILINE):
@@ -177,7 +192,7 @@ def test_docs_profiles_md_is_up_to_date() -> None:
 
 # --- load_profile arguments ----------------------------------------------------
 def test_load_profile_unknown_kind_lists_valid_kinds() -> None:
-    with pytest.raises(ConfigError, match="skin, belt, emg, hand"):
+    with pytest.raises(ConfigError, match="the kinds are skin, emg, belt, hand"):
         load_profile("glove", 0x10)
 
 
@@ -238,7 +253,7 @@ def _error(tmp_path: Path, text: str, name: str = "belt.eds") -> EdsError:
 
 
 def test_validator_accepts_every_shipped_eds() -> None:
-    for kind in DEVICE_KINDS:
+    for kind in KINDS:
         validate_eds(eds_path(kind))
 
 

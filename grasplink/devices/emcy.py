@@ -47,15 +47,9 @@ DESCRIPTIONS = {
     RPDO_TIMEOUT: "RPDO deadline expired",
     SENSOR_SATURATED: "FSR at full scale",
 }
-_EVERY_NODE = frozenset({ERROR_RESET, HEARTBEAT_TIMEOUT, CAN_ID_COLLISION})
-_RPDO_CODES = frozenset({PDO_LENGTH_ERROR, PDO_LENGTH_EXCEEDED, RPDO_TIMEOUT})
-# The codes each node kind can send (RPDO errors only where there are RPDOs).
-CODES_BY_KIND: dict[str, frozenset[int]] = {
-    "skin": _EVERY_NODE | {SENSOR_SATURATED},
-    "emg": _EVERY_NODE,
-    "belt": _EVERY_NODE | _RPDO_CODES,
-    "hand": _EVERY_NODE | _RPDO_CODES,
-}
+# Codes every node can send, and those of a node with RPDOs (the kind's set: factory.DEVICES).
+EVERY_NODE_CODES = frozenset({ERROR_RESET, HEARTBEAT_TIMEOUT, CAN_ID_COLLISION})
+RPDO_CODES = frozenset({PDO_LENGTH_ERROR, PDO_LENGTH_EXCEEDED, RPDO_TIMEOUT})
 
 
 class EmcyProducer:

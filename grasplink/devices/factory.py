@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from grasplink.devices import emcy as em
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.belt import BeltApp
 from grasplink.devices.emg import EmgApp
@@ -9,21 +13,35 @@ from grasplink.devices.hand import HandApp
 from grasplink.devices.node import DeviceNode
 from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import SampleSource
-from grasplink.errors import ConfigError
-from grasplink.profiles import DEVICE_KINDS, load_profile
-from grasplink.profiles import objects as obj
+from grasplink.profiles import load_profile
+from grasplink.profiles.kinds import node_kind, per_kind
+
+
+@dataclass(frozen=True, slots=True)
+class KindDevice:
+    """The devices layer's piece of a node kind (kinds.py)."""
+
+    # the kind's default application; a sensor's samples `source`
+    app: Callable[[SampleSource | None], DeviceApp]
+    # the EMCY codes it can send (docs/devices.md): RPDO errors only where there are RPDOs
+    emcy_codes: frozenset[int]
+
+
+DEVICES = per_kind(
+    "devices/factory.py DEVICES",
+    {
+        "skin": KindDevice(SkinApp, em.EVERY_NODE_CODES | {em.SENSOR_SATURATED}),
+        "emg": KindDevice(EmgApp, em.EVERY_NODE_CODES),
+        "belt": KindDevice(lambda _: BeltApp(), em.EVERY_NODE_CODES | em.RPDO_CODES),
+        "hand": KindDevice(lambda _: HandApp(), em.EVERY_NODE_CODES | em.RPDO_CODES),
+    },
+)
+#: kind -> the EMCY codes its node can send
+CODES_BY_KIND = {kind: device.emcy_codes for kind, device in DEVICES.items()}
 
 
 def make_app(kind: str, source: SampleSource | None = None) -> DeviceApp:
-    if kind == "skin":
-        return SkinApp(source)
-    if kind == "emg":
-        return EmgApp(source)
-    if kind == "belt":
-        return BeltApp()
-    if kind == "hand":
-        return HandApp()
-    raise ConfigError(f"unknown node type {kind!r}; choose one of {', '.join(DEVICE_KINDS)}")
+    return DEVICES[node_kind(kind).name].app(source)
 
 
 def build_node(
@@ -32,10 +50,11 @@ def build_node(
     source: SampleSource | None = None,
     app: DeviceApp | None = None,
 ) -> DeviceNode:
-    """A ready-to-start node of `kind` at `node_id` (default from objects.DEFAULT_NODE_IDS).
+    """A ready-to-start node of `kind` at `node_id` (default: the kind's, kinds.py).
 
     `app` replaces the default application of `kind` (e.g. a drive with an external motor).
     """
+    default_id = node_kind(kind).node_id
     app = app or make_app(kind, source)
-    node_id = obj.DEFAULT_NODE_IDS[kind] if node_id is None else node_id
+    node_id = default_id if node_id is None else node_id
     return DeviceNode(load_profile(kind, node_id), node_id, app)

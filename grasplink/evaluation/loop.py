@@ -65,6 +65,9 @@ MODES: dict[str, str] = {
     "grip_force": "grip force",
     "force_and_slip": "force + slip",
 }
+# The nodes the closed loop senses and drives, in scene order (the network's frame order):
+# the loop's own choice, not every registered kind (a gateway masters only a scene's nodes).
+LOOP_KINDS = ("skin", "emg", "belt", "hand")
 LAYOUT = "alpha0.1"
 SKIN_END_MM = float(sum(LAYOUTS_MM[LAYOUT]))  # 84 mm: the leading edge past it has left the hand
 START_S = 1.0  # the pull starts (loop_headline.toml)
@@ -115,7 +118,7 @@ def scene_data(trial: Trial) -> dict:
             "seed": trial.seed,
             "duration_s": trial.duration_s,
         },
-        "nodes": {"skin": {"layout": LAYOUT}, "emg": {}, "belt": {}, "hand": {}},
+        "nodes": {kind: {} for kind in LOOP_KINDS} | {"skin": {"layout": LAYOUT}},
         "controller": {
             "type": "gateway",
             "nodes": {"emg": {"grip_levels_n": [0.0, 5.0, 8.0, 11.0, 14.0, 20.0]}},
@@ -410,11 +413,10 @@ def judge(scene: Scene, controllers_for: ControllerFactory) -> Outcome:
     A drop ends the run at once: nothing after it changes the outcome.
     """
     sim = Simulation(scene, None, controllers=list(controllers_for(scene)))
-    if scene.controller.name != "gateway" or not {"skin", "emg", "belt", "hand"} <= set(
-        scene.nodes
-    ):
+    if scene.controller.name != "gateway" or not set(LOOP_KINDS) <= set(scene.nodes):
+        kinds = f"{', '.join(LOOP_KINDS[:-1])} and {LOOP_KINDS[-1]}"
         raise ConfigError(
-            f"{scene.path}: a closed-loop scene needs skin, emg, belt and hand nodes and "
+            f"{scene.path}: a closed-loop scene needs {kinds} nodes and "
             '[controller] type = "gateway"'
         )
     emg = parse_config(scene.controller.options, scene.controller.source).nodes.get("emg")

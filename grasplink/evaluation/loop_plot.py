@@ -22,6 +22,7 @@ from grasplink.errors import RecordingError
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.pdo_codec import PdoCodec
 from grasplink.simulators import signals as sig
 from grasplink.simulators.plots import read_csv, read_summary
@@ -85,7 +86,9 @@ def replay_skin(path: Path, skin: dict, layout: str) -> list[SlipEstimate]:
     settings = {"node_id": skin["node_id"], "layout": layout}
     if "sample_rate_hz" in skin:
         settings["sample_rate_hz"] = skin["sample_rate_hz"]
-    data = {"nodes": {"skin": settings} | {k: {"enabled": False} for k in ("emg", "belt", "hand")}}
+    # every other kind off: a gateway masters each kind its configuration does not disable
+    others = {k: {"enabled": False} for k in KINDS if k != "skin"}
+    data = {"nodes": {"skin": settings} | others}
     gateway = Gateway(parse_config(data, str(path)))
     estimates: list[SlipEstimate] = []
     gateway.estimate_listeners.append(lambda t_us, estimate: estimates.append(estimate))

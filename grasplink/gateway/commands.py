@@ -17,12 +17,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from grasplink.gateway.feedback import FeedbackMode
+from grasplink.profiles.kinds import KINDS
 
 INBOX_SIZE = 64  # commands waiting for the gateway's thread; more is a flood, refused
 SHOWN_CHARS = 60  # of a refused value, in the error message
 MIN_THRESHOLD_MM_S, MAX_THRESHOLD_MM_S = 1.0, 1000.0
 CALIBRATION_PHASES = ("rest", "maximum", "finish", "cancel")
-NODE_KINDS = ("skin", "emg", "belt", "hand")
+NODE_KINDS = KINDS  # restart_node's choices, in the registry's order (Modbus codes 1..)
 
 
 @dataclass(frozen=True, slots=True)

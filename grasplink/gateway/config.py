@@ -35,9 +35,10 @@ from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import KINDS as KINDS  # re-exported for service and surfaces
+from grasplink.profiles.kinds import node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 
-KINDS = ("skin", "emg", "belt", "hand")
 # The thesis's EMG control window is "rectified and integrated" over 150-250 ms (ch. 2.3).
 EMG_WINDOW_MS = (150, 250)
 FEEDBACK_MODES = tuple(m.value for m in FeedbackMode)
@@ -167,7 +168,7 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     unknown = set(nodes.table) - set(KINDS)
     if unknown:
         name = sorted(unknown)[0]
-        raise nodes.error(name, f"unknown node type; expected one of {', '.join(KINDS)}")
+        raise nodes.error(name, unknown_kind(name))
     # Every kind is mastered unless its table says `enabled = false`.
     used = {config.node_id: "gateway"}
     for kind in KINDS:
@@ -307,7 +308,7 @@ def _telemetry(p: Params) -> TelemetrySettings:
 def _common(p: Params, kind: str) -> dict[str, Any]:
     return {
         "kind": kind,
-        "node_id": p.integer("node_id", obj.DEFAULT_NODE_IDS[kind], low=1, high=127),
+        "node_id": p.integer("node_id", node_kind(kind).node_id, low=1, high=127),
         "heartbeat_ms": p.integer("heartbeat_ms", 100, low=10, high=10_000),
     }
 
@@ -383,4 +384,7 @@ def _hand(p: Params, kind: str) -> HandConfig:
     )
 
 
-_PARSERS = {"skin": _skin, "emg": _emg, "belt": _belt, "hand": _hand}
+# kind -> its configuration class's parser; every kind is mastered unless disabled
+_PARSERS: dict[str, Callable[[Params, str], NodeConfig]] = per_kind(
+    "gateway/config.py _PARSERS", {"skin": _skin, "emg": _emg, "belt": _belt, "hand": _hand}
+)

@@ -27,7 +27,8 @@ import math
 from collections import Counter
 from dataclasses import dataclass
 
-from grasplink.devices.emcy import CODES_BY_KIND, DESCRIPTIONS
+from grasplink.devices.emcy import DESCRIPTIONS
+from grasplink.devices.factory import CODES_BY_KIND
 
 US_PER_S = 1_000_000
 

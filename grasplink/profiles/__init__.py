@@ -1,10 +1,10 @@
 """Device profiles: the shipped EDS files and how to load them.
 
-The four .eds files next to this module are the source of truth for every
-object a grasplink node has (type, access, limits, default, unit). Devices
-and the gateway load them through `load_profile`, which validates first so a
-broken file fails with an EdsError naming file, section and key instead of
-canopen silently dropping a default.
+The .eds files next to this module (one per node kind, `kinds.py`) are the
+source of truth for every object a grasplink node has (type, access, limits,
+default, unit). Devices and the gateway load them through `load_profile`,
+which validates first so a broken file fails with an EdsError naming file,
+section and key instead of canopen silently dropping a default.
 
 canopen is imported lazily: `grasplink.profiles.objects` is imported by
 almost everything and should stay cheap.
@@ -18,22 +18,20 @@ from typing import TYPE_CHECKING
 
 from grasplink.errors import ConfigError, EdsError
 from grasplink.profiles.eds import validate_eds
+from grasplink.profiles.kinds import KINDS, node_kind, unknown_kind
 
 if TYPE_CHECKING:
     import canopen
     from canopen.objectdictionary import ODVariable
 
-__all__ = ["DEVICE_KINDS", "eds_path", "load_profile", "object_limits", "validate_eds"]
+__all__ = ["eds_path", "load_profile", "object_limits", "validate_eds"]
 
-DEVICE_KINDS: tuple[str, ...] = ("skin", "belt", "emg", "hand")
 _PROFILE_DIR = Path(__file__).resolve().parent
 
 
 def eds_path(kind: str) -> Path:
-    """Path of the shipped EDS for a device kind ("skin", "belt", "emg", "hand")."""
-    if kind not in DEVICE_KINDS:
-        raise ConfigError(f"unknown device kind {kind!r}; valid kinds: {', '.join(DEVICE_KINDS)}")
-    return _PROFILE_DIR / f"{kind}.eds"
+    """Path of the shipped EDS of a node kind (`kinds.py`)."""
+    return _PROFILE_DIR / node_kind(kind).eds
 
 
 def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictionary:
@@ -79,9 +77,8 @@ def object_limits(kind: str, index: int, subindex: int = 0) -> tuple[int, int]:
     Cached: the shipped profiles do not change while a process runs.
     """
     from grasplink.profiles.eds import _types
-    from grasplink.profiles.objects import DEFAULT_NODE_IDS
 
-    entry = od_variable(load_profile(kind, DEFAULT_NODE_IDS[kind]), index, subindex)
+    entry = od_variable(load_profile(kind, node_kind(kind).node_id), index, subindex)
     dtype = _types()[int(entry.data_type or 0)]
     low = entry.min if entry.min is not None else dtype.low
     high = entry.max if entry.max is not None else dtype.high
@@ -92,11 +89,8 @@ def _resolve(kind_or_path: str | Path) -> Path:
     if isinstance(kind_or_path, Path):
         return kind_or_path
     text = str(kind_or_path)
-    if text in DEVICE_KINDS:
+    if text in KINDS:
         return eds_path(text)
     if "/" in text or "\\" in text or text.lower().endswith((".eds", ".dcf")):
         return Path(text)
-    raise ConfigError(
-        f"unknown device kind {text!r}; valid kinds: {', '.join(DEVICE_KINDS)} "
-        "(or a path to an .eds file)"
-    )
+    raise ConfigError(f"{unknown_kind(text)} (or a path to an .eds file)")

@@ -39,14 +39,15 @@ from grasplink.core.frames import (
 )
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.errors import ConfigError
-from grasplink.profiles import DEVICE_KINDS, load_profile, od_default
+from grasplink.profiles import load_profile, od_default
 from grasplink.profiles import objects as obj
 from grasplink.profiles.eds import DATA_TYPES
+from grasplink.profiles.kinds import BY_NODE_ID, KINDS, node_kind, unknown_kind
 from grasplink.profiles.objects import DEFAULT_NODE_IDS
 
 MASTER = "gateway"
 GATEWAY_HEARTBEAT_MS = 100  # the gateway's default heartbeat ([gateway] heartbeat_ms)
-NODE_NAMES = {"skin": "Skin", "emg": "EMG", "belt": "Belt", "hand": "Hand", MASTER: "Gateway"}
+NODE_NAMES = {k: node_kind(k).title for k in KINDS} | {MASTER: "Gateway"}
 DBC_NAME_MAX = 32  # longer names need a DBC long-name attribute some analysers ignore
 _UNIT_RE = re.compile(r"\s*\[([^\]]+)\]\s*$")
 _Value = TypeVar("_Value", bound=int)  # an int or an IntEnum (NmtState, NmtCommand)
@@ -201,8 +202,7 @@ def node_ids_with(overrides: Mapping[str, int] | None = None) -> dict[str, int]:
     ids = dict(DEFAULT_NODE_IDS) | {MASTER: obj.GATEWAY_NODE_ID}
     for kind, node_id in (overrides or {}).items():
         if kind not in ids:
-            valid = ", ".join([*DEVICE_KINDS, MASTER])
-            raise ConfigError(f"--node-id {kind}=...: unknown node kind; valid kinds: {valid}")
+            raise ConfigError(f"--node-id {kind}=...: {unknown_kind(kind)} (or {MASTER})")
         if not 1 <= node_id <= 127:
             raise ConfigError(f"--node-id {kind}={node_id}: node-ID is outside 1..127")
         ids[kind] = node_id
@@ -217,7 +217,7 @@ def build_database(overrides: Mapping[str, int] | None = None) -> Database:
     """The whole network (four nodes and the gateway) as a cantools `Database`."""
     ids = node_ids_with(overrides)
     master = NODE_NAMES[MASTER]
-    kinds = list(DEVICE_KINDS)
+    kinds = list(BY_NODE_ID)
     nodes = [Node(master, comment=f"NMT master and gateway, node-ID 0x{ids[MASTER]:02X}")]
     nodes += [
         Node(NODE_NAMES[k], comment=f"{k} node, node-ID 0x{ids[k]:02X} ({k}.eds)") for k in kinds
@@ -336,8 +336,8 @@ def _pdo_message(pdo: PdoMessage) -> Message:
 
 
 def _nmt(ids: Mapping[str, int]) -> Message:
-    targets = {0: "all nodes"} | {ids[k]: k for k in DEVICE_KINDS}
-    nodes = [NODE_NAMES[k] for k in DEVICE_KINDS]
+    targets = {0: "all nodes"} | {ids[k]: k for k in BY_NODE_ID}
+    nodes = [NODE_NAMES[k] for k in BY_NODE_ID]
     return Message(
         frame_id=NMT_COB_ID,
         name="NMT",

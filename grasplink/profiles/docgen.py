@@ -11,9 +11,9 @@ from pathlib import Path
 
 from canopen.objectdictionary import ObjectDictionary, ODArray, ODRecord, ODVariable
 
-from grasplink.profiles import DEVICE_KINDS, eds_path, load_profile, od_default, od_variable
+from grasplink.profiles import eds_path, load_profile, od_default, od_variable
 from grasplink.profiles.eds import DATA_TYPES
-from grasplink.profiles.objects import DEFAULT_NODE_IDS
+from grasplink.profiles.kinds import BY_NODE_ID, node_kind
 
 _UNIT_RE = re.compile(r"\[([^\]]+)\]\s*$")
 _PROFILES = {0x0192: "CiA 402 (drives and motion control)", 0x0194: "CiA 404 (measuring devices)"}
@@ -39,7 +39,7 @@ def render_profiles_markdown() -> str:
         "the EDS and, where they depend on the node-ID, resolved for the default node-ID.",
         "",
     ]
-    for kind in DEVICE_KINDS:
+    for kind in BY_NODE_ID:
         out += _device_section(kind)
     return "\n".join(out).rstrip("\n") + "\n"
 
@@ -53,7 +53,7 @@ def write_profiles_doc(path: str | Path) -> Path:
 
 
 def _device_section(kind: str) -> list[str]:
-    node_id = DEFAULT_NODE_IDS[kind]
+    node_id = node_kind(kind).node_id
     od = load_profile(kind, node_id)
     device_type = od_default(od, 0x1000)
     profile = _PROFILES.get(device_type & 0xFFFF, f"profile {device_type & 0xFFFF}")

@@ -1,4 +1,4 @@
-"""Write the four shipped EDS files from one description.
+"""Write the shipped EDS files (one per node kind) from one description.
 
 Why a generator: the files share ~20 communication objects and one PDO
 scheme, and by hand a COB-ID off by 0x100 or a stale SubNumber slips in
@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from grasplink.profiles import objects as ob
+from grasplink.profiles.kinds import BY_NODE_ID, node_kind, per_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, MAX_NODE_SPACINGS, PRESET_CODES, spacings_um
 
 I8, I16, I32, U8, U16, U32, VSTR = 0x2, 0x3, 0x4, 0x5, 0x6, 0x7, 0x9
@@ -458,7 +459,7 @@ def hand() -> tuple[list[Obj], list[Pdo], list[Pdo]]:
     return objs, _pad(tx), [*rx, *(Pdo(ttype=255) for _ in range(3))]
 
 
-DEVICES: dict[str, tuple[int, int, str, bool, tuple[str, ...]]] = {
+_DEVICES: dict[str, tuple[int, int, str, bool, tuple[str, ...]]] = {
     # kind: (product code, device type, device name, dummy mapping, comment lines)
     "skin": (
         1,
@@ -511,7 +512,10 @@ DEVICES: dict[str, tuple[int, int, str, bool, tuple[str, ...]]] = {
         ),
     ),
 }
-BUILDERS = {"skin": skin, "belt": belt, "emg": emg, "hand": hand}
+DEVICES = per_kind("profiles/edsgen.py DEVICES", _DEVICES)
+BUILDERS = per_kind(
+    "profiles/edsgen.py BUILDERS", {"skin": skin, "belt": belt, "emg": emg, "hand": hand}
+)
 
 
 def build(kind: str) -> tuple[Device, int, int]:
@@ -556,7 +560,7 @@ def render_eds(kind: str) -> str:
         "; python -m grasplink.profiles.edsgen (tests fail if this file differs).",
         "",
         "[FileInfo]",
-        f"FileName={kind}.eds",
+        f"FileName={node_kind(kind).eds}",
         "FileVersion=1",
         "FileRevision=0",
         "EDSVersion=4.0",
@@ -625,8 +629,8 @@ def write_all(directory: Path | None = None) -> list[Path]:
     """Regenerate every shipped EDS; returns the paths written."""
     directory = directory or Path(__file__).parent
     paths = []
-    for kind in BUILDERS:
-        path = directory / f"{kind}.eds"
+    for kind in BY_NODE_ID:
+        path = directory / node_kind(kind).eds
         path.write_text(render_eds(kind), encoding="ascii", newline="\n")
         paths.append(path)
     return paths

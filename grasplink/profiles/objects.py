@@ -7,6 +7,8 @@ not carry magic numbers. A test checks every name here exists in its EDS.
 
 from __future__ import annotations
 
+from grasplink.profiles.kinds import BY_NODE_ID, node_kind
+
 # --- Communication profile area (CiA 301), on every node -------------------
 DEVICE_TYPE = 0x1000
 ERROR_REGISTER = 0x1001
@@ -95,4 +97,5 @@ MODE_GRIP_FORCE = -1  # manufacturer-specific (negative values, CiA 402)
 
 # Default node-IDs
 GATEWAY_NODE_ID = 0x01
-DEFAULT_NODE_IDS = {"skin": 0x10, "belt": 0x20, "emg": 0x30, "hand": 0x40}
+# kind -> its default node-ID, from the registry (kinds.py)
+DEFAULT_NODE_IDS = {kind: node_kind(kind).node_id for kind in BY_NODE_ID}

@@ -4,8 +4,8 @@ A binding says what a node of its kind reads from the scene (a sensor
 signal it samples, or the actual value of the motor or actuator it drives),
 what it writes back (its actuator command), which scene options it takes,
 and how scene settings become the node's stored parameters. The engine only
-talks to bindings, so a new node kind means a new binding here, not an edit
-of the engine.
+talks to bindings, so a new node kind (kinds.py) means a new binding here,
+not an edit of the engine.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from grasplink.devices.belt import BeltApp
 from grasplink.devices.factory import build_node
 from grasplink.devices.hand import HandApp
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import per_kind
 from grasplink.profiles.layouts import PRESET_CODES, spacings_um
 from grasplink.simulators import signals as sig
 from grasplink.simulators.core import EMG, PHYSICS, SKIN, Endpoint
@@ -201,9 +202,10 @@ class HandBinding(NodeBinding):
 
 
 DEFAULT_RATES_HZ = {"skin": 400, "emg": 1500}
-BINDINGS: dict[str, type[NodeBinding]] = {
-    b.kind: b for b in (SkinBinding, EmgBinding, BeltBinding, HandBinding)
-}
+BINDINGS: dict[str, type[NodeBinding]] = per_kind(
+    "simulators/bindings.py BINDINGS",
+    {b.kind: b for b in (SkinBinding, EmgBinding, BeltBinding, HandBinding)},
+)
 
 
 def bind(spec: NodeSpec, scene: Scene, produced: Iterable[str]) -> NodeBinding:

@@ -14,12 +14,12 @@ import grasplink.simulators.effects  # noqa: F401  (registers every effect)
 from grasplink.core.params import Params, SceneError
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import KINDS, node_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 from grasplink.simulators.bindings import BINDINGS, DEFAULT_RATES_HZ
 from grasplink.simulators.core import REGISTRY, Context, Effect, Endpoint, build_graph
 
 US_PER_S = 1_000_000
-NODE_KINDS = tuple(BINDINGS)
 CLOCKS = ("virtual", "realtime")
 DEFAULT_CONTROLLER = "scripted"  # the NMT master that starts the nodes (see grasplink.controllers)
 NO_CONTROLLER = "none"
@@ -193,10 +193,10 @@ def _parse_nodes(table: Params) -> dict[str, NodeSpec]:
     nodes: dict[str, NodeSpec] = {}
     used_ids: dict[int, str] = {}
     for kind in list(table.table):
-        if kind not in NODE_KINDS:
-            raise table.error(kind, f"unknown node type; expected one of {', '.join(NODE_KINDS)}")
+        if kind not in KINDS:
+            raise table.error(kind, unknown_kind(kind))
         p = table.table_of(kind)
-        spec = NodeSpec(kind, p.integer("node_id", obj.DEFAULT_NODE_IDS[kind], low=1, high=127))
+        spec = NodeSpec(kind, p.integer("node_id", node_kind(kind).node_id, low=1, high=127))
         if spec.node_id in used_ids or spec.node_id == obj.GATEWAY_NODE_ID:
             other = used_ids.get(spec.node_id, "gateway")
             raise p.error("node_id", f"0x{spec.node_id:02X} is already used by {other}")

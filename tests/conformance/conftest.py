@@ -30,10 +30,10 @@ from canopen.sdo.exceptions import SdoAbortedError
 from grasplink.bus.runner import NodeRunner
 from grasplink.devices.factory import build_node
 from grasplink.devices.node import DeviceNode
-from grasplink.profiles import DEVICE_KINDS, eds_path
+from grasplink.profiles import eds_path
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import KINDS
 
-KINDS: tuple[str, ...] = DEVICE_KINDS
 RPDO_KINDS = frozenset({"belt", "hand"})
 NO_RPDO_REASON = "{kind} has no RPDOs (NrOfRXPDO=0, 1400h-17FFh absent in its EDS)"
 

@@ -17,7 +17,7 @@ from grasplink.controllers import CONTROLLERS, build_controllers, simulation
 from grasplink.core.nmt import NmtState
 from grasplink.errors import ConfigError
 from grasplink.gateway.scripted import ScriptedMaster
-from grasplink.profiles import DEVICE_KINDS
+from grasplink.profiles.kinds import KINDS
 from grasplink.simulators.bindings import BINDINGS
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
@@ -42,7 +42,7 @@ def scene_of(controller: str):
 
 
 def test_every_device_kind_has_a_binding():
-    assert set(BINDINGS) == set(DEVICE_KINDS)
+    assert tuple(BINDINGS) == KINDS
 
 
 def test_default_controller_is_the_scripted_master_that_starts_the_nodes():

@@ -273,7 +273,7 @@ def test_saturated_sensor_clips_at_full_scale(tmp_path):
     [
         ("[scene]\nduration_s = -1\n", "scene.duration_s: expected a number > 0"),
         ('[scene]\nduration_s = 1\nlayout = "4,0,5"\n', "layout"),
-        ("[scene]\nduration_s = 1\n[nodes.elbow]\n", "nodes.elbow: unknown node type"),
+        ("[scene]\nduration_s = 1\n[nodes.elbow]\n", "nodes.elbow: unknown node kind"),
         ("[scene]\nduration_s = 1\ndurtion = 2\n", "scene.durtion: unknown key"),
         ('[scene]\nduration_s = 1\n[[effects]]\ntype = "skin.fsr"\n', "needs a skin layout"),
         (
