@@ -351,9 +351,11 @@ def render(figures: dict) -> str:
         + " Decoding a slipping scene (the loop headline's recorded CAN log replayed in "
         "real time onto the gateway's bus as its nodes, looped; docs/benchmarks/telemetry.md), "
         + _verdict(runs.get(SCENE_BOTH), target_share, scene=True)
-        + " The Modbus cost does not depend on what the gateway measures: a read is "
-        "answered in the connection's data callback (one event-loop wake-up, pymodbus's "
-        "framing, the snapshot encoded whole once, cached per snapshot, one socket write), "
+        + " The Modbus cost does not depend on what the gateway measures: a read goes "
+        "through pymodbus's own request path (one event-loop wake-up, pymodbus's framing, "
+        "a task per request, the datastore's action filling the registers from the snapshot "
+        "encoded whole once, cached per snapshot, one socket write; docs/modbus.md, the "
+        "server), "
         "so it grows with the request rate, not with the values: "
         + ", ".join(f"{us:.0f} µs of CPU per request ({run})" for run, us in per_request_us.items())
         + ". The Modbus thread sleeps and wakes "

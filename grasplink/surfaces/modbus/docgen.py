@@ -7,7 +7,12 @@ output, so the document cannot drift from what the server serves.
 from __future__ import annotations
 
 from grasplink.gateway.config import KINDS
-from grasplink.surfaces.modbus.functions import FUNCTIONS, MAX_READ_WRITE_WRITE, MAX_WRITE
+from grasplink.surfaces.modbus.functions import (
+    FUNCTIONS,
+    MAX_READ_WRITE_WRITE,
+    MAX_WRITE,
+    SERVER_DOC,
+)
 from grasplink.surfaces.modbus.registers import (
     COMMAND_TIMEOUT_S,
     MAP_CHANGES,
@@ -128,6 +133,7 @@ def _connection(rmap: RegisterMap) -> list[str]:
         "",
         f"A read may ask for up to {MAX_READ} registers.",
         "",
+        *SERVER_DOC,
     ]
 
 

@@ -142,3 +142,34 @@ def _bytes(code: int, pdu: bytes, at: int, quantity: int) -> RegisterError | Non
         f"function 0x{code:02X}: byte count {count} and {len(pdu) - at - 1} data bytes "
         f"for {quantity} registers",
     )
+
+
+#: docs/modbus.md (docgen): how the server is built on pymodbus, and why that way.
+SERVER_DOC: tuple[str, ...] = (
+    "### The server: pymodbus's documented hooks",
+    "",
+    "The server is pymodbus's `ModbusTcpServer` or `ModbusSerialServer` (the version pinned "
+    "in pyproject.toml), set up only through the parameters its documentation lists, so an "
+    "upgrade breaks only what pymodbus's API changes say it changed "
+    "(`tests/test_public_library_apis.py` fails on any private attribute of a library "
+    "object, or an import of pymodbus's request handler, transaction manager or framers):",
+    "",
+    "- the datastore: a `SimDevice` per unit, holding and input tables, and its `action`, "
+    "which pymodbus calls before every access: it fills the registers read from the "
+    "gateway's snapshot and settings, and turns a write into a command, answering the "
+    "exception code when the gateway refuses it or does not answer;",
+    "- `custom_pdu`: each request class pymodbus decodes, behind a check of the request's "
+    "bytes (`functions.check_request`) that runs before pymodbus's own decoding: 01 for a "
+    "function this server does not implement, 03 for a quantity or length outside the "
+    "specification (pymodbus alone answers several of those functions, and a bad quantity "
+    "`80 01`); over TCP also a class answering 01 for every other code 01..7F;",
+    "- `trace_pdu`, which sees each decoded request first, with `ignore_missing_devices`: "
+    "a request to a unit no gateway has is answered 0B over TCP and not at all on a "
+    "serial line (pymodbus would answer a write 04); an exception-response code sent as "
+    "a request is answered 01 (pymodbus: 04);",
+    "- `identity`: what Read Device Identification reports.",
+    "",
+    "Every request goes through pymodbus's own request path (a task per request); what "
+    "that costs per request is in docs/benchmarks/modbus.md.",
+    "",
+)

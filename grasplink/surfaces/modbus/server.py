@@ -14,23 +14,24 @@ the reply waits, at most `command_timeout_s`, for the `CommandResult`:
 - no result in time: 04 SERVER DEVICE FAILURE; the command stays queued
   and may still be applied: read the holding registers back.
 
-pymodbus 3.16's `SimDevice` carries the tables and calls `_action` before
-every access; the action fills the registers read, or vetoes a write with an
-exception code. Reads of a whole table (03, 04: what pollers send, many times a
-second) are answered from the connection's data callback instead (`answer_now`):
-same registers and exception codes, without a task, a loop turn and the
-datastore's copy per request.
+Only pymodbus's documented server hooks (3.16, pinned):
 
-Which requests are answered at all is `functions.check_request`'s: every request PDU goes
-through it before pymodbus decodes it (`_RequestDecoder`), and a function this server does
-not implement, or a quantity or length the specification does not allow, is answered
-with its exception code (01, 03) at once (`answer_now`), whatever pymodbus would do with it.
+- the datastore: a `SimDevice` per unit carries the tables, and its `action`, called
+  before every access, fills the registers read or vetoes a write with an exception code;
+- `custom_pdu`: request classes for every function code, registered with the server's
+  decoder, put `functions.check_request` in front of pymodbus's own decoding: a function
+  this server does not implement, or a quantity or length the specification does not
+  allow, is answered with its exception code (01, 03), whatever pymodbus would do with it;
+- `trace_pdu`: sees each decoded request first; a request to a unit no gateway has is
+  answered 0x0B over TCP and dropped on a serial line, an exception-response code sent as
+  a request is answered 01;
+- `identity`: what Read Device Identification reports.
 
 A process mastering several buses (`grasplink gateway --bus A --bus B`) has a gateway
 per bus; one server serves them all, one unit id each (`units`): over TCP 1, 2, ...
 in bus order, on a serial line the URL's unit and those after it. A request to a unit
-id no gateway has is answered 0x0B GATEWAY TARGET DEVICE FAILED TO RESPOND over TCP (as
-pymodbus answers it), and not at all on a serial line (another device's request).
+id no gateway has is answered 0x0B GATEWAY TARGET DEVICE FAILED TO RESPOND over TCP, and
+not at all on a serial line (another device's request).
 """
 
 from __future__ import annotations
@@ -41,7 +42,6 @@ import errno
 import logging
 import os
 import socket
-import struct
 import threading
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -52,22 +52,43 @@ from typing import Any
 from pymodbus import FramerType
 from pymodbus.constants import ExcCodes
 from pymodbus.datastore import ModbusServerContext
-from pymodbus.exceptions import ModbusIOException
-from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
+from pymodbus.exceptions import NoSuchIdException
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.pdu.bit_message import (
+    ReadCoilsRequest,
+    ReadDiscreteInputsRequest,
+    WriteMultipleCoilsRequest,
+    WriteSingleCoilRequest,
+)
 from pymodbus.pdu.device import ModbusDeviceIdentification
+from pymodbus.pdu.diag_message import DiagnosticBase
+from pymodbus.pdu.file_message import (
+    ReadFifoQueueRequest,
+    ReadFileRecordRequest,
+    WriteFileRecordRequest,
+)
+from pymodbus.pdu.mei_message import ReadDeviceInformationRequest
+from pymodbus.pdu.other_message import (
+    GetCommEventCounterRequest,
+    GetCommEventLogRequest,
+    ReadExceptionStatusRequest,
+    ReportDeviceIdRequest,
+)
 from pymodbus.pdu.register_message import (
-    ReadHoldingRegistersResponse,
-    ReadInputRegistersResponse,
+    MaskWriteRegisterRequest,
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    ReadWriteMultipleRegistersRequest,
+    WriteMultipleRegistersRequest,
+    WriteSingleRegisterRequest,
 )
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
-from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import DataType, SimData, SimDevice
-from pymodbus.transaction import TransactionManager
 
 from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
 from grasplink.gateway.service import Gateway
-from grasplink.surfaces.modbus.functions import IDENTIFICATION, check_request
+from grasplink.surfaces.modbus.functions import CODES, IDENTIFICATION, check_request
 from grasplink.surfaces.modbus.registers import (
     COMMAND_TIMEOUT_S,
     RegisterError,
@@ -214,14 +235,14 @@ class ModbusServer:
         finally:
             await server.shutdown()  # type: ignore[no-untyped-call]
 
-    def _make_server(self) -> _TcpServer | _SerialServer:
+    def _make_server(self) -> ModbusTcpServer | ModbusSerialServer:
         url = self.url
         devices = [
             SimDevice(
                 id=unit or 0,  # 0: every unit id (TCP, one gateway)
                 simdata=(
                     [SimData(0, datatype=DataType.BITS)],  # coils, discrete inputs: none,
-                    [SimData(0, datatype=DataType.BITS)],  # refused by _Handler
+                    [SimData(0, datatype=DataType.BITS)],  # refused (request_classes)
                     [SimData(0, count=self.map.holding_count, datatype=DataType.REGISTERS)],
                     [
                         SimData(
@@ -237,28 +258,28 @@ class ModbusServer:
             for unit, served in self.units.items()
         ]
         device = devices[0] if len(devices) == 1 else devices
-        server: _TcpServer | _SerialServer
         if url.scheme == "tcp":
-            # trace_pdu may return None to drop a request (pymodbus types it as returning
-            # the PDU): how other units' requests stay unanswered on a shared line.
-            server = _TcpServer(
+            return ModbusTcpServer(
                 device,
                 address=(url.host, url.port),
+                identity=_identity(),
                 trace_pdu=self._trace,
+                custom_pdu=request_classes(serial=False),
+                ignore_missing_devices=False,  # a unit no gateway has: 0x0B
             )
-        else:
-            server = _SerialServer(
-                device,
-                framer=FramerType.RTU,
-                port=url.device,
-                baudrate=url.baud,
-                parity=url.parity,
-                stopbits=url.stopbits,
-                bytesize=8,
-                trace_pdu=self._trace,
-            )
-        server.answer_now = self.answer_now
-        return server
+        return ModbusSerialServer(
+            device,
+            framer=FramerType.RTU,
+            port=url.device,
+            baudrate=url.baud,
+            parity=url.parity,
+            stopbits=url.stopbits,
+            bytesize=8,
+            identity=_identity(),
+            trace_pdu=self._trace,
+            custom_pdu=request_classes(serial=True),
+            ignore_missing_devices=True,  # a unit no gateway has: another device's request
+        )
 
     def _listen_error(self) -> BusError:
         """Why listening failed, found by trying what pymodbus tried (it only logs it)."""
@@ -285,16 +306,23 @@ class ModbusServer:
             return BusError(f"modbus: cannot listen on {url}: {why}{hint}")
         return BusError(f"modbus: cannot listen on {url}")
 
-    def _trace(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU | None:
-        """On a serial line, stay silent for other units' requests (and broadcasts)."""
+    def _trace(self, sending: bool, pdu: ModbusPDU) -> ModbusPDU:
+        """pymodbus's `trace_pdu` hook, on each request as decoded and each answer: counts
+        them, and puts in its place a request the datastore must not see. One to a unit id
+        no gateway is served at becomes `_NoSuchUnit`: pymodbus then answers 0x0B over TCP
+        and nothing on a serial line, where it is another device's (`ignore_missing_devices`);
+        with SimDevices alone it would answer a write 0x04, failing to find the device. An
+        exception-response code (81..FF) sent as a request is answered 01 (pymodbus: 04)."""
         if sending:
             if pdu.function_code & 0x80:
                 self.stats["exceptions"] += 1
             return pdu
         self.stats["requests"] += 1
-        if self.url.scheme == "rtu" and pdu.dev_id not in self.units:
+        if self._unit(pdu.dev_id) is None:
             self.stats["other units"] += 1
-            return None  # pymodbus then neither executes nor answers it
+            return _NoSuchUnit(pdu)
+        if isinstance(pdu, ExceptionResponse):
+            return _Answer(pdu, ExcCodes.ILLEGAL_FUNCTION)
         return pdu
 
     def _unit(self, dev_id: int) -> _Unit | None:
@@ -338,41 +366,6 @@ class ModbusServer:
             return ExcCodes(exc.code)
         return None
 
-    def answer_now(self, pdu: ModbusPDU) -> ModbusPDU | None:
-        """The answer made at once, in the connection's data callback: 0x0B for a unit id no
-        gateway is served at (pymodbus would answer a write 0x04, failing to find the
-        device), or a register read (03, 04): the registers, or the exception `_action`
-        would give (0x02 outside the table), or the exception a refused request gets
-        (`functions.check_request`: 0x01, 0x03). None: pymodbus handles it."""
-        unit = self._unit(pdu.dev_id)
-        response: ModbusPDU
-        if unit is None:
-            response = ExceptionResponse(pdu.function_code, ExcCodes.GATEWAY_NO_RESPONSE)
-        elif isinstance(pdu, _Refused):
-            logger.debug("modbus: %s", pdu.error)
-            response = pdu.response()
-        elif pdu.function_code not in (READ_HOLDING, READ_INPUTS):
-            return None
-        else:
-            response = self._read(unit, pdu)
-        response.transaction_id, response.dev_id = pdu.transaction_id, pdu.dev_id
-        return response
-
-    def _read(self, unit: _Unit, pdu: ModbusPDU) -> ModbusPDU:
-        try:
-            response: ModbusPDU
-            if pdu.function_code == READ_INPUTS:
-                table = self._inputs(unit)
-                response = _InputsResponse()
-            else:
-                table = self.map.encode_holding(settings_of(unit.gateway, unit.last_actions))
-                response = _HoldingResponse()
-            response.registers = self.map.read(table, pdu.address, pdu.count)
-        except RegisterError as exc:
-            logger.debug("modbus: %s", exc)
-            response = ExceptionResponse(pdu.function_code, ExcCodes(exc.code))
-        return response
-
     def _inputs(self, unit: _Unit) -> list[int]:
         """A unit's encoded input table, once per snapshot (pollers faster than 20 Hz, or
         several, share one encoding)."""
@@ -407,118 +400,91 @@ class ModbusServer:
         return ExcCodes.ILLEGAL_VALUE
 
 
-def _pack_registers(registers: list[int]) -> bytes:
-    """A read response's data (byte count, then the words) in one `struct.pack`; pymodbus
-    packs and concatenates word by word."""
-    return struct.pack(f">B{len(registers)}H", 2 * len(registers), *registers)
+class _Checked(ModbusPDU):
+    """Put before a pymodbus request class (`request_classes`): `functions.check_request`
+    judges the request's bytes before pymodbus decodes them, and a refused request is
+    answered with its exception code instead of executed."""
 
+    refusal: RegisterError | None = None
 
-class _InputsResponse(ReadInputRegistersResponse):
-    def encode(self) -> bytes:
-        return _pack_registers(list(self.registers))
-
-
-class _HoldingResponse(ReadHoldingRegistersResponse):
-    def encode(self) -> bytes:
-        return _pack_registers(list(self.registers))
-
-
-class _Refused(ModbusPDU):
-    """A request `functions.check_request` refuses: answered with its exception code."""
-
-    def __init__(self, function_code: int, error: RegisterError) -> None:
-        super().__init__()
-        self.function_code = function_code
-        self.error = error
-
-    def response(self) -> ExceptionResponse:
-        return ExceptionResponse(self.function_code, ExcCodes(self.error.code))
+    def decode(self, data: bytes) -> None:
+        self.refusal = check_request(bytes((self.function_code,)) + data)
+        if self.refusal is None:
+            super().decode(data)
+        else:
+            self.sub_function_code = -1  # no sub-function's class replaces this one
 
     async def datastore_update(self, context: ModbusServerContext, device_id: int) -> ModbusPDU:
-        return self.response()  # not answered at once (a path answer_now does not take)
+        if self.refusal is not None:
+            logger.debug("modbus: %s", self.refusal)
+            return ExceptionResponse(self.function_code, ExcCodes(self.refusal.code))
+        return await super().datastore_update(context, device_id)
 
 
-class _RequestDecoder(DecodePDU):
-    """pymodbus's request decoder behind `functions.check_request`: a request this server
-    does not answer as it is becomes a `_Refused` carrying its exception code. pymodbus
-    alone would answer 07, 08, 11 (naming itself "Pymodbus"), 14, 15, 18 and others, refuse
-    an exception-response code with 04, and a read of 0 or 126 registers with 80 01."""
-
-    def decode(self, frame: bytes) -> ModbusPDU | None:
-        error = check_request(frame)
-        if error is not None:
-            return _Refused(frame[0] if frame else 0, error)
-        return super().decode(frame)
-
-
-class _Handler(ServerRequestHandler):
-    """pymodbus's connection handler: register reads answered in the data callback, the
-    rest scheduled as a task of its own loop.
-
-    pymodbus 3.16 schedules every request for the loop's next turn (`call_soon`), which
-    hands it to the loop with `run_coroutine_threadsafe` from the loop's own thread: a
-    concurrent Future, its lock and a self-pipe wake-up per request. A read needs none of
-    that: `answer_now` answers it where it was decoded. Other requests (writes wait for the
-    gateway) go on as a task on the same loop.
-    """
-
-    def __init__(self, *args: Any) -> None:
-        super().__init__(*args)  # type: ignore[no-untyped-call]
-        self._tasks: set[asyncio.Task[None]] = set()  # the loop keeps only weak references
-        self._answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = getattr(
-            self.server, "answer_now", None
-        )
-
-    def callback_data(self, data: bytes, addr: tuple[Any, ...] | None = None) -> int:
-        """`ServerRequestHandler.callback_data` (pymodbus 3.16), reads answered at once."""
-        try:
-            used: int = TransactionManager.callback_data(self, data, addr)
-        except ModbusIOException as exc:  # as pymodbus answers an undecodable request
-            response = ExceptionResponse(
-                0x00 if exc.fcode is None else exc.fcode,
-                exception_code=ExcCodes.ILLEGAL_FUNCTION,
-                device_id=exc.dev_id,
-                transaction=exc.transaction_id,
-            )
-            self.server_send(response, addr)  # type: ignore[no-untyped-call]
-            return len(data)
-        pdu = self.last_pdu
-        if pdu is None:
-            return used
-        broadcast = self.server.broadcast_enable and not pdu.dev_id
-        answer = None if broadcast or self._answer_now is None else self._answer_now(pdu)
-        if answer is not None:
-            self.server_send(answer, self.last_addr)  # type: ignore[no-untyped-call]
-        else:
-            self.loop.call_soon(self.handle_later)
-        return used
-
-    def handle_later(self) -> None:
-        task = self.loop.create_task(self.handle_request())  # type: ignore[no-untyped-call]
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+#: pymodbus's request class per function code it decodes (their RTU frame sizes too)
+PYMODBUS_REQUESTS: tuple[type[ModbusPDU], ...] = (
+    ReadCoilsRequest,
+    ReadDiscreteInputsRequest,
+    ReadHoldingRegistersRequest,
+    ReadInputRegistersRequest,
+    WriteSingleCoilRequest,
+    WriteSingleRegisterRequest,
+    ReadExceptionStatusRequest,
+    DiagnosticBase,
+    GetCommEventCounterRequest,
+    GetCommEventLogRequest,
+    WriteMultipleCoilsRequest,
+    WriteMultipleRegistersRequest,
+    ReportDeviceIdRequest,
+    ReadFileRecordRequest,
+    WriteFileRecordRequest,
+    MaskWriteRegisterRequest,
+    ReadWriteMultipleRegistersRequest,
+    ReadFifoQueueRequest,
+    ReadDeviceInformationRequest,
+)
 
 
-class _TcpServer(ModbusTcpServer):
-    answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = None  # ModbusServer's
+def request_classes(*, serial: bool) -> list[type[ModbusPDU]]:
+    """The `custom_pdu` classes: each of pymodbus's request classes behind `_Checked`, and
+    over TCP a refusing class for every other function code 01..7F (their length comes
+    from the MBAP header; on a serial line the frame length of a code nobody defines is
+    unknown, and pymodbus skips such a frame as it always has)."""
+    classes: list[type[ModbusPDU]] = [
+        type(f"Checked{base.__name__}", (_Checked, base), {}) for base in PYMODBUS_REQUESTS
+    ]
+    if not serial:
+        known = {cls.function_code for cls in PYMODBUS_REQUESTS}
+        classes += [
+            type(f"Function{code:02X}", (_Checked,), {"function_code": code})
+            for code in range(0x01, 0x80)
+            if code not in known and code not in CODES
+        ]
+    return classes
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, identity=_identity(), **kwargs)
-        self.decoder = _RequestDecoder(True)  # what every connection's framer decodes with
 
-    def callback_new_connection(self) -> _Handler:
-        return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+class _NoSuchUnit(ModbusPDU):
+    """A request to a unit id no gateway is served at (put in its place by `trace_pdu`)."""
+
+    def __init__(self, request: ModbusPDU) -> None:
+        super().__init__(dev_id=request.dev_id, transaction_id=request.transaction_id)
+        self.function_code = request.function_code
+
+    async def datastore_update(self, context: ModbusServerContext, device_id: int) -> ModbusPDU:
+        raise NoSuchIdException(f"no gateway at unit {device_id}")
 
 
-class _SerialServer(ModbusSerialServer):
-    answer_now: Callable[[ModbusPDU], ModbusPDU | None] | None = None  # ModbusServer's
+class _Answer(ModbusPDU):
+    """A request answered with an exception whatever it asked (put in its place by the
+    `trace_pdu` hook): pymodbus sends what `datastore_update` returns."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, identity=_identity(), **kwargs)
-        self.decoder = _RequestDecoder(True)
+    def __init__(self, request: ModbusPDU, code: ExcCodes) -> None:
+        super().__init__(dev_id=request.dev_id, transaction_id=request.transaction_id)
+        self.function_code = request.function_code
+        self.code = code
 
-    def callback_new_connection(self) -> _Handler:
-        return _Handler(self, self.trace_packet, self.trace_pdu, self.trace_connect)
+    async def datastore_update(self, context: ModbusServerContext, device_id: int) -> ModbusPDU:
+        return ExceptionResponse(self.function_code, self.code)
 
 
 def _identity() -> ModbusDeviceIdentification:
