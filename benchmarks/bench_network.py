@@ -39,12 +39,13 @@ from grasplink.demo import demo_master
 from grasplink.devices.factory import build_node
 from grasplink.profiles import eds_path
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import BY_NODE_ID
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "benchmarks"
 BITRATE = 1_000_000
 TARGET_LOAD_PERCENT = 25.0
-KINDS = ("skin", "belt", "emg", "hand")
+KINDS = BY_NODE_ID  # the network in node-ID order, as the profile documents list it
 S = 1_000_000
 
 

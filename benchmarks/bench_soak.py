@@ -65,7 +65,8 @@ from grasplink.gateway.master import EMCY_HEARTBEAT_ERROR  # noqa: E402
 from grasplink.profiles import objects as obj  # noqa: E402
 
 GRASPLINK = str(ROOT / ".venv" / "bin" / "grasplink")
-KINDS = ("skin", "emg", "belt", "hand")
+from grasplink.profiles.kinds import KINDS  # noqa: E402
+
 OLD_CONSUMER_MS = 300  # what the nodes were given before issue 21
 STAND_IN_RR_PRIORITY = 5
 STAND_IN_NICE = -10
