@@ -2,7 +2,10 @@
 
 `Gateway` is what an integrator deploys, and what a scene puts in the loop
 (`[controller] type = "gateway"`): the same object runs on a live bus
-(`grasplink gateway`, wrapped by a real-time runner) and in virtual time.
+(`grasplink gateway`: a real-time runner drives it through its live edge,
+`edge.GatewayEdge`, which holds the cross-thread command mailbox and the
+wall clock) and in virtual time. What it knows goes out as a typed
+`snapshot.Snapshot`.
 
 - **Network master**: NMT master and heartbeat producer (`NmtMaster`); each
   configured node that boots is provisioned over SDO (`provisioning.py`,

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import operator
 import types
 import typing
 from collections.abc import Callable, Mapping
@@ -285,56 +286,65 @@ def check_path(path: tuple[str, ...], root: type = Snapshot) -> None:
 
 
 # -- the JSON-ready form -------------------------------------------------------------------
-Convert = Callable[[Any], Any] | None  # None: the value as it is
+# One function per class, built once from its fields: every field read in one call, then
+# only the few that need converting. A snapshot is converted 20 times a second on each
+# surface's thread, so this stays a few C calls per section.
+Convert = Callable[[Any], Any]
 
 
-def _enum_text(value: Any) -> Any:
-    """A StrEnum's value; another enum's name (an NMT state: its value is the heartbeat byte)."""
-    if isinstance(value, StrEnum):
-        return value.value
+def _enum_value(value: Any) -> Any:
+    """A StrEnum member as its plain-str value (anything else as it is)."""
+    return str(value) if isinstance(value, str) else value
+
+
+def _enum_name(value: Any) -> Any:
+    """Another enum's member by name (an NMT state: its value is the heartbeat byte)."""
     return value.name if isinstance(value, Enum) else value
 
 
-def _hex_code(value: int | None) -> str | None:
-    return None if value is None else f"0x{value:04X}"
+def _hex_code(value: int) -> str:
+    return f"0x{value:04X}"
 
 
-def _converter(cls: type, item: dataclasses.Field[Any]) -> Convert:
+def _converter(cls: type, item: dataclasses.Field[Any]) -> Convert | None:
     if item.metadata.get("hex_code"):
         return _hex_code
     hint = _bare(_hints(cls)[item.name])
     if isinstance(hint, type) and issubclass(hint, Enum):
-        return _enum_text
+        return _enum_value if issubclass(hint, StrEnum) else _enum_name
     if dataclasses.is_dataclass(hint):
-        return _to_json
+        return _json_maker(hint)  # type: ignore[arg-type]
     if typing.get_origin(hint) in (Mapping, dict):
         inner = typing.get_args(hint)[1]
         if dataclasses.is_dataclass(inner):
-            return lambda mapping: {k: _to_json(v) for k, v in mapping.items()}
+            make = _json_maker(inner)  # type: ignore[arg-type]
+            return lambda mapping: {key: make(value) for key, value in mapping.items()}
         return dict
     return None
 
 
-_PLANS: dict[type, tuple[tuple[str, Convert, bool], ...]] = {}
+@functools.cache
+def _json_maker(cls: type) -> Callable[[Any], dict[str, Any]]:
+    items = dataclasses.fields(cls)
+    names = tuple(f.name for f in items)
+    getter = operator.attrgetter(*names)
+    read: Callable[[Any], Any] = getter if len(names) > 1 else lambda obj: (getter(obj),)
+    convert = tuple((f.name, c) for f in items if (c := _converter(cls, f)) is not None)
+    omit = tuple(f.name for f in items if f.metadata.get("omit_if_none"))
+
+    def make(section: Any) -> dict[str, Any]:
+        out = dict(zip(names, read(section), strict=True))
+        for name, change in convert:
+            value = out[name]
+            if value is not None:
+                out[name] = change(value)
+        for name in omit:
+            if out[name] is None:
+                del out[name]
+        return out
+
+    return make
 
 
-def _plan(cls: type) -> tuple[tuple[str, Convert, bool], ...]:
-    plan = _PLANS.get(cls)
-    if plan is None:
-        plan = _PLANS[cls] = tuple(
-            (f.name, _converter(cls, f), bool(f.metadata.get("omit_if_none")))
-            for f in dataclasses.fields(cls)
-        )
-    return plan
-
-
-def _to_json(section: Any) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name, convert, omit_if_none in _plan(type(section)):
-        value = getattr(section, name)
-        if value is None:
-            if not omit_if_none:
-                out[name] = None
-        else:
-            out[name] = value if convert is None else convert(value)
-    return out
+def _to_json(snapshot: Snapshot) -> dict[str, Any]:
+    return _json_maker(Snapshot)(snapshot)
