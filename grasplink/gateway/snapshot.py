@@ -6,9 +6,9 @@ the runtime and its surfaces: the JSON tree's value and state fields, the Sparkp
 metrics and their types, and the Modbus register paths are all read from these
 classes' fields (`section_fields`, `wire_kind`, `check_path`), never listed again.
 
-`Snapshot.to_dict()` is the JSON-ready form every surface publishes: enums as their
-names on the wire, the EMCY code as "0xXXXX" text, a field marked `omit_if_none`
-left out while it has no value.
+`Snapshot.to_dict()` is the JSON-ready form every surface publishes: enums as the text
+the wire carries (a StrEnum's value, an NMT state's name), the EMCY code as "0xXXXX",
+a field marked `omit_if_none` left out while it has no value.
 
 Field metadata says what the type alone does not:
 
@@ -52,6 +52,7 @@ __all__ = [
     "SkinSnapshot",
     "Snapshot",
     "check_path",
+    "field_of",
     "node_sections",
     "section_fields",
     "wire_kind",
