@@ -30,6 +30,7 @@ import sys
 import tempfile
 import time
 import uuid
+from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,13 +90,13 @@ def run_gateway(
                 from grasplink.surfaces.telemetry import TelemetryPublisher, parse_broker_url
 
                 publisher = TelemetryPublisher(
-                    live.gateway,
+                    live.edge,
                     parse_broker_url(f"mqtt://127.0.0.1:{broker_port}"),
                     "bench",
                     controls=TelemetryPublisher.controls_of(config),
                 ).start()
             if polls is not None:
-                server = ModbusServer(live.gateway, "tcp://127.0.0.1:0").start()
+                server = ModbusServer(live.edge, "tcp://127.0.0.1:0").start()
                 port = str(server.address.port)
                 for table, poll_ms in polls:
                     command = ["mbpoll", "-0", "-l", str(poll_ms), "-t", table, "-r", "0"]
@@ -174,7 +175,7 @@ def latency(reads: int, writes: int) -> dict[str, list[float]]:
     channel = f"virtual:bench-modbus-{uuid.uuid4().hex[:8]}"
     with (
         LiveGateway(channel, config, with_nodes=True) as live,
-        ModbusServer(live.gateway, "tcp://127.0.0.1:0") as server,
+        ModbusServer(live.edge, "tcp://127.0.0.1:0") as server,
     ):
         time.sleep(WARMUP_S)
         args = [server.address.port, reads, 50, writes, 10, rmap.input_count]
@@ -190,7 +191,8 @@ def latency(reads: int, writes: int) -> dict[str, list[float]]:
 
 
 def encode_cost(samples: int, paced: int) -> tuple[float, float]:
-    """µs to encode one snapshot into the input table (a fresh snapshot each time): back to
+    """µs to encode one snapshot into the input table (a fresh snapshot each time, so its
+    JSON-ready form is made too, as for every new snapshot the server meets): back to
     back (the mean of `samples`, caches warm), and paced as a 10 Hz poll meets it (`paced`
     snapshots, one every 100 ms with the thread asleep in between; the median)."""
     channel = f"virtual:bench-modbus-{uuid.uuid4().hex[:8]}"
@@ -200,12 +202,12 @@ def encode_cost(samples: int, paced: int) -> tuple[float, float]:
     rmap = register_map()
     started = time.perf_counter()
     for _ in range(samples):
-        rmap.encode_inputs(dict(snapshot))
+        rmap.encode_inputs(replace(snapshot))
     back_to_back = (time.perf_counter() - started) / samples * 1e6
     times = []
     for _ in range(paced):
         time.sleep(POLL_PERIOD_S)
-        fresh = dict(snapshot)
+        fresh = replace(snapshot)
         t0 = time.thread_time_ns()
         rmap.encode_inputs(fresh)
         times.append((time.thread_time_ns() - t0) / 1e3)

@@ -36,6 +36,7 @@ import threading
 import time
 import tracemalloc
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +55,7 @@ from grasplink.bus.logs import (  # noqa: E402
 from grasplink.core.frames import function_of  # noqa: E402
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402
+from grasplink.gateway.snapshot import Snapshot  # noqa: E402
 from grasplink.surfaces.telemetry import (  # noqa: E402
     TelemetryPublisher,
     json_tree,
@@ -169,28 +171,30 @@ class EveryValueChanging:
 
     def __init__(self, gateway: Any):
         self.gateway = gateway
-        self._source: dict | None = None
-        self._view: dict | None = None
+        self._source: Snapshot | None = None
+        self._view: Snapshot | None = None
         self.k = 0
 
     @property
-    def latest(self) -> dict | None:
+    def latest(self) -> Snapshot | None:
         snap = self.gateway.latest
         if snap is not None and snap is not self._source:
             self._source, self.k = snap, self.k + 1
             k = self.k
-            view = dict(snap)
-            view["skin"] = {
-                "grip_force_n": 5 + k % 7 * 0.1,
-                "slip": k % 3 > 0,
-                "slip_speed_mm_s": 20 + k % 11,
-                "position_mm": k * 0.5 % 80,
-                "confidence": 0.5 + k % 5 * 0.1,
-            }
-            view["emg"] = {**snap["emg"], "envelope_uv": 100.0 + k % 13, "level": k % 5}
-            view["belt"] = {**snap["belt"], "velocity_mrad_s": -2000 - k % 9 * 100}
-            view["hand"] = {**snap["hand"], "grip_n": 5 + k % 17 * 0.1}
-            self._view = view
+            self._view = replace(
+                snap,
+                skin=replace(
+                    snap.skin,
+                    grip_force_n=5 + k % 7 * 0.1,
+                    slip=k % 3 > 0,
+                    slip_speed_mm_s=20 + k % 11,
+                    position_mm=k * 0.5 % 80,
+                    confidence=0.5 + k % 5 * 0.1,
+                ),
+                emg=replace(snap.emg, envelope_uv=100.0 + k % 13, level=k % 5),
+                belt=replace(snap.belt, velocity_mrad_s=-2000 - k % 9 * 100),
+                hand=replace(snap.hand, grip_n=5 + k % 17 * 0.1),
+            )
         return self._view
 
     def post(self, command: Any) -> Any:
@@ -301,7 +305,7 @@ def run_gateway(
                 )
                 time.sleep(0.5)
             url = parse_broker_url(f"mqtt://127.0.0.1:{broker.port}")
-            source = EveryValueChanging(live.gateway) if changing else live.gateway
+            source = EveryValueChanging(live.edge) if changing else live.edge
             publisher = TelemetryPublisher(
                 source,
                 url,
@@ -317,8 +321,8 @@ def run_gateway(
         elapsed = time.monotonic() - t0
         after, slept, process = thread_cpu_s(), thread_sleeps(), time.process_time()
         percepts = live.gateway.counters["percepts"] - percepts0
-        nodes = (live.gateway.latest or {"nodes": {}})["nodes"]
-        phases = {kind: node["phase"] for kind, node in nodes.items()}
+        latest = live.gateway.latest
+        phases = {kind: str(node.phase) for kind, node in (latest.nodes if latest else {}).items()}
         stats = publisher.stats() if publisher else None
         if publisher is not None:
             publisher.stop()
@@ -449,7 +453,7 @@ def outage(broker: Broker, outage_s: float) -> dict[str, Any]:
     with LiveGateway(f"virtual:bench-outage-{os.getpid()}", config, with_nodes=True) as live:
         url = parse_broker_url(f"mqtt://127.0.0.1:{broker.port}")
         publisher = TelemetryPublisher(
-            live.gateway,
+            live.edge,
             url,
             "bench",
             controls=TelemetryPublisher.controls_of(config),

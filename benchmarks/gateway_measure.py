@@ -67,6 +67,7 @@ from grasplink.devices.node import DeviceNode
 from grasplink.devices.sources import ConstantSource, SampleSource
 from grasplink.gateway import provisioning as provisioning_module
 from grasplink.gateway.config import GatewayConfig, parse_config
+from grasplink.gateway.edge import GatewayEdge
 from grasplink.gateway.live import prepare_to_go_live
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import load_profile
@@ -253,7 +254,8 @@ def realtime_loop(seconds: float) -> dict:
     listener = threading.Thread(target=listen, name="bench-listener", daemon=True)
     listener.start()
     nodes = NodeRunner(nodes_bus, set_nodes(config), name="bench-nodes")
-    runner = NodeRunner(gw_bus, [gateway], name="bench-gateway")
+    # through its live edge, which measures the loop latency (`loop_latency_us`)
+    runner = NodeRunner(gw_bus, [GatewayEdge(gateway)], name="bench-gateway")
     rss: list[tuple[float, float]] = []
     prepare_to_go_live([gateway])  # as `LiveGateway.start` does before its runners start
     try:

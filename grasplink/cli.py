@@ -712,12 +712,12 @@ def cmd_gateway(args: argparse.Namespace) -> int:
         )
         running.callback(live.stop)
         live.open()  # the buses open and the decoder ready: no frame yet
-        modbus = running.enter_context(_modbus_server(live.gateways, modbus_url))
+        modbus = running.enter_context(_modbus_server(live.edges, modbus_url))
         if modbus is not None:
             print(modbus.describe(), flush=True)
         publishers = [
-            running.enter_context(telemetry(gateway, config, gateway_id))
-            for gateway, gateway_id in zip(live.gateways, telemetry_ids, strict=True)
+            running.enter_context(telemetry(edge, config, gateway_id))
+            for edge, gateway_id in zip(live.edges, telemetry_ids, strict=True)
         ]
         live.go()  # the first frame: reset, provisioning, heartbeat
         up_at = time.monotonic()

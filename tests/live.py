@@ -6,6 +6,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from grasplink.gateway.snapshot import NodePhase
+
 
 def wait_until(predicate: Callable[[], Any], timeout_s: float = 15.0, what: str = "") -> Any:
     """Poll `predicate` until it is truthy (2 shared cores: be patient, never flaky)."""
@@ -20,8 +22,8 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 15.0, what: str 
 
 
 def operational(gateway) -> bool:
-    """Every node of the gateway's latest snapshot is operational."""
+    """Every node of the gateway's latest snapshot is operational (a gateway or its edge)."""
     snapshot = gateway.latest
     return snapshot is not None and all(
-        n["phase"] == "operational" for n in snapshot["nodes"].values()
+        n.phase is NodePhase.OPERATIONAL for n in snapshot.nodes.values()
     )

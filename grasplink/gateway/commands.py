@@ -2,24 +2,20 @@
 
 A command is validated like any other input before anything changes, and
 answered with accepted/rejected and the reason; a rejected command changes
-nothing. Surfaces run in other threads: they `post` a command to the
-gateway's inbox and get a Future; the gateway executes it on its own thread
-at its next call (`Gateway.advance`), so its state is only ever touched by
-one thread.
+nothing. The sans-IO gateway executes a command when it is handed one
+(`Gateway.execute`); surfaces in other threads post theirs to the live edge's
+mailbox (`edge.GatewayEdge.post`), which hands them over on the gateway's thread.
 """
 
 from __future__ import annotations
 
 import math
-import queue
-from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
 from grasplink.gateway.feedback import FeedbackMode
 from grasplink.profiles.kinds import KINDS
 
-INBOX_SIZE = 64  # commands waiting for the gateway's thread; more is a flood, refused
 SHOWN_CHARS = 60  # of a refused value, in the error message
 MIN_THRESHOLD_MM_S, MAX_THRESHOLD_MM_S = 1.0, 1000.0
 CALIBRATION_PHASES = ("rest", "maximum", "finish", "cancel")
@@ -98,30 +94,3 @@ def shown(value: Any, limit: int = SHOWN_CHARS) -> str:
 
 def _number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-
-
-class Inbox:
-    """Commands posted from other threads, executed on the gateway's."""
-
-    def __init__(self, size: int = INBOX_SIZE):
-        self._queue: queue.Queue[tuple[Command, Future[CommandResult]]] = queue.Queue(size)
-
-    def post(self, command: Command) -> Future[CommandResult]:
-        """Queue a command; the Future resolves when the gateway has executed or refused it."""
-        future: Future[CommandResult] = Future()
-        try:
-            self._queue.put_nowait((command, future))
-        except queue.Full:
-            future.set_result(CommandResult(command.name, False, "too many commands waiting"))
-        return future
-
-    def drain(self) -> list[tuple[Command, Future[CommandResult]]]:
-        items = []
-        while True:
-            try:
-                items.append(self._queue.get_nowait())
-            except queue.Empty:
-                return items
-
-    def __bool__(self) -> bool:
-        return not self._queue.empty()

@@ -3,7 +3,9 @@
 `LiveGateway` opens the bus a URL names, runs the gateway on it (and, for
 the embedded bus, optionally the four device nodes beside it), reopens a
 lost bus with back-off, and offers the gateway's latest snapshot and a
-one-line status for whoever watches (the CLI, telemetry).
+one-line status for whoever watches (the CLI, telemetry). The runners drive each
+gateway through its `edge.GatewayEdge` (`edges`): the mailbox for commands from
+other threads and the wall-clock loop latency; surfaces are handed the edges.
 
 Start-up comes in two steps so a failure sends nothing: `open` opens every bus and
 readies the decoder without a frame, the caller binds its surfaces (Modbus, MQTT), and
@@ -27,7 +29,6 @@ from __future__ import annotations
 import functools
 import gc
 from collections.abc import Iterable, Sequence
-from typing import Any
 
 import can
 
@@ -37,7 +38,9 @@ from grasplink.bus.runner import DEFAULT_STALL_LIMIT_S
 from grasplink.devices.factory import build_node
 from grasplink.errors import BusError
 from grasplink.gateway.config import GatewayConfig
+from grasplink.gateway.edge import GatewayEdge
 from grasplink.gateway.service import Gateway
+from grasplink.gateway.snapshot import SkinSnapshot, Snapshot
 
 # The gateway's runner thread runs ahead of ordinary work (decoding must keep up with the
 # bus on a busy host), but not real-time: its work grows with the traffic it is sent.
@@ -63,7 +66,8 @@ def prepare_to_go_live(gateways: Iterable[Gateway]) -> None:
 
 class LiveGateway:
     """Run a `Gateway` on `bus_url` (and on each of ``more_buses``) in a background thread;
-    a context manager. `gateways` are in bus order; `gateway` is the first bus's."""
+    a context manager. `gateways` are in bus order, `edges` theirs (what surfaces are
+    handed); `gateway` and `edge` are the first bus's."""
 
     def __init__(
         self,
@@ -82,6 +86,8 @@ class LiveGateway:
         self.config = config
         self.gateways = [Gateway(config) for _ in self.bus_urls]
         self.gateway = self.gateways[0]
+        self.edges = [GatewayEdge(g) for g in self.gateways]
+        self.edge = self.edges[0]
         self.with_nodes = with_nodes
         self.reconnect_timeout_s = reconnect_timeout_s
         self.stall_limit_s = stall_limit_s
@@ -119,7 +125,8 @@ class LiveGateway:
             raise RuntimeError("LiveGateway.open() twice")
         self._opened = True
         node_runners = self._node_runners
-        for url, gateway in zip(self.bus_urls, self.gateways, strict=True):
+        for url, edge in zip(self.bus_urls, self.edges, strict=True):
+            gateway = edge.gateway
             bus = open_bus(url)
             self._buses.append(bus)
             if self.with_nodes:
@@ -131,7 +138,7 @@ class LiveGateway:
             self._gateway_runners.append(
                 NodeRunner(
                     bus,
-                    [gateway],
+                    [edge],
                     name=f"grasplink-gateway {url}",
                     reopen=functools.partial(open_bus, url),
                     reconnect_timeout_s=self.reconnect_timeout_s,
@@ -190,7 +197,7 @@ class LiveGateway:
         """What the host granted the thread running the gateway (None: not started)."""
         return self._runners[-1].priority if self._runners else None  # the gateways' is last
 
-    def snapshot(self) -> dict[str, Any] | None:
+    def snapshot(self) -> Snapshot | None:
         return self.gateway.latest
 
     def status_line(self) -> str:
@@ -209,41 +216,41 @@ def status_of(gateway: Gateway) -> str:
     if snap is None:
         return "gateway starting"
     nodes = " ".join(
-        f"{kind}:{n['phase']}" + (f"/{n['pdos_dropped']}drop" if n["pdos_dropped"] else "")
-        for kind, n in snap["nodes"].items()
+        f"{kind}:{n.phase}" + (f"/{n.pdos_dropped}drop" if n.pdos_dropped else "")
+        for kind, n in snap.nodes.items()
     )
-    skin, belt, hand, loop = snap["skin"], snap["belt"], snap["hand"], snap["loop"]
-    slip = "-" if not skin["slip"] else f"SLIP {slip_text(skin)}"
-    force = skin["grip_force_n"]
-    grip = hand["setpoint_n"]
-    latency = loop["latency_p99_us"]
+    skin, belt, hand, loop = snap.skin, snap.belt, snap.hand, snap.loop
+    slip = "-" if not skin.slip else f"SLIP {slip_text(skin)}"
+    force = skin.grip_force_n
+    grip = hand.setpoint_n
+    latency = loop.latency_p99_us
     parts = [
-        f"up {snap['uptime_s']:.1f} s",
+        f"up {snap.uptime_s:.1f} s",
         nodes,
         f"skin {force:.1f} N" if force is not None else "skin -",
         slip,
-        f"belt {belt['belt']}{'' if belt['level'] is None else belt['level']}",
+        f"belt {belt.belt}{'' if belt.level is None else belt.level}",
         f"grip {grip:.1f} N" if grip is not None else "grip -",
-        f"reflex {hand['reflex']}",
+        f"reflex {hand.reflex}",
         f"loop p99 {latency:.0f} us" if latency is not None else "loop -",
     ]
-    beat = snap.get("heartbeat")
-    if beat and beat["late"]:
+    beat = snap.heartbeat
+    if beat.late:
         parts.append(
-            f"own heartbeat late {beat['late']}x (max {beat['late_max_ms']:.0f} ms, "
-            f"{beat['over_consumer']} over {beat['consumer_ms']:.0f} ms)"
+            f"own heartbeat late {beat.late}x (max {beat.late_max_ms:.0f} ms, "
+            f"{beat.over_consumer} over {beat.consumer_ms:.0f} ms)"
         )
-    if snap["alarms"]:
-        parts.append("ALARMS " + "; ".join(f"{k}: {v}" for k, v in snap["alarms"].items()))
+    if snap.alarms:
+        parts.append("ALARMS " + "; ".join(f"{k}: {v}" for k, v in snap.alarms.items()))
     return " | ".join(parts)
 
 
-def slip_text(skin: dict[str, Any]) -> str:
+def slip_text(skin: SkinSnapshot) -> str:
     """A slip's speed for the status line: "40 mm/s +" (speed, direction), ">= 12 mm/s"
     (only a bound: its lower end), "(speed ?)"; the direction "+" towards the last ridge,
     "-" back, "?" not told."""
-    speed, low = skin.get("slip_speed_mm_s"), skin.get("slip_speed_low_mm_s")
-    direction = {1: "+", -1: "-"}.get(skin.get("slip_direction"), "?")  # type: ignore[arg-type]
+    speed, low = skin.slip_speed_mm_s, skin.slip_speed_low_mm_s
+    direction = {1: "+", -1: "-"}.get(skin.slip_direction, "?")  # type: ignore[arg-type]
     if speed is not None:
         return f"{speed:.0f} mm/s {direction}"
     if low is not None:

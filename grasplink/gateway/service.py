@@ -2,7 +2,10 @@
 
 `Gateway` is what an integrator deploys, and what a scene puts in the loop
 (`[controller] type = "gateway"`): the same object runs on a live bus
-(`grasplink gateway`, wrapped by a real-time runner) and in virtual time.
+(`grasplink gateway`: a real-time runner drives it through its live edge,
+`edge.GatewayEdge`, which holds the cross-thread command mailbox and the
+wall clock) and in virtual time. What it knows goes out as a typed
+`snapshot.Snapshot`.
 
 - **Network master**: NMT master and heartbeat producer (`NmtMaster`); each
   configured node that boots is provisioned over SDO (`provisioning.py`,
@@ -28,10 +31,8 @@ from __future__ import annotations
 import copy
 import logging
 import math
-import time
 from collections import Counter, deque
 from collections.abc import Callable, Mapping
-from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -43,7 +44,7 @@ from grasplink.core.params import Params
 from grasplink.decoding.base import SlipEstimate
 from grasplink.decoding.registry import make_decoder
 from grasplink.errors import ConfigError, PdoError
-from grasplink.gateway.commands import Command, CommandError, CommandResult, Inbox, parse_value
+from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value
 from grasplink.gateway.config import (
     KINDS,
     EmgConfig,
@@ -62,6 +63,7 @@ from grasplink.gateway.emg import (
     EmgIntentDecoder,
 )
 from grasplink.gateway.feedback import FeedbackController, FeedbackOutput
+from grasplink.gateway.levels import Belt
 from grasplink.gateway.master import NmtMaster
 from grasplink.gateway.percept import Percept
 from grasplink.gateway.plausibility import (
@@ -72,8 +74,20 @@ from grasplink.gateway.plausibility import (
     judge_emcy,
 )
 from grasplink.gateway.provisioning import Provisioner, SdoWrite
-from grasplink.gateway.reflex import GripArbiter, GripCommand
+from grasplink.gateway.reflex import GripArbiter, GripCommand, ReflexState
 from grasplink.gateway.sdo_client import SdoClient, Transfer
+from grasplink.gateway.snapshot import (
+    BeltSnapshot,
+    EmgSnapshot,
+    HandSnapshot,
+    HeartbeatStats,
+    LoopSnapshot,
+    NodePhase,
+    NodeSnapshot,
+    Rejected,
+    SkinSnapshot,
+    Snapshot,
+)
 from grasplink.gateway.streams import LIVE_SETTLE_US, SampleStream
 from grasplink.profiles import load_profile, object_limits, od_default
 from grasplink.profiles import objects as obj
@@ -105,7 +119,7 @@ class NodeLink:
     config: NodeConfig
     codec: PdoCodec
     sdo: SdoClient
-    phase: str = "absent"  # absent, provisioning, starting, operational, failed, lost
+    phase: NodePhase = NodePhase.ABSENT
     provisioning: list[tuple[SdoWrite, Transfer]] = field(default_factory=list)
     writes: tuple[SdoWrite, ...] = ()  # built with the gateway: a boot never parses an EDS
     retry_at_us: int | None = None
@@ -167,16 +181,16 @@ class Gateway(NmtMaster):
         self.last_intent: EmgIntent | None = None
         self.counters: Counter[str] = Counter()
         self._plausibility_setup()
-        self.inbox = Inbox()  # commands from MQTT/Modbus threads, executed in advance()
         self.calibration = CalibrationRecorder()
         # Called with (t_us, estimate) for every skin decoder update (telemetry, replays).
         self.estimate_listeners: list[Callable[[int, SlipEstimate], None]] = []
-        # Processing time from a skin TPDO to the RPDOs it causes, recent history only.
+        # Processing time from a skin TPDO to the RPDOs it causes, recent history only:
+        # measured by the live edge (`edge.GatewayEdge`), which has a clock; none in virtual time.
         self.loop_latency_us: deque[float] = deque(maxlen=LATENCY_HISTORY)
         self._next_refresh_us: int | None = None
         # The latest snapshot, replaced whole every SNAPSHOT_PERIOD_US on the gateway's own
         # thread, so other threads (status line, telemetry) read it without locks.
-        self.latest: dict[str, Any] | None = None
+        self.latest: Snapshot | None = None
         self._next_snapshot_us: int | None = None
         self._started_us = 0
         self._sent: dict[int, bytes] = {}
@@ -309,20 +323,12 @@ class Gateway(NmtMaster):
         if function == "EMCY" and frame.can_id == EMCY_BASE + node_id:
             return super().receive(frame, t_us) + self._emcy_alarm(link, frame, t_us)
         if function.startswith("TPDO"):
-            started_ns = time.perf_counter_ns()
-            frames = self._on_tpdo(link, frame, t_us)
-            if frames and link.kind == "skin":
-                self.loop_latency_us.append((time.perf_counter_ns() - started_ns) / 1000)
-            return frames
+            return self._on_tpdo(link, frame, t_us)
         return []
 
     def advance(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
         frames = super().advance(t_us)
-        for command, future in self.inbox.drain():
-            result, sent = self.execute(command, t_us)
-            frames += sent
-            future.set_result(result)
         for link in self.links.values():
             frames += link.sdo.advance(t_us)
             frames += self._check_provisioning(link, t_us)
@@ -330,8 +336,8 @@ class Gateway(NmtMaster):
                 link.retry_at_us = None
                 frames += self._provision(link, t_us)
             status = self.nodes.get(link.node_id)
-            if status is not None and status.lost and link.phase != "lost":
-                frames += self._lose(link, "heartbeat lost", t_us)
+            if status is not None and status.lost and link.phase is not NodePhase.LOST:
+                frames += self._lose(link, NodePhase.LOST, "heartbeat lost", t_us)
         deadline = self._control_deadline()
         if deadline is not None and t_us >= deadline:
             self._advance_control(t_us)
@@ -351,7 +357,7 @@ class Gateway(NmtMaster):
 
     def next_deadline_us(self) -> int | None:
         # The runner asks after every frame: a plain running minimum, no lists (~3x cheaper).
-        best = self.now_us if self.inbox else None
+        best = None
         for c in (
             super().next_deadline_us(),
             self._next_refresh_us,
@@ -381,9 +387,9 @@ class Gateway(NmtMaster):
             return super()._start(node_id)
         boots = self.nodes[node_id].boots
         if boots == link.boots_seen:
-            if link.phase in ("provisioning", "failed"):
+            if link.phase in (NodePhase.PROVISIONING, NodePhase.FAILED):
                 return []
-            if link.phase == "starting":
+            if link.phase is NodePhase.STARTING:
                 return [self.command_start(node_id)]
         link.boots_seen = boots
         self.on_node_restart(node_id)
@@ -400,28 +406,28 @@ class Gateway(NmtMaster):
 
     def _provision(self, link: NodeLink, t_us: int) -> list[Frame]:
         link.sdo.cancel()
-        link.phase = "provisioning"
+        link.phase = NodePhase.PROVISIONING
         link.provisioning = [
             (w, link.sdo.download(w.index, w.subindex, w.data)) for w in link.writes
         ]
         return link.sdo.advance(t_us)
 
     def _check_provisioning(self, link: NodeLink, t_us: int) -> list[Frame]:
-        if link.phase != "provisioning" or not link.provisioning:
+        if link.phase is not NodePhase.PROVISIONING or not link.provisioning:
             return []
         failed = next(((w, t) for w, t in link.provisioning if t.done and not t.ok), None)
         if failed is not None:
             write, transfer = failed
             link.sdo.cancel()
             link.provisioning = []
-            link.phase = "failed"
+            link.phase = NodePhase.FAILED
             link.failure = f"{write.what}: {transfer.describe()}"
             self.alarms[f"{link.kind}.provisioning"] = link.failure
             link.retry_at_us = t_us + PROVISION_RETRY_US
             return []
         if all(t.ok for _, t in link.provisioning):
             link.provisioning = []
-            link.phase = "starting"
+            link.phase = NodePhase.STARTING
             self.alarms.pop(f"{link.kind}.provisioning", None)
             return [self.command_start(link.node_id)]
         return []
@@ -436,18 +442,20 @@ class Gateway(NmtMaster):
         if status is None or status.state is None:
             return []
         if status.state == NmtState.OPERATIONAL:
-            if link.phase != "operational":
-                link.phase = "operational"
+            if link.phase is not NodePhase.OPERATIONAL:
+                link.phase = NodePhase.OPERATIONAL
                 self.alarms.pop(f"{link.kind}.lost", None)
                 return self._commands(t_us, refresh=True)
             return []
-        if link.phase == "operational":
-            return self._lose(link, f"left OPERATIONAL ({status.state.name})", t_us)
+        if link.phase is NodePhase.OPERATIONAL:
+            why = f"left OPERATIONAL ({status.state.name})"
+            return self._lose(link, NodePhase.ABSENT, why, t_us)
         return []
 
-    def _lose(self, link: NodeLink, why: str, t_us: int) -> list[Frame]:
-        """The degraded state for a node gone: belt stopped, hand holding, alarm raised."""
-        link.phase = "lost" if "heartbeat" in why else "absent"
+    def _lose(self, link: NodeLink, phase: NodePhase, why: str, t_us: int) -> list[Frame]:
+        """The degraded state for a node gone (`phase`: lost, its heartbeat stopped; absent,
+        it left OPERATIONAL): belt stopped, hand holding, alarm raised."""
+        link.phase = phase
         link.sdo.cancel()
         self.alarms[f"{link.kind}.lost"] = why
         if link.kind == "skin" and self.skin_stream is not None:
@@ -600,74 +608,75 @@ class Gateway(NmtMaster):
         return self._commands(t_us)
 
     # -- what the gateway knows, for status lines, telemetry and registers -------------------
-    def snapshot(self) -> dict[str, Any]:
-        """Everything a telemetry consumer wants, as plain JSON-ready values with units."""
+    def snapshot(self) -> Snapshot:
+        """Everything a surface wants, typed, with units (see snapshot.py)."""
         nodes = {}
         for link in self.links.values():
             status = self.nodes.get(link.node_id)
-            nodes[link.kind] = {
-                "node_id": link.node_id,
-                "phase": link.phase,
-                "nmt_state": status.state.name if status and status.state else None,
-                "boots": status.boots if status else 0,
-                "pdos_rx": link.pdos_rx,
-                "pdos_dropped": sum(link.pdos_dropped.values()),
-                "last_emcy": f"0x{link.emcy[-1][1]:04X}" if link.emcy else None,
-                "failure": link.failure or None,
-            }
-        if self.skin_stream is not None and "skin" in nodes:
-            nodes["skin"]["lost_packets"] = self.skin_stream.stats.lost_packets
+            lost_packets = None
+            if link.kind == "skin" and self.skin_stream is not None:
+                lost_packets = self.skin_stream.stats.lost_packets
+            nodes[link.kind] = NodeSnapshot(
+                node_id=link.node_id,
+                phase=link.phase,
+                nmt_state=status.state if status else None,
+                boots=status.boots if status else 0,
+                last_emcy=link.emcy[-1][1] if link.emcy else None,
+                failure=link.failure or None,
+                pdos_dropped=sum(link.pdos_dropped.values()),
+                lost_packets=lost_packets,
+                pdos_rx=link.pdos_rx,
+            )
         est = self.last_estimate
         belt = self.belt_output.belt if self.belt_output else None
         grip = self.grip_command
         intent = self.last_intent
         latencies = sorted(self.loop_latency_us)
-        return {
-            "uptime_s": (self.now_us - self._started_us) / 1e6,
-            "nodes": nodes,
-            "skin": {
-                "slip": est.slip if est else None,
-                "slip_speed_mm_s": _finite(est.speed_mm_s) if est else None,  # |speed|
-                "slip_speed_low_mm_s": _finite(est.speed_low_mm_s) if est else None,
-                "slip_speed_high_mm_s": _finite(est.speed_high_mm_s) if est else None,
-                "slip_direction": est.direction if est else None,  # +1, -1, None: not told
-                "slip_direction_confidence": _finite(est.direction_confidence) if est else None,
-                "position_mm": _finite(est.position_mm) if est else None,
-                "grip_force_n": _finite(est.force_n) if est else None,
-                "confidence": est.confidence if est else None,
-            },
-            "emg": {
-                "envelope_uv": intent.envelope_uv if intent else None,
-                "level": intent.level if intent else None,
-                "grip_intent_n": intent.grip_n if intent else None,
-                "saturated": intent.saturated if intent else None,
-            },
-            "belt": {
-                "mode": self.feedback.mode.value,
-                "belt": belt.belt.value if belt else "none",
-                "level": belt.level if belt else None,
-                "velocity_mrad_s": self._belt_velocity(),
-                "reason": belt.reason.value if belt else None,
-            },
-            "hand": {
-                "grip_n": self.hand_grip_n,
-                "setpoint_n": grip.grip_n if grip else None,
-                "reflex": grip.reflex.value if grip else "idle",
-                "source": grip.source.value if grip else None,
-            },
-            "loop": {
-                "latency_p50_us": _percentile(latencies, 0.5),
-                "latency_p99_us": _percentile(latencies, 0.99),
-                "percepts": self.counters["percepts"],
-            },
-            "heartbeat": self.heartbeat.stats(),  # our own: how late it went out
-            "rejected": {
-                **self.rejected.as_dict(),
-                "hand_command_slew_limited": self.grip_ramp.limited,
-                "belt_command_slew_limited": self.belt_ramp.limited,
-            },
-            "alarms": dict(self.alarms),
-        }
+        rejected = self.rejected.as_dict()
+        rejected["hand_command_slew_limited"] = self.grip_ramp.limited
+        rejected["belt_command_slew_limited"] = self.belt_ramp.limited
+        return Snapshot(
+            uptime_s=(self.now_us - self._started_us) / 1e6,
+            nodes=nodes,
+            skin=SkinSnapshot(
+                grip_force_n=_finite(est.force_n) if est else None,
+                slip=est.slip if est else None,
+                slip_speed_mm_s=_finite(est.speed_mm_s) if est else None,  # |speed|
+                position_mm=_finite(est.position_mm) if est else None,
+                confidence=est.confidence if est else None,
+                slip_speed_low_mm_s=_finite(est.speed_low_mm_s) if est else None,
+                slip_speed_high_mm_s=_finite(est.speed_high_mm_s) if est else None,
+                slip_direction=est.direction if est else None,  # +1, -1, None: not told
+                slip_direction_confidence=_finite(est.direction_confidence) if est else None,
+            ),
+            emg=EmgSnapshot(
+                envelope_uv=intent.envelope_uv if intent else None,
+                level=intent.level if intent else None,
+                grip_intent_n=intent.grip_n if intent else None,
+                saturated=intent.saturated if intent else None,
+            ),
+            belt=BeltSnapshot(
+                mode=self.feedback.mode,
+                belt=belt.belt if belt else Belt.NONE,
+                level=belt.level if belt else None,
+                velocity_mrad_s=self._belt_velocity(),
+                reason=belt.reason if belt else None,
+            ),
+            hand=HandSnapshot(
+                grip_n=self.hand_grip_n,
+                setpoint_n=grip.grip_n if grip else None,
+                reflex=grip.reflex if grip else ReflexState.IDLE,
+                source=grip.source if grip else None,
+            ),
+            loop=LoopSnapshot(
+                latency_p50_us=_percentile(latencies, 0.5),
+                latency_p99_us=_percentile(latencies, 0.99),
+                percepts=self.counters["percepts"],
+            ),
+            heartbeat=HeartbeatStats(**self.heartbeat.stats()),  # our own: how late it went
+            rejected=Rejected(**rejected),
+            alarms=dict(self.alarms),
+        )
 
     # -- control ---------------------------------------------------------------------------
     def _control(self, estimate: SlipEstimate, t_us: int) -> None:
@@ -691,11 +700,7 @@ class Gateway(NmtMaster):
         self.belt_output = self.feedback.advance(t_us)
         self.grip_command = self.arbiter.advance(t_us)
 
-    # -- run-time commands (MQTT, Modbus) ---------------------------------------------------
-    def post(self, command: Command) -> Future[CommandResult]:
-        """Thread-safe: queue a command for the gateway's thread (see commands.py)."""
-        return self.inbox.post(command)
-
+    # -- run-time commands (MQTT, Modbus, through the live edge's mailbox: edge.py) ----------
     def execute(self, command: Command, t_us: int) -> tuple[CommandResult, list[Frame]]:
         """Validate and apply one command now; a refused command changes nothing."""
         t_us = max(t_us, self.now_us)
@@ -805,13 +810,13 @@ class Gateway(NmtMaster):
 
     def _commandable(self, link: NodeLink) -> bool:
         """Operational in our eyes and the master's: not lost, not held by a consumer fault."""
-        return link.phase == "operational" and self.commandable(link.node_id)
+        return link.phase is NodePhase.OPERATIONAL and self.commandable(link.node_id)
 
     def _sensing_lost(self) -> list[str]:
         return [
             k
             for k in ("skin", "emg")
-            if k in self.by_kind and self.by_kind[k].phase != "operational"
+            if k in self.by_kind and self.by_kind[k].phase is not NodePhase.OPERATIONAL
         ]
 
     def _belt_velocity(self) -> int:

@@ -102,8 +102,10 @@ def test_garbage_on_every_tpdo_cob_id_keeps_the_hand_target_in_slew_and_is_count
     rx = sum(link.pdos_rx - before_rx[k] for k, link in gateway.by_kind.items())
     rejected = sum(gateway.rejected[k] for k in INPUT_KEYS) - before_rejected
     assert rejected > 0 and rx + rejected == legit + injected, "every frame followed or counted"
-    snapshot = gateway.snapshot()["rejected"]
-    assert sum(snapshot[k] for k in INPUT_KEYS) == sum(gateway.rejected[k] for k in INPUT_KEYS)
+    snapshot = gateway.snapshot().rejected
+    assert sum(getattr(snapshot, k) for k in INPUT_KEYS) == sum(
+        gateway.rejected[k] for k in INPUT_KEYS
+    )
     # the hand target: never faster than the hand's 50 N/s, in steps >= 10 ms apart
     grip = hand_targets(sent)
     assert grip, "the hand is still commanded"
@@ -147,7 +149,7 @@ def test_reflex_still_raises_the_grip_5_to_8_8_n_within_0_7_s():
     assert next(v for t, v in grip if t < start) == 5000
     reached = next(t for t, v in grip if v >= 8800)
     assert reached - start <= 700_000
-    assert sim.controllers[0].snapshot()["rejected"]["hand_grip_jump"] == 0
+    assert sim.controllers[0].snapshot().rejected.hand_grip_jump == 0
 
 
 def test_command_ramp_steps_once_per_interval_and_counts_episodes():
@@ -199,8 +201,8 @@ def test_a_second_master_is_an_alarm_a_log_line_and_counted(caplog):
         sim.network.inject(Frame(0x700 + gateway.node_id, rtr=True, dlc=1))  # not a master's
     assert "another master on the bus" in gateway.alarms["gateway.second_master"]
     assert [r.message for r in caplog.records if "another master" in r.message]
-    snap = gateway.snapshot()["rejected"]
-    assert (snap["foreign_nmt"], snap["second_master_heartbeat"]) == (1, 1)
+    snap = gateway.snapshot().rejected
+    assert (snap.foreign_nmt, snap.second_master_heartbeat) == (1, 1)
     go_on(sim, 5.2)
     assert "gateway.second_master" not in gateway.alarms, "clears after 5 s unheard"
     assert gateway.by_kind["hand"].phase == "operational"

@@ -14,6 +14,7 @@ from grasplink.controllers import simulation
 from grasplink.core.frames import RPDO_BASES, TPDO_BASES, Frame
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.errors import ConfigError
+from grasplink.gateway.snapshot import NodePhase
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import PdoCodec
 from grasplink.simulators.scene import parse_scene
@@ -124,6 +125,28 @@ def test_lost_skin_stops_the_belt_holds_the_hand_and_recovers():
     assert "skin.lost" not in gateway.alarms
 
 
+def test_a_node_whose_heartbeat_stops_is_lost_and_one_that_leaves_operational_absent():
+    """The phase comes from the path that saw it go (consumer time, or its own heartbeat
+    saying another state), never from the alarm's text."""
+    from grasplink.core.frames import HEARTBEAT_BASE
+
+    power = (
+        '[[effects]]\ntype = "bus.faults"\n'
+        'power_loss = [{ node = "skin", at_s = 1.5, restore_s = 2.5 }]'
+    )
+    sim = simulation(scene(duration=4.0, extra=power))
+    gateway = sim.controllers[0]
+    sim.network.start()
+    go_on(sim, 2.2)
+    assert gateway.snapshot().nodes["skin"].phase is NodePhase.LOST
+    assert gateway.alarms["skin.lost"] == "heartbeat lost"
+    go_on(sim, 1.5)
+    assert gateway.snapshot().nodes["skin"].phase is NodePhase.OPERATIONAL
+    gateway.receive(Frame(HEARTBEAT_BASE + BELT, bytes([0x04])), gateway.now_us)  # STOPPED
+    assert gateway.snapshot().nodes["belt"].phase is NodePhase.ABSENT
+    assert gateway.alarms["belt.lost"] == "left OPERATIONAL (STOPPED)"
+
+
 def test_garbage_tpdo_is_dropped_and_counted_never_decoded():
     sc = scene(duration=1.0)
     sim = simulation(sc)
@@ -229,11 +252,28 @@ def test_commands_are_applied_or_refused_with_the_reason():
         assert (gateway.feedback.mode, gateway.arbiter.reflex.config) == before
 
 
+def edge_gateway(duration: float = 1.0):
+    """The shipped closed-loop scene's gateway driven through its live edge (the mailbox
+    that takes commands from other threads), after `duration`."""
+    from grasplink.controllers import build_controllers
+    from grasplink.gateway.edge import GatewayEdge
+    from grasplink.simulators.engine import Simulation
+    from grasplink.simulators.scene import load_scene
+
+    scene = load_scene(ROOT / "scenes" / "loop_headline.toml")
+    edge = GatewayEdge(build_controllers(scene)[0])
+    sim = Simulation(scene, controllers=[edge])
+    sim.network.start()
+    go_on(sim, duration)
+    return sim, edge
+
+
 def test_emg_calibration_command_reaches_the_node_over_sdo():
     from grasplink.gateway.commands import Command
 
-    sim, gateway = loop_gateway()
-    future = gateway.post(Command("emg_calibration", {"e_min_uv": 80, "e_max_uv": 900}))
+    sim, edge = edge_gateway()
+    gateway = edge.gateway
+    future = edge.post(Command("emg_calibration", {"e_min_uv": 80, "e_max_uv": 900}))
     go_on(sim, 0.2)
     assert future.result(timeout=0).accepted
     store = sim.nodes["emg"].store
@@ -244,13 +284,14 @@ def test_emg_calibration_command_reaches_the_node_over_sdo():
 def test_posted_restart_resets_the_node_and_the_gateway_brings_it_back():
     from grasplink.gateway.commands import Command
 
-    sim, gateway = loop_gateway()
+    sim, edge = edge_gateway()
+    gateway = edge.gateway
     boots = gateway.nodes[HAND].boots
-    future = gateway.post(Command("restart_node", "hand"))
+    future = edge.post(Command("restart_node", "hand"))
     go_on(sim, 0.5)
     assert future.result(timeout=0).accepted
     assert gateway.nodes[HAND].boots == boots + 1
-    assert gateway.by_kind["hand"].phase == "operational"
+    assert gateway.by_kind["hand"].phase is NodePhase.OPERATIONAL
 
 
 def test_loop_headline_recording_shows_the_loop_on_the_bus(tmp_path, caplog):

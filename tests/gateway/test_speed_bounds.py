@@ -16,6 +16,7 @@ from grasplink.gateway.live import slip_text
 from grasplink.gateway.percept import Percept
 from grasplink.gateway.reflex import GripArbiter, ReflexConfig, ReflexState
 from grasplink.gateway.service import Gateway
+from grasplink.gateway.snapshot import Snapshot
 from grasplink.surfaces.modbus.registers import register_map
 from grasplink.surfaces.telemetry.buffer import Sample
 from grasplink.surfaces.telemetry.json_tree import JsonTree
@@ -147,7 +148,7 @@ def test_the_first_speed_after_a_bound_is_shown_at_once_not_held_by_the_dwell():
 # -- telemetry and Modbus -------------------------------------------------------------------
 
 
-def gateway_snapshot(estimate: SlipEstimate) -> dict:
+def gateway_snapshot(estimate: SlipEstimate) -> Snapshot:
     gateway = Gateway(load_config(None))
     gateway.last_estimate = estimate
     return gateway.snapshot()
@@ -169,7 +170,7 @@ def test_speed_bounds_and_direction_reach_the_snapshot_and_the_json_tree(estimat
         "slip_direction": estimate.direction,
         "slip_direction_confidence": estimate.direction_confidence,
     }
-    assert {k: snap["skin"][k] for k in expected} == expected
+    assert {k: getattr(snap.skin, k) for k in expected} == expected
     messages = JsonTree("gw").update([Sample(1000, snap)], EXTRA)
     (values,) = [json.loads(m.payload) for m in messages if m.topic.endswith("skin/values")]
     assert {k: values[k] for k in expected} == expected
@@ -187,7 +188,7 @@ def test_speed_bounds_and_direction_reach_sparkplug_with_their_types():
                 host.feed(final.topic, final.payload)
 
     def publish(t_ms: int, estimate: SlipEstimate) -> None:
-        live = snapshot(1.0, skin=gateway_snapshot(estimate)["skin"])  # every node operational
+        live = snapshot(1.0, skin=gateway_snapshot(estimate).skin)  # every node operational
         send(session.update([Sample(t_ms, live)], EXTRA))
 
     send(first + after)
@@ -237,6 +238,6 @@ def test_the_new_registers_were_added_after_every_existing_one():
 
 
 def test_the_status_line_tells_a_bound_as_at_least_its_lower_end():
-    assert slip_text(gateway_snapshot(BOUND_ONLY)["skin"]) == ">= 12 mm/s ?"
-    assert slip_text(gateway_snapshot(UNDIRECTED)["skin"]) == "41 mm/s ?"
-    assert slip_text(gateway_snapshot(DIRECTED)["skin"]) == "41 mm/s -"
+    assert slip_text(gateway_snapshot(BOUND_ONLY).skin) == ">= 12 mm/s ?"
+    assert slip_text(gateway_snapshot(UNDIRECTED).skin) == "41 mm/s ?"
+    assert slip_text(gateway_snapshot(DIRECTED).skin) == "41 mm/s -"

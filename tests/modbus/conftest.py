@@ -34,7 +34,7 @@ def live_modbus() -> Iterator[tuple[LiveGateway, ModbusServer]]:
     channel = f"virtual:modbus-{uuid.uuid4().hex[:12]}"
     with (
         LiveGateway(channel, parse_config({}, "<test>"), with_nodes=True) as live,
-        ModbusServer(live.gateway, "tcp://127.0.0.1:0") as server,
+        ModbusServer(live.edge, "tcp://127.0.0.1:0") as server,
     ):
         wait_until(lambda: operational(live.gateway), what="every node operational")
         yield live, server

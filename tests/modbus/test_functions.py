@@ -14,6 +14,7 @@ from pymodbus.client import ModbusTcpClient
 
 from grasplink import __version__
 from grasplink.gateway.config import parse_config
+from grasplink.gateway.edge import GatewayEdge
 from grasplink.gateway.service import Gateway
 from grasplink.surfaces.modbus.functions import CODES, check_request
 from grasplink.surfaces.modbus.registers import MAP_VERSION
@@ -94,7 +95,7 @@ def test_only_the_documented_functions_pass_and_2b_only_as_device_identification
 @pytest.fixture(scope="module")
 def server():
     """A gateway nobody runs (no snapshot: reads answer the sentinels), served on a free port."""
-    gateway = Gateway(parse_config({}, "<functions>"))
+    gateway = GatewayEdge(Gateway(parse_config({}, "<functions>")))
     with ModbusServer(gateway, "tcp://127.0.0.1:0", command_timeout_s=0.3) as served:
         yield served
 

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 import pytest
 
 from grasplink.gateway.config import parse_config
+from grasplink.gateway.feedback import FeedbackMode
 from grasplink.gateway.live import LiveGateway
 from grasplink.surfaces.modbus.registers import MAP_VERSION, PHASE_CODES, settings_of
 from grasplink.surfaces.modbus.server import ModbusServer
@@ -53,7 +54,7 @@ def test_mbpoll_reads_32_bit_values_with_big_endian_word_order(live_modbus):
     run = mbpoll("-t", "3:int", "-B", "-r", str(RMAP["uptime_ms"].address), *tcp(server))
     assert run.returncode == 0, run.stderr
     uptime_ms = mbpoll_values(run.stdout)[RMAP["uptime_ms"].address]
-    assert abs(uptime_ms / 1000 - live.gateway.latest["uptime_s"]) < 2.0
+    assert abs(uptime_ms / 1000 - live.gateway.latest.uptime_s) < 2.0
     run = mbpoll("-t", "3:int", "-B", "-r", str(RMAP["skin.position_mm"].address), *tcp(server))
     # No slip on the embedded bus: the position is unknown, the i32 sentinel.
     assert mbpoll_values(run.stdout)[RMAP["skin.position_mm"].address] == -(2**31)
@@ -102,7 +103,7 @@ def test_mbpoll_sees_refused_writes_and_the_gateway_state_does_not_change(
     time.sleep(0.1)
     assert settings_of(live.gateway) == before
     wait_until(lambda: live.gateway.latest is not snapshot_before, what="a new snapshot")
-    assert live.gateway.latest["belt"]["mode"] == "force_and_slip"
+    assert live.gateway.latest.belt.mode is FeedbackMode.FORCE_AND_SLIP
     assert commands_executed(live.gateway) == commands_before  # nothing was even posted
 
 
@@ -183,7 +184,7 @@ def rtu() -> Iterator[tuple[LiveGateway, PtyLine]]:
     try:
         with (
             LiveGateway(channel, parse_config({}, "<test>"), with_nodes=True) as live,
-            ModbusServer(live.gateway, url),
+            ModbusServer(live.edge, url),
         ):
             wait_until(lambda: operational(live.gateway), what="every node operational")
             yield live, line

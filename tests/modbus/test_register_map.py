@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from pymodbus.client import ModbusTcpClient
 from grasplink.controllers import simulation
 from grasplink.gateway.commands import Command, parse_value
 from grasplink.gateway.config import parse_config
+from grasplink.gateway.reflex import ReflexState
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
@@ -31,6 +33,7 @@ from grasplink.surfaces.modbus.registers import (
     to_words,
 )
 from tests.gateway.test_service import ROOT, go_on
+from tests.telemetry.snapshots import snapshot as gateway_snapshot
 
 RMAP = register_map()
 DATATYPE = ModbusTcpClient.DATATYPE
@@ -131,16 +134,16 @@ def slipping():
     gateway = sim.controllers[0]
     for _ in range(100):  # the slip starts at 1 s; the reflex acts within 0.5 s of the limit
         snapshot = gateway.snapshot()
-        if snapshot["hand"]["reflex"] == "active":
+        if snapshot.hand.reflex is ReflexState.ACTIVE:
             return gateway, snapshot
         go_on(sim, 0.01)
-    raise AssertionError(f"no reflex by 2.5 s: {snapshot['hand']}, {snapshot['skin']}")
+    raise AssertionError(f"no reflex by 2.5 s: {snapshot.hand}, {snapshot.skin}")
 
 
 def test_a_slipping_gateways_snapshot_reads_back_through_the_registers(slipping):
     _, snapshot = slipping
-    assert snapshot["skin"]["slip"] and snapshot["belt"]["velocity_mrad_s"] < 0
-    assert snapshot["hand"]["reflex"] == "active"
+    assert snapshot.skin.slip and snapshot.belt.velocity_mrad_s < 0
+    assert snapshot.hand.reflex is ReflexState.ACTIVE
     table = RMAP.encode_inputs(snapshot)
     assert len(table) == RMAP.input_count and all(0 <= w <= 0xFFFF for w in table)
     checked = 0
@@ -162,7 +165,7 @@ def test_a_slipping_gateways_snapshot_reads_back_through_the_registers(slipping)
         checked += 1
     assert checked > 40
     assert table[RMAP["map_version"].address] == MAP_VERSION
-    velocity = snapshot["belt"]["velocity_mrad_s"]  # the slip belt runs backwards: signed
+    velocity = snapshot.belt.velocity_mrad_s  # the slip belt runs backwards: signed
     assert velocity < 0 and words_of("belt.velocity_mrad_s", table) == to_words(I32, velocity)
 
 
@@ -176,15 +179,20 @@ def test_the_table_encoder_equals_each_registers_own_encoding(slipping):
     value (float, int, bool, code, NaN, inf, out of range, numpy, absent) must come out as
     the registers themselves encode it."""
     _, snapshot = slipping
-    odd: dict = {**snapshot, "skin": dict(snapshot["skin"]), "emg": dict(snapshot["emg"])}
-    odd["skin"].update(grip_force_n=math.nan, slip_speed_mm_s=-math.inf, position_mm=1e12)
-    odd["skin"]["confidence"] = np.float32(0.25)
-    odd["emg"].update(envelope_uv=np.int64(-7), level="not a level", saturated=None)
-    odd["belt"] = {**snapshot["belt"], "mode": "no such mode", "velocity_mrad_s": -(1 << 40)}
-    odd["loop"] = {**snapshot["loop"], "percepts": (1 << 40) + 5, "latency_p50_us": 2.5}
-    del odd["hand"]
-    odd["nodes"] = {**snapshot["nodes"], "emg": {**snapshot["nodes"]["emg"], "boots": -1}}
-    for data in (snapshot, odd, {}, None, {"nodes": None, "skin": 3}):
+    skin = replace(
+        snapshot.skin,
+        grip_force_n=math.nan,
+        slip_speed_mm_s=-math.inf,
+        position_mm=1e12,
+        confidence=np.float32(0.25),
+    )
+    emg = replace(snapshot.emg, envelope_uv=np.int64(-7), level="not a level", saturated=None)
+    belt = replace(snapshot.belt, mode="no such mode", velocity_mrad_s=-(1 << 40))
+    loop = replace(snapshot.loop, percepts=(1 << 40) + 5, latency_p50_us=2.5)
+    hand = replace(snapshot.hand, grip_n=None, setpoint_n=None, reflex=None, source=None)
+    nodes = {**snapshot.nodes, "emg": replace(snapshot.nodes["emg"], boots=-1)}
+    odd = replace(snapshot, skin=skin, emg=emg, belt=belt, loop=loop, hand=hand, nodes=nodes)
+    for data in (snapshot, odd, None):
         assert RMAP.encode_inputs(data) == _one_by_one(RMAP.inputs, data)
     gateway = Gateway(parse_config({}, "<test>"))
     for settings in (settings_of(gateway), {"reflex_threshold_mm_s": math.inf}, {}, None):
@@ -193,20 +201,22 @@ def test_the_table_encoder_equals_each_registers_own_encoding(slipping):
 
 def test_node_bits_alarm_bits_and_emcy_codes():
     node = {"node_id": 16, "phase": "operational", "nmt_state": "OPERATIONAL", "boots": 1}
-    snapshot = {
-        "uptime_s": 3.5,
-        "nodes": {
+    four = gateway_snapshot(
+        3.5,
+        nodes={
             "skin": {**node, "phase": "lost"},  # heard once, now overdue
-            "emg": {**node, "node_id": 48, "last_emcy": "0x8130"},
+            "emg": {**node, "node_id": 48, "last_emcy": 0x8130},
             "belt": {
                 **node,
                 "node_id": 32,
                 "phase": "provisioning",
                 "nmt_state": "PRE_OPERATIONAL",
             },
-        },  # no hand: not configured
-        "alarms": {"skin.lost": "heartbeat lost", "emg.emcy": "EMCY", "decoder.stuck": "?"},
-    }
+        },
+        alarms={"skin.lost": "heartbeat lost", "emg.emcy": "EMCY", "decoder.stuck": "?"},
+    )
+    nodes = {kind: four.nodes[kind] for kind in ("skin", "emg", "belt")}  # no hand: not configured
+    snapshot = replace(four, nodes=nodes)
     table = RMAP.encode_inputs(snapshot)
     read = {r.name: r.decode(words_of(r.name, table)) for r in RMAP.inputs}
     assert read["nodes_configured"] == 0b0111

@@ -1,5 +1,5 @@
 """The Modbus server against a pymodbus client: the live gateway's real values, commands
-applied or refused (exception code, nothing applied), a stalled gateway, a busy inbox,
+applied or refused (exception code, nothing applied), a stalled gateway, a busy mailbox,
 and start-up errors."""
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 
 from grasplink.errors import BusError
-from grasplink.gateway.commands import INBOX_SIZE, Command
+from grasplink.gateway.commands import Command
 from grasplink.gateway.config import parse_config
+from grasplink.gateway.edge import MAILBOX_SIZE, GatewayEdge
 from grasplink.gateway.service import Gateway
 from grasplink.profiles import objects as obj
 from grasplink.surfaces.modbus.registers import MAP_VERSION, PHASE_CODES, settings_of
@@ -52,8 +53,8 @@ def test_one_read_returns_the_whole_map_with_the_live_gateways_values(live_modbu
     assert values["map_version"] == MAP_VERSION
     assert values["nodes_configured"] == values["nodes_live"] == ALL_NODES
     assert values["nodes_operational"] == ALL_NODES
-    for kind, node in snapshot["nodes"].items():
-        assert values[f"nodes.{kind}.node_id"] == node["node_id"] == live.config.nodes[kind].node_id
+    for kind, node in snapshot.nodes.items():
+        assert values[f"nodes.{kind}.node_id"] == node.node_id == live.config.nodes[kind].node_id
         assert values[f"nodes.{kind}.nmt_state"] == 5  # OPERATIONAL
         assert values[f"nodes.{kind}.phase"] == PHASE_CODES["operational"]
         assert values[f"nodes.{kind}.pdos_rx"] > 0
@@ -71,7 +72,7 @@ def test_32_bit_registers_read_with_pymodbus_big_word_order(live_modbus, client)
     uptime = RMAP["uptime_ms"]
     response = client.read_input_registers(uptime.address, count=2)
     ms = ModbusTcpClient.convert_from_registers(response.registers, DATATYPE.UINT32)
-    assert abs(ms / 1000 - live.gateway.latest["uptime_s"]) < 1.0
+    assert abs(ms / 1000 - live.gateway.latest.uptime_s) < 1.0
 
 
 def test_writes_apply_commands_and_read_back(live_modbus, client):
@@ -171,9 +172,9 @@ def test_restart_node_resets_it_and_the_gateway_brings_it_back(live_modbus, clie
 @pytest.fixture
 def stalled():
     """A gateway nobody runs: its snapshot never comes, its commands are never executed."""
-    gateway = Gateway(parse_config({}, "<stalled>"))
-    with ModbusServer(gateway, "tcp://127.0.0.1:0", command_timeout_s=0.3) as server:
-        yield gateway, server
+    edge = GatewayEdge(Gateway(parse_config({}, "<stalled>")))
+    with ModbusServer(edge, "tcp://127.0.0.1:0", command_timeout_s=0.3) as server:
+        yield edge, server
 
 
 def test_a_stalled_gateway_reads_unknown_and_writes_fail_without_blocking_reads(stalled):
@@ -205,28 +206,28 @@ def test_a_stalled_gateway_reads_unknown_and_writes_fail_without_blocking_reads(
         # The server kept answering reads while the write waited for the gateway.
         assert len(latencies) >= 3 and min(latencies) < 0.2
     # The command stays queued: the gateway may still apply it (docs/modbus.md).
-    assert len(gateway.inbox.drain()) == 1
+    assert len(gateway.mailbox.drain()) == 1
 
 
-def test_a_full_inbox_answers_busy_and_queues_nothing_more(stalled):
+def test_a_full_mailbox_answers_busy_and_queues_nothing_more(stalled):
     gateway, server = stalled
-    for _ in range(INBOX_SIZE):
+    for _ in range(MAILBOX_SIZE):
         gateway.post(Command("reflex_enabled", True))
     with ModbusTcpClient("127.0.0.1", port=server.address.port, timeout=3) as client:
         response = client.write_register(0, 2)
     assert response.isError() and response.exception_code == 0x06
-    assert len(gateway.inbox.drain()) == INBOX_SIZE
+    assert len(gateway.mailbox.drain()) == MAILBOX_SIZE
 
 
 def test_the_server_binds_localhost_unless_told_otherwise():
-    gateway = Gateway(parse_config({}, "<test>"))
+    gateway = GatewayEdge(Gateway(parse_config({}, "<test>")))
     with ModbusServer(gateway, "tcp://:0") as server:
         assert server.address.host == "127.0.0.1" and server.address.port > 0
         assert f"tcp://127.0.0.1:{server.address.port}" in server.describe()
 
 
 def test_a_port_in_use_is_a_one_line_bus_error():
-    gateway = Gateway(parse_config({}, "<test>"))
+    gateway = GatewayEdge(Gateway(parse_config({}, "<test>")))
     with socket.create_server(("127.0.0.1", 0)) as taken:
         port = taken.getsockname()[1]
         with pytest.raises(BusError) as caught:
@@ -236,7 +237,7 @@ def test_a_port_in_use_is_a_one_line_bus_error():
 
 
 def test_a_missing_serial_device_is_a_one_line_bus_error(tmp_path):
-    gateway = Gateway(parse_config({}, "<test>"))
+    gateway = GatewayEdge(Gateway(parse_config({}, "<test>")))
     device = tmp_path / f"ttyNONE{uuid.uuid4().hex[:6]}"
     with pytest.raises(BusError) as caught:
         ModbusServer(gateway, f"rtu://{device}?unit=1").start()

@@ -36,7 +36,7 @@ def two_units() -> Iterator[tuple[LiveGateway, ModbusServer]]:
     config = parse_config({}, "<test>")
     with (
         LiveGateway(urls[0], config, with_nodes=True, more_buses=urls[1:]) as live,
-        ModbusServer(live.gateways, "tcp://127.0.0.1:0") as server,
+        ModbusServer(live.edges, "tcp://127.0.0.1:0") as server,
     ):
         wait_until(lambda: all(map(operational, live.gateways)), 20.0, "every node on both buses")
         yield live, server
@@ -66,7 +66,7 @@ def test_each_unit_is_its_own_buses_gateway(two_units) -> None:
             ms = ModbusTcpClient.convert_from_registers(
                 words.registers, ModbusTcpClient.DATATYPE.UINT32
             )
-            assert abs(ms / 1000 - gateway.latest["uptime_s"]) < 1.0
+            assert abs(ms / 1000 - gateway.latest.uptime_s) < 1.0
         # no gateway at unit 3: exception 0x0B, for a read and for a write; nothing applied
         response = client.read_input_registers(0, count=4, device_id=3)
         assert response.isError() and response.exception_code == 0x0B

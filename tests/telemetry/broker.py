@@ -18,7 +18,9 @@ import paho.mqtt.client as paho
 from paho.mqtt.enums import CallbackAPIVersion
 
 from grasplink.gateway.config import load_config
+from grasplink.gateway.edge import Mailbox
 from grasplink.gateway.service import Gateway
+from grasplink.gateway.snapshot import Snapshot
 from tests.telemetry.snapshots import snapshot
 
 MOSQUITTO = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
@@ -236,8 +238,9 @@ class FakeGateway:
 
     def __init__(self, period_s: float = 0.05):
         self.real = Gateway(load_config(None))
+        self.mailbox = Mailbox()
         self.period_s = period_s
-        self.latest: dict | None = None
+        self.latest: Snapshot | None = None
         self.count = 0
         self.phases: dict[str, str] = {}
         self._stop = threading.Event()
@@ -246,14 +249,14 @@ class FakeGateway:
         self._thread.start()
 
     def post(self, command):
-        return self.real.post(command)
+        return self.mailbox.post(command)
 
     def _run(self) -> None:
         next_t = self._start
         while not self._stop.is_set():
             now = time.monotonic()
             t_us = int((now - self._start) * 1e6)
-            for command, future in self.real.inbox.drain():
+            for command, future in self.mailbox.drain():
                 result, _ = self.real.execute(command, t_us)
                 future.set_result(result)
             self.count += 1

@@ -25,9 +25,11 @@ def a_gateway_mostly_at_rest(count: int) -> list[Sample]:
             changes["alarms"] = {"belt.emcy": "EMCY 0x8130"}
         if 200 <= k < 230:
             changes["nodes"] = {"hand": {"phase": "lost", "nmt_state": None}}
+        counted = {kind: {"pdos_rx": 17 * k} for kind in ("skin", "emg", "belt", "hand")}
+        for kind, fields in changes.get("nodes", {}).items():
+            counted[kind].update(fields)
+        changes["nodes"] = counted
         snap = snapshot(1 + k / 20, **changes)
-        for node in snap["nodes"].values():
-            node["pdos_rx"] = 17 * k
         samples.append(Sample(1_000_000 + 50 * k + k % 3, snap))
     return samples
 

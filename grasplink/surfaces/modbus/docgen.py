@@ -56,7 +56,11 @@ def render_modbus_markdown(rmap: RegisterMap | None = None) -> str:
         f"Addresses 0..{rmap.input_count - 1}: one read of {rmap.input_count} registers "
         "returns the whole map. Values come from the gateway's snapshot (replaced every "
         "50 ms), so two reads within 50 ms may return the same values; `uptime_ms` changes "
-        "with every snapshot.",
+        "with every snapshot. The snapshot's fields are defined once, in "
+        "`grasplink/gateway/snapshot.py` (frozen dataclasses, units in the names); which of "
+        "them the map carries, at which address, type and scale, is the map's own table, "
+        "and every register's source path is checked against those fields when the map is "
+        "built (a misspelt path fails, naming its register).",
         "",
     ]
     section = None

@@ -7,7 +7,10 @@ from that object in the EDS, so the map cannot disagree with the nodes. Node
 blocks are generated per node kind the gateway masters.
 
 - **Input registers** (function 04): read-only state, encoded from
-  `Gateway.latest` (the 20 Hz snapshot). Contiguous from address 0 and small
+  `Gateway.latest` (the 20 Hz snapshot, `grasplink.gateway.snapshot`). Which values
+  the map carries, at which address, scale and encoding, is this table's decision;
+  every `path` must name a field of the snapshot (checked as the map is built, so a
+  misspelt path fails naming its register). Contiguous from address 0 and small
   enough (`MAX_READ`) for one request to read the whole map.
 - **Holding registers** (03, 06, 16, 23): the run-time commands of
   `gateway/commands.py`. A write must cover exactly one command group (one
@@ -41,9 +44,12 @@ from grasplink.gateway.commands import (
     Command,
 )
 from grasplink.gateway.config import KINDS
+from grasplink.gateway.edge import GatewayEdge
 from grasplink.gateway.feedback import FeedbackMode, Reason
 from grasplink.gateway.levels import Belt
 from grasplink.gateway.reflex import GripSource, ReflexState
+from grasplink.gateway.service import Gateway
+from grasplink.gateway.snapshot import NodePhase, NodeSnapshot, Snapshot, check_path
 from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
 
@@ -68,8 +74,6 @@ MAP_CHANGES: tuple[tuple[int, str], ...] = (
 MAX_READ = 125
 #: How long a write waits for the gateway's CommandResult (its runner wakes every 20 ms).
 COMMAND_TIMEOUT_S = 0.5
-#: Node phases as the gateway names them (service.NodeLink.phase), in code order.
-PHASES = ("absent", "provisioning", "starting", "operational", "failed", "lost")
 #: Alarm categories per node (the gateway's alarm keys are "KIND.CATEGORY").
 ALARM_CATEGORIES = ("lost", "provisioning", "emcy", "clamped")
 OTHER_ALARM_BIT = 31
@@ -183,8 +187,9 @@ class Register:
 
     Engineering value = raw × `scale`, in `unit`. `codes`: an enumeration (name ->
     code); `bits`: a bit field (bit i means `bits[i]`); `counter`: wraps modulo 2^bits
-    and has no sentinel. `path` locates the value in the snapshot (input) or the
-    settings (holding); `derive` computes it instead when it is not one value there.
+    and has no sentinel. `path` locates the value in the snapshot's JSON-ready form
+    (input) or the settings (holding); `derive` computes it instead, from the typed
+    `Snapshot` (input) or the settings, when it is not one value there.
     Holding registers accept raw values `low..high` (or the codes).
     """
 
@@ -196,7 +201,7 @@ class Register:
     scale: float = 1.0
     section: str = ""
     path: tuple[str, ...] = ()
-    derive: Callable[[Mapping[str, Any]], Any] | None = None
+    derive: Callable[[Any], Any] | None = None
     source: str = ""  # where the value comes from, for the docs
     profile: ProfileSource | None = None
     codes: Mapping[str, int] | None = None
@@ -219,13 +224,13 @@ class Register:
     def has_sentinel(self) -> bool:
         return not self.counter and self.default is None
 
-    def value_of(self, data: Mapping[str, Any] | None) -> Any:
+    def value_of(self, data: Snapshot | Mapping[str, Any] | None) -> Any:
         """The engineering value in a snapshot or settings mapping (None if absent)."""
         if data is None:
             return None
         if self.derive is not None:
             return self.derive(data)
-        return _lookup(data, self.path)
+        return _lookup(data.to_dict() if isinstance(data, Snapshot) else data, self.path)
 
     def to_raw(self, value: Any) -> int | None:
         """Engineering value -> raw integer (saturated, or wrapped for counters);
@@ -355,13 +360,14 @@ class RegisterMap:
     def holding_count(self) -> int:
         return self.holding[-1].end if self.holding else 0
 
-    def encode_inputs(self, snapshot: Mapping[str, Any] | None) -> list[int]:
+    def encode_inputs(self, snapshot: Snapshot | None) -> list[int]:
         """The whole input table for one snapshot (None: before the first one)."""
-        return _encode_table(self._compiled["inputs"], snapshot)
+        data = None if snapshot is None else snapshot.to_dict()
+        return _encode_table(self._compiled["inputs"], data, snapshot)
 
     def encode_holding(self, settings: Mapping[str, Any] | None) -> list[int]:
         """The whole holding table for the gateway's current settings."""
-        return _encode_table(self._compiled["holding"], settings)
+        return _encode_table(self._compiled["holding"], settings, settings)
 
     def read(self, table: list[int], address: int, count: int) -> list[int]:
         """`count` words from `address` of an encoded table; ILLEGAL_ADDRESS outside it."""
@@ -448,7 +454,7 @@ def _check_contiguous(table: tuple[Register, ...]) -> None:
 # low, high, raw when absent (None: the sentinel), sentinel pattern, two words, register).
 _Plan = tuple[
     tuple[str, ...],
-    Callable[[Mapping[str, Any]], Any] | None,
+    Callable[[Any], Any] | None,
     float,
     Mapping[str, int] | None,
     bool,
@@ -481,11 +487,14 @@ def _plan(register: Register) -> _Plan:
     )
 
 
-def _encode_table(plans: tuple[_Plan, ...], data: Mapping[str, Any] | None) -> list[int]:
+def _encode_table(
+    plans: tuple[_Plan, ...], data: Mapping[str, Any] | None, source: Any
+) -> list[int]:
     """`Register.value_of` and `Register.encode` for every register of a table, in one loop
     with their common cases inlined: the server encodes a snapshot for every poll it
     answers, and per-register method calls were most of that cost. Anything unusual (a
-    numpy scalar, a value of another type) takes the register's own path."""
+    numpy scalar, a value of another type) takes the register's own path. Paths read
+    `data` (the JSON-ready form), `derive` reads `source` (the typed snapshot)."""
     words: list[int] = []
     append = words.append
     for plan in plans:
@@ -494,7 +503,7 @@ def _encode_table(plans: tuple[_Plan, ...], data: Mapping[str, Any] | None) -> l
         if data is None:
             value = None
         elif derive is not None:
-            value = derive(data)
+            value = derive(source)
         else:
             value = data
             try:
@@ -542,12 +551,12 @@ def _lookup(data: Any, path: tuple[str, ...]) -> Any:
     return data
 
 
-# -- derived values ------------------------------------------------------------------------
-def _node_bits(test: Callable[[Mapping[str, Any]], bool]) -> Callable[[Mapping[str, Any]], int]:
+# -- derived values (from the typed snapshot) -----------------------------------------------
+def _node_bits(test: Callable[[NodeSnapshot], bool]) -> Callable[[Snapshot], int]:
     bits = tuple((1 << i, kind) for i, kind in enumerate(KINDS))
 
-    def derive(snapshot: Mapping[str, Any]) -> int:
-        nodes = snapshot.get("nodes") or {}
+    def derive(snapshot: Snapshot) -> int:
+        nodes = snapshot.nodes
         value = 0
         for bit, kind in bits:
             node = nodes.get(kind)
@@ -558,8 +567,8 @@ def _node_bits(test: Callable[[Mapping[str, Any]], bool]) -> Callable[[Mapping[s
     return derive
 
 
-def _live(node: Mapping[str, Any]) -> bool:
-    return node.get("nmt_state") is not None and node.get("phase") != "lost"
+def _live(node: NodeSnapshot) -> bool:
+    return node.nmt_state is not None and node.phase is not NodePhase.LOST
 
 
 def alarm_bit(key: str) -> int:
@@ -570,33 +579,29 @@ def alarm_bit(key: str) -> int:
     return OTHER_ALARM_BIT
 
 
-def _alarms(snapshot: Mapping[str, Any]) -> int:
-    return functools.reduce(
-        lambda bits, key: bits | 1 << alarm_bit(key), snapshot.get("alarms") or {}, 0
-    )
+def _alarms(snapshot: Snapshot) -> int:
+    return functools.reduce(lambda bits, key: bits | 1 << alarm_bit(key), snapshot.alarms, 0)
 
 
-def _alarm_count(snapshot: Mapping[str, Any]) -> int:
-    return len(snapshot.get("alarms") or {})
+def _alarm_count(snapshot: Snapshot) -> int:
+    return len(snapshot.alarms)
 
 
-def _emcy_code(kind: str) -> Callable[[Mapping[str, Any]], int | None]:
-    def derive(snapshot: Mapping[str, Any]) -> int | None:
-        node = (snapshot.get("nodes") or {}).get(kind)
+def _emcy_code(kind: str) -> Callable[[Snapshot], int | None]:
+    def derive(snapshot: Snapshot) -> int | None:
+        node = snapshot.nodes.get(kind)
         if node is None:
             return None
-        text = node.get("last_emcy")
-        return int(text, 16) if isinstance(text, str) else 0
+        return 0 if node.last_emcy is None else node.last_emcy
 
     return derive
 
 
-def _uptime_ms(snapshot: Mapping[str, Any]) -> float | None:
-    uptime = snapshot.get("uptime_s")
-    return None if uptime is None else uptime * 1000
+def _uptime_ms(snapshot: Snapshot) -> float:
+    return snapshot.uptime_s * 1000
 
 
-def _map_version(_: Mapping[str, Any]) -> int:
+def _map_version(_: object) -> int:
     return MAP_VERSION
 
 
@@ -604,11 +609,17 @@ def _map_version(_: Mapping[str, Any]) -> int:
 class _Table:
     """Allocates consecutive addresses in declaration order."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, of_snapshot: bool = False) -> None:
         self.registers: list[Register] = []
         self.section = ""
+        self.of_snapshot = of_snapshot  # paths name snapshot fields (the input table)
 
     def add(self, name: str, word_type: WordType | None, description: str, **kw: Any) -> Register:
+        if self.of_snapshot and kw.get("path"):
+            try:
+                check_path(kw["path"])
+            except ValueError as exc:
+                raise ValueError(f"input register {name}: {exc}") from None
         profile: ProfileSource | None = kw.get("profile")
         if word_type is None:
             assert profile is not None
@@ -631,7 +642,7 @@ BELT_CODES = _codes([b.value for b in Belt])  # none, force, slip: as the belt's
 REASON_CODES = _codes([r.value for r in Reason])
 REFLEX_CODES = _codes([s.value for s in ReflexState])
 SOURCE_CODES = _codes([s.value for s in GripSource])
-PHASE_CODES = _codes(PHASES)
+PHASE_CODES = _codes([p.value for p in NodePhase])
 NMT_CODES = {s.name: s.value for s in NmtState}
 CALIBRATE_CODES = _codes(CALIBRATION_PHASES, start=1)
 RESTART_CODES = _codes(NODE_KINDS, start=1)
@@ -640,7 +651,7 @@ THRESHOLD_SCALE = 0.1
 
 
 def _inputs() -> tuple[Register, ...]:
-    t = _Table()
+    t = _Table(of_snapshot=True)
     node_bits = tuple(f"{kind}" for kind in KINDS)
     t.section = "gateway"
     t.add(
@@ -681,7 +692,7 @@ def _inputs() -> tuple[Register, ...]:
         "nodes_operational",
         U16,
         "the node is provisioned and OPERATIONAL",
-        derive=_node_bits(lambda n: n.get("phase") == "operational"),
+        derive=_node_bits(lambda n: n.phase is NodePhase.OPERATIONAL),
         bits=node_bits,
         source="snapshot nodes.KIND.phase == operational",
     )
@@ -1120,13 +1131,17 @@ def register_map() -> RegisterMap:
     return RegisterMap(_inputs(), holding, groups)
 
 
-def settings_of(gateway: Any, last_actions: Mapping[str, str] | None = None) -> dict[str, Any]:
+def settings_of(
+    gateway: Gateway | GatewayEdge, last_actions: Mapping[str, str] | None = None
+) -> dict[str, Any]:
     """The gateway's current settings for the holding registers.
 
     Read from another thread without locks: each is one attribute holding an
     immutable value (enum, bool, frozen dataclass) that the gateway's thread
     replaces whole, so a write is visible as soon as its CommandResult arrives.
     """
+    if isinstance(gateway, GatewayEdge):
+        gateway = gateway.gateway
     reflex = gateway.arbiter.reflex
     settings: dict[str, Any] = {
         "feedback_mode": gateway.feedback.mode.value,

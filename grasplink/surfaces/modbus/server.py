@@ -4,7 +4,8 @@ Nothing here touches the gateway's state or blocks its thread. Reads encode
 `Gateway.latest` (the snapshot the gateway replaces whole at 20 Hz, read
 without locks) and the gateway's current settings (`registers.settings_of`).
 A write becomes one `Command` (`RegisterMap.command_for_write` checks address
-and value first: a refused write posts nothing) posted to the gateway's inbox;
+and value first: a refused write posts nothing) posted to the gateway's mailbox
+(its live edge, `gateway.edge.GatewayEdge`);
 the reply waits, at most `command_timeout_s`, for the `CommandResult`:
 
 - accepted: the normal reply;
@@ -87,7 +88,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
-from grasplink.gateway.service import Gateway
+from grasplink.gateway.edge import GatewayEdge
 from grasplink.surfaces.modbus.functions import CODES, IDENTIFICATION, check_request
 from grasplink.surfaces.modbus.registers import (
     COMMAND_TIMEOUT_S,
@@ -113,7 +114,7 @@ class _Unit:
     """One gateway as one Modbus unit: what its action registers read back, and its input
     table encoded once per snapshot."""
 
-    gateway: Gateway
+    gateway: GatewayEdge
     last_actions: dict[str, str] = field(default_factory=dict)
     cached: tuple[Any, list[int]] | None = None  # (snapshot, its encoded table)
 
@@ -128,13 +129,13 @@ class ModbusServer:
 
     def __init__(
         self,
-        gateway: Gateway | Sequence[Gateway],
+        gateway: GatewayEdge | Sequence[GatewayEdge],
         url: str | ModbusUrl,
         *,
         command_timeout_s: float = COMMAND_TIMEOUT_S,
         register_map_: RegisterMap | None = None,
     ):
-        gateways = [gateway] if isinstance(gateway, Gateway) else list(gateway)
+        gateways = [gateway] if isinstance(gateway, GatewayEdge) else list(gateway)
         self.url = parse_modbus_url(url) if isinstance(url, str) else url
         # unit id (None: every one) -> the gateway served there, in bus order
         self.units: dict[int | None, _Unit] = {

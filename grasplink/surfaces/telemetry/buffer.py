@@ -15,6 +15,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from grasplink.gateway.snapshot import Snapshot
+
 # What one buffered message costs beyond its topic and payload (the Message, its bytes and
 # str objects and the deque slot, measured with tracemalloc: benchmarks/bench_telemetry.py).
 MESSAGE_OVERHEAD_BYTES = 220
@@ -42,7 +44,7 @@ class Sample:
     """A gateway snapshot and when it was made (wall clock, ms since the epoch)."""
 
     ts_ms: int
-    snapshot: dict[str, Any]
+    snapshot: Snapshot
 
 
 class SnapshotQueue:

@@ -129,7 +129,7 @@ class JsonTree:
             return out
         latest = batch[-1]
         self.latest = latest
-        snap, ts = latest.snapshot, latest.ts_ms
+        snap, ts = latest.snapshot.to_dict(), latest.ts_ms
         for kind in snap["nodes"]:
             section = snap.get(kind)
             last = self._values.get(kind)
@@ -158,7 +158,7 @@ class JsonTree:
         return out
 
     def _changes(self, sample: Sample, out: list[Message]) -> None:
-        snap, ts = sample.snapshot, sample.ts_ms
+        snap, ts = sample.snapshot.to_dict(), sample.ts_ms
         seen = self._seen
         for kind, node in snap["nodes"].items():
             topic = self._topics[kind][0]
@@ -200,7 +200,7 @@ class JsonTree:
         return Message(topic, dumps({"ts_ms": ts_ms, **body}), QOS, True)
 
     def _health(self, sample: Sample, ts_ms: int) -> Message:
-        snap = sample.snapshot
+        snap = sample.snapshot.to_dict()
         live = live_nodes(snap)
         self._live = live
         self._last_health_ms = sample.ts_ms

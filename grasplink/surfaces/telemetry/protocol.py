@@ -1,6 +1,9 @@
 """What the two telemetry protocols share: the sans-IO interface the MQTT edge drives,
 command requests, and how a gateway snapshot reads (live nodes, value fields, controls).
 
+The field lists come from the snapshot's classes (`grasplink.gateway.snapshot`): a field
+added there is published by both protocols without a change here.
+
 A protocol object is fed snapshots (`update`) and broker events (`on_connect`,
 `receive`) and returns `Message`s; it never touches a socket, so the JSON tree
 and the Sparkplug session are tested without a broker. The edge
@@ -18,6 +21,7 @@ and the Sparkplug session are tested without a broker. The edge
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import operator
@@ -25,29 +29,29 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from grasplink.gateway.commands import Command, CommandResult
+from grasplink.gateway.snapshot import (
+    NodePhase,
+    NodeSnapshot,
+    Snapshot,
+    node_sections,
+    section_fields,
+)
 from grasplink.surfaces.telemetry.buffer import Message, Sample
 
-LIVE_PHASE = "operational"  # a node is live (a Sparkplug device born) only while operational
+LIVE_PHASE = NodePhase.OPERATIONAL.value  # a node is live (a Sparkplug device born) only then
 
-#: per node kind: the snapshot section and its decoded values (units in the names)
+#: per node kind: the snapshot section and its decoded values (units in the names), in the
+#: order they are published
 VALUE_FIELDS: dict[str, tuple[str, ...]] = {
-    "skin": (
-        "grip_force_n",
-        "slip",
-        "slip_speed_mm_s",  # |speed|; its range and direction follow (docs/telemetry.md)
-        "position_mm",
-        "confidence",
-        "slip_speed_low_mm_s",
-        "slip_speed_high_mm_s",
-        "slip_direction",
-        "slip_direction_confidence",
-    ),
-    "emg": ("envelope_uv", "level", "grip_intent_n", "saturated"),
-    "belt": ("mode", "belt", "level", "velocity_mrad_s", "reason"),
-    "hand": ("grip_n", "setpoint_n", "reflex", "source"),
+    kind: section_fields(section) for kind, section in node_sections().items()
 }
-#: node state fields of `snapshot["nodes"][kind]` that are published on change
-STATE_FIELDS = ("node_id", "phase", "nmt_state", "boots", "last_emcy", "failure")
+_NODE_FIELDS = dataclasses.fields(NodeSnapshot)
+#: node state fields of `snapshot.nodes[kind]`, published on change (the rest are counters)
+STATE_FIELDS = tuple(f.name for f in _NODE_FIELDS if not f.metadata.get("counter"))
+#: what either protocol reports on change of a node (the fast counters go on their own period)
+_REPORTED_NODE_FIELDS = operator.attrgetter(
+    *(f.name for f in _NODE_FIELDS if not f.metadata.get("fast"))
+)
 _COMPARED_SECTIONS = (*VALUE_FIELDS, "alarms")
 #: Bounds on what one command message may ask for, checked before it is parsed: the largest
 #: real command is a few hundred bytes, 2 levels deep, 8 metrics (every writable one of the
@@ -101,41 +105,28 @@ class TelemetryProtocol(Protocol):
     def reply(self, request: CommandRequest, result: CommandResult, t_ms: int) -> list[Message]: ...
 
 
-#: node status fields either protocol reports on change (counters go on their own period),
-#: but for the skin's `lost_packets` (the other kinds have none)
-_REPORTED_NODE_FIELDS = operator.itemgetter(*STATE_FIELDS, "pdos_dropped")
-
-
-def same_report(before: dict[str, Any], after: dict[str, Any]) -> bool:
+def same_report(before: Snapshot, after: Snapshot) -> bool:
     """Whether `after` tells nothing `before` did not, apart from uptime and the counters
     the protocols publish on their own period: then a protocol fed `after` has nothing to
     say before its `next_due_ms`, and the snapshot need not go through it at all. Written
-    for a thread that wakes with cold caches 20 times a second: a few C-level compares."""
-    try:
-        for section in _COMPARED_SECTIONS:
-            if before[section] != after[section]:
-                return False
-        nodes_before, nodes_after = before["nodes"], after["nodes"]
-        if nodes_before.keys() != nodes_after.keys():
+    for a thread that wakes with cold caches 20 times a second: a few compares of frozen
+    sections, no conversion."""
+    for section in _COMPARED_SECTIONS:
+        if getattr(before, section) != getattr(after, section):
             return False
-        for kind, node in nodes_after.items():
-            other = nodes_before[kind]
-            if _REPORTED_NODE_FIELDS(node) != _REPORTED_NODE_FIELDS(other):
-                return False
-            if node.get("lost_packets") != other.get("lost_packets"):
-                return False
-    except KeyError:  # not shaped like the gateway's snapshots: let the protocols judge
+    nodes_before, nodes_after = before.nodes, after.nodes
+    if nodes_before.keys() != nodes_after.keys():
         return False
+    for kind, node in nodes_after.items():
+        if _REPORTED_NODE_FIELDS(node) != _REPORTED_NODE_FIELDS(nodes_before[kind]):
+            return False
     return True
 
 
+# The helpers below read a snapshot's JSON-ready form (`Snapshot.to_dict()`): what the
+# protocols publish from.
 def live_nodes(snapshot: dict[str, Any]) -> list[str]:
     return [kind for kind, node in snapshot["nodes"].items() if node["phase"] == LIVE_PHASE]
-
-
-def node_values(snapshot: dict[str, Any], kind: str) -> dict[str, Any]:
-    section = snapshot.get(kind, {})
-    return {key: section.get(key) for key in VALUE_FIELDS[kind]}
 
 
 def controls_view(snapshot: dict[str, Any] | None, extra: dict[str, Any]) -> dict[str, Any]:

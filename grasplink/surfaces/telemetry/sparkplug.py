@@ -37,6 +37,7 @@ those of the payload serialised with its seq, without parsing it again per messa
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import operator
 from collections.abc import Callable, Sequence
@@ -46,13 +47,21 @@ from typing import Any
 from google.protobuf.message import DecodeError
 
 from grasplink.gateway.commands import Command, CommandResult, shown
-from grasplink.gateway.plausibility import REJECTION_KEYS
+from grasplink.gateway.snapshot import (
+    LoopSnapshot,
+    NodeSnapshot,
+    Rejected,
+    Snapshot,
+    field_of,
+    node_sections,
+    section_fields,
+    wire_kind,
+)
 from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
 from grasplink.surfaces.telemetry.buffer import Message, Sample
 from grasplink.surfaces.telemetry.protocol import (
     LIVE_PHASE,
     MAX_COMMAND_METRICS,
-    VALUE_FIELDS,
     CommandRequest,
     Incoming,
     controls_view,
@@ -65,6 +74,15 @@ NAMESPACE = "spBv1.0"
 INT8, INT16, INT32, INT64 = 1, 2, 3, 4
 UINT8, UINT16, UINT32, UINT64 = 5, 6, 7, 8
 FLOAT, DOUBLE, BOOLEAN, STRING = 9, 10, 11, 12
+#: how a snapshot field is carried (`snapshot.wire_kind`) -> its Sparkplug data type
+WIRE_TYPES = {
+    "float": DOUBLE,
+    "bool": BOOLEAN,
+    "int": INT32,
+    "uint32": UINT32,
+    "uint64": UINT64,
+    "str": STRING,
+}
 COUNTER_PERIOD_MS = 1000  # counters and latencies that change with every snapshot
 BDSEQ = "bdSeq"
 REBIRTH = "Node Control/Rebirth"
@@ -109,6 +127,11 @@ class SpMeta:
     epoch: int
     kind: str
     device: str | None = None
+
+
+def datatype(section: type, name: str) -> int:
+    """The Sparkplug data type of a snapshot field, from its type (`snapshot.wire_kind`)."""
+    return WIRE_TYPES[wire_kind(section, name)]
 
 
 def _snap(path: tuple[str, ...], default: Any = None) -> Getter:
@@ -171,10 +194,11 @@ NODE_GROUPS: tuple[MetricGroup, ...] = (
     ),
     MetricGroup(
         (
-            MetricSpec("Gateway/uptime_s", DOUBLE, _snap(("uptime_s",))),
-            MetricSpec("Loop/latency_p50_us", DOUBLE, _snap(("loop", "latency_p50_us"))),
-            MetricSpec("Loop/latency_p99_us", DOUBLE, _snap(("loop", "latency_p99_us"))),
-            MetricSpec("Loop/percepts", UINT64, _snap(("loop", "percepts"))),
+            MetricSpec("Gateway/uptime_s", datatype(Snapshot, "uptime_s"), _snap(("uptime_s",))),
+            *(
+                MetricSpec(f"Loop/{name}", datatype(LoopSnapshot, name), _snap(("loop", name)))
+                for name in section_fields(LoopSnapshot)
+            ),
         ),
         lambda s, e: (s["uptime_s"], s["loop"]),  # type: ignore[index]
         COUNTER_PERIOD_MS,
@@ -211,48 +235,31 @@ NODE_GROUPS: tuple[MetricGroup, ...] = (
     ),
     MetricGroup(  # what the loop refused to follow (docs/gateway.md, Plausibility)
         tuple(
-            MetricSpec(f"Rejected/{key}", UINT64, _snap(("rejected", key), 0))
-            for key in REJECTION_KEYS
+            MetricSpec(f"Rejected/{key}", datatype(Rejected, key), _snap(("rejected", key), 0))
+            for key in section_fields(Rejected)
         ),
         lambda s, e: s.get("rejected") if s else None,  # on change: rare but news
     ),
 )
 NODE_METRICS: tuple[MetricSpec, ...] = tuple(spec for group in NODE_GROUPS for spec in group.specs)
 
-FIELD_TYPES: dict[str, int] = {
-    "grip_force_n": DOUBLE,
-    "slip": BOOLEAN,
-    "slip_speed_mm_s": DOUBLE,
-    "position_mm": DOUBLE,
-    "confidence": DOUBLE,
-    "slip_speed_low_mm_s": DOUBLE,
-    "slip_speed_high_mm_s": DOUBLE,
-    "slip_direction": INT32,  # +1, -1; null: not told
-    "slip_direction_confidence": DOUBLE,
-    "envelope_uv": DOUBLE,
-    "level": INT32,
-    "grip_intent_n": DOUBLE,
-    "saturated": BOOLEAN,
-    "mode": STRING,
-    "belt": STRING,
-    "velocity_mrad_s": INT32,
-    "reason": STRING,
-    "grip_n": DOUBLE,
-    "setpoint_n": DOUBLE,
-    "reflex": STRING,
-    "source": STRING,
-}
-STATE_METRICS: tuple[tuple[str, int], ...] = (  # (field of nodes[kind], type), on change
-    ("node_id", UINT32),
-    ("phase", STRING),
-    ("nmt_state", STRING),
-    ("boots", UINT32),
-    ("last_emcy", STRING),
-    ("failure", STRING),
-    ("pdos_dropped", UINT64),
-    ("lost_packets", UINT64),
+# A device's `State/…` metrics: its node's fields, on change; the fast counters once a period.
+STATE_METRICS: tuple[tuple[str, int], ...] = tuple(
+    (f.name, datatype(NodeSnapshot, f.name))
+    for f in dataclasses.fields(NodeSnapshot)
+    if not f.metadata.get("fast")
 )
-COUNTER_STATE_METRICS: tuple[tuple[str, int], ...] = (("pdos_rx", UINT64),)  # once a second
+COUNTER_STATE_METRICS: tuple[tuple[str, int], ...] = tuple(
+    (f.name, datatype(NodeSnapshot, f.name))
+    for f in dataclasses.fields(NodeSnapshot)
+    if f.metadata.get("fast")
+)
+
+
+def _node_has(kind: str, name: str) -> bool:
+    """Whether nodes of `kind` have the state field (`kinds` metadata: only those kinds)."""
+    kinds = field_of(NodeSnapshot, name).metadata.get("kinds")
+    return kinds is None or kind in kinds
 
 
 def _node_state(kind: str, name: str) -> Getter:
@@ -296,13 +303,14 @@ def _section_values(names: tuple[str, ...]) -> Callable[[Any], Sequence[Any] | N
 
 def device_groups(kind: str) -> tuple[MetricGroup, ...]:
     """A device's metrics: its decoded values, then `State/…` from the node's status."""
-    fields = VALUE_FIELDS[kind]
-    values = tuple(MetricSpec(name, FIELD_TYPES[name], _snap((kind, name))) for name in fields)
+    section = node_sections()[kind]
+    fields = section_fields(section)
+    values = tuple(MetricSpec(n, datatype(section, n), _snap((kind, n))) for n in fields)
     groups = [
         MetricGroup(values, lambda s, e: s.get(kind), values=_section_values(fields))  # type: ignore[union-attr]
     ]
     for state, period in ((STATE_METRICS, 0), (COUNTER_STATE_METRICS, COUNTER_PERIOD_MS)):
-        names = tuple(n for n, _ in state if n != "lost_packets" or kind == "skin")
+        names = tuple(n for n, _ in state if _node_has(kind, n))
         specs = tuple(
             MetricSpec(f"State/{n}", t, _node_state(kind, n)) for n, t in state if n in names
         )
@@ -314,7 +322,7 @@ def device_groups(kind: str) -> tuple[MetricGroup, ...]:
     return tuple(groups)
 
 
-DEVICE_GROUPS = {kind: device_groups(kind) for kind in VALUE_FIELDS}
+DEVICE_GROUPS = {kind: device_groups(kind) for kind in node_sections()}
 DEVICE_METRICS = {
     kind: tuple(spec for group in groups for spec in group.specs)
     for kind, groups in DEVICE_GROUPS.items()
@@ -547,7 +555,7 @@ class SparkplugSession:
         )
 
     def _births(self, t_ms: int) -> list[Message]:
-        snap = self.latest.snapshot if self.latest else None
+        snap = self.latest.snapshot.to_dict() if self.latest else None
         ts = self.latest.ts_ms if self.latest else t_ms
         payload = pb.Payload(timestamp=t_ms)
         aliases = ALIASES[None]
@@ -565,21 +573,19 @@ class SparkplugSession:
             set_value(metric, DATATYPES[None][name], self._reply[name])
         out = [self._message("NBIRTH", payload)]
         if snap is not None:
-            out += [self._dbirth(kind, Sample(ts, snap), t_ms) for kind in sorted(self._alive)]
+            out += [self._dbirth(kind, snap, ts, t_ms) for kind in sorted(self._alive)]
         return out
 
-    def _dbirth(self, kind: str, sample: Sample, t_ms: int) -> Message:
+    def _dbirth(self, kind: str, snap: dict[str, Any], ts_ms: int, t_ms: int) -> Message:
         payload = pb.Payload(timestamp=t_ms)
         last = self._last[kind] = {}
-        self._forget(kind, sample.ts_ms)
+        self._forget(kind, ts_ms)
         aliases = ALIASES[kind]
         for spec in DEVICE_METRICS[kind]:
-            last[spec.name] = spec.get(sample.snapshot, self._extra)
-            metric = payload.metrics.add(
-                name=spec.name, alias=aliases[spec.name], timestamp=sample.ts_ms
-            )
+            last[spec.name] = spec.get(snap, self._extra)
+            metric = payload.metrics.add(name=spec.name, alias=aliases[spec.name], timestamp=ts_ms)
             set_value(metric, spec.datatype, last[spec.name])
-        metric = payload.metrics.add(name=RESTART, alias=aliases[RESTART], timestamp=sample.ts_ms)
+        metric = payload.metrics.add(name=RESTART, alias=aliases[RESTART], timestamp=ts_ms)
         set_value(metric, BOOLEAN, False)
         return self._message("DBIRTH", payload, kind)
 
@@ -609,7 +615,7 @@ class SparkplugSession:
         node_payload: pb.Payload | None = None
         for sample in batch:
             self.latest = sample
-            snap = sample.snapshot
+            snap = sample.snapshot.to_dict()
             for kind, status in snap["nodes"].items():
                 groups = DEVICE_GROUPS.get(kind)
                 if groups is None:
@@ -617,7 +623,7 @@ class SparkplugSession:
                 alive = status["phase"] == LIVE_PHASE
                 if alive and kind not in self._alive:
                     self._alive.add(kind)
-                    out.append(self._dbirth(kind, sample, sample.ts_ms))
+                    out.append(self._dbirth(kind, snap, sample.ts_ms, sample.ts_ms))
                 elif not alive and kind in self._alive:
                     self._alive.discard(kind)
                     if kind in pending:
@@ -648,7 +654,7 @@ class SparkplugSession:
         payload: pb.Payload | None,
     ) -> pb.Payload | None:
         """Add what changed in `sample` to `payload` (made when first needed), by alias."""
-        snap, ts, extra = sample.snapshot, sample.ts_ms, self._extra
+        snap, ts, extra = sample.snapshot.to_dict(), sample.ts_ms, self._extra
         last = self._last.setdefault(device, {})
         aliases = ALIASES[device]
         for index, group in enumerate(groups):

@@ -1,6 +1,6 @@
 """The MQTT edge: aiomqtt in its own thread and event loop, never on the gateway's thread.
 
-`TelemetryPublisher` reads `gateway.latest` (a dict replaced whole at 20 Hz, so
+`TelemetryPublisher` reads `gateway.latest` (a `Snapshot` replaced whole at 20 Hz, so
 reading it needs no lock), stamps each new snapshot with the wall-clock time it
 was made, and queues it (`SnapshotQueue`: bounded, drop-oldest, counted). At
 most `rate_hz` times a second the queued snapshots go through each protocol
@@ -9,8 +9,9 @@ store-and-forward buffer its `Writer` drains while the broker is there. Its
 `Session` keeps the connection: a lost broker is retried with back-off; on its
 return the buffer is replayed in order and what the bound dropped is logged and
 published (health, Telemetry/ metrics). Commands read from the broker are posted
-to the gateway (`gateway.post`), their results answered by the protocol that
-received them.
+to the gateway's mailbox (`gateway.post`, the live edge
+`grasplink.gateway.edge.GatewayEdge`), their results answered by the protocol
+that received them.
 
 One connection per protocol: each has its own Will (JSON `status` offline,
 Sparkplug NDEATH), which MQTT allows only one of per connection.
@@ -30,6 +31,7 @@ from typing import Any, Protocol
 
 from grasplink.gateway.commands import Command, CommandResult
 from grasplink.gateway.service import SNAPSHOT_PERIOD_US
+from grasplink.gateway.snapshot import Snapshot
 from grasplink.surfaces.telemetry.buffer import Message, Outbox, Sample, SnapshotQueue
 from grasplink.surfaces.telemetry.json_tree import JsonTree
 from grasplink.surfaces.telemetry.protocol import (
@@ -60,9 +62,10 @@ RATE_BURST = 1.5  # publish credit kept: a snapshot a little early (jitter) stil
 
 
 class GatewayLike(Protocol):
-    """What telemetry needs of a gateway (`grasplink.gateway.service.Gateway`)."""
+    """What telemetry needs of a gateway (its live edge, `grasplink.gateway.edge.GatewayEdge`)."""
 
-    latest: dict[str, Any] | None
+    @property
+    def latest(self) -> Snapshot | None: ...
 
     def post(self, command: Command) -> Future[CommandResult]: ...
 
@@ -259,7 +262,7 @@ class TelemetryPublisher:
         self.links: list[MqttLink] = []
         self.published_snapshots = 0
         self.skipped_snapshots = 0  # like the one before: nothing to publish (_has_news)
-        self._last_snapshot: dict[str, Any] | None = None
+        self._last_snapshot: Snapshot | None = None
         self._counted_seen = -1
         self._controls_seen: dict[str, Any] = {}
         self._thread: threading.Thread | None = None
@@ -426,11 +429,11 @@ class TelemetryPublisher:
                     protocol.latest = sample
         return True
 
-    def _sample(self, snapshot: dict[str, Any], now: float) -> Sample:
+    def _sample(self, snapshot: Snapshot, now: float) -> Sample:
         """The snapshot stamped with the wall-clock time it was made (seen at monotonic `now`)."""
-        return Sample(self.clock.stamp_ms(snapshot["uptime_s"], now, time.time() - now), snapshot)
+        return Sample(self.clock.stamp_ms(snapshot.uptime_s, now, time.time() - now), snapshot)
 
-    def _has_news(self, previous: dict[str, Any] | None, sample: Sample) -> bool:
+    def _has_news(self, previous: Snapshot | None, sample: Sample) -> bool:
         """Whether a snapshot may change what a protocol publishes; compared before any
         encoding, so a gateway at rest costs a comparison per snapshot, not two encodings.
         Lossless: a snapshot like the one before (values, states, alarms; counters aside)
