@@ -18,7 +18,6 @@ import pytest
 from grasplink.devices.factory import CODES_BY_KIND, DEVICES, build_node
 from grasplink.errors import ConfigError
 from grasplink.evaluation.loop import LOOP_KINDS
-from grasplink.gateway import commands
 from grasplink.gateway import config as gateway_config
 from grasplink.profiles import eds_path, edsgen, load_profile
 from grasplink.profiles import objects as obj
@@ -59,7 +58,6 @@ def test_the_index_order_is_the_order_of_the_modbus_bits_blocks_and_codes():
     assert re.findall(r"^### nodes\.(\w+)$", doc, re.M) == list(KINDS)
     codes = ", ".join(f"{k.index + 1} {k.name}" for k in NODE_KINDS)
     assert f"| `restart_node` | u16 |  | 1 | {codes} |" in doc
-    assert commands.NODE_KINDS == KINDS
 
 
 def test_the_gateway_masters_its_nodes_in_index_order():

@@ -19,7 +19,6 @@ from grasplink.profiles.kinds import KINDS
 SHOWN_CHARS = 60  # of a refused value, in the error message
 MIN_THRESHOLD_MM_S, MAX_THRESHOLD_MM_S = 1.0, 1000.0
 CALIBRATION_PHASES = ("rest", "maximum", "finish", "cancel")
-NODE_KINDS = KINDS  # restart_node's choices, in the registry's order (Modbus codes 1..)
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,7 +46,7 @@ COMMANDS: dict[str, str] = {
     "reflex_threshold_mm_s": f"a number {MIN_THRESHOLD_MM_S:g}..{MAX_THRESHOLD_MM_S:g}",
     "emg_calibration": "{e_min_uv, e_max_uv}, numbers with 0 <= e_min_uv < e_max_uv <= 65535",
     "emg_calibrate": "one of " + ", ".join(CALIBRATION_PHASES),
-    "restart_node": "one of " + ", ".join(NODE_KINDS),
+    "restart_node": "one of " + ", ".join(KINDS),
 }
 
 
@@ -79,7 +78,7 @@ def parse_value(command: Command) -> Any:
             if _number(low) and _number(high) and 0 <= low < high <= 65535:
                 return float(low), float(high)
     elif name in ("emg_calibrate", "restart_node"):
-        choices = CALIBRATION_PHASES if name == "emg_calibrate" else NODE_KINDS
+        choices = CALIBRATION_PHASES if name == "emg_calibrate" else KINDS
         if value in choices:
             return value
     raise CommandError(f"{name}: expected {expected}, got {shown(value)}")

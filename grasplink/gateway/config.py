@@ -35,8 +35,7 @@ from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.profiles import object_limits
 from grasplink.profiles import objects as obj
-from grasplink.profiles.kinds import KINDS as KINDS  # re-exported for service and surfaces
-from grasplink.profiles.kinds import node_kind, per_kind, unknown_kind
+from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 
 # The thesis's EMG control window is "rectified and integrated" over 150-250 ms (ch. 2.3).

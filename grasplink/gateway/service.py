@@ -46,7 +46,6 @@ from grasplink.decoding.registry import make_decoder
 from grasplink.errors import ConfigError, PdoError
 from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value
 from grasplink.gateway.config import (
-    KINDS,
     EmgConfig,
     GatewayConfig,
     HandConfig,
@@ -91,6 +90,7 @@ from grasplink.gateway.snapshot import (
 from grasplink.gateway.streams import LIVE_SETTLE_US, SampleStream
 from grasplink.profiles import load_profile, object_limits, od_default
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.pdo_codec import Key, PdoCodec
 
 log = logging.getLogger(__name__)

@@ -4,7 +4,7 @@ rebirth, seq/bdSeq across sessions, store-and-forward as historical data, comman
 from __future__ import annotations
 
 from grasplink.gateway.commands import Command, CommandResult
-from grasplink.gateway.config import KINDS
+from grasplink.profiles.kinds import KINDS
 from grasplink.surfaces.telemetry import sparkplug_b_pb2 as pb
 from grasplink.surfaces.telemetry.buffer import Message, Sample
 from grasplink.surfaces.telemetry.protocol import Incoming

@@ -6,7 +6,7 @@ output, so the document cannot drift from what the server serves.
 
 from __future__ import annotations
 
-from grasplink.gateway.config import KINDS
+from grasplink.profiles.kinds import KINDS
 from grasplink.surfaces.modbus.functions import (
     FUNCTIONS,
     MAX_READ_WRITE_WRITE,

@@ -40,10 +40,8 @@ from grasplink.gateway.commands import (
     CALIBRATION_PHASES,
     MAX_THRESHOLD_MM_S,
     MIN_THRESHOLD_MM_S,
-    NODE_KINDS,
     Command,
 )
-from grasplink.gateway.config import KINDS
 from grasplink.gateway.edge import GatewayEdge
 from grasplink.gateway.feedback import FeedbackMode, Reason
 from grasplink.gateway.levels import Belt
@@ -52,6 +50,7 @@ from grasplink.gateway.service import Gateway
 from grasplink.gateway.snapshot import NodePhase, NodeSnapshot, Snapshot, check_path
 from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
+from grasplink.profiles.kinds import KINDS
 
 #: Bumped whenever an address, type, scale or a value's meaning changes, or registers are
 #: added (at the end of a table: no address moves); readable at input register 0.
@@ -645,7 +644,7 @@ SOURCE_CODES = _codes([s.value for s in GripSource])
 PHASE_CODES = _codes([p.value for p in NodePhase])
 NMT_CODES = {s.name: s.value for s in NmtState}
 CALIBRATE_CODES = _codes(CALIBRATION_PHASES, start=1)
-RESTART_CODES = _codes(NODE_KINDS, start=1)
+RESTART_CODES = _codes(KINDS, start=1)  # restart_node: the registry's order
 BOOL_CODES = {"false": 0, "true": 1}
 THRESHOLD_SCALE = 0.1
 
@@ -1117,7 +1116,7 @@ def _holding() -> tuple[tuple[Register, ...], tuple[CommandGroup, ...]]:
         CommandGroup(
             "restart_node",
             (restart,),
-            lambda r: NODE_KINDS[r[0] - 1],
+            lambda r: KINDS[r[0] - 1],
             "reset the node; the gateway provisions and starts it again",
         )
     )
