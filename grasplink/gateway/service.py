@@ -779,12 +779,14 @@ class Gateway(NmtMaster):
         if hand is not None and self._commandable(hand):
             grip_mn = self._hand_grip_mn()
             if grip_mn is not None:
-                # held while sensing is lost: where the ramp is, not where it was going
+                # held while sensing is lost: where the ramp is, not where it was going;
+                # the ramp stops there too, or its next step would stay due for ever
                 at = self.grip_ramp.value
-                held = at is not None and bool(self._sensing_lost())
-                grip_mn = round(
-                    at if at is not None and held else self.grip_ramp.output(grip_mn, t_us)
-                )
+                if at is not None and self._sensing_lost():
+                    self.grip_ramp.start_from(at)
+                    grip_mn = round(at)
+                else:
+                    grip_mn = round(self.grip_ramp.output(grip_mn, t_us))
                 frames += self._rpdo(hand, (obj.HAND_TARGET_GRIP_MN, 0), grip_mn, refresh)
         return frames
 

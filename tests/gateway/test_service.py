@@ -125,6 +125,22 @@ def test_lost_skin_stops_the_belt_holds_the_hand_and_recovers():
     assert "skin.lost" not in gateway.alarms
 
 
+def test_a_sensing_node_lost_while_the_grip_ramps_holds_the_grip_and_time_goes_on():
+    """The EMG node loses power while the hand's grip is on its slew-limited way: the grip
+    is held where the ramp was, and the ramp stops there (before, its next step stayed due
+    for ever: the lock-step network stopped, "devices make no progress")."""
+    text = (ROOT / "scenes" / "loop_headline.toml").read_text() + (
+        '\n[[effects]]\ntype = "bus.faults"\n'
+        'power_loss = [{ node = "emg", at_s = 4.0, restore_s = 4.8 }]\n'
+    )
+    sim, gateway, frames = run(parse_scene(tomllib.loads(text), "loop_headline.toml"))
+    lost_us = 4_000_000 + gateway.node_heartbeat_us * 3 + 100_000
+    held = {f.data[2:] for t, f in frames if f.can_id == HAND_RPDO and lost_us < t < 4_800_000}
+    assert len(held) <= 1, "the hand's grip command is held while the EMG node is lost"
+    assert gateway.by_kind["emg"].phase is NodePhase.OPERATIONAL, "back after it boots again"
+    assert sim.t_us >= round(sim.scene.duration_s * 1e6)
+
+
 def test_a_node_whose_heartbeat_stops_is_lost_and_one_that_leaves_operational_absent():
     """The phase comes from the path that saw it go (consumer time, or its own heartbeat
     saying another state), never from the alarm's text."""
