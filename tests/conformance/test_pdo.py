@@ -13,6 +13,7 @@ bus, never on single gaps.
 
 from __future__ import annotations
 
+import math
 import struct
 import time
 from itertools import pairwise
@@ -50,6 +51,7 @@ from tests.conformance.conftest import (
 WRONG_LENGTH = {ABORT_NOT_MAPPABLE, ABORT_PARAMETER_INCOMPATIBLE}
 EVENT_TIMER_MS = 25
 WINDOW_S = 0.25
+STARVED_WAIT_S = 5.0  # how long a check waits for frames a starved device thread owes
 
 
 def entry_of(e: EdsEntry) -> int:
@@ -258,17 +260,27 @@ def check_event_timer(dut: Dut, numbers: list[int], window: float = WINDOW_S) ->
     pdos = setup(dut, numbers, transmission_type=254, event_timer_ms=EVENT_TIMER_MS)
     dut.start()
     mark = dut.log.mark()
+    started = time.monotonic()
     time.sleep(window)
-    expected = window / (EVENT_TIMER_MS / 1000)
+    # A loaded host may not run the device's thread for a while: wait (bounded) for the
+    # frames the window should have held, then judge counts by the time that really passed.
+    wanted = math.ceil(0.6 * window / (EVENT_TIMER_MS / 1000))
+    give_up = time.monotonic() + STARVED_WAIT_S
+    while time.monotonic() < give_up and any(
+        len(frames_of(dut, mark, can_id)) < wanted for can_id, _ in pdos.values()
+    ):
+        time.sleep(0.01)
+    expected = (time.monotonic() - started) / (EVENT_TIMER_MS / 1000)
     for number, (can_id, length) in pdos.items():
         frames = frames_of(dut, mark, can_id)
-        assert len(frames) >= 0.6 * expected, f"TPDO{number}: {len(frames)} frames"
+        assert len(frames) >= wanted, f"TPDO{number}: {len(frames)} frames"
         assert {len(f.data) for f in frames} == {length}
         if number not in APP_TRIGGERED[dut.kind]:
             assert len(frames) <= expected + 3, f"TPDO{number}: {len(frames)} frames"
         gaps = [b.timestamp - a.timestamp for a, b in pairwise(frames)]
-        # A long silence means no timer; single late frames are the OS, not the device.
-        assert max(gaps) <= 4 * EVENT_TIMER_MS / 1000, f"TPDO{number}: gap {max(gaps):.3f} s"
+        # Silences mean a timer that stops; a single one is the OS not running the device.
+        long = [g for g in gaps if g > 4 * EVENT_TIMER_MS / 1000]
+        assert len(long) <= 1, f"TPDO{number}: gaps {', '.join(f'{g:.3f}' for g in long)} s"
         assert median(gaps) == pytest.approx(EVENT_TIMER_MS / 1000, abs=0.008) or (
             number in APP_TRIGGERED[dut.kind]
         ), f"TPDO{number}: median gap {median(gaps):.3f} s"
