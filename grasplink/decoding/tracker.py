@@ -82,29 +82,21 @@ from grasplink.decoding.contacts import (
     PulseCheck,
 )
 from grasplink.decoding.kernels import posterior as posterior_kernels
-from grasplink.decoding.kernels.branch import (
+from grasplink.decoding.kernels.branch import branch, pack_constants
+from grasplink.decoding.kernels.common import ring_slot
+from grasplink.decoding.kernels.layout import (
+    F_COLS,
     F_D,
-    F_M,
     F_S,
     F_SCORE,
-    F_SIG,
     F_STOP,
-    F_T,
     F_WIDTH,
-    I_DIRN,
-    I_FIRST,
-    I_IDS,
+    I_COLS,
     I_LAST,
-    I_MODEL,
     I_N,
-    I_RIDGE,
-    I_RUN,
     I_WIDTH,
     IDS,
-    branch,
-    pack_constants,
 )
-from grasplink.decoding.kernels.common import ring_slot
 from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.errors import ConfigError
 
@@ -116,20 +108,14 @@ UNKNOWN, PULSE, STEP, UNCLEAR, NOISE = 0, 1, 2, 3, 4
 RING = 256
 
 
-# the columns of a bank's two matrices (`kernels.branch` defines them: the kernels read
-# them as plain ints): floats (P flattened row-major, X = (s, v, a, d), m, score, sig, stop,
-# t) and integers (dirn, first, ids, model, n, ridge, run); a field is a view
-_P, _X = slice(0, 16), slice(F_S, F_D + 1)
-_M, _SCORE, _SIG, _STOP, _T = F_M, F_SCORE, F_SIG, F_STOP, F_T
-_DIRN, _FIRST, _IDS = I_DIRN, I_FIRST, slice(I_IDS, I_LAST + 1)
-_MODEL, _N, _RIDGE, _RUN = I_MODEL, I_N, I_RIDGE, I_RUN
+# the columns of a bank's two matrices (`kernels.layout`: the kernels read them as plain
+# ints): floats (P flattened row-major, X = (s, v, a, d), m, score, sig, stop, t) and
+# integers (dirn, first, ids, model, n, ridge, run); a field is a view
 _F_COLS: dict[str, int | slice] = {
-    "P": _P, "X": _X, "m": _M, "score": _SCORE, "sig": _SIG, "stop": _STOP, "t": _T,
-}  # fmt: skip
-_I_COLS: dict[str, int | slice] = {
-    "dirn": _DIRN, "first": _FIRST, "ids": _IDS, "model": _MODEL, "n": _N, "ridge": _RIDGE,
-    "run": _RUN,
-}  # fmt: skip
+    "X": slice(F_S, F_D + 1),
+    **{key: F_COLS[key] for key in ("P", "m", "score", "sig", "stop", "t")},
+}
+_I_COLS: dict[str, int | slice] = dict(I_COLS)
 _F_WIDTH, _I_WIDTH = F_WIDTH, I_WIDTH
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
 _WARM = False  # this process's kernels are loaded

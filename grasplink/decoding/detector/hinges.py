@@ -36,6 +36,14 @@ from grasplink.decoding.detector.series import (
 from grasplink.decoding.filters import SosFilter, lattice_median
 from grasplink.decoding.kernels.detector import (
     BLOCK_DONE,
+    NOT_TAKEN,
+    TAKEN,
+    channel_fast,
+    channel_hinge,
+    channels_fast,
+    hinge_maxima,
+)
+from grasplink.decoding.kernels.layout import (
     CH_ABS_N,
     CH_HELD,
     CH_NEXT_N,
@@ -45,12 +53,11 @@ from grasplink.decoding.kernels.detector import (
     CH_W,
     CH_Z_START,
     CHANNEL_COLUMNS,
-    NOT_TAKEN,
-    TAKEN,
-    channel_fast,
-    channel_hinge,
-    channels_fast,
-    hinge_maxima,
+    CHANNEL_ROWS,
+    ROW_AFTER,
+    ROW_HINGE,
+    ROW_READY,
+    ROW_Z,
 )
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
@@ -131,7 +138,7 @@ class _Channel:
     z_start = BankInt(CH_Z_START)  # global centre index of z[0]
 
     def __post_init__(self) -> None:
-        self.rows = BankRows(self.bank.ints, self.index, CH_SIZE, 256, rows=4)
+        self.rows = BankRows(self.bank.ints, self.index, CH_SIZE, 256, rows=len(CHANNEL_ROWS))
 
     @property
     def taps(self) -> np.ndarray:
@@ -154,8 +161,10 @@ class _Channel:
     def refresh_views(self) -> None:
         """z, zh, za, zready as views of the rows' storage, after an append that grew it
         (or the first one); an append that fits keeps them."""
-        if self.z.base is not self.rows.data:
-            self.z, self.zh, self.za, self.zready = self.rows.data
+        data = self.rows.data
+        if self.z.base is not data:
+            self.z, self.zh, self.za = data[ROW_Z], data[ROW_HINGE], data[ROW_AFTER]
+            self.zready = data[ROW_READY]
 
 
 def slope_taps(width: int) -> np.ndarray:
@@ -392,8 +401,8 @@ class HingeBank:
         ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
     ) -> None:
         new = ch.rows.extend(len(seg_h))
-        np.divide(seg_h, noise, new[0])
-        new[1], new[2], new[3] = seg_h, seg_a, ready
+        np.divide(seg_h, noise, new[ROW_Z])
+        new[ROW_HINGE], new[ROW_AFTER], new[ROW_READY] = seg_h, seg_a, ready
         ch.refresh_views()
 
     def _candidates(self, ci: int, ch: _Channel, found: np.ndarray, candidates: list) -> None:

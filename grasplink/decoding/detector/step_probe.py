@@ -23,15 +23,8 @@ from grasplink.decoding.detector.series import BankInt, BankRows, Found, Samples
 from grasplink.decoding.detector.watch import PulseWatcher, Watch
 from grasplink.decoding.filters import SosFilter
 from grasplink.decoding.kernels.common import PROBE_IDS
-from grasplink.decoding.kernels.detector import (
-    S_NEXT,
-    S_SIZE,
-    S_START,
-    S_W,
-    SCALE_COLUMNS,
-    scales_fast,
-    step_scale,
-)
+from grasplink.decoding.kernels.detector import scales_fast, step_scale
+from grasplink.decoding.kernels.layout import S_NEXT, S_SIZE, S_START, S_W, SCALE_COLUMNS
 
 STEP_IDS = PROBE_IDS  # ids of the small steps found by the step probe (their own series)
 

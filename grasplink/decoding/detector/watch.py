@@ -24,6 +24,7 @@ from grasplink.decoding.detector.noise_floor import NOISE_FLOOR_N, NoiseFloor, h
 from grasplink.decoding.detector.series import Samples, Series, mean
 from grasplink.decoding.filters import SosFilter
 from grasplink.decoding.kernels.detector import fir_run, watch_scan
+from grasplink.decoding.kernels.layout import HELD_DETRENDED, HELD_LEVELS, HELD_PLAIN, WATCH_ROWS
 
 
 @dataclass(frozen=True)
@@ -74,7 +75,7 @@ class Watch:
     hist_n: int = 0
     # to the hold: the level - base, with an earlier tail's fall out, with the trend out
     # too (`plain`, `levels`, `detrended`): held[:, :held_n] (room to the hold)
-    held: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
+    held: np.ndarray = field(default_factory=lambda: np.zeros((len(WATCH_ROWS), 0)))
     held_n: int = 0
     fell: bool = False  # a sharp rise that fell back like a pulse before the hold
     next_k: int = 0  # next level sample to examine
@@ -88,17 +89,17 @@ class Watch:
     @property
     def plain(self) -> np.ndarray:
         """level - base, to the hold."""
-        return self.held[0, : self.held_n]
+        return self.held[HELD_PLAIN, : self.held_n]
 
     @property
     def levels(self) -> np.ndarray:
         """The raw level (an earlier pulse's tail out, `_tail_credit`), to the hold."""
-        return self.held[1, : self.held_n]
+        return self.held[HELD_LEVELS, : self.held_n]
 
     @property
     def detrended(self) -> np.ndarray:
         """... and the rising trend taken out, to the hold."""
-        return self.held[2, : self.held_n]
+        return self.held[HELD_DETRENDED, : self.held_n]
 
 
 def sharp_flat_step(
@@ -247,7 +248,7 @@ class PulseWatcher:
             fall=fall,
             next_k=index,
             history=np.empty(self.watch + 1),  # samples index .. index + watch
-            held=np.empty((3, self.step_hold + 1)),  # ... to index + step_hold
+            held=np.empty((len(WATCH_ROWS), self.step_hold + 1)),  # ... to index + step_hold
         )
         if emit is not None and base is not None:
             watch.slope = self._level_slope(before)
