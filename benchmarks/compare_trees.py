@@ -9,7 +9,9 @@ static recordings. --decoders: comma-separated registry names, or "all" (default
 tracker); decoders other than the tracker take the 26 quick non-stationary signals.
 Prints the share of estimates bit-equal and within 1e-9 relative, and every signal whose
 estimates differ beyond tolerance (a slip flag, speed > 0.5 mm/s, position > 0.5 mm,
-confidence > 0.02). docs/decoding.md ("Compiled kernels") quotes it.
+confidence > 0.02). docs/decoding.md ("Compiled kernels") quotes it. --cost ROUNDS:
+instead the default decoder's CPU per sample in each tree (the target cases in 3-sample
+chunks, the trees alternating, the least of ROUNDS runs each) and their ratio.
 """
 
 from __future__ import annotations
@@ -106,6 +108,49 @@ def collect(tree: Path, quick: bool, out: Path, decoders: tuple[str, ...] = ("tr
     )  # fmt: skip
 
 
+# Run inside each tree's interpreter: the default decoder's CPU per sample on the target
+# cases, fed 3 samples at a time (a skin TPDO), after a warm-up (kernels loaded).
+COST = """
+import sys, time
+import numpy as np
+from grasplink.evaluation import decoding_bench as db
+from grasplink.evaluation.decoders import make_decoder
+from grasplink.decoding.registry import DEFAULT_DECODER
+
+recs = [c.recording(1) for c in db.cases(True) if "target" in c.tags]
+make_decoder(DEFAULT_DECODER, recs[0].layout_mm, recs[0].fs_hz).warm_up()
+samples, cpu = 0, 0.0
+for rec in recs:
+    dec = make_decoder(DEFAULT_DECODER, rec.layout_mm, rec.fs_hz)
+    start = time.process_time()
+    for i in range(0, len(rec.t_s), 3):
+        dec.process(rec.t_s[i : i + 3], rec.force_n[i : i + 3])
+    cpu += time.process_time() - start
+    samples += len(rec.t_s)
+print(1e6 * cpu / samples)
+"""
+
+
+def cost_us(tree: Path) -> float:
+    """The default decoder's CPU per sample (us) in `tree`, one run in its own interpreter."""
+    env_path = f"import sys; sys.path.insert(0, {str(tree)!r}); "
+    done = subprocess.run(
+        [sys.executable, "-c", env_path + COST],
+        check=True, cwd=tempfile.gettempdir(), capture_output=True, text=True,
+    )  # fmt: skip
+    return float(done.stdout.split()[-1])
+
+
+def cost_ratio(tree_a: Path, tree_b: Path, rounds: int) -> tuple[float, float]:
+    """The least CPU per sample of each tree over `rounds` runs, the trees alternating (a
+    machine's load drifts: both see it alike)."""
+    best = [float("inf"), float("inf")]
+    for _ in range(rounds):
+        for k, tree in enumerate((tree_a, tree_b)):
+            best[k] = min(best[k], cost_us(tree))
+    return best[0], best[1]
+
+
 def compare(a: np.lib.npyio.NpzFile, b: np.lib.npyio.NpzFile) -> tuple[int, int, int, list]:
     total = equal = close = 0
     beyond = []
@@ -136,7 +181,15 @@ def main() -> int:
     parser.add_argument("tree_b", type=Path)
     parser.add_argument("--quick", action="store_true", help="26 non-stationary signals")
     parser.add_argument("--decoders", default="tracker", help='names, or "all" (the registry\'s)')
+    parser.add_argument(
+        "--cost", type=int, default=0, metavar="ROUNDS",
+        help="instead: the default decoder's CPU per sample, B over A (least of ROUNDS runs)",
+    )  # fmt: skip
     args = parser.parse_args()
+    if args.cost:
+        a, b = cost_ratio(args.tree_a.resolve(), args.tree_b.resolve(), args.cost)
+        print(f"default decoder CPU: A {a:.2f} us/sample, B {b:.2f} us/sample, B/A {b / a:.3f}")
+        return 0
     decoders = tuple(args.decoders.split(","))
     with tempfile.TemporaryDirectory() as tmp:
         paths = [Path(tmp) / "a.npz", Path(tmp) / "b.npz"]
