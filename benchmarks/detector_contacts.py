@@ -50,7 +50,12 @@ from pathlib import Path
 
 import numpy as np
 
-from grasplink.decoding.contacts import PULSE_SCALES_S, ContactDetector
+from grasplink.decoding.contacts import (
+    PULSE_SCALES_S,
+    ContactDetector,
+    DetectorSettings,
+    PulseProbeSettings,
+)
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import contact_truth as ct
 from grasplink.evaluation import nonstationary as ns
@@ -65,6 +70,11 @@ from grasplink.evaluation.contact_truth import (
 )
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
+
+
+def _pulse_scales(scales: tuple[float, ...]) -> DetectorSettings:
+    """The shipped detector with the pulse probe's windows `scales` (none: off)."""
+    return DetectorSettings(pulses=PulseProbeSettings(scales_s=scales))
 
 
 def headline() -> None:
@@ -199,7 +209,7 @@ def decoder_snr10() -> None:
             continue
         rec = signal.make()
         for label, scales in (("pulse probe", PULSE_SCALES_S), ("without", ())):
-            detector = ContactDetector(rec.fs_hz, pulse_scales_s=scales)
+            detector = ContactDetector(rec.fs_hz, _pulse_scales(scales))
             decoding = sr.build_decoder(
                 DEFAULT_DECODER, rec.truth.layout_mm, rec.fs_hz, {"detector": detector}
             )
@@ -350,7 +360,7 @@ def cost() -> None:
         best = {"pulse probe": np.inf, "without": np.inf}
         for _ in range(3):
             for label, scales in (("pulse probe", PULSE_SCALES_S), ("without", ())):
-                detector = ContactDetector(400.0, pulse_scales_s=scales)
+                detector = ContactDetector(400.0, _pulse_scales(scales))
                 start = time.perf_counter()
                 for i in range(0, len(x), 3):
                     detector.feed(t[i : i + 3], x[i : i + 3])

@@ -82,29 +82,21 @@ from grasplink.decoding.contacts import (
     PulseCheck,
 )
 from grasplink.decoding.kernels import posterior as posterior_kernels
-from grasplink.decoding.kernels.branch import (
+from grasplink.decoding.kernels.branch import branch, pack_constants
+from grasplink.decoding.kernels.common import ring_slot
+from grasplink.decoding.kernels.layout import (
+    F_COLS,
     F_D,
-    F_M,
     F_S,
     F_SCORE,
-    F_SIG,
     F_STOP,
-    F_T,
     F_WIDTH,
-    I_DIRN,
-    I_FIRST,
-    I_IDS,
+    I_COLS,
     I_LAST,
-    I_MODEL,
     I_N,
-    I_RIDGE,
-    I_RUN,
     I_WIDTH,
     IDS,
-    branch,
-    pack_constants,
 )
-from grasplink.decoding.kernels.common import ring_slot
 from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.errors import ConfigError
 
@@ -116,20 +108,14 @@ UNKNOWN, PULSE, STEP, UNCLEAR, NOISE = 0, 1, 2, 3, 4
 RING = 256
 
 
-# the columns of a bank's two matrices (`kernels.branch` defines them: the kernels read
-# them as plain ints): floats (P flattened row-major, X = (s, v, a, d), m, score, sig, stop,
-# t) and integers (dirn, first, ids, model, n, ridge, run); a field is a view
-_P, _X = slice(0, 16), slice(F_S, F_D + 1)
-_M, _SCORE, _SIG, _STOP, _T = F_M, F_SCORE, F_SIG, F_STOP, F_T
-_DIRN, _FIRST, _IDS = I_DIRN, I_FIRST, slice(I_IDS, I_LAST + 1)
-_MODEL, _N, _RIDGE, _RUN = I_MODEL, I_N, I_RIDGE, I_RUN
+# the columns of a bank's two matrices (`kernels.layout`: the kernels read them as plain
+# ints): floats (P flattened row-major, X = (s, v, a, d), m, score, sig, stop, t) and
+# integers (dirn, first, ids, model, n, ridge, run); a field is a view
 _F_COLS: dict[str, int | slice] = {
-    "P": _P, "X": _X, "m": _M, "score": _SCORE, "sig": _SIG, "stop": _STOP, "t": _T,
-}  # fmt: skip
-_I_COLS: dict[str, int | slice] = {
-    "dirn": _DIRN, "first": _FIRST, "ids": _IDS, "model": _MODEL, "n": _N, "ridge": _RIDGE,
-    "run": _RUN,
-}  # fmt: skip
+    "X": slice(F_S, F_D + 1),
+    **{key: F_COLS[key] for key in ("P", "m", "score", "sig", "stop", "t")},
+}
+_I_COLS: dict[str, int | slice] = dict(I_COLS)
 _F_WIDTH, _I_WIDTH = F_WIDTH, I_WIDTH
 _EMPTY: list[_Bank] = []  # _Bank.empty()'s one instance
 _WARM = False  # this process's kernels are loaded
@@ -146,6 +132,16 @@ def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict) -> None:
             floats[:, col] = value
         else:
             ints[:, _I_COLS[key]] = value
+
+
+def _tracks(B: _Bank) -> tuple:
+    """A bank's fields as the posterior's kernels take them (a plain tuple)."""
+    return tuple(
+        posterior_kernels.Tracks(
+            score=B.score, X=B.X, P=B.P, m=B.m, t=B.t, stop=B.stop, dirn=B.dirn,
+            ridge=B.ridge, run=B.run, n=B.n, ids=B.ids,
+        )
+    )  # fmt: skip
 
 
 def warm_up_signal(ridges_mm: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
@@ -200,7 +196,7 @@ class _Bank:
     t: np.ndarray
     _f: np.ndarray
     _i: np.ndarray
-    _sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
+    _sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None  # (a `Schedule`)
 
     def __init__(self, floats: np.ndarray, ints: np.ndarray):
         self._f, self._i = floats, ints
@@ -893,12 +889,9 @@ class TrackerDecoder(Decoder):
         computed for the active tracks only (kernels.posterior.schedule). Cached on the
         bank (banks are immutable)."""
         if B._sched is None:
-            T = self._silence_tables
             B._sched = posterior_kernels.schedule(
-                B.X, B.P, B.m, B.t, B.stop, B.dirn, B.ridge, B.run, T["due"], T["adj"],
-                T["stopped"], T["limit"], T["done"], T["coast"], T["target"], self._pos, self._K,
-                self._latency_floor(B),
-            )  # fmt: skip
+                _tracks(B), self._silence, self._skin, self._latency_floor(B)
+            )
         return B._sched
 
     def _latency_floor(self, B: _Bank) -> np.ndarray:
@@ -1053,15 +1046,15 @@ class TrackerDecoder(Decoder):
         moving the other way.
         """
         B = self._tracks
-        due, adj_t, stop_t, limit_t = self._schedule(B)
+        sched = self._schedule(B)
         blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
-        ahead_log, ahead_finite, ahead_before = self._waiting_tables
+        verdicts = tuple(
+            posterior_kernels.Verdicts(self._ring, self._ring_id, *self._evidence_tables)
+        )
         (until, i, is_stopped, lim, p_slip, agree, odds, fast, share, low, high) = (
             posterior_kernels.posterior(
-                g, self._null, B.score, B.X, B.P, B.m, B.t, B.stop, B.dirn, B.ridge, B.run,
-                B.n, due, adj_t, stop_t, limit_t, _NO_BLIND if blind is None else blind,
-                blind is not None, B.ids, self._ring, self._ring_id, self._evidence_tables,
-                ahead_log, ahead_finite, ahead_before, self._pos, self._K,
+                g, self._null, _tracks(B), sched, _NO_BLIND if blind is None else blind,
+                blind is not None, verdicts, self._waiting, self._skin,
             )
         )  # fmt: skip
         magnitude = (_One(B, fast) if fast >= 0 else None, share, low, high)
@@ -1134,6 +1127,21 @@ class TrackerDecoder(Decoder):
             rest_share=self.REST_SHARE,
             silence_brake=self.SILENCE_BRAKE,
         )
+
+    @cached_property
+    def _silence(self) -> tuple:
+        """The silence tables as `kernels.posterior.schedule` takes them (a `Silence`)."""
+        return tuple(posterior_kernels.Silence(**self._silence_tables))
+
+    @cached_property
+    def _waiting(self) -> tuple:
+        """The waiting tables as `kernels.posterior.posterior` takes them (a `Waiting`)."""
+        return tuple(posterior_kernels.Waiting(*self._waiting_tables))
+
+    @cached_property
+    def _skin(self) -> tuple:
+        """The ridge positions and the constants, as the posterior's kernels take them."""
+        return tuple(posterior_kernels.Skin(pos=self._pos, K=self._K))
 
     @cached_property
     def _waiting_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

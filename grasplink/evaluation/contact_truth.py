@@ -17,12 +17,16 @@ over alpha0.1 with speed dips, stopping at 2.426 s while the reflex raises the g
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from grasplink.decoding.contacts import ContactDetector, ContactEvent, PulseCheck
+from grasplink.decoding.contacts import (
+    ContactDetector,
+    ContactEvent,
+    DetectorSettings,
+    PulseCheck,
+)
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import harness
 from grasplink.simulators.effects import actuators, kinematics, noise, skin
@@ -228,13 +232,13 @@ class _Traced(ContactDetector):
     """A detector that keeps every kink candidate it merged away (`_merge`): their times and
     the scale that found them. For the measurement only: the same contacts as the plain one."""
 
-    def __init__(self, fs_hz: float, **kwargs: Any):
-        super().__init__(fs_hz, **kwargs)
+    def __init__(self, fs_hz: float, settings: DetectorSettings | None = None):
+        super().__init__(fs_hz, settings)
         self.candidates: list[tuple[float, float, float]] = []  # (t_s, scale_s, z) all
         self.dropped: list[tuple[float, float, float]] = []  # ... merged away
 
     def _merge(self, candidates: list) -> list[ContactEvent]:
-        told = [(self._time(c[2], c[3]), c[1] / self.fs_hz, c[4]) for c in candidates]
+        told = [(self.samples.time(c[2], c[3]), c[1] / self.fs_hz, c[4]) for c in candidates]
         events = super()._merge(candidates)
         kept = {e.t_s for e in events}
         self.candidates += told
@@ -243,11 +247,11 @@ class _Traced(ContactDetector):
 
 
 def _traced(
-    t_s: np.ndarray, force_n: np.ndarray, fs_hz: float, **kwargs: Any
+    t_s: np.ndarray, force_n: np.ndarray, fs_hz: float, settings: DetectorSettings
 ) -> tuple[_Traced, np.ndarray]:
     """A traced detector fed the whole signal (chunking changes nothing), and the times of
     every contact it told (kink, step probe, pulse probe)."""
-    detector = _Traced(fs_hz, **kwargs)
+    detector = _Traced(fs_hz, settings)
     events, _ = detector.feed(t_s, force_n)
     return detector, np.array([e.t_s for e in events])
 
@@ -268,14 +272,15 @@ def by_contact(
     t_s: np.ndarray,
     force_n: np.ndarray,
     fs_hz: float,
-    **kwargs: Any,
+    settings: DetectorSettings | None = None,
 ) -> ByContact:
     """Every true ridge contact of a signal: found or not, and why not (`AGAIN`: the
     detector had a candidate over its threshold within MATCH_S and took it for an earlier
     contact seen again; `UNDER`: a kink of `LOW_THRESHOLD` noise units or more was there;
-    `NO_KINK`: none - the pulse merged into the previous one's decay). `kwargs` go to the
-    detector (the low-threshold one takes the same, threshold apart)."""
-    plain, events = _traced(t_s, force_n, fs_hz, **kwargs)
+    `NO_KINK`: none - the pulse merged into the previous one's decay). `settings`: the
+    detector's (the low-threshold one takes the same, threshold apart)."""
+    settings = settings or DetectorSettings()
+    plain, events = _traced(t_s, force_n, fs_hz, settings)
     low: _Traced | None = None
     spacing: list[str] = []
     band: list[str] = []
@@ -294,7 +299,8 @@ def by_contact(
             why.append(AGAIN)
         else:
             if low is None:
-                low, _ = _traced(t_s, force_n, fs_hz, **{**kwargs, "threshold": LOW_THRESHOLD})
+                hinges = replace(settings.hinges, threshold=LOW_THRESHOLD)
+                low, _ = _traced(t_s, force_n, fs_hz, replace(settings, hinges=hinges))
             near = any(abs(t - c) <= MATCH_S for t, _, _ in low.candidates)
             why.append(UNDER if near else NO_KINK)
     truth_s = truth.contact_times_s

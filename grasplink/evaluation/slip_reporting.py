@@ -19,7 +19,6 @@ processes, fed 3 samples at a time (one skin TPDO1).
 
 from __future__ import annotations
 
-import inspect
 import json
 import math
 import multiprocessing
@@ -38,7 +37,7 @@ import numpy as np
 
 from grasplink.decoding import tracker as tr
 from grasplink.decoding.base import Decoder, SlipEstimate
-from grasplink.decoding.contacts import ContactDetector
+from grasplink.decoding.contacts import ContactDetector, DetectorSettings, HingeSettings
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import LOOP_OBJECT_MM, loop_recording
@@ -732,7 +731,7 @@ def shipped_value(name: str, layouts: Sequence[str] = ()) -> float:
     if name == "STEP_STOP_WAIT":
         return float(tr.TrackerDecoder.STEP_STOP_WAIT)
     if name == "threshold":
-        return float(inspect.signature(ContactDetector).parameters["threshold"].default)
+        return float(HingeSettings().threshold)
     raise KeyError(name)
 
 
@@ -795,7 +794,8 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
     settings = dict(settings)
     threshold = settings.pop("detector_threshold", None)
     if threshold is not None:
-        settings["detector"] = ContactDetector(fs_hz, threshold=threshold)
+        hinges = HingeSettings(threshold=threshold)
+        settings["detector"] = ContactDetector(fs_hz, DetectorSettings(hinges=hinges))
     return make_decoder(name, layout_mm, fs_hz, **settings)
 
 

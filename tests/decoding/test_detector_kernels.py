@@ -85,14 +85,17 @@ def told(detector, x: np.ndarray, chunk: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def state(detector) -> dict[str, np.ndarray]:
-    """What the numeric path holds after the last sample: z rows, level, step differences."""
+    """What the numeric path holds after the last sample: z rows, level, step differences
+    (the numpy detector holds them itself, the compiled one in its parts)."""
     out: dict[str, np.ndarray] = {}
     for i, ch in enumerate(detector.channels):
         out[f"rows{i}"] = ch.rows.view().copy()
         out[f"rows{i}_at"] = np.array([ch.z_start, ch.next_n, ch.next_test])
-    out["level"] = detector._level.copy()
-    out["level_at"] = np.array([detector._level_start])
-    for i, sc in enumerate(detector._scales):
+    level = getattr(detector, "watcher", detector)  # (the pulse watcher holds the level)
+    out["level"] = level._level.copy()
+    out["level_at"] = np.array([level._level_start])
+    scales = detector.steps.scales if hasattr(detector, "steps") else detector._scales
+    for i, sc in enumerate(scales):
         out[f"step{i}"] = sc.d.copy()
         out[f"step{i}_at"] = np.array([sc.start, sc.next])
     return out
@@ -183,8 +186,9 @@ def test_a_one_tap_level_filter_still_runs_as_a_gain() -> None:
     detector = ContactDetector(60.0)
     x = 3.0 + np.random.default_rng(0).normal(0, 0.05, 200)
     detector.feed(np.arange(len(x)) / 60.0, x)
-    assert not detector._level_filter.is_fir
-    np.testing.assert_array_equal(detector._level, x[-len(detector._level) :])
+    level = detector.watcher
+    assert not level._level_filter.is_fir
+    np.testing.assert_array_equal(level._level, x[-len(level._level) :])
 
 
 def test_compiled_hinge_holds_slopes_until_a_centre_completes() -> None:
@@ -256,7 +260,7 @@ def test_compiled_step_scale_with_nothing_to_test_only_filters() -> None:
 def test_feeding_nothing_tells_nothing_and_changes_nothing() -> None:
     detector = ContactDetector(400.0)
     assert detector.feed(np.zeros(0), np.zeros(0)) == ([], [])
-    assert detector._n == 0 and detector.channels[0].held == 0
+    assert detector.samples.n == 0 and detector.channels[0].held == 0
 
 
 def test_a_deep_copy_of_a_detector_runs_on_alone() -> None:
@@ -273,8 +277,9 @@ def test_a_deep_copy_of_a_detector_runs_on_alone() -> None:
     for i in range(0, half, 3):
         original.feed(t[i : min(i + 3, half)], x[i : min(i + 3, half)])
     clone = copy.deepcopy(original)
-    assert clone._bank.rows[0] is clone.channels[0].rows.data
-    assert clone._bank.ints is not original._bank.ints
+    assert clone.hinges.bank.rows[0] is clone.channels[0].rows.data
+    assert clone.hinges.bank.ints is not original.hinges.bank.ints
+    assert clone.steps.watcher is clone.watcher and clone.hinges.noise is clone.noise
 
     def rest(detector: ContactDetector) -> list:
         out = []
@@ -296,7 +301,7 @@ def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
     x = SIGNALS["slip"][:400]
     detector = ContactDetector(FS_HZ)
     detector.feed(np.arange(len(x)) / FS_HZ, x)
-    bank = detector._bank
+    bank = detector.hinges.bank
     bank.ints[:, -1] = -1  # no channel knows its block's noise
     ints, state, after = bank.ints.copy(), bank.state.copy(), bank.after.copy()
     needs_python = channels_fast(
@@ -319,8 +324,9 @@ def test_step_scales_the_kernel_has_no_room_for_are_left_as_they_were() -> None:
     x = SIGNALS["slip"][:400]
     detector = ContactDetector(FS_HZ)
     detector.feed(np.arange(len(x)) / FS_HZ, x)
-    bank = detector._scale_bank
-    full = tuple(store[: detector._scales[s].store.size] for s, store in enumerate(bank.stores))
+    bank = detector.steps.bank
+    scales = detector.steps.scales
+    full = tuple(store[: scales[s].store.size] for s, store in enumerate(bank.stores))
     ints, state = bank.ints.copy(), bank.state.copy()
     held = [store.copy() for store in full]
     needs_python = scales_fast(

@@ -24,14 +24,14 @@ def _cycle() -> np.ndarray:
 def _held(detector: ContactDetector) -> dict[str, int]:
     """Storage (entries allocated) of every buffer the detector extends per block."""
     sizes = {
-        "samples": detector._tx.data.shape[-1],
-        "level": detector._levels.data.shape[-1],
-        "raw": len(detector._raw),
+        "samples": detector.samples.series.data.shape[-1],
+        "level": detector.watcher._levels.data.shape[-1],
+        "raw": len(detector.noise._raw),
     }
     for i, ch in enumerate(detector.channels):
         sizes[f"z{i}"] = ch.rows.data.shape[-1]
         sizes[f"abs{i}"] = len(ch.block_abs)
-    for i, sc in enumerate(detector._scales):
+    for i, sc in enumerate(detector.steps.scales):
         sizes[f"step{i}"] = sc.store.data.shape[-1]
     return sizes
 
@@ -58,10 +58,11 @@ def test_the_detector_buffers_stay_bounded_over_a_long_stream():
     assert told > 0  # it did see contacts
     assert held[-1] == held[2]  # after the first cycles, no buffer grows any more
     keep = detector._keep
-    assert len(detector._t) <= 2 * keep and len(detector._level) <= 2 * keep + detector.watch
+    level = detector.watcher._level
+    assert len(detector.samples.t) <= 2 * keep and len(level) <= 2 * keep + detector.watcher.watch
     for ch in detector.channels:
         assert ch.rows.size <= 2 * keep
-    for sc in detector._scales:
+    for sc in detector.steps.scales:
         assert sc.store.size <= 2 * keep
 
 

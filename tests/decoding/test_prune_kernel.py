@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from grasplink.decoding import tracker as tr
+from grasplink.decoding.kernels import layout
 from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.evaluation import nonstationary
 from tests.decoding.reference import tracker as reference
@@ -34,7 +35,7 @@ def choose(score, stop, ints, recent, held, max_hypotheses=MAX_HYPOTHESES):
         NEGLIGIBLE=NEGLIGIBLE, max_hypotheses=max_hypotheses, PER_START=PER_START
     )
     pool = tr._Bank(np.zeros((len(score), tr._F_WIDTH)), np.asarray(ints))
-    pool._f[:, tr._SCORE], pool._f[:, tr._STOP] = score, stop
+    pool._f[:, layout.F_SCORE], pool._f[:, layout.F_STOP] = score, stop
     expected = reference.prune_choice(constants, pool, recent, held)  # type: ignore[arg-type]
     np.testing.assert_array_equal(chosen, expected)
     return chosen
@@ -67,11 +68,11 @@ def bank(rows: list[dict]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(score, stop, ints) of tracks given by a few fields (the rest zero)."""
     ints = np.zeros((len(rows), tr._I_WIDTH), np.int64)
     for r, row in enumerate(rows):
-        ints[r, tr._IDS] = row.get("ids", (r, r + 1000, r + 2000, 0, 0, 0))[::-1]
-        ints[r, tr._N] = row.get("n", 3)
-        ints[r, tr._RUN] = row.get("run", 3)
-        ints[r, tr._FIRST] = row.get("first", 0)
-        ints[r, tr._RIDGE] = row.get("ridge", 0)
+        ints[r, layout.I_COLS["ids"]] = row.get("ids", (r, r + 1000, r + 2000, 0, 0, 0))[::-1]
+        ints[r, layout.I_N] = row.get("n", 3)
+        ints[r, layout.I_RUN] = row.get("run", 3)
+        ints[r, layout.I_FIRST] = row.get("first", 0)
+        ints[r, layout.I_RIDGE] = row.get("ridge", 0)
     score = np.array([row["score"] for row in rows], float)
     stop = np.array([row.get("stop", np.nan) for row in rows], float)
     return score, stop, ints

@@ -45,7 +45,7 @@ def test_a_sharp_tall_step_is_told_a_sure_step_half_the_hold_after_its_onset(see
     detector = ContactDetector(FS_HZ)
     assert first.pulse is False and first.sure
     onset = round(ONSET_S * FS_HZ)
-    assert first.emit_index <= onset + detector.sure_hold + detector.level_half + 2
+    assert first.emit_index <= onset + detector.watcher.sure_hold + detector.watcher.level_half + 2
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])

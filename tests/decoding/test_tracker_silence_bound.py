@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from grasplink.decoding.kernels.branch import IDS
+from grasplink.decoding.kernels.layout import IDS
 from grasplink.decoding.tracker import TrackerDecoder, _Bank, _One
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr

@@ -7,8 +7,8 @@ hundred calls on arrays of tens of rows, about half a contact's CPU; here it is 
 that writes the children pool row by row, in the order the numpy code built it (the
 pruning keeps the first of equal scores, so the order is part of the result).
 
-The bank layout (`tracker._F_COLS`, `tracker._I_COLS`) is repeated below as plain ints
-(numba freezes module ints into the code); a test checks the two agree. The decoder's
+The bank's layout (its float and int columns) is `layout`'s, as the tracker's and the
+numpy reference's in the tests (numba freezes its ints into the code). The decoder's
 constants come in one float array (`pack_constants`, names in `CONSTANTS`), its tables
 (ridge positions, spacings, priors, the one-contact track template) as arrays.
 """
@@ -24,20 +24,43 @@ from grasplink.decoding.kernels import jit
 from grasplink.decoding.kernels.common import maximum as _maximum
 from grasplink.decoding.kernels.common import minimum as _minimum
 from grasplink.decoding.kernels.common import pack, travel
+from grasplink.decoding.kernels.layout import (
+    CHANGING,
+    F_A,
+    F_D,
+    F_M,
+    F_S,
+    F_SCORE,
+    F_SIG,
+    F_STOP,
+    F_T,
+    F_V,
+    F_WIDTH,
+    I_DIRN,
+    I_FIRST,
+    I_IDS,
+    I_LAST,
+    I_MODEL,
+    I_N,
+    I_RIDGE,
+    I_RUN,
+    I_WIDTH,
+    P00,
+    P01,
+    P10,
+    P11,
+    P12,
+    P13,
+    P21,
+    P22,
+    P31,
+    P33,
+    STEADY,
+)
 
 __all__ = ["CONSTANTS", "branch", "pack_constants"]
 
-# the bank's float columns (P flat 16, X = s, v, a, d, then m, score, sig, stop, t) and
-# int columns (dirn, first, IDS ids, model, n, ridge, run)
-F_WIDTH, F_S, F_V, F_A, F_D = 25, 16, 17, 18, 19
-F_M, F_SCORE, F_SIG, F_STOP, F_T = 20, 21, 22, 23, 24
-IDS = 6
-I_WIDTH, I_DIRN, I_FIRST, I_IDS = 6 + IDS, 0, 1, 2
-I_LAST, I_MODEL, I_N, I_RIDGE, I_RUN = 1 + IDS, 2 + IDS, 3 + IDS, 4 + IDS, 5 + IDS
-STEADY, CHANGING = 0, 1
-# flat indices of the covariance entries the kernels write
-P00, P01, P10, P11, P12, P13, P21, P22, P31, P33 = 0, 1, 4, 5, 6, 7, 9, 10, 13, 15
-
+# the bank's columns and the covariance entries the kernels write (`layout`)
 # the decoder's constants, in the order `pack_constants` packs them
 CONSTANTS = (
     "stale_s", "clutter_per_s", "p_tip", "tip_mm", "tip_gap_mm", "tip_s", "tip_slow_per_s",

@@ -20,6 +20,27 @@ import math
 import numpy as np
 
 from grasplink.decoding.kernels import jit
+from grasplink.decoding.kernels.layout import (
+    CH_ABS_N,
+    CH_HELD,
+    CH_NEXT_N,
+    CH_NEXT_TEST,
+    CH_NOISE_BLOCK,
+    CH_SIZE,
+    CH_W,
+    CH_Z_START,
+    HELD_DETRENDED,
+    HELD_LEVELS,
+    HELD_PLAIN,
+    ROW_AFTER,
+    ROW_HINGE,
+    ROW_READY,
+    ROW_Z,
+    S_NEXT,
+    S_SIZE,
+    S_START,
+    S_W,
+)
 
 __all__ = [
     "all_finite",
@@ -132,7 +153,7 @@ def hinge_maxima(
     by `needed` of the hinge. Their indices go to found[:count] (room for i1 - i0 + 1: the
     caller's), for the Python refinement; returns count (a count, not an array: no
     boxing on the usual call that finds none)."""
-    z, jump, rising = rows[0], rows[1], rows[2]
+    z, jump, rising = rows[ROW_Z], rows[ROW_HINGE], rows[ROW_AFTER]
     count = 0
     for i in range(i0, i1 + 1):
         zc = z[i]
@@ -177,31 +198,14 @@ def channel_fast(
     for i in range(count):
         slope_after = full[w + i]
         hinge = slope_after - full[i]
-        rows[1, at + i] = hinge
-        rows[0, at + i] = hinge / noise
-        rows[2, at + i] = slope_after
-        rows[3, at + i] = ready
+        rows[ROW_HINGE, at + i] = hinge
+        rows[ROW_Z, at + i] = hinge / noise
+        rows[ROW_AFTER, at + i] = slope_after
+        rows[ROW_READY, at + i] = ready
         block_abs[abs_n + i] = abs(hinge)
     return hinge_maxima(rows, lo, at + count - 1 - w, w, threshold, needed, found)
 
 
-# The hinge channels' int state, a row per channel (`ContactDetector`'s `_Channel`s read
-# and write theirs there): width, slopes held, next centre, |hinge| entries of the block,
-# next centre to test, centre of row 0, rows held, and the block whose noise is
-# `noise[channel]` (-1: none known, or blocks waiting for one: the Python path).
-CHANNEL_COLUMNS = (
-    "width",
-    "held",
-    "next_n",
-    "abs_n",
-    "next_test",
-    "z_start",
-    "size",
-    "noise_block",
-)
-CH_W, CH_HELD, CH_NEXT_N, CH_ABS_N, CH_NEXT_TEST, CH_Z_START, CH_SIZE, CH_NOISE_BLOCK = range(
-    len(CHANNEL_COLUMNS)
-)
 # what `channels_fast` says of each channel
 TAKEN, NOT_TAKEN, BLOCK_DONE = 0, 1, 2
 
@@ -324,12 +328,6 @@ def step_scale(
     return count
 
 
-# The step probe's scales' int state, a row per scale (`_StepScale`): width, differences
-# held, centre of the first, next centre to test.
-SCALE_COLUMNS = ("width", "size", "start", "next")
-S_W, S_SIZE, S_START, S_NEXT = range(len(SCALE_COLUMNS))
-
-
 @jit()
 def scales_fast(
     x: np.ndarray,
@@ -432,9 +430,9 @@ def watch_scan(
         peak = max(d[j] - credit, peak)
         history[hist_n + j] = peak
         if next_k + j <= hold:
-            held[0, held_n + j] = plain
-            held[1, held_n + j] = raw
-            held[2, held_n + j] = d[j]
+            held[HELD_PLAIN, held_n + j] = plain
+            held[HELD_LEVELS, held_n + j] = raw
+            held[HELD_DETRENDED, held_n + j] = d[j]
     count = hist_n + m
     floor = 4.0 * noise
     hit = -1

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from grasplink.decoding.kernels import jit
-from grasplink.decoding.kernels.branch import (
+from grasplink.decoding.kernels.layout import (
     I_DIRN,
     I_FIRST,
     I_LAST,

@@ -67,6 +67,7 @@ import numpy as np
 
 from grasplink.decoding.contacts import sharp_flat_step
 from grasplink.decoding.filters import RAIL_SHARE, lattice_median, on_rail, resolution
+from grasplink.decoding.kernels.layout import ROW_AFTER, ROW_HINGE, ROW_READY, ROW_Z
 from tests.decoding.reference.filters import SosFilter
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
@@ -172,8 +173,10 @@ class _Channel:
     def refresh_views(self) -> None:
         """z, zh, za, zready as views of the rows' storage, after an append that grew it
         (or the first one); an append that fits keeps them."""
-        if self.z.base is not self.rows.data:
-            self.z, self.zh, self.za, self.zready = self.rows.data
+        data = self.rows.data  # (its rows: `kernels.layout.CHANNEL_ROWS`)
+        if self.z.base is not data:
+            self.z, self.zh, self.za = data[ROW_Z], data[ROW_HINGE], data[ROW_AFTER]
+            self.zready = data[ROW_READY]
 
 
 @dataclass
@@ -473,9 +476,9 @@ class ContactDetector:
         the hinge written straight into the z rows, the same numbers."""
         w = ch.width
         new = ch.rows.extend(count)
-        hinge = np.subtract(after[w:], after[:count], new[1])
-        np.divide(hinge, noise, new[0])
-        new[2], new[3] = after[w:], start + w
+        hinge = np.subtract(after[w:], after[:count], new[ROW_HINGE])
+        np.divide(hinge, noise, new[ROW_Z])
+        new[ROW_AFTER], new[ROW_READY] = after[w:], start + w
         ch.refresh_views()
         np.abs(hinge, out=ch.block_abs[ch.abs_n : ch.abs_n + count])
         ch.abs_n += count
@@ -539,8 +542,8 @@ class ContactDetector:
         ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray, noise: float, ready: int
     ) -> None:
         new = ch.rows.extend(len(seg_h))
-        np.divide(seg_h, noise, new[0])
-        new[1], new[2], new[3] = seg_h, seg_a, ready
+        np.divide(seg_h, noise, new[ROW_Z])
+        new[ROW_HINGE], new[ROW_AFTER], new[ROW_READY] = seg_h, seg_a, ready
         ch.refresh_views()
 
     def _white(self, block: int) -> tuple[float, int] | None:

@@ -28,6 +28,39 @@ import numpy as np
 from scipy.special import erf
 
 from grasplink.decoding.contacts import STEP_IDS, ContactEvent
+from grasplink.decoding.kernels.layout import (
+    CHANGING,
+    F_A,
+    F_COLS,
+    F_D,
+    F_M,
+    F_S,
+    F_SCORE,
+    F_SIG,
+    F_STOP,
+    F_T,
+    F_V,
+    F_WIDTH,
+    I_COLS,
+    I_DIRN,
+    I_FIRST,
+    I_MODEL,
+    I_N,
+    I_RIDGE,
+    I_RUN,
+    I_WIDTH,
+    P00,
+    P01,
+    P10,
+    P11,
+    P12,
+    P13,
+    P21,
+    P22,
+    P31,
+    P33,
+    STEADY,
+)
 from grasplink.decoding.tracker import (
     RING,
     V_MAX_MM_S,
@@ -37,8 +70,6 @@ from grasplink.decoding.tracker import (
     _One,
 )
 
-IDS = 6  # recent contact ids a track remembers (pulse evidence, merging)
-STEADY, CHANGING = 0, 1
 # process noise of the Kalman prediction as one scatter per model: flat (4 x 4) index of each
 # entry, and the powers of dt (columns of [1, dt, dt^2, dt^3]) and divisor of its term, in
 # the order _kalman adds them (x * 1.0 and x / 1.0 are exact: the same bits as without)
@@ -48,14 +79,25 @@ _QJ_AT = np.array([0, 1, 4, 2, 8, 5, 6, 9, 10])
 _QJ_POW1, _QJ_POW2 = np.array([3, 2, 2, 3, 3, 3, 2, 2, 1]), np.array([2, 2, 2, 0, 0, 0, 0, 0, 0])
 _QJ_DIV = np.array([20.0, 8.0, 8.0, 6.0, 6.0, 3.0, 2.0, 2.0, 1.0])
 _VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries a sigma needs
-# the columns of a bank's two matrices (as at 0858d90; test_a_banks_fields_are_the_kernels_
-# columns checks the runtime's layout is this one)
-_P, _X, _S, _V, _A, _D = slice(0, 16), slice(16, 20), 16, 17, 18, 19
-_P00, _P01, _P10, _P11, _P12, _P13, _P21, _P22, _P31, _P33 = 0, 1, 4, 5, 6, 7, 9, 10, 13, 15
-_M, _SCORE, _SIG, _STOP, _T = 20, 21, 22, 23, 24
-_DIRN, _FIRST, _IDS = 0, 1, slice(2, 2 + IDS)
-_MODEL, _N, _RIDGE, _RUN = 2 + IDS, 3 + IDS, 4 + IDS, 5 + IDS
-_F_WIDTH, _I_WIDTH = 25, 6 + IDS
+# the columns of a bank's two matrices: the kernels' and the runtime's (`kernels.layout`),
+# named as the numpy code of 0858d90 named them
+_P, _X, _S, _V, _A, _D = F_COLS["P"], slice(F_S, F_D + 1), F_S, F_V, F_A, F_D
+_M, _SCORE, _SIG, _STOP, _T = F_M, F_SCORE, F_SIG, F_STOP, F_T
+_DIRN, _FIRST, _IDS = I_DIRN, I_FIRST, I_COLS["ids"]
+_MODEL, _N, _RIDGE, _RUN = I_MODEL, I_N, I_RIDGE, I_RUN
+_F_WIDTH, _I_WIDTH = F_WIDTH, I_WIDTH
+_P00, _P01, _P10, _P11, _P12, _P13, _P21, _P22, _P31, _P33 = (
+    P00,
+    P01,
+    P10,
+    P11,
+    P12,
+    P13,
+    P21,
+    P22,
+    P31,
+    P33,
+)
 # `_prune`'s dedup key, the int columns' part: the last three contact ids, ridge, direction
 # and model weighted (mod 2^64, as the chained int64 multiply-adds wrap)
 _KEY_M = 1000003
