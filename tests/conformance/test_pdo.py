@@ -228,11 +228,8 @@ def check_event_driven(dut: Dut, numbers: list[int], window: float = WINDOW_S) -
         started = time.monotonic()
         time.sleep(window)
         wanted = math.ceil(window / 0.050)  # a starved thread still owes these: wait, bounded
-        give_up = time.monotonic() + STARVED_WAIT_S
-        while time.monotonic() < give_up and any(
-            len(frames_of(dut, mark, can_id)) < wanted for can_id, _ in pdos.values()
-        ):
-            time.sleep(0.01)
+        for can_id, _ in pdos.values():
+            dut.log.wait_count(cob(can_id), wanted, STARVED_WAIT_S, since=mark)
         elapsed = time.monotonic() - started
         for can_id, _ in pdos.values():
             count = len(frames_of(dut, mark, can_id))
@@ -273,11 +270,8 @@ def check_event_timer(dut: Dut, numbers: list[int], window: float = WINDOW_S) ->
     # A loaded host may not run the device's thread for a while: wait (bounded) for the
     # frames the window should have held, then judge counts by the time that really passed.
     wanted = math.ceil(0.6 * window / (EVENT_TIMER_MS / 1000))
-    give_up = time.monotonic() + STARVED_WAIT_S
-    while time.monotonic() < give_up and any(
-        len(frames_of(dut, mark, can_id)) < wanted for can_id, _ in pdos.values()
-    ):
-        time.sleep(0.01)
+    for can_id, _ in pdos.values():
+        dut.log.wait_count(cob(can_id), wanted, STARVED_WAIT_S, since=mark)
     expected = (time.monotonic() - started) / (EVENT_TIMER_MS / 1000)
     for number, (can_id, length) in pdos.items():
         frames = frames_of(dut, mark, can_id)
