@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import figures_json  # noqa: E402
 from bench_telemetry import since, thread_cpu_s, thread_sleeps  # noqa: E402  (the same clocks)
 from doc_tables import table  # noqa: E402
+from figures_json import rank_percentile  # noqa: E402
 
 from grasplink.gateway.config import load_config  # noqa: E402
 from grasplink.gateway.live import LiveGateway  # noqa: E402
@@ -212,11 +213,6 @@ def encode_cost(samples: int, paced: int) -> tuple[float, float]:
         rmap.encode_inputs(fresh)
         times.append((time.thread_time_ns() - t0) / 1e3)
     return back_to_back, statistics.median(times)
-
-
-def percentile(values: list[float], share: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
 
 
 def measure(quick: bool) -> dict:
@@ -409,7 +405,7 @@ def render(figures: dict) -> str:
 
 def _latency_row(label: str, values: list[float]) -> list[object]:
     """Round trips [µs] as p50, p99 and max in ms."""
-    ms = (percentile(values, 0.5), percentile(values, 0.99), max(values))
+    ms = (rank_percentile(values, 0.5), rank_percentile(values, 0.99), max(values))
     return [label, len(values), *(f"{us / 1000:.2f} ms" for us in ms)]
 
 

@@ -31,6 +31,7 @@ import can
 import canopen
 import figures_json
 from doc_tables import table
+from figures_json import rank_percentile
 
 from grasplink.bus import NodeRunner, frame_bits_worst_case, message_to_frame, open_bus
 from grasplink.bus.lockstep import LockstepNetwork
@@ -147,11 +148,6 @@ def resolution_table(seconds: int) -> list[dict]:
     return rows
 
 
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
-
-
 def _heartbeat_stats(beats: list[float]) -> dict:
     periods_ms = [(b - a) * 1e3 for a, b in itertools.pairwise(beats)]
     deviations = [abs(p - 100.0) for p in periods_ms]
@@ -159,7 +155,7 @@ def _heartbeat_stats(beats: list[float]) -> dict:
         "count": len(periods_ms),
         "mean_ms": statistics.mean(periods_ms),
         "sd_ms": statistics.pstdev(periods_ms),
-        "p99_dev_ms": percentile(deviations, 0.99),
+        "p99_dev_ms": rank_percentile(deviations, 0.99),
         "max_dev_ms": max(deviations),
     }
 
@@ -210,8 +206,8 @@ def realtime_figures(sdo_count: int, heartbeat_s: float) -> dict:
                     times.append((time.perf_counter() - t0) * 1e6)
                 figures["sdo"][name] = (
                     statistics.median(times),
-                    percentile(times, 0.9),
-                    percentile(times, 0.99),
+                    rank_percentile(times, 0.9),
+                    rank_percentile(times, 0.99),
                 )
             figures["heartbeat_under_sdo_load"] = _heartbeat_stats(beats)
             beats.clear()

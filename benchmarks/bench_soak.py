@@ -51,6 +51,7 @@ sys.path.insert(0, str(ROOT))
 
 import figures_json  # noqa: E402
 from doc_tables import table  # noqa: E402
+from figures_json import rank_percentile  # noqa: E402
 
 from grasplink.bus import open_bus  # noqa: E402
 from grasplink.bus.priority import raise_thread_priority  # noqa: E402
@@ -180,10 +181,6 @@ def stand_in_priority(mode: str):  # -> preexec_fn or None
     return raise_it
 
 
-def percentile(ordered: list[float], share: float) -> float:
-    return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
-
-
 def soak(args: argparse.Namespace, work: Path) -> dict[str, object]:
     config = load_config(None)
     consumer_ms = config.consumer_ms
@@ -298,9 +295,9 @@ def summarise(
         "runner_priority": runner.group(1) if runner else "normal priority (not logged)",
         "analyser_priority": watch.priority,
         "beats": len(watch.beats_s),
-        "p50_ms": percentile(intervals_ms, 0.5) if intervals_ms else None,
-        "p99_ms": percentile(intervals_ms, 0.99) if intervals_ms else None,
-        "p999_ms": percentile(intervals_ms, 0.999) if intervals_ms else None,
+        "p50_ms": rank_percentile(intervals_ms, 0.5) if intervals_ms else None,
+        "p99_ms": rank_percentile(intervals_ms, 0.99) if intervals_ms else None,
+        "p999_ms": rank_percentile(intervals_ms, 0.999) if intervals_ms else None,
         "max_ms": intervals_ms[-1] if intervals_ms else None,
         "over_old": sum(1 for i in intervals_ms if i > OLD_CONSUMER_MS),
         "over_consumer": sum(1 for i in intervals_ms if i > consumer_ms),

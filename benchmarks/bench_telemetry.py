@@ -44,6 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import can  # noqa: E402
+from figures_json import rank_percentile  # noqa: E402
 
 from grasplink.bus import open_bus  # noqa: E402
 from grasplink.bus.logs import (  # noqa: E402
@@ -358,11 +359,6 @@ def latencies(path: Path) -> dict[str, list[float]]:
             if payload.metrics:
                 out["sparkplug DATA"].append(received_ms - payload.timestamp)
     return out
-
-
-def percentile(values: list[float], share: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
 
 
 def encoder_cost(samples: int, paced: int) -> dict[str, float]:
@@ -876,8 +872,8 @@ def render(run_s, rounds, runs, lat, gone, encoders, measured) -> str:
         for name, values in data.items():
             if values:
                 lines.append(
-                    f"| {run} | {name} | {len(values)} | {percentile(values, 0.5):.1f} ms "
-                    f"| {percentile(values, 0.99):.1f} ms | {max(values):.1f} ms |"
+                    f"| {run} | {name} | {len(values)} | {rank_percentile(values, 0.5):.1f} ms "
+                    f"| {rank_percentile(values, 0.99):.1f} ms | {max(values):.1f} ms |"
                 )
             else:
                 lines.append(f"| {run} | {name} | 0 | — | — | — |")

@@ -73,6 +73,13 @@ def percentile(values: list[float], q: float) -> float:
     return float(np.percentile(np.asarray(values, dtype=float), q)) if len(values) else float("nan")
 
 
+def rank_percentile(values: list[float], share: float) -> float:
+    """The nearest-rank percentile, `share` in [0, 1]: a value that occurred (a latency
+    tail is a sample, not an interpolation between two)."""
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(share * len(ordered)))]
+
+
 def slope_per_min(t_s: list[float], values: list[float]) -> float:
     """Least-squares slope of `values` per minute of `t_s` [s]; NaN for fewer than two."""
     if len(t_s) < 2:
