@@ -11,7 +11,7 @@ the reply waits, at most `command_timeout_s`, for the `CommandResult`:
 - accepted: the normal reply;
 - rejected by the gateway (no such node, a calibration it cannot use):
   exception 03 ILLEGAL DATA VALUE, and nothing changed;
-- inbox full: 06 SERVER DEVICE BUSY, nothing changed, try again;
+- the edge's mailbox full: 06 SERVER DEVICE BUSY, nothing changed, try again;
 - no result in time: 04 SERVER DEVICE FAILURE; the command stays queued
   and may still be applied: read the holding registers back.
 
@@ -88,6 +88,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from grasplink.errors import BusError
 from grasplink.gateway.commands import CommandResult
+from grasplink.gateway.edge import FULL as MAILBOX_FULL
 from grasplink.gateway.edge import GatewayEdge
 from grasplink.surfaces.modbus.functions import CODES, IDENTIFICATION, check_request
 from grasplink.surfaces.modbus.registers import (
@@ -396,7 +397,7 @@ class ModbusServer:
                 unit.last_actions[command.name] = command.value
             return None
         logger.info("modbus: %s refused: %s", command.name, result.detail)
-        if result.detail == "too many commands waiting":
+        if result.detail == MAILBOX_FULL:
             return ExcCodes.DEVICE_BUSY
         return ExcCodes.ILLEGAL_VALUE
 
