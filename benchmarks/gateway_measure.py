@@ -293,7 +293,7 @@ def realtime_loop(seconds: float) -> dict:
         "tpdo_cpu_us": cpu,
         "tpdo_wall_us": wall,
         "rss": rss,
-        "lost_packets": gateway.skin_stream.stats.lost_packets if gateway.skin_stream else 0,
+        "lost_packets": gateway.skin_frames.stats.lost_packets if gateway.skin_frames else 0,
         "boots": _boots([gateway]) - boots0,
         "tracks": len(getattr(gateway.decoder, "_tracks", ())),
         "thread_percent": 100 * thread_s / seconds,
@@ -635,7 +635,7 @@ PROFILE_PARTS = (
     ("      contact detector", "contacts.py", "feed"),
     ("      new contact: branch every hypothesis", "tracker.py", "_add_contact"),
     ("    estimate (posterior, report)", "tracker.py", "_report"),
-    ("  sample stream (times)", "streams.py", "feed"),
+    ("  sample times (skin frames)", "skin_frames.py", "feed"),
     ("  feedback + reflex", "service.py", "_control"),
     ("  RPDOs (commands)", "service.py", "_commands"),
     ("PDO unpacking (all TPDOs)", "pdo_codec.py", "decode"),
@@ -848,7 +848,7 @@ def _realtime_capacity(sets: int, seconds: float, *, together: bool, multi: bool
             g.stamped_us.clear()
             g.tpdo_wall_us.clear()
             g.busy_ns = 0
-        streams = [g.skin_stream for g in gateways]
+        streams = [g.skin_frames for g in gateways]
         packets0 = [st.stats.packets for st in streams if st]
         lost0 = [st.stats.lost_packets for st in streams if st]
         resyncs0 = [st.stats.resyncs for st in streams if st]

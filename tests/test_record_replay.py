@@ -45,6 +45,7 @@ from grasplink.core.frames import (
     SYNC_COB_ID_DEFAULT,
     TPDO_BASES,
 )
+from grasplink.decoding.io import read_can_log
 from grasplink.errors import ConfigError, RecordingError
 from grasplink.gateway.live import LiveGateway
 from grasplink.gateway.service import Gateway
@@ -295,7 +296,7 @@ def _listen(gateway: Gateway) -> _Updates:
 
     def listener(t_us: int, estimate) -> None:
         if not updates:  # the stream forgets its grid when the skin is lost at the end
-            anchor_s = gateway.skin_stream.anchor_s
+            anchor_s = gateway.skin_frames.anchor_s
             updates.anchor_us = None if anchor_s is None else anchor_s * 1e6
         updates.append((t_us, estimate))
 
@@ -393,7 +394,7 @@ def test_grasplink_replay_in_real_time_decodes_as_live_through_the_hub(loop_run,
             if keep(m) and m.arbitration_id & 0x7F == SKIN_ID
         ]
         assert len(heard) == frames and "wrote" in out
-        stream = gateway.skin_stream.stats
+        stream = gateway.skin_frames.stats
         if stream.resyncs or stream.lost_packets:
             misses.append(replay.stdout.strip().splitlines()[-1])
             continue
@@ -475,3 +476,17 @@ def test_a_recording_thread_stops_on_request(tmp_path):
     worker.join(5)
     bus.shutdown()
     assert not worker.is_alive() and result["stats"].frames == 0
+
+
+def test_offline_decoding_of_the_log_gives_the_live_gateways_estimates(loop_run):
+    """One front end (decoding.skin_frames) for the live gateway and `grasplink decode`:
+    the run's can.asc read offline and fed to a decoder configured as the gateway's, in
+    the packets' 3-sample chunks, gives every update the gateway made live, bit for bit."""
+    log, scene, live = loop_run
+    t_s, force_n, stats = read_can_log(log)
+    assert stats.malformed == stats.stray == 0
+    decoder = build_controllers(scene)[0].decoder  # a fresh one, configured as live
+    offline = []
+    for start in range(0, len(t_s), 3):
+        offline += decoder.feed(t_s[start : start + 3], force_n[start : start + 3])
+    assert offline[: len(live)] == [estimate for _, estimate in live]

@@ -10,20 +10,17 @@
   sample rate from its summary.json (`read_run_folder`).
 * CAN logs of the skin node (``.asc``, ``.blf``, ``.log`` candump, ``.trc``
   PCAN-View trace: `core.log_formats.LOG_FORMATS`, read by python-can's LogReader):
-  TPDO1 frames decoded through the skin EDS - the COB-ID (0x1800:01), the
-  mapping (0x1A00: three U16 sample slots 0x2100 and the U8 packet sequence
-  0x2101), samples per PDO (0x2121), sample rate
-  (0x2120) and the FSR calibration defaults (0x2130: resolution, full scale
-  in mN, zero offset), force_mN = (counts - zero) x full_scale_mN /
-  (2^bits - 1 - zero).
+  the frames of the TPDO that maps the sample slots (2100h), unpacked by the
+  skin EDS's own mapping (`PdoCodec`, as the live gateway unpacks them), with
+  samples per PDO (2121h), sample rate (2120h) and the FSR calibration
+  defaults (2130h: `skin_frames.SkinCalibration`).
 
-Frames become samples through the live gateway's own front end
-(`packets.SampleStream`): sample times from the packet sequence, anchored on
-the earliest time stamps of the first `SETTLE_US` and rounded to a sample
-period, so time-stamp jitter changes nothing; a frame up to `REORDER_PACKETS`
-packets late is put back in place by its sequence number (held frames take
-the held time stamps in increasing order); the node's boot-up message starts
-the sample times anew.
+Frames become samples through the live gateway's own front end (`skin_frames.SkinFrames`
+over `packets.SampleStream`): sample times from the packet sequence, anchored on the
+earliest time stamps of the first `SETTLE_US` and rounded to a sample period, so
+time-stamp jitter changes nothing; a frame up to `REORDER_PACKETS` packets late is put
+back in place by its sequence number (held frames take the held time stamps in
+increasing order); the node's boot-up message starts the sample times anew.
 
 What a CAN log loses is counted in `CanStats` (`CanStats.summary()` is the
 line `grasplink decode` prints): frames of the wrong length; frames that
@@ -49,8 +46,10 @@ import numpy as np
 from grasplink.core.frames import HEARTBEAT_BASE
 from grasplink.core.log_formats import LOG_FORMATS
 from grasplink.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
-from grasplink.decoding.packets import SEQUENCE_MODULO, SampleStream
-from grasplink.errors import ConfigError, RecordingError
+from grasplink.decoding.skin_frames import SkinCalibration, SkinFrames
+from grasplink.errors import ConfigError, PdoError, RecordingError
+from grasplink.profiles import objects as obj
+from grasplink.profiles.pdo_codec import PdoCodec
 
 CSV_HEADER = ("t_s", "force_n")
 #: The force column of a CSV: ours, or the skin.csv of `grasplink run`
@@ -59,9 +58,6 @@ FORCE_COLUMNS = ("force_n", "skin.force_n")
 CAN_EXTENSIONS = tuple(LOG_FORMATS)  # the formats grasplink record/replay take
 RUN_SUMMARY = "summary.json"
 DEFAULT_SKIN_NODE_ID = 0x10
-SAMPLE_SLOTS, PACKET_SEQUENCE = 0x2100, 0x2101
-SAMPLE_RATE, SAMPLES_PER_PDO, CALIBRATION = 0x2120, 0x2121, 0x2130
-TPDO1_COMM, TPDO1_MAP = 0x1800, 0x1A00
 #: How late (in packets) a frame may arrive and still be put back in place: 8 packets
 #: are 60 ms at 400 Hz, far more than any reordering of a CAN bus or adapter queue.
 REORDER_PACKETS = 8
@@ -69,7 +65,6 @@ REORDER_PACKETS = 8
 #: packets at 400 Hz; the earliest of them sets the anchor, so time-stamp jitter of a
 #: USB adapter or a loaded host (a few ms) moves no sample time.
 SETTLE_US = 250_000
-SEQUENCE_MODULUS = SEQUENCE_MODULO  # the U8 packet sequence (0x2101) wraps
 BOOT_UP_DATA = b"\x00"  # a heartbeat carrying state 0: the node (re)booted
 REAL_KINDS = "iuf"  # numpy kinds of a real number: signed, unsigned, floating point
 
@@ -362,74 +357,40 @@ def read_run_folder(folder: str | Path) -> RunRecording:
 
 # -- CAN logs ----------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class SkinPdo:
-    """Where TPDO1 keeps what, from the EDS."""
+class SkinTpdo:
+    """The skin's sample TPDO as its EDS maps it, and what the samples mean."""
 
+    codec: PdoCodec  # decodes its frames, as the live gateway does
     cob_id: int
-    length: int  # payload bytes
-    slots: tuple[tuple[int, int], ...]  # (byte offset, bytes) of each sample slot, in order
-    sequence: tuple[int, int] | None  # (byte offset, bytes)
+    length: int  # data bytes
     samples_per_pdo: int
     rate_hz: float
-    zero: int
-    full_scale_mn: float
-    bits: int
-
-    def to_newton(self, counts: np.ndarray) -> np.ndarray:
-        levels = (1 << self.bits) - 1 - self.zero
-        return (
-            (np.asarray(counts, dtype=np.float64) - self.zero)
-            * (self.full_scale_mn / levels)
-            / 1000.0
-        )
+    calibration: SkinCalibration
 
 
-def skin_pdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinPdo:
-    """Decode TPDO1's layout and the calibration defaults from the shipped skin EDS."""
+def skin_tpdo(node_id: int = DEFAULT_SKIN_NODE_ID) -> SkinTpdo:
+    """The TPDO mapping sample slots (2100h), the sample rate (2120h), samples per PDO
+    (2121h) and the FSR calibration (2130h) of the shipped skin EDS."""
     from grasplink.profiles import load_profile, od_default
 
+    codec = PdoCodec("skin", node_id)
+    for cob_id in sorted(codec.tpdo_can_ids()):
+        keys = codec.tpdo_keys(cob_id)
+        slots = sum(1 for index, _ in keys if index == obj.SKIN_SAMPLE_SLOTS)
+        if slots:
+            break
+    else:
+        raise ConfigError(
+            f"skin EDS: no TPDO maps an FSR sample slot (0x{obj.SKIN_SAMPLE_SLOTS:04X})"
+        )
     od = load_profile("skin", node_id)
-
-    def default(index: int, sub: int = 0) -> int:
-        return od_default(od, index, sub)
-
-    cob_id = default(TPDO1_COMM, 1) & 0x7FF
-    count = default(TPDO1_MAP, 0)
-    offset = 0
-    slots: list[tuple[int, int, int]] = []
-    sequence = None
-    for sub in range(1, count + 1):
-        mapped = default(TPDO1_MAP, sub)
-        index, subindex, bits = mapped >> 16, (mapped >> 8) & 0xFF, mapped & 0xFF
-        if bits % 8:
-            raise ConfigError(
-                f"skin EDS: TPDO1 maps 0x{index:04X}:{subindex} with {bits} bits; "
-                "only whole bytes are supported"
-            )
-        size = bits // 8
-        if index == SAMPLE_SLOTS:
-            slots.append((subindex, offset, size))
-        elif index == PACKET_SEQUENCE:
-            sequence = (offset, size)
-        offset += size
-    if not slots:
-        raise ConfigError("skin EDS: TPDO1 maps no FSR sample slot (0x2100)")
-    per_pdo = min(default(SAMPLES_PER_PDO), len(slots))
-    ordered = tuple((o, s) for _, o, s in sorted(slots))
-    bits = default(CALIBRATION, 1)
-    zero = default(CALIBRATION, 3)
-    if zero >= (1 << bits) - 1:
-        raise ConfigError(f"skin EDS: zero offset {zero} is not below full scale at {bits} bits")
-    return SkinPdo(
+    return SkinTpdo(
+        codec,
         cob_id,
-        offset,
-        ordered[:per_pdo],
-        sequence,
-        per_pdo,
-        float(default(SAMPLE_RATE)),
-        zero,
-        float(default(CALIBRATION, 2)),
-        bits,
+        codec.tpdo_length(cob_id),
+        min(od_default(od, obj.SKIN_SAMPLES_PER_PDO), slots),
+        float(od_default(od, obj.SKIN_SAMPLE_RATE_HZ)),
+        SkinCalibration.from_od(od),
     )
 
 
@@ -438,30 +399,35 @@ def read_can_log(
 ) -> tuple[np.ndarray, np.ndarray, CanStats]:
     """Skin TPDO1 samples from a python-can log: (t_s, force_n, stats).
 
-    Frames go through the live gateway's front end (`packets.SampleStream`) in log
-    order: sample times from the packet sequence, a reorder window of REORDER_PACKETS
-    packets, the anchor settled over SETTLE_US of arrivals; the node's boot-up message
-    starts a new anchor.
+    Frames go through the live gateway's front end (`skin_frames.SkinFrames`) in log
+    order, so the samples are bit for bit those the gateway decodes live: sample
+    times from the packet sequence, a reorder window of REORDER_PACKETS packets, the
+    anchor settled over SETTLE_US of arrivals; the node's boot-up message starts a
+    new anchor.
     """
     import can
 
     p = Path(path)
     if not p.is_file():
         raise RecordingError(f"{p}: no such file")
-    pdo = skin_pdo(node_id)
+    pdo = skin_tpdo(node_id)
     rate = check_sample_rate(pdo.rate_hz if fs_hz is None else fs_hz)
     stats = CanStats(rate_hz=rate, cob_id=pdo.cob_id)
-    stream = SampleStream(
-        rate, pdo.samples_per_pdo, reorder_packets=REORDER_PACKETS, settle_us=SETTLE_US
+    frames = SkinFrames(
+        pdo.calibration,
+        rate,
+        pdo.samples_per_pdo,
+        reorder_packets=REORDER_PACKETS,
+        settle_us=SETTLE_US,
     )
     boot_up = HEARTBEAT_BASE + node_id
     times: list[np.ndarray] = []
-    counts: list[np.ndarray] = []
+    forces: list[np.ndarray] = []
 
     def keep(released: tuple[np.ndarray, np.ndarray]) -> None:
         if len(released[0]):
             times.append(released[0])
-            counts.append(released[1])
+            forces.append(released[1])
 
     try:
         for msg in can.LogReader(str(p)):
@@ -473,33 +439,29 @@ def read_can_log(
                 stats.other_frames += 1
                 stats.other_ids.add(msg.arbitration_id)
                 if msg.arbitration_id == boot_up and bytes(msg.data) == BOOT_UP_DATA:
-                    stream.restart()  # the node rebooted: its numbers start again
+                    frames.restart()  # the node rebooted: its numbers start again
                 continue
             stats.frames += 1
-            data = bytes(msg.data)
-            if len(data) != pdo.length:
+            try:
+                values = pdo.codec.decode(pdo.cob_id, bytes(msg.data))
+            except PdoError:  # a length its mapping does not have
                 stats.malformed += 1
                 continue
-            slots = [int.from_bytes(data[o : o + s], "little") for o, s in pdo.slots]
-            seq = None
-            if pdo.sequence is not None:
-                o, s = pdo.sequence
-                seq = int.from_bytes(data[o : o + s], "little") % SEQUENCE_MODULUS
-            keep(stream.feed(float(msg.timestamp) * 1e6, seq, np.array(slots, dtype=np.float64)))
+            keep(frames.feed(float(msg.timestamp) * 1e6, values))
     except RecordingError:
         raise
     except Exception as exc:  # python-can raises assorted errors on a corrupt log
         raise RecordingError(
             f"{p}: cannot read as a CAN log ({type(exc).__name__}: {exc})"
         ) from None
-    keep(stream.flush())
+    keep(frames.flush())
     if not stats.frames:
         seen = ", ".join(f"0x{i:03X}" for i in sorted(stats.other_ids)[:12]) or "none"
         raise RecordingError(
             f"{p}: no skin TPDO1 frames (COB-ID 0x{pdo.cob_id:03X}, node-ID "
             f"0x{node_id:02X}, {pdo.length} data bytes); CAN-IDs seen: {seen}"
         )
-    got = stream.stats
+    got = frames.stats
     stats.packets = got.released
     stats.republished = got.repeated_packets
     stats.out_of_order = got.late_packets
@@ -511,4 +473,4 @@ def read_can_log(
     if not times:
         raise RecordingError(f"{p}: no usable skin samples: {stats.reasons()}")
     t = np.concatenate(times)
-    return t, pdo.to_newton(np.concatenate(counts)), stats
+    return t, np.concatenate(forces), stats

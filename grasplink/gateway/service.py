@@ -14,8 +14,9 @@ wall clock) and in virtual time. What it knows goes out as a typed
   that reboots is provisioned again.
 - **Decoding**: TPDOs are unpacked through the node's EDS mapping
   (`PdoCodec`); frames that do not fit are dropped and counted. Skin samples
-  get their node-clock times from the packet sequence (`SampleStream`) and
-  feed the configured skin decoder; EMG envelopes become intent (`EmgIntentDecoder`).
+  get their node-clock times from the packet sequence (`decoding.skin_frames`,
+  the front end offline decoding shares) and feed the configured skin decoder;
+  EMG envelopes become intent (`EmgIntentDecoder`).
 - **Control**: every skin decoder update drives the feedback controller
   (belt) and the hybrid reflex, whose grip joins the wearer's EMG grip in
   the arbiter (hand). Commands go out as RPDOs packed through the mapping,
@@ -36,13 +37,13 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
-
 from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, Frame, function_of
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.core.params import Params
 from grasplink.decoding.base import SlipEstimate
+from grasplink.decoding.packets import LIVE_SETTLE_US
 from grasplink.decoding.registry import make_decoder
+from grasplink.decoding.skin_frames import SkinCalibration, SkinFrames
 from grasplink.errors import ConfigError, PdoError
 from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value
 from grasplink.gateway.config import (
@@ -87,8 +88,7 @@ from grasplink.gateway.snapshot import (
     SkinSnapshot,
     Snapshot,
 )
-from grasplink.gateway.streams import LIVE_SETTLE_US, SampleStream
-from grasplink.profiles import load_profile, object_limits, od_default
+from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.pdo_codec import Key, PdoCodec
@@ -101,10 +101,7 @@ COMMAND_REFRESH_US = 100_000  # RPDOs repeat at least this often (drive handshak
 SNAPSHOT_PERIOD_US = 50_000  # 20 Hz, the default telemetry rate
 PROVISION_RETRY_US = 2_000_000
 MN_PER_N = 1000.0
-ADC_BITS, FULL_SCALE_MN, ZERO_COUNTS = 1, 2, 3  # 2130h sub-indices
 
-SAMPLE_SLOT_KEYS = tuple((obj.SKIN_SAMPLE_SLOTS, sub) for sub in (1, 2, 3))
-SEQUENCE_KEY = (obj.SKIN_PACKET_SEQUENCE, 0)
 STATIC_FORCE_KEY = (obj.SKIN_STATIC_FORCE_MN, 0)
 ENVELOPE_KEY = (obj.EMG_ENVELOPE_UV, 0)
 STATUSWORD_KEY = (obj.STATUSWORD, 0)
@@ -230,7 +227,7 @@ class Gateway(NmtMaster):
     # -- construction helpers --------------------------------------------------------------
     def _skin_setup(self) -> None:
         link = self.by_kind.get("skin")
-        self.skin_stream: SampleStream | None = None
+        self.skin_frames: SkinFrames | None = None
         self.decoder = None
         self._skin_max_counts: int | None = None
         self._static_force_mn = (0.0, 0.0)
@@ -238,26 +235,20 @@ class Gateway(NmtMaster):
             return
         skin = link.config
         assert isinstance(skin, SkinConfig)
+        calibration = SkinCalibration.from_od(load_profile("skin", skin.node_id))
         # Sample times come from the packet sequence; a packet may arrive as late as the
         # heartbeat consumer time (a stalled host, the burst after it) without a reset.
-        self.skin_stream = SampleStream(
+        self.skin_frames = SkinFrames(
+            calibration,
             skin.sample_rate_hz,
             skin.samples_per_pdo,
             late_us=self.node_consumer_us,
             settle_us=LIVE_SETTLE_US,
         )
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
-        od = load_profile("skin", skin.node_id)
-        bits = od_default(od, obj.SKIN_FSR_CALIBRATION, ADC_BITS)
-        self._skin_zero = od_default(od, obj.SKIN_FSR_CALIBRATION, ZERO_COUNTS)
-        full_scale_mn = od_default(od, obj.SKIN_FSR_CALIBRATION, FULL_SCALE_MN)
-        full = (1 << bits) - 1
-        self._skin_n_per_count = full_scale_mn / (full - self._skin_zero) / 1e3
-        # what the sensor can report (plausibility): ADC counts up to full, a static force
-        # from the zero offset's negative to full scale (+-1 mN: rounding)
-        self._skin_max_counts = full
-        per_count_mn = full_scale_mn / (full - self._skin_zero)
-        self._static_force_mn = (-self._skin_zero * per_count_mn - 1, full_scale_mn + 1)
+        # what the sensor can report (plausibility)
+        self._skin_max_counts = calibration.full_counts
+        self._static_force_mn = calibration.static_force_range_mn()
 
     def _plausibility_setup(self) -> None:
         """What the loop refuses to follow, and how fast its commands may move
@@ -401,8 +392,8 @@ class Gateway(NmtMaster):
             return
         if link.kind in self.drives:
             self.drives[link.kind].reset()
-        if link.kind == "skin" and self.skin_stream is not None:
-            self.skin_stream.reset()
+        if link.kind == "skin" and self.skin_frames is not None:
+            self.skin_frames.restart()
 
     def _provision(self, link: NodeLink, t_us: int) -> list[Frame]:
         link.sdo.cancel()
@@ -458,8 +449,8 @@ class Gateway(NmtMaster):
         link.phase = phase
         link.sdo.cancel()
         self.alarms[f"{link.kind}.lost"] = why
-        if link.kind == "skin" and self.skin_stream is not None:
-            self.skin_stream.reset()
+        if link.kind == "skin" and self.skin_frames is not None:
+            self.skin_frames.restart()
         return self._commands(t_us, refresh=True)
 
     def _emcy_alarm(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
@@ -548,7 +539,9 @@ class Gateway(NmtMaster):
         kind = link.kind
         if kind == "skin":
             top = self._skin_max_counts
-            if top is not None and any(values.get(k, 0) > top for k in SAMPLE_SLOT_KEYS):
+            if top is not None and any(
+                v > top for (i, _), v in values.items() if i == obj.SKIN_SAMPLE_SLOTS
+            ):
                 return "skin_sample_out_of_range"
             low, high = self._static_force_mn
             if STATIC_FORCE_KEY in values and not low <= values[STATIC_FORCE_KEY] <= high:
@@ -576,15 +569,9 @@ class Gateway(NmtMaster):
         return self._eds_limits[cache_key]
 
     def _on_skin(self, values: dict[Key, int | float], t_us: int) -> list[Frame]:
-        if self.skin_stream is None or self.decoder is None:
+        if self.skin_frames is None or self.decoder is None:
             return []
-        slots = [values[k] for k in SAMPLE_SLOT_KEYS if k in values]
-        if not slots:
-            return []
-        sequence = int(values[SEQUENCE_KEY]) if SEQUENCE_KEY in values else None
-        counts = np.asarray(slots, dtype=np.float64)
-        force_n = (counts - self._skin_zero) * self._skin_n_per_count
-        t_s, force_n = self.skin_stream.feed(t_us, sequence, force_n)
+        t_s, force_n = self.skin_frames.feed(t_us, values)
         if not len(t_s):
             return []
         estimates = self.decoder.feed(t_s, force_n)
@@ -614,8 +601,8 @@ class Gateway(NmtMaster):
         for link in self.links.values():
             status = self.nodes.get(link.node_id)
             lost_packets = None
-            if link.kind == "skin" and self.skin_stream is not None:
-                lost_packets = self.skin_stream.stats.lost_packets
+            if link.kind == "skin" and self.skin_frames is not None:
+                lost_packets = self.skin_frames.stats.lost_packets
             nodes[link.kind] = NodeSnapshot(
                 node_id=link.node_id,
                 phase=link.phase,

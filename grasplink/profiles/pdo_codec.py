@@ -75,11 +75,23 @@ class PdoCodec:
     def tpdo_can_ids(self) -> frozenset[int]:
         return frozenset(self._tpdo_by_can_id)
 
-    def decode(self, can_id: int, data: bytes) -> dict[Key, int | float]:
-        """The mapped values of a TPDO frame; PdoError for a frame that does not fit its map."""
+    def tpdo_keys(self, can_id: int) -> tuple[Key, ...]:
+        """The objects TPDO `can_id` maps, in map order."""
+        return tuple((v.od.index, v.od.subindex) for v in self._tpdo(can_id).map)
+
+    def tpdo_length(self, can_id: int) -> int:
+        """The data bytes a frame of TPDO `can_id` carries."""
+        return (self._tpdo(can_id).length + 7) // 8
+
+    def _tpdo(self, can_id: int) -> PdoMap:
         pdo = self._tpdo_by_can_id.get(can_id)
         if pdo is None:
             raise PdoError(f"0x{can_id:03X} is no TPDO of node 0x{self.node_id:02X}")
+        return pdo
+
+    def decode(self, can_id: int, data: bytes) -> dict[Key, int | float]:
+        """The mapped values of a TPDO frame; PdoError for a frame that does not fit its map."""
+        pdo = self._tpdo(can_id)
         expected = (pdo.length + 7) // 8
         if len(data) != expected:
             raise PdoError(f"{pdo.name}: {len(data)} bytes, its mapping needs {expected}")

@@ -18,7 +18,7 @@ from grasplink.cli import main
 from grasplink.controllers import build_controllers
 from grasplink.decoding import registry
 from grasplink.decoding.base import Decoder, SlipEstimate
-from grasplink.decoding.io import skin_pdo
+from grasplink.decoding.io import skin_tpdo
 from grasplink.decoding.mmse import ReferenceSlip
 from grasplink.errors import ConfigError
 from grasplink.evaluation import decoding_bench as bench
@@ -205,8 +205,8 @@ def recorded(tmp_path_factory):
 def test_can_path_signal_is_the_skin_nodes_adc_reading_of_skin_csv(recorded):
     _, signals = recorded
     can, csv = signals.can, signals.csv
-    pdo = skin_pdo()
-    step_n = pdo.full_scale_mn / ((1 << pdo.bits) - 1 - pdo.zero) / 1000.0
+    pdo = skin_tpdo()
+    step_n = pdo.calibration.n_per_count
     at = np.searchsorted(csv.t_s, can.t_s - 1e-6)
     np.testing.assert_allclose(csv.t_s[at], can.t_s, atol=1e-6)  # the node's own timing
     np.testing.assert_allclose(can.force_n / step_n, np.round(can.force_n / step_n), atol=1e-6)

@@ -280,7 +280,7 @@ def test_the_gateway_keeps_its_decoder_through_a_stall_and_a_burst(headline):
     gateway, estimates = feed(late)
     _, reference = feed(on_time)
     assert gateway.decoder is not None and gateway.decoder.stats.gaps == 0
-    assert gateway.skin_stream is not None and gateway.skin_stream.stats.resyncs == 0
+    assert gateway.skin_frames is not None and gateway.skin_frames.stats.resyncs == 0
     assert estimates == reference
     # the reflex stops the headline slip after two ridge contacts: ~0.4 s with a speed
     assert sum(e.slip and e.speed_mm_s is not None for e in estimates) >= 30

@@ -16,19 +16,20 @@ import pytest
 
 from grasplink.decoding import filters
 from grasplink.decoding.contacts import ContactDetector
-from grasplink.decoding.io import skin_pdo
+from grasplink.decoding.io import skin_tpdo
 from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation.scoring import along_truth
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 
-PDO = skin_pdo()
-ADC_STEP_N = PDO.full_scale_mn / ((1 << PDO.bits) - 1 - PDO.zero) / 1000.0  # ~0.024 N
+CALIBRATION = skin_tpdo().calibration
+ADC_STEP_N = CALIBRATION.n_per_count  # ~0.024 N
 
 
 def adc(force_n: np.ndarray) -> np.ndarray:
     """What the skin node's TPDO carries, back in newtons: whole counts, clipped at 0."""
-    counts = np.clip(np.round(force_n / ADC_STEP_N), 0, (1 << PDO.bits) - 1 - PDO.zero)
+    top = CALIBRATION.full_counts - CALIBRATION.zero_counts
+    counts = np.clip(np.round(force_n / ADC_STEP_N), 0, top)
     return counts * ADC_STEP_N
 
 

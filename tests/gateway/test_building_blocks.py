@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from grasplink.bus.lockstep import LockstepNetwork
+from grasplink.decoding.packets import SampleStream
 from grasplink.devices.cia402 import DriveState
 from grasplink.devices.factory import build_node
 from grasplink.errors import ConfigError
@@ -17,7 +18,6 @@ from grasplink.gateway.drives import DriveHandshake
 from grasplink.gateway.emg import CalibrationRecorder, EmgCalibration, EmgIntentDecoder
 from grasplink.gateway.provisioning import Provisioner
 from grasplink.gateway.sdo_client import SdoClient
-from grasplink.gateway.streams import SampleStream
 from grasplink.profiles import objects as obj
 from tests.gateway.test_sdo_client import ClientDevice
 

@@ -1,0 +1,60 @@
+"""The one front end from skin TPDO values to timed samples in newtons (decoding.skin_frames)."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from grasplink.decoding.io import skin_tpdo
+from grasplink.decoding.skin_frames import SEQUENCE_KEY, SkinCalibration, SkinFrames
+from grasplink.errors import ConfigError
+from grasplink.profiles import objects as obj
+
+SLOT = obj.SKIN_SAMPLE_SLOTS
+
+
+@pytest.mark.parametrize(
+    ("bits", "zero", "needle"),
+    [(12, 4095, "not below full scale"), (12, 5000, "not below full scale"), (0, 0, "ADC bits")],
+)
+def test_a_degenerate_calibration_is_refused_by_name(bits, zero, needle):
+    with pytest.raises(ConfigError, match=needle):
+        SkinCalibration(bits, 98067.0, zero)
+
+
+def test_counts_become_newtons_from_the_zero_offset_to_full_scale():
+    calibration = SkinCalibration(12, 98067.0, 95)
+    newtons = calibration.to_newton(np.array([95, 4095, 0]))
+    assert newtons[0] == 0.0
+    assert newtons[1] == pytest.approx(98.067, rel=1e-12)
+    assert newtons[2] < 0  # below the offset: a negative force, not a wrapped count
+    low_mn, high_mn = calibration.static_force_range_mn()
+    assert low_mn < newtons[2] * 1e3 and high_mn > 98067.0
+
+
+def test_a_tpdo_without_sample_slots_gives_no_samples_and_counts_no_packet():
+    frames = SkinFrames(SkinCalibration(12, 98067.0, 0), 400.0, 3)
+    t_s, force_n = frames.feed(0, {(obj.SKIN_STATIC_FORCE_MN, 0): 1200})
+    assert len(t_s) == len(force_n) == 0
+    assert frames.stats.packets == 0
+
+
+def test_frames_unpacked_by_the_eds_mapping_become_samples_on_the_sequence_grid():
+    pdo = skin_tpdo()
+    assert pdo.codec.tpdo_keys(pdo.cob_id)[:3] == ((SLOT, 1), (SLOT, 2), (SLOT, 3))
+    frames = SkinFrames(pdo.calibration, pdo.rate_hz, pdo.samples_per_pdo)
+    out_t, out_f = [], []
+    for n in range(4):
+        data = struct.pack("<HHHB", 100 * n, 100 * n + 1, 100 * n + 2, n)
+        assert len(data) == pdo.length
+        values = pdo.codec.decode(pdo.cob_id, data)
+        assert values[SEQUENCE_KEY] == n
+        t_s, force_n = frames.feed(1000 + n * 7500, values)  # 3 samples at 400 Hz: 7.5 ms
+        out_t += list(t_s)
+        out_f += list(force_n)
+    out_t += list(frames.flush()[0])
+    assert np.allclose(np.diff(out_t), 1 / 400.0)
+    counts = [100 * n + k for n in range(4) for k in range(3)]
+    assert out_f == list(pdo.calibration.to_newton(np.array(counts[: len(out_f)])))
