@@ -21,6 +21,8 @@ from typing import Any, TypeVar
 from grasplink.core.params import Params
 from grasplink.decoding.registry import DEFAULT_DECODER, check_live_decoder
 from grasplink.errors import ConfigError
+from grasplink.gateway import description
+from grasplink.gateway.description import Identity, SdoWrite
 from grasplink.gateway.feedback import FeedbackConfig, FeedbackMode
 from grasplink.gateway.levels import (
     DEFAULT_FORCE_ENTRIES,
@@ -33,7 +35,7 @@ from grasplink.gateway.levels import (
 from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
-from grasplink.profiles import object_limits
+from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
@@ -50,12 +52,37 @@ DEFAULT_STATE_DIR = "~/.local/state/grasplink"
 _HOST_ID = re.compile(r"[A-Za-z0-9_.:-]{1,64}")
 
 
+NODE_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")  # one topic level, one register-map label
+DEVICE_ROLE = "device"  # mastered and published, not in the loop
+ROLES = (*KINDS, DEVICE_ROLE)
+
+
 @dataclass
 class NodeConfig:
-    kind: str
+    """One node of the bus description (`[nodes.NAME]`): a loop node is one of our kinds,
+    its table named after its role; any other is a `device` built from its EDS/DCF."""
+
+    kind: str  # a node kind (kinds.py), or DEVICE_ROLE
     node_id: int
     heartbeat_ms: int = 100
     options: dict[str, Any] = field(default_factory=dict)
+    name: str = ""  # the table's name; a loop node's is its kind
+    eds: Path | None = None  # the file its dictionary comes from; None: the kind's own EDS
+    identity: Identity | None = None  # what 1018h must read before it is configured
+    mandatory: bool = False  # no node is started until every mandatory one is ready
+    sdo: tuple[SdoWrite, ...] = ()  # written last before the start, in order
+
+    def __post_init__(self) -> None:
+        self.name = self.name or self.kind
+
+    @property
+    def role(self) -> str:
+        return self.kind
+
+    @property
+    def profile(self) -> str | Path:
+        """What `load_profile` and `PdoCodec` take for this node."""
+        return self.eds if self.eds is not None else self.kind
 
 
 @dataclass
@@ -164,25 +191,26 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     config.status_period_s = gw.number("status_period_s", 5.0, low=0.1, high=3600.0)
     gw.finish()
     nodes = top.table_of("nodes", {})
-    unknown = set(nodes.table) - set(KINDS)
-    if unknown:
-        name = sorted(unknown)[0]
-        raise nodes.error(name, unknown_kind(name))
-    # Every kind is mastered unless its table says `enabled = false`.
+    base = _base_folder(source)
+    # Every kind is mastered unless its table says `enabled = false`; then the devices.
     used = {config.node_id: "gateway"}
-    for kind in KINDS:
-        p = nodes.table_of(kind, {})
+    for name in (*KINDS, *sorted(set(nodes.table) - set(KINDS))):
+        p = nodes.table_of(name, {})
         if not p.boolean("enabled", True):
             p.finish()
             continue
-        node = _PARSERS[kind](p, kind)
+        if not NODE_NAME.fullmatch(name):
+            raise nodes.error(name, "a node's name is a-z, 0-9 and _ (1-32, a letter first)")
+        node = _PARSERS[name](p, name) if name in KINDS else _device(p, name, base)
+        if name in KINDS:
+            _describe_loop_node(p, node)
         if node.node_id in used:
             raise p.error(
                 "node_id", f"0x{node.node_id:02X} is already used by {used[node.node_id]}"
             )
-        used[node.node_id] = kind
+        used[node.node_id] = name
         p.finish()
-        config.nodes[kind] = node
+        config.nodes[name] = node
     config.feedback = _feedback(top.table_of("feedback", {}))
     hand = config.nodes.get("hand")
     crush_n = hand.crush_limit_n if isinstance(hand, HandConfig) else 40.0
@@ -302,6 +330,59 @@ def _telemetry(p: Params) -> TelemetrySettings:
         raise p.error("state_dir", "expected a directory")
     p.finish()
     return TelemetrySettings(host_id, state_dir)
+
+
+def _base_folder(source: str) -> Path:
+    """Where the files a configuration names are looked up: beside it."""
+    path = Path(source)
+    return path.parent if path.is_file() else Path.cwd()
+
+
+def _describe_loop_node(p: Params, node: NodeConfig) -> None:
+    """The description keys of a loop node: our own EDS, so no file; the rest as any node's."""
+    role = p.string("role", node.kind, choices=ROLES)
+    if role != node.kind:
+        raise p.error("role", f"[nodes.{node.kind}] is the {node.kind} role's node, got {role!r}")
+    for key in ("eds", "dcf"):
+        if p.has(key):
+            raise p.error(
+                key,
+                f"the {node.kind} role's node is grasplink's own (its EDS is shipped); a "
+                f'vendor\'s device is mastered as role = "device" under another name',
+            )
+    _description(p, node, lambda: load_profile(node.kind, node.node_id))
+
+
+def _description(p: Params, node: NodeConfig, od: Callable[[], Any]) -> None:
+    node.identity = description.identity(p)
+    node.mandatory = p.boolean("mandatory", False)
+    node.sdo = description.sdo_writes(p, od) if p.has("sdo") else ()
+
+
+def _device(p: Params, name: str, base: Path) -> NodeConfig:
+    """A node the gateway masters and publishes but does not put in the loop."""
+    role = p.string("role", DEVICE_ROLE, choices=ROLES)
+    if role != DEVICE_ROLE:
+        raise p.error("role", f"the {role} role's node is [nodes.{role}], not [nodes.{name}]")
+    path = description.node_file(p, base)
+    if path is None:
+        raise p.error(
+            "eds",
+            f"{unknown_kind(name)}; any other node is a device and needs the EDS or DCF "
+            "it is built from (eds = or dcf =)",
+        )
+    node = NodeConfig(
+        kind=DEVICE_ROLE,
+        node_id=p.integer("node_id", low=1, high=127),
+        heartbeat_ms=p.integer("heartbeat_ms", 100, low=10, high=10_000),
+        name=name,
+        eds=path,
+    )
+    od = description.dictionary(
+        p, "dcf" if path.suffix.lower() == ".dcf" else "eds", path, node.node_id
+    )
+    _description(p, node, lambda: od)
+    return node
 
 
 def _common(p: Params, kind: str) -> dict[str, Any]:

@@ -19,12 +19,13 @@ cached dictionary costs ~0.1 ms; handing out the built tuple costs nothing).
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from pathlib import Path
 
 import canopen
 from canopen.objectdictionary import ODVariable
 
 from grasplink.gateway.config import EmgConfig, GatewayConfig, HandConfig, NodeConfig, SkinConfig
+from grasplink.gateway.description import SdoWrite, dcf_writes
 from grasplink.profiles import load_profile, od_default, od_variable
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import PRESET_CODES, spacings_um
@@ -35,20 +36,13 @@ PDO_OBJECTS = ((obj.RPDO_COMM, obj.RPDO_MAP), (obj.TPDO_COMM, obj.TPDO_MAP))
 
 
 @functools.lru_cache(maxsize=64)
-def profile(kind: str, node_id: int) -> canopen.ObjectDictionary:
-    """A node's parsed profile, shared and read-only: parsed once per kind and node-ID.
+def profile(kind: str | Path, node_id: int) -> canopen.ObjectDictionary:
+    """A node's parsed profile (a kind or an EDS/DCF path), shared and read-only: parsed once
+    per file and node-ID.
 
     Bounded: a gateway has a handful of nodes; 64 covers many gateways in one process.
     """
     return load_profile(kind, node_id)
-
-
-@dataclass(frozen=True)
-class SdoWrite:
-    index: int
-    subindex: int
-    data: bytes
-    what: str
 
 
 class Provisioner:
@@ -57,12 +51,19 @@ class Provisioner:
     def __init__(self, node: NodeConfig, config: GatewayConfig):
         self.node = node
         self.config = config
-        self.od: canopen.ObjectDictionary = profile(node.kind, node.node_id)  # never mutated
+        self.od: canopen.ObjectDictionary = profile(node.profile, node.node_id)  # never mutated
 
     def writes(self) -> list[SdoWrite]:
+        """Heartbeats; then for our own nodes their PDO maps and application parameters, for
+        a device its DCF's values (its EDS's PDO maps are its own: never overwritten); then
+        the description's `[sdo]` table, last, so it has the final word."""
         out = self._heartbeats()
-        out += self._pdo_mappings()
-        out += self._application()
+        if self.node.eds is None:
+            out += self._pdo_mappings()
+            out += self._application()
+        elif self.node.eds.suffix.lower() == ".dcf":
+            out += dcf_writes(self.od)
+        out += self.node.sdo
         return out
 
     # -- helpers -----------------------------------------------------------------------
@@ -80,16 +81,33 @@ class Provisioner:
 
     # -- what is written -------------------------------------------------------------------
     def _heartbeats(self) -> list[SdoWrite]:
+        """The node's heartbeat time, and its watch of the gateway's (where its dictionary
+        has 1017h and 1016h:01: every grasplink node; a device may lack them)."""
         consumer_ms = self.config.consumer_ms
-        return [
-            self._write(obj.HEARTBEAT_PRODUCER_MS, 0, self.node.heartbeat_ms, "heartbeat time"),
-            self._write(
-                obj.HEARTBEAT_CONSUMER,
-                1,
-                (self.config.node_id << 16) | consumer_ms,
-                "watch the gateway's heartbeat",
-            ),
-        ]
+        out = []
+        if self._has(obj.HEARTBEAT_PRODUCER_MS, 0):
+            out.append(
+                self._write(obj.HEARTBEAT_PRODUCER_MS, 0, self.node.heartbeat_ms, "heartbeat time")
+            )
+        if self._has(obj.HEARTBEAT_CONSUMER, 1):
+            out.append(
+                self._write(
+                    obj.HEARTBEAT_CONSUMER,
+                    1,
+                    (self.config.node_id << 16) | consumer_ms,
+                    "watch the gateway's heartbeat",
+                )
+            )
+        return out
+
+    def _has(self, index: int, subindex: int) -> bool:
+        if index not in self.od:
+            return False
+        try:
+            var = self._entry(index, subindex)
+        except KeyError:
+            return False
+        return var.access_type in ("rw", "wo", "rww", "rwr")
 
     def _pdo_mappings(self) -> list[SdoWrite]:
         """Every PDO the profile defines, set back to its EDS mapping (CiA 301 7.5.2.36)."""

@@ -54,6 +54,7 @@ from grasplink.gateway.config import (
     SkinConfig,
     parse_config,
 )
+from grasplink.gateway.description import SdoWrite
 from grasplink.gateway.drives import DriveHandshake
 from grasplink.gateway.emg import (
     ENVELOPE_FULL_SCALE_UV,
@@ -73,7 +74,7 @@ from grasplink.gateway.plausibility import (
     Rejections,
     judge_emcy,
 )
-from grasplink.gateway.provisioning import Provisioner, SdoWrite
+from grasplink.gateway.provisioning import Provisioner
 from grasplink.gateway.reflex import GripArbiter, GripCommand, ReflexState
 from grasplink.gateway.sdo_client import SdoClient, Transfer
 from grasplink.gateway.snapshot import (
@@ -100,6 +101,8 @@ SECOND_MASTER_CLEAR_US = 5_000_000  # the second-master alarm clears after this 
 COMMAND_REFRESH_US = 100_000  # RPDOs repeat at least this often (drive handshake, deadlines)
 SNAPSHOT_PERIOD_US = 50_000  # 20 Hz, the default telemetry rate
 PROVISION_RETRY_US = 2_000_000
+NETWORK_HELD = "network.held"  # the alarm while a mandatory node keeps the others waiting
+STARTED_OR_READY = (NodePhase.READY, NodePhase.STARTING, NodePhase.OPERATIONAL)
 MN_PER_N = 1000.0
 
 STATIC_FORCE_KEY = (obj.SKIN_STATIC_FORCE_MN, 0)
@@ -118,6 +121,7 @@ class NodeLink:
     sdo: SdoClient
     phase: NodePhase = NodePhase.ABSENT
     provisioning: list[tuple[SdoWrite, Transfer]] = field(default_factory=list)
+    identity_reads: list[tuple[int, Transfer]] = field(default_factory=list)  # 1018h sub-index
     writes: tuple[SdoWrite, ...] = ()  # built with the gateway: a boot never parses an EDS
     retry_at_us: int | None = None
     boots_seen: int = -1  # the master's boot count when provisioning last began
@@ -130,6 +134,11 @@ class NodeLink:
     @property
     def kind(self) -> str:
         return self.config.kind
+
+    @property
+    def name(self) -> str:
+        """The description's name (a loop node's is its kind): alarms and snapshots use it."""
+        return self.config.name
 
     def codec_od_entry(self, index: int, subindex: int = 0) -> Any:
         """The node's object-dictionary entry (types for SDO values)."""
@@ -154,16 +163,17 @@ class Gateway(NmtMaster):
         )
         self.config = config
         self.links: dict[int, NodeLink] = {}
-        self.by_kind: dict[str, NodeLink] = {}
+        self.by_kind: dict[str, NodeLink] = {}  # the loop's nodes, by role
         for node in config.nodes.values():
             link = NodeLink(
                 node,
-                PdoCodec(node.kind, node.node_id),
+                PdoCodec(node.profile, node.node_id),
                 SdoClient(node.node_id, timeout_us=config.sdo_timeout_ms * 1000),
                 writes=tuple(Provisioner(node, config).writes()),
             )
             self.links[node.node_id] = link
-            self.by_kind[node.kind] = link
+            if node.kind in KINDS:
+                self.by_kind[node.kind] = link
         self.alarms: dict[str, str] = {}
         self.frames_dropped: Counter[str] = Counter()
         self._skin_setup()
@@ -378,7 +388,7 @@ class Gateway(NmtMaster):
             return super()._start(node_id)
         boots = self.nodes[node_id].boots
         if boots == link.boots_seen:
-            if link.phase in (NodePhase.PROVISIONING, NodePhase.FAILED):
+            if link.phase in (NodePhase.PROVISIONING, NodePhase.FAILED, NodePhase.READY):
                 return []
             if link.phase is NodePhase.STARTING:
                 return [self.command_start(node_id)]
@@ -396,32 +406,92 @@ class Gateway(NmtMaster):
             self.skin_frames.restart()
 
     def _provision(self, link: NodeLink, t_us: int) -> list[Frame]:
+        """CiA 302-2 boot, the parts that matter here: the identity read back from 1018h
+        (when the description gives one), then the configuration writes, then the start."""
         link.sdo.cancel()
         link.phase = NodePhase.PROVISIONING
+        identity = link.config.identity
+        if identity is not None:
+            link.identity_reads = [
+                (sub, link.sdo.upload(obj.IDENTITY, sub)) for sub, _ in identity.expected
+            ]
+            return link.sdo.advance(t_us)
+        return self._configure(link, t_us)
+
+    def _configure(self, link: NodeLink, t_us: int) -> list[Frame]:
         link.provisioning = [
             (w, link.sdo.download(w.index, w.subindex, w.data)) for w in link.writes
         ]
+        if not link.provisioning:  # a device with nothing to write
+            return self._ready(link, t_us)
         return link.sdo.advance(t_us)
 
     def _check_provisioning(self, link: NodeLink, t_us: int) -> list[Frame]:
-        if link.phase is not NodePhase.PROVISIONING or not link.provisioning:
+        if link.phase is not NodePhase.PROVISIONING:
+            return []
+        if link.identity_reads:
+            return self._check_identity(link, t_us)
+        if not link.provisioning:
             return []
         failed = next(((w, t) for w, t in link.provisioning if t.done and not t.ok), None)
         if failed is not None:
             write, transfer = failed
-            link.sdo.cancel()
-            link.provisioning = []
-            link.phase = NodePhase.FAILED
-            link.failure = f"{write.what}: {transfer.describe()}"
-            self.alarms[f"{link.kind}.provisioning"] = link.failure
-            link.retry_at_us = t_us + PROVISION_RETRY_US
-            return []
+            return self._failed(link, f"{write.what}: {transfer.describe()}", t_us)
         if all(t.ok for _, t in link.provisioning):
             link.provisioning = []
-            link.phase = NodePhase.STARTING
-            self.alarms.pop(f"{link.kind}.provisioning", None)
-            return [self.command_start(link.node_id)]
+            self.alarms.pop(f"{link.name}.provisioning", None)
+            return self._ready(link, t_us)
         return []
+
+    def _failed(self, link: NodeLink, why: str, t_us: int, *, retry: bool = True) -> list[Frame]:
+        """A configuration step failed: alarmed, and retried later unless `retry` is False
+        (a wrong identity stays wrong until the node boots again)."""
+        link.sdo.cancel()
+        link.provisioning = []
+        link.identity_reads = []
+        link.phase = NodePhase.FAILED
+        link.failure = why
+        self.alarms[f"{link.name}.{'provisioning' if retry else 'identity'}"] = why
+        link.retry_at_us = t_us + PROVISION_RETRY_US if retry else None
+        return []
+
+    def _check_identity(self, link: NodeLink, t_us: int) -> list[Frame]:
+        reads = link.identity_reads
+        if not all(t.done for _, t in reads):
+            return []
+        failed = next((t for _, t in reads if not t.ok), None)
+        if failed is not None:
+            return self._failed(link, f"identity: {failed.describe()}", t_us)
+        identity = link.config.identity
+        assert identity is not None
+        read = {sub: int.from_bytes(t.data[:4], "little") for sub, t in reads}
+        link.identity_reads = []
+        wrong = identity.mismatch(read)
+        if wrong is not None:
+            return self._failed(link, f"wrong identity: {wrong}; not started", t_us, retry=False)
+        self.alarms.pop(f"{link.name}.identity", None)
+        self.alarms.pop(f"{link.name}.provisioning", None)
+        return self._configure(link, t_us)
+
+    def _ready(self, link: NodeLink, t_us: int) -> list[Frame]:
+        """Configured: started now, or held while a mandatory node is not ready (CiA 302:
+        the network starts once every mandatory node is); then every held node starts."""
+        link.phase = NodePhase.READY
+        missing = [
+            f"{other.name} (0x{other.node_id:02X})"
+            for other in self.links.values()
+            if other.config.mandatory and other.phase not in STARTED_OR_READY
+        ]
+        if missing:
+            self.alarms[NETWORK_HELD] = f"waiting for mandatory node {', '.join(missing)}"
+            return []
+        self.alarms.pop(NETWORK_HELD, None)
+        frames = []
+        for held in self.links.values():
+            if held.phase is NodePhase.READY:
+                held.phase = NodePhase.STARTING
+                frames.append(self.command_start(held.node_id))
+        return frames
 
     def command_start(self, node_id: int) -> Frame:
         return self.command(NmtCommand.START, node_id)
@@ -435,7 +505,7 @@ class Gateway(NmtMaster):
         if status.state == NmtState.OPERATIONAL:
             if link.phase is not NodePhase.OPERATIONAL:
                 link.phase = NodePhase.OPERATIONAL
-                self.alarms.pop(f"{link.kind}.lost", None)
+                self.alarms.pop(f"{link.name}.lost", None)
                 return self._commands(t_us, refresh=True)
             return []
         if link.phase is NodePhase.OPERATIONAL:
@@ -448,7 +518,7 @@ class Gateway(NmtMaster):
         it left OPERATIONAL): belt stopped, hand holding, alarm raised."""
         link.phase = phase
         link.sdo.cancel()
-        self.alarms[f"{link.kind}.lost"] = why
+        self.alarms[f"{link.name}.lost"] = why
         if link.kind == "skin" and self.skin_frames is not None:
             self.skin_frames.restart()
         return self._commands(t_us, refresh=True)
@@ -466,7 +536,7 @@ class Gateway(NmtMaster):
             self.rejected["emcy_unknown_code"] += 1
         link.emcy.append((t_us, code))
         del link.emcy[:-32]
-        key = f"{link.kind}.emcy"
+        key = f"{link.name}.emcy"
         if code == 0:
             self.alarms.pop(key, None)
         else:
@@ -554,7 +624,7 @@ class Gateway(NmtMaster):
 
     def _eds_limit(self, link: NodeLink, key: Key) -> tuple[float, float] | None:
         """The EDS LowLimit/HighLimit of a mapped object (None: only its type bounds it)."""
-        cache_key = (link.kind, key)
+        cache_key = (link.name, key)
         if cache_key not in self._eds_limits:
             entry = link.codec_od_entry(*key)
             low, high = entry.min, entry.max
@@ -603,7 +673,7 @@ class Gateway(NmtMaster):
             lost_packets = None
             if link.kind == "skin" and self.skin_frames is not None:
                 lost_packets = self.skin_frames.stats.lost_packets
-            nodes[link.kind] = NodeSnapshot(
+            nodes[link.name] = NodeSnapshot(
                 node_id=link.node_id,
                 phase=link.phase,
                 nmt_state=status.state if status else None,

@@ -68,6 +68,7 @@ class NodePhase(StrEnum):
     OPERATIONAL = "operational"  # live: its data is used, commands go to it
     FAILED = "failed"  # a provisioning write failed; retried
     LOST = "lost"  # its heartbeat stopped (one consumer time)
+    READY = "ready"  # configured, held until every mandatory node is ready (CiA 302)
 
 
 _UINT32 = {"integer": "uint32"}

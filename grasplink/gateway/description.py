@@ -1,0 +1,180 @@
+"""The bus description's per-node keys: the file a node is built from, what it must be,
+whether the network waits for it, and what is written to it before it starts.
+
+A `[nodes.NAME]` table (docs/gateway.md, "Bus description"):
+
+    node_id = 0x30
+    dcf = "vendor/gripper.dcf"            # or eds = "..."; relative to the config file
+    identity = { vendor_id = 0x360, product_code = 0x1 }   # checked from 1018h first
+    mandatory = true                      # the network is not started without it
+    [nodes.NAME.sdo]                      # written after the DCF values, before the start
+    "6060sub0" = 3
+
+Every object the table names is checked against the node's dictionary here, before
+the bus is touched: it exists, it is writable, the value fits its type and limits.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import canopen
+from canopen.objectdictionary import ODVariable, datatypes
+
+from grasplink.core.params import Params
+from grasplink.errors import ConfigError
+from grasplink.profiles import load_profile, od_variable
+
+#: identity keys -> their 1018h sub-index (CiA 301 identity object)
+IDENTITY_SUBS = {"vendor_id": 1, "product_code": 2, "revision": 3, "serial": 4}
+# "6060sub0", "2100sub1A" (sub-index in hex, as EDS section names spell it), or "6060"
+_OBJECT_KEY = re.compile(r"(?:0x)?([0-9A-Fa-f]{4})(?:sub([0-9A-Fa-f]{1,2}))?")
+_WRITABLE = ("rw", "wo", "rww", "rwr")
+
+
+@dataclass(frozen=True)
+class Identity:
+    """What 1018h must read: (sub-index, value) for each key the description gives."""
+
+    expected: tuple[tuple[int, int], ...]
+
+    def mismatch(self, read: Mapping[int, int]) -> str | None:
+        """Why `read` (sub-index -> value) is not this identity; None when it is."""
+        names = {sub: name for name, sub in IDENTITY_SUBS.items()}
+        wrong = [
+            f"{names[sub]} 0x{read.get(sub, 0):X}, expected 0x{value:X}"
+            for sub, value in self.expected
+            if read.get(sub) != value
+        ]
+        return "; ".join(wrong) or None
+
+
+@dataclass(frozen=True)
+class SdoWrite:
+    """One value written to a node over SDO before it starts, encoded by its dictionary."""
+
+    index: int
+    subindex: int
+    data: bytes
+    what: str
+
+
+def object_key(text: str) -> tuple[int, int]:
+    """(index, subindex) of "6060sub0" / "6060" (sub-index 0); ConfigError otherwise."""
+    match = _OBJECT_KEY.fullmatch(text.strip())
+    if match is None:
+        raise ConfigError(f"{text!r} is not an object: write it as 6060sub0 (index, sub in hex)")
+    return int(match[1], 16), int(match[2] or "0", 16)
+
+
+def node_file(p: Params, base: Path) -> Path | None:
+    """The `eds` or `dcf` the table names (one of them), resolved against `base`."""
+    eds, dcf = p.string("eds", None), p.string("dcf", None)
+    if eds is not None and dcf is not None:
+        raise p.error("dcf", "give eds or dcf, not both")
+    name, text = ("dcf", dcf) if dcf is not None else ("eds", eds)
+    if text is None:
+        return None
+    path = Path(text).expanduser()
+    path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise p.error(name, f"no such file: {path}")
+    suffix = path.suffix.lower()
+    if (name == "dcf") != (suffix == ".dcf") or suffix not in (".eds", ".dcf"):
+        raise p.error(name, f"expected a .{name} file, got {path.name}")
+    return path
+
+
+def dictionary(p: Params, key: str, path: Path, node_id: int) -> canopen.ObjectDictionary:
+    """The node's object dictionary, its file's problems reported at `key`."""
+    try:
+        return load_profile(path, node_id)
+    except ConfigError as exc:
+        raise p.error(key, str(exc)) from None
+
+
+def identity(p: Params) -> Identity | None:
+    if not p.has("identity"):
+        return None
+    t = p.table_of("identity")
+    expected = tuple(
+        (sub, t.integer(name, low=0, high=0xFFFFFFFF))
+        for name, sub in IDENTITY_SUBS.items()
+        if t.has(name)
+    )
+    t.finish()
+    if not expected:
+        raise p.error("identity", f"name at least one of {', '.join(IDENTITY_SUBS)}")
+    return Identity(expected)
+
+
+def sdo_writes(p: Params, od_of: Callable[[], canopen.ObjectDictionary]) -> tuple[SdoWrite, ...]:
+    """The `[sdo]` table's writes in the order given, each checked against the dictionary."""
+    t = p.table_of("sdo")
+    od = od_of()
+    out = []
+    for key in t.table:
+        value = t.raw(key)
+        try:
+            index, subindex = object_key(key)
+            var = _variable(od, index, subindex)
+            data = encode(var, value)
+        except ConfigError as exc:
+            raise t.error(key, str(exc)) from None
+        out.append(SdoWrite(index, subindex, data, f"{var.name} = {value!r}"))
+    t.finish()
+    return tuple(out)
+
+
+def dcf_writes(od: canopen.ObjectDictionary) -> tuple[SdoWrite, ...]:
+    """A DCF's configured values (ParameterValue): every writable object the file gives
+    one, in index order, as a CiA 302 master writes its concise DCF."""
+    out = []
+    for index in sorted(od.indices):
+        entry = od[index]
+        variables = [entry] if isinstance(entry, ODVariable) else list(entry.values())
+        for var in variables:
+            if var.value is None or var.access_type not in _WRITABLE:
+                continue
+            data = var.encode_raw(var.value)
+            out.append(SdoWrite(var.index, var.subindex, data, f"{var.name} (DCF)"))
+    return tuple(out)
+
+
+def _variable(od: canopen.ObjectDictionary, index: int, subindex: int) -> ODVariable:
+    if index not in od:
+        raise ConfigError(f"the node's dictionary has no object 0x{index:04X}")
+    try:
+        var = od_variable(od, index, subindex)
+    except KeyError:
+        raise ConfigError(f"object 0x{index:04X} has no sub-index {subindex}") from None
+    if var.access_type not in _WRITABLE:
+        raise ConfigError(f"{var.name} (0x{index:04X}sub{subindex:X}) is {var.access_type}")
+    return var
+
+
+def encode(var: ODVariable, value: Any) -> bytes:
+    """`value` in `var`'s data type, within its limits; ConfigError naming why not."""
+    integer = var.data_type in datatypes.INTEGER_TYPES
+    if integer and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ConfigError(f"{var.name} takes an integer, got {value!r}")
+    if var.data_type in datatypes.FLOAT_TYPES and (
+        isinstance(value, bool) or not isinstance(value, int | float)
+    ):
+        raise ConfigError(f"{var.name} takes a number, got {value!r}")
+    if var.data_type == datatypes.VISIBLE_STRING and not isinstance(value, str):
+        raise ConfigError(f"{var.name} takes a string, got {value!r}")
+    low, high = var.min, var.max
+    if isinstance(value, int | float) and (
+        (low is not None and value < low) or (high is not None and value > high)
+    ):
+        raise ConfigError(f"{var.name} = {value} is outside {low}..{high}")
+    try:
+        return var.encode_raw(value)
+    except (ValueError, OverflowError, TypeError, struct.error) as exc:
+        raise ConfigError(f"{var.name} = {value!r} does not fit its type: {exc}") from None
