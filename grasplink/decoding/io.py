@@ -46,7 +46,7 @@ import numpy as np
 from grasplink.core.frames import HEARTBEAT_BASE
 from grasplink.core.log_formats import LOG_FORMATS
 from grasplink.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
-from grasplink.decoding.skin_frames import SkinCalibration, SkinFrames
+from grasplink.decoding.skin_frames import SampleObjects, SkinCalibration, SkinFrames
 from grasplink.errors import ConfigError, PdoError, RecordingError
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import PdoCodec
@@ -414,9 +414,8 @@ def read_can_log(
     rate = check_sample_rate(pdo.rate_hz if fs_hz is None else fs_hz)
     stats = CanStats(rate_hz=rate, cob_id=pdo.cob_id)
     frames = SkinFrames(
-        pdo.calibration,
+        SampleObjects.of_skin(pdo.calibration, pdo.samples_per_pdo),
         rate,
-        pdo.samples_per_pdo,
         reorder_packets=REORDER_PACKETS,
         settle_us=SETTLE_US,
     )

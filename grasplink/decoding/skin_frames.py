@@ -83,24 +83,47 @@ class SkinCalibration:
         return (-self.zero_counts * per_count_mn - 1, self.full_scale_mn + 1)
 
 
+@dataclass(frozen=True)
+class SampleObjects:
+    """Where a TPDO carries force samples, and how they become newtons:
+    force_N = (value - zero_units) x newtons_per_unit."""
+
+    samples: tuple[Key, ...]  # in sample order
+    newtons_per_unit: float
+    zero_units: float = 0.0
+    sequence: Key | None = None  # a packet number: sample times from it, not from arrival
+
+    @classmethod
+    def of_skin(cls, calibration: SkinCalibration, samples_per_pdo: int) -> SampleObjects:
+        """Our skin node's: ADC counts in 2100h sub 1..n, the packet number 2101h."""
+        return cls(
+            sample_slot_keys(samples_per_pdo),
+            calibration.n_per_count,
+            calibration.zero_counts,
+            SEQUENCE_KEY,
+        )
+
+
 class SkinFrames:
     """Decoded skin TPDOs (`feed`) -> (sample times in s, force in N) on the node's clock."""
 
     def __init__(
         self,
-        calibration: SkinCalibration,
+        objects: SampleObjects,
         sample_rate_hz: float,
-        samples_per_pdo: int,
         *,
         late_us: float = DEFAULT_LATE_US,
         reorder_packets: int = 0,
         settle_us: float = 0.0,
     ):
-        self.calibration = calibration
-        self.slot_keys = sample_slot_keys(samples_per_pdo)
+        self.objects = objects
+        self.slot_keys = objects.samples
+        self._sequence_key = objects.sequence
+        self._zero = objects.zero_units
+        self._per_unit = objects.newtons_per_unit
         self.stream = SampleStream(
             sample_rate_hz,
-            samples_per_pdo,
+            len(objects.samples),
             late_us=late_us,
             reorder_packets=reorder_packets,
             settle_us=settle_us,
@@ -120,9 +143,9 @@ class SkinFrames:
         slots = [values[k] for k in self.slot_keys if k in values]
         if not slots:
             return EMPTY
-        number = values.get(SEQUENCE_KEY)
+        number = None if self._sequence_key is None else values.get(self._sequence_key)
         sequence = None if number is None else int(number) % SEQUENCE_MODULO
-        force_n = self.calibration.to_newton(np.asarray(slots, dtype=np.float64))
+        force_n = (np.asarray(slots, dtype=np.float64) - self._zero) * self._per_unit
         return self.stream.feed(t_us, sequence, force_n)
 
     def restart(self) -> None:

@@ -21,7 +21,7 @@ from typing import Any, TypeVar
 from grasplink.core.params import Params
 from grasplink.decoding.registry import DEFAULT_DECODER, check_live_decoder
 from grasplink.errors import ConfigError
-from grasplink.gateway import description
+from grasplink.gateway import description, roles
 from grasplink.gateway.description import Identity, SdoWrite
 from grasplink.gateway.feedback import FeedbackConfig, FeedbackMode
 from grasplink.gateway.levels import (
@@ -35,10 +35,12 @@ from grasplink.gateway.levels import (
 from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
+from grasplink.gateway.roles import Binding
 from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
+from grasplink.profiles.pdo_codec import PdoCodec
 
 # The thesis's EMG control window is "rectified and integrated" over 150-250 ms (ch. 2.3).
 EMG_WINDOW_MS = (150, 250)
@@ -71,6 +73,7 @@ class NodeConfig:
     identity: Identity | None = None  # what 1018h must read before it is configured
     mandatory: bool = False  # no node is started until every mandatory one is ready
     sdo: tuple[SdoWrite, ...] = ()  # written last before the start, in order
+    binding: Binding | None = None  # a vendor's node in a loop role: its objects (roles.py)
 
     def __post_init__(self) -> None:
         self.name = self.name or self.kind
@@ -203,7 +206,7 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
             raise nodes.error(name, "a node's name is a-z, 0-9 and _ (1-32, a letter first)")
         node = _PARSERS[name](p, name) if name in KINDS else _device(p, name, base)
         if name in KINDS:
-            _describe_loop_node(p, node)
+            _describe_loop_node(p, node, base)
         if node.node_id in used:
             raise p.error(
                 "node_id", f"0x{node.node_id:02X} is already used by {used[node.node_id]}"
@@ -338,19 +341,45 @@ def _base_folder(source: str) -> Path:
     return path.parent if path.is_file() else Path.cwd()
 
 
-def _describe_loop_node(p: Params, node: NodeConfig) -> None:
-    """The description keys of a loop node: our own EDS, so no file; the rest as any node's."""
+def _describe_loop_node(p: Params, node: NodeConfig, base: Path) -> None:
+    """The description keys of a loop node. Ours comes with its EDS; a vendor's names its
+    file and binds the role to its objects (roles.py)."""
     role = p.string("role", node.kind, choices=ROLES)
     if role != node.kind:
         raise p.error("role", f"[nodes.{node.kind}] is the {node.kind} role's node, got {role!r}")
-    for key in ("eds", "dcf"):
-        if p.has(key):
+    path = description.node_file(p, base)
+    if path is None:
+        _description(p, node, lambda: load_profile(node.kind, node.node_id))
+        for table in BINDING_TABLES.values():
+            if p.has(table):
+                raise p.error(table, "binds a vendor's node: give its file (eds = or dcf =)")
+        return
+    node.eds = path
+    od = description.dictionary(p, _file_key(path), path, node.node_id)
+    codec = PdoCodec(path, node.node_id)
+    try:
+        if node.kind == "skin":
+            node.binding = roles.skin(p, codec)
+        elif node.kind == "emg":
+            node.binding = roles.emg(p, codec)
+        else:
+            node.binding = roles.drive(p, codec, node.kind)
+    except ConfigError as exc:
+        if not p.has(BINDING_TABLES[node.kind]):
+            table = BINDING_TABLES[node.kind]
             raise p.error(
-                key,
-                f"the {node.kind} role's node is grasplink's own (its EDS is shipped); a "
-                f'vendor\'s device is mastered as role = "device" under another name',
-            )
-    _description(p, node, lambda: load_profile(node.kind, node.node_id))
+                table, f"a vendor's node in the {node.kind} role binds it to its objects here"
+            ) from None
+        raise exc from None
+    _description(p, node, lambda: od)
+
+
+# the table that binds a vendor's node to a loop role (roles.py)
+BINDING_TABLES = {"skin": "samples", "emg": "envelope", "belt": "drive", "hand": "drive"}
+
+
+def _file_key(path: Path) -> str:
+    return "dcf" if path.suffix.lower() == ".dcf" else "eds"
 
 
 def _description(p: Params, node: NodeConfig, od: Callable[[], Any]) -> None:
@@ -378,9 +407,7 @@ def _device(p: Params, name: str, base: Path) -> NodeConfig:
         name=name,
         eds=path,
     )
-    od = description.dictionary(
-        p, "dcf" if path.suffix.lower() == ".dcf" else "eds", path, node.node_id
-    )
+    od = description.dictionary(p, _file_key(path), path, node.node_id)
     _description(p, node, lambda: od)
     return node
 

@@ -45,6 +45,7 @@ from grasplink.decoding.packets import LIVE_SETTLE_US
 from grasplink.decoding.registry import make_decoder
 from grasplink.decoding.skin_frames import SkinCalibration, SkinFrames
 from grasplink.errors import ConfigError, PdoError
+from grasplink.gateway import roles
 from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value
 from grasplink.gateway.config import (
     EmgConfig,
@@ -89,7 +90,7 @@ from grasplink.gateway.snapshot import (
     SkinSnapshot,
     Snapshot,
 )
-from grasplink.profiles import load_profile, object_limits
+from grasplink.profiles import load_profile, object_limits, variable_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.pdo_codec import Key, PdoCodec
@@ -106,10 +107,8 @@ STARTED_OR_READY = (NodePhase.READY, NodePhase.STARTING, NodePhase.OPERATIONAL)
 MN_PER_N = 1000.0
 
 STATIC_FORCE_KEY = (obj.SKIN_STATIC_FORCE_MN, 0)
-ENVELOPE_KEY = (obj.EMG_ENVELOPE_UV, 0)
 STATUSWORD_KEY = (obj.STATUSWORD, 0)
 CONTROLWORD_KEY = (obj.CONTROLWORD, 0)
-HAND_GRIP_KEY = (obj.HAND_ACTUAL_GRIP_MN, 0)
 
 
 @dataclass
@@ -178,6 +177,7 @@ class Gateway(NmtMaster):
         self.frames_dropped: Counter[str] = Counter()
         self._skin_setup()
         self._emg_setup()
+        self._bindings_setup()
         self.feedback = FeedbackController(config.feedback.controller, mode=config.feedback.mode)
         self.arbiter = GripArbiter(config.reflex)
         self.drives = {k: DriveHandshake() for k in ("belt", "hand") if k in self.by_kind}
@@ -240,25 +240,28 @@ class Gateway(NmtMaster):
         self.skin_frames: SkinFrames | None = None
         self.decoder = None
         self._skin_max_counts: int | None = None
-        self._static_force_mn = (0.0, 0.0)
+        self._static_force_mn: tuple[float, float] | None = None
         if link is None:
             return
         skin = link.config
         assert isinstance(skin, SkinConfig)
-        calibration = SkinCalibration.from_od(load_profile("skin", skin.node_id))
+        binding = skin.binding
+        if binding is None:  # our skin node: its calibration from its EDS
+            calibration = SkinCalibration.from_od(load_profile("skin", skin.node_id))
+            binding = roles.own_skin(calibration, skin.samples_per_pdo)
+        assert isinstance(binding, roles.SkinBinding)
         # Sample times come from the packet sequence; a packet may arrive as late as the
         # heartbeat consumer time (a stalled host, the burst after it) without a reset.
         self.skin_frames = SkinFrames(
-            calibration,
+            binding.objects,
             skin.sample_rate_hz,
-            skin.samples_per_pdo,
             late_us=self.node_consumer_us,
             settle_us=LIVE_SETTLE_US,
         )
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
         # what the sensor can report (plausibility)
-        self._skin_max_counts = calibration.full_counts
-        self._static_force_mn = calibration.static_force_range_mn()
+        self._skin_max_counts = binding.max_units
+        self._static_force_mn = binding.static_force_range_mn
 
     def _plausibility_setup(self) -> None:
         """What the loop refuses to follow, and how fast its commands may move
@@ -286,6 +289,43 @@ class Gateway(NmtMaster):
                 plaus.hand_grip_margin_n,
                 plaus.hand_slew_factor,
             )
+
+    def _bindings_setup(self) -> None:
+        """Which objects the loop reads and writes on each role's node (roles.py): our own
+        nodes' from their EDS, a vendor's from the description."""
+        self.drive_bindings: dict[str, roles.DriveBinding] = {}
+        for role in ("belt", "hand"):
+            link = self.by_kind.get(role)
+            if link is not None:
+                binding = link.config.binding or roles.own_drive(role, link.codec)
+                assert isinstance(binding, roles.DriveBinding)
+                self.drive_bindings[role] = binding
+        emg = self.by_kind.get("emg")
+        envelope = (emg.config.binding if emg is not None else None) or roles.OWN_EMG
+        assert isinstance(envelope, roles.EmgBinding)
+        self._envelope_key = envelope.envelope
+        self._uv_per_unit = envelope.uv_per_unit
+        self._command_limits: dict[str, tuple[int, int]] = {}
+        for role, binding in self.drive_bindings.items():
+            link = self.by_kind[role]
+            if link.config.eds is None:
+                limits = object_limits(role, *binding.target)
+            else:
+                low, high = variable_limits(link.codec_od_entry(*binding.target))
+                limits = (math.ceil(low), math.floor(high))
+            self._command_limits[role] = limits
+
+    def _envelope_uv(self, values: Mapping[Key, int | float]) -> float:
+        return float(values[self._envelope_key]) * self._uv_per_unit
+
+    def _actual_grip_n(self, link: NodeLink, values: Mapping[Key, int | float]) -> float | None:
+        """The grip the hand reports, in N (None: this frame does not carry it)."""
+        if link.kind != "hand":
+            return None
+        binding = self.drive_bindings["hand"]
+        if binding.actual is None or binding.actual not in values:
+            return None
+        return float(values[binding.actual]) / binding.units_per_command / MN_PER_N
 
     def _emg_setup(self) -> None:
         link = self.by_kind.get("emg")
@@ -588,12 +628,13 @@ class Gateway(NmtMaster):
         link.values.update(values)
         if link.kind == "skin":
             return self._on_skin(values, t_us)
-        if link.kind == "emg" and ENVELOPE_KEY in values:
-            return self._on_emg(float(values[ENVELOPE_KEY]), t_us)
+        if link.kind == "emg" and self._envelope_key in values:
+            return self._on_emg(self._envelope_uv(values), t_us)
         if link.kind in self.drives and STATUSWORD_KEY in values:
             self.drives[link.kind].on_statusword(int(values[STATUSWORD_KEY]))
-            if link.kind == "hand" and HAND_GRIP_KEY in values:
-                self.hand_grip_n = float(values[HAND_GRIP_KEY]) / MN_PER_N
+            grip_n = self._actual_grip_n(link, values)
+            if grip_n is not None:
+                self.hand_grip_n = grip_n
                 if self.emg_decoder is None and not self._voluntary_known:
                     # No EMG: the wearer's grip is whatever the hand holds when we start.
                     self._voluntary_known = True
@@ -613,13 +654,19 @@ class Gateway(NmtMaster):
                 v > top for (i, _), v in values.items() if i == obj.SKIN_SAMPLE_SLOTS
             ):
                 return "skin_sample_out_of_range"
-            low, high = self._static_force_mn
-            if STATIC_FORCE_KEY in values and not low <= values[STATIC_FORCE_KEY] <= high:
+            static = self._static_force_mn
+            if (
+                static is not None
+                and STATIC_FORCE_KEY in values
+                and not static[0] <= values[STATIC_FORCE_KEY] <= static[1]
+            ):
                 return "skin_sample_out_of_range"
-        elif kind == "emg" and ENVELOPE_KEY in values and self._envelope_check is not None:
-            return self._envelope_check.check(t_us, float(values[ENVELOPE_KEY]))
-        elif kind == "hand" and HAND_GRIP_KEY in values and self._grip_check is not None:
-            return self._grip_check.check(t_us, float(values[HAND_GRIP_KEY]) / MN_PER_N)
+        elif kind == "emg" and self._envelope_key in values and self._envelope_check is not None:
+            return self._envelope_check.check(t_us, self._envelope_uv(values))
+        elif kind == "hand" and self._grip_check is not None:
+            grip_n = self._actual_grip_n(link, values)
+            if grip_n is not None:
+                return self._grip_check.check(t_us, grip_n)
         return None
 
     def _eds_limit(self, link: NodeLink, key: Key) -> tuple[float, float] | None:
@@ -831,7 +878,7 @@ class Gateway(NmtMaster):
                 self.belt_ramp.start_from(0)
             else:  # at most the belt's acceleration, one change per command interval
                 velocity = round(self.belt_ramp.output(velocity, t_us))
-            frames += self._rpdo(belt, (obj.BELT_TARGET_VELOCITY_MRAD_S, 0), velocity, refresh)
+            frames += self._rpdo(belt, velocity, refresh)
         hand = self.by_kind.get("hand")
         if hand is not None and self._commandable(hand):
             grip_mn = self._hand_grip_mn()
@@ -844,7 +891,7 @@ class Gateway(NmtMaster):
                     grip_mn = round(at)
                 else:
                     grip_mn = round(self.grip_ramp.output(grip_mn, t_us))
-                frames += self._rpdo(hand, (obj.HAND_TARGET_GRIP_MN, 0), grip_mn, refresh)
+                frames += self._rpdo(hand, grip_mn, refresh)
         return frames
 
     def _next_ramp_us(self) -> int | None:
@@ -894,10 +941,15 @@ class Gateway(NmtMaster):
         self._held_grip_mn = command.target_grip_mn
         return self._held_grip_mn
 
-    def _rpdo(self, link: NodeLink, target: Key, value: int, refresh: bool) -> list[Frame]:
-        low, high = object_limits(link.kind, target[0], target[1])
+    def _rpdo(self, link: NodeLink, value: int, refresh: bool) -> list[Frame]:
+        """The drive's RPDO with `value` (mN of grip, mrad/s of belt) in its own units."""
+        binding = self.drive_bindings[link.kind]
+        target = binding.target
+        if binding.units_per_command != 1.0:
+            value = round(value * binding.units_per_command)
+        low, high = self._command_limits[link.kind]
         if not low <= value <= high:
-            self.alarms[f"{link.kind}.clamped"] = f"command {value} clamped to {low}..{high}"
+            self.alarms[f"{link.name}.clamped"] = f"command {value} clamped to {low}..{high}"
             value = min(high, max(low, value))
         controlword = self.drives[link.kind].controlword()
         # Most calls repeat the last command (every skin update and EMG intent asks):
@@ -907,7 +959,9 @@ class Gateway(NmtMaster):
         if last is not None and last[0] == inputs:
             can_id, data = last[1]
         else:
-            can_id, data = link.codec.encode(1, {CONTROLWORD_KEY: controlword, target: value})
+            can_id, data = link.codec.encode(
+                binding.rpdo, {CONTROLWORD_KEY: controlword, target: value}
+            )
             self._packed[link.kind] = (inputs, (can_id, data))
         if not refresh and self._sent.get(can_id) == data:
             return []

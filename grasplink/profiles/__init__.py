@@ -76,13 +76,19 @@ def object_limits(kind: str, index: int, subindex: int = 0) -> tuple[int, int]:
 
     Cached: the shipped profiles do not change while a process runs.
     """
+    entry = od_variable(load_profile(kind, node_kind(kind).node_id), index, subindex)
+    low, high = variable_limits(entry)
+    return int(low), int(high)
+
+
+def variable_limits(entry: ODVariable) -> tuple[float, float]:
+    """(low, high) an object accepts: its file's LowLimit/HighLimit, else its type's range."""
     from grasplink.profiles.eds import _types
 
-    entry = od_variable(load_profile(kind, node_kind(kind).node_id), index, subindex)
     dtype = _types()[int(entry.data_type or 0)]
     low = entry.min if entry.min is not None else dtype.low
     high = entry.max if entry.max is not None else dtype.high
-    return int(low), int(high)
+    return low, high
 
 
 def _resolve(kind_or_path: str | Path) -> Path:

@@ -113,6 +113,13 @@ class PdoCodec:
         }
 
     # -- transmit (RPDOs the node receives) -----------------------------------------------
+    def rpdo_numbers(self) -> tuple[int, ...]:
+        """The RPDOs the node's file enables and maps, by number."""
+        maps = self._node.rpdo.map
+        if maps is None:
+            return ()
+        return tuple(n for n, pdo in sorted(maps.items()) if pdo.enabled and len(pdo.map))
+
     def rpdo(self, number: int) -> PdoMap:
         try:
             pdo = self._node.rpdo[number]

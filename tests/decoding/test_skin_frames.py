@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 
 from grasplink.decoding.io import skin_tpdo
-from grasplink.decoding.skin_frames import SEQUENCE_KEY, SkinCalibration, SkinFrames
+from grasplink.decoding.skin_frames import (
+    SEQUENCE_KEY,
+    SampleObjects,
+    SkinCalibration,
+    SkinFrames,
+)
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
 
@@ -35,7 +40,7 @@ def test_counts_become_newtons_from_the_zero_offset_to_full_scale():
 
 
 def test_a_tpdo_without_sample_slots_gives_no_samples_and_counts_no_packet():
-    frames = SkinFrames(SkinCalibration(12, 98067.0, 0), 400.0, 3)
+    frames = SkinFrames(SampleObjects.of_skin(SkinCalibration(12, 98067.0, 0), 3), 400.0)
     t_s, force_n = frames.feed(0, {(obj.SKIN_STATIC_FORCE_MN, 0): 1200})
     assert len(t_s) == len(force_n) == 0
     assert frames.stats.packets == 0
@@ -44,7 +49,7 @@ def test_a_tpdo_without_sample_slots_gives_no_samples_and_counts_no_packet():
 def test_frames_unpacked_by_the_eds_mapping_become_samples_on_the_sequence_grid():
     pdo = skin_tpdo()
     assert pdo.codec.tpdo_keys(pdo.cob_id)[:3] == ((SLOT, 1), (SLOT, 2), (SLOT, 3))
-    frames = SkinFrames(pdo.calibration, pdo.rate_hz, pdo.samples_per_pdo)
+    frames = SkinFrames(SampleObjects.of_skin(pdo.calibration, pdo.samples_per_pdo), pdo.rate_hz)
     out_t, out_f = [], []
     for n in range(4):
         data = struct.pack("<HHHB", 100 * n, 100 * n + 1, 100 * n + 2, n)
@@ -58,3 +63,21 @@ def test_frames_unpacked_by_the_eds_mapping_become_samples_on_the_sequence_grid(
     assert np.allclose(np.diff(out_t), 1 / 400.0)
     counts = [100 * n + k for n in range(4) for k in range(3)]
     assert out_f == list(pdo.calibration.to_newton(np.array(counts[: len(out_f)])))
+
+
+def test_a_single_analogue_value_without_a_sequence_is_timed_by_arrival():
+    """A vendor's analogue input (CiA 401 6401h) sampled on SYNC: one sample a frame, its
+    units scaled to newtons, sample times on the grid its arrivals lay."""
+    objects = SampleObjects(((0x6401, 1),), newtons_per_unit=0.01, zero_units=100)
+    frames = SkinFrames(objects, 100.0)
+    out_t, out_f = [], []
+    for n in range(40):
+        t_s, force_n = frames.feed(5_000 + n * 10_000, {(0x6401, 1): 100 + n})
+        out_t += list(t_s)
+        out_f += list(force_n)
+    t_s, force_n = frames.flush()
+    out_t += list(t_s)
+    out_f += list(force_n)
+    assert len(out_t) == 40
+    assert np.allclose(np.diff(out_t), 0.01)
+    assert np.allclose(out_f, 0.01 * np.arange(40))

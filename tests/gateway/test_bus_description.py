@@ -11,6 +11,7 @@ import pytest
 from grasplink.bus.lockstep import LockstepNetwork
 from grasplink.core.frames import SDO_RX_BASE
 from grasplink.core.nmt import NmtState
+from grasplink.decoding.io import skin_tpdo
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.node import DeviceNode
 from grasplink.errors import ConfigError
@@ -20,6 +21,8 @@ from grasplink.gateway.snapshot import NodePhase
 from grasplink.profiles import eds_path, load_profile
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
+from tests.gateway.test_service import HAND_RPDO, scene
+from tests.gateway.test_service import run as run_scene
 
 GRIPPER = 0x30
 VENDOR, PRODUCT = 0xABC, 0x4  # what the hand's EDS (copied as a vendor's file) says in 1018h
@@ -137,9 +140,11 @@ def test_a_bad_description_names_file_node_and_key_before_the_bus(
     assert "gw.toml" in str(info.value)
 
 
-def test_a_loop_node_is_grasplinks_own_and_keeps_its_table_name(tmp_path):
-    with pytest.raises(ConfigError, match=r"nodes\.hand\.eds: the hand role's node is grasplink"):
-        gateway_for(tmp_path, '[nodes.hand]\neds = "x.eds"\n', kinds_off=False)
+def test_a_loop_node_keeps_its_table_name_and_a_vendors_binds_its_objects(tmp_path, vendor_eds):
+    with pytest.raises(ConfigError, match=r"nodes\.hand\.drive: a vendor's node in the hand"):
+        gateway_for(tmp_path, '[nodes.hand]\neds = "vendor/gripper.eds"\n', kinds_off=False)
+    with pytest.raises(ConfigError, match=r"nodes\.hand\.drive: binds a vendor's node"):
+        gateway_for(tmp_path, '[nodes.hand.drive]\ntarget = "2400sub0"\n', kinds_off=False)
     with pytest.raises(ConfigError, match=r"nodes.belt.role: \[nodes.belt\] is the belt role"):
         gateway_for(tmp_path, '[nodes.belt]\nrole = "hand"\n', kinds_off=False)
     with pytest.raises(ConfigError, match=r"nodes\.Grip: a node's name is a-z"):
@@ -255,3 +260,62 @@ def test_a_dcf_writes_its_values_then_the_table_has_the_last_word(tmp_path, vend
     assert device.state is NmtState.OPERATIONAL
     assert device.store.get(obj.HAND_CRUSH_LIMIT_MN) == 25000  # the DCF's
     assert device.store.get(obj.HAND_GRIP_RATE_MN_S) == 20000  # the table's, written last
+
+
+# -- roles: a vendor's node in the loop --------------------------------------------------------
+def hand_rpdos(frames) -> list[tuple[int, bytes]]:
+    return [(t, bytes(f.data)) for t, f in frames if f.can_id == HAND_RPDO]
+
+
+def test_a_vendor_hand_bound_to_our_objects_is_commanded_bit_for_bit_as_ours(vendor_eds):
+    """The hand role bound through the description (the hand's own EDS as a vendor's file,
+    its grip objects named, 1000 units per N) drives the loop exactly as our own hand."""
+    _, _, ours = run_scene(scene(duration=2.0))
+    bound = (
+        f'[controller.nodes.hand]\neds = "{vendor_eds}"\n[controller.nodes.hand.drive]\n'
+        f'target = "{obj.HAND_TARGET_GRIP_MN:04X}sub0"\nunits_per_n = 1000.0\n'
+        f'actual = "{obj.HAND_ACTUAL_GRIP_MN:04X}sub0"\n'
+    )
+    _, gateway, theirs = run_scene(scene(duration=2.0, controller=bound))
+    assert gateway.config.nodes["hand"].binding is not None
+    assert len(hand_rpdos(ours)) > 10
+    assert hand_rpdos(theirs) == hand_rpdos(ours)
+
+
+def test_a_vendor_drive_binding_is_checked_against_its_file(tmp_path, vendor_eds):
+    def refused(drive: str) -> str:
+        with pytest.raises(ConfigError) as info:
+            gateway_for(
+                tmp_path,
+                f'[nodes.hand]\neds = "vendor/gripper.eds"\n[nodes.hand.drive]\n{drive}',
+                kinds_off=False,
+            )
+        return str(info.value)
+
+    target = f'target = "{obj.HAND_TARGET_GRIP_MN:04X}sub0"\n'
+    assert "nodes.hand.drive.units_per_n: is required" in refused(target)
+    assert "is in no RPDO of the file" in refused('target = "2401sub0"\nunits_per_n = 1.0\n')
+    assert "nodes.hand.drive.actual: 0x2400sub0 is in no TPDO" in refused(
+        target + 'units_per_n = 1.0\nactual = "2400sub0"\n'
+    )
+    assert "expected a number > 0" in refused(target + "units_per_n = 0\n")
+
+
+def test_a_vendor_skin_bound_to_analogue_values_is_timed_by_arrival(tmp_path):
+    """The skin role bound to three sample objects without a packet number (as an analogue
+    module sends them): samples are timed by arrival, the slip is decoded all the same."""
+    vendor = tmp_path / "skin.eds"
+    shutil.copy(eds_path("skin"), vendor)
+    step = skin_tpdo().calibration.n_per_count
+    slots = ", ".join(f'"{obj.SKIN_SAMPLE_SLOTS:04X}sub{sub}"' for sub in (1, 2, 3))
+    bound = (
+        f'[controller.nodes.skin]\neds = "{vendor}"\n[controller.nodes.skin.samples]\n'
+        f"objects = [{slots}]\nnewtons_per_unit = {step!r}\n"
+    )
+    _, ours, _ = run_scene(scene(duration=2.5))
+    _, theirs, _ = run_scene(scene(duration=2.5, controller=bound))
+    binding = theirs.config.nodes["skin"].binding
+    assert binding is not None and binding.objects.sequence is None
+    assert theirs.skin_frames.stats.packets == ours.skin_frames.stats.packets > 100
+    assert theirs.last_estimate is not None and theirs.last_estimate.slip
+    assert theirs.last_estimate.speed_mm_s == pytest.approx(ours.last_estimate.speed_mm_s, rel=0.05)
