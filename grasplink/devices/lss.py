@@ -129,7 +129,7 @@ class LssSlave:
     """The LSS state machine of one node; see the module docstring.
 
     `stored_node_id` and `stored_bit_timing` are the node's non-volatile LSS
-    configuration: they survive `power_on`, like the 1010h values in
+    configuration: they survive a power cycle, like the 1010h values in
     `ObjectStore.nvm` (CiA 305 keeps them apart from 1010h, so 1011h does not
     forget them). `can_store` False makes "store configuration" answer error 1
     (not supported), as a device without non-volatile memory does.
@@ -168,10 +168,11 @@ class LssSlave:
 
     def identity(self) -> tuple[int, int, int, int]:
         """The LSS address, from 1018h (a sub-index the EDS lacks reads 0)."""
-        return tuple(  # type: ignore[return-value]
+        vendor, product, revision, serial = (
             int(self.store.get(obj.IDENTITY, sub)) if self.store.has(obj.IDENTITY, sub) else 0
             for sub in range(1, IDENTITY_PARTS + 1)
         )
+        return vendor, product, revision, serial
 
     @staticmethod
     def unconfigured(active_node_id: int, pending_node_id: int) -> bool:
