@@ -34,6 +34,23 @@ def node_id_arg(text: str) -> int:
     return value
 
 
+def device_node_id_arg(text: str) -> int:
+    """A device's node-ID: 1..127, or 0xFF for a node that waits for an LSS master."""
+    if text.strip().lower() in ("0xff", "255"):
+        return 0xFF
+    return node_id_arg(text)
+
+
+def serial_arg(text: str) -> int:
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"serial number {text!r} is not a number") from None
+    if not 0 <= value <= 0xFFFFFFFF:
+        raise argparse.ArgumentTypeError(f"serial number {text} is outside 0..0xFFFFFFFF")
+    return value
+
+
 def positive_seconds(text: str) -> float:
     try:
         value = float(text)
@@ -73,9 +90,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     node.add_argument(
         "--node-id",
-        type=node_id_arg,
+        type=device_node_id_arg,
         default=None,
-        help="CANopen node-ID 1..127 (default: the profile's)",
+        help="CANopen node-ID 1..127 (default: the profile's), or 0xFF: unconfigured, "
+        "silent until an LSS master gives it one (docs/devices.md, LSS)",
+    )
+    node.add_argument(
+        "--serial",
+        type=serial_arg,
+        default=None,
+        help="serial number in 1018h:04 (default 0), the part of the LSS address that "
+        "tells nodes of one kind apart",
     )
     node.add_argument(
         "--duration",
@@ -398,10 +423,11 @@ def cmd_node(args: argparse.Namespace) -> int:
     from grasplink.devices.factory import build_node
     from grasplink.errors import BusError
 
-    node = build_node(args.kind, args.node_id)
+    node = build_node(args.kind, args.node_id, serial=args.serial)
     bus = open_bus(args.bus)
     try:
-        _refuse_if_node_id_taken(bus, node.node_id, args.bus)
+        if node.configured:
+            _refuse_if_node_id_taken(bus, node.node_id, args.bus)
         stop = threading.Event()
         if threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -414,10 +440,17 @@ def cmd_node(args: argparse.Namespace) -> int:
             reopen=lambda: open_bus(args.bus),
             reconnect_timeout_s=args.reconnect_timeout,
         ) as runner:
-            print(f"{args.kind} node 0x{node.node_id:02X} running on {args.bus}", flush=True)
+            if node.configured:
+                print(f"{args.kind} node 0x{node.node_id:02X} running on {args.bus}", flush=True)
+            else:
+                print(
+                    f"{args.kind} node running unconfigured on {args.bus}: "
+                    "waiting for an LSS master to give it a node-ID",
+                    flush=True,
+                )
             deadline = None if args.duration is None else time.monotonic() + args.duration
-            heartbeat_id = HEARTBEAT_BASE + node.node_id
             warned = False
+            node_id = node.node_id
             try:
                 while not stop.wait(0.1):
                     if runner.failure is not None:
@@ -426,6 +459,11 @@ def cmd_node(args: argparse.Namespace) -> int:
                     # 8150h itself), never a reason to leave the bus: a guarding RTR or one
                     # stray frame must not take a node down.
                     colliding = node.collision_active
+                    if node.node_id != node_id:  # LSS gave or changed it
+                        node_id = node.node_id
+                        state = f"0x{node_id:02X}" if node.configured else "none (unconfigured)"
+                        print(f"node-ID now {state}", flush=True)
+                    heartbeat_id = HEARTBEAT_BASE + node_id
                     if colliding and not warned:
                         print(
                             f"warning: another node transmits on 0x{heartbeat_id:03X} "

@@ -15,7 +15,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 
 from grasplink.bus.faults import ErrorFrame, FaultyLink
-from grasplink.core.frames import Frame
+from grasplink.core.frames import UNCONFIGURED_NODE_ID, Frame
 from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import ConfigError
 
@@ -41,7 +41,10 @@ class LockstepNetwork:
             self.add(device)
 
     def add(self, device: SansIoDevice) -> None:
-        if any(d.node_id == device.node_id for d in self.devices):
+        # Unconfigured nodes (FFh) share their "node-ID" until LSS gives them theirs.
+        if device.node_id != UNCONFIGURED_NODE_ID and any(
+            d.node_id == device.node_id for d in self.devices
+        ):
             raise ConfigError(f"two nodes with node-ID 0x{device.node_id:02X} on one bus")
         self.devices.append(device)
 

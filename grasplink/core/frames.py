@@ -12,7 +12,10 @@ RPDO_BASES = (0x200, 0x300, 0x400, 0x500)
 SDO_TX_BASE = 0x580  # server -> client
 SDO_RX_BASE = 0x600  # client -> server
 HEARTBEAT_BASE = 0x700
+LSS_SLAVE_COB_ID = 0x7E4  # LSS slave -> master (CiA 305)
+LSS_MASTER_COB_ID = 0x7E5  # LSS master -> slaves
 NODE_ID_MASK = 0x7F
+UNCONFIGURED_NODE_ID = 0xFF  # no node-ID yet: the node answers only LSS (CiA 305)
 
 # CAN-IDs no PDO, SYNC or EMCY may use (CiA 301 7.3.5, "restricted CAN-IDs").
 RESTRICTED_CAN_IDS = (
@@ -39,10 +42,13 @@ FUNCTION_NAMES = {
 
 
 def function_of(can_id: int) -> tuple[str, int]:
-    """(service name, node-ID) of a predefined-connection-set CAN-ID; ("SYNC", 0) for 080h."""
+    """(service name, node-ID) of a predefined-connection-set CAN-ID; ("SYNC", 0) for 080h,
+    ("LSS master", 0) and ("LSS slave", 0) for 7E5h and 7E4h."""
     base, node_id = can_id & ~NODE_ID_MASK, can_id & NODE_ID_MASK
     if can_id == SYNC_COB_ID_DEFAULT:
         return "SYNC", 0
+    if can_id in (LSS_MASTER_COB_ID, LSS_SLAVE_COB_ID):
+        return ("LSS master" if can_id == LSS_MASTER_COB_ID else "LSS slave"), 0
     return FUNCTION_NAMES.get(base, f"0x{base:03X}"), node_id
 
 

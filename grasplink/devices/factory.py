@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from grasplink.core.frames import UNCONFIGURED_NODE_ID
 from grasplink.devices import emcy as em
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.belt import BeltApp
@@ -13,7 +14,9 @@ from grasplink.devices.hand import HandApp
 from grasplink.devices.node import DeviceNode
 from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import SampleSource
-from grasplink.profiles import load_profile
+from grasplink.errors import ConfigError
+from grasplink.profiles import load_profile, od_variable
+from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import node_kind, per_kind
 
 
@@ -44,17 +47,33 @@ def make_app(kind: str, source: SampleSource | None = None) -> DeviceApp:
     return DEVICES[node_kind(kind).name].app(source)
 
 
+SERIAL_MAX = 0xFFFFFFFF
+
+
 def build_node(
     kind: str,
     node_id: int | None = None,
     source: SampleSource | None = None,
     app: DeviceApp | None = None,
+    *,
+    serial: int | None = None,
 ) -> DeviceNode:
     """A ready-to-start node of `kind` at `node_id` (default: the kind's, kinds.py).
 
+    `node_id` 0xFF builds an unconfigured node that waits for an LSS master.
+    `serial` is its serial number (1018h:04, default 0): nodes of one kind that an
+    LSS master must tell apart need different ones.
     `app` replaces the default application of `kind` (e.g. a drive with an external motor).
     """
     default_id = node_kind(kind).node_id
     app = app or make_app(kind, source)
     node_id = default_id if node_id is None else node_id
-    return DeviceNode(load_profile(kind, node_id), node_id, app)
+    # The dictionary of an unconfigured node is built for the kind's node-ID; its
+    # $NODEID defaults move to the one LSS gives it.
+    od_node_id = default_id if node_id == UNCONFIGURED_NODE_ID else node_id
+    od = load_profile(kind, od_node_id)
+    if serial is not None:
+        if not 0 <= serial <= SERIAL_MAX:
+            raise ConfigError(f"serial number {serial} is outside 0..0x{SERIAL_MAX:X}")
+        od_variable(od, obj.IDENTITY, 4).default = serial
+    return DeviceNode(od, node_id, app, od_node_id=od_node_id)

@@ -3,6 +3,10 @@
 `DeviceNode` is the firmware of every grasplink node; what differs between
 the skin, EMG, belt and hand is the object dictionary (EDS) and the
 `DeviceApp` plugged in. Everything is sans-IO (see `protocol.SansIoDevice`).
+
+`node_id` is the *active* node-ID; LSS (`lss.py`) may set a pending one, taken
+at the next NMT reset. A node whose node-ID is FFh (`UNCONFIGURED_NODE_ID`)
+answers LSS only, and boots once an LSS master has given it a node-ID.
 """
 
 from __future__ import annotations
@@ -11,9 +15,12 @@ import canopen.objectdictionary as cod
 
 from grasplink.core.frames import (
     HEARTBEAT_BASE,
+    LSS_MASTER_COB_ID,
+    LSS_SLAVE_COB_ID,
     NMT_COB_ID,
     SDO_RX_BASE,
     SDO_TX_BASE,
+    UNCONFIGURED_NODE_ID,
     Frame,
     is_restricted_can_id,
 )
@@ -27,6 +34,7 @@ from grasplink.core.nmt import (
 from grasplink.devices import emcy as em
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.heartbeat import HeartbeatConsumer, HeartbeatProducer
+from grasplink.devices.lss import LssSlave
 from grasplink.devices.pdo import CAN_ID_MASK, PdoEngine
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sdo_server import SdoServer
@@ -64,11 +72,19 @@ class DeviceNode:
         app: DeviceApp | None = None,
         *,
         dummies: frozenset[int] | None = None,
+        od_node_id: int | None = None,
     ):
-        if not 1 <= node_id <= 127:
-            raise ConfigError(f"node-ID {node_id} is outside 1..127")
+        """`od_node_id`: the node-ID `od` was loaded for (default `node_id`; an
+        unconfigured node's dictionary needs one to resolve `$NODEID`)."""
+        if not (1 <= node_id <= 127 or node_id == UNCONFIGURED_NODE_ID):
+            raise ConfigError(f"node-ID {node_id} is outside 1..127 (or 0xFF: unconfigured)")
+        if od_node_id is None:
+            if node_id == UNCONFIGURED_NODE_ID:
+                raise ConfigError("an unconfigured node needs the node-ID its EDS was loaded for")
+            od_node_id = node_id
         self.node_id = node_id
-        self.store = ObjectStore(od)
+        self.store = ObjectStore(od, od_node_id)
+        self.lss = LssSlave(self.store, node_id)
         self.emcy = em.EmcyProducer(self.store)
         self.heartbeat = HeartbeatProducer(self.store)
         self.consumer = HeartbeatConsumer(self.store)
@@ -99,10 +115,16 @@ class DeviceNode:
     def _mark_stale(self, *_change: object) -> None:
         self._deadline_stale = True
 
+    @property
+    def configured(self) -> bool:
+        """Whether the node has a node-ID (else it waits for an LSS master)."""
+        return self.node_id != UNCONFIGURED_NODE_ID
+
     def start(self, t_us: int) -> list[Frame]:
-        """Power on: initialise the whole dictionary and boot."""
+        """Power on: initialise the whole dictionary and boot (with the node-ID LSS stored)."""
         self._deadline_stale = True
         self.powered = True
+        self.lss.power_on()
         return self._reset(t_us, application=True)
 
     def power_off(self) -> None:
@@ -113,7 +135,13 @@ class DeviceNode:
         self.pdo.set_operational(False, 0)
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
-        if not self.powered or self.state == NmtState.INITIALISING:
+        if not self.powered:
+            return []
+        if frame.can_id == LSS_MASTER_COB_ID and not frame.rtr:
+            self._deadline_stale = True
+            self._touch(t_us)
+            return self._on_lss(frame, t_us)
+        if self.state == NmtState.INITIALISING:
             return []
         self._touch(t_us)
         frames = self._dispatch(frame, t_us)
@@ -176,8 +204,8 @@ class DeviceNode:
         return self._deadline
 
     def _compute_deadline(self) -> int | None:
-        if not self.powered:
-            return None
+        if not self.powered or self.state == NmtState.INITIALISING:
+            return None  # off, or unconfigured: nothing runs until LSS gives a node-ID
         candidates = [
             self.heartbeat.next_deadline_us(),
             self.consumer.next_deadline_us(),
@@ -220,8 +248,16 @@ class DeviceNode:
         return self.pdo.advance(t_us) if state == NmtState.OPERATIONAL else []
 
     def _reset(self, t_us: int, *, application: bool) -> list[Frame]:
-        """Reset node (application=True) or reset communication, then boot again."""
+        """Reset node (application=True) or reset communication, then boot again.
+
+        The pending node-ID becomes the active one (CiA 305); without one the node
+        stays in initialisation, silent but for LSS.
+        """
         self.state = NmtState.INITIALISING
+        self.node_id = self.lss.pending_node_id
+        if self.configured:
+            self.store.node_id = self.node_id  # $NODEID defaults follow it
+        self.lss.reset()
         self.pdo.set_operational(False, t_us)
         self.sdo.reset()
         if application:
@@ -233,10 +269,21 @@ class DeviceNode:
         self.consumer.reset()
         if application:
             self.app.on_reset(t_us)
+        if not self.configured:
+            return []
         self.heartbeat.restart(t_us)
         self.state = NmtState.PRE_OPERATIONAL
         self.app.on_state(self.state, t_us)
         return [Frame(HEARTBEAT_BASE + self.node_id, bytes([NmtState.INITIALISING]))]
+
+    # -- LSS -------------------------------------------------------------------------------
+    def _on_lss(self, frame: Frame, t_us: int) -> list[Frame]:
+        outcome = self.lss.on_request(bytes(frame.data), self.node_id)
+        frames = [] if outcome.reply is None else [Frame(LSS_SLAVE_COB_ID, outcome.reply)]
+        if outcome.boot:
+            # An unconfigured node never booted: with its first node-ID it boots in full.
+            frames += self._reset(t_us, application=True)
+        return frames
 
     # -- heartbeat consumer --------------------------------------------------------------
     def _on_heartbeat(self, node_id: int, state: int, t_us: int) -> list[Frame]:

@@ -9,6 +9,11 @@ process data does, and notifies listeners so mapped TPDOs see changes.
 
 "Non-volatile memory" (objects 1010h/1011h) is a dict that survives resets
 of this object, which is what a reset node / reset communication must honour.
+
+Defaults written `$NODEID+...` in the EDS (COB-IDs) follow `node_id`: a node
+whose node-ID LSS changed gets its new COB-IDs at the next reset, and 1010h
+stores such an entry only when it differs from that default, so a stored
+default keeps following the node-ID (as CANopenNode does).
 """
 
 from __future__ import annotations
@@ -85,7 +90,8 @@ def _iter_variables(od: cod.ObjectDictionary) -> Iterator[ODVariable]:
 class ObjectStore:
     """Current values of a device's object dictionary, with CiA 301 write checks."""
 
-    def __init__(self, od: cod.ObjectDictionary):
+    def __init__(self, od: cod.ObjectDictionary, node_id: int = 0):
+        """`node_id`: the one `od`'s `$NODEID` defaults were resolved for."""
         self.od = od
         self._entries: dict[Key, Entry] = {}
         self._objects: set[int] = set()
@@ -97,6 +103,8 @@ class ObjectStore:
         self._listeners_by_index: dict[int, list[Listener]] = {}
         self._commands: dict[int, Command] = {}
         self.nvm: dict[Key, Value] = {}
+        self._od_node_id = node_id
+        self.node_id = node_id  # the one `default` computes `$NODEID` defaults for
         self.add_command(obj.STORE_PARAMETERS, self._on_store)
         self.add_command(obj.RESTORE_DEFAULTS, self._on_restore)
 
@@ -213,12 +221,19 @@ class ObjectStore:
             raise SdoAbort(AbortCode.VALUE_TOO_LOW, f"{value} < {var.min}")
 
     # -- defaults and non-volatile memory ------------------------------------
+    def default(self, entry: Entry) -> Value:
+        """The EDS default of `entry`, a `$NODEID` one for the current `node_id`."""
+        value = _default_of(entry.var)
+        if entry.var.relative and isinstance(value, int):
+            return value - self._od_node_id + self.node_id
+        return value
+
     def load_defaults(self, area: range) -> None:
         """Reset an area to EDS defaults overlaid with what 1010h stored."""
         for (index, sub), entry in self._entries.items():
             if index in area:
                 key = (index, sub)
-                value = self.nvm.get(key, _default_of(entry.var))
+                value = self.nvm.get(key, self.default(entry))
                 self.set(index, sub, value)
 
     def _on_store(self, subindex: int, value: Value) -> None:
@@ -229,7 +244,10 @@ class ObjectStore:
                 and self._in(index, subindex)
                 and index not in (obj.STORE_PARAMETERS, obj.RESTORE_DEFAULTS)
             ):
-                self.nvm[(index, sub)] = entry.value
+                if entry.var.relative and entry.value == self.default(entry):
+                    self.nvm.pop((index, sub), None)  # keeps following the node-ID
+                else:
+                    self.nvm[(index, sub)] = entry.value
 
     def _on_restore(self, subindex: int, value: Value) -> None:
         """Forget stored values; the defaults take effect at the next reset (CiA 301)."""
