@@ -738,6 +738,12 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     ready_file = args.ready_file
     if ready_file is not None:
         _clear_ready_file(ready_file)  # a stale one must not say "up" for this run
+    if config.lss:  # unconfigured nodes get their node-IDs first (docs/gateway.md, LSS)
+        from grasplink.gateway.lss import assign_at_start
+
+        for url in buses:
+            report = assign_at_start(url, config)
+            print(f"{url}: {report.summary()}", file=sys.stdout if report.ok else sys.stderr)
     # Start-up order: every surface is bound or connected before the network is touched,
     # so a failure (port taken, broker unreachable) exits having sent no frame.
     with StopSignals() as stop, ExitStack() as running:

@@ -142,6 +142,7 @@ class GatewayConfig:
     consumer_allowance_ms: int = CONSUMER_ALLOWANCE_MS
     sdo_timeout_ms: int = 500
     status_period_s: float = 5.0
+    lss: bool = False  # assign node-IDs over LSS at start (the description's identities)
     nodes: dict[str, NodeConfig] = field(default_factory=dict)
     feedback: FeedbackSettings = field(default_factory=FeedbackSettings)
     reflex: ReflexConfig = field(default_factory=ReflexConfig)
@@ -192,6 +193,7 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     )
     config.sdo_timeout_ms = gw.integer("sdo_timeout_ms", 500, low=10, high=10_000)
     config.status_period_s = gw.number("status_period_s", 5.0, low=0.1, high=3600.0)
+    config.lss = gw.boolean("lss", False)
     gw.finish()
     nodes = top.table_of("nodes", {})
     base = _base_folder(source)
@@ -214,6 +216,15 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
         used[node.node_id] = name
         p.finish()
         config.nodes[name] = node
+    if config.lss and not any(
+        node.identity is not None and len(node.identity.expected) == len(description.IDENTITY_SUBS)
+        for node in config.nodes.values()
+    ):
+        raise gw.error(
+            "lss",
+            "no node's identity names vendor_id, product_code, revision and serial: LSS "
+            "addresses a node by all four",
+        )
     config.feedback = _feedback(top.table_of("feedback", {}))
     hand = config.nodes.get("hand")
     crush_n = hand.crush_limit_n if isinstance(hand, HandConfig) else 40.0

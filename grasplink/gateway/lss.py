@@ -27,6 +27,7 @@ import canopen
 from canopen.lss import LssError
 
 from grasplink.errors import ConfigError
+from grasplink.gateway.config import GatewayConfig
 
 log = logging.getLogger(__name__)
 
@@ -179,3 +180,27 @@ def _assign(lss: LssMasterApi, address: LssAddress, node_id: int, report: LssRep
         report.failed[address] = str(exc)
     finally:
         lss.send_switch_state_global(lss.WAITING_STATE)  # boots with its node-ID
+
+
+def wanted_from(config: GatewayConfig) -> dict[LssAddress, int]:
+    """The description's nodes that LSS can address: those whose identity names all of
+    vendor, product, revision and serial (an LSS address), with their node-IDs."""
+    wanted = {}
+    for node in config.nodes.values():
+        expected = dict(node.identity.expected) if node.identity is not None else {}
+        if len(expected) == len(LssAddress._fields):
+            wanted[LssAddress(*(expected[sub] for sub in (1, 2, 3, 4)))] = node.node_id
+    return wanted
+
+
+def assign_at_start(bus_url: str, config: GatewayConfig) -> LssReport:
+    """`[gateway] lss = true`: before the gateway's loop, give every unconfigured node the
+    description names its node-ID, on a bus handle of its own (python-canopen's)."""
+    from grasplink.bus.url import open_bus
+
+    network = canopen.Network(open_bus(bus_url))
+    network.connect()
+    try:
+        return assign_node_ids(network, wanted_from(config))
+    finally:
+        network.disconnect()

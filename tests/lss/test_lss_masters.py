@@ -157,3 +157,43 @@ def test_the_gateway_assigns_known_nodes_and_reports_the_unknown_one(virtual_bus
 def test_assignments_with_bad_node_ids_are_refused_before_the_bus(wanted, message):
     with pytest.raises(ConfigError, match=message):
         check_assignments(wanted)
+
+
+@pytest.mark.slow
+def test_the_gateway_assigns_the_descriptions_identities_at_start():
+    """`[gateway] lss = true`: the node whose description names its whole LSS address is
+    given its node-ID before the gateway's loop starts, on a bus handle of its own."""
+    from grasplink.gateway.config import parse_config
+    from grasplink.gateway.lss import assign_at_start, wanted_from
+
+    identity = {
+        "vendor_id": VENDOR_ID,
+        "product_code": SKIN_PRODUCT,
+        "revision": REVISION,
+        "serial": 9,
+    }
+    data = {
+        "gateway": {"lss": True},
+        "nodes": {"skin": {"node_id": 0x12, "identity": identity}},
+    }
+    config = parse_config(data, "gw.toml")
+    assert wanted_from(config) == {LssAddress(VENDOR_ID, SKIN_PRODUCT, REVISION, 9): 0x12}
+    channel = f"lss-{uuid.uuid4().hex}"
+    node = build_node("skin", UNCONFIGURED, serial=9)
+    device_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    runner = NodeRunner(device_bus, [node], max_wait_s=0.01, name="lss-nodes").start()
+    try:
+        report = assign_at_start(f"virtual:{channel}", config)
+    finally:
+        runner.stop()
+        device_bus.shutdown()
+    assert report.assigned == {LssAddress(VENDOR_ID, SKIN_PRODUCT, REVISION, 9): 0x12}
+    assert node.node_id == 0x12
+
+
+def test_lss_at_start_needs_a_whole_lss_address_in_the_description():
+    from grasplink.gateway.config import parse_config
+
+    data = {"gateway": {"lss": True}, "nodes": {"skin": {"identity": {"vendor_id": 1}}}}
+    with pytest.raises(ConfigError, match=r"gateway\.lss: no node.s identity names vendor_id"):
+        parse_config(data, "gw.toml")
