@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, ExitStack, nullcontext
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from grasplink.errors import ConfigError, GrasplinkError
 
@@ -347,7 +347,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _add_log_commands(sub: argparse._SubParsersAction, default_bus: str) -> None:
+class Subcommands(Protocol):
+    """What `ArgumentParser.add_subparsers` returns, as far as we use it (its class is
+    argparse's private `_SubParsersAction`)."""
+
+    def add_parser(self, name: str, *, help: str | None = ...) -> argparse.ArgumentParser: ...
+
+
+def _add_log_commands(sub: Subcommands, default_bus: str) -> None:
     """`record` and `replay`: CAN logs in the formats analysers read (docs/can_tools.md)."""
     record = sub.add_parser("record", help="record a bus to a CAN log (.asc, .blf, .log, .trc)")
     record.add_argument(

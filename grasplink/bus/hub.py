@@ -73,8 +73,9 @@ class _HubSession(RemoteServerProtocol):
     """One client's session: RemoteServerProtocol's loops, ending quietly when the client goes.
 
     The receiving loop (the handler's thread) and the sending loop (a thread of
-    its own) are python-can-remote 0.3.0's, except that a dead socket in either
-    ends the session for both, and its reason is kept for one log line.
+    its own) do what python-can-remote 0.3.0's do, on our own thread and table of
+    periodic tasks, except that a dead socket in either ends the session for both,
+    and its reason is kept for one log line.
     """
 
     def __init__(self, config: dict[str, Any], websocket: WebSocket, address: str) -> None:
@@ -82,17 +83,20 @@ class _HubSession(RemoteServerProtocol):
         self.address = address
         self.ended: BaseException | None = None  # why the session ended (first seen)
         super().__init__(config, websocket)
+        # our own sending thread and periodic tasks (the base's are private to it: unused)
+        self._sender = threading.Thread(target=self._bus_to_client, daemon=True)
+        self._periodic: dict[int, Any] = {}  # CAN-ID -> the bus's (modifiable) periodic task
 
     def run(self) -> None:
-        self._send_thread.start()
+        self._sender.start()
         try:
-            self._receive_from_client()
+            self._client_to_bus()
         except _GONE as exc:
             self._end(exc)
         finally:
             self._end(None)
-            if self._send_thread.is_alive():
-                self._send_thread.join(3)
+            if self._sender.is_alive():
+                self._sender.join(3)
 
     def _end(self, why: BaseException | None) -> None:
         """Stop both loops; the first reason given is the one logged."""
@@ -102,7 +106,7 @@ class _HubSession(RemoteServerProtocol):
         with contextlib.suppress(OSError):  # wakes the receiving loop out of its select()
             self.websocket.socket.shutdown(socket.SHUT_RDWR)
 
-    def _send_to_client(self) -> None:
+    def _bus_to_client(self) -> None:
         try:
             while self.running:
                 msg = self.bus.recv(0.5)
@@ -113,7 +117,7 @@ class _HubSession(RemoteServerProtocol):
         finally:
             self.bus.shutdown()
 
-    def _receive_from_client(self) -> None:
+    def _client_to_bus(self) -> None:
         while self.running:
             event = self.recv()
             if event is None:
@@ -122,15 +126,15 @@ class _HubSession(RemoteServerProtocol):
                 self.bus.send(event)
             elif event["type"] == "periodic_start":
                 msg = can.Message(**event["payload"]["msg"])
-                task = self._send_tasks.get(msg.arbitration_id)
+                task = self._periodic.get(msg.arbitration_id)
                 if task is not None:
                     task.modify_data(msg)
                 else:
-                    self._send_tasks[msg.arbitration_id] = self.bus.send_periodic(
+                    self._periodic[msg.arbitration_id] = self.bus.send_periodic(
                         msg, event["payload"]["period"], event["payload"].get("duration")
                     )
             elif event["type"] == "periodic_stop":
-                stopped = self._send_tasks.pop(event["payload"], None)
+                stopped = self._periodic.pop(event["payload"], None)
                 if stopped is not None:
                     stopped.stop()
 

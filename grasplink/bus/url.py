@@ -22,6 +22,7 @@ import contextlib
 import errno
 import os
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -35,7 +36,7 @@ from can.broadcastmanager import ThreadBasedCyclicSendTask
 from can_remote import DEFAULT_PORT as CAN_REMOTE_DEFAULT_PORT
 from can_remote.client import DEFAULT_SSL_CONTEXT, RemoteBus, RemoteClientProtocol
 from can_remote.protocol import RemoteError
-from can_remote.websocket import WebSocket, WebsocketClosed, get_accept_key
+from can_remote.websocket import CLOSE, WebSocket, WebsocketClosed, get_accept_key
 
 from grasplink.bus.options import convert_options, format_value
 from grasplink.core.frames import Frame
@@ -224,7 +225,14 @@ def _open_failure_message(spec: BusSpec, exc: Exception) -> str:
 
 
 class _HubWebSocket(WebSocket):
-    """can_remote's client websocket, with a timeout on connect and handshake."""
+    """can_remote's client websocket, with a timeout on connect and handshake.
+
+    `secure` says whether the socket is TLS: python-can-remote keeps that in a private
+    flag its own `connect` sets, so `close` here does what its close does for TLS.
+    """
+
+    secure = False
+    closed: bool  # WebSocket's (set in its __init__)
 
     def __init__(self, url: str, protocols: list[str], *, ssl_context: Any, timeout: float):
         self._connect_timeout = timeout
@@ -237,7 +245,7 @@ class _HubWebSocket(WebSocket):
             conn: HTTPConnection = HTTPSConnection(
                 o.netloc, context=ssl_context, timeout=self._connect_timeout
             )
-            self._ssl = True
+            self.secure = True
         else:
             conn = HTTPConnection(o.netloc, timeout=self._connect_timeout)
         try:
@@ -269,6 +277,18 @@ class _HubWebSocket(WebSocket):
         self.socket = conn.sock
         self.socket.settimeout(None)  # can_remote waits with select() from here on
 
+    def close(self, status: int | None = None, reason: str = "") -> None:
+        if not self.secure:
+            super().close(status, reason)  # the close frame, then a half-close
+            return
+        # TLS has no half-close: the close frame alone, as python-can-remote 0.3.0 does for it
+        if not self.closed:
+            payload = struct.pack(">H", status) + reason.encode() if status else b""
+            try:
+                self.send_frame(CLOSE, payload)
+            finally:
+                self.closed = True
+
 
 class _NotAHub(Exception):
     pass
@@ -296,6 +316,8 @@ class HubClientBus(RemoteBus):
     stock one can spin or raise when the connection is already gone). The
     handle never recovers: reconnecting means opening a new one.
     """
+
+    _shut_down = True  # until built: nothing to shut down
 
     def __init__(
         self,
@@ -325,6 +347,7 @@ class HubClientBus(RemoteBus):
         self.channel = channel
         self._periodic_lock = threading.Lock()
         can.BusABC.__init__(self, channel)
+        self._shut_down = False
 
     def _send_periodic_internal(
         self,
@@ -369,8 +392,9 @@ class HubClientBus(RemoteBus):
             raise BusDisconnected(f"connection to CAN hub {self.channel} closed ({exc})") from exc
 
     def shutdown(self) -> None:
-        if self._is_shutdown:
+        if self._shut_down:
             return
+        self._shut_down = True
         self.stop_all_periodic_tasks()  # before the socket closes under their threads
         ws = self.websocket
         try:

@@ -34,10 +34,13 @@ DOMAIN_FILES = {"physics": "truth.csv", "skin": "skin.csv", "emg": "emg.csv"}
 
 
 class SceneAscWriter(can.ASCWriter):
-    """python-can's ASC writer with the scene epoch instead of the wall clock in its header."""
+    """python-can's ASC writer with the scene epoch instead of the wall clock in its header.
 
-    def _format_header_datetime(self, dt: datetime) -> str:
-        return SCENE_EPOCH.strftime(self.FORMAT_DATE.format(0))
+    Its header times are `FORMAT_DATE` (a public class attribute) given the milliseconds,
+    then formatted by strftime: a date with neither braces nor % directives stays as it is.
+    """
+
+    FORMAT_DATE = SCENE_EPOCH.strftime("%a %b %d %H:%M:%S.0 %Y")
 
 
 class CsvStream:

@@ -201,7 +201,7 @@ class Register:
     section: str = ""
     path: tuple[str, ...] = ()
     derive: Callable[[Any], Any] | None = None
-    source: str = ""  # where the value comes from, for the docs
+    source: str = ""  # where the value comes from, for the docs (default: "snapshot PATH")
     profile: ProfileSource | None = None
     codes: Mapping[str, int] | None = None
     bits: tuple[str, ...] = ()
@@ -619,6 +619,8 @@ class _Table:
                 check_path(kw["path"])
             except ValueError as exc:
                 raise ValueError(f"input register {name}: {exc}") from None
+            # the docs' source column: the path, unless the register says more
+            kw.setdefault("source", "snapshot " + ".".join(kw["path"]))
         profile: ProfileSource | None = kw.get("profile")
         if word_type is None:
             assert profile is not None
@@ -721,7 +723,6 @@ def _inputs() -> tuple[Register, ...]:
             f"{kind} node-ID; 0 when not configured",
             path=(*base, "node_id"),
             default=0,
-            source=f"snapshot nodes.{kind}.node_id",
         )
         t.add(
             f"nodes.{kind}.nmt_state",
@@ -729,7 +730,6 @@ def _inputs() -> tuple[Register, ...]:
             "NMT state from its last heartbeat (CANopen state byte)",
             path=(*base, "nmt_state"),
             codes=NMT_CODES,
-            source=f"snapshot nodes.{kind}.nmt_state",
         )
         t.add(
             f"nodes.{kind}.phase",
@@ -737,7 +737,6 @@ def _inputs() -> tuple[Register, ...]:
             "what the gateway is doing with the node",
             path=(*base, "phase"),
             codes=PHASE_CODES,
-            source=f"snapshot nodes.{kind}.phase",
         )
         t.add(
             f"nodes.{kind}.boots",
@@ -745,7 +744,6 @@ def _inputs() -> tuple[Register, ...]:
             "boot-ups seen",
             path=(*base, "boots"),
             counter=True,
-            source=f"snapshot nodes.{kind}.boots",
         )
         t.add(
             f"nodes.{kind}.pdos_rx",
@@ -753,7 +751,6 @@ def _inputs() -> tuple[Register, ...]:
             "TPDOs received and decoded",
             path=(*base, "pdos_rx"),
             counter=True,
-            source=f"snapshot nodes.{kind}.pdos_rx",
         )
         t.add(
             f"nodes.{kind}.pdos_dropped",
@@ -761,7 +758,6 @@ def _inputs() -> tuple[Register, ...]:
             "TPDOs dropped (did not fit the mapping)",
             path=(*base, "pdos_dropped"),
             counter=True,
-            source=f"snapshot nodes.{kind}.pdos_dropped",
         )
         t.add(
             f"nodes.{kind}.last_emcy_code",
@@ -780,14 +776,12 @@ def _inputs() -> tuple[Register, ...]:
         unit="N",
         path=("skin", "grip_force_n"),
         profile=profile_source("skin", obj.SKIN_STATIC_FORCE_MN),
-        source="snapshot skin.grip_force_n",
     )
     t.add(
         "skin.slip",
         U16,
         "the decoder reports slip (0 no, 1 yes)",
         path=("skin", "slip"),
-        source="snapshot skin.slip",
     )
     t.add(
         "skin.slip_speed_mm_s",
@@ -797,7 +791,6 @@ def _inputs() -> tuple[Register, ...]:
         unit="mm/s",
         scale=0.1,
         path=("skin", "slip_speed_mm_s"),
-        source="snapshot skin.slip_speed_mm_s",
     )
     t.add(
         "skin.position_mm",
@@ -806,7 +799,6 @@ def _inputs() -> tuple[Register, ...]:
         unit="mm",
         scale=0.001,
         path=("skin", "position_mm"),
-        source="snapshot skin.position_mm",
     )
     t.add(
         "skin.confidence",
@@ -814,7 +806,6 @@ def _inputs() -> tuple[Register, ...]:
         "decoder confidence 0..1",
         scale=0.001,
         path=("skin", "confidence"),
-        source="snapshot skin.confidence",
     )
     t.add(
         "skin.lost_packets",
@@ -822,7 +813,6 @@ def _inputs() -> tuple[Register, ...]:
         "skin sample packets lost (sequence gaps)",
         path=("nodes", "skin", "lost_packets"),
         counter=True,
-        source="snapshot nodes.skin.lost_packets",
     )
 
     t.section = "emg"
@@ -832,7 +822,6 @@ def _inputs() -> tuple[Register, ...]:
         "EMG envelope the intent was decoded from",
         path=("emg", "envelope_uv"),
         profile=profile_source("emg", obj.EMG_ENVELOPE_UV),
-        source="snapshot emg.envelope_uv",
     )
     t.add(
         "emg.level",
@@ -840,7 +829,6 @@ def _inputs() -> tuple[Register, ...]:
         "contraction level e0..e5 (through the gateway's calibration)",
         path=("emg", "level"),
         profile=profile_source("emg", obj.EMG_LEVEL),
-        source="snapshot emg.level",
     )
     t.add(
         "emg.grip_intent_n",
@@ -849,14 +837,12 @@ def _inputs() -> tuple[Register, ...]:
         unit="N",
         path=("emg", "grip_intent_n"),
         profile=profile_source("hand", obj.HAND_TARGET_GRIP_MN),
-        source="snapshot emg.grip_intent_n",
     )
     t.add(
         "emg.saturated",
         U16,
         "the envelope is saturated (0 no, 1 yes)",
         path=("emg", "saturated"),
-        source="snapshot emg.saturated",
     )
 
     t.section = "belt"
@@ -866,7 +852,6 @@ def _inputs() -> tuple[Register, ...]:
         "feedback mode",
         path=("belt", "mode"),
         codes=FEEDBACK_CODES,
-        source="snapshot belt.mode",
     )
     t.add(
         "belt.belt",
@@ -875,7 +860,6 @@ def _inputs() -> tuple[Register, ...]:
         path=("belt", "belt"),
         codes=BELT_CODES,
         profile=profile_source("belt", obj.BELT_ACTIVE),
-        source="snapshot belt.belt",
     )
     t.add(
         "belt.level",
@@ -884,7 +868,6 @@ def _inputs() -> tuple[Register, ...]:
         "unknown speed at the occurrence speed)",
         path=("belt", "level"),
         default=0,
-        source="snapshot belt.level",
     )
     t.add(
         "belt.velocity_mrad_s",
@@ -892,7 +875,6 @@ def _inputs() -> tuple[Register, ...]:
         "belt velocity commanded (> 0 force belt, < 0 slip belt, 0 stopped)",
         path=("belt", "velocity_mrad_s"),
         profile=profile_source("belt", obj.BELT_TARGET_VELOCITY_MRAD_S),
-        source="snapshot belt.velocity_mrad_s",
     )
     t.add(
         "belt.reason",
@@ -900,7 +882,6 @@ def _inputs() -> tuple[Register, ...]:
         "why the belt does what it does",
         path=("belt", "reason"),
         codes=REASON_CODES,
-        source="snapshot belt.reason",
     )
 
     t.section = "hand"
@@ -911,7 +892,6 @@ def _inputs() -> tuple[Register, ...]:
         unit="N",
         path=("hand", "grip_n"),
         profile=profile_source("hand", obj.HAND_ACTUAL_GRIP_MN),
-        source="snapshot hand.grip_n",
     )
     t.add(
         "hand.setpoint_n",
@@ -920,7 +900,6 @@ def _inputs() -> tuple[Register, ...]:
         unit="N",
         path=("hand", "setpoint_n"),
         profile=profile_source("hand", obj.HAND_TARGET_GRIP_MN),
-        source="snapshot hand.setpoint_n",
     )
     t.add(
         "hand.reflex",
@@ -928,7 +907,6 @@ def _inputs() -> tuple[Register, ...]:
         "grip reflex state",
         path=("hand", "reflex"),
         codes=REFLEX_CODES,
-        source="snapshot hand.reflex",
     )
     t.add(
         "hand.source",
@@ -936,7 +914,6 @@ def _inputs() -> tuple[Register, ...]:
         "where the commanded grip comes from",
         path=("hand", "source"),
         codes=SOURCE_CODES,
-        source="snapshot hand.source",
     )
 
     t.section = "loop"
@@ -946,7 +923,6 @@ def _inputs() -> tuple[Register, ...]:
         "gateway processing time from a skin TPDO to the RPDOs it causes, median of recent",
         unit="us",
         path=("loop", "latency_p50_us"),
-        source="snapshot loop.latency_p50_us",
     )
     t.add(
         "loop.latency_p99_us",
@@ -954,7 +930,6 @@ def _inputs() -> tuple[Register, ...]:
         "the same, 99th percentile",
         unit="us",
         path=("loop", "latency_p99_us"),
-        source="snapshot loop.latency_p99_us",
     )
     t.add(
         "loop.percepts",
@@ -962,7 +937,6 @@ def _inputs() -> tuple[Register, ...]:
         "skin decoder updates the loop acted on",
         path=("loop", "percepts"),
         counter=True,
-        source="snapshot loop.percepts",
     )
 
     # map version 2: added after the rest, so no earlier address moved
@@ -977,7 +951,6 @@ def _inputs() -> tuple[Register, ...]:
             unit="mm/s",
             scale=0.1,
             path=("skin", f"slip_speed_{end}_mm_s"),
-            source=f"snapshot skin.slip_speed_{end}_mm_s",
         )
     t.add(
         "skin.slip_direction",
@@ -985,7 +958,6 @@ def _inputs() -> tuple[Register, ...]:
         "slip direction: +1 from the first ridge towards the last, -1 back "
         "(sentinel: not told, e.g. a uniform skin)",
         path=("skin", "slip_direction"),
-        source="snapshot skin.slip_direction",
     )
     t.add(
         "skin.slip_direction_confidence",
@@ -993,7 +965,6 @@ def _inputs() -> tuple[Register, ...]:
         "P(the object moves that way) 0..1 (sentinel: no direction)",
         scale=0.001,
         path=("skin", "slip_direction_confidence"),
-        source="snapshot skin.slip_direction_confidence",
     )
     return tuple(t.registers)
 
