@@ -26,11 +26,19 @@ class GrasplinkError(Exception):
 
 
 class EdsError(GrasplinkError):
-    """A malformed or inconsistent EDS; names the file, section and key."""
+    """A malformed or inconsistent EDS; names the file (and line), section and key."""
 
-    def __init__(self, path: str, section: str | None, key: str | None, problem: str):
+    def __init__(
+        self,
+        path: str,
+        section: str | None,
+        key: str | None,
+        problem: str,
+        line: int | None = None,
+    ):
         self.path, self.section, self.key, self.problem = path, section, key, problem
-        where = path
+        self.line = line
+        where = path if line is None else f"{path}:{line}"
         if section:
             where += f" [{section}]"
         if key:
