@@ -920,10 +920,10 @@ class _Loader:
                 yield f"{key}={entry.text}"
 
     def _emit_device_info(self) -> Iterable[str]:
+        yield "[DeviceInfo]"  # even empty: canopen logs its own warning without one
         section = self.sections.get("DeviceInfo")
         if section is None:
             return
-        yield "[DeviceInfo]"
         for key in _DEVICE_INFO_STRINGS:
             entry = section.get(key)
             if entry is not None:
