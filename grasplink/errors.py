@@ -6,7 +6,7 @@ one line and exits 1 without a traceback. Keeping every class here lets any
 layer raise or catch them without importing another layer::
 
     GrasplinkError
-    ├── EdsError         a malformed or inconsistent EDS (file, section, key)
+    ├── EdsError         a malformed or inconsistent EDS (file and line, section, key)
     ├── ConfigError      an invalid option or configuration value
     │   └── SceneError   a scene file value (file, key, what was expected)
     ├── RecordingError   a recording that cannot be read (file, line or key)

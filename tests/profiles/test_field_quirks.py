@@ -285,6 +285,12 @@ def test_byte_order_mark_latin1_bytes_and_control_characters_are_repaired(
     assert od.device_information.vendor_name == "M\xfcller"
 
 
+def test_a_utf16_file_is_decoded(tmp_path: Path) -> None:
+    od, warnings = _load(tmp_path, b"\xff\xfe" + _BASE.encode("utf-16-le"))
+    assert _messages(warnings) == [(1, "UTF-16 file: read as text (canopen would not)")]
+    assert _var(od, 0x1017).default == 100
+
+
 def test_section_names_are_read_in_any_case(tmp_path: Path) -> None:
     text = _BASE.replace("[1018sub1]", "[1018SUB1]").replace("[DeviceInfo]", "[deviceinfo]")
     od, warnings = _load(tmp_path, text)
