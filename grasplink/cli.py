@@ -327,8 +327,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     doc = prof_sub.add_parser("doc", help="generate docs/profiles.md from the EDS files")
     doc.add_argument("--out", type=Path, default=Path("docs/profiles.md"))
-    check = prof_sub.add_parser("check", help="validate EDS files")
+    check = prof_sub.add_parser(
+        "check",
+        help="load EDS/DCF files as canopen and Lely do, printing each quirk repaired "
+        "(docs/eds_files.md)",
+    )
     check.add_argument("files", nargs="+", type=Path)
+    check.add_argument(
+        "--strict",
+        action="store_true",
+        help="grasplink's own rules for its EDS files: the first problem is an error",
+    )
     dbc = prof_sub.add_parser(
         "dbc", help="every node's PDO map (and NMT, heartbeat, EMCY, SDO) as a DBC file"
     )
@@ -684,12 +693,33 @@ def cmd_profiles(args: argparse.Namespace) -> int:
         write_profiles_doc(args.out)
         print(f"wrote {args.out}")
         return 0
-    from grasplink.profiles.eds import validate_eds
+    if args.strict:
+        from grasplink.profiles.eds import validate_eds
 
-    for path in args.files:
-        validate_eds(path)
-        print(f"{path}: ok")
-    return 0
+        for path in args.files:
+            validate_eds(path)
+            print(f"{path}: ok")
+        return 0
+    return _check_field_files(args.files)
+
+
+def _check_field_files(paths: Sequence[Path]) -> int:
+    """`profiles check` without --strict: every file, its warnings, exit 1 if one fails."""
+    from grasplink.errors import EdsError
+    from grasplink.profiles.field import load_object_dictionary
+
+    failed = False
+    for path in paths:
+        try:
+            od, warnings = load_object_dictionary(path)
+        except EdsError as exc:
+            print(f"grasplink: error: {exc}", file=sys.stderr)
+            failed = True
+            continue
+        for warning in warnings:
+            print(warning)
+        print(f"{path}: ok ({len(od)} objects, {len(warnings)} warnings)")
+    return EXIT_ERROR if failed else 0
 
 
 def cmd_bench(args: argparse.Namespace) -> int:

@@ -6,7 +6,7 @@ one line and exits 1 without a traceback. Keeping every class here lets any
 layer raise or catch them without importing another layer::
 
     GrasplinkError
-    ├── EdsError         a malformed or inconsistent EDS (file, section, key)
+    ├── EdsError         a malformed or inconsistent EDS (file and line, section, key)
     ├── ConfigError      an invalid option or configuration value
     │   └── SceneError   a scene file value (file, key, what was expected)
     ├── RecordingError   a recording that cannot be read (file, line or key)
@@ -26,11 +26,19 @@ class GrasplinkError(Exception):
 
 
 class EdsError(GrasplinkError):
-    """A malformed or inconsistent EDS; names the file, section and key."""
+    """A malformed or inconsistent EDS; names the file (and line), section and key."""
 
-    def __init__(self, path: str, section: str | None, key: str | None, problem: str):
+    def __init__(
+        self,
+        path: str,
+        section: str | None,
+        key: str | None,
+        problem: str,
+        line: int | None = None,
+    ):
         self.path, self.section, self.key, self.problem = path, section, key, problem
-        where = path
+        self.line = line
+        where = path if line is None else f"{path}:{line}"
         if section:
             where += f" [{section}]"
         if key:

@@ -85,13 +85,13 @@ def test_invalid_eds_names_file_section_and_key(tmp_path):
     bad = tmp_path / "bad.eds"
     text = eds_path("belt").read_text().replace("HighLimit=8000", "HighLimit=7000", 1)
     bad.write_text(text)
-    result = run_cli("profiles", "check", str(bad))
+    result = run_cli("profiles", "check", "--strict", str(bad))
     assert_clean_error(result, "bad.eds", "[", "DefaultValue")
 
 
 @pytest.mark.slow
 def test_profiles_check_accepts_the_shipped_eds_files():
-    result = run_cli("profiles", "check", *(str(eds_path(k)) for k in ("skin", "belt")))
+    result = run_cli("profiles", "check", "--strict", *(str(eds_path(k)) for k in ("skin", "belt")))
     assert result.returncode == 0, result.stderr
 
 

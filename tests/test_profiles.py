@@ -407,7 +407,7 @@ def test_profiles_check_names_a_missing_default_in_one_line(
 
     path = tmp_path / "skin.eds"
     path.write_text(_edit("skin", "1017", "DefaultValue", None), encoding="ascii")
-    assert main(["profiles", "check", str(path)]) == 1
+    assert main(["profiles", "check", "--strict", str(path)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert f"{path} [1017] DefaultValue: required key is missing" in err
