@@ -775,6 +775,9 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     ready_file = args.ready_file
     if ready_file is not None:
         _clear_ready_file(ready_file)  # a stale one must not say "up" for this run
+    for node in config.nodes.values():  # what the field loader repaired in a vendor's file
+        for warning in node.file_warnings:
+            print(f"warning: nodes.{node.name}: {warning}", file=sys.stderr)
     if config.lss:  # unconfigured nodes get their node-IDs first (docs/gateway.md, LSS)
         from grasplink.gateway.lss import assign_at_start
 

@@ -59,7 +59,12 @@ class EmcyProducer:
         self._queue: deque[bytes] = deque(maxlen=QUEUE_LIMIT)
         self._last_sent_us: int | None = None
         self.dropped = 0
-        history = store.entry(obj.ERROR_HISTORY, 0).var.parent
+        # 1003h is optional (CiA 301): a device without it keeps no history
+        history = (
+            store.entry(obj.ERROR_HISTORY, 0).var.parent
+            if store.has(obj.ERROR_HISTORY, 0)
+            else None
+        )
         self._history_len = max(history.subindices) if history is not None else 0
         store.add_command(obj.ERROR_HISTORY, self._on_history_write)
 
@@ -90,6 +95,9 @@ class EmcyProducer:
     # -- transmission --------------------------------------------------------
     def poll(self, t_us: int) -> list[Frame]:
         """Frames due now, honouring the inhibit time."""
+        if not self.store.has(obj.COB_ID_EMCY):  # 1014h is optional: a device without EMCY
+            self._queue.clear()
+            return []
         cob_id = int(self.store.get(obj.COB_ID_EMCY))
         if cob_id & COB_ID_INVALID:
             self._queue.clear()
@@ -113,6 +121,8 @@ class EmcyProducer:
 
     @property
     def inhibit_us(self) -> int:
+        if not self.store.has(obj.EMCY_INHIBIT_100US):
+            return 0
         return int(self.store.get(obj.EMCY_INHIBIT_100US)) * 100
 
     # -- internals -----------------------------------------------------------

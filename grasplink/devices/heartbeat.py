@@ -121,6 +121,8 @@ class HeartbeatConsumer:
         return min(deadlines, default=None)
 
     def _subindices(self) -> list[int]:
+        if not self.store.has(obj.HEARTBEAT_CONSUMER, 0):  # optional (CiA 301): no watch
+            return []
         parent = self.store.entry(obj.HEARTBEAT_CONSUMER, 0).var.parent
         return sorted(s for s in parent.subindices if s) if parent is not None else []
 

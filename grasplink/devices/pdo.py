@@ -147,10 +147,7 @@ class PdoEngine:
             }
             if self.is_valid(pdo):
                 self._by_can_id.setdefault(self.cob_id(pdo) & CAN_ID_MASK, pdo)
-            count = int(self.store.get(pdo.map_index, 0))
-            pdo.mapping = [
-                MapEntry.decode(int(self.store.get(pdo.map_index, s))) for s in range(1, count + 1)
-            ]
+            pdo.mapping = self._mapping(pdo)
             if pdo.transmit:
                 for entry in pdo.mapping:
                     self._watchers.setdefault((entry.index, entry.subindex), []).append(pdo)
@@ -337,6 +334,22 @@ class PdoEngine:
         if timer and pdo.last_rx_us is not None and t_us > pdo.last_rx_us + timer:
             self.emcy.raise_error(em.RPDO_TIMEOUT, em.REG_COMMUNICATION, t_us, bytes([pdo.number]))
             pdo.last_rx_us = None
+
+    def _mapping(self, pdo: _Pdo) -> list[MapEntry]:
+        """The PDO's mapping as the store holds it; none when the file gives a count
+        without its entries or maps an object the dictionary lacks (a vendor's file may):
+        such a PDO carries nothing rather than failing when it is sent."""
+        if not self.store.has(pdo.map_index, 0):
+            return []
+        count = int(self.store.get(pdo.map_index, 0))
+        if not all(self.store.has(pdo.map_index, s) for s in range(1, count + 1)):
+            return []
+        mapping = [
+            MapEntry.decode(int(self.store.get(pdo.map_index, s))) for s in range(1, count + 1)
+        ]
+        if not all(self.store.has(e.index, e.subindex) or e.is_dummy for e in mapping):
+            return []
+        return mapping
 
     # -- transmission ------------------------------------------------------------
     def _inhibit_end(self, pdo: _Pdo) -> int:

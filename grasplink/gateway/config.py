@@ -74,6 +74,7 @@ class NodeConfig:
     mandatory: bool = False  # no node is started until every mandatory one is ready
     sdo: tuple[SdoWrite, ...] = ()  # written last before the start, in order
     binding: Binding | None = None  # a vendor's node in a loop role: its objects (roles.py)
+    file_warnings: tuple[str, ...] = ()  # what the field loader repaired in its file
 
     def __post_init__(self) -> None:
         self.name = self.name or self.kind
@@ -366,7 +367,7 @@ def _describe_loop_node(p: Params, node: NodeConfig, base: Path) -> None:
                 raise p.error(table, "binds a vendor's node: give its file (eds = or dcf =)")
         return
     node.eds = path
-    od = description.dictionary(p, _file_key(path), path, node.node_id)
+    od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
     codec = PdoCodec(path, node.node_id)
     try:
         if node.kind == "skin":
@@ -418,7 +419,7 @@ def _device(p: Params, name: str, base: Path) -> NodeConfig:
         name=name,
         eds=path,
     )
-    od = description.dictionary(p, _file_key(path), path, node.node_id)
+    od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
     _description(p, node, lambda: od)
     return node
 

@@ -28,7 +28,7 @@ from canopen.objectdictionary import ODVariable, datatypes
 
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError
-from grasplink.profiles import load_profile, od_variable
+from grasplink.profiles import od_variable
 
 #: identity keys -> their 1018h sub-index (CiA 301 identity object)
 IDENTITY_SUBS = {"vendor_id": 1, "product_code": 2, "revision": 3, "serial": 4}
@@ -90,12 +90,19 @@ def node_file(p: Params, base: Path) -> Path | None:
     return path
 
 
-def dictionary(p: Params, key: str, path: Path, node_id: int) -> canopen.ObjectDictionary:
-    """The node's object dictionary, its file's problems reported at `key`."""
+def dictionary(
+    p: Params, key: str, path: Path, node_id: int
+) -> tuple[canopen.ObjectDictionary, tuple[str, ...]]:
+    """The node's object dictionary as the field loader builds it, and its warnings (the
+    quirks it repaired, `file:line: what`); a file no dictionary comes from is reported
+    at `key`."""
+    from grasplink.profiles.field import load_object_dictionary
+
     try:
-        return load_profile(path, node_id)
+        od, warnings = load_object_dictionary(path, node_id)
     except ConfigError as exc:
         raise p.error(key, str(exc)) from None
+    return od, tuple(str(w) for w in warnings)
 
 
 def identity(p: Params) -> Identity | None:
@@ -131,19 +138,68 @@ def sdo_writes(p: Params, od_of: Callable[[], canopen.ObjectDictionary]) -> tupl
     return tuple(out)
 
 
+PDO_COMM = ((0x1400, 0x1600), (0x1800, 0x1A00))  # (first communication, first mapping) objects
+PDO_COUNT = 512  # PDOs of each direction (CiA 301)
+COB_ID_INVALID = 0x80000000
+
+
 def dcf_writes(od: canopen.ObjectDictionary) -> tuple[SdoWrite, ...]:
-    """A DCF's configured values (ParameterValue): every writable object the file gives
-    one, in index order, as a CiA 302 master writes its concise DCF."""
-    out = []
+    """A DCF's configured values (ParameterValue) as a CiA 302 master writes its concise
+    DCF: every writable object the file gives one, in index order; a PDO's by the CiA 301
+    mapping procedure (COB-ID invalid, count 0, entries, count, parameters, COB-ID), as a
+    device refuses a mapping changed while its PDO is valid."""
+    out: list[SdoWrite] = []
+    pdo_objects = {base + n for bases in PDO_COMM for base in bases for n in range(PDO_COUNT)}
     for index in sorted(od.indices):
-        entry = od[index]
-        variables = [entry] if isinstance(entry, ODVariable) else list(entry.values())
-        for var in variables:
-            if var.value is None or var.access_type not in _WRITABLE:
-                continue
-            data = var.encode_raw(var.value)
-            out.append(SdoWrite(var.index, var.subindex, data, f"{var.name} (DCF)"))
+        if index in pdo_objects:
+            continue
+        out += [_dcf_write(var) for var in _configured(od, index)]
+    for comm_base, map_base in PDO_COMM:
+        for n in range(PDO_COUNT):
+            out += _pdo_writes(od, comm_base + n, map_base + n)
     return tuple(out)
+
+
+def _configured(od: canopen.ObjectDictionary, index: int) -> list[ODVariable]:
+    """The writable variables of `index` the DCF gives a ParameterValue."""
+    if index not in od:
+        return []
+    entry = od[index]
+    variables = [entry] if isinstance(entry, ODVariable) else list(entry.values())
+    return [v for v in variables if v.value is not None and v.access_type in _WRITABLE]
+
+
+def _dcf_write(var: ODVariable, value: Any = None, what: str = "") -> SdoWrite:
+    value = var.value if value is None else value
+    return SdoWrite(var.index, var.subindex, var.encode_raw(value), what or f"{var.name} (DCF)")
+
+
+def _pdo_writes(od: canopen.ObjectDictionary, comm: int, mapping: int) -> list[SdoWrite]:
+    comm_vars = {v.subindex: v for v in _configured(od, comm)}
+    map_vars = {v.subindex: v for v in _configured(od, mapping)}
+    if not comm_vars and not map_vars:
+        return []
+    if comm not in od or 1 not in od[comm]:  # type: ignore[operator]
+        return [_dcf_write(v) for v in (*comm_vars.values(), *map_vars.values())]
+    cob = od[comm][1]  # type: ignore[index]
+    final_cob = cob.value if cob.value is not None else cob.default
+    out = []
+    label = f"PDO 0x{comm:04X}"
+    if final_cob is not None and cob.access_type in _WRITABLE:
+        out.append(_dcf_write(cob, int(final_cob) | COB_ID_INVALID, f"{label} off (DCF)"))
+    count = od[mapping][0] if mapping in od else None  # type: ignore[index]
+    if map_vars and count is not None and count.access_type in _WRITABLE:
+        # (a read-only count is a static mapping: the device's, never written)
+        map_vars.pop(0, None)
+        final_count = count.value if count.value is not None else count.default
+        out.append(_dcf_write(count, 0, f"{label} mapping cleared (DCF)"))
+        out += [_dcf_write(v) for _, v in sorted(map_vars.items())]
+        if final_count is not None:
+            out.append(_dcf_write(count, int(final_count), f"{label} maps {final_count} (DCF)"))
+    out += [_dcf_write(v) for sub, v in sorted(comm_vars.items()) if sub != 1]
+    if final_cob is not None and cob.access_type in _WRITABLE:
+        out.append(_dcf_write(cob, int(final_cob), f"{label} on (DCF)"))
+    return out
 
 
 def _variable(od: canopen.ObjectDictionary, index: int, subindex: int) -> ODVariable:

@@ -35,7 +35,10 @@ def eds_path(kind: str) -> Path:
 
 
 def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictionary:
-    """Validate an EDS and import it with canopen, $NODEID resolved to `node_id`.
+    """An object dictionary, $NODEID resolved to `node_id`: a shipped profile validated
+    strictly and imported with canopen; any other file through the field loader
+    (`field.py`: its quirks repaired, warnings dropped here: `field.load_object_dictionary`
+    returns them).
 
     `kind_or_path` is a device kind or a path to an .eds/.dcf file (a Path, or
     a string containing a path separator or ending in .eds/.dcf).
@@ -43,6 +46,10 @@ def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictio
     if isinstance(node_id, bool) or not isinstance(node_id, int) or not 1 <= node_id <= 127:
         raise ConfigError(f"node-ID {node_id!r} is outside 1..127")
     path = _resolve(kind_or_path)
+    if path.resolve().parent != _PROFILE_DIR:  # a vendor's file: as it is in the field
+        from grasplink.profiles.field import load_object_dictionary
+
+        return load_object_dictionary(path, node_id)[0]
     validate_eds(path)
     from canopen.objectdictionary import import_od
 

@@ -54,8 +54,14 @@ class PdoCodec:
         network = canopen.Network()  # never connected: only holds the PDO maps' subscriptions
         self._node = canopen.RemoteNode(node_id, od)
         network.add_node(self._node)
-        self._node.tpdo.read(from_od=True)
-        self._node.rpdo.read(from_od=True)
+        self.unreadable: list[str] = []  # PDOs whose file entries canopen cannot read
+        for pdos in (self._node.tpdo, self._node.rpdo):
+            for pdo in pdos.map.values():
+                try:
+                    pdo.read(from_od=True)
+                except (KeyError, ValueError) as exc:  # e.g. a map without its entries
+                    self.unreadable.append(f"{pdo.name}: {exc}")
+                    pdo.enabled = False
         tpdos = self._node.tpdo.map.values() if self._node.tpdo.map is not None else ()
         self._tpdo_by_can_id = {
             m.cob_id: m for m in tpdos if m.cob_id is not None and m.enabled and len(m.map)

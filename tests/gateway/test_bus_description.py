@@ -319,3 +319,32 @@ def test_a_vendor_skin_bound_to_analogue_values_is_timed_by_arrival(tmp_path):
     assert theirs.skin_frames.stats.packets == ours.skin_frames.stats.packets > 100
     assert theirs.last_estimate is not None and theirs.last_estimate.slip
     assert theirs.last_estimate.speed_mm_s == pytest.approx(ours.last_estimate.speed_mm_s, rel=0.05)
+
+
+# -- devices from other projects' files -------------------------------------------------------
+FIELD = Path(__file__).resolve().parents[1] / "profiles" / "field"
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "canopendemo_demoDevice.eds",
+        "python-canopen_e35.eds",
+        "canopennode_DS301_profile.eds",
+        "lely_co-nmt-slave.dcf",
+        "lely_coapp-fiber-slave.dcf",
+        "python-canopen_sample.eds",
+    ],
+)
+def test_a_node_from_another_projects_file_boots_and_is_mastered(tmp_path, name):
+    """Files written by other CANopen stacks (tests/profiles/field/README.md): a node built
+    from each boots, and the gateway masters it from a description naming the file."""
+    from grasplink.profiles.field import load_object_dictionary
+
+    key = "dcf" if name.endswith(".dcf") else "eds"
+    gw = gateway_for(tmp_path, f'[nodes.vendor]\nnode_id = 0x35\n{key} = "{FIELD / name}"\n')
+    device = DeviceNode(load_object_dictionary(FIELD / name, 0x35)[0], 0x35, DeviceApp())
+    run([gw, device], seconds=2.0)
+    assert device.state is NmtState.OPERATIONAL
+    snap = gw.snapshot()
+    assert snap.nodes["vendor"].phase is NodePhase.OPERATIONAL, snap.alarms

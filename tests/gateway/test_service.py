@@ -194,9 +194,7 @@ def test_refused_provisioning_is_an_alarm_and_the_node_is_not_started():
 
 def test_command_beyond_the_profile_is_clamped_with_an_alarm():
     _, gateway, _ = run(scene(duration=0.5))
-    frames = gateway._rpdo(
-        gateway.by_kind["belt"], (obj.BELT_TARGET_VELOCITY_MRAD_S, 0), 99_999, True
-    )
+    frames = gateway._rpdo(gateway.by_kind["belt"], 99_999, True)
     assert int.from_bytes(frames[0].data[2:6], "little", signed=True) == 8000
     assert "belt.clamped" in gateway.alarms
 
