@@ -51,9 +51,25 @@ def device_config(folder: Path, extra: str = "", *, loop: bool = False) -> Gatew
     return parse_config(tomllib.loads(text), str(path))
 
 
-def fsr_node(folder: Path, node_id: int = FSR) -> DeviceNode:
-    """The generic device built from the vendor's file: protocol only, no application."""
-    return DeviceNode(load_profile(folder / "vendor" / "fsr.eds", node_id), node_id, DeviceApp())
+class Reading(DeviceApp):
+    """An application that only holds fixed readings: set on every reset, on the node's
+    own thread (a live runner's), so a test never writes a running node's store."""
+
+    def __init__(self, values: dict[tuple[int, int], int | float]):
+        self.values = values
+
+    def on_reset(self, t_us: int) -> None:
+        for (index, subindex), value in self.values.items():
+            self.store.set(index, subindex, value)
+
+
+def fsr_node(
+    folder: Path, node_id: int = FSR, values: dict[tuple[int, int], int | float] | None = None
+) -> DeviceNode:
+    """The generic device built from the vendor's file: protocol only, no application
+    (or one holding fixed `values`)."""
+    app = DeviceApp() if values is None else Reading(values)
+    return DeviceNode(load_profile(folder / "vendor" / "fsr.eds", node_id), node_id, app)
 
 
 def running(folder: Path, seconds: float = 1.0) -> tuple[Gateway, DeviceNode, LockstepNetwork]:
