@@ -205,7 +205,8 @@ def build_parser() -> argparse.ArgumentParser:
     gateway.add_argument(
         "--print-register-map",
         action="store_true",
-        help="print the Modbus register map (docs/modbus.md) and exit",
+        help="print the Modbus register map (docs/modbus.md; with --config, with that "
+        "configuration's device objects) and exit",
     )
 
     bus = sub.add_parser("bus", help="bus tools")
@@ -754,12 +755,13 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     from grasplink.gateway.live import LiveGateway
     from grasplink.terminal import StopSignals
 
-    if args.print_register_map:
-        from grasplink.surfaces.modbus.docgen import render_modbus_markdown
-
-        sys.stdout.write(render_modbus_markdown())
-        return 0
     config = load_config(args.config)  # a bad file fails here, before the bus is touched
+    if args.print_register_map:  # the map this configuration serves
+        from grasplink.surfaces.modbus.docgen import render_modbus_markdown
+        from grasplink.surfaces.modbus.registers import register_map_for
+
+        sys.stdout.write(render_modbus_markdown(register_map_for(config)))
+        return 0
     modbus_url = None
     if args.modbus is not None:
         from grasplink.surfaces.modbus.url import parse_modbus_url

@@ -38,6 +38,7 @@ from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.gateway.roles import Binding
 from grasplink.profiles import load_profile, object_limits
 from grasplink.profiles import objects as obj
+from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 from grasplink.profiles.pdo_codec import PdoCodec
@@ -117,6 +118,52 @@ class HandConfig(NodeConfig):
     grip_rate_n_s: float = 50.0
 
 
+#: Modbus register types a device object may be mapped to -> the CiA 301 data types each
+#: carries exactly (float32: REAL64 rounded to the nearest float32, integers up to 24 bits)
+MODBUS_TYPES: dict[str, frozenset[str]] = {
+    "int16": frozenset({"BOOLEAN", "INTEGER8", "INTEGER16", "UNSIGNED8"}),
+    "uint16": frozenset({"BOOLEAN", "UNSIGNED8", "UNSIGNED16"}),
+    "int32": frozenset(
+        {"BOOLEAN", "INTEGER8", "INTEGER16", "INTEGER24", "INTEGER32"}
+        | {"UNSIGNED8", "UNSIGNED16", "UNSIGNED24"}
+    ),
+    "uint32": frozenset({"BOOLEAN", "UNSIGNED8", "UNSIGNED16", "UNSIGNED24", "UNSIGNED32"}),
+    "float32": frozenset(
+        {"REAL32", "REAL64", "INTEGER8", "INTEGER16", "INTEGER24"}
+        | {"UNSIGNED8", "UNSIGNED16", "UNSIGNED24"}
+    ),
+}
+MODBUS_WORDS = {"int16": 1, "uint16": 1, "int32": 2, "uint32": 2, "float32": 2}
+#: Input registers below this are the fixed map's (it stays within one read of 125, and
+#: grows only at its end): a configured register starts here or above.
+MODBUS_DEVICE_BASE = 256
+
+
+@dataclass(frozen=True)
+class ModbusRegister:
+    """One `[[modbus.registers]]` entry: a device object's value at an input register."""
+
+    node: str  # a device node's name
+    key: str  # "6401sub1"
+    index: int
+    subindex: int
+    address: int  # PDU address of its first register
+    type: str  # a MODBUS_TYPES name
+    name: str  # the object's ParameterName in the node's file
+    data_type: str  # its CiA 301 data type
+    unit: str  # its Unit ("" where the file gives none)
+    where: str  # "gw.toml: modbus.registers[0]": what an error about it names
+
+    @property
+    def words(self) -> int:
+        return MODBUS_WORDS[self.type]
+
+    @property
+    def end(self) -> int:
+        """One past its last register."""
+        return self.address + self.words
+
+
 @dataclass
 class FeedbackSettings:
     mode: FeedbackMode = FeedbackMode.FORCE_AND_SLIP
@@ -149,6 +196,7 @@ class GatewayConfig:
     reflex: ReflexConfig = field(default_factory=ReflexConfig)
     telemetry: TelemetrySettings = field(default_factory=TelemetrySettings)
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
+    modbus_registers: tuple[ModbusRegister, ...] = ()  # `[[modbus.registers]]`, by address
 
     def node(self, kind: str) -> NodeConfig | None:
         return self.nodes.get(kind)
@@ -233,6 +281,7 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     config.telemetry = _telemetry(top.table_of("telemetry", {}))
     grip_rate_n_s = hand.grip_rate_n_s if isinstance(hand, HandConfig) else 50.0
     config.plausibility = _plausibility(top.table_of("plausibility", {}), grip_rate_n_s)
+    config.modbus_registers = _modbus_registers(top.table_of("modbus", {}), config)
     top.finish()
     return config
 
@@ -507,3 +556,84 @@ def _hand(p: Params, kind: str) -> HandConfig:
 _PARSERS: dict[str, Callable[[Params, str], NodeConfig]] = per_kind(
     "gateway/config.py _PARSERS", {"skin": _skin, "emg": _emg, "belt": _belt, "hand": _hand}
 )
+
+
+def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister, ...]:
+    """`[[modbus.registers]]`: device objects at input registers, each checked now: a
+    device node, an object its TPDOs map, a type that carries it, an address of its own
+    above the fixed map."""
+    entries = p.raw("registers", [])
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise p.error("registers", "expected an array of tables ([[modbus.registers]])")
+    p.finish()
+    devices = sorted(n for n, c in config.nodes.items() if c.kind == DEVICE_ROLE)
+    mapped: dict[str, dict[tuple[int, int], Any]] = {}
+    out: list[ModbusRegister] = []
+    for i, entry in enumerate(entries):
+        t = Params(entry, p.source, p.key(f"registers[{i}]"))
+        name = t.string("node")
+        node = config.nodes.get(name)
+        if node is None or node.kind != DEVICE_ROLE:
+            why = (
+                "a loop node: its values are in the fixed map" if name in KINDS else "no such node"
+            )
+            raise t.error(
+                "node", f"{name!r} is {why}; device nodes: {', '.join(devices) or 'none'}"
+            )
+        if name not in mapped:
+            codec = PdoCodec(node.profile, node.node_id)
+            mapped[name] = {(v.index, v.subindex): v for v in codec.tpdo_objects()}
+        text = t.string("object")
+        try:
+            index, subindex = description.object_key(text)
+        except ConfigError as exc:
+            raise t.error("object", str(exc)) from None
+        var = mapped[name].get((index, subindex))
+        if var is None:
+            listed = ", ".join(f"{i:04X}sub{s:X}" for i, s in mapped[name]) or "none"
+            raise t.error(
+                "object", f"{text} is no TPDO-mapped object of {node.eds} (mapped: {listed})"
+            )
+        kind = t.string("type", choices=tuple(MODBUS_TYPES))
+        known = DATA_TYPES.get(var.data_type)
+        data_type = known.name if known else f"0x{var.data_type or 0:04X}"
+        if data_type not in MODBUS_TYPES[kind]:
+            fits = " or ".join(k for k, carried in MODBUS_TYPES.items() if data_type in carried)
+            hint = f"use {fits}" if fits else "no register type carries it"
+            raise t.error(
+                "type", f"{var.name} is {data_type}, which {kind} does not carry ({hint})"
+            )
+        words = MODBUS_WORDS[kind]
+        address = t.integer("address", low=0, high=0xFFFF)
+        if address < MODBUS_DEVICE_BASE:
+            raise t.error(
+                "address",
+                f"{address} is in the fixed map's range (input registers below "
+                f"{MODBUS_DEVICE_BASE}): a device object starts at {MODBUS_DEVICE_BASE} or above",
+            )
+        if address + words > 0x10000:
+            raise t.error("address", f"{kind} at {address} takes {words} registers, past 65535")
+        t.finish()
+        register = ModbusRegister(
+            name,
+            f"{index:04X}sub{subindex:X}",
+            index,
+            subindex,
+            address,
+            kind,
+            var.name,
+            data_type,
+            var.unit or "",
+            f"{p.source}: {t.prefix}",
+        )
+        clash = next(
+            (r for r in out if r.address < register.end and register.address < r.end), None
+        )
+        if clash is not None:
+            raise t.error(
+                "address",
+                f"{address}..{register.end - 1} overlaps {clash.where.split(': ')[-1]} "
+                f"({clash.node} {clash.key} at {clash.address}..{clash.end - 1})",
+            )
+        out.append(register)
+    return tuple(sorted(out, key=lambda r: r.address))

@@ -48,6 +48,7 @@ from grasplink.errors import ConfigError, PdoError
 from grasplink.gateway import roles
 from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value
 from grasplink.gateway.config import (
+    DEVICE_ROLE,
     EmgConfig,
     GatewayConfig,
     HandConfig,
@@ -80,6 +81,8 @@ from grasplink.gateway.reflex import GripArbiter, GripCommand, ReflexState
 from grasplink.gateway.sdo_client import SdoClient, Transfer
 from grasplink.gateway.snapshot import (
     BeltSnapshot,
+    DeviceObject,
+    DeviceValues,
     EmgSnapshot,
     HandSnapshot,
     HeartbeatStats,
@@ -89,6 +92,8 @@ from grasplink.gateway.snapshot import (
     Rejected,
     SkinSnapshot,
     Snapshot,
+    device_objects,
+    device_value,
 )
 from grasplink.profiles import load_profile, object_limits, variable_limits
 from grasplink.profiles import objects as obj
@@ -174,6 +179,12 @@ class Gateway(NmtMaster):
             if node.kind in KINDS:
                 self.by_kind[node.kind] = link
         self.alarms: dict[str, str] = {}
+        # device nodes: what their TPDOs map, described once for every snapshot
+        self._device_objects: dict[str, tuple[NodeLink, tuple[DeviceObject, ...]]] = {
+            link.name: (link, device_objects(link.codec))
+            for link in self.links.values()
+            if link.kind == DEVICE_ROLE
+        }
         self.frames_dropped: Counter[str] = Counter()
         self._skin_setup()
         self._emg_setup()
@@ -780,6 +791,13 @@ class Gateway(NmtMaster):
             heartbeat=HeartbeatStats(**self.heartbeat.stats()),  # our own: how late it went
             rejected=Rejected(**rejected),
             alarms=dict(self.alarms),
+            devices={
+                name: DeviceValues(
+                    objects,
+                    tuple(device_value(link.values.get((o.index, o.subindex))) for o in objects),
+                )
+                for name, (link, objects) in self._device_objects.items()
+            },
         )
 
     # -- control ---------------------------------------------------------------------------

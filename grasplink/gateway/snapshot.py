@@ -19,7 +19,13 @@ Field metadata says what the type alone does not:
   once per period, not on change;
 - `kinds`: the node kinds that have the field (the others leave it None);
 - `hex_code`: an error code, carried as "0xXXXX" text;
-- `node_values`: a section holding one node kind's decoded values.
+- `node_values`: a section holding one node kind's decoded values;
+- `json`: the function that makes the field's JSON-ready form (a device's values).
+
+A `device` node (mastered, not in the loop: docs/gateway.md, bus description) has its
+state in `nodes[NAME]` like any node, and its values in `devices[NAME]`: the objects its
+TPDOs map, described once from its EDS/DCF (`DeviceObject`, shared by every snapshot),
+and their latest values in that order.
 """
 
 from __future__ import annotations
@@ -39,9 +45,13 @@ from grasplink.gateway.feedback import FeedbackMode, Reason
 from grasplink.gateway.levels import Belt
 from grasplink.gateway.plausibility import REJECTION_KEYS
 from grasplink.gateway.reflex import GripSource, ReflexState
+from grasplink.profiles.eds import DATA_TYPES
+from grasplink.profiles.pdo_codec import PdoCodec
 
 __all__ = [
     "BeltSnapshot",
+    "DeviceObject",
+    "DeviceValues",
     "EmgSnapshot",
     "HandSnapshot",
     "HeartbeatStats",
@@ -52,6 +62,7 @@ __all__ = [
     "SkinSnapshot",
     "Snapshot",
     "check_path",
+    "device_objects",
     "field_of",
     "node_sections",
     "section_fields",
@@ -182,6 +193,62 @@ class Rejected:
     second_master_heartbeat: int = field(metadata=_COUNTER)
 
 
+@dataclass(frozen=True, slots=True)
+class DeviceObject:
+    """One object a device node's TPDOs map, as its EDS/DCF describes it."""
+
+    key: str  # "6401sub1": how the configuration names it (index, sub-index in hex)
+    index: int
+    subindex: int
+    name: str  # the file's ParameterName
+    data_type: str  # its CiA 301 data type: "INTEGER16", "REAL32", "VISIBLE_STRING", ...
+    unit: str  # the file's Unit; "" where it gives none
+
+
+DeviceValue = int | float | bool | str | None  # None: not received yet
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceValues:
+    """A device node's TPDO-mapped objects and their latest values, in the same order."""
+
+    objects: tuple[DeviceObject, ...]  # made once per node (`device_objects`), shared
+    values: tuple[DeviceValue, ...]
+
+    def as_dict(self) -> dict[str, DeviceValue]:
+        """Values by object key: the JSON-ready form."""
+        return {obj.key: value for obj, value in zip(self.objects, self.values, strict=True)}
+
+
+def device_objects(codec: PdoCodec) -> tuple[DeviceObject, ...]:
+    """The objects a node's TPDOs map (TPDO by TPDO, in map order), described from its file."""
+    out = []
+    for var in codec.tpdo_objects():
+        known = DATA_TYPES.get(var.data_type) if var.data_type is not None else None
+        out.append(
+            DeviceObject(
+                key=f"{var.index:04X}sub{var.subindex:X}",
+                index=var.index,
+                subindex=var.subindex,
+                name=var.name,
+                data_type=known.name if known else f"0x{var.data_type or 0:04X}",
+                unit=var.unit or "",
+            )
+        )
+    return tuple(out)
+
+
+def device_value(value: Any) -> DeviceValue:
+    """A decoded TPDO value as a snapshot carries it (an octet string or domain as hex)."""
+    if isinstance(value, bytes | bytearray):
+        return bytes(value).hex()
+    return value  # type: ignore[no-any-return]
+
+
+def _devices_json(devices: Mapping[str, DeviceValues]) -> dict[str, dict[str, DeviceValue]]:
+    return {name: device.as_dict() for name, device in devices.items()}
+
+
 _NODE_VALUES = {"node_values": True}
 
 
@@ -190,7 +257,7 @@ class Snapshot:
     """Everything the gateway knows at one instant; replaced whole, never changed."""
 
     uptime_s: float
-    nodes: Mapping[str, NodeSnapshot]  # by node kind, configured nodes only
+    nodes: Mapping[str, NodeSnapshot]  # by node name (a loop node's is its kind), configured only
     skin: SkinSnapshot = field(metadata=_NODE_VALUES)
     emg: EmgSnapshot = field(metadata=_NODE_VALUES)
     belt: BeltSnapshot = field(metadata=_NODE_VALUES)
@@ -199,6 +266,10 @@ class Snapshot:
     heartbeat: HeartbeatStats
     rejected: Rejected
     alarms: Mapping[str, str]  # key "KIND.CATEGORY" (or "gateway.…") -> text
+    # device nodes' TPDO-mapped objects, by node name (JSON: name -> {object key: value})
+    devices: Mapping[str, DeviceValues] = field(
+        default_factory=dict, metadata={"json": _devices_json}
+    )
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON-ready form (made once per snapshot and shared: do not change it)."""
@@ -309,6 +380,8 @@ def _hex_code(value: int) -> str:
 
 
 def _converter(cls: type, item: dataclasses.Field[Any]) -> Convert | None:
+    if "json" in item.metadata:
+        return item.metadata["json"]  # type: ignore[no-any-return]
     if item.metadata.get("hex_code"):
         return _hex_code
     hint = _bare(_hints(cls)[item.name])

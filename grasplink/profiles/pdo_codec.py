@@ -85,6 +85,14 @@ class PdoCodec:
         """The objects TPDO `can_id` maps, in map order."""
         return tuple((v.od.index, v.od.subindex) for v in self._tpdo(can_id).map)
 
+    def tpdo_objects(self) -> tuple[ODVariable, ...]:
+        """Every object the node's TPDOs map, each once: TPDO by TPDO, in map order."""
+        seen: dict[Key, ODVariable] = {}
+        for pdo in self._tpdo_by_can_id.values():
+            for var in pdo.map:
+                seen.setdefault((var.od.index, var.od.subindex), var.od)
+        return tuple(seen.values())
+
     def tpdo_length(self, can_id: int) -> int:
         """The data bytes a frame of TPDO `can_id` carries."""
         return (self._tpdo(can_id).length + 7) // 8

@@ -6,6 +6,7 @@ output, so the document cannot drift from what the server serves.
 
 from __future__ import annotations
 
+from grasplink.gateway.config import MODBUS_DEVICE_BASE
 from grasplink.profiles.kinds import KINDS
 from grasplink.surfaces.modbus.functions import (
     FUNCTIONS,
@@ -70,6 +71,7 @@ def render_modbus_markdown(rmap: RegisterMap | None = None) -> str:
             out += ["", f"### {section}", "", *_table_head()]
         out.append(_row(register))
     out += ["", *_enumerations(rmap)]
+    out += _device_registers(rmap)
     out += _holding(rmap)
     out += _examples(rmap)
     return "\n".join(out).rstrip() + "\n"
@@ -299,6 +301,37 @@ def _enumerations(rmap: RegisterMap) -> list[str]:
         "",
     ]
     return lines
+
+
+def _device_registers(rmap: RegisterMap) -> list[str]:
+    """The configuration's device objects (`[[modbus.registers]]`; none by default)."""
+    if not rmap.device_registers:
+        return []
+    out = [
+        "## Device objects (input registers, this configuration)",
+        "",
+        f"From `{rmap.source}` (`[[modbus.registers]]`, docs/gateway.md): objects that device "
+        "nodes' TPDOs map, each at the input registers its entry gives (at or above "
+        f"{MODBUS_DEVICE_BASE}; the fixed map above is unchanged). A read must lie inside "
+        "the fixed map or on consecutive configured registers: a span that touches an "
+        f"address neither maps is exception {ExceptionCode.ILLEGAL_ADDRESS:02X}. Integers "
+        "read the object's value (saturated one short of the sentinel); float32 is IEEE 754 "
+        'single precision, high word first ("ABCD", like every 32-bit value here). While '
+        "the node is not operational, or before its first TPDO, a register reads the "
+        "sentinel (float32: NaN, `0x7FC0 0x0000`): never a stale value.",
+        "",
+        "| address | name | type | unit | object | data type | node |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for register in rmap.device_registers:
+        entry = register.config
+        span = str(entry.address) if entry.words == 1 else f"{entry.address}–{entry.end - 1}"
+        out.append(
+            f"| {span} | `{register.name}` | {entry.type} | {entry.unit} | "
+            f"{entry.index:04X}h:{entry.subindex:02X} {entry.name} | {entry.data_type} | "
+            f"{entry.node} |"
+        )
+    return [*out, ""]
 
 
 def _holding(rmap: RegisterMap) -> list[str]:

@@ -18,6 +18,10 @@ blocks are generated per node kind the gateway masters.
   (`ILLEGAL_VALUE`), addresses and groups too (`ILLEGAL_ADDRESS`), so a
   refused write posts nothing.
 
+A configuration may add device objects (`[[modbus.registers]]`, `config.ModbusRegister`):
+each at its own input registers, at or above `MODBUS_DEVICE_BASE` (`DeviceRegister`,
+`register_map_for`); a read must lie inside the fixed map or on configured registers.
+
 Conventions (docs/modbus.md): 32-bit values take two registers, high word
 first; signed values are two's complement; engineering value = raw × scale;
 an unknown value reads as the type's sentinel (0xFFFF, 0x8000, 0xFFFFFFFF,
@@ -30,6 +34,7 @@ import functools
 import math
 import numbers
 import re
+import struct
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -42,6 +47,7 @@ from grasplink.gateway.commands import (
     MIN_THRESHOLD_MM_S,
     Command,
 )
+from grasplink.gateway.config import MODBUS_DEVICE_BASE, GatewayConfig, ModbusRegister
 from grasplink.gateway.edge import GatewayEdge
 from grasplink.gateway.feedback import FeedbackMode, Reason
 from grasplink.gateway.levels import Belt
@@ -335,6 +341,9 @@ class RegisterMap:
     _by_name: dict[str, Register] = field(default_factory=dict, repr=False)
     # "inputs", "holding" -> the table's registers as the encoder reads them (`_Plan`)
     _compiled: dict[str, tuple[_Plan, ...]] = field(default_factory=dict, repr=False, compare=False)
+    # a configuration's device objects (`register_map_for`), by address, above the fixed map
+    device_registers: tuple[DeviceRegister, ...] = ()
+    source: str = ""  # the configuration they come from
 
     def __post_init__(self) -> None:
         for table in (self.inputs, self.holding):
@@ -367,6 +376,50 @@ class RegisterMap:
     def encode_holding(self, settings: Mapping[str, Any] | None) -> list[int]:
         """The whole holding table for the gateway's current settings."""
         return _encode_table(self._compiled["holding"], settings, settings)
+
+    @property
+    def input_span(self) -> int:
+        """One past the last input register served: the fixed map's, or a device object's."""
+        return max((r.end for r in self.device_registers), default=self.input_count)
+
+    def encode_served_inputs(self, snapshot: Snapshot | None) -> list[int]:
+        """Every input register served (0..input_span): the fixed map, then the device
+        objects at their addresses (0 between them: never read, `read_inputs` refuses it)."""
+        table = self.encode_inputs(snapshot)
+        if not self.device_registers:
+            return table
+        table += [0] * (self.input_span - len(table))
+        for register in self.device_registers:
+            table[register.address : register.end] = register.encode(snapshot)
+        return table
+
+    def read_inputs(self, table: list[int], address: int, count: int) -> list[int]:
+        """`read` of the served input table: ILLEGAL_ADDRESS also for a span that is not
+        all in the fixed map or all on configured registers."""
+        words = self.read(table, address, count)
+        end = address + count
+        if end > self.input_count and (
+            address < self.input_count or not self._covered(address, end)
+        ):
+            raise RegisterError(
+                ExceptionCode.ILLEGAL_ADDRESS,
+                f"input registers {address}..{end - 1} are not all mapped (fixed map "
+                f"0..{self.input_count - 1}; device objects: "
+                + ", ".join(f"{r.address}..{r.end - 1}" for r in self.device_registers)
+                + ")",
+            )
+        return words
+
+    def _covered(self, address: int, end: int) -> bool:
+        for register in self.device_registers:  # by address: a gap ends the run
+            if register.end <= address:
+                continue
+            if register.address > address:
+                return False
+            address = register.end
+            if address >= end:
+                return True
+        return False
 
     def read(self, table: list[int], address: int, count: int) -> list[int]:
         """`count` words from `address` of an encoded table; ILLEGAL_ADDRESS outside it."""
@@ -1092,6 +1145,91 @@ def _holding() -> tuple[tuple[Register, ...], tuple[CommandGroup, ...]]:
         )
     )
     return tuple(t.registers), tuple(groups)
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceRegister:
+    """A device node's object at configured input registers (`[[modbus.registers]]`).
+
+    The object's value as the register type carries it: integers exact (one short of the
+    sentinel at most: an UNSIGNED16 of 65535 in a uint16 reads 65534), float32 as IEEE 754
+    high word first; unknown (not received yet, or the node not operational: no stale
+    value is served as live) reads the sentinel, float32 a quiet NaN."""
+
+    config: ModbusRegister
+    type: WordType | None  # None: float32
+
+    @property
+    def name(self) -> str:
+        return f"{self.config.node}.{self.config.key}"
+
+    @property
+    def address(self) -> int:
+        return self.config.address
+
+    @property
+    def end(self) -> int:
+        return self.config.end
+
+    def value_of(self, snapshot: Snapshot | None) -> Any:
+        """The object's value in `snapshot` (None: unknown, or the node not operational)."""
+        if snapshot is None:
+            return None
+        node = snapshot.nodes.get(self.config.node)
+        device = snapshot.devices.get(self.config.node)
+        if node is None or device is None or node.phase is not NodePhase.OPERATIONAL:
+            return None
+        for obj_, value in zip(device.objects, device.values, strict=True):
+            if obj_.key == self.config.key:
+                return value
+        return None
+
+    def encode(self, snapshot: Snapshot | None) -> list[int]:
+        value = self.value_of(snapshot)
+        if self.type is None:
+            return float32_words(value)
+        if isinstance(value, int):  # (a BOOLEAN too)
+            word_type = self.type
+            return to_words(word_type, min(word_type.high, max(word_type.low, int(value))))
+        return to_words(self.type, None)
+
+
+def float32_words(value: Any) -> list[int]:
+    """A number as IEEE 754 single precision, high word first; None (unknown): quiet NaN,
+    beyond its range: ±infinity."""
+    if value is None or isinstance(value, str):
+        value = math.nan
+    number = float(value)
+    if math.isfinite(number) and abs(number) > FLOAT32_MAX:
+        number = math.copysign(math.inf, number)
+    bits = int.from_bytes(struct.pack(">f", number), "big")
+    return [bits >> 16, bits & 0xFFFF]
+
+
+FLOAT32_MAX = 3.4028234663852886e38
+_DEVICE_WORD_TYPES: dict[str, WordType | None] = {
+    "int16": I16,
+    "uint16": U16,
+    "int32": I32,
+    "uint32": U32,
+    "float32": None,
+}
+
+
+def register_map_for(config: GatewayConfig) -> RegisterMap:
+    """The map a gateway with `config` serves: the fixed map, and the configuration's
+    device objects (the fixed map itself when it names none)."""
+    if not config.modbus_registers:
+        return register_map()
+    fixed = register_map()
+    if fixed.input_count > MODBUS_DEVICE_BASE:  # never: the fixed map is one read at most
+        raise ValueError(f"the fixed map reaches {fixed.input_count}, past {MODBUS_DEVICE_BASE}")
+    devices = tuple(
+        DeviceRegister(entry, _DEVICE_WORD_TYPES[entry.type]) for entry in config.modbus_registers
+    )
+    return RegisterMap(
+        fixed.inputs, fixed.holding, fixed.groups, device_registers=devices, source=config.source
+    )
 
 
 @functools.lru_cache(maxsize=1)

@@ -95,7 +95,7 @@ from grasplink.surfaces.modbus.registers import (
     COMMAND_TIMEOUT_S,
     RegisterError,
     RegisterMap,
-    register_map,
+    register_map_for,
     settings_of,
 )
 from grasplink.surfaces.modbus.url import ModbusUrl, parse_modbus_url, unit_ids
@@ -144,7 +144,8 @@ class ModbusServer:
             for unit, g in zip(unit_ids(self.url, len(gateways)), gateways, strict=True)
         }
         self.gateway = gateways[0]
-        self.map = register_map_ or register_map()
+        # the map of the gateways' configuration (several buses: one configuration)
+        self.map = register_map_ or register_map_for(gateways[0].gateway.config)
         self.command_timeout_s = command_timeout_s
         self.stats: Counter[str] = Counter()  # requests, exceptions, commands; this thread only
         self.address: ModbusUrl = self.url
@@ -199,9 +200,12 @@ class ModbusServer:
             units = "every unit id"
         else:
             units = f"unit {self.address.unit}"
+        devices = "".join(
+            f", {r.name} at {r.address}" for r in self.map.device_registers
+        )  # a configuration's device objects
         return (
-            f"modbus {self.address} ({units}): input registers 0..{self.map.input_count - 1}, "
-            f"holding registers 0..{self.map.holding_count - 1} (docs/modbus.md)"
+            f"modbus {self.address} ({units}): input registers 0..{self.map.input_count - 1}"
+            f"{devices}, holding registers 0..{self.map.holding_count - 1} (docs/modbus.md)"
         )
 
     # -- the server thread ---------------------------------------------------------------
@@ -249,7 +253,7 @@ class ModbusServer:
                     [
                         SimData(
                             0,
-                            count=self.map.input_count,
+                            count=self.map.input_span,
                             datatype=DataType.REGISTERS,
                             readonly=True,
                         )
@@ -359,10 +363,11 @@ class ModbusServer:
             if function_code == 6:
                 return None  # the echo of a single write: the registers hold what was written
             if function_code == READ_INPUTS:
-                table = self._inputs(unit)
+                words = self.map.read_inputs(self._inputs(unit), address, count)
             else:
                 table = self.map.encode_holding(settings_of(unit.gateway, unit.last_actions))
-            registers[offset : offset + count] = self.map.read(table, address, count)
+                words = self.map.read(table, address, count)
+            registers[offset : offset + count] = words
         except RegisterError as exc:
             logger.debug("modbus: %s", exc)
             return ExcCodes(exc.code)
@@ -375,7 +380,7 @@ class ModbusServer:
         cached = unit.cached
         if cached is not None and cached[0] is snapshot:
             return cached[1]
-        table = self.map.encode_inputs(snapshot)
+        table = self.map.encode_served_inputs(snapshot)
         unit.cached = (snapshot, table)
         return table
 

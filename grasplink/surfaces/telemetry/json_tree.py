@@ -6,10 +6,15 @@
 | `health` | yes | every `health_period_ms`, and at once when the live node list changes |
 | `alarms` | yes | on change |
 | `controls` | yes | on change (feedback mode, reflex, EMG calibration) |
-| `node/<kind>/state` | yes | on change (phase, NMT state, boots, EMCY, failure) |
-| `node/<kind>/values` | no | latest decoded values, when one changed, else every second |
+| `node/<name>/state` | yes | on change (phase, NMT state, boots, EMCY, failure) |
+| `node/<name>/values` | no | latest decoded values, when one changed, else every second |
+| `node/<name>/objects` | yes | a device node's TPDO-mapped objects, described from its file |
 | `cmd/<name>` | — | in: `{"value": …, "id": …}` (id optional, echoed); one command, one reply |
 | `reply/<name>` | no | out: `{"id", "command", "accepted", "detail"}` |
+
+A loop node's name is its kind and its values are its snapshot section's fields; a
+`device` node's values are its objects by key ("6401sub1": index and sub-index in hex,
+as the configuration names them), and `objects` says what each key is.
 
 Every payload carries `ts_ms`, when the snapshot it reports was made (wall
 clock, ms since the epoch), so a message replayed after an outage still says
@@ -25,6 +30,7 @@ from collections import Counter
 from typing import Any
 
 from grasplink.gateway.commands import Command, CommandResult
+from grasplink.gateway.snapshot import DeviceObject
 from grasplink.surfaces.telemetry.buffer import Message, Sample
 from grasplink.surfaces.telemetry.protocol import (
     LIVE_PHASE,
@@ -130,8 +136,10 @@ class JsonTree:
         latest = batch[-1]
         self.latest = latest
         snap, ts = latest.snapshot.to_dict(), latest.ts_ms
+        devices = snap["devices"]
         for kind in snap["nodes"]:
-            section = snap.get(kind)
+            fields = VALUE_FIELDS.get(kind)
+            section = snap.get(kind) if fields is not None else devices.get(kind)
             last = self._values.get(kind)
             refresh = self.values_refresh_ms
             if last and last[1] == section and ts // refresh == last[0] // refresh:
@@ -139,7 +147,7 @@ class JsonTree:
             self._values[kind] = (ts, section)
             body: dict[str, Any] = {"ts_ms": ts}
             get = section.get if section is not None else {}.get
-            for key in VALUE_FIELDS[kind]:
+            for key in fields if fields is not None else (section or ()):
                 body[key] = get(key)
             out.append(Message(self._topics[kind][1], dumps(body), VALUES_QOS, False))
         # Periodic topics go once per period of the clock, all in the same snapshot (and with
@@ -177,6 +185,11 @@ class JsonTree:
             body["live"] = live
             body["times_lost"] = self._times_lost[kind]
             out += self._if_changed(topic, body, ts)
+        for name, device in sample.snapshot.devices.items():
+            topic = f"{self.base}/node/{name}/objects"
+            if seen.get(topic) is not device.objects:  # described once: the same tuple
+                seen[topic] = device.objects
+                out += self._if_changed(topic, _objects_body(device.objects), ts)
         alarms = snap["alarms"]
         topic = f"{self.base}/alarms"
         if seen.get(topic) != alarms:
@@ -260,3 +273,20 @@ class JsonTree:
     def reply(self, request: CommandRequest, result: CommandResult, t_ms: int) -> list[Message]:
         body = {"ts_ms": t_ms, "id": request.context, **result.as_dict()}
         return [Message(f"{self.base}/reply/{request.name}", dumps(body), QOS, False)]
+
+
+def _objects_body(objects: tuple[DeviceObject, ...]) -> dict[str, Any]:
+    """A device node's objects as its `objects` topic describes them, in TPDO map order."""
+    return {
+        "objects": [
+            {
+                "key": o.key,
+                "index": o.index,
+                "subindex": o.subindex,
+                "name": o.name,
+                "type": o.data_type,
+                "unit": o.unit,
+            }
+            for o in objects
+        ]
+    }

@@ -52,7 +52,7 @@ STATE_FIELDS = tuple(f.name for f in _NODE_FIELDS if not f.metadata.get("counter
 _REPORTED_NODE_FIELDS = operator.attrgetter(
     *(f.name for f in _NODE_FIELDS if not f.metadata.get("fast"))
 )
-_COMPARED_SECTIONS = (*VALUE_FIELDS, "alarms")
+_COMPARED_SECTIONS = (*VALUE_FIELDS, "alarms", "devices")
 #: Bounds on what one command message may ask for, checked before it is parsed: the largest
 #: real command is a few hundred bytes, 2 levels deep, 8 metrics (every writable one of the
 #: edge node); a bigger one is refused whole, answered once, and costs no parsing.

@@ -16,6 +16,12 @@ node a device. Snapshots in, `(topic, payload, qos, retain)` out; see docs/telem
 - `update()`: report by exception: NDATA/DDATA carry the metrics that changed, each
   with the timestamp of the snapshot it changed in (fast counters at most once a
   second); DDEATH when a node is lost or leaves OPERATIONAL, DBIRTH when it is back.
+- A `device` node (mastered, not in the loop) is a device too, named as the
+  configuration names it: a metric per object its TPDOs map, named by the object's
+  key ("6401sub1"), typed from its EDS data type (`EDS_TYPES`), its birth carrying the
+  file's name, data type and unit as properties (`Documentation`, `edsDataType`,
+  `engUnit`), then `State/…` like any node. Its aliases are given when the session
+  first sees it, after every fixed one, and kept for the session's life.
   Metrics are grouped by what they are read from (`MetricGroup`), so an unchanged
   group costs one comparison, not one per metric.
 - `finalize()` runs as a message is actually sent: it stamps `seq` (NBIRTH 0, then
@@ -40,7 +46,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import operator
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,6 +54,7 @@ from google.protobuf.message import DecodeError
 
 from grasplink.gateway.commands import Command, CommandResult, shown
 from grasplink.gateway.snapshot import (
+    DeviceObject,
     LoopSnapshot,
     NodeSnapshot,
     Rejected,
@@ -74,6 +81,30 @@ NAMESPACE = "spBv1.0"
 INT8, INT16, INT32, INT64 = 1, 2, 3, 4
 UINT8, UINT16, UINT32, UINT64 = 5, 6, 7, 8
 FLOAT, DOUBLE, BOOLEAN, STRING = 9, 10, 11, 12
+#: a device object's CiA 301 data type (`snapshot.DeviceObject.data_type`) -> its Sparkplug
+#: data type; the integers of odd sizes in the next wider one, any other type as text
+#: (octet strings and domains as hex, as the snapshot carries them)
+EDS_TYPES = {
+    "BOOLEAN": BOOLEAN,
+    "INTEGER8": INT8,
+    "INTEGER16": INT16,
+    "INTEGER24": INT32,
+    "INTEGER32": INT32,
+    "INTEGER40": INT64,
+    "INTEGER48": INT64,
+    "INTEGER56": INT64,
+    "INTEGER64": INT64,
+    "UNSIGNED8": UINT8,
+    "UNSIGNED16": UINT16,
+    "UNSIGNED24": UINT32,
+    "UNSIGNED32": UINT32,
+    "UNSIGNED40": UINT64,
+    "UNSIGNED48": UINT64,
+    "UNSIGNED56": UINT64,
+    "UNSIGNED64": UINT64,
+    "REAL32": FLOAT,
+    "REAL64": DOUBLE,
+}
 #: how a snapshot field is carried (`snapshot.wire_kind`) -> its Sparkplug data type
 WIRE_TYPES = {
     "float": DOUBLE,
@@ -103,6 +134,7 @@ class MetricSpec:
     name: str
     datatype: int
     get: Getter
+    properties: tuple[tuple[str, str], ...] = ()  # carried by births (a device object's)
 
 
 @dataclass(frozen=True)
@@ -127,6 +159,11 @@ class SpMeta:
     epoch: int
     kind: str
     device: str | None = None
+
+
+def datatype_of_eds(data_type: str) -> int:
+    """The Sparkplug data type of a device object's CiA 301 data type (`EDS_TYPES`)."""
+    return EDS_TYPES.get(data_type, STRING)
 
 
 def datatype(section: type, name: str) -> int:
@@ -309,6 +346,37 @@ def device_groups(kind: str) -> tuple[MetricGroup, ...]:
     groups = [
         MetricGroup(values, lambda s, e: s.get(kind), values=_section_values(fields))  # type: ignore[union-attr]
     ]
+    return (*groups, *_state_groups(kind))
+
+
+def device_node_groups(name: str, objects: tuple[DeviceObject, ...]) -> tuple[MetricGroup, ...]:
+    """A `device` node's metrics: its TPDO-mapped objects by key, then `State/…`."""
+    values = tuple(
+        MetricSpec(
+            o.key,
+            datatype_of_eds(o.data_type),
+            _snap(("devices", name, o.key)),
+            (
+                ("Documentation", o.name),
+                ("edsDataType", o.data_type),
+                *((("engUnit", o.unit),) if o.unit else ()),
+            ),
+        )
+        for o in objects
+    )
+
+    def fingerprint(snap: dict[str, Any] | None, extra: dict[str, Any]) -> Any:
+        return snap["devices"].get(name)  # type: ignore[index]
+
+    def in_order(found: Any) -> Sequence[Any] | None:
+        return None if found is None else tuple(found.values())
+
+    return (MetricGroup(values, fingerprint, values=in_order), *_state_groups(name))
+
+
+def _state_groups(kind: str) -> list[MetricGroup]:
+    """A node's `State/…` metrics: on change, and its fast counters once a period."""
+    groups = []
     for state, period in ((STATE_METRICS, 0), (COUNTER_STATE_METRICS, COUNTER_PERIOD_MS)):
         names = tuple(n for n, _ in state if _node_has(kind, n))
         specs = tuple(
@@ -319,7 +387,7 @@ def device_groups(kind: str) -> tuple[MetricGroup, ...]:
         else:
             group = MetricGroup(specs, _node_state(kind, names[0]), period, values=lambda fp: (fp,))
         groups.append(group)
-    return tuple(groups)
+    return groups
 
 
 DEVICE_GROUPS = {kind: device_groups(kind) for kind in node_sections()}
@@ -415,14 +483,15 @@ def metric_value(metric: pb.Payload.Metric, datatype: int | None = None) -> Any:
 
 
 def _last_of_each(
-    device: str | None, metrics: Sequence[pb.Payload.Metric]
+    device: str | None,
+    metrics: Sequence[pb.Payload.Metric],
+    names: Mapping[int, str],
 ) -> dict[str, pb.Payload.Metric | None]:
     """A command payload's writes, one per metric: the last of each (by name or by alias,
     the same metric either way), in the order of those last ones; as if the earlier copies
     had not been sent, as a later write of a value replaces an earlier one. A metric that
     names nothing maps its refusal to None (one per distinct alias)."""
     writes: dict[str, pb.Payload.Metric | None] = {}
-    names = NAMES_BY_ALIAS[device]
     for metric in metrics:
         key: str = metric.name
         found: pb.Payload.Metric | None = metric
@@ -486,6 +555,38 @@ class SparkplugSession:
         self._seen: dict[tuple[str | None, int], Any] = {}  # (device, group) -> fingerprint
         self._reported_ms: dict[tuple[str | None, int], int] = {}  # periodic groups
         self._reply: dict[str, Any] = dict.fromkeys(REPLY_METRICS)
+        # per device (None: the edge node): the fixed tables, then the device nodes seen
+        self._groups: dict[str | None, tuple[MetricGroup, ...]] = {None: NODE_GROUPS}
+        self._groups.update(DEVICE_GROUPS)
+        self._metrics: dict[str, tuple[MetricSpec, ...]] = dict(DEVICE_METRICS)
+        self._aliases: dict[str | None, dict[str, int]] = dict(ALIASES)
+        self._types: dict[str | None, dict[str, int]] = dict(DATATYPES)
+        self._names: dict[str | None, dict[int, str]] = dict(NAMES_BY_ALIAS)
+        self._periodic = dict(_PERIODIC)
+        self._next_alias = max(a for table in ALIASES.values() for a in table.values()) + 1
+
+    def _known(self, device: str, snapshot: Snapshot) -> bool:
+        """Whether `device` is one of the session's devices: a loop kind, or a device node
+        (given its metrics and fresh aliases the first time it is seen)."""
+        if device in self._metrics:
+            return True
+        found = snapshot.devices.get(device)
+        if found is None:
+            return False
+        groups = device_node_groups(device, found.objects)
+        specs = tuple(spec for group in groups for spec in group.specs)
+        types = {**{spec.name: spec.datatype for spec in specs}, RESTART: BOOLEAN}
+        aliases = {name: self._next_alias + i for i, name in enumerate(types)}
+        self._next_alias += len(aliases)
+        self._groups[device] = groups
+        self._metrics[device] = specs
+        self._types[device] = types
+        self._aliases[device] = aliases
+        self._names[device] = {a: n for n, a in aliases.items()}
+        self._periodic[device] = [
+            (device, i, g.period_ms) for i, g in enumerate(groups) if g.period_ms
+        ]
+        return True
 
     # -- topics ----------------------------------------------------------------------------
     def topic(self, kind: str, device: str | None = None) -> str:
@@ -580,18 +681,21 @@ class SparkplugSession:
         payload = pb.Payload(timestamp=t_ms)
         last = self._last[kind] = {}
         self._forget(kind, ts_ms)
-        aliases = ALIASES[kind]
-        for spec in DEVICE_METRICS[kind]:
+        aliases = self._aliases[kind]
+        for spec in self._metrics[kind]:
             last[spec.name] = spec.get(snap, self._extra)
             metric = payload.metrics.add(name=spec.name, alias=aliases[spec.name], timestamp=ts_ms)
             set_value(metric, spec.datatype, last[spec.name])
+            for key, text in spec.properties:
+                metric.properties.keys.append(key)
+                metric.properties.values.add(type=STRING, string_value=text)
         metric = payload.metrics.add(name=RESTART, alias=aliases[RESTART], timestamp=ts_ms)
         set_value(metric, BOOLEAN, False)
         return self._message("DBIRTH", payload, kind)
 
     def _forget(self, device: str | None, ts_ms: int) -> None:
         """After a birth: compare every group again; periodic ones wait a period."""
-        groups = NODE_GROUPS if device is None else DEVICE_GROUPS[device]
+        groups = self._groups[device]
         for index, group in enumerate(groups):
             self._seen.pop((device, index), None)
             if group.period_ms:
@@ -617,9 +721,9 @@ class SparkplugSession:
             self.latest = sample
             snap = sample.snapshot.to_dict()
             for kind, status in snap["nodes"].items():
-                groups = DEVICE_GROUPS.get(kind)
-                if groups is None:
+                if not self._known(kind, sample.snapshot):
                     continue
+                groups = self._groups[kind]
                 alive = status["phase"] == LIVE_PHASE
                 if alive and kind not in self._alive:
                     self._alive.add(kind)
@@ -641,8 +745,8 @@ class SparkplugSession:
             out.append(self._message("NDATA", node_payload))
         self.next_due_ms = min(
             (self._reported_ms.get((device, index), _NEVER) // period + 1) * period
-            for device, index, period in _PERIODIC[None]
-            + [key for kind in self._alive for key in _PERIODIC[kind]]
+            for device, index, period in self._periodic[None]
+            + [key for kind in self._alive for key in self._periodic[kind]]
         )
         return out
 
@@ -656,7 +760,7 @@ class SparkplugSession:
         """Add what changed in `sample` to `payload` (made when first needed), by alias."""
         snap, ts, extra = sample.snapshot.to_dict(), sample.ts_ms, self._extra
         last = self._last.setdefault(device, {})
-        aliases = ALIASES[device]
+        aliases = self._aliases[device]
         for index, group in enumerate(groups):
             key = (device, index)
             period = group.period_ms
@@ -743,7 +847,7 @@ class SparkplugSession:
         if retain:
             refused = "retained commands are not executed (publish with retain off)"
             return Incoming([CommandRequest(label, refused=refused)])
-        if device is not None and device not in DEVICE_METRICS:
+        if device is not None and device not in self._metrics:
             return Incoming([CommandRequest(label, refused=f"no device {device!r}")])
         count = len(message.metrics)
         if not 1 <= count <= MAX_COMMAND_METRICS:
@@ -754,11 +858,11 @@ class SparkplugSession:
             return Incoming([CommandRequest(label, refused=refused)])
         incoming = Incoming()
         calibration: dict[str, Any] = {}
-        for name, metric in _last_of_each(device, message.metrics).items():
+        for name, metric in _last_of_each(device, message.metrics, self._names[device]).items():
             if metric is None:
                 incoming.requests.append(CommandRequest(label, refused=name))
                 continue
-            value = metric_value(metric, DATATYPES[device].get(name))
+            value = metric_value(metric, self._types[device].get(name))
             if name in (REBIRTH, RESTART) and (name == REBIRTH) == (device is None):
                 if value is not True:
                     refused = f"{name}: write Boolean true, got {shown(value)}"
