@@ -56,7 +56,7 @@ class PdoCodec:
         network.add_node(self._node)
         self.unreadable: list[str] = []  # PDOs whose file entries canopen cannot read
         for pdos in (self._node.tpdo, self._node.rpdo):
-            for pdo in pdos.map.values():
+            for pdo in pdos.map.values() if pdos.map is not None else ():
                 try:
                     pdo.read(from_od=True)
                 except (KeyError, ValueError) as exc:  # e.g. a map without its entries

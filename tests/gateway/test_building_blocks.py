@@ -196,7 +196,8 @@ def test_configuration_reference_in_the_docs_is_the_defaults():
     from pathlib import Path
 
     text = (Path(__file__).resolve().parents[2] / "docs" / "gateway.md").read_text()
-    block = text.split("```toml\n", 1)[1].split("```", 1)[0]
+    section = text.split("\n## Configuration\n", 1)[1]  # the reference, not the examples
+    block = section.split("```toml\n", 1)[1].split("```", 1)[0]
     documented = parse_config(tomllib.loads(block), "docs/gateway.md")
     defaults = load_config(None)
     documented.source = defaults.source
