@@ -27,6 +27,9 @@ from grasplink.bus.runner import NodeRunner
 from grasplink.core.frames import Frame
 from grasplink.core.protocol import SansIoDevice
 
+# The bus's thread runs ahead of ordinary work, as the gateway's does (a loaded host must
+# not stall the nodes' heartbeats and TPDOs), but not real-time: its physics can grow.
+SCENE_NICE = -10
 # The caller's thread looks at the clock at least this often (a stop request, a lost bus).
 WATCH_PERIOD_S = 0.05
 
@@ -123,6 +126,7 @@ class LiveNetwork:
             name=name,
             reopen=live.reopen,
             reconnect_timeout_s=live.reconnect_timeout_s,
+            nice=SCENE_NICE,
         )
 
     def clock_us(self) -> int:
