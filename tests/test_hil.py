@@ -31,12 +31,12 @@ import pytest
 from grasplink.bus import CanHub, open_bus
 from grasplink.cli import main
 from grasplink.core.frames import HEARTBEAT_BASE, NMT_COB_ID, RPDO_BASES, Frame
-from grasplink.errors import ConfigError
+from grasplink.errors import BusError, ConfigError
 from grasplink.evaluation.hil import judge_recording, master_activity
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.live import LiveGateway
 from grasplink.simulators.engine import Simulation
-from grasplink.simulators.live import LiveBus, PhysicsStepper
+from grasplink.simulators.live import LiveBus, LiveNetwork, PhysicsStepper
 from grasplink.simulators.plots import read_summary
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import load_scene
@@ -299,3 +299,68 @@ def test_bus_alone_runs_the_scene_with_its_own_master_on_that_bus(tmp_path, caps
     assert summary["bus"]["master"] == "scene" and summary["controller"] == "scripted"
     assert {n["state"] for n in summary["nodes"].values()} == {"OPERATIONAL"}
     assert f"real time on {url}, master scene" in capsys.readouterr().out
+
+
+# -- failures end the run with the files kept ---------------------------------------------
+def test_physics_that_raises_on_the_bus_thread_is_raised_on_the_callers():
+    def boom(t_end_us: int) -> None:
+        if t_end_us > 20_000:
+            raise ValueError("an effect failed")
+
+    stepped = []
+    stepper = PhysicsStepper(lambda t: (stepped.append(t), boom(t)), 10_000, 50_000, [])
+    stepper.advance(40_000)
+    assert stepped == [10_000, 20_000, 30_000]  # nothing after the failure
+    assert isinstance(stepper.failure, ValueError) and stepper.next_deadline_us() is None
+
+
+@pytest.mark.slow
+def test_live_network_raises_what_the_physics_raised_and_stops_its_thread():
+    def boom(t_end_us: int) -> None:
+        raise ValueError("an effect failed")
+
+    bus = open_bus(_channel())
+    try:
+        network = LiveNetwork(
+            LiveBus(bus, "virtual:x"), [], boom, chunk_us=10_000, duration_us=600_000_000,
+            name="test",
+        )  # fmt: skip
+        network.start()
+        try:
+            with pytest.raises(ValueError, match="an effect failed"):
+                network.run_until(60_000_000)
+        finally:
+            network.stop()
+        assert not network.runner.running
+    finally:
+        bus.shutdown()
+
+
+@pytest.mark.slow
+def test_a_bus_lost_for_good_ends_the_run_with_its_files_whole(tmp_path):
+    text = (ROOT / "scenes" / "boot.toml").read_text()
+    scene_path = tmp_path / "boot.toml"
+    scene_path.write_text(re.sub(r"(?m)^duration_s = .*$", "duration_s = 600.0", text))
+    scene = load_scene(scene_path)
+    out = tmp_path / "out"
+    hub = CanHub("127.0.0.1", 0).start()
+    try:
+        bus = open_bus(hub.url)
+        live = LiveBus(bus, hub.url, reopen=lambda: open_bus(hub.url), reconnect_timeout_s=0.0)
+        sim = Simulation(scene, Recorder(out), live=live)
+
+        def stop_the_hub(t_us: int, duration_us: int) -> None:
+            if t_us >= 200_000 and hub.running:
+                hub.stop()
+
+        try:
+            with pytest.raises(BusError):
+                sim.run(progress=stop_the_hub)
+        finally:
+            bus.shutdown()
+    finally:
+        hub.stop()
+    assert not sim.network.runner.running
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["complete"] is False and summary["simulated_s"] < 600
+    assert list(can.LogReader(str(out / "can.asc")))  # whole: readable to its end

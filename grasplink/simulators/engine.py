@@ -25,7 +25,7 @@ from grasplink.bus.lockstep import LockstepNetwork
 from grasplink.core.protocol import SansIoDevice
 from grasplink.devices.node import DeviceNode
 from grasplink.devices.sampling import SampleClock
-from grasplink.errors import ConfigError
+from grasplink.errors import BusError, ConfigError
 from grasplink.simulators.bindings import NodeBinding, bind
 from grasplink.simulators.core import DOMAINS, PHYSICS, Io
 from grasplink.simulators.live import LiveBus, LiveNetwork
@@ -155,6 +155,7 @@ class Simulation:
         live = isinstance(self.network, LiveNetwork)
         self.network.start()
         duration_us = self.scene.duration_us
+        lost: BusError | None = None
         try:
             while self.t_us < duration_us:
                 if should_stop is not None and should_stop():
@@ -167,6 +168,8 @@ class Simulation:
                     delay = wall0 + t_end / 1e6 - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)
+        except BusError as exc:  # a live bus lost for good: the files up to then are kept
+            lost = exc
         finally:
             if isinstance(self.network, LiveNetwork):
                 self.network.stop()  # before the files close: the bus's thread writes them
@@ -175,6 +178,8 @@ class Simulation:
             self.recorder.close(summary)
         self.wall_s = time.monotonic() - wall0
         self.cpu_s = time.process_time() - cpu0
+        if lost is not None:
+            raise lost
         return summary
 
     def step(self, t_end_us: int) -> None:

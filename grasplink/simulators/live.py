@@ -65,6 +65,7 @@ class PhysicsStepper:
         self.chunks = 0
         self.late_chunks = 0  # chunks stepped more than one chunk after they began
         self.max_late_us = 0  # the latest a chunk's physics was stepped after it began
+        self.failure: Exception | None = None  # what the physics raised; no chunk after it
 
     def catch_up(self, t_us: int) -> None:
         """Step every chunk that has begun by `t_us`."""
@@ -73,7 +74,12 @@ class PhysicsStepper:
             self.max_late_us = max(self.max_late_us, late_us)
             self.late_chunks += late_us > self._chunk_us
             end_us = min(self._next_us + self._chunk_us, self._duration_us)
-            self._step(end_us)
+            try:
+                self._step(end_us)
+            except Exception as exc:  # the caller's thread raises it: a bug, not the bus's
+                self.failure = exc
+                self._next_us = None
+                return
             self.chunks += 1
             self.stepped_to_us = end_us
             self._next_us = end_us if end_us < self._duration_us else None
@@ -146,10 +152,12 @@ class LiveNetwork:
 
     def run_until(self, t_us: int) -> None:
         """Wait until the bus's time reaches `t_us`; raises the runner's `BusError` if it
-        gave up on its bus."""
+        gave up on its bus, or what the physics raised on the bus's thread."""
         while True:
             if self.runner.failure is not None:
                 raise self.runner.failure
+            if self.stepper.failure is not None:
+                raise self.stepper.failure
             left_us = min(t_us, self._last_us) - self.clock_us()
             if left_us <= 0:
                 return
