@@ -8,7 +8,7 @@ SYSTEM_PACKAGES := mosquitto mosquitto-clients mbpoll
 STAMP_PY := $(VENV)/.stamp-install
 STAMP_SYS := $(VENV)/.stamp-system
 
-.PHONY: demo test test-fast check lint typecheck format docs bench clean setup system proto telemetry-demo
+.PHONY: demo test test-fast check lint typecheck format docs bench clean setup system proto telemetry-demo hil-demo
 
 # The decoders' compiled kernels: compiled on a machine's first run (and after a kernel
 # changes), loaded from numba's cache after that.
@@ -54,6 +54,7 @@ demo: setup
 	$(VENV)/bin/grasplink run $(LOOP_HEADLINE) --out out/loop_headline
 	$(VENV)/bin/grasplink plot out/loop_headline
 	$(MAKE) --no-print-directory telemetry-demo
+	$(MAKE) --no-print-directory hil-demo
 
 # The gateway live with telemetry on: a private mosquitto on a free 127.0.0.1 port (its
 # config under out/telemetry/, stopped at the end), the gateway on a loopback hub publishing
@@ -101,6 +102,35 @@ telemetry-demo: setup
 	grep -m 2 '"belt":"slip"' $$out/json.txt | cut -c1-200 || true; \
 	echo "== the end of the log: nodes lost, alarms retained:"; grep '/alarms ' $$out/json.txt | tail -n 1 | cut -c1-200; \
 	echo "all of it: $$out/json.txt, $$out/sparkplug.txt"
+
+# Hardware in the loop (docs/hil.md): the loop headline's nodes and physics in real time on a
+# loopback hub, `run --bus --master external`, mastered by a `grasplink gateway` in another
+# process, as an integrator's own master would; then what that master did and how the loop
+# went, read from the run's can.asc and truth.csv. The pull starts at 2 s (1 s in the scene)
+# so a loaded machine's gateway has booted the nodes first, and the gateway's SDO timeout and
+# heartbeat allowance are generous, as on any host that is not real-time (docs/hil.md).
+# Nothing waits a fixed time: the
+# hub is waited for until it accepts a connection, the gateway until its --ready-file; every
+# process started here is stopped on the way out, also on failure.
+HIL_OUT := out/hil
+hil-demo: setup
+	@set -e; out=$(HIL_OUT); rm -rf $$out; mkdir -p $$out; \
+	hub=$$($(FREE_PORT)); pids=""; \
+	trap 'kill $$pids 2>/dev/null || true; wait 2>/dev/null || true' EXIT; \
+	sed -e 's/^duration_s = .*/duration_s = 4.5/' -e 's/^start_s = 1.0$$/start_s = 2.0/' \
+	  $(LOOP_HEADLINE) > $$out/scene.toml; \
+	printf '[gateway]\nsdo_timeout_ms = 5000\nconsumer_allowance_ms = 3000\n[nodes.skin]\nlayout = "alpha0.1"\n[nodes.emg]\ngrip_levels_n = [0.0, 5.0, 8.0, 11.0, 14.0, 20.0]\n[feedback]\nmode = "force_and_slip"\n[reflex]\nthreshold_mm_s = 30.0\n' > $$out/gateway.toml; \
+	$(VENV)/bin/grasplink bus hub --port $$hub > $$out/hub.log 2>&1 & pids="$$pids $$!"; \
+	$(WAIT_PORT) "the CAN hub" $$hub $$out/hub.log; \
+	echo "== HIL: hub on 127.0.0.1:$$hub; a gateway process configured as the scene's controller"; \
+	$(VENV)/bin/grasplink gateway --bus remote:ws://127.0.0.1:$$hub/ --config $$out/gateway.toml \
+	  --duration 120 --ready-file $$out/gateway.ready > $$out/gateway.log 2>&1 & gw=$$!; pids="$$pids $$gw"; \
+	waited=0; until [ -f $$out/gateway.ready ]; do \
+	  if ! kill -0 $$gw 2>/dev/null; then echo "hil-demo: the gateway exited before it was up; see $$out/gateway.log"; exit 1; fi; \
+	  if [ $$waited -ge $$(( $(GATEWAY_READY_S) * 20 )) ]; then echo "hil-demo: the gateway was not up within $(GATEWAY_READY_S) s"; exit 1; fi; \
+	  sleep 0.05; waited=$$((waited + 1)); done; \
+	echo "== the scene's nodes and physics on the hub, the gateway process closing the loop"; \
+	$(VENV)/bin/grasplink run $$out/scene.toml --bus remote:ws://127.0.0.1:$$hub/ --master external --out $$out/run
 
 # Everything ruff checks and formats.
 LINT_PATHS := grasplink tests benchmarks scenes

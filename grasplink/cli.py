@@ -227,7 +227,23 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--realtime",
         action="store_true",
-        help="pace the scene to the wall clock (hardware in the loop)",
+        help="pace the scene to the wall clock",
+    )
+    run.add_argument(
+        "--bus",
+        default=None,
+        metavar="URL",
+        help="run the scene's nodes and physics in real time on this bus, which can.asc "
+        "records whole (hardware in the loop; see docs/hil.md and docs/buses.md); with the "
+        "scene's own controller unless --master external",
+    )
+    run.add_argument(
+        "--master",
+        choices=("scene", "external"),
+        default="scene",
+        help="with --bus: who masters the nodes: the scene's [controller] on the same bus "
+        "(default), or whatever master is on it (external: the nodes boot and wait "
+        "PRE-OPERATIONAL for its NMT start, take their commands from its RPDOs)",
     )
 
     plot = sub.add_parser("plot", help="draw PNGs of a recording made by `grasplink run`")
@@ -575,25 +591,40 @@ def cmd_run(args: argparse.Namespace) -> int:
     from grasplink.simulators.scene import load_scene
     from grasplink.terminal import ProgressBar, StopSignals
 
+    if args.master == "external" and args.bus is None:
+        raise ConfigError("--master external needs --bus URL: the bus the master is on")
     scene = load_scene(args.scene)
     controllers = build_controllers(scene)  # validates [controller] before any file is written
+    if args.master == "external":
+        controllers = []  # the loop is closed by the master on the bus
     out = args.out or Path("out") / args.scene.stem
-    sim = Simulation(scene, Recorder(out), controllers=controllers)
-    realtime = args.realtime or scene.clock == "realtime"
-    progress = ProgressBar(scene.name)
-    with StopSignals() as stop:
-        try:
-            summary = sim.run(realtime=realtime, progress=progress, should_stop=stop)
-        finally:
-            progress.close()
+    with ExitStack() as bus_open:
+        live = None if args.bus is None else bus_open.enter_context(_scene_bus(args, scene))
+        if live is not None:
+            _refuse_taken_node_ids(live.bus, args.bus, scene, controllers)
+        sim = Simulation(scene, Recorder(out), controllers=controllers, live=live)
+        realtime = args.realtime or scene.clock == "realtime" or live is not None
+        progress = ProgressBar(scene.name)
+        with StopSignals() as stop:
+            try:
+                summary = sim.run(realtime=realtime, progress=progress, should_stop=stop)
+            finally:
+                progress.close()
     states = ", ".join(f"{k} {v['state'].lower()}" for k, v in summary["nodes"].items())
     simulated_s = summary["simulated_s"]
-    print(
-        f"{scene.name}: {simulated_s:g} s simulated in {sim.wall_s:.2f} s "
-        f"({_speed_text(simulated_s, sim.wall_s)}{', paced' if realtime else ''})"
-    )
+    if live is None:
+        how = f"{_speed_text(simulated_s, sim.wall_s)}{', paced' if realtime else ''}"
+    else:
+        timing = summary["bus"]["realtime"]
+        how = (
+            f"real time on {args.bus}, master {args.master}; physics stepped at most "
+            f"{timing['max_late_ms']:g} ms late, {timing['late_chunks']} chunk(s) over a chunk"
+        )
+    print(f"{scene.name}: {simulated_s:g} s simulated in {sim.wall_s:.2f} s ({how})")
     print(f"  nodes: {states or 'none'}; effects: {', '.join(summary['effects']) or 'none'}")
     print(f"  wrote {out}/ ({', '.join(sorted(p.name for p in out.iterdir()))})")
+    if args.master == "external":
+        _print_master_activity(out, summary)
     if not summary["complete"]:
         name = stop.received.name if stop.received else "a stop request"
         print(
@@ -605,12 +636,87 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scene_bus(args: argparse.Namespace, scene: Any) -> AbstractContextManager[Any]:
+    """`run --bus`: the bus opened (a bad URL fails here, before any file is written), as a
+    `LiveBus` that a lost bus is reopened from with back-off; shut down on leaving."""
+    from contextlib import contextmanager
+
+    from grasplink.bus import open_bus
+    from grasplink.simulators.live import LiveBus
+
+    @contextmanager
+    def opened() -> Any:
+        bus = open_bus(args.bus)
+        try:
+            yield LiveBus(bus, args.bus, reopen=lambda: open_bus(args.bus))
+        finally:
+            bus.shutdown()
+
+    return opened()
+
+
+def _refuse_taken_node_ids(bus: Any, url: str, scene: Any, controllers: Sequence[Any]) -> None:
+    """Listen before booting: a heartbeat, EMCY, TPDO or SDO answer from one of the node-IDs
+    we are about to bring (the scene's nodes, its controller) means a clash, such as a
+    second master when the scene's own is run beside another (--master external)."""
+    from grasplink.bus.url import BusDisconnected, message_to_frame
+    from grasplink.core.frames import node_cob_ids
+
+    ours = {n.node_id: f"the scene's {k} node" for k, n in scene.nodes.items()}
+    ours |= {c.node_id: "the scene's controller" for c in controllers}
+    taken = {can_id: (node_id, what) for node_id, what in ours.items()
+             for can_id in node_cob_ids(node_id)}  # fmt: skip
+    deadline = time.monotonic() + PROBE_S
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            msg = bus.recv(left)
+        except BusDisconnected:
+            return  # the hub went away meanwhile: the runner reconnects
+        frame = message_to_frame(msg) if msg is not None else None
+        if frame is None or frame.rtr or frame.can_id not in taken:
+            continue
+        node_id, what = taken[frame.can_id]
+        hint = "; is a master running there? then --master external" if controllers else ""
+        raise ConfigError(
+            f"node-ID 0x{node_id:02X} ({what}) is already in use on {url} "
+            f"(saw COB-ID 0x{frame.can_id:03X}){hint}"
+        )
+
+
+def _print_master_activity(out: Path, summary: dict) -> None:
+    """What the external master did, from the recording: who it started, what it sent,
+    and, for a closed-loop scene, how the loop went."""
+    from grasplink.evaluation.hil import master_activity
+    from grasplink.evaluation.loop import LOOP_KINDS
+    from grasplink.evaluation.loop_plot import describe_loop
+
+    nodes = {kind: int(n["node_id"]) for kind, n in summary["nodes"].items()}
+    activity = master_activity(out / "can.asc", nodes)
+    print("  the master on the bus:")
+    for line in activity.lines():
+        print(f"    {line}")
+    never = [kind for kind in nodes if kind not in activity.started_s]
+    if never:
+        print(
+            f"grasplink: warning: no NMT start for {', '.join(never)}: they stayed "
+            "PRE-OPERATIONAL (was the master running on the bus?)",
+            file=sys.stderr,
+        )
+    elif set(LOOP_KINDS) <= set(nodes):
+        print("  the loop:")
+        for line in describe_loop(out):
+            print(f"    {line}")
+
+
 def cmd_plot(args: argparse.Namespace) -> int:
     from grasplink.simulators.plots import plot_recording, read_summary
 
     for path in plot_recording(args.recording):
         print(f"wrote {path}")
-    if read_summary(args.recording / "summary.json").get("controller") == "gateway":
+    summary = read_summary(args.recording / "summary.json")
+    controller = summary.get("controller")
+    # an external master's loop (run --bus --master external) is drawn alike
+    if controller == "gateway" or (controller == "external" and "skin" in summary["nodes"]):
         from grasplink.evaluation.loop_plot import describe_loop, plot_loop
 
         print(f"wrote {plot_loop(args.recording)}")

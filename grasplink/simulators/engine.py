@@ -1,12 +1,15 @@
-"""Run a scene: its effects, its nodes on a virtual-time CAN network, and a recorder.
+"""Run a scene: its effects, its nodes on a CAN network, and a recorder.
 
 Time advances in chunks (`[scene] chunk_ms`, default 10 ms). For each chunk
 the physics domain steps first (its last sample lands exactly on the chunk
 end, so sensor domains can interpolate it), then the skin and EMG domains;
 then the network runs to the chunk end, the nodes sampling what the sensor
 domains produced. Actuator commands flow back from the nodes at chunk
-boundaries. Virtual time runs as fast as the machine allows; real time
-paces each chunk to the wall clock (same code, same results).
+boundaries. The network is pluggable: the lock-step network runs in virtual
+time, as fast as the machine allows, or paced to the wall clock (same code,
+same results); a live bus (`simulators/live.py`) runs the nodes in real time
+on a python-can bus beside other participants (an external master), and
+steps the same per-chunk physics from its own clock as each chunk begins.
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ from grasplink.bus.lockstep import LockstepNetwork
 from grasplink.core.protocol import SansIoDevice
 from grasplink.devices.node import DeviceNode
 from grasplink.devices.sampling import SampleClock
+from grasplink.errors import BusError, ConfigError
 from grasplink.simulators.bindings import NodeBinding, bind
 from grasplink.simulators.core import DOMAINS, PHYSICS, Io
+from grasplink.simulators.live import LiveBus, LiveNetwork
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import Scene
 
@@ -44,6 +49,9 @@ class Simulation:
     `controllers` are the sans-IO participants besides the scene's nodes (the NMT master,
     the gateway, extra devices): the caller builds them (see `grasplink.controllers`), the
     engine only puts them on the bus first, in the order given.
+
+    With `live`, the participants run on that bus in real time (`simulators/live.py`);
+    with no controllers there, the loop is closed by whatever master is on the bus.
     """
 
     def __init__(
@@ -53,6 +61,7 @@ class Simulation:
         *,
         controllers: Sequence[SansIoDevice] = (),
         measure: bool = False,
+        live: LiveBus | None = None,
     ):
         self.scene = scene
         self.recorder = recorder
@@ -74,6 +83,11 @@ class Simulation:
         }
         self.nodes: dict[str, DeviceNode] = {k: b.node for k, b in self.bindings.items()}
         link = None
+        if scene.bus is not None and live is not None:
+            raise ConfigError(
+                f"{scene.path}: bus.faults (link faults, power loss) are simulated by the "
+                "in-process bus; on a real bus (--bus) they cannot apply"
+            )
         if scene.bus is not None:
             b = scene.bus
             link = FaultyLink(
@@ -83,7 +97,19 @@ class Simulation:
                 drop_probability=b.drop_probability,
                 error_frames_per_s=b.error_frames_per_s,
             )
-        self.network = LockstepNetwork([*self.controllers, *self.nodes.values()], link)
+        participants = [*self.controllers, *self.nodes.values()]
+        self.network: LockstepNetwork | LiveNetwork
+        if live is None:
+            self.network = LockstepNetwork(participants, link)
+        else:
+            self.network = LiveNetwork(
+                live,
+                participants,
+                self.step_physics,
+                chunk_us=scene.chunk_us,
+                duration_us=scene.duration_us,
+                name=f"scene {scene.name} on {live.url}",
+            )
         self.domains: dict[str, DomainState] = {}
         for domain in DOMAINS:
             signals = sorted({n for n, d in self.domain_of.items() if d == domain})
@@ -120,43 +146,68 @@ class Simulation:
 
         `progress(t_us, duration_us)` is called after every chunk. When `should_stop()`
         turns true the run ends after the current chunk: every file is complete up to
-        that time and the summary says `"complete": false` with the time reached.
+        that time and the summary says `"complete": false` with the time reached. On a
+        live bus the run is real time whatever `realtime` says, and `progress` is called
+        from this thread while the bus's thread steps the physics: it gets times only.
         """
         wall0 = time.monotonic()
         cpu0 = time.process_time()
+        live = isinstance(self.network, LiveNetwork)
         self.network.start()
         duration_us = self.scene.duration_us
-        while self.t_us < duration_us:
-            if should_stop is not None and should_stop():
-                break
-            t_end = min(self.t_us + self.scene.chunk_us, duration_us)
-            self.step(t_end)
-            if progress is not None:
-                progress(self.t_us, duration_us)
-            if realtime:
-                delay = wall0 + t_end / 1e6 - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
+        lost: BusError | None = None
+        try:
+            while self.t_us < duration_us:
+                if should_stop is not None and should_stop():
+                    break
+                t_end = min(self.t_us + self.scene.chunk_us, duration_us)
+                self.step(t_end)
+                if progress is not None:
+                    progress(self.t_us, duration_us)
+                if realtime and not live:
+                    delay = wall0 + t_end / 1e6 - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+        except BusError as exc:  # a live bus lost for good: the files up to then are kept
+            lost = exc
+        finally:
+            if isinstance(self.network, LiveNetwork):
+                self.network.stop()  # before the files close: the bus's thread writes them
         summary = self.summary()
         if self.recorder is not None:
             self.recorder.close(summary)
         self.wall_s = time.monotonic() - wall0
         self.cpu_s = time.process_time() - cpu0
+        if lost is not None:
+            raise lost
         return summary
 
     def step(self, t_end_us: int) -> None:
-        """Advance signals and network from self.t_us to t_end_us."""
+        """Advance signals and network from self.t_us to t_end_us.
+
+        On a live bus the physics is stepped by the bus's thread as its time passes
+        (`live.PhysicsStepper`); here the engine waits for the bus to get to t_end_us.
+        """
+        if isinstance(self.network, LiveNetwork):
+            self.network.run_until(t_end_us - 1)
+            self.t_us = t_end_us
+            return
+        self.step_physics(t_end_us)
+        t0 = time.process_time() if self.measure else 0.0
+        self._run_network(t_end_us)
+        if self.measure:
+            self._charge("network (nodes + bus)", t0)
+        self.t_us = t_end_us
+
+    def step_physics(self, t_end_us: int) -> None:
+        """Step every domain of one chunk, up to t_end_us, and tell the nodes the actual
+        values at its end: the one per-chunk physics step, in virtual and in real time."""
         for domain in DOMAINS:
             state = self.domains.get(domain)
             if state is not None:
                 # Physics includes the sample at t_end so sensors can interpolate up to it.
                 self._step_domain(state, t_end_us if domain == PHYSICS else t_end_us - 1)
         self._read_actuators()
-        t0 = time.process_time() if self.measure else 0.0
-        self._run_network(t_end_us)
-        if self.measure:
-            self._charge("network (nodes + bus)", t0)
-        self.t_us = t_end_us
 
     def _charge(self, what: str, since: float) -> None:
         self.cost_s[what] = self.cost_s.get(what, 0.0) + time.process_time() - since
@@ -230,6 +281,7 @@ class Simulation:
 
     def _run_network(self, t_end_us: int) -> None:
         """Run the bus to just before t_end, applying power events at their exact time."""
+        assert isinstance(self.network, LockstepNetwork)
         while self._power_events and self._power_events[0][0] < t_end_us:
             at_us, action, kind = self._power_events.pop(0)
             self.network.run_until(at_us - 1)
@@ -243,7 +295,8 @@ class Simulation:
 
     def summary(self) -> dict:
         scene = self.scene
-        return {
+        live = self.network if isinstance(self.network, LiveNetwork) else None
+        summary = {
             "scene": scene.name,
             "path": scene.path,
             "description": scene.description,
@@ -257,9 +310,18 @@ class Simulation:
             "nodes": {
                 k: {"node_id": n.node_id, "state": n.state.name} for k, n in self.nodes.items()
             },
-            "controller": scene.controller.name,
+            "controller": scene.controller.name if self.controllers or not live else "external",
             "effects": [e.kind for e in scene.effects],
             "bus_faults": vars(scene.bus) | {"power_loss": [vars(p) for p in scene.bus.power_loss]}
             if scene.bus
             else None,
         }
+        if live is not None:
+            # what ran on which bus, and how well real time was kept (a lock-step run's
+            # summary is a pure function of the scene: it has no such entry)
+            summary["bus"] = {
+                "url": live.url,
+                "master": "scene" if self.controllers else "external",
+                "realtime": live.timing(),
+            }
+        return summary
