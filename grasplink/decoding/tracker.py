@@ -249,8 +249,8 @@ class _One:
     """One track's numbers as plain floats (the chosen track, read at every update)."""
 
     __slots__ = (
-        "a", "d", "dirn", "m", "n", "p00", "p01", "p02", "p11", "p12", "p22", "ridge", "run",
-        "s", "stop", "t", "v",
+        "a", "d", "dirn", "m", "n", "numbers", "p00", "p01", "p02", "p11", "p12", "p22", "ridge",
+        "run", "s", "stop", "t", "v",
     )  # fmt: skip
 
     def __init__(self, B: _Bank, i: int):
@@ -261,6 +261,11 @@ class _One:
         P = B.P[i]
         self.p00, self.p01, self.p02 = float(P[0, 0]), float(P[0, 1]), float(P[0, 2])
         self.p11, self.p12, self.p22 = float(P[1, 1]), float(P[1, 2]), float(P[2, 2])
+        # as `kernels.posterior.where` takes them (a `posterior.One` as a plain tuple)
+        self.numbers = (
+            self.s, self.v, self.a, self.d, self.m, self.t, self.stop,
+            self.p00, self.p01, self.p11, self.p02, self.p12, self.p22, self.dirn, self.ridge,
+        )  # fmt: skip
 
 
 class TrackerDecoder(Decoder):
@@ -1007,10 +1012,7 @@ class TrackerDecoder(Decoder):
             reach = self.SILENCE_REACH * float(self._reach_mm[(1 - h.dirn) // 2, h.ridge])
             blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
             silent = g - h.t - self._silence_latency - (0.0 if blind is None else float(blind[0]))
-        return posterior_kernels.where(
-            h.s, h.v, h.a, h.d, h.m, h.t, h.stop, h.p00, h.p01, h.p11, h.p02, h.p12, h.p22,
-            h.dirn, h.ridge, g, stopped, limit, self._pos, self._K, reach, silent,
-        )  # fmt: skip
+        return posterior_kernels.where(h.numbers, g, stopped, limit, (reach, silent), self._skin)
 
     @cached_property
     def _silence_latency(self) -> float:
