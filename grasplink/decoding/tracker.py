@@ -82,7 +82,7 @@ from grasplink.decoding.contacts import (
     PulseCheck,
 )
 from grasplink.decoding.kernels import posterior as posterior_kernels
-from grasplink.decoding.kernels.branch import branch, pack_constants
+from grasplink.decoding.kernels.branch import Model, branch, pack_constants
 from grasplink.decoding.kernels.common import ring_slot
 from grasplink.decoding.kernels.layout import (
     F_COLS,
@@ -249,8 +249,8 @@ class _One:
     """One track's numbers as plain floats (the chosen track, read at every update)."""
 
     __slots__ = (
-        "a", "d", "dirn", "m", "n", "p00", "p01", "p02", "p11", "p12", "p22", "ridge", "run",
-        "s", "stop", "t", "v",
+        "a", "d", "dirn", "m", "n", "numbers", "p00", "p01", "p02", "p11", "p12", "p22", "ridge",
+        "run", "s", "stop", "t", "v",
     )  # fmt: skip
 
     def __init__(self, B: _Bank, i: int):
@@ -261,6 +261,11 @@ class _One:
         P = B.P[i]
         self.p00, self.p01, self.p02 = float(P[0, 0]), float(P[0, 1]), float(P[0, 2])
         self.p11, self.p12, self.p22 = float(P[1, 1]), float(P[1, 2]), float(P[2, 2])
+        # as `kernels.posterior.where` takes them (a `posterior.One` as a plain tuple)
+        self.numbers = (
+            self.s, self.v, self.a, self.d, self.m, self.t, self.stop,
+            self.p00, self.p01, self.p11, self.p02, self.p12, self.p22, self.dirn, self.ridge,
+        )  # fmt: skip
 
 
 class TrackerDecoder(Decoder):
@@ -561,15 +566,17 @@ class TrackerDecoder(Decoder):
         )
         self._birth._f.flags.writeable = False
         self._birth._i.flags.writeable = False
-        # what `kernels.branch` reads besides the tracks: built once
-        self._branch_constants = pack_constants(self._branch_constant_values())
-        self._branch_tables = (
-            self._pos,
-            self._gap,
-            self._log_prior,
-            self._skip_prior,
-            self._birth._f,
-            self._birth._i,
+        # what `kernels.branch` reads besides the tracks: built once (a plain tuple)
+        self._branch_model = tuple(
+            Model(
+                c=pack_constants(self._branch_constant_values()),
+                pos=self._pos,
+                gap=self._gap,
+                log_prior=self._log_prior,
+                skip_prior=self._skip_prior,
+                birth_f=self._birth._f,
+                birth_i=self._birth._i,
+            )
         )
 
     @classmethod
@@ -737,19 +744,11 @@ class TrackerDecoder(Decoder):
             # pile up like a step - so perhaps a ridge it could not time (mid-rise, loosely)
             sigma_s = max(ev.sigma_s, self.PROBE_SIGMA_S)
         log_strength = 0.0 if probe else self._log_strength(ev.z)  # (a probe starts none)
-        floats, ints, self._null = branch(
-            self._tracks._f,
-            self._tracks._i,
-            (ev.t_s, ev.id, ev.sigma_s),
-            sigma_s,
-            log_strength,
-            math.log(stop_rate),
-            step,
-            probe,
-            self._null,
-            self._branch_constants,
-            self._branch_tables,
-        )
+        # the tracks and the contact: a `kernels.branch.Bank` and `Contact`, as plain tuples
+        tracks = (self._tracks._f, self._tracks._i)
+        log_stop = math.log(stop_rate)
+        contact = (ev.t_s, ev.id, ev.sigma_s, sigma_s, log_strength, log_stop, step, probe)
+        floats, ints, self._null = branch(tracks, contact, self._null, self._branch_model)
         if ev.id in self._sure:  # a step beyond doubt: seldom a ridge the slip went on from
             ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_N] >= 2) & np.isnan(floats[:, F_STOP])
             floats[ridge, F_SCORE] += self.LOG_SURE_STEP_RIDGE
@@ -1007,10 +1006,7 @@ class TrackerDecoder(Decoder):
             reach = self.SILENCE_REACH * float(self._reach_mm[(1 - h.dirn) // 2, h.ridge])
             blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
             silent = g - h.t - self._silence_latency - (0.0 if blind is None else float(blind[0]))
-        return posterior_kernels.where(
-            h.s, h.v, h.a, h.d, h.m, h.t, h.stop, h.p00, h.p01, h.p11, h.p02, h.p12, h.p22,
-            h.dirn, h.ridge, g, stopped, limit, self._pos, self._K, reach, silent,
-        )  # fmt: skip
+        return posterior_kernels.where(h.numbers, g, stopped, limit, (reach, silent), self._skin)
 
     @cached_property
     def _silence_latency(self) -> float:

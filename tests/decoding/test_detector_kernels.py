@@ -305,10 +305,8 @@ def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
     bank.ints[:, -1] = -1  # no channel knows its block's noise
     ints, state, after = bank.ints.copy(), bank.state.copy(), bank.after.copy()
     needs_python = channels_fast(
-        np.array([1.0, 1.1, 1.2]), bank.ints, bank.noise, bank.needed, bank.taps, bank.state,
-        bank.after, bank.block_abs, bank.rows, detector.block, detector.threshold, bank.found,
-        bank.counts, bank.status, bank.taken,
-    )  # fmt: skip
+        np.array([1.0, 1.1, 1.2]), bank.numbers, bank.rows, detector.hinges.constants, bank.told
+    )
     assert needs_python
     assert (bank.status == NOT_TAKEN).all() and (bank.counts == 0).all()
     np.testing.assert_array_equal(bank.ints, ints)
@@ -384,7 +382,7 @@ def _scan_as_numpy_had_it(
 @pytest.mark.parametrize("seed", range(12))
 def test_compiled_watch_scan_matches_the_numpy_watch(seed: int) -> None:
     """Pulses, steps and ramps under a watch, looked at a few samples at a time."""
-    from grasplink.decoding.kernels.detector import watch_scan
+    from grasplink.decoding.kernels.detector import ScanFrom, ScanSettings, Watched, watch_scan
 
     rng = np.random.default_rng(seed)
     n, index, hold = 120, 50, 50 + int(rng.integers(5, 60))
@@ -413,27 +411,12 @@ def test_compiled_watch_scan_matches_the_numpy_watch(seed: int) -> None:
         hit, fell, expected_history, expected_held = _scan_as_numpy_had_it(
             new, next_k, index, peak0=peak, history=expected_history, hold=hold, **args
         )
-        told = watch_scan(
-            new,
-            next_k,
-            index,
-            args["base"],
-            args["fall"],
-            args["fall_credit"],
-            args["trend"],
-            args["width"],
-            peak,
-            history,
-            hist_n,
-            held,
-            held_n,
-            hold,
-            args["min_rise"],
-            args["drop"],
-            args["decay"],
-            args["noise"],
-            args["step_rise"],
+        watch = Watched(
+            index, args["base"], args["fall"], args["trend"], args["noise"], hold, history, held
         )
+        at = ScanFrom(next_k=next_k, peak=peak, hist_n=hist_n, held_n=held_n)
+        settings = ScanSettings(**{key: args[key] for key in ScanSettings._fields})
+        told = watch_scan(new, tuple(watch), tuple(at), tuple(settings))
         assert told == (hit, fell)
         hist_n += len(new)
         np.testing.assert_array_equal(history[:hist_n], expected_history)

@@ -38,6 +38,9 @@ from grasplink.decoding.kernels.detector import (
     BLOCK_DONE,
     NOT_TAKEN,
     TAKEN,
+    Channels,
+    ChannelSettings,
+    ChannelsTold,
     channel_fast,
     channel_hinge,
     channels_fast,
@@ -92,9 +95,10 @@ class _ChannelBank:
     """The hinge channels' numbers side by side (a row per channel), so that one kernel
     crossing steps them all (`kernels.detector.channels_fast`): their int state
     (`CHANNEL_COLUMNS`), the noise of the block they are in, the slope filters' taps and
-    carried state, the slopes held, the block's |hinge|, and the kernel's outputs. A
-    `_Channel` reads and writes its own row through properties (no views are kept: a
-    deep copy of the detector stays one piece)."""
+    carried state, the slopes held, the block's |hinge|, and the kernel's outputs; the
+    kernel takes them in two bundles built here once (`numbers`, `told`). A `_Channel`
+    reads and writes its own row through properties (no views are kept: a deep copy of
+    the detector stays one piece)."""
 
     def __init__(self, widths: list[int], needed: list[float], block: int):
         C, wide = len(widths), max(widths)
@@ -112,6 +116,16 @@ class _ChannelBank:
         self.status = np.zeros(C, np.int64)
         self.taken = np.zeros(C, np.int64)
         self.rows: tuple[np.ndarray, ...] = ()  # the channels' rows storage (`BankRows.data`)
+        # `channels_fast`'s bundles (plain tuples: `kernels.detector.Channels`, `ChannelsTold`)
+        self.numbers = tuple(
+            Channels(
+                ints=self.ints, noise=self.noise, needed=self.needed, taps=self.taps,
+                state=self.state, after=self.after, block_abs=self.block_abs,
+            )
+        )  # fmt: skip
+        self.told = tuple(
+            ChannelsTold(found=self.found, counts=self.counts, status=self.status, taken=self.taken)
+        )
 
 
 @dataclass
@@ -199,6 +213,7 @@ class HingeBank:
             for w in widths
         ]
         self.bank = _ChannelBank(widths, needed, self.block)
+        self.constants = tuple(ChannelSettings(block=self.block, threshold=self.threshold))
         self.channels = [
             _Channel(w, SosFilter.fir(slope_taps(w)), needed[ci], self.bank, ci)
             for ci, w in enumerate(widths)
@@ -231,11 +246,7 @@ class HingeBank:
         centres past a block's end, after that block's noise. In channel order, as the
         channels one after the other: a channel reads only finer ones."""
         bank = self.bank
-        if not channels_fast(
-            x, bank.ints, bank.noise, bank.needed, bank.taps, bank.state, bank.after,
-            bank.block_abs, bank.rows, self.block, self.threshold, bank.found, bank.counts,
-            bank.status, bank.taken,
-        ):  # fmt: skip
+        if not channels_fast(x, bank.numbers, bank.rows, self.constants, bank.told):
             return
         said, taken = bank.status.tolist(), bank.taken.tolist()
         for ci, told in enumerate(bank.counts.tolist()):

@@ -23,7 +23,12 @@ from grasplink.decoding.detector.events import ContactEvent, Ledger, PulseCheck
 from grasplink.decoding.detector.noise_floor import NOISE_FLOOR_N, NoiseFloor, hinge_gain
 from grasplink.decoding.detector.series import Samples, Series, mean
 from grasplink.decoding.filters import SosFilter
-from grasplink.decoding.kernels.detector import fir_run, watch_scan
+from grasplink.decoding.kernels.detector import (
+    ScanSettings,
+    Watched,
+    fir_run,
+    watch_scan,
+)
 from grasplink.decoding.kernels.layout import HELD_DETRENDED, HELD_LEVELS, HELD_PLAIN, WATCH_ROWS
 
 
@@ -85,6 +90,9 @@ class Watch:
     room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
     rise: int = 0  # a probe: the rise of its scale (samples)
     long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
+    # what `watch_scan` reads of it that stays (a `kernels.detector.Watched` as a plain
+    # tuple, built once by `PulseWatcher.start`: the fields it holds are never reassigned)
+    scanned: tuple = ()
 
     @property
     def plain(self) -> np.ndarray:
@@ -177,6 +185,12 @@ class PulseWatcher:
         self.trend_n = max(1, round(settings.trend_s * fs_hz))
         self.long_trend_n = max(self.trend_n + 1, round(settings.long_trend_s * fs_hz))
         self.slip_fall = 6.0  # noise units (`_fell_in_slip`)
+        self._scan_settings = tuple(
+            ScanSettings(
+                fall_credit=self.fall_credit, width=2 * half + 1, min_rise=self.min_rise,
+                drop=self.drop_fraction, decay=1.0 + self.decay_rises, step_rise=self.step_rise,
+            )
+        )  # fmt: skip
 
     def settle(self, first: float) -> None:
         """The level filter's taps and state, settled on the first sample, for the kernel
@@ -250,6 +264,13 @@ class PulseWatcher:
             history=np.empty(self.watch + 1),  # samples index .. index + watch
             held=np.empty((len(WATCH_ROWS), self.step_hold + 1)),  # ... to index + step_hold
         )
+        watch.scanned = tuple(
+            Watched(
+                onset=watch.index, base=watch.base, fall=watch.fall, trend=watch.trend,
+                noise=watch.noise, hold=watch.index + self.step_hold, history=watch.history,
+                held=watch.held,
+            )
+        )  # fmt: skip
         if emit is not None and base is not None:
             watch.slope = self._level_slope(before)
             watch.room = self._tail_room(index, emit, base)
@@ -397,27 +418,9 @@ class PulseWatcher:
             level = self._level[i0 : i0 + end - watch.next_k + 1]
             hold = watch.index + self.step_hold
             first = watch.hist_n  # the new samples' running peaks: history[first:]
-            hit, fell = watch_scan(
-                level,
-                watch.next_k,
-                watch.index,
-                watch.base,
-                watch.fall,
-                self.fall_credit,
-                watch.trend,
-                2 * h + 1,
-                watch.peak,
-                watch.history,
-                first,
-                watch.held,
-                watch.held_n,
-                hold,
-                self.min_rise,
-                self.drop_fraction,
-                1.0 + self.decay_rises,
-                watch.noise,
-                self.step_rise,
-            )
+            # (where the look starts: a `kernels.detector.ScanFrom`, as a plain tuple)
+            at = (watch.next_k, watch.peak, first, watch.held_n)
+            hit, fell = watch_scan(level, watch.scanned, at, self._scan_settings)
             watch.hist_n += len(level)
             if watch.next_k <= hold:
                 watch.held_n += min(len(level), hold - watch.next_k + 1)

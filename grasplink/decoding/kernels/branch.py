@@ -10,10 +10,14 @@ pruning keeps the first of equal scores, so the order is part of the result).
 The bank's layout (its float and int columns) is `layout`'s, as the tracker's and the
 numpy reference's in the tests (numba freezes its ints into the code). The decoder's
 constants come in one float array (`pack_constants`, names in `CONSTANTS`), its tables
-(ridge positions, spacings, priors, the one-contact track template) as arrays.
+(ridge positions, spacings, priors, the one-contact track template) as arrays. `branch`
+takes them in named bundles (`Bank`: the tracks, `Contact`, `Model`: the constants and
+tables), each a plain tuple named again on entry, as `kernels.posterior`'s.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from llvmlite import ir
@@ -634,32 +638,59 @@ def _spurious(
     return j
 
 
+class Bank(NamedTuple):
+    """The tracks: the bank's float and int matrices (a row per track, `layout`)."""
+
+    floats: np.ndarray
+    ints: np.ndarray
+
+
+class Contact(NamedTuple):
+    """The contact the tracks branch on, and what the decoder made of it: its time (s),
+    id and timing sigma (s); its timing sigma as a ridge (a step probe's: loosened); its
+    ridge / false-alarm log odds (births; unused for a probe); the prior of a stop at a
+    step (log); whether it is a step; whether a probe (a small step the kink bank missed:
+    no births, its ridge children less likely)."""
+
+    t_s: float
+    id: int
+    sigma_s: float
+    sigma_assign_s: float
+    log_strength: float
+    log_stop: float
+    step: bool
+    probe: bool
+
+
+class Model(NamedTuple):
+    """What the branching reads besides the tracks, built once by the decoder: its
+    constants (`pack_constants`), ridge positions (2, R + 1), spacings after each ridge
+    (2, R), a new track's log prior (2, R), `_assign`'s log prior (2, R, skips), the
+    one-contact tracks' float and int rows (2 R)."""
+
+    c: np.ndarray
+    pos: np.ndarray
+    gap: np.ndarray
+    log_prior: np.ndarray
+    skip_prior: np.ndarray
+    birth_f: np.ndarray
+    birth_i: np.ndarray
+
+
 @jit()
 def branch(
-    floats: np.ndarray,
-    ints: np.ndarray,
-    contact: tuple[float, int, float],
-    sigma_assign_s: float,
-    log_strength: float,
-    log_stop: float,
-    step: bool,
-    probe: bool,
-    null: float,
-    c: np.ndarray,
-    tables: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tracks: tuple, contact: tuple, null: float, model: tuple
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Every track's children for a contact (t_s, id, sigma_s), unpruned, in the numpy
-    code's order, and the new null score ("no slip": every contact clutter).
-
-    `sigma_assign_s`: the contact's timing sigma as a ridge (a step probe's: loosened);
-    `log_strength`: the contact's ridge / false-alarm log odds (births; unused for a
-    probe); `log_stop`: prior of a stop at a step; `step`: the contact is a step; `probe`:
-    a small step the kink bank missed (no births; its ridge children less likely);
-    `tables`: ridge positions (2, R + 1), spacings after each ridge (2, R), a new track's
-    log prior (2, R), `_assign`'s log prior (2, R, skips), the one-contact tracks' float
-    and int rows (2 R)."""
-    pos, gap, log_prior, skip_prior, birth_f, birth_i = tables
-    tc, ev_id = contact[0], contact[1]
+    """Every track's children for a contact, unpruned, in the numpy code's order, and the
+    new null score ("no slip": every contact clutter). `tracks`, `contact`, `model`: a
+    `Bank`, `Contact` and `Model` as plain tuples."""
+    tracks, contact, model = Bank(*tracks), Contact(*contact), Model(*model)
+    floats, ints = tracks.floats, tracks.ints
+    tc, ev_id, sigma_s = contact.t_s, contact.id, contact.sigma_s
+    sigma_assign_s, log_strength = contact.sigma_assign_s, contact.log_strength
+    log_stop, step, probe = contact.log_stop, contact.step, contact.probe
+    c, pos, gap, log_prior = model.c, model.pos, model.gap, model.log_prior
+    skip_prior, birth_f, birth_i = model.skip_prior, model.birth_f, model.birth_i
     f, i = _kept(floats, ints, tc, c[STALE_S])
     N, R, S = len(f), gap.shape[1], skip_prior.shape[2]
     cap = 2 * N + 4 * N * S + 2 * R
@@ -691,7 +722,7 @@ def branch(
             j,
             best_before,
             log_strength,
-            contact,
+            (tc, ev_id, sigma_s),
             c,
             log_prior,
             birth_f,

@@ -11,11 +11,17 @@ Bit-identity with the numpy code they replace: the FIR loop is scipy's `lfilter`
 + - * / abs and comparisons in numpy's order, so the detector's events do not change by
 a bit (tests/decoding/test_detector_kernels.py, against the numpy code it replaced, run in
 the same process: tests/decoding/reference/).
+
+`channels_fast` and `watch_scan` take their arrays and constants in named bundles
+(`Channels`, `ChannelSettings`, `ChannelsTold`; `Watched`, `ScanFrom`, `ScanSettings`) as
+`kernels.posterior`'s do: the caller passes each as a plain tuple, built once where its
+parts stay, and the kernel names it again on entry.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -210,33 +216,54 @@ def channel_fast(
 TAKEN, NOT_TAKEN, BLOCK_DONE = 0, 1, 2
 
 
+class Channels(NamedTuple):
+    """The hinge channels' numbers, a row each (`detector.hinges._ChannelBank`): int state
+    (`CHANNEL_COLUMNS`), the noise of the block each is in, the rise needed after a
+    candidate, the slope filters' taps and carried state (a channel's first `width` + 1,
+    `width` entries), the slopes held (`width`) and the block's |hinge|."""
+
+    ints: np.ndarray
+    noise: np.ndarray
+    needed: np.ndarray
+    taps: np.ndarray
+    state: np.ndarray
+    after: np.ndarray
+    block_abs: np.ndarray
+
+
+class ChannelSettings(NamedTuple):
+    """The hinge bank's constants: block length (samples) and a candidate's z."""
+
+    block: int
+    threshold: float
+
+
+class ChannelsTold(NamedTuple):
+    """What `channels_fast` tells of each channel (a row each): its candidates' indices
+    (`found[c, :counts[c]]`), its status and the samples taken."""
+
+    found: np.ndarray
+    counts: np.ndarray
+    status: np.ndarray
+    taken: np.ndarray
+
+
 @jit()
-def channels_fast(
-    x: np.ndarray,
-    ints: np.ndarray,
-    noise: np.ndarray,
-    needed: np.ndarray,
-    taps: np.ndarray,
-    state: np.ndarray,
-    after: np.ndarray,
-    block_abs: np.ndarray,
-    rows: tuple,
-    block: int,
-    threshold: float,
-    found: np.ndarray,
-    counts: np.ndarray,
-    status: np.ndarray,
-    taken: np.ndarray,
-) -> bool:
+def channels_fast(x: np.ndarray, bank: tuple, rows: tuple, settings: tuple, out: tuple) -> bool:
     """Every hinge channel's usual step (`channel_fast`) in one crossing: the new centres
     in the block of the channel's known noise, with room in its rows and for its
     candidates. Per channel: status TAKEN (counts[c] candidates in found[c]), BLOCK_DONE
     (taken, and its block complete: the caller takes its noise; centres past the block's
     end are left to it: only x[:taken[c]] was taken) or NOT_TAKEN (nothing changed: the
-    caller's Python path does it); the int state updated in `ints`. Rows of `taps`,
-    `state`, `after` are the channels' (a channel's first `width` + 1, `width`, `width`
-    entries). Returns whether any channel needs the caller (not taken, a block done, a
-    candidate): usually none does."""
+    caller's Python path does it); the int state updated in `bank.ints`. `bank`,
+    `settings`, `out`: a `Channels`, `ChannelSettings` and `ChannelsTold` as plain tuples
+    (built once by the caller); `rows`: the channels' rows storage. Returns whether any
+    channel needs the caller (not taken, a block done, a candidate): usually none does."""
+    bank, settings, out = Channels(*bank), ChannelSettings(*settings), ChannelsTold(*out)
+    ints, noise, needed, taps = bank.ints, bank.noise, bank.needed, bank.taps
+    state, after, block_abs = bank.state, bank.after, bank.block_abs
+    block, threshold = settings.block, settings.threshold
+    found, counts, status, taken = out.found, out.counts, out.status, out.taken
     attention = False
     for c in range(ints.shape[0]):
         w, held, start = ints[c, CH_W], ints[c, CH_HELD], ints[c, CH_NEXT_N]
@@ -385,30 +412,50 @@ def _first_at_least(sorted_values: np.ndarray, count: int, value: float) -> int:
     return lo
 
 
+class Watched(NamedTuple):
+    """What `watch_scan` reads of a pulse watch that stays for its life (`detector.watch.
+    Watch`): its onset sample (`Watch.index`), base level, an earlier tail's fall and the
+    rising trend (N/sample), the level noise (N), the hold (sample), and the rows it
+    writes in place: the running peak by sample (`history`) and the level to the hold
+    (`held`, rows `WATCH_ROWS`)."""
+
+    onset: int
+    base: float
+    fall: float
+    trend: float
+    noise: float
+    hold: int
+    history: np.ndarray
+    held: np.ndarray
+
+
+class ScanFrom(NamedTuple):
+    """Where a watch's look at new level samples starts: the first of them, the running
+    peak before it, and the entries of history and held filled so far."""
+
+    next_k: int
+    peak: float
+    hist_n: int
+    held_n: int
+
+
+class ScanSettings(NamedTuple):
+    """The pulse watcher's constants `watch_scan` reads (`detector.watch.PulseWatcher`),
+    in samples but for the drop (share of the peak) and the decay (rise times)."""
+
+    fall_credit: int
+    width: int
+    min_rise: int
+    drop: float
+    decay: float
+    step_rise: int
+
+
 @jit()
-def watch_scan(
-    level: np.ndarray,
-    next_k: int,
-    index: int,
-    base: float,
-    fall: float,
-    fall_credit: int,
-    trend: float,
-    width: int,
-    peak: float,
-    history: np.ndarray,
-    hist_n: int,
-    held: np.ndarray,
-    held_n: int,
-    hold: int,
-    min_rise: int,
-    drop: float,
-    decay: float,
-    noise: float,
-    step_rise: int,
-) -> tuple[int, bool]:
+def watch_scan(level: np.ndarray, watch: tuple, at: tuple, settings: tuple) -> tuple[int, bool]:
     """A pulse watch's look at the level samples k = next_k .. (level: their values):
-    the numbers of `ContactDetector._advance`, which keeps the verdicts.
+    the numbers of `ContactDetector._advance`, which keeps the verdicts. `watch`, `at`,
+    `settings`: a `Watched`, `ScanFrom` and `ScanSettings` as plain tuples.
 
     With since = k - index, credit = fall min(since, fall_credit) (an earlier tail's fall
     out), raw = level - base + credit and d = raw - trend (since + width) (the trend out):
@@ -419,6 +466,12 @@ def watch_scan(
     least min_rise). Before the hold, a sharp rise (to 80 % within step_rise) is deferred:
     judged at the hold. Returns (the first sample ok and not deferred, as an offset from
     next_k, -1: none; whether one ok was deferred)."""
+    watch, at, settings = Watched(*watch), ScanFrom(*at), ScanSettings(*settings)
+    index, base, fall, trend = watch.onset, watch.base, watch.fall, watch.trend
+    noise, hold, history, held = watch.noise, watch.hold, watch.history, watch.held
+    next_k, peak, hist_n, held_n = at.next_k, at.peak, at.hist_n, at.held_n
+    fall_credit, width, min_rise = settings.fall_credit, settings.width, settings.min_rise
+    drop, decay, step_rise = settings.drop, settings.decay, settings.step_rise
     m = len(level)
     d = np.empty(m)
     for j in range(m):

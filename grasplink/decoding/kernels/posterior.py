@@ -9,10 +9,13 @@ Constants come in one float vector, `K`, indexed by the names below (the decoder
 packs it once with `constants`). The arrays come in named bundles: the tracks' fields
 (`Tracks`), the silence tables (`Silence` to make a schedule, `Schedule` made), the pulse
 verdicts (`Verdicts`), the tables of a track waiting for its speed (`Waiting`) and the
-skin (`Skin`). A caller builds each by name and passes it as a plain tuple
-(`tuple(bundle)`); the kernel names it again on entry (`Tracks(*tracks)`). numba types a
-plain tuple's arrays in C and a NamedTuple's in Python on every call: 1.7 against 8.3 us
-a call for a bundle of three arrays, and the posterior takes 25.
+skin (`Skin`); `where` takes one track's numbers (`One`) and what silence says of it
+(`Bound`). A caller builds each by name and passes it as a plain tuple (`tuple(bundle)`;
+a bundle of plain numbers made per call is written in its order instead: making the
+NamedTuple by name costs some microseconds in Python); the kernel names it again on
+entry (`Tracks(*tracks)`). numba types a plain tuple's arrays in C and a NamedTuple's in
+Python on every call: 1.7 against 8.3 us a call for a bundle of three arrays, and the
+posterior takes 25.
 """
 
 from __future__ import annotations
@@ -141,6 +144,36 @@ class Waiting(NamedTuple):
     log: np.ndarray
     finite: np.ndarray
     before: np.ndarray
+
+
+class One(NamedTuple):
+    """One track's numbers (`tracker._One`, `where`): travel s, speed v, acceleration a, dip
+    d, dip memory m, time t of its last contact, stop (NaN: slipping), the covariance
+    entries `where` reads, direction and the ridge of its last contact."""
+
+    s: float
+    v: float
+    a: float
+    d: float
+    m: float
+    t: float
+    stop: float
+    p00: float
+    p01: float
+    p11: float
+    p02: float
+    p12: float
+    p22: float
+    dirn: int
+    ridge: int
+
+
+class Bound(NamedTuple):
+    """What silence says of a track (`where`): no contact told in the `silent` s after
+    its contact, so by then it travelled less than `reach` mm (inf: no bound)."""
+
+    reach: float
+    silent: float
 
 
 class Skin(NamedTuple):
@@ -290,33 +323,19 @@ def stop_seen(
 
 @jit()
 def where(
-    s: float,
-    v: float,
-    a: float,
-    d: float,
-    m: float,
-    t: float,
-    stop: float,
-    p00: float,
-    p01: float,
-    p11: float,
-    p02: float,
-    p12: float,
-    p22: float,
-    dirn: int,
-    ridge: int,
-    g: float,
-    stopped: bool,
-    limit: int,
-    pos: np.ndarray,
-    K: np.ndarray,
-    reach: float,
-    silent: float,
+    one: tuple, g: float, stopped: bool, limit: int, bound: tuple, skin: tuple
 ) -> tuple[float, float, float]:
     """(travel of the edge from the first ridge met, speed, sigma) of one track at g
-    (`TrackerDecoder._where`). Silence bounds it: no contact told in the `silent` s after
-    the track's contact, so by then it travelled less than `reach` mm (inf: no bound) -
-    its acceleration is capped to keep it there (`TrackerDecoder.SILENCE_REACH`)."""
+    (`TrackerDecoder._where`). Silence bounds it: no contact told in the `bound.silent` s
+    after the track's contact, so by then it travelled less than `bound.reach` mm (inf:
+    no bound) - its acceleration is capped to keep it there (`TrackerDecoder.
+    SILENCE_REACH`). `one`, `bound`, `skin`: a `One`, `Bound` and `Skin` as plain tuples."""
+    one, bound, skin = One(*one), Bound(*bound), Skin(*skin)
+    s, v, a, d, m, t, stop = one.s, one.v, one.a, one.d, one.m, one.t, one.stop
+    p00, p01, p11, p02, p12, p22 = one.p00, one.p01, one.p11, one.p02, one.p12, one.p22
+    dirn, ridge = one.dirn, one.ridge
+    reach, silent = bound.reach, bound.silent
+    pos, K = skin.pos, skin.K
     R = pos.shape[1] - 1
     di = (1 - dirn) // 2
     if stop == stop:  # stopped at a step: where it was then
@@ -552,11 +571,12 @@ def posterior(
         if run[chosen] == 1 or n[chosen] < K[DIRECTION_CONTACTS] or odds < K[LOG_REPORT_ODDS]:
             return until, chosen, is_stopped, lim, p_slip, 0.0, odds, fast, share, low, high
     c = chosen
-    x_ref = where(
+    one = (
         X[c, 0], X[c, 1], X[c, 2], X[c, 3], m[c], t[c], stop[c],
         P[c, 0, 0], P[c, 0, 1], P[c, 1, 1], P[c, 0, 2], P[c, 1, 2], P[c, 2, 2],
-        dirn[c], ridge[c], g, is_stopped, lim, pos, K, np.inf, 0.0,
-    )[0]  # fmt: skip
+        dirn[c], ridge[c],
+    )  # fmt: skip
+    x_ref = where(one, g, is_stopped, lim, (np.inf, 0.0), (pos, K))[0]  # (plain tuples)
     if dirn[c] < 0:
         x_ref = K[LENGTH_MM] - x_ref
     # agreement: the share of the posterior within AGREE_MM (and AGREE_SPEED) of the chosen
