@@ -118,7 +118,8 @@ _INT_KEYS_DEVICEINFO = (
     "NrOfTXPDO",
     "LSS_Supported",
 )
-_OBJECT_KEYS = (
+#: the keys CiA 306 defines for an object's section (field.py adds what canopen reads)
+OBJECT_KEYS = (
     "ParameterName",
     "ObjectType",
     "DataType",
@@ -137,7 +138,7 @@ _OBJECT_KEYS = (
     "DownloadFile",
     "ParamRefd",
 )
-_OBJECT_KEYS_LOWER = {key.lower(): key for key in _OBJECT_KEYS}
+_OBJECT_KEYS_LOWER = {key.lower(): key for key in OBJECT_KEYS}
 _OBJECT_RE = re.compile(r"^([0-9A-Fa-f]{4})$")
 _SUB_RE = re.compile(r"^([0-9A-Fa-f]{4})sub([0-9A-Fa-f]{1,2})$", re.IGNORECASE)
 _NUMBER_RE = re.compile(r"^-?(0[xX][0-9A-Fa-f]+|[0-9]+)$")
@@ -361,7 +362,7 @@ class _Checker:
 
     def _check_keys(self, section: str) -> None:
         for key in self.cfg.options(section):
-            if key not in _OBJECT_KEYS and key.lower() in _OBJECT_KEYS_LOWER:
+            if key not in OBJECT_KEYS and key.lower() in _OBJECT_KEYS_LOWER:
                 spelling = _OBJECT_KEYS_LOWER[key.lower()]
                 self.fail(section, key, f"spell it {spelling!r} (canopen is case-sensitive)")
 

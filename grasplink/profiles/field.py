@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from grasplink.errors import ConfigError, EdsError
-from grasplink.profiles.eds import ACCESS_TYPES, DATA_TYPES, OBJECT_LISTS
+from grasplink.profiles.eds import ACCESS_TYPES, DATA_TYPES, OBJECT_KEYS, OBJECT_LISTS
 
 if TYPE_CHECKING:
     from canopen.objectdictionary import ObjectDictionary
@@ -85,23 +85,7 @@ _COMMISSIONING_KEYS = (
     "LSS_SerialNumber",
 )
 _OBJECT_KEYS = (
-    "ParameterName",
-    "ObjectType",
-    "DataType",
-    "AccessType",
-    "DefaultValue",
-    "LowLimit",
-    "HighLimit",
-    "PDOMapping",
-    "SubNumber",
-    "ObjFlags",
-    "CompactSubObj",
-    "ParameterValue",
-    "Denotation",
-    "StorageLocation",
-    "UploadFile",
-    "DownloadFile",
-    "ParamRefd",
+    *OBJECT_KEYS,
     # not CiA 306, but canopen reads them
     "Factor",
     "Description",
