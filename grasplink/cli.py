@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import sys
 import threading
@@ -82,7 +83,24 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     node = sub.add_parser("node", help="run one device node as its own process")
-    node.add_argument("kind", choices=KINDS, help="which device")
+    node.add_argument(
+        "kind", choices=KINDS, nargs="?", help="which device (or --eds: any vendor's file)"
+    )
+    node.add_argument(
+        "--eds",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="a node built from any EDS or DCF: the protocol its file describes, no "
+        "application (docs/devices.md, Nodes from any EDS)",
+    )
+    node.add_argument(
+        "--value",
+        action="append",
+        default=[],
+        metavar="OBJECT=VALUE",
+        help="with --eds: an object's value, e.g. 6401sub1=512 (repeatable)",
+    )
     node.add_argument(
         "--bus",
         default=DEFAULT_BUS_URL,
@@ -450,13 +468,42 @@ def reconnect_seconds(text: str) -> float:
     return value
 
 
+def _object_value(text: str) -> tuple[int, int, int | float]:
+    """`6401sub1=512` -> (0x6401, 1, 512); ConfigError naming what is wrong."""
+    key, sep, value = text.partition("=")
+    match = re.fullmatch(r"(?:0x)?([0-9A-Fa-f]{4})(?:sub([0-9A-Fa-f]{1,2}))?", key.strip())
+    if not sep or match is None:
+        raise ConfigError(f"--value {text!r}: expected OBJECT=VALUE, e.g. 6401sub1=512")
+    try:
+        number: int | float = int(value, 0)
+    except ValueError:
+        try:
+            number = float(value)
+        except ValueError:
+            raise ConfigError(f"--value {text!r}: {value!r} is not a number") from None
+    return int(match[1], 16), int(match[2] or "0", 16), number
+
+
 def cmd_node(args: argparse.Namespace) -> int:
     from grasplink.bus import NodeRunner, open_bus
     from grasplink.core.frames import HEARTBEAT_BASE
-    from grasplink.devices.factory import build_node
+    from grasplink.devices.factory import build_from_file, build_node
     from grasplink.errors import BusError
 
-    node = build_node(args.kind, args.node_id, serial=args.serial)
+    if (args.kind is None) == (args.eds is None):
+        raise ConfigError("name a node kind or --eds FILE, not both or neither")
+    if args.eds is not None:
+        if args.serial is not None:
+            raise ConfigError("--serial is for our node kinds; a file's 1018h:04 is its own")
+        values = [_object_value(text) for text in args.value]
+        node, warnings = build_from_file(args.eds, args.node_id, values)
+        for warning in warnings:
+            print(f"warning: {warning}", file=sys.stderr)
+        args.kind = args.eds.name
+    elif args.value:
+        raise ConfigError("--value sets objects of a node built from a file (--eds)")
+    else:
+        node = build_node(args.kind, args.node_id, serial=args.serial)
     bus = open_bus(args.bus)
     try:
         if node.configured:

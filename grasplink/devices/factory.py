@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import struct
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from grasplink.core.frames import UNCONFIGURED_NODE_ID
 from grasplink.devices import emcy as em
@@ -77,3 +79,36 @@ def build_node(
             raise ConfigError(f"serial number {serial} is outside 0..0x{SERIAL_MAX:X}")
         od_variable(od, obj.IDENTITY, 4).default = serial
     return DeviceNode(od, node_id, app, od_node_id=od_node_id)
+
+
+def build_from_file(
+    path: str | Path,
+    node_id: int | None = None,
+    values: Sequence[tuple[int, int, int | float]] = (),
+) -> tuple[DeviceNode, list[str]]:
+    """A node built from any EDS or DCF (the field loader), and the loader's warnings.
+
+    It speaks the protocol its file describes (NMT, SDO, heartbeat, EMCY, its PDOs as
+    mapped); its application is none: `values` (index, sub-index, value) become the
+    defaults of those objects, so a script sets what the node reports and a reset
+    keeps it. `node_id` defaults to the DCF's [DeviceComissioning] NodeID.
+    """
+    from grasplink.profiles.field import load_object_dictionary
+
+    od, warnings = load_object_dictionary(path, node_id)
+    chosen = node_id if node_id is not None else od.node_id
+    if chosen is None:
+        raise ConfigError(f"{path}: give a node-ID (its file names none)")
+    for index, subindex, value in values:
+        if index not in od:
+            raise ConfigError(f"{path}: no object 0x{index:04X} to set")
+        try:
+            var = od_variable(od, index, subindex)
+        except KeyError:
+            raise ConfigError(f"{path}: object 0x{index:04X} has no sub-index {subindex}") from None
+        try:
+            var.encode_raw(value)
+        except (ValueError, TypeError, OverflowError, struct.error) as exc:
+            raise ConfigError(f"{path}: {var.name} = {value!r} does not fit: {exc}") from None
+        var.default = value  # type: ignore[assignment]  # (typed int; a REAL holds a float)
+    return DeviceNode(od, chosen, DeviceApp()), [str(w) for w in warnings]

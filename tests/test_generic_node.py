@@ -1,0 +1,76 @@
+"""`grasplink node --eds FILE`: a node built from another project's EDS, on a bus, with the
+values a script gives it (issue 24, item 2)."""
+
+from __future__ import annotations
+
+import uuid
+from pathlib import Path
+
+import can
+import canopen
+import pytest
+
+from grasplink.bus.runner import NodeRunner
+from grasplink.cli import main
+from grasplink.devices.factory import build_from_file
+from grasplink.errors import ConfigError
+
+DEMO = Path(__file__).resolve().parent / "profiles" / "field" / "canopendemo_demoDevice.eds"
+ANALOGUE_IN_1 = (0x6401, 1)  # CiA 401: analogue input 16-bit, channel 1
+
+
+def test_a_node_from_a_cia_401_file_reports_the_value_a_script_gives_it_over_sdo():
+    channel = f"generic-{uuid.uuid4().hex}"
+    node, _ = build_from_file(DEMO, 0x35, [(0x6401, 1, 1234)])
+    device_bus = can.Bus(interface="virtual", channel=channel)
+    network = canopen.Network(can.Bus(interface="virtual", channel=channel))
+    network.connect()
+    remote = network.add_node(0x35, str(DEMO))
+    remote.sdo.RESPONSE_TIMEOUT = 5.0  # a bound for a loaded machine, not a delay
+    runner = NodeRunner(device_bus, [node], max_wait_s=0.01, name="generic").start()
+    try:
+        remote.nmt.wait_for_bootup(10)
+        value = int.from_bytes(remote.sdo.upload(*ANALOGUE_IN_1), "little", signed=True)
+        assert value == 1234
+        vendor = int.from_bytes(remote.sdo.upload(0x1018, 1), "little")
+        assert vendor == remote.object_dictionary[0x1018][1].default
+        remote.nmt.send_command(0x81)  # reset node: the script's value is its default
+        remote.nmt.wait_for_bootup(10)
+        assert int.from_bytes(remote.sdo.upload(*ANALOGUE_IN_1), "little", signed=True) == 1234
+    finally:
+        runner.stop()
+        network.disconnect()
+        device_bus.shutdown()
+
+
+def test_grasplink_node_eds_runs_a_vendors_file_on_a_bus(capsys):
+    argv = ["node", "--eds", str(DEMO), "--node-id", "0x35", "--value", "6401sub1=7"]
+    assert main([*argv, "--bus", f"virtual:{uuid.uuid4().hex}", "--duration", "0.3"]) == 0
+    assert "canopendemo_demoDevice.eds node 0x35 running on virtual:" in capsys.readouterr().out
+
+
+def test_values_are_checked_against_the_file():
+    node, _ = build_from_file(DEMO, 0x35, [(0x6401, 1, -5)])
+    assert node.store.get(*ANALOGUE_IN_1) == -5
+    with pytest.raises(ConfigError, match="no object 0x5FFF"):
+        build_from_file(DEMO, 0x35, [(0x5FFF, 0, 1)])
+    with pytest.raises(ConfigError, match="does not fit"):
+        build_from_file(DEMO, 0x35, [(0x6401, 1, 1 << 20)])
+    with pytest.raises(ConfigError, match="give a node-ID"):
+        build_from_file(DEMO)
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["node"], "name a node kind or --eds FILE"),
+        (["node", "skin", "--eds", str(DEMO)], "not both or neither"),
+        (["node", "skin", "--value", "6401sub1=3"], "--value sets objects of a node built"),
+        (["node", "--eds", str(DEMO), "--value", "6401=x"], "'x' is not a number"),
+        (["node", "--eds", str(DEMO), "--value", "64x1sub1=3"], "expected OBJECT=VALUE"),
+    ],
+)
+def test_a_bad_node_command_is_one_line_naming_the_problem(argv, needle, capsys):
+    assert main([*argv, "--bus", "virtual:nothing", "--duration", "0.1"]) != 0
+    err = capsys.readouterr().err
+    assert needle in err and len(err.strip().splitlines()) == 1
