@@ -35,7 +35,7 @@ import can
 from grasplink.bus import MultiRunner, NodeRunner, open_bus
 from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S
 from grasplink.bus.runner import DEFAULT_STALL_LIMIT_S
-from grasplink.devices.factory import build_node
+from grasplink.devices.factory import build_from_file, build_node
 from grasplink.errors import BusError
 from grasplink.gateway.config import GatewayConfig
 from grasplink.gateway.edge import GatewayEdge
@@ -133,7 +133,12 @@ class LiveGateway:
                 # The four device nodes on their own handle of the same bus, as if in other boxes.
                 nodes_bus = open_bus(url)
                 self._buses.append(nodes_bus)
-                nodes = [build_node(n.kind, n.node_id) for n in self.config.nodes.values()]
+                nodes = [
+                    build_node(n.kind, n.node_id)
+                    if n.eds is None
+                    else build_from_file(n.eds, n.node_id)[0]  # a vendor's: protocol only
+                    for n in self.config.nodes.values()
+                ]
                 node_runners.append(NodeRunner(nodes_bus, nodes, name=f"grasplink-nodes {url}"))
             self._gateway_runners.append(
                 NodeRunner(

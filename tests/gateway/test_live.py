@@ -54,3 +54,18 @@ def test_gateway_command_takes_several_buses(capsys) -> None:
     assert f"on {urls[0]}, {urls[1]} (" in out
     stopped = out[out.index("stopped: ") :]
     assert f"[{urls[0]}]" in stopped and f"[{urls[1]}]" in stopped
+
+
+@pytest.mark.slow
+def test_with_nodes_runs_a_vendors_device_from_its_file_beside_ours() -> None:
+    """`grasplink gateway --with-nodes` and a described device: the stand-in is built from
+    the device's own file (protocol only), and the gateway masters it live."""
+    from pathlib import Path
+
+    field = Path(__file__).resolve().parents[1] / "profiles" / "field"
+    data = {"nodes": {"io": {"node_id": 0x35, "eds": str(field / "canopendemo_demoDevice.eds")}}}
+    config = parse_config(data, "<test>")
+    with LiveGateway(f"virtual:live-{uuid.uuid4().hex[:12]}", config, with_nodes=True) as live:
+        wait_until(lambda: operational(live.gateway), 30.0, "our four nodes and the device")
+        assert set(live.gateway.latest.nodes) == {"skin", "emg", "belt", "hand", "io"}
+        assert live.failure is None
