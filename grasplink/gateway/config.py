@@ -191,6 +191,8 @@ class GatewayConfig:
     sdo_timeout_ms: int = 500
     status_period_s: float = 5.0
     lss: bool = False  # assign node-IDs over LSS at start (the description's identities)
+    sync_period_us: int = 0  # the SYNC producer's period (1006h), 0: no SYNC
+    sync_counter_overflow: int = 0  # 1019h: 2-240, each SYNC carries a counter; 0: none
     nodes: dict[str, NodeConfig] = field(default_factory=dict)
     feedback: FeedbackSettings = field(default_factory=FeedbackSettings)
     reflex: ReflexConfig = field(default_factory=ReflexConfig)
@@ -243,6 +245,14 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     config.sdo_timeout_ms = gw.integer("sdo_timeout_ms", 500, low=10, high=10_000)
     config.status_period_s = gw.number("status_period_s", 5.0, low=0.1, high=3600.0)
     config.lss = gw.boolean("lss", False)
+    sync_ms = gw.number("sync_period_ms", 0.0, low=0.0, high=1000.0)
+    if 0 < sync_ms < 1:
+        raise gw.error("sync_period_ms", f"expected 0 (no SYNC) or 1..1000 ms, got {sync_ms:g}")
+    config.sync_period_us = round(sync_ms * 1000)
+    overflow = gw.integer("sync_counter_overflow", 0, low=0, high=240)
+    if overflow == 1:
+        raise gw.error("sync_counter_overflow", "expected 0 (no counter) or 2..240, got 1")
+    config.sync_counter_overflow = overflow
     gw.finish()
     nodes = top.table_of("nodes", {})
     base = _base_folder(source)

@@ -95,6 +95,7 @@ from grasplink.gateway.snapshot import (
     device_objects,
     device_value,
 )
+from grasplink.gateway.sync import SyncProducer
 from grasplink.profiles import load_profile, object_limits, variable_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
@@ -186,6 +187,12 @@ class Gateway(NmtMaster):
             if link.kind == DEVICE_ROLE
         }
         self.frames_dropped: Counter[str] = Counter()
+        # the SYNC producer (sync.py), when the configuration asks for one
+        self.sync = (
+            SyncProducer(config.sync_period_us, config.sync_counter_overflow)
+            if config.sync_period_us
+            else None
+        )
         self._skin_setup()
         self._emg_setup()
         self._bindings_setup()
@@ -358,6 +365,8 @@ class Gateway(NmtMaster):
         self._next_refresh_us = t_us + COMMAND_REFRESH_US
         self._next_snapshot_us = t_us
         self._started_us = t_us
+        if self.sync is not None:
+            self.sync.start(t_us)
         return super().start(t_us)
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
@@ -380,7 +389,9 @@ class Gateway(NmtMaster):
 
     def advance(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
-        frames = super().advance(t_us)
+        # SYNC first: the nodes sample and answer on it, the rest can wait a frame
+        frames = self.sync.advance(t_us) if self.sync is not None else []
+        frames += super().advance(t_us)
         for link in self.links.values():
             frames += link.sdo.advance(t_us)
             frames += self._check_provisioning(link, t_us)
@@ -417,6 +428,7 @@ class Gateway(NmtMaster):
             self.arbiter.next_deadline_us(),
             self._next_ramp_us(),
             self._next_snapshot_us,
+            self.sync.next_deadline_us() if self.sync is not None else None,
         ):
             if c is not None and (best is None or c < best):
                 best = c
