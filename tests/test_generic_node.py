@@ -74,3 +74,55 @@ def test_a_bad_node_command_is_one_line_naming_the_problem(argv, needle, capsys)
     assert main([*argv, "--bus", "virtual:nothing", "--duration", "0.1"]) != 0
     err = capsys.readouterr().err
     assert needle in err and len(err.strip().splitlines()) == 1
+
+
+E35 = DEMO.with_name("python-canopen_e35.eds")  # a CiA 402 drive: RPDO1 60FFh + 6040h
+
+
+def test_a_vendors_cia_402_drive_is_brought_up_and_follows_the_belt_command(tmp_path):
+    """python-canopen's e35.eds as the belt (its velocity bound in the description): its
+    PDOs are synchronous (transmission type 1), so the gateway produces SYNC; the CiA 402
+    handshake enables it and its actual velocity follows the command."""
+    import tomllib
+
+    from grasplink.bus.lockstep import LockstepNetwork
+    from grasplink.core.nmt import NmtState
+    from grasplink.devices.cia402 import DriveState
+    from grasplink.gateway.config import parse_config
+    from grasplink.gateway.service import Gateway
+    from grasplink.profiles.kinds import KINDS
+
+    off = "".join(f"[nodes.{kind}]\nenabled = false\n" for kind in KINDS if kind != "belt")
+    text = (
+        "[gateway]\nsync_period_ms = 10\n"
+        + off
+        + f'[nodes.belt]\nnode_id = 0x20\neds = "{E35}"\n[nodes.belt.drive]\n'
+        'target = "60FFsub0"\nunits_per_rad_s = 1000.0\n'
+    )
+    gateway = Gateway(parse_config(tomllib.loads(text), str(tmp_path / "gw.toml")))
+    drive, _ = build_from_file(E35, 0x20)
+    network = LockstepNetwork([gateway, drive])
+    network.start()
+    network.run_until(1_000_000)
+    assert drive.state is NmtState.OPERATIONAL
+    assert drive.app.drive.state is DriveState.OPERATION_ENABLED
+    assert gateway.snapshot().nodes["belt"].pdos_dropped == 0  # its TPDOs decode as mapped
+
+
+def test_a_vendors_drive_enabled_moves_its_actual_value_towards_its_target():
+    from grasplink.bus.lockstep import LockstepNetwork
+    from grasplink.core.frames import Frame
+    from grasplink.core.nmt import NmtCommand
+
+    drive, _ = build_from_file(E35, 0x20)
+    network = LockstepNetwork([drive])
+    network.start()
+    drive.receive(Frame(0, bytes([NmtCommand.START, 0x20])), 0)
+    for controlword in (0x06, 0x07, 0x0F):  # shutdown, switch on, enable operation
+        drive.store.set(0x6040, 0, controlword)
+    drive.store.set(0x60FF, 0, 3000)
+    network.run_for(25_000)  # half a time constant: on its way
+    assert 0 < drive.store.get(0x606C) < 3000
+    network.run_for(500_000)  # ten time constants: there
+    assert drive.store.get(0x606C) == 3000
+    assert drive.store.get(0x6041) & 0x6F == 0x27  # operation enabled

@@ -7,11 +7,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import canopen
+from canopen.objectdictionary import ODVariable
+
 from grasplink.core.frames import UNCONFIGURED_NODE_ID
 from grasplink.devices import emcy as em
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.belt import BeltApp
 from grasplink.devices.emg import EmgApp
+from grasplink.devices.generic import GenericDriveApp, is_drive
 from grasplink.devices.hand import HandApp
 from grasplink.devices.node import DeviceNode
 from grasplink.devices.skin import SkinApp
@@ -89,7 +93,8 @@ def build_from_file(
     """A node built from any EDS or DCF (the field loader), and the loader's warnings.
 
     It speaks the protocol its file describes (NMT, SDO, heartbeat, EMCY, its PDOs as
-    mapped); its application is none: `values` (index, sub-index, value) become the
+    mapped); a CiA 402 file gets the drive state machine and a plain drive
+    (generic.py), any other no application: `values` (index, sub-index, value) become the
     defaults of those objects, so a script sets what the node reports and a reset
     keeps it. `node_id` defaults to the DCF's [DeviceComissioning] NodeID.
     """
@@ -99,6 +104,12 @@ def build_from_file(
     chosen = node_id if node_id is not None else od.node_id
     if chosen is None:
         raise ConfigError(f"{path}: give a node-ID (its file names none)")
+    # A node built from a file comes up configured as its file says: a ParameterValue
+    # (a DCF's, or an EDS that carries one) is what it holds, as python-canopen's
+    # LocalNode serves it and as the master that decodes its PDOs reads it.
+    for var in _variables(od):
+        if var.value is not None:
+            var.default = var.value
     for index, subindex, value in values:
         if index not in od:
             raise ConfigError(f"{path}: no object 0x{index:04X} to set")
@@ -111,4 +122,13 @@ def build_from_file(
         except (ValueError, TypeError, OverflowError, struct.error) as exc:
             raise ConfigError(f"{path}: {var.name} = {value!r} does not fit: {exc}") from None
         var.default = value  # type: ignore[assignment]  # (typed int; a REAL holds a float)
-    return DeviceNode(od, chosen, DeviceApp()), [str(w) for w in warnings]
+    app = GenericDriveApp(od) if is_drive(od) else DeviceApp()
+    return DeviceNode(od, chosen, app), [str(w) for w in warnings]
+
+
+def _variables(od: canopen.ObjectDictionary) -> list[ODVariable]:
+    out: list[ODVariable] = []
+    for index in od.indices:
+        entry = od[index]
+        out += [entry] if isinstance(entry, ODVariable) else list(entry.values())
+    return out

@@ -152,7 +152,7 @@ class PdoEngine:
                 for entry in pdo.mapping:
                     self._watchers.setdefault((entry.index, entry.subindex), []).append(pdo)
                 pdo.packer = self._packer(pdo)
-                if self.is_valid(pdo) and self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER:
+                if self._sendable(pdo) and self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER:
                     self._event_tpdos.append(pdo)
 
     def _packer(self, pdo: _Pdo) -> struct.Struct | None:
@@ -256,7 +256,7 @@ class PdoEngine:
                 pdo.buffered = None
         frames = []
         for pdo in self.tpdos:
-            if not self.is_valid(pdo):
+            if not self._sendable(pdo):
                 continue
             kind = self.transmission_type(pdo)
             if kind == 0:
@@ -368,9 +368,13 @@ class PdoEngine:
     def _flush(self, pdo: _Pdo, t_us: int) -> list[Frame]:
         if not (pdo.pending or pdo.timer_due):
             return []
-        if not self.is_valid(pdo) or t_us < self._inhibit_end(pdo):
+        if not self._sendable(pdo) or t_us < self._inhibit_end(pdo):
             return []
         return [self._build(pdo, t_us)]
+
+    def _sendable(self, pdo: _Pdo) -> bool:
+        """A TPDO whose mapping is disabled (0 objects) is not sent (CiA 301 7.5.2.36)."""
+        return self.is_valid(pdo) and bool(pdo.mapping)
 
     def _build(self, pdo: _Pdo, t_us: int) -> Frame:
         if pdo.packer is not None:
