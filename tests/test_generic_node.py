@@ -3,6 +3,8 @@ values a script gives it (issue 24, item 2)."""
 
 from __future__ import annotations
 
+import queue
+import time
 import uuid
 from pathlib import Path
 
@@ -17,6 +19,14 @@ from grasplink.errors import ConfigError
 
 DEMO = Path(__file__).resolve().parent / "profiles" / "field" / "canopendemo_demoDevice.eds"
 ANALOGUE_IN_1 = (0x6401, 1)  # CiA 401: analogue input 16-bit, channel 1
+BOOT_WAIT_S = 10.0  # a bound, not a delay: the boot-up comes within milliseconds
+
+
+def wait_for_boot_up(frames: queue.Queue[bytes]) -> None:
+    """The next boot-up among the node's 700h frames (heartbeats are skipped)."""
+    deadline = time.monotonic() + BOOT_WAIT_S
+    while frames.get(timeout=max(0.0, deadline - time.monotonic())) != b"\x00":
+        pass
 
 
 def test_a_node_from_a_cia_401_file_reports_the_value_a_script_gives_it_over_sdo():
@@ -25,17 +35,19 @@ def test_a_node_from_a_cia_401_file_reports_the_value_a_script_gives_it_over_sdo
     device_bus = can.Bus(interface="virtual", channel=channel)
     network = canopen.Network(can.Bus(interface="virtual", channel=channel))
     network.connect()
+    boot_ups: queue.Queue[bytes] = queue.Queue()  # listening before the node can boot
+    network.subscribe(0x700 + 0x35, lambda can_id, data, t: boot_ups.put(bytes(data)))
     remote = network.add_node(0x35, str(DEMO))
     remote.sdo.RESPONSE_TIMEOUT = 5.0  # a bound for a loaded machine, not a delay
     runner = NodeRunner(device_bus, [node], max_wait_s=0.01, name="generic").start()
     try:
-        remote.nmt.wait_for_bootup(10)
+        wait_for_boot_up(boot_ups)
         value = int.from_bytes(remote.sdo.upload(*ANALOGUE_IN_1), "little", signed=True)
         assert value == 1234
         vendor = int.from_bytes(remote.sdo.upload(0x1018, 1), "little")
         assert vendor == remote.object_dictionary[0x1018][1].default
         remote.nmt.send_command(0x81)  # reset node: the script's value is its default
-        remote.nmt.wait_for_bootup(10)
+        wait_for_boot_up(boot_ups)
         assert int.from_bytes(remote.sdo.upload(*ANALOGUE_IN_1), "little", signed=True) == 1234
     finally:
         runner.stop()
