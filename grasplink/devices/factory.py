@@ -21,7 +21,7 @@ from grasplink.devices.node import DeviceNode
 from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import SampleSource
 from grasplink.errors import ConfigError
-from grasplink.profiles import load_profile, od_variable
+from grasplink.profiles import find_variable, load_profile, od_variable
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import node_kind, per_kind
 
@@ -111,12 +111,10 @@ def build_from_file(
         if var.value is not None:
             var.default = var.value
     for index, subindex, value in values:
-        if index not in od:
-            raise ConfigError(f"{path}: no object 0x{index:04X} to set")
         try:
-            var = od_variable(od, index, subindex)
-        except KeyError:
-            raise ConfigError(f"{path}: object 0x{index:04X} has no sub-index {subindex}") from None
+            var = find_variable(od, index, subindex)
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
         try:
             var.encode_raw(value)
         except (ValueError, TypeError, OverflowError, struct.error) as exc:

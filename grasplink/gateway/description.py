@@ -28,7 +28,7 @@ from canopen.objectdictionary import ODVariable, datatypes
 
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError
-from grasplink.profiles import od_variable
+from grasplink.profiles import find_variable
 
 #: identity keys -> their 1018h sub-index (CiA 301 identity object)
 IDENTITY_SUBS = {"vendor_id": 1, "product_code": 2, "revision": 3, "serial": 4}
@@ -203,12 +203,7 @@ def _pdo_writes(od: canopen.ObjectDictionary, comm: int, mapping: int) -> list[S
 
 
 def _variable(od: canopen.ObjectDictionary, index: int, subindex: int) -> ODVariable:
-    if index not in od:
-        raise ConfigError(f"the node's dictionary has no object 0x{index:04X}")
-    try:
-        var = od_variable(od, index, subindex)
-    except KeyError:
-        raise ConfigError(f"object 0x{index:04X} has no sub-index {subindex}") from None
+    var = find_variable(od, index, subindex)
     if var.access_type not in _WRITABLE:
         raise ConfigError(f"{var.name} (0x{index:04X}sub{subindex:X}) is {var.access_type}")
     return var

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     import canopen
     from canopen.objectdictionary import ODVariable
 
-__all__ = ["eds_path", "load_profile", "object_limits", "validate_eds"]
+__all__ = ["eds_path", "find_variable", "load_profile", "object_limits", "validate_eds"]
 
 _PROFILE_DIR = Path(__file__).resolve().parent
 
@@ -67,6 +67,16 @@ def od_variable(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> 
     if isinstance(entry, ODArray | ODRecord):
         return entry[subindex]
     return entry
+
+
+def find_variable(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> ODVariable:
+    """The variable at index:subindex; ConfigError saying which of the two the file lacks."""
+    if index not in od:
+        raise ConfigError(f"the node's dictionary has no object 0x{index:04X}")
+    try:
+        return od_variable(od, index, subindex)
+    except KeyError:
+        raise ConfigError(f"object 0x{index:04X} has no sub-index {subindex}") from None
 
 
 def od_default(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> int:
