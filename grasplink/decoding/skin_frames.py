@@ -10,7 +10,7 @@ the FSR calibration (2130h) before the samples are placed (`packets.SampleStream
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import canopen
@@ -73,9 +73,6 @@ class SkinCalibration:
         """One ADC step in newtons."""
         return self.full_scale_mn / (self.full_counts - self.zero_counts) / 1e3
 
-    def to_newton(self, counts: np.ndarray) -> np.ndarray:
-        return (np.asarray(counts, dtype=np.float64) - self.zero_counts) * self.n_per_count
-
     def static_force_range_mn(self) -> tuple[float, float]:
         """What a static force (2110h) can read: the zero offset's negative to full scale,
         +-1 mN for the node's rounding."""
@@ -92,6 +89,9 @@ class SampleObjects:
     newtons_per_unit: float
     zero_units: float = 0.0
     sequence: Key | None = None  # a packet number: sample times from it, not from arrival
+
+    def to_newton(self, values: Sequence[int | float] | np.ndarray) -> np.ndarray:
+        return (np.asarray(values, dtype=np.float64) - self.zero_units) * self.newtons_per_unit
 
     @classmethod
     def of_skin(cls, calibration: SkinCalibration, samples_per_pdo: int) -> SampleObjects:
@@ -117,10 +117,6 @@ class SkinFrames:
         settle_us: float = 0.0,
     ):
         self.objects = objects
-        self.slot_keys = objects.samples
-        self._sequence_key = objects.sequence
-        self._zero = objects.zero_units
-        self._per_unit = objects.newtons_per_unit
         self.stream = SampleStream(
             sample_rate_hz,
             len(objects.samples),
@@ -140,13 +136,13 @@ class SkinFrames:
     def feed(self, t_us: float, values: Mapping[Key, int | float]) -> Released:
         """One TPDO's values received at `t_us`; the samples given out now (see SampleStream).
         A TPDO without sample slots (the static force alone) gives none."""
-        slots = [values[k] for k in self.slot_keys if k in values]
+        objects = self.objects
+        slots = [values[k] for k in objects.samples if k in values]
         if not slots:
             return EMPTY
-        number = None if self._sequence_key is None else values.get(self._sequence_key)
+        number = None if objects.sequence is None else values.get(objects.sequence)
         sequence = None if number is None else int(number) % SEQUENCE_MODULO
-        force_n = (np.asarray(slots, dtype=np.float64) - self._zero) * self._per_unit
-        return self.stream.feed(t_us, sequence, force_n)
+        return self.stream.feed(t_us, sequence, objects.to_newton(slots))
 
     def restart(self) -> None:
         """The node rebooted (its boot-up): its sample numbers start again."""

@@ -31,7 +31,7 @@ def test_a_degenerate_calibration_is_refused_by_name(bits, zero, needle):
 
 def test_counts_become_newtons_from_the_zero_offset_to_full_scale():
     calibration = SkinCalibration(12, 98067.0, 95)
-    newtons = calibration.to_newton(np.array([95, 4095, 0]))
+    newtons = SampleObjects.of_skin(calibration, 3).to_newton(np.array([95, 4095, 0]))
     assert newtons[0] == 0.0
     assert newtons[1] == pytest.approx(98.067, rel=1e-12)
     assert newtons[2] < 0  # below the offset: a negative force, not a wrapped count
@@ -62,7 +62,8 @@ def test_frames_unpacked_by_the_eds_mapping_become_samples_on_the_sequence_grid(
     out_t += list(frames.flush()[0])
     assert np.allclose(np.diff(out_t), 1 / 400.0)
     counts = [100 * n + k for n in range(4) for k in range(3)]
-    assert out_f == list(pdo.calibration.to_newton(np.array(counts[: len(out_f)])))
+    expected = SampleObjects.of_skin(pdo.calibration, 3).to_newton(np.array(counts))
+    assert out_f == list(expected[: len(out_f)])
 
 
 def test_a_single_analogue_value_without_a_sequence_is_timed_by_arrival():
