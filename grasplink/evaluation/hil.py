@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import can
-import numpy as np
 
 from grasplink.core.frames import (
     HEARTBEAT_BASE,
@@ -26,7 +25,7 @@ from grasplink.core.frames import (
 )
 from grasplink.core.nmt import NmtCommand
 from grasplink.errors import RecordingError
-from grasplink.evaluation.loop import LOOP_KINDS, BusLog, Outcome, outcome
+from grasplink.evaluation.loop import LOOP_KINDS, BusLog, Outcome
 from grasplink.gateway.config import EmgConfig, parse_config
 from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.layouts import parse_layout
@@ -112,16 +111,7 @@ def judge_recording(folder: Path, emg: EmgConfig | None = None) -> Outcome:
     for msg in _frames(folder / "can.asc"):
         bus.tap(round(msg.timestamp * US_PER_S), Frame(msg.arbitration_id, bytes(msg.data)), None)
     truth = read_csv(folder / "truth.csv", (sig.OBJECT_POSITION_MM, sig.OBJECT_SLIPPING))
-    skin_end_mm = sum(summary_layout_mm(summary))
-    return outcome(
-        truth,
-        belt=bus.belt.arrays(),
-        hand=bus.hand.arrays(),
-        voluntary_n=np.asarray(bus.voluntary_n, dtype=float),
-        envelope=bus.envelope.arrays(),
-        calibration=bus.calibration,
-        skin_end_mm=skin_end_mm,
-    )
+    return bus.outcome(truth, sum(summary_layout_mm(summary)))
 
 
 def scene_emg(scene_path: str, node_id: int) -> EmgConfig:

@@ -199,6 +199,18 @@ class BusLog:
         self._emg = PdoCodec("emg", node_ids["emg"])
         self._emg_ids = self._emg.tpdo_can_ids()
 
+    def outcome(self, physics: dict[str, np.ndarray], skin_end_mm: float) -> Outcome:
+        """The trial's `outcome` from its physics and the traffic this log kept."""
+        return outcome(
+            physics,
+            belt=self.belt.arrays(),
+            hand=self.hand.arrays(),
+            voluntary_n=np.asarray(self.voluntary_n, dtype=float),
+            envelope=self.envelope.arrays(),
+            calibration=self.calibration,
+            skin_end_mm=skin_end_mm,
+        )
+
     def tap(self, t_us: int, frame: Frame | ErrorFrame, sender: object) -> None:
         if isinstance(frame, ErrorFrame):
             return  # no CAN-ID, no data
@@ -426,15 +438,7 @@ def judge(scene: Scene, controllers_for: ControllerFactory) -> Outcome:
     skin_end_mm = float(sum(scene.layout_mm or ()))
     physics = PhysicsLog(sim, skin_end_mm)
     sim.run(progress=physics.chunk, should_stop=lambda: physics.dropped)
-    return outcome(
-        physics.arrays(),
-        belt=bus.belt.arrays(),
-        hand=bus.hand.arrays(),
-        voluntary_n=np.asarray(bus.voluntary_n, dtype=float),
-        envelope=bus.envelope.arrays(),
-        calibration=bus.calibration,
-        skin_end_mm=skin_end_mm,
-    )
+    return bus.outcome(physics.arrays(), skin_end_mm)
 
 
 # -- the grid ----------------------------------------------------------------------------------
