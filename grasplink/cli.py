@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 import signal
 import sys
 import threading
@@ -16,9 +15,12 @@ import time
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, ExitStack, nullcontext
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from grasplink.errors import ConfigError, GrasplinkError
+
+if TYPE_CHECKING:
+    from grasplink.gateway.config import GatewayConfig
 
 EXIT_ERROR = 1
 PROBE_S = 0.35  # longer than the default 100 ms heartbeat period, several times over
@@ -219,6 +221,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="also serve the register map over Modbus: tcp://127.0.0.1:1502 or "
         "rtu:///dev/ttyUSB0?baud=115200&parity=N&unit=1 (see docs/modbus.md)",
+    )
+    gateway.add_argument(
+        "--check",
+        action="store_true",
+        help="read the configuration and every file it names, say what each node is, and "
+        "exit (1 on the first error); no bus is opened",
     )
     gateway.add_argument(
         "--print-register-map",
@@ -470,9 +478,14 @@ def reconnect_seconds(text: str) -> float:
 
 def _object_value(text: str) -> tuple[int, int, int | float]:
     """`6401sub1=512` -> (0x6401, 1, 512); ConfigError naming what is wrong."""
+    from grasplink.profiles import object_key
+
     key, sep, value = text.partition("=")
-    match = re.fullmatch(r"(?:0x)?([0-9A-Fa-f]{4})(?:sub([0-9A-Fa-f]{1,2}))?", key.strip())
-    if not sep or match is None:
+    try:
+        index, subindex = object_key(key)
+    except ConfigError:
+        sep = ""
+    if not sep:
         raise ConfigError(f"--value {text!r}: expected OBJECT=VALUE, e.g. 6401sub1=512")
     try:
         number: int | float = int(value, 0)
@@ -481,7 +494,7 @@ def _object_value(text: str) -> tuple[int, int, int | float]:
             number = float(value)
         except ValueError:
             raise ConfigError(f"--value {text!r}: {value!r} is not a number") from None
-    return int(match[1], 16), int(match[2] or "0", 16), number
+    return index, subindex, number
 
 
 def cmd_node(args: argparse.Namespace) -> int:
@@ -902,6 +915,24 @@ def cmd_bench_loop(args: argparse.Namespace) -> int:
     return 0
 
 
+def config_check_lines(config: GatewayConfig) -> list[str]:
+    """`gateway --check`: each node as the configuration describes it, and its file's
+    warnings (what the field loader repaired)."""
+    lines = []
+    for node in config.nodes.values():
+        source = node.eds.name if node.eds is not None else f"our {node.kind} EDS"
+        extras = [f"bound: {type(node.binding).__name__}"] if node.binding is not None else []
+        extras += ["mandatory"] if node.mandatory else []
+        extras += [f"{len(node.sdo)} SDO writes"] if node.sdo else []
+        extras += ["identity checked"] if node.identity is not None else []
+        tail = f" ({', '.join(extras)})" if extras else ""
+        lines.append(f"nodes.{node.name}: {node.role} 0x{node.node_id:02X} from {source}{tail}")
+        lines += [f"  warning: {w}" for w in node.file_warnings]
+    sync = f"SYNC every {config.sync_period_us / 1000:g} ms" if config.sync_period_us else "no SYNC"
+    lines.append(f"configuration ok: {len(config.nodes)} nodes, {sync}")
+    return lines
+
+
 def cmd_gateway(args: argparse.Namespace) -> int:
     from grasplink.bus.url import DEFAULT_BUS_URL
     from grasplink.gateway.config import load_config
@@ -909,6 +940,10 @@ def cmd_gateway(args: argparse.Namespace) -> int:
     from grasplink.terminal import StopSignals
 
     config = load_config(args.config)  # a bad file fails here, before the bus is touched
+    if args.check:
+        for line in config_check_lines(config):
+            print(line)
+        return 0
     if args.print_register_map:  # the map this configuration serves
         from grasplink.surfaces.modbus.docgen import render_modbus_markdown
         from grasplink.surfaces.modbus.registers import register_map_for

@@ -133,15 +133,21 @@ class SkinFrames:
     def anchor_s(self) -> float | None:
         return self.stream.anchor_s
 
-    def feed(self, t_us: float, values: Mapping[Key, int | float]) -> Released:
+    def feed(
+        self, t_us: float, values: Mapping[Key, int | float], number: int | None = None
+    ) -> Released:
         """One TPDO's values received at `t_us`; the samples given out now (see SampleStream).
-        A TPDO without sample slots (the static force alone) gives none."""
+        A TPDO without sample slots (the static force alone) gives none. `number` is the
+        packet's number when the caller knows it and the TPDO does not carry one (the
+        SYNC a synchronous TPDO answered)."""
         objects = self.objects
         slots = [values[k] for k in objects.samples if k in values]
         if not slots:
             return EMPTY
-        number = None if objects.sequence is None else values.get(objects.sequence)
-        sequence = None if number is None else int(number) % SEQUENCE_MODULO
+        if objects.sequence is not None:
+            carried = values.get(objects.sequence)
+            number = None if carried is None else int(carried)
+        sequence = None if number is None else number % SEQUENCE_MODULO
         return self.stream.feed(t_us, sequence, objects.to_newton(slots))
 
     def restart(self) -> None:

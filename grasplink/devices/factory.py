@@ -89,6 +89,7 @@ def build_from_file(
     path: str | Path,
     node_id: int | None = None,
     values: Sequence[tuple[int, int, int | float]] = (),
+    app: Callable[[canopen.ObjectDictionary], DeviceApp] | None = None,
 ) -> tuple[DeviceNode, list[str]]:
     """A node built from any EDS or DCF (the field loader), and the loader's warnings.
 
@@ -96,7 +97,8 @@ def build_from_file(
     mapped); a CiA 402 file gets the drive state machine and a plain drive
     (generic.py), any other no application: `values` (index, sub-index, value) become the
     defaults of those objects, so a script sets what the node reports and a reset
-    keeps it. `node_id` defaults to the DCF's [DeviceComissioning] NodeID.
+    keeps it. `node_id` defaults to the DCF's [DeviceComissioning] NodeID. `app` builds
+    another application from the dictionary (a scene's sensor input, a measured drive).
     """
     from grasplink.profiles.field import load_object_dictionary
 
@@ -120,8 +122,8 @@ def build_from_file(
         except (ValueError, TypeError, OverflowError, struct.error) as exc:
             raise ConfigError(f"{path}: {var.name} = {value!r} does not fit: {exc}") from None
         var.default = value  # type: ignore[assignment]  # (typed int; a REAL holds a float)
-    app = GenericDriveApp(od) if is_drive(od) else DeviceApp()
-    return DeviceNode(od, chosen, app), [str(w) for w in warnings]
+    built = app(od) if app is not None else GenericDriveApp(od) if is_drive(od) else DeviceApp()
+    return DeviceNode(od, chosen, built), [str(w) for w in warnings]
 
 
 def _variables(od: canopen.ObjectDictionary) -> list[ODVariable]:

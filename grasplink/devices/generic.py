@@ -7,7 +7,9 @@ is enabled: torque (6071h -> 6077h), velocity (60FFh -> 606Ch), position (607Ah 
 6064h), a first-order lag of `TIME_CONSTANT_S`. That is enough for a master to bring
 it up, command it and read it back; it models no motor. Objects CiA 402 makes
 optional (quick stop option 605Ah, modes 6060h/6061h) are used where the file has
-them; any mode of operation is accepted (the lag does not depend on it).
+them; any mode of operation is accepted (the lag does not depend on it). An actual
+value a simulation measures (`measured`: a scene's actuator drives the grip) is set by
+`measure` instead of the lag, as a real drive reads its sensor.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import canopen
 from grasplink.devices.drive import DriveApp
 from grasplink.devices.store import Value
 from grasplink.profiles import objects as obj
+from grasplink.profiles import variable_limits
 
 #: (target, actual) pairs a drive may have, CiA 402
 TARGET_ACTUAL = ((0x6071, 0x6077), (0x60FF, 0x606C), (0x607A, 0x6064))
@@ -33,14 +36,23 @@ def is_drive(od: canopen.ObjectDictionary) -> bool:
 class GenericDriveApp(DriveApp):
     """See module docstring."""
 
-    def __init__(self, od: canopen.ObjectDictionary) -> None:
+    def __init__(
+        self, od: canopen.ObjectDictionary, measured: frozenset[int] = frozenset()
+    ) -> None:
         super().__init__()
+        self.measured = measured
         self.pairs = tuple((t, a) for t, a in TARGET_ACTUAL if t in od and a in od)
         self.inputs = (
             *(i for i in DriveApp.inputs if i in od),
             *(target for target, _ in self.pairs),
         )
         self.actual: dict[int, float] = {}
+
+    def measure(self, index: int, value: float) -> None:
+        """The actual value `index` as measured (a `measured` one), held at its object's
+        range as the drive's own reading would be."""
+        low, high = variable_limits(self.store.entry(index).var)
+        self.actual[index] = min(max(value, low), high)
 
     def _validate_mode(self, index: int, subindex: int, value: Value) -> None:
         """Any mode: the lag is the same in each (see module docstring)."""
@@ -73,6 +85,8 @@ class GenericDriveApp(DriveApp):
             return
         step = 1.0 - math.exp(-dt_s / TIME_CONSTANT_S)
         for target, actual in self.pairs:
+            if actual in self.measured:
+                continue
             goal = float(self.store.get(target))
             now = self.actual.get(actual, 0.0)
             self.actual[actual] = goal if abs(goal - now) < 0.5 else now + (goal - now) * step

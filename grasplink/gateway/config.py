@@ -14,7 +14,7 @@ import itertools
 import re
 import tomllib
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -36,9 +36,10 @@ from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.gateway.roles import Binding
-from grasplink.profiles import load_profile, object_limits
+from grasplink.profiles import load_profile, object_key, object_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.eds import DATA_TYPES
+from grasplink.profiles.field import node_file
 from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 from grasplink.profiles.pdo_codec import PdoCodec
@@ -58,6 +59,8 @@ _HOST_ID = re.compile(r"[A-Za-z0-9_.:-]{1,64}")
 NODE_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")  # one topic level, one register-map label
 DEVICE_ROLE = "device"  # mastered and published, not in the loop
 ROLES = (*KINDS, DEVICE_ROLE)
+US_PER_S = 1_000_000
+SYNC_TYPE_MAX = 240  # TPDO transmission types 1-240: every n-th SYNC (CiA 301)
 
 
 @dataclass
@@ -267,7 +270,7 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
             raise nodes.error(name, "a node's name is a-z, 0-9 and _ (1-32, a letter first)")
         node = _PARSERS[name](p, name) if name in KINDS else _device(p, name, base)
         if name in KINDS:
-            _describe_loop_node(p, node, base)
+            _describe_loop_node(p, node, base, config.sync_period_us)
         if node.node_id in used:
             raise p.error(
                 "node_id", f"0x{node.node_id:02X} is already used by {used[node.node_id]}"
@@ -412,13 +415,13 @@ def _base_folder(source: str) -> Path:
     return path.parent if path.is_file() else Path.cwd()
 
 
-def _describe_loop_node(p: Params, node: NodeConfig, base: Path) -> None:
+def _describe_loop_node(p: Params, node: NodeConfig, base: Path, sync_period_us: int) -> None:
     """The description keys of a loop node. Ours comes with its EDS; a vendor's names its
     file and binds the role to its objects (roles.py)."""
     role = p.string("role", node.kind, choices=ROLES)
     if role != node.kind:
         raise p.error("role", f"[nodes.{node.kind}] is the {node.kind} role's node, got {role!r}")
-    path = description.node_file(p, base)
+    path = node_file(p, base)
     if path is None:
         _description(p, node, lambda: load_profile(node.kind, node.node_id))
         for table in BINDING_TABLES.values():
@@ -443,6 +446,36 @@ def _describe_loop_node(p: Params, node: NodeConfig, base: Path) -> None:
             ) from None
         raise exc from None
     _description(p, node, lambda: od)
+    if isinstance(node.binding, roles.SkinBinding) and isinstance(node, SkinConfig):
+        node.binding = _synchronous_samples(p, node, node.binding, od, sync_period_us)
+
+
+def _synchronous_samples(
+    p: Params, node: SkinConfig, binding: roles.SkinBinding, od: Any, sync_period_us: int
+) -> roles.SkinBinding:
+    """Samples without a packet number in a synchronous TPDO are numbered by the SYNC they
+    answer (a transport's jitter and a late host then cannot move them in time): the
+    gateway must produce SYNC, at the rate the samples are taken."""
+    can_id = binding.tpdo_can_id
+    if binding.objects.sequence is not None or can_id is None:
+        return binding
+    kind = description.tpdo_transmission_type(od, can_id, node.sdo)
+    if kind is None or not 1 <= kind <= SYNC_TYPE_MAX:
+        return binding
+    if not sync_period_us:
+        raise p.error(
+            "samples",
+            f"their TPDO (0x{can_id:03X}) goes on SYNC (type {kind}), and the gateway "
+            "produces none: set [gateway] sync_period_ms",
+        )
+    rate_hz = US_PER_S / (sync_period_us * kind)
+    if abs(node.sample_rate_hz - rate_hz) > 1e-9 * rate_hz:
+        raise p.error(
+            "sample_rate_hz",
+            f"{node.sample_rate_hz} Hz, but a sample comes every {kind} SYNC(s) of "
+            f"{sync_period_us / 1000:g} ms: {rate_hz:g} Hz",
+        )
+    return replace(binding, sync_every=kind)
 
 
 # the table that binds a vendor's node to a loop role (roles.py)
@@ -464,7 +497,7 @@ def _device(p: Params, name: str, base: Path) -> NodeConfig:
     role = p.string("role", DEVICE_ROLE, choices=ROLES)
     if role != DEVICE_ROLE:
         raise p.error("role", f"the {role} role's node is [nodes.{role}], not [nodes.{name}]")
-    path = description.node_file(p, base)
+    path = node_file(p, base)
     if path is None:
         raise p.error(
             "eds",
@@ -595,7 +628,7 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
             mapped[name] = {(v.index, v.subindex): v for v in codec.tpdo_objects()}
         text = t.string("object")
         try:
-            index, subindex = description.object_key(text)
+            index, subindex = object_key(text)
         except ConfigError as exc:
             raise t.error("object", str(exc)) from None
         var = mapped[name].get((index, subindex))

@@ -16,7 +16,6 @@ the bus is touched: it exists, it is writable, the value fits its type and limit
 
 from __future__ import annotations
 
-import re
 import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -24,16 +23,14 @@ from pathlib import Path
 from typing import Any
 
 import canopen
-from canopen.objectdictionary import ODVariable, datatypes
+from canopen.objectdictionary import ODArray, ODRecord, ODVariable, datatypes
 
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError
-from grasplink.profiles import find_variable
+from grasplink.profiles import find_variable, object_key
 
 #: identity keys -> their 1018h sub-index (CiA 301 identity object)
 IDENTITY_SUBS = {"vendor_id": 1, "product_code": 2, "revision": 3, "serial": 4}
-# "6060sub0", "2100sub1A" (sub-index in hex, as EDS section names spell it), or "6060"
-_OBJECT_KEY = re.compile(r"(?:0x)?([0-9A-Fa-f]{4})(?:sub([0-9A-Fa-f]{1,2}))?")
 _WRITABLE = ("rw", "wo", "rww", "rwr")
 
 
@@ -62,32 +59,6 @@ class SdoWrite:
     subindex: int
     data: bytes
     what: str
-
-
-def object_key(text: str) -> tuple[int, int]:
-    """(index, subindex) of "6060sub0" / "6060" (sub-index 0); ConfigError otherwise."""
-    match = _OBJECT_KEY.fullmatch(text.strip())
-    if match is None:
-        raise ConfigError(f"{text!r} is not an object: write it as 6060sub0 (index, sub in hex)")
-    return int(match[1], 16), int(match[2] or "0", 16)
-
-
-def node_file(p: Params, base: Path) -> Path | None:
-    """The `eds` or `dcf` the table names (one of them), resolved against `base`."""
-    eds, dcf = p.string("eds", None), p.string("dcf", None)
-    if eds is not None and dcf is not None:
-        raise p.error("dcf", "give eds or dcf, not both")
-    name, text = ("dcf", dcf) if dcf is not None else ("eds", eds)
-    if text is None:
-        return None
-    path = Path(text).expanduser()
-    path = path if path.is_absolute() else base / path
-    if not path.is_file():
-        raise p.error(name, f"no such file: {path}")
-    suffix = path.suffix.lower()
-    if (name == "dcf") != (suffix == ".dcf") or suffix not in (".eds", ".dcf"):
-        raise p.error(name, f"expected a .{name} file, got {path.name}")
-    return path
 
 
 def dictionary(
@@ -141,6 +112,7 @@ def sdo_writes(p: Params, od_of: Callable[[], canopen.ObjectDictionary]) -> tupl
 PDO_COMM = ((0x1400, 0x1600), (0x1800, 0x1A00))  # (first communication, first mapping) objects
 PDO_COUNT = 512  # PDOs of each direction (CiA 301)
 COB_ID_INVALID = 0x80000000
+CAN_ID_MASK = 0x7FF
 
 
 def dcf_writes(od: canopen.ObjectDictionary) -> tuple[SdoWrite, ...]:
@@ -158,6 +130,34 @@ def dcf_writes(od: canopen.ObjectDictionary) -> tuple[SdoWrite, ...]:
         for n in range(PDO_COUNT):
             out += _pdo_writes(od, comm_base + n, map_base + n)
     return tuple(out)
+
+
+def tpdo_transmission_type(
+    od: canopen.ObjectDictionary, can_id: int, writes: tuple[SdoWrite, ...]
+) -> int | None:
+    """The transmission type the TPDO at `can_id` has once configured: its file's (a DCF's
+    value, else the default), then the description's last `[sdo]` write of it; None when
+    no TPDO of the file goes at that COB-ID."""
+    for n in range(PDO_COUNT):
+        comm = PDO_COMM[1][0] + n
+        if comm not in od or not isinstance(od[comm], ODRecord | ODArray):
+            continue
+        params = od[comm]
+        if 1 not in params.subindices or 2 not in params.subindices:  # type: ignore[union-attr]
+            continue
+        cob = _current(params[1])  # type: ignore[index]
+        if cob is None or int(cob) & CAN_ID_MASK != can_id:
+            continue
+        kind = _current(params[2])  # type: ignore[index]
+        for write in writes:
+            if (write.index, write.subindex) == (comm, 2):
+                kind = write.data[0]
+        return None if kind is None else int(kind)
+    return None
+
+
+def _current(var: ODVariable) -> Any:
+    return var.value if var.value is not None else var.default
 
 
 def _configured(od: canopen.ObjectDictionary, index: int) -> list[ODVariable]:

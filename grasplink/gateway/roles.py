@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from grasplink.core.params import Params
 from grasplink.decoding.skin_frames import SampleObjects, SkinCalibration
 from grasplink.errors import ConfigError, PdoError
-from grasplink.gateway.description import object_key
+from grasplink.profiles import object_key
 from grasplink.profiles import objects as obj
 from grasplink.profiles.pdo_codec import Key, PdoCodec
 
@@ -55,6 +55,10 @@ class SkinBinding:
     objects: SampleObjects
     max_units: int | None = None  # what the sensor can read (ours: ADC full scale)
     static_force_range_mn: tuple[float, float] | None = None  # ours: 2110h's range
+    # a vendor's samples in a synchronous TPDO: sent every that many SYNCs (its type 1-240),
+    # so each is numbered by the SYNC it answered; 0: event-driven, timed by arrival
+    sync_every: int = 0
+    tpdo_can_id: int | None = None  # the TPDO the samples travel in
 
 
 @dataclass(frozen=True)
@@ -115,7 +119,8 @@ def skin(p: Params, codec: PdoCodec) -> SkinBinding:
     if not homes:
         raise t.error("objects", "the samples must travel in one TPDO")
     binding = SkinBinding(
-        SampleObjects(tuple(keys), _factor(t, "newtons_per_unit"), t.number("zero", 0.0))
+        SampleObjects(tuple(keys), _factor(t, "newtons_per_unit"), t.number("zero", 0.0)),
+        tpdo_can_id=min(homes),
     )
     t.finish()
     return binding

@@ -95,7 +95,7 @@ from grasplink.gateway.snapshot import (
     device_objects,
     device_value,
 )
-from grasplink.gateway.sync import SyncProducer
+from grasplink.gateway.sync import SyncNumbers, SyncProducer
 from grasplink.profiles import load_profile, object_limits, variable_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
@@ -259,6 +259,8 @@ class Gateway(NmtMaster):
         self.decoder = None
         self._skin_max_counts: int | None = None
         self._static_force_mn: tuple[float, float] | None = None
+        # a vendor's samples on SYNC are numbered by the SYNC they answer (roles.py)
+        self._skin_sync_numbers: SyncNumbers | None = None
         if link is None:
             return
         skin = link.config
@@ -277,6 +279,8 @@ class Gateway(NmtMaster):
             settle_us=LIVE_SETTLE_US,
         )
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
+        if binding.sync_every:
+            self._skin_sync_numbers = SyncNumbers(binding.sync_every)
         # what the sensor can report (plausibility)
         self._skin_max_counts = binding.max_units
         self._static_force_mn = binding.static_force_range_mn
@@ -367,6 +371,8 @@ class Gateway(NmtMaster):
         self._started_us = t_us
         if self.sync is not None:
             self.sync.start(t_us)
+            if self._skin_sync_numbers is not None:
+                self._skin_sync_numbers = SyncNumbers(self._skin_sync_numbers.every)
         return super().start(t_us)
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
@@ -391,6 +397,9 @@ class Gateway(NmtMaster):
         self.now_us = t_us
         # SYNC first: the nodes sample and answer on it, the rest can wait a frame
         frames = self.sync.advance(t_us) if self.sync is not None else []
+        if frames and self._skin_sync_numbers is not None:
+            assert self.sync is not None
+            self._skin_sync_numbers.sent(self.sync.index)
         frames += super().advance(t_us)
         for link in self.links.values():
             frames += link.sdo.advance(t_us)
@@ -711,7 +720,9 @@ class Gateway(NmtMaster):
     def _on_skin(self, values: dict[Key, int | float], t_us: int) -> list[Frame]:
         if self.skin_frames is None or self.decoder is None:
             return []
-        t_s, force_n = self.skin_frames.feed(t_us, values)
+        numbers = self._skin_sync_numbers
+        number = numbers.answer() if numbers is not None else None
+        t_s, force_n = self.skin_frames.feed(t_us, values, number)
         if not len(t_s):
             return []
         estimates = self.decoder.feed(t_s, force_n)

@@ -9,6 +9,8 @@ grid, never sent in a burst (a burst of SYNCs would be a burst of samples).
 
 from __future__ import annotations
 
+from collections import deque
+
 from grasplink.core.frames import SYNC_COB_ID_DEFAULT, Frame
 
 
@@ -26,12 +28,14 @@ class SyncProducer:
         self.period_us = period_us
         self.counter_overflow = counter_overflow
         self.sent = 0
+        self.index = -1  # grid index of the last SYNC sent (periods since start, minus one)
         self._next_us: int | None = None
         self._counter = 0
 
     def start(self, t_us: int) -> None:
         self._next_us = t_us + self.period_us
         self._counter = 0
+        self.index = -1
 
     def next_deadline_us(self) -> int | None:
         return self._next_us
@@ -41,8 +45,40 @@ class SyncProducer:
             return []
         missed = (t_us - self._next_us) // self.period_us
         self._next_us += (missed + 1) * self.period_us
+        self.index += missed + 1
         self.sent += 1
         if not self.counter_overflow:
             return [Frame(SYNC_COB_ID_DEFAULT, b"")]
         self._counter = self._counter % self.counter_overflow + 1
         return [Frame(SYNC_COB_ID_DEFAULT, bytes([self._counter]))]
+
+
+class SyncNumbers:
+    """Numbers for the replies of a synchronous TPDO that carries none (an analogue input
+    sampled on SYNC): the SYNC each answered, on the producer's grid, every `every`-th.
+
+    A reply takes the older of the last two SYNCs sent that are not yet answered, so one
+    late by up to a period keeps its SYNC's time; periods a stalled host skipped were never
+    sent, so their samples are missing, not squeezed together; a reply with none left
+    repeats the last number (a stream drops it as a repeat). Fed in the order things
+    happen: `sent` as each SYNC goes, `answer` as each reply comes.
+    """
+
+    def __init__(self, every: int = 1):
+        if not 1 <= every <= 240:
+            raise ValueError(f"a synchronous TPDO goes every 1-240 SYNCs, got {every}")
+        self.every = every
+        self.last = -1  # the number given the last reply
+        self._sent: deque[int] = deque(maxlen=2)
+
+    def sent(self, index: int) -> None:
+        """A SYNC went out; `index` is its place on the grid (SyncProducer.index)."""
+        number = index // self.every
+        if not self._sent or self._sent[-1] != number:
+            self._sent.append(number)
+
+    def answer(self) -> int:
+        unanswered = [n for n in self._sent if n > self.last]
+        if unanswered:
+            self.last = unanswered[0]
+        return self.last

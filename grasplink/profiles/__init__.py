@@ -13,6 +13,7 @@ almost everything and should stay cheap.
 from __future__ import annotations
 
 import functools
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -59,6 +60,18 @@ def load_profile(kind_or_path: str | Path, node_id: int) -> canopen.ObjectDictio
         raise EdsError(str(path), None, None, f"canopen cannot import it: {exc!r}") from exc
 
 
+# "6060sub0", "2100sub1A" (sub-index in hex, as EDS section names spell it), or "6060"
+_OBJECT_KEY = re.compile(r"(?:0x)?([0-9A-Fa-f]{4})(?:sub([0-9A-Fa-f]{1,2}))?")
+
+
+def object_key(text: str) -> tuple[int, int]:
+    """(index, subindex) of "6060sub0" / "6060" (sub-index 0); ConfigError otherwise."""
+    match = _OBJECT_KEY.fullmatch(text.strip())
+    if match is None:
+        raise ConfigError(f"{text!r} is not an object: write it as 6060sub0 (index, sub in hex)")
+    return int(match[1], 16), int(match[2] or "0", 16)
+
+
 def od_variable(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> ODVariable:
     """The variable at index:subindex (a plain VAR's own entry when it has no sub-indices)."""
     from canopen.objectdictionary import ODArray, ODRecord
@@ -71,12 +84,16 @@ def od_variable(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> 
 
 def find_variable(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> ODVariable:
     """The variable at index:subindex; ConfigError saying which of the two the file lacks."""
+    from canopen.objectdictionary import ODArray, ODRecord
+
     if index not in od:
         raise ConfigError(f"the node's dictionary has no object 0x{index:04X}")
-    try:
-        return od_variable(od, index, subindex)
-    except KeyError:
-        raise ConfigError(f"object 0x{index:04X} has no sub-index {subindex}") from None
+    entry = od[index]
+    # (canopen makes up any sub-index of an ARRAY from its first: the file's are the real ones)
+    declared = entry.subindices if isinstance(entry, ODArray | ODRecord) else {0: entry}
+    if subindex not in declared:
+        raise ConfigError(f"object 0x{index:04X} has no sub-index {subindex}")
+    return od_variable(od, index, subindex)
 
 
 def od_default(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> int:

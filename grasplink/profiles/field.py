@@ -37,7 +37,9 @@ from grasplink.profiles.eds import ACCESS_TYPES, DATA_TYPES, OBJECT_KEYS, OBJECT
 if TYPE_CHECKING:
     from canopen.objectdictionary import ObjectDictionary
 
-__all__ = ["LoadWarning", "load_object_dictionary"]
+    from grasplink.core.params import Params
+
+__all__ = ["LoadWarning", "load_object_dictionary", "node_file"]
 
 _VAR, _ARRAY, _RECORD, _DOMAIN = 0x7, 0x8, 0x9, 0x2
 _DEFINITIONS = {0x0: "NULL", 0x5: "DEFTYPE", 0x6: "DEFSTRUCT"}
@@ -144,6 +146,25 @@ def load_object_dictionary(
     ):
         raise ConfigError(f"node-ID {node_id!r} is outside 1..127")
     return _Loader(Path(path), node_id).run()
+
+
+def node_file(p: Params, base: Path) -> Path | None:
+    """The `eds` or `dcf` a table names (one of them), resolved against `base` (the
+    folder of the file the table is in); None when it names neither."""
+    eds, dcf = p.string("eds", None), p.string("dcf", None)
+    if eds is not None and dcf is not None:
+        raise p.error("dcf", "give eds or dcf, not both")
+    name, text = ("dcf", dcf) if dcf is not None else ("eds", eds)
+    if text is None:
+        return None
+    path = Path(text).expanduser()
+    path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise p.error(name, f"no such file: {path}")
+    suffix = path.suffix.lower()
+    if (name == "dcf") != (suffix == ".dcf") or suffix not in (".eds", ".dcf"):
+        raise p.error(name, f"expected a .{name} file, got {path.name}")
+    return path
 
 
 # --- numbers -----------------------------------------------------------------

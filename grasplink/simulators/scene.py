@@ -14,9 +14,10 @@ import grasplink.simulators.effects  # noqa: F401  (registers every effect)
 from grasplink.core.params import Params, SceneError
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
+from grasplink.profiles.field import node_file
 from grasplink.profiles.kinds import KINDS, node_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
-from grasplink.simulators.bindings import BINDINGS, DEFAULT_RATES_HZ
+from grasplink.simulators.bindings import BINDINGS, DEFAULT_RATES_HZ, DriveWiring, InputWiring
 from grasplink.simulators.core import REGISTRY, Context, Effect, Endpoint, build_graph
 
 US_PER_S = 1_000_000
@@ -34,6 +35,8 @@ class NodeSpec:
     sample_rate_hz: int | None = None
     samples_per_pdo: int | None = None
     layout: str | None = None
+    file: Path | None = None  # a vendor's EDS/DCF the node is built from; None: ours
+    wiring: InputWiring | DriveWiring | None = None  # how a vendor's node meets the scene
 
 
 @dataclass
@@ -197,6 +200,7 @@ def _parse_nodes(table: Params) -> dict[str, NodeSpec]:
             raise table.error(kind, unknown_kind(kind))
         p = table.table_of(kind)
         spec = NodeSpec(kind, p.integer("node_id", node_kind(kind).node_id, low=1, high=127))
+        spec.file = node_file(p, Path(table.source).parent)
         if spec.node_id in used_ids or spec.node_id == obj.GATEWAY_NODE_ID:
             other = used_ids.get(spec.node_id, "gateway")
             raise p.error("node_id", f"0x{spec.node_id:02X} is already used by {other}")
