@@ -47,19 +47,7 @@ def build_controllers(scene: Scene) -> list[SansIoDevice]:
         cls = controller_class(spec.name)
     except ConfigError as exc:
         raise spec.params().error("type", str(exc)) from None
-    return [cls.from_scene(spec.params(), scene_nodes(scene))]
-
-
-def scene_nodes(scene: Scene) -> dict[str, dict[str, Any]]:
-    """The scene's nodes as plain settings; the skin's layout as text (name or spacings)."""
-    layout = scene.layout_name or ",".join(f"{s:g}" for s in scene.layout_mm or ())
-    nodes = {}
-    for kind, spec in scene.nodes.items():
-        settings = {k: v for k, v in vars(spec).items() if v is not None and k != "kind"}
-        if kind == "skin" and layout:
-            settings["layout"] = layout
-        nodes[kind] = settings
-    return nodes
+    return [cls.from_scene(spec.params(), scene.node_settings())]
 
 
 def simulation(scene: Scene, recorder: Recorder | None = None, **options: Any) -> Simulation:

@@ -19,6 +19,7 @@ from grasplink.core.frames import SYNC_COB_ID_DEFAULT, Frame
 from grasplink.core.params import SceneError
 from grasplink.devices.cia402 import DriveState
 from grasplink.errors import ConfigError
+from grasplink.evaluation.hil import judge_recording
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.sync import SyncNumbers
 from grasplink.simulators import signals as sig
@@ -193,3 +194,13 @@ def test_the_loop_loses_and_repeats_no_sample_on_the_virtual_bus(run):
     stats = gateway.skin_frames.stats
     assert stats.packets > 800
     assert (stats.lost_packets, stats.repeated_packets, stats.resyncs) == (0, 0, 0)
+
+
+def test_the_recording_is_judged_through_the_vendors_drive_units(run):
+    """The HIL judgement reads the hand's commands as the description binds them: the
+    drive's RPDO2, 10 units a newton (before: our hand's RPDO1, so no reflex at all)."""
+    _, _, out = run
+    outcome = judge_recording(out)
+    assert outcome.stopped and not outcome.dropped
+    assert outcome.reflex_latency_s is not None and outcome.reflex_latency_s < 1.0
+    assert outcome.slip_belt_latency_s is not None

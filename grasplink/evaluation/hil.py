@@ -26,8 +26,7 @@ from grasplink.core.frames import (
 from grasplink.core.nmt import NmtCommand
 from grasplink.errors import RecordingError
 from grasplink.evaluation.loop import LOOP_KINDS, BusLog, Outcome
-from grasplink.gateway.config import EmgConfig, parse_config
-from grasplink.profiles.kinds import KINDS
+from grasplink.gateway.config import GatewayConfig, scene_config
 from grasplink.profiles.layouts import parse_layout
 from grasplink.simulators import signals as sig
 from grasplink.simulators.plots import read_csv, read_summary
@@ -93,13 +92,15 @@ def master_activity(can_asc: Path, node_ids: dict[str, int]) -> MasterActivity:
     return activity
 
 
-def judge_recording(folder: Path, emg: EmgConfig | None = None) -> Outcome:
+def judge_recording(folder: Path, config: GatewayConfig | None = None) -> Outcome:
     """The closed-loop outcome (`loop.outcome`) of a recorded run with skin, EMG, belt and
     hand nodes, from its truth.csv and can.asc.
 
-    `emg` is the master's EMG settings (calibration, grip levels), which say what grip the
-    wearer asked for at each hand RPDO; by default the scene's own `[controller]` ones
-    (the scene named in summary.json), which a gateway configured for the scene shares.
+    `config` is the master's configuration: its EMG settings (calibration, grip levels) say
+    what grip the wearer asked for at each hand RPDO, its bindings how the belt's and hand's
+    RPDOs carry the commands (a vendor's drive in its own units); by default the scene's
+    own `[controller]` (the scene named in summary.json), which a gateway configured for the
+    scene shares.
     """
     folder = Path(folder)
     summary = read_summary(folder / "summary.json")
@@ -107,22 +108,14 @@ def judge_recording(folder: Path, emg: EmgConfig | None = None) -> Outcome:
     missing = [kind for kind in LOOP_KINDS if kind not in nodes]
     if missing:
         raise RecordingError(f"{folder}: no {', '.join(missing)} node: not a closed-loop run")
-    bus = BusLog(nodes, emg or scene_emg(summary["path"], nodes["emg"]))
+    if config is None:
+        scene = load_scene(summary["path"])
+        config = scene_config(scene.controller.params(), scene.node_settings())
+    bus = BusLog(config)
     for msg in _frames(folder / "can.asc"):
         bus.tap(round(msg.timestamp * US_PER_S), Frame(msg.arbitration_id, bytes(msg.data)), None)
     truth = read_csv(folder / "truth.csv", (sig.OBJECT_POSITION_MM, sig.OBJECT_SLIPPING))
     return bus.outcome(truth, sum(summary_layout_mm(summary)))
-
-
-def scene_emg(scene_path: str, node_id: int) -> EmgConfig:
-    """The EMG settings of a scene's `[controller.nodes.emg]` (the gateway's defaults if none)."""
-    scene = load_scene(scene_path)
-    table = scene.controller.options.get("nodes", {}).get("emg", {})
-    others = {kind: {"enabled": False} for kind in KINDS if kind != "emg"}
-    data = {"nodes": others | {"emg": {"node_id": node_id} | dict(table)}}
-    emg = parse_config(data, scene.controller.source, "controller").nodes.get("emg")
-    assert isinstance(emg, EmgConfig)
-    return emg
 
 
 def summary_layout_mm(summary: dict) -> tuple[float, ...]:

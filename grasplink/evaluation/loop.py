@@ -36,12 +36,12 @@ from grasplink.bus.faults import ErrorFrame
 from grasplink.core.frames import Frame
 from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import ConfigError, PdoError
-from grasplink.gateway.config import EmgConfig, parse_config
+from grasplink.gateway import roles
+from grasplink.gateway.config import EmgConfig, GatewayConfig, scene_config
 from grasplink.gateway.emg import EmgCalibration, EmgIntentDecoder
 from grasplink.gateway.feedback import FeedbackConfig
 from grasplink.gateway.levels import DEFAULT_FORCE_ENTRIES
 from grasplink.gateway.reflex import ReflexConfig
-from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.profiles.pdo_codec import PdoCodec
 from grasplink.simulators import signals as sig
@@ -168,14 +168,16 @@ class Series:
 
 
 class BusLog:
-    """A network tap keeping what the outcome needs from the bus, unpacked through the EDS.
-
-    Belt target velocity (60FFh) and hand target grip (2400h) from their RPDO1s; the EMG
+    """A network tap keeping what the outcome needs from the bus, unpacked as the gateway
+    configuration binds it (roles.py): the belt's target velocity and the hand's target
+    grip from the RPDOs the loop writes (ours, or a vendor's drive in its units); the EMG
     envelope from its TPDO and, replayed through the gateway's own EMG calibration in bus
     order, the voluntary grip the gateway knew when each hand RPDO went out.
     """
 
-    def __init__(self, node_ids: dict[str, int], emg: EmgConfig):
+    def __init__(self, config: GatewayConfig):
+        emg = config.nodes["emg"]
+        assert isinstance(emg, EmgConfig)
         self.belt = Series()  # mrad/s
         self.hand = Series()  # N commanded
         self.voluntary_n: list[float] = []  # what the wearer's EMG asked for, per hand RPDO
@@ -189,14 +191,18 @@ class BusLog:
         self.calibration = self._intent.calibration
         self._voluntary_n = math.nan
         self._rpdos = {}
-        for kind, index in (
-            ("belt", obj.BELT_TARGET_VELOCITY_MRAD_S),
-            ("hand", obj.HAND_TARGET_GRIP_MN),
-        ):
-            rpdo = PdoCodec(kind, node_ids[kind]).rpdo(1)
-            var = next(v for v in rpdo.map if v.od.index == index)
-            self._rpdos[rpdo.cob_id] = (kind, rpdo, var)
-        self._emg = PdoCodec("emg", node_ids["emg"])
+        for kind in ("belt", "hand"):
+            node = config.nodes[kind]
+            codec = PdoCodec(node.profile, node.node_id)
+            binding = node.binding
+            if not isinstance(binding, roles.DriveBinding):
+                binding = roles.own_drive(kind, codec)
+            rpdo = codec.rpdo(binding.rpdo)
+            var = next(v for v in rpdo.map if (v.od.index, v.od.subindex) == binding.target)
+            self._rpdos[rpdo.cob_id] = (kind, rpdo, var, binding.units_per_command)
+        envelope = emg.binding if isinstance(emg.binding, roles.EmgBinding) else roles.OWN_EMG
+        self._envelope = envelope
+        self._emg = PdoCodec(emg.profile, emg.node_id)
         self._emg_ids = self._emg.tpdo_can_ids()
 
     def outcome(self, physics: dict[str, np.ndarray], skin_end_mm: float) -> Outcome:
@@ -220,24 +226,26 @@ class BusLog:
                 values = self._emg.decode(can_id, frame.data)
             except PdoError:
                 return  # the gateway drops it too
-            envelope = values.get((obj.EMG_ENVELOPE_UV, 0))
-            if envelope is not None:
-                self.envelope.add(t_us / US_PER_S, float(envelope))
-                intent = self._intent.update(t_us, float(envelope))
+            raw = values.get(self._envelope.envelope)
+            if raw is not None:
+                envelope = float(raw) * self._envelope.uv_per_unit
+                self.envelope.add(t_us / US_PER_S, envelope)
+                intent = self._intent.update(t_us, envelope)
                 if intent is not None:
                     self._voluntary_n = intent.grip_n
             return
         target = self._rpdos.get(can_id)
         if target is None:
             return
-        kind, rpdo, var = target
+        kind, rpdo, var, units_per_command = target
         if len(frame.data) != (rpdo.length + 7) // 8:
             return
         rpdo.data = bytearray(frame.data)
+        command = float(var.raw) / units_per_command  # the loop's units: mrad/s, mN
         if kind == "belt":
-            self.belt.add(t_us / US_PER_S, float(var.raw))
+            self.belt.add(t_us / US_PER_S, command)
         else:
-            self.hand.add(t_us / US_PER_S, float(var.raw) / MN_PER_N)
+            self.hand.add(t_us / US_PER_S, command / MN_PER_N)
             self.voluntary_n.append(self._voluntary_n)
 
 
@@ -431,9 +439,7 @@ def judge(scene: Scene, controllers_for: ControllerFactory) -> Outcome:
             f"{scene.path}: a closed-loop scene needs {kinds} nodes and "
             '[controller] type = "gateway"'
         )
-    emg = parse_config(scene.controller.options, scene.controller.source).nodes.get("emg")
-    assert isinstance(emg, EmgConfig)  # the scene has an EMG node, so the gateway has one
-    bus = BusLog({kind: node.node_id for kind, node in scene.nodes.items()}, emg)
+    bus = BusLog(scene_config(scene.controller.params(), scene.node_settings()))
     sim.network.taps.append(bus.tap)
     skin_end_mm = float(sum(scene.layout_mm or ()))
     physics = PhysicsLog(sim, skin_end_mm)

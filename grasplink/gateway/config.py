@@ -10,10 +10,11 @@ file could have caught.
 
 from __future__ import annotations
 
+import copy
 import itertools
 import re
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypeVar
@@ -680,3 +681,29 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
             )
         out.append(register)
     return tuple(sorted(out, key=lambda r: r.address))
+
+
+def scene_config(options: Params, nodes: Mapping[str, Mapping[str, Any]]) -> GatewayConfig:
+    """A scene's `[controller] type = "gateway"`: the gateway configuration format
+    (`[controller.feedback]`, `[controller.reflex]`, `[controller.nodes.emg]`, ...) with
+    the scene's nodes, IDs and skin settings filled in (nodes not in the scene are off)."""
+    data = copy.deepcopy(options.table)
+    tables = data.setdefault("nodes", {})
+    if not isinstance(tables, dict):
+        raise options.error("nodes", "expected a table of node settings")
+    for kind in KINDS:
+        table = tables.setdefault(kind, {})
+        if not isinstance(table, dict):
+            raise options.error(f"nodes.{kind}", "expected a table")
+        if kind not in nodes:
+            table["enabled"] = False
+            continue
+        scene_settings = nodes[kind]
+        for key in ("node_id", "sample_rate_hz", "samples_per_pdo", "layout"):
+            if key in scene_settings:
+                if key in table and table[key] != scene_settings[key]:
+                    raise options.error(
+                        f"nodes.{kind}.{key}", "is set by the scene's [nodes] table"
+                    )
+                table[key] = scene_settings[key]
+    return parse_config(data, options.source, options.prefix)

@@ -29,7 +29,6 @@ wall clock) and in virtual time. What it knows goes out as a typed
 
 from __future__ import annotations
 
-import copy
 import logging
 import math
 from collections import Counter, deque
@@ -54,7 +53,7 @@ from grasplink.gateway.config import (
     HandConfig,
     NodeConfig,
     SkinConfig,
-    parse_config,
+    scene_config,
 )
 from grasplink.gateway.description import SdoWrite
 from grasplink.gateway.drives import DriveHandshake
@@ -228,29 +227,8 @@ class Gateway(NmtMaster):
 
     @classmethod
     def from_scene(cls, options: Params, nodes: Mapping[str, Mapping[str, Any]]) -> Gateway:
-        """A scene's `[controller] type = "gateway"`: the gateway configuration format
-        (`[controller.feedback]`, `[controller.reflex]`, `[controller.nodes.emg]`, ...) with
-        the scene's nodes, IDs and skin settings filled in (nodes not in the scene are off)."""
-        data = copy.deepcopy(options.table)
-        tables = data.setdefault("nodes", {})
-        if not isinstance(tables, dict):
-            raise options.error("nodes", "expected a table of node settings")
-        for kind in KINDS:
-            table = tables.setdefault(kind, {})
-            if not isinstance(table, dict):
-                raise options.error(f"nodes.{kind}", "expected a table")
-            if kind not in nodes:
-                table["enabled"] = False
-                continue
-            scene_settings = nodes[kind]
-            for key in ("node_id", "sample_rate_hz", "samples_per_pdo", "layout"):
-                if key in scene_settings:
-                    if key in table and table[key] != scene_settings[key]:
-                        raise options.error(
-                            f"nodes.{kind}.{key}", "is set by the scene's [nodes] table"
-                        )
-                    table[key] = scene_settings[key]
-        return cls(parse_config(data, options.source, options.prefix))
+        """A scene's `[controller] type = "gateway"` (see `scene_config`)."""
+        return cls(scene_config(options, nodes))
 
     # -- construction helpers --------------------------------------------------------------
     def _skin_setup(self) -> None:

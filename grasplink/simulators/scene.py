@@ -100,6 +100,18 @@ class Scene:
     def rate_hz(self, domain: str) -> int:
         return self.context.rates_hz[domain]
 
+    def node_settings(self) -> dict[str, dict]:
+        """The nodes as plain settings (what a controller fills its own tables from); the
+        skin's layout as text (name or spacings)."""
+        layout = self.layout_name or ",".join(f"{s:g}" for s in self.layout_mm or ())
+        nodes = {}
+        for kind, spec in self.nodes.items():
+            settings = {k: v for k, v in vars(spec).items() if v is not None and k != "kind"}
+            if kind == "skin" and layout:
+                settings["layout"] = layout
+            nodes[kind] = settings
+        return nodes
+
 
 def load_scene(path: str | Path) -> Scene:
     source = str(path)
