@@ -16,7 +16,7 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from grasplink.core.params import Params
 from grasplink.decoding.registry import DEFAULT_DECODER, check_live_decoder
@@ -36,12 +36,15 @@ from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.gateway.roles import Binding
-from grasplink.profiles import load_profile, object_limits
+from grasplink.profiles import load_profile, object_limits, shipped_profile
 from grasplink.profiles import objects as obj
 from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 from grasplink.profiles.pdo_codec import PdoCodec
+
+if TYPE_CHECKING:
+    import canopen
 
 # The thesis's EMG control window is "rectified and integrated" over 150-250 ms (ch. 2.3).
 EMG_WINDOW_MS = (150, 250)
@@ -76,18 +79,26 @@ class NodeConfig:
     sdo: tuple[SdoWrite, ...] = ()  # written last before the start, in order
     binding: Binding | None = None  # a vendor's node in a loop role: its objects (roles.py)
     file_warnings: tuple[str, ...] = ()  # what the field loader repaired in its file
+    # its dictionary, parsed once when the description is read and shared by every later
+    # pass (bindings, codecs, provisioning): read-only
+    od: canopen.ObjectDictionary | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.name = self.name or self.kind
 
+    def dictionary(self) -> canopen.ObjectDictionary:
+        """The node's dictionary (read-only): the description's, else its kind's shipped
+        profile, parsed once per process."""
+        if self.od is None:
+            if self.eds is not None:
+                self.od = load_profile(self.eds, self.node_id)
+            else:
+                self.od = shipped_profile(self.kind, self.node_id)
+        return self.od
+
     @property
     def role(self) -> str:
         return self.kind
-
-    @property
-    def profile(self) -> str | Path:
-        """What `load_profile` and `PdoCodec` take for this node."""
-        return self.eds if self.eds is not None else self.kind
 
 
 @dataclass
@@ -420,14 +431,14 @@ def _describe_loop_node(p: Params, node: NodeConfig, base: Path) -> None:
         raise p.error("role", f"[nodes.{node.kind}] is the {node.kind} role's node, got {role!r}")
     path = description.node_file(p, base)
     if path is None:
-        _description(p, node, lambda: load_profile(node.kind, node.node_id))
+        _description(p, node, node.dictionary)
         for table in BINDING_TABLES.values():
             if p.has(table):
                 raise p.error(table, "binds a vendor's node: give its file (eds = or dcf =)")
         return
     node.eds = path
-    od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
-    codec = PdoCodec(path, node.node_id)
+    node.od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
+    codec = PdoCodec.from_od(node.od, node.node_id)
     try:
         if node.kind == "skin":
             node.binding = roles.skin(p, codec)
@@ -442,7 +453,7 @@ def _describe_loop_node(p: Params, node: NodeConfig, base: Path) -> None:
                 table, f"a vendor's node in the {node.kind} role binds it to its objects here"
             ) from None
         raise exc from None
-    _description(p, node, lambda: od)
+    _description(p, node, node.dictionary)
 
 
 # the table that binds a vendor's node to a loop role (roles.py)
@@ -478,8 +489,8 @@ def _device(p: Params, name: str, base: Path) -> NodeConfig:
         name=name,
         eds=path,
     )
-    od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
-    _description(p, node, lambda: od)
+    node.od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
+    _description(p, node, node.dictionary)
     return node
 
 
@@ -591,7 +602,7 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
                 "node", f"{name!r} is {why}; device nodes: {', '.join(devices) or 'none'}"
             )
         if name not in mapped:
-            codec = PdoCodec(node.profile, node.node_id)
+            codec = PdoCodec.from_od(node.dictionary(), node.node_id)
             mapped[name] = {(v.index, v.subindex): v for v in codec.tpdo_objects()}
         text = t.string("object")
         try:

@@ -96,7 +96,7 @@ from grasplink.gateway.snapshot import (
     device_value,
 )
 from grasplink.gateway.sync import SyncProducer
-from grasplink.profiles import load_profile, object_limits, variable_limits
+from grasplink.profiles import object_limits, variable_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
 from grasplink.profiles.pdo_codec import Key, PdoCodec
@@ -172,7 +172,7 @@ class Gateway(NmtMaster):
         for node in config.nodes.values():
             link = NodeLink(
                 node,
-                PdoCodec(node.profile, node.node_id),
+                PdoCodec.from_od(node.dictionary(), node.node_id),
                 SdoClient(node.node_id, timeout_us=config.sdo_timeout_ms * 1000),
                 writes=tuple(Provisioner(node, config).writes()),
             )
@@ -265,7 +265,7 @@ class Gateway(NmtMaster):
         assert isinstance(skin, SkinConfig)
         binding = skin.binding
         if binding is None:  # our skin node: its calibration from its EDS
-            calibration = SkinCalibration.from_od(load_profile("skin", skin.node_id))
+            calibration = SkinCalibration.from_od(skin.dictionary())
             binding = roles.own_skin(calibration, skin.samples_per_pdo)
         assert isinstance(binding, roles.SkinBinding)
         # Sample times come from the packet sequence; a packet may arrive as late as the

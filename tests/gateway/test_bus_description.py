@@ -348,3 +348,37 @@ def test_a_node_from_another_projects_file_boots_and_is_mastered(tmp_path, name)
     assert device.state is NmtState.OPERATIONAL
     snap = gw.snapshot()
     assert snap.nodes["vendor"].phase is NodePhase.OPERATIONAL, snap.alarms
+
+
+def test_a_gateway_start_parses_each_nodes_file_once(tmp_path, monkeypatch):
+    """Config check, role binding, codecs and provisioning share the dictionary the
+    description read: one parse per file (there were 3 of a vendor's, up to 9 of ours)."""
+    import grasplink.profiles
+    import grasplink.profiles.field as field
+    from grasplink.profiles import object_limits, shipped_profile
+
+    parses: list[str] = []
+    load_field, load_shipped = field.load_object_dictionary, grasplink.profiles.load_profile
+
+    def counted_field(path, *args, **kwargs):
+        parses.append(Path(path).name)
+        return load_field(path, *args, **kwargs)
+
+    def counted_shipped(kind, *args, **kwargs):
+        parses.append(str(kind))
+        return load_shipped(kind, *args, **kwargs)
+
+    monkeypatch.setattr(field, "load_object_dictionary", counted_field)
+    monkeypatch.setattr(grasplink.profiles, "load_profile", counted_shipped)
+    shipped_profile.cache_clear()  # a cold process: nothing parsed yet
+    object_limits.cache_clear()
+    e35 = FIELD / "python-canopen_e35.eds"
+    device = f'[nodes.vendor]\nnode_id = 0x35\neds = "{e35}"\n'
+    gw = gateway_for(tmp_path, device, kinds_off=False)
+    assert sorted(parses) == sorted([*KINDS, e35.name])
+    parses.clear()
+    gateway_for(tmp_path, device, kinds_off=False)  # ours stay parsed; the vendor file is reread
+    assert parses == [e35.name]
+    link = gw.links[0x35]
+    od = gw.config.nodes["vendor"].dictionary()
+    assert link.codec.od_entry(0x1017) is od[0x1017]  # the codec reads the description's
