@@ -257,8 +257,7 @@ class Gateway(NmtMaster):
         link = self.by_kind.get("skin")
         self.skin_frames: SkinFrames | None = None
         self.decoder = None
-        self._skin_max_counts: int | None = None
-        self._static_force_mn: tuple[float, float] | None = None
+        self.skin_binding: roles.SkinBinding | None = None  # its objects, what it can read
         if link is None:
             return
         skin = link.config
@@ -268,6 +267,7 @@ class Gateway(NmtMaster):
             calibration = SkinCalibration.from_od(skin.dictionary())
             binding = roles.own_skin(calibration, skin.samples_per_pdo)
         assert isinstance(binding, roles.SkinBinding)
+        self.skin_binding = binding
         # Sample times come from the packet sequence; a packet may arrive as late as the
         # heartbeat consumer time (a stalled host, the burst after it) without a reset.
         self.skin_frames = SkinFrames(
@@ -277,9 +277,6 @@ class Gateway(NmtMaster):
             settle_us=LIVE_SETTLE_US,
         )
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
-        # what the sensor can report (plausibility)
-        self._skin_max_counts = binding.max_units
-        self._static_force_mn = binding.static_force_range_mn
 
     def _plausibility_setup(self) -> None:
         """What the loop refuses to follow, and how fast its commands may move
@@ -671,13 +668,13 @@ class Gateway(NmtMaster):
             if limits is not None and not limits[0] <= value <= limits[1]:
                 return "tpdo_out_of_range"
         kind = link.kind
-        if kind == "skin":
-            top = self._skin_max_counts
+        if kind == "skin" and self.skin_binding is not None:  # what the sensor can report
+            top = self.skin_binding.max_units
             if top is not None and any(
                 v > top for (i, _), v in values.items() if i == obj.SKIN_SAMPLE_SLOTS
             ):
                 return "skin_sample_out_of_range"
-            static = self._static_force_mn
+            static = self.skin_binding.static_force_range_mn
             if (
                 static is not None
                 and STATIC_FORCE_KEY in values
