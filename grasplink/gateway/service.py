@@ -513,6 +513,8 @@ class Gateway(NmtMaster):
         link.failure = why
         self.alarms[f"{link.name}.{'provisioning' if retry else 'identity'}"] = why
         link.retry_at_us = t_us + PROVISION_RETRY_US if retry else None
+        if link.config.mandatory:  # the nodes it holds say why
+            self._missing_mandatory()
         return []
 
     def _check_identity(self, link: NodeLink, t_us: int) -> list[Frame]:
@@ -537,21 +539,32 @@ class Gateway(NmtMaster):
         """Configured: started now, or held while a mandatory node is not ready (CiA 302:
         the network starts once every mandatory node is); then every held node starts."""
         link.phase = NodePhase.READY
-        missing = [
-            f"{other.name} (0x{other.node_id:02X})"
-            for other in self.links.values()
-            if other.config.mandatory and other.phase not in STARTED_OR_READY
-        ]
-        if missing:
-            self.alarms[NETWORK_HELD] = f"waiting for mandatory node {', '.join(missing)}"
+        if self._missing_mandatory():
             return []
-        self.alarms.pop(NETWORK_HELD, None)
         frames = []
         for held in self.links.values():
             if held.phase is NodePhase.READY:
                 held.phase = NodePhase.STARTING
                 frames.append(self.command_start(held.node_id))
         return frames
+
+    def _missing_mandatory(self) -> bool:
+        """Whether a mandatory node is not ready; while it holds configured nodes back, the
+        alarm `network.held` names it and why (a refused write, no answer, not booted)."""
+        missing = [
+            other
+            for other in self.links.values()
+            if other.config.mandatory and other.phase not in STARTED_OR_READY
+        ]
+        held = any(link.phase is NodePhase.READY for link in self.links.values())
+        if missing and held:
+            self.alarms[NETWORK_HELD] = "waiting for mandatory node " + "; ".join(
+                f"{other.name} (0x{other.node_id:02X}): {_why_not_ready(other)}"
+                for other in missing
+            )
+        else:
+            self.alarms.pop(NETWORK_HELD, None)
+        return bool(missing)
 
     def command_start(self, node_id: int) -> Frame:
         return self.command(NmtCommand.START, node_id)
@@ -994,6 +1007,16 @@ class Gateway(NmtMaster):
             return []
         self._sent[can_id] = data
         return [Frame(can_id, data)]
+
+
+def _why_not_ready(link: NodeLink) -> str:
+    if link.phase is NodePhase.FAILED:
+        return link.failure
+    if link.phase is NodePhase.PROVISIONING:
+        return "being configured"
+    if link.phase is NodePhase.LOST:
+        return "heartbeat lost"
+    return "not booted" if link.boots_seen < 0 else "absent"
 
 
 def _finite(value: float | None) -> float | None:
