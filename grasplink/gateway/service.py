@@ -46,7 +46,7 @@ from grasplink.decoding.registry import make_decoder
 from grasplink.decoding.skin_frames import SkinCalibration, SkinFrames
 from grasplink.errors import ConfigError, PdoError
 from grasplink.gateway import roles
-from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value
+from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value, shown
 from grasplink.gateway.config import (
     DEVICE_ROLE,
     EmgConfig,
@@ -875,11 +875,12 @@ class Gateway(NmtMaster):
             return self._calibrate(EmgCalibration(*value), t_us)
         if name == "emg_calibrate":
             return self._calibration_phase(value, t_us)
-        if name == "restart_node":
-            link = self.by_kind.get(value)
-            if link is None:
-                raise CommandError(f"restart_node: this gateway has no {value} node")
-            return f"reset node {value}", [self.command(NmtCommand.RESET_NODE, link.node_id)]
+        if name == "restart_node":  # any node of the description; configured again on boot-up
+            node = self.config.nodes.get(value)
+            if node is None:
+                names = ", ".join(self.config.nodes) or "none"
+                raise CommandError(f"restart_node: no node {shown(value)}; nodes: {names}")
+            return f"reset node {value}", [self.command(NmtCommand.RESET_NODE, node.node_id)]
         raise CommandError(f"unknown command {name!r}")
 
     def _calibrate(self, calibration: EmgCalibration, t_us: int) -> tuple[str, list[Frame]]:

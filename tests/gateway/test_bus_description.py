@@ -529,3 +529,36 @@ def test_a_mandatory_node_that_fails_its_boot_holds_the_start_saying_why(
     assert snap.nodes["wrist"].phase is NodePhase.READY
     assert snap.alarms["gripper.provisioning"] == why
     assert snap.alarms[NETWORK_HELD] == f"waiting for mandatory node gripper (0x30): {why}"
+
+
+def test_restart_node_resets_a_device_by_its_name_and_it_is_configured_again(tmp_path, vendor_eds):
+    """Any node of the description, by its table name (posted as a surface does): NMT
+    reset node, then its boot-up is a reboot: configured again and started."""
+    from grasplink.gateway.commands import Command
+    from grasplink.gateway.edge import GatewayEdge
+
+    gw = gateway_for(
+        tmp_path,
+        f'[nodes.gripper]\nnode_id = 0x35\neds = "vendor/gripper.eds"\n'
+        f'[nodes.gripper.sdo]\n"{CRUSH}" = 30000\n',
+        kinds_off=False,
+    )
+    edge, device = GatewayEdge(gw), gripper(vendor_eds, 0x35)
+    network = run([edge, device])
+    assert device.state is NmtState.OPERATIONAL
+    device.store.set(obj.HAND_CRUSH_LIMIT_MN, 0, 12345)  # changed behind the gateway's back
+    boots = gw.snapshot().nodes["gripper"].boots
+    future = edge.post(Command("restart_node", "gripper"))
+    network.run_for(1_000_000)
+    result = future.result(timeout=0)
+    assert result.accepted and result.detail == "reset node gripper"
+    assert device.state is NmtState.OPERATIONAL
+    assert device.store.get(obj.HAND_CRUSH_LIMIT_MN) == 30000  # configured again
+    assert gw.snapshot().nodes["gripper"].boots == boots + 1
+    assert "gateway.second_master" not in gw.snapshot().alarms
+
+    result, frames = gw.execute(Command("restart_node", "arm"), network.t_us)
+    assert not result.accepted and frames == []
+    assert result.detail == "restart_node: no node 'arm'; nodes: skin, emg, belt, hand, gripper"
+    result, _ = gw.execute(Command("restart_node", 4), network.t_us)
+    assert not result.accepted and "restart_node: expected a node's name" in result.detail

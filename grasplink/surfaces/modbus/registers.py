@@ -1141,7 +1141,8 @@ def _holding() -> tuple[tuple[Register, ...], tuple[CommandGroup, ...]]:
             "restart_node",
             (restart,),
             lambda r: KINDS[r[0] - 1],
-            "reset the node; the gateway provisions and starts it again",
+            "reset the node; the gateway provisions and starts it again (a device node: "
+            "by its name over MQTT, docs/telemetry.md)",
         )
     )
     return tuple(t.registers), tuple(groups)
