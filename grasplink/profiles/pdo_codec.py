@@ -56,7 +56,7 @@ class PdoCodec:
         """The codec of a dictionary already loaded (a gateway's node keeps one, and every
         pass at start shares it instead of parsing the file again). Only read: the maps are
         the codec's own, so several codecs may share one dictionary."""
-        codec = cls.__new__(cls)
+        codec: PdoCodec = cls.__new__(cls)
         codec._build(od, node_id)
         return codec
 
