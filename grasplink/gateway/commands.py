@@ -48,7 +48,10 @@ COMMANDS: dict[str, str] = {
     "emg_calibrate": "one of " + ", ".join(CALIBRATION_PHASES),
     "restart_node": "a node's name in the bus description (" + ", ".join(KINDS) + ", or a "
     "device's table name)",
+    "write_object": "{node, object, value}: a device's RPDO-mapped object the configuration "
+    "offers for writing ([[modbus.holding]]), a finite number",
 }
+WRITE_OBJECT_KEYS = frozenset({"node", "object", "value"})
 NODE_NAME_CHARS = 32  # a description's node name is at most this long (config.NODE_NAME)
 
 
@@ -84,6 +87,10 @@ def parse_value(command: Command) -> Any:
             return value
     elif name == "restart_node" and isinstance(value, str) and 0 < len(value) <= NODE_NAME_CHARS:
         return value  # which names exist is for the gateway's description to say
+    elif name == "write_object" and isinstance(value, dict) and set(value) == WRITE_OBJECT_KEYS:
+        node, key, number = value["node"], value["object"], value["value"]
+        if isinstance(node, str) and isinstance(key, str) and _number(number):
+            return node, key, number  # which objects may be written: the configuration's
     raise CommandError(f"{name}: expected {expected}, got {shown(value)}")
 
 

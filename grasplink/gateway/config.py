@@ -11,12 +11,15 @@ file could have caught.
 from __future__ import annotations
 
 import itertools
+import math
 import re
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
+
+from canopen.objectdictionary.datatypes import FLOAT_TYPES
 
 from grasplink.core.params import Params
 from grasplink.decoding.registry import DEFAULT_DECODER, check_live_decoder
@@ -36,7 +39,7 @@ from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.gateway.roles import Binding
-from grasplink.profiles import load_profile, object_limits, shipped_profile
+from grasplink.profiles import load_profile, object_limits, shipped_profile, variable_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
@@ -152,7 +155,8 @@ MODBUS_DEVICE_BASE = 256
 
 @dataclass(frozen=True)
 class ModbusRegister:
-    """One `[[modbus.registers]]` entry: a device object's value at an input register."""
+    """One `[[modbus.registers]]` entry (a device object's value at input registers) or
+    `[[modbus.holding]]` entry (a device's RPDO-mapped object, written at holding ones)."""
 
     node: str  # a device node's name
     key: str  # "6401sub1"
@@ -164,6 +168,8 @@ class ModbusRegister:
     data_type: str  # its CiA 301 data type
     unit: str  # its Unit ("" where the file gives none)
     where: str  # "gw.toml: modbus.registers[0]": what an error about it names
+    holding: bool = False  # written by a client, sent in the node's RPDO
+    limits: tuple[float, float] = (-math.inf, math.inf)  # what the object accepts (holding)
 
     @property
     def words(self) -> int:
@@ -210,6 +216,7 @@ class GatewayConfig:
     telemetry: TelemetrySettings = field(default_factory=TelemetrySettings)
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     modbus_registers: tuple[ModbusRegister, ...] = ()  # `[[modbus.registers]]`, by address
+    modbus_holding: tuple[ModbusRegister, ...] = ()  # `[[modbus.holding]]`, by address
 
     def node(self, kind: str) -> NodeConfig | None:
         return self.nodes.get(kind)
@@ -302,7 +309,9 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     config.telemetry = _telemetry(top.table_of("telemetry", {}))
     grip_rate_n_s = hand.grip_rate_n_s if isinstance(hand, HandConfig) else 50.0
     config.plausibility = _plausibility(top.table_of("plausibility", {}), grip_rate_n_s)
-    config.modbus_registers = _modbus_registers(top.table_of("modbus", {}), config)
+    config.modbus_registers, config.modbus_holding = _modbus_registers(
+        top.table_of("modbus", {}), config
+    )
     top.finish()
     return config
 
@@ -579,19 +588,53 @@ _PARSERS: dict[str, Callable[[Params, str], NodeConfig]] = per_kind(
 )
 
 
-def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister, ...]:
-    """`[[modbus.registers]]`: device objects at input registers, each checked now: a
-    device node, an object its TPDOs map, a type that carries it, an address of its own
-    above the fixed map."""
-    entries = p.raw("registers", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise p.error("registers", "expected an array of tables ([[modbus.registers]])")
+def _modbus_registers(
+    p: Params, config: GatewayConfig
+) -> tuple[tuple[ModbusRegister, ...], tuple[ModbusRegister, ...]]:
+    """`[[modbus.registers]]` (device objects at input registers) and `[[modbus.holding]]`
+    (device objects a client writes), each checked now: a device node, an object its TPDOs
+    map (input) or its RPDOs map and it accepts writing (holding), a type that carries it,
+    an address of its own above the fixed map."""
+    tables = {}
+    for key in ("registers", "holding"):
+        entries = p.raw(key, [])
+        if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+            raise p.error(key, f"expected an array of tables ([[modbus.{key}]])")
+        tables[key] = entries
     p.finish()
+    return (
+        _modbus_entries(p, config, "registers", tables["registers"]),
+        _modbus_entries(p, config, "holding", tables["holding"]),
+    )
+
+
+def _mapped(node: NodeConfig, holding: bool) -> dict[tuple[int, int], Any]:
+    """A device's objects its TPDOs map (input registers) or its RPDOs map (holding)."""
+    codec = PdoCodec.from_od(node.dictionary(), node.node_id)
+    if not holding:
+        return {(v.index, v.subindex): v for v in codec.tpdo_objects()}
+    keys = [m.key for number in codec.rpdo_numbers() for m in codec.rpdo_objects(number)]
+    return {key: codec.od_entry(*key) for key in keys}
+
+
+def _accepted(var: Any) -> tuple[float, float]:
+    """What an object accepts: its file's LowLimit/HighLimit, else its type's range (a
+    REAL's: any finite number)."""
+    if var.data_type in FLOAT_TYPES:
+        low, high = var.min, var.max
+        return (-math.inf if low is None else low, math.inf if high is None else high)
+    return variable_limits(var)
+
+
+def _modbus_entries(
+    p: Params, config: GatewayConfig, table: str, entries: list[dict[str, Any]]
+) -> tuple[ModbusRegister, ...]:
+    holding = table == "holding"
     devices = sorted(n for n, c in config.nodes.items() if c.kind == DEVICE_ROLE)
     mapped: dict[str, dict[tuple[int, int], Any]] = {}
     out: list[ModbusRegister] = []
     for i, entry in enumerate(entries):
-        t = Params(entry, p.source, p.key(f"registers[{i}]"))
+        t = Params(entry, p.source, p.key(f"{table}[{i}]"))
         name = t.string("node")
         node = config.nodes.get(name)
         if node is None or node.kind != DEVICE_ROLE:
@@ -602,8 +645,7 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
                 "node", f"{name!r} is {why}; device nodes: {', '.join(devices) or 'none'}"
             )
         if name not in mapped:
-            codec = PdoCodec.from_od(node.dictionary(), node.node_id)
-            mapped[name] = {(v.index, v.subindex): v for v in codec.tpdo_objects()}
+            mapped[name] = _mapped(node, holding)
         text = t.string("object")
         try:
             index, subindex = description.object_key(text)
@@ -612,8 +654,13 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
         var = mapped[name].get((index, subindex))
         if var is None:
             listed = ", ".join(f"{i:04X}sub{s:X}" for i, s in mapped[name]) or "none"
+            pdo = "RPDO" if holding else "TPDO"
             raise t.error(
-                "object", f"{text} is no TPDO-mapped object of {node.eds} (mapped: {listed})"
+                "object", f"{text} is no {pdo}-mapped object of {node.eds} (mapped: {listed})"
+            )
+        if holding and var.access_type not in ("rw", "wo", "rww"):
+            raise t.error(
+                "object", f"{var.name} ({text}) is {var.access_type}: a client cannot write it"
             )
         kind = t.string("type", choices=tuple(MODBUS_TYPES))
         known = DATA_TYPES.get(var.data_type)
@@ -627,9 +674,10 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
         words = MODBUS_WORDS[kind]
         address = t.integer("address", low=0, high=0xFFFF)
         if address < MODBUS_DEVICE_BASE:
+            what = "holding" if holding else "input"
             raise t.error(
                 "address",
-                f"{address} is in the fixed map's range (input registers below "
+                f"{address} is in the fixed map's range ({what} registers below "
                 f"{MODBUS_DEVICE_BASE}): a device object starts at {MODBUS_DEVICE_BASE} or above",
             )
         if address + words > 0x10000:
@@ -646,6 +694,8 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
             data_type,
             var.unit or "",
             f"{p.source}: {t.prefix}",
+            holding,
+            _accepted(var) if holding else (-math.inf, math.inf),
         )
         clash = next(
             (r for r in out if r.address < register.end and register.address < r.end), None

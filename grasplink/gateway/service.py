@@ -56,7 +56,7 @@ from grasplink.gateway.config import (
     SkinConfig,
     parse_config,
 )
-from grasplink.gateway.description import SdoWrite
+from grasplink.gateway.description import SdoWrite, object_key
 from grasplink.gateway.drives import DriveHandshake
 from grasplink.gateway.emg import (
     ENVELOPE_FULL_SCALE_UV,
@@ -99,7 +99,7 @@ from grasplink.gateway.sync import SyncProducer
 from grasplink.profiles import object_limits, variable_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
-from grasplink.profiles.pdo_codec import Key, PdoCodec
+from grasplink.profiles.pdo_codec import INTEGER_TYPES, Key, PdoCodec
 
 log = logging.getLogger(__name__)
 
@@ -135,6 +135,9 @@ class NodeLink:
     pdos_dropped: Counter[str] = field(default_factory=Counter)
     emcy: list[tuple[int, int]] = field(default_factory=list)  # (t_us, error code), bounded
     values: dict[Key, int | float] = field(default_factory=dict)
+    # RPDO values last sent to a device at a client's request (write_object); replaced
+    # whole, as the Modbus thread reads it back
+    written: dict[Key, int | float] = field(default_factory=dict)
 
     @property
     def kind(self) -> str:
@@ -460,6 +463,7 @@ class Gateway(NmtMaster):
         link = self.links.get(node_id)
         if link is None:
             return
+        link.written = {}  # back to its defaults: what a client wrote is gone
         if link.kind in self.drives:
             self.drives[link.kind].reset()
         if link.kind == "skin" and self.skin_frames is not None:
@@ -881,7 +885,41 @@ class Gateway(NmtMaster):
                 names = ", ".join(self.config.nodes) or "none"
                 raise CommandError(f"restart_node: no node {shown(value)}; nodes: {names}")
             return f"reset node {value}", [self.command(NmtCommand.RESET_NODE, node.node_id)]
+        if name == "write_object":
+            return self._write_object(*value)
         raise CommandError(f"unknown command {name!r}")
+
+    def _write_object(self, name: str, text: str, value: float) -> tuple[str, list[Frame]]:
+        """A client's value for a device's RPDO-mapped object the configuration offers
+        (`[[modbus.holding]]`): sent now in its RPDO, whose other objects keep the value
+        last sent, else their file's. Never queued: a node not operational refuses it."""
+        key = object_key(text)
+        offered = {(r.node, (r.index, r.subindex)) for r in self.config.modbus_holding}
+        if (name, key) not in offered:
+            listed = ", ".join(f"{node} {i:04X}sub{s:X}" for node, (i, s) in sorted(offered))
+            raise CommandError(
+                f"write_object: {name} {text} is not offered for writing; offered: "
+                f"{listed or 'none'} ([[modbus.holding]])"
+            )
+        link = self.links[self.config.nodes[name].node_id]
+        if not self._commandable(link):
+            raise CommandError(f"write_object: {name} is {link.phase.value}, not operational")
+        codec = link.codec
+        number = next(
+            n for n in codec.rpdo_numbers() if key in (m.key for m in codec.rpdo_objects(n))
+        )
+        values = {
+            m.key: link.written.get(m.key, _file_value(link, m.key))
+            for m in codec.rpdo_objects(number)
+        }
+        integer = codec.od_entry(*key).data_type in INTEGER_TYPES
+        values[key] = int(value) if integer and float(value).is_integer() else value
+        try:
+            can_id, data = codec.encode(number, values)
+        except PdoError as exc:
+            raise CommandError(f"write_object: {exc}") from None
+        link.written = {**link.written, **values}
+        return f"{name} {text} = {value:g} (RPDO{number})", [Frame(can_id, data)]
 
     def _calibrate(self, calibration: EmgCalibration, t_us: int) -> tuple[str, list[Frame]]:
         """New EMG calibration: used at once, and written to the EMG node (envelope levels)."""
@@ -1008,6 +1046,13 @@ class Gateway(NmtMaster):
             return []
         self._sent[can_id] = data
         return [Frame(can_id, data)]
+
+
+def _file_value(link: NodeLink, key: Key) -> int | float:
+    """What the node's file gives an object (a DCF's value, else its default; else 0)."""
+    entry = link.codec_od_entry(*key)
+    value = entry.value if entry.value is not None else entry.default
+    return value if isinstance(value, int | float) else 0
 
 
 def _why_not_ready(link: NodeLink) -> str:
