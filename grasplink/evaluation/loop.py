@@ -193,7 +193,7 @@ class BusLog:
         self._rpdos = {}
         for kind in ("belt", "hand"):
             node = config.nodes[kind]
-            codec = PdoCodec(node.profile, node.node_id)
+            codec = PdoCodec.from_od(node.dictionary(), node.node_id)
             binding = node.binding
             if not isinstance(binding, roles.DriveBinding):
                 binding = roles.own_drive(kind, codec)
@@ -202,7 +202,7 @@ class BusLog:
             self._rpdos[rpdo.cob_id] = (kind, rpdo, var, binding.units_per_command)
         envelope = emg.binding if isinstance(emg.binding, roles.EmgBinding) else roles.OWN_EMG
         self._envelope = envelope
-        self._emg = PdoCodec(emg.profile, emg.node_id)
+        self._emg = PdoCodec.from_od(emg.dictionary(), emg.node_id)
         self._emg_ids = self._emg.tpdo_can_ids()
 
     def outcome(self, physics: dict[str, np.ndarray], skin_end_mm: float) -> Outcome:

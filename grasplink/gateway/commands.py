@@ -46,8 +46,13 @@ COMMANDS: dict[str, str] = {
     "reflex_threshold_mm_s": f"a number {MIN_THRESHOLD_MM_S:g}..{MAX_THRESHOLD_MM_S:g}",
     "emg_calibration": "{e_min_uv, e_max_uv}, numbers with 0 <= e_min_uv < e_max_uv <= 65535",
     "emg_calibrate": "one of " + ", ".join(CALIBRATION_PHASES),
-    "restart_node": "one of " + ", ".join(KINDS),
+    "restart_node": "a node's name in the bus description (" + ", ".join(KINDS) + ", or a "
+    "device's table name)",
+    "write_object": "{node, object, value}: a device's RPDO-mapped object the configuration "
+    "offers for writing ([[modbus.holding]]), a finite number",
 }
+WRITE_OBJECT_KEYS = frozenset({"node", "object", "value"})
+NODE_NAME_CHARS = 32  # a description's node name is at most this long (config.NODE_NAME)
 
 
 class CommandError(ValueError):
@@ -77,10 +82,15 @@ def parse_value(command: Command) -> Any:
             low, high = value["e_min_uv"], value["e_max_uv"]
             if _number(low) and _number(high) and 0 <= low < high <= 65535:
                 return float(low), float(high)
-    elif name in ("emg_calibrate", "restart_node"):
-        choices = CALIBRATION_PHASES if name == "emg_calibrate" else KINDS
-        if value in choices:
+    elif name == "emg_calibrate":
+        if value in CALIBRATION_PHASES:
             return value
+    elif name == "restart_node" and isinstance(value, str) and 0 < len(value) <= NODE_NAME_CHARS:
+        return value  # which names exist is for the gateway's description to say
+    elif name == "write_object" and isinstance(value, dict) and set(value) == WRITE_OBJECT_KEYS:
+        node, key, number = value["node"], value["object"], value["value"]
+        if isinstance(node, str) and isinstance(key, str) and _number(number):
+            return node, key, number  # which objects may be written: the configuration's
     raise CommandError(f"{name}: expected {expected}, got {shown(value)}")
 
 

@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import copy
 import itertools
+import math
 import re
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
+
+from canopen.objectdictionary.datatypes import FLOAT_TYPES
 
 from grasplink.core.params import Params
 from grasplink.decoding.registry import DEFAULT_DECODER, check_live_decoder
@@ -37,13 +40,22 @@ from grasplink.gateway.master import CONSUMER_ALLOWANCE_MS
 from grasplink.gateway.plausibility import PlausibilityConfig
 from grasplink.gateway.reflex import HAND_MAX_GRIP_N, ReflexConfig
 from grasplink.gateway.roles import Binding
-from grasplink.profiles import load_profile, object_key, object_limits
+from grasplink.profiles import (
+    load_profile,
+    object_key,
+    object_limits,
+    shipped_profile,
+    variable_limits,
+)
 from grasplink.profiles import objects as obj
 from grasplink.profiles.eds import DATA_TYPES
 from grasplink.profiles.field import node_file
 from grasplink.profiles.kinds import KINDS, node_kind, per_kind, unknown_kind
 from grasplink.profiles.layouts import LAYOUTS_MM, parse_layout
 from grasplink.profiles.pdo_codec import PdoCodec
+
+if TYPE_CHECKING:
+    import canopen
 
 # The thesis's EMG control window is "rectified and integrated" over 150-250 ms (ch. 2.3).
 EMG_WINDOW_MS = (150, 250)
@@ -80,18 +92,26 @@ class NodeConfig:
     sdo: tuple[SdoWrite, ...] = ()  # written last before the start, in order
     binding: Binding | None = None  # a vendor's node in a loop role: its objects (roles.py)
     file_warnings: tuple[str, ...] = ()  # what the field loader repaired in its file
+    # its dictionary, parsed once when the description is read and shared by every later
+    # pass (bindings, codecs, provisioning): read-only
+    od: canopen.ObjectDictionary | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.name = self.name or self.kind
 
+    def dictionary(self) -> canopen.ObjectDictionary:
+        """The node's dictionary (read-only): the description's, else its kind's shipped
+        profile, parsed once per process."""
+        if self.od is None:
+            if self.eds is not None:
+                self.od = load_profile(self.eds, self.node_id)
+            else:
+                self.od = shipped_profile(self.kind, self.node_id)
+        return self.od
+
     @property
     def role(self) -> str:
         return self.kind
-
-    @property
-    def profile(self) -> str | Path:
-        """What `load_profile` and `PdoCodec` take for this node."""
-        return self.eds if self.eds is not None else self.kind
 
 
 @dataclass
@@ -145,7 +165,8 @@ MODBUS_DEVICE_BASE = 256
 
 @dataclass(frozen=True)
 class ModbusRegister:
-    """One `[[modbus.registers]]` entry: a device object's value at an input register."""
+    """One `[[modbus.registers]]` entry (a device object's value at input registers) or
+    `[[modbus.holding]]` entry (a device's RPDO-mapped object, written at holding ones)."""
 
     node: str  # a device node's name
     key: str  # "6401sub1"
@@ -157,6 +178,8 @@ class ModbusRegister:
     data_type: str  # its CiA 301 data type
     unit: str  # its Unit ("" where the file gives none)
     where: str  # "gw.toml: modbus.registers[0]": what an error about it names
+    holding: bool = False  # written by a client, sent in the node's RPDO
+    limits: tuple[float, float] = (-math.inf, math.inf)  # what the object accepts (holding)
 
     @property
     def words(self) -> int:
@@ -203,6 +226,7 @@ class GatewayConfig:
     telemetry: TelemetrySettings = field(default_factory=TelemetrySettings)
     plausibility: PlausibilityConfig = field(default_factory=PlausibilityConfig)
     modbus_registers: tuple[ModbusRegister, ...] = ()  # `[[modbus.registers]]`, by address
+    modbus_holding: tuple[ModbusRegister, ...] = ()  # `[[modbus.holding]]`, by address
 
     def node(self, kind: str) -> NodeConfig | None:
         return self.nodes.get(kind)
@@ -295,7 +319,9 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     config.telemetry = _telemetry(top.table_of("telemetry", {}))
     grip_rate_n_s = hand.grip_rate_n_s if isinstance(hand, HandConfig) else 50.0
     config.plausibility = _plausibility(top.table_of("plausibility", {}), grip_rate_n_s)
-    config.modbus_registers = _modbus_registers(top.table_of("modbus", {}), config)
+    config.modbus_registers, config.modbus_holding = _modbus_registers(
+        top.table_of("modbus", {}), config
+    )
     top.finish()
     return config
 
@@ -424,14 +450,14 @@ def _describe_loop_node(p: Params, node: NodeConfig, base: Path, sync_period_us:
         raise p.error("role", f"[nodes.{node.kind}] is the {node.kind} role's node, got {role!r}")
     path = node_file(p, base)
     if path is None:
-        _description(p, node, lambda: load_profile(node.kind, node.node_id))
+        _description(p, node, node.dictionary)
         for table in BINDING_TABLES.values():
             if p.has(table):
                 raise p.error(table, "binds a vendor's node: give its file (eds = or dcf =)")
         return
     node.eds = path
-    od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
-    codec = PdoCodec(path, node.node_id)
+    node.od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
+    codec = PdoCodec.from_od(node.od, node.node_id)
     try:
         if node.kind == "skin":
             node.binding = roles.skin(p, codec)
@@ -446,9 +472,11 @@ def _describe_loop_node(p: Params, node: NodeConfig, base: Path, sync_period_us:
                 table, f"a vendor's node in the {node.kind} role binds it to its objects here"
             ) from None
         raise exc from None
-    _description(p, node, lambda: od)
+    _description(p, node, node.dictionary)
     if isinstance(node.binding, roles.SkinBinding) and isinstance(node, SkinConfig):
-        node.binding = _synchronous_samples(p, node, node.binding, od, sync_period_us)
+        node.binding = _synchronous_samples(
+            p, node, node.binding, node.dictionary(), sync_period_us
+        )
 
 
 def _synchronous_samples(
@@ -512,8 +540,8 @@ def _device(p: Params, name: str, base: Path) -> NodeConfig:
         name=name,
         eds=path,
     )
-    od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
-    _description(p, node, lambda: od)
+    node.od, node.file_warnings = description.dictionary(p, _file_key(path), path, node.node_id)
+    _description(p, node, node.dictionary)
     return node
 
 
@@ -602,19 +630,53 @@ _PARSERS: dict[str, Callable[[Params, str], NodeConfig]] = per_kind(
 )
 
 
-def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister, ...]:
-    """`[[modbus.registers]]`: device objects at input registers, each checked now: a
-    device node, an object its TPDOs map, a type that carries it, an address of its own
-    above the fixed map."""
-    entries = p.raw("registers", [])
-    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
-        raise p.error("registers", "expected an array of tables ([[modbus.registers]])")
+def _modbus_registers(
+    p: Params, config: GatewayConfig
+) -> tuple[tuple[ModbusRegister, ...], tuple[ModbusRegister, ...]]:
+    """`[[modbus.registers]]` (device objects at input registers) and `[[modbus.holding]]`
+    (device objects a client writes), each checked now: a device node, an object its TPDOs
+    map (input) or its RPDOs map and it accepts writing (holding), a type that carries it,
+    an address of its own above the fixed map."""
+    tables = {}
+    for key in ("registers", "holding"):
+        entries = p.raw(key, [])
+        if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+            raise p.error(key, f"expected an array of tables ([[modbus.{key}]])")
+        tables[key] = entries
     p.finish()
+    return (
+        _modbus_entries(p, config, "registers", tables["registers"]),
+        _modbus_entries(p, config, "holding", tables["holding"]),
+    )
+
+
+def _mapped(node: NodeConfig, holding: bool) -> dict[tuple[int, int], Any]:
+    """A device's objects its TPDOs map (input registers) or its RPDOs map (holding)."""
+    codec = PdoCodec.from_od(node.dictionary(), node.node_id)
+    if not holding:
+        return {(v.index, v.subindex): v for v in codec.tpdo_objects()}
+    keys = [m.key for number in codec.rpdo_numbers() for m in codec.rpdo_objects(number)]
+    return {key: codec.od_entry(*key) for key in keys}
+
+
+def _accepted(var: Any) -> tuple[float, float]:
+    """What an object accepts: its file's LowLimit/HighLimit, else its type's range (a
+    REAL's: any finite number)."""
+    if var.data_type in FLOAT_TYPES:
+        low, high = var.min, var.max
+        return (-math.inf if low is None else low, math.inf if high is None else high)
+    return variable_limits(var)
+
+
+def _modbus_entries(
+    p: Params, config: GatewayConfig, table: str, entries: list[dict[str, Any]]
+) -> tuple[ModbusRegister, ...]:
+    holding = table == "holding"
     devices = sorted(n for n, c in config.nodes.items() if c.kind == DEVICE_ROLE)
     mapped: dict[str, dict[tuple[int, int], Any]] = {}
     out: list[ModbusRegister] = []
     for i, entry in enumerate(entries):
-        t = Params(entry, p.source, p.key(f"registers[{i}]"))
+        t = Params(entry, p.source, p.key(f"{table}[{i}]"))
         name = t.string("node")
         node = config.nodes.get(name)
         if node is None or node.kind != DEVICE_ROLE:
@@ -625,8 +687,7 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
                 "node", f"{name!r} is {why}; device nodes: {', '.join(devices) or 'none'}"
             )
         if name not in mapped:
-            codec = PdoCodec(node.profile, node.node_id)
-            mapped[name] = {(v.index, v.subindex): v for v in codec.tpdo_objects()}
+            mapped[name] = _mapped(node, holding)
         text = t.string("object")
         try:
             index, subindex = object_key(text)
@@ -635,8 +696,13 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
         var = mapped[name].get((index, subindex))
         if var is None:
             listed = ", ".join(f"{i:04X}sub{s:X}" for i, s in mapped[name]) or "none"
+            pdo = "RPDO" if holding else "TPDO"
             raise t.error(
-                "object", f"{text} is no TPDO-mapped object of {node.eds} (mapped: {listed})"
+                "object", f"{text} is no {pdo}-mapped object of {node.eds} (mapped: {listed})"
+            )
+        if holding and var.access_type not in ("rw", "wo", "rww"):
+            raise t.error(
+                "object", f"{var.name} ({text}) is {var.access_type}: a client cannot write it"
             )
         kind = t.string("type", choices=tuple(MODBUS_TYPES))
         known = DATA_TYPES.get(var.data_type)
@@ -650,9 +716,10 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
         words = MODBUS_WORDS[kind]
         address = t.integer("address", low=0, high=0xFFFF)
         if address < MODBUS_DEVICE_BASE:
+            what = "holding" if holding else "input"
             raise t.error(
                 "address",
-                f"{address} is in the fixed map's range (input registers below "
+                f"{address} is in the fixed map's range ({what} registers below "
                 f"{MODBUS_DEVICE_BASE}): a device object starts at {MODBUS_DEVICE_BASE} or above",
             )
         if address + words > 0x10000:
@@ -669,6 +736,8 @@ def _modbus_registers(p: Params, config: GatewayConfig) -> tuple[ModbusRegister,
             data_type,
             var.unit or "",
             f"{p.source}: {t.prefix}",
+            holding,
+            _accepted(var) if holding else (-math.inf, math.inf),
         )
         clash = next(
             (r for r in out if r.address < register.end and register.address < r.end), None

@@ -11,38 +11,26 @@ types), never by hand.
 
 A node boots on the gateway's real-time thread, so nothing here may parse an
 EDS at that moment (tens of ms: heartbeats and SDO answers of every node would
-wait): each profile is parsed once per process (`profile`), and the gateway
-builds every node's writes when it is constructed (`Provisioner.writes` on a
-cached dictionary costs ~0.1 ms; handing out the built tuple costs nothing).
+wait): the writes come from the dictionary the node's configuration already
+holds (`NodeConfig.dictionary`, parsed once when the description is read), and
+the gateway builds every node's writes when it is constructed
+(`Provisioner.writes` costs ~0.1 ms; handing out the built tuple costs nothing).
 """
 
 from __future__ import annotations
-
-import functools
-from pathlib import Path
 
 import canopen
 from canopen.objectdictionary import ODVariable
 
 from grasplink.gateway.config import EmgConfig, GatewayConfig, HandConfig, NodeConfig, SkinConfig
 from grasplink.gateway.description import SdoWrite, dcf_writes
-from grasplink.profiles import load_profile, od_default, od_variable
 from grasplink.profiles import objects as obj
+from grasplink.profiles import od_default, od_variable
 from grasplink.profiles.layouts import PRESET_CODES, spacings_um
 
 COB_ID_INVALID = 0x80000000
 # (first communication object, first mapping object) of the RPDOs and of the TPDOs
 PDO_OBJECTS = ((obj.RPDO_COMM, obj.RPDO_MAP), (obj.TPDO_COMM, obj.TPDO_MAP))
-
-
-@functools.lru_cache(maxsize=64)
-def profile(kind: str | Path, node_id: int) -> canopen.ObjectDictionary:
-    """A node's parsed profile (a kind or an EDS/DCF path), shared and read-only: parsed once
-    per file and node-ID.
-
-    Bounded: a gateway has a handful of nodes; 64 covers many gateways in one process.
-    """
-    return load_profile(kind, node_id)
 
 
 class Provisioner:
@@ -51,7 +39,7 @@ class Provisioner:
     def __init__(self, node: NodeConfig, config: GatewayConfig):
         self.node = node
         self.config = config
-        self.od: canopen.ObjectDictionary = profile(node.profile, node.node_id)  # never mutated
+        self.od: canopen.ObjectDictionary = node.dictionary()  # shared: never mutated
 
     def writes(self) -> list[SdoWrite]:
         """Heartbeats; then for our own nodes their PDO maps and application parameters, for

@@ -129,7 +129,9 @@ class SdoClient:
             and self._deadline_us is not None
             and t_us >= self._deadline_us
         ):
-            return self._abort(AbortCode.TIMEOUT, ": no response")
+            return self._abort(
+                AbortCode.TIMEOUT, f": no answer after {self.timeout_us / 1000:g} ms"
+            )
         if self._current is None and self._queue:
             self._current = self._queue.popleft()
             self._current.phase = Phase.RUNNING

@@ -45,7 +45,7 @@ from grasplink.decoding.registry import make_decoder
 from grasplink.decoding.skin_frames import SkinCalibration, SkinFrames
 from grasplink.errors import ConfigError, PdoError
 from grasplink.gateway import roles
-from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value
+from grasplink.gateway.commands import Command, CommandError, CommandResult, parse_value, shown
 from grasplink.gateway.config import (
     DEVICE_ROLE,
     EmgConfig,
@@ -95,10 +95,10 @@ from grasplink.gateway.snapshot import (
     device_value,
 )
 from grasplink.gateway.sync import SyncNumbers, SyncProducer
-from grasplink.profiles import load_profile, object_limits, variable_limits
+from grasplink.profiles import object_key, object_limits, variable_limits
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
-from grasplink.profiles.pdo_codec import Key, PdoCodec
+from grasplink.profiles.pdo_codec import INTEGER_TYPES, Key, PdoCodec
 
 log = logging.getLogger(__name__)
 
@@ -134,6 +134,9 @@ class NodeLink:
     pdos_dropped: Counter[str] = field(default_factory=Counter)
     emcy: list[tuple[int, int]] = field(default_factory=list)  # (t_us, error code), bounded
     values: dict[Key, int | float] = field(default_factory=dict)
+    # RPDO values last sent to a device at a client's request (write_object); replaced
+    # whole, as the Modbus thread reads it back
+    written: dict[Key, int | float] = field(default_factory=dict)
 
     @property
     def kind(self) -> str:
@@ -171,7 +174,7 @@ class Gateway(NmtMaster):
         for node in config.nodes.values():
             link = NodeLink(
                 node,
-                PdoCodec(node.profile, node.node_id),
+                PdoCodec.from_od(node.dictionary(), node.node_id),
                 SdoClient(node.node_id, timeout_us=config.sdo_timeout_ms * 1000),
                 writes=tuple(Provisioner(node, config).writes()),
             )
@@ -235,8 +238,7 @@ class Gateway(NmtMaster):
         link = self.by_kind.get("skin")
         self.skin_frames: SkinFrames | None = None
         self.decoder = None
-        self._skin_max_counts: int | None = None
-        self._static_force_mn: tuple[float, float] | None = None
+        self.skin_binding: roles.SkinBinding | None = None  # its objects, what it can read
         # a vendor's samples on SYNC are numbered by the SYNC they answer (roles.py)
         self._skin_sync_numbers: SyncNumbers | None = None
         if link is None:
@@ -245,9 +247,10 @@ class Gateway(NmtMaster):
         assert isinstance(skin, SkinConfig)
         binding = skin.binding
         if binding is None:  # our skin node: its calibration from its EDS
-            calibration = SkinCalibration.from_od(load_profile("skin", skin.node_id))
+            calibration = SkinCalibration.from_od(skin.dictionary())
             binding = roles.own_skin(calibration, skin.samples_per_pdo)
         assert isinstance(binding, roles.SkinBinding)
+        self.skin_binding = binding
         # Sample times come from the packet sequence; a packet may arrive as late as the
         # heartbeat consumer time (a stalled host, the burst after it) without a reset.
         self.skin_frames = SkinFrames(
@@ -259,9 +262,6 @@ class Gateway(NmtMaster):
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
         if binding.sync_every:
             self._skin_sync_numbers = SyncNumbers(binding.sync_every)
-        # what the sensor can report (plausibility)
-        self._skin_max_counts = binding.max_units
-        self._static_force_mn = binding.static_force_range_mn
 
     def _plausibility_setup(self) -> None:
         """What the loop refuses to follow, and how fast its commands may move
@@ -450,6 +450,7 @@ class Gateway(NmtMaster):
         link = self.links.get(node_id)
         if link is None:
             return
+        link.written = {}  # back to its defaults: what a client wrote is gone
         if link.kind in self.drives:
             self.drives[link.kind].reset()
         if link.kind == "skin" and self.skin_frames is not None:
@@ -503,6 +504,8 @@ class Gateway(NmtMaster):
         link.failure = why
         self.alarms[f"{link.name}.{'provisioning' if retry else 'identity'}"] = why
         link.retry_at_us = t_us + PROVISION_RETRY_US if retry else None
+        if link.config.mandatory:  # the nodes it holds say why
+            self._missing_mandatory()
         return []
 
     def _check_identity(self, link: NodeLink, t_us: int) -> list[Frame]:
@@ -527,21 +530,32 @@ class Gateway(NmtMaster):
         """Configured: started now, or held while a mandatory node is not ready (CiA 302:
         the network starts once every mandatory node is); then every held node starts."""
         link.phase = NodePhase.READY
-        missing = [
-            f"{other.name} (0x{other.node_id:02X})"
-            for other in self.links.values()
-            if other.config.mandatory and other.phase not in STARTED_OR_READY
-        ]
-        if missing:
-            self.alarms[NETWORK_HELD] = f"waiting for mandatory node {', '.join(missing)}"
+        if self._missing_mandatory():
             return []
-        self.alarms.pop(NETWORK_HELD, None)
         frames = []
         for held in self.links.values():
             if held.phase is NodePhase.READY:
                 held.phase = NodePhase.STARTING
                 frames.append(self.command_start(held.node_id))
         return frames
+
+    def _missing_mandatory(self) -> bool:
+        """Whether a mandatory node is not ready; while it holds configured nodes back, the
+        alarm `network.held` names it and why (a refused write, no answer, not booted)."""
+        missing = [
+            other
+            for other in self.links.values()
+            if other.config.mandatory and other.phase not in STARTED_OR_READY
+        ]
+        held = any(link.phase is NodePhase.READY for link in self.links.values())
+        if missing and held:
+            self.alarms[NETWORK_HELD] = "waiting for mandatory node " + "; ".join(
+                f"{other.name} (0x{other.node_id:02X}): {_why_not_ready(other)}"
+                for other in missing
+            )
+        else:
+            self.alarms.pop(NETWORK_HELD, None)
+        return bool(missing)
 
     def command_start(self, node_id: int) -> Frame:
         return self.command(NmtCommand.START, node_id)
@@ -658,13 +672,13 @@ class Gateway(NmtMaster):
             if limits is not None and not limits[0] <= value <= limits[1]:
                 return "tpdo_out_of_range"
         kind = link.kind
-        if kind == "skin":
-            top = self._skin_max_counts
+        if kind == "skin" and self.skin_binding is not None:  # what the sensor can report
+            top = self.skin_binding.max_units
             if top is not None and any(
                 v > top for (i, _), v in values.items() if i == obj.SKIN_SAMPLE_SLOTS
             ):
                 return "skin_sample_out_of_range"
-            static = self._static_force_mn
+            static = self.skin_binding.static_force_range_mn
             if (
                 static is not None
                 and STATIC_FORCE_KEY in values
@@ -854,12 +868,47 @@ class Gateway(NmtMaster):
             return self._calibrate(EmgCalibration(*value), t_us)
         if name == "emg_calibrate":
             return self._calibration_phase(value, t_us)
-        if name == "restart_node":
-            link = self.by_kind.get(value)
-            if link is None:
-                raise CommandError(f"restart_node: this gateway has no {value} node")
-            return f"reset node {value}", [self.command(NmtCommand.RESET_NODE, link.node_id)]
+        if name == "restart_node":  # any node of the description; configured again on boot-up
+            node = self.config.nodes.get(value)
+            if node is None:
+                names = ", ".join(self.config.nodes) or "none"
+                raise CommandError(f"restart_node: no node {shown(value)}; nodes: {names}")
+            return f"reset node {value}", [self.command(NmtCommand.RESET_NODE, node.node_id)]
+        if name == "write_object":
+            return self._write_object(*value)
         raise CommandError(f"unknown command {name!r}")
+
+    def _write_object(self, name: str, text: str, value: float) -> tuple[str, list[Frame]]:
+        """A client's value for a device's RPDO-mapped object the configuration offers
+        (`[[modbus.holding]]`): sent now in its RPDO, whose other objects keep the value
+        last sent, else their file's. Never queued: a node not operational refuses it."""
+        key = object_key(text)
+        offered = {(r.node, (r.index, r.subindex)) for r in self.config.modbus_holding}
+        if (name, key) not in offered:
+            listed = ", ".join(f"{node} {i:04X}sub{s:X}" for node, (i, s) in sorted(offered))
+            raise CommandError(
+                f"write_object: {name} {text} is not offered for writing; offered: "
+                f"{listed or 'none'} ([[modbus.holding]])"
+            )
+        link = self.links[self.config.nodes[name].node_id]
+        if not self._commandable(link):
+            raise CommandError(f"write_object: {name} is {link.phase.value}, not operational")
+        codec = link.codec
+        number = next(
+            n for n in codec.rpdo_numbers() if key in (m.key for m in codec.rpdo_objects(n))
+        )
+        values = {
+            m.key: link.written.get(m.key, _file_value(link, m.key))
+            for m in codec.rpdo_objects(number)
+        }
+        integer = codec.od_entry(*key).data_type in INTEGER_TYPES
+        values[key] = int(value) if integer and float(value).is_integer() else value
+        try:
+            can_id, data = codec.encode(number, values)
+        except PdoError as exc:
+            raise CommandError(f"write_object: {exc}") from None
+        link.written = {**link.written, **values}
+        return f"{name} {text} = {value:g} (RPDO{number})", [Frame(can_id, data)]
 
     def _calibrate(self, calibration: EmgCalibration, t_us: int) -> tuple[str, list[Frame]]:
         """New EMG calibration: used at once, and written to the EMG node (envelope levels)."""
@@ -986,6 +1035,23 @@ class Gateway(NmtMaster):
             return []
         self._sent[can_id] = data
         return [Frame(can_id, data)]
+
+
+def _file_value(link: NodeLink, key: Key) -> int | float:
+    """What the node's file gives an object (a DCF's value, else its default; else 0)."""
+    entry = link.codec_od_entry(*key)
+    value = entry.value if entry.value is not None else entry.default
+    return value if isinstance(value, int | float) else 0
+
+
+def _why_not_ready(link: NodeLink) -> str:
+    if link.phase is NodePhase.FAILED:
+        return link.failure
+    if link.phase is NodePhase.PROVISIONING:
+        return "being configured"
+    if link.phase is NodePhase.LOST:
+        return "heartbeat lost"
+    return "not booted" if link.boots_seen < 0 else "absent"
 
 
 def _finite(value: float | None) -> float | None:

@@ -25,7 +25,14 @@ if TYPE_CHECKING:
     import canopen
     from canopen.objectdictionary import ODVariable
 
-__all__ = ["eds_path", "find_variable", "load_profile", "object_limits", "validate_eds"]
+__all__ = [
+    "eds_path",
+    "find_variable",
+    "load_profile",
+    "object_limits",
+    "shipped_profile",
+    "validate_eds",
+]
 
 _PROFILE_DIR = Path(__file__).resolve().parent
 
@@ -104,13 +111,25 @@ def od_default(od: canopen.ObjectDictionary, index: int, subindex: int = 0) -> i
     return int(value)
 
 
+@functools.lru_cache(maxsize=64)
+def shipped_profile(kind: str, node_id: int) -> canopen.ObjectDictionary:
+    """A shipped profile parsed once per process and node-ID, shared: read it, never write
+    it (a device's own store is built from `load_profile`'s fresh copy).
+
+    Bounded: four kinds at a handful of node-IDs each.
+    """
+    if kind not in KINDS:  # a vendor's file may change between two loads: never cached
+        raise ConfigError(unknown_kind(kind))
+    return load_profile(kind, node_id)
+
+
 @functools.lru_cache(maxsize=256)
 def object_limits(kind: str, index: int, subindex: int = 0) -> tuple[int, int]:
     """(low, high) a shipped profile's object accepts: its EDS limits, else its type's range.
 
     Cached: the shipped profiles do not change while a process runs.
     """
-    entry = od_variable(load_profile(kind, node_kind(kind).node_id), index, subindex)
+    entry = od_variable(shipped_profile(kind, node_kind(kind).node_id), index, subindex)
     low, high = variable_limits(entry)
     return int(low), int(high)
 

@@ -49,8 +49,19 @@ class PdoCodec:
     """All PDOs of one node (`kind` or an EDS path at `node_id`), by CAN-ID and by number."""
 
     def __init__(self, kind_or_path: str | Path, node_id: int):
+        self._build(load_profile(kind_or_path, node_id), node_id)
+
+    @classmethod
+    def from_od(cls, od: canopen.ObjectDictionary, node_id: int) -> PdoCodec:
+        """The codec of a dictionary already loaded (a gateway's node keeps one, and every
+        pass at start shares it instead of parsing the file again). Only read: the maps are
+        the codec's own, so several codecs may share one dictionary."""
+        codec: PdoCodec = cls.__new__(cls)
+        codec._build(od, node_id)
+        return codec
+
+    def _build(self, od: canopen.ObjectDictionary, node_id: int) -> None:
         self.node_id = node_id
-        od = load_profile(kind_or_path, node_id)
         network = canopen.Network()  # never connected: only holds the PDO maps' subscriptions
         self._node = canopen.RemoteNode(node_id, od)
         network.add_node(self._node)

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from grasplink.bus.lockstep import LockstepNetwork
+from grasplink.controllers import simulation
 from grasplink.core.frames import SDO_RX_BASE
 from grasplink.core.nmt import NmtState
 from grasplink.decoding.io import skin_tpdo
@@ -21,7 +22,7 @@ from grasplink.gateway.snapshot import NodePhase
 from grasplink.profiles import eds_path, load_profile
 from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import KINDS
-from tests.gateway.test_service import HAND_RPDO, scene
+from tests.gateway.test_service import HAND_RPDO, belt_velocities, scene
 from tests.gateway.test_service import run as run_scene
 
 GRIPPER = 0x30
@@ -200,7 +201,7 @@ def test_a_mandatory_node_holds_the_network_start_until_it_is_ready(tmp_path, ve
     assert wrist.state is NmtState.PRE_OPERATIONAL  # configured, held
     snap = gw.snapshot()
     assert snap.nodes["wrist"].phase is NodePhase.READY
-    assert snap.alarms[NETWORK_HELD] == "waiting for mandatory node gripper (0x30)"
+    assert snap.alarms[NETWORK_HELD] == "waiting for mandatory node gripper (0x30): not booted"
     device = gripper(vendor_eds)
     network.add(device)
     network.start_device(device)
@@ -348,3 +349,216 @@ def test_a_node_from_another_projects_file_boots_and_is_mastered(tmp_path, name)
     assert device.state is NmtState.OPERATIONAL
     snap = gw.snapshot()
     assert snap.nodes["vendor"].phase is NodePhase.OPERATIONAL, snap.alarms
+
+
+def test_a_gateway_start_parses_each_nodes_file_once(tmp_path, monkeypatch):
+    """Config check, role binding, codecs and provisioning share the dictionary the
+    description read: one parse per file (there were 3 of a vendor's, up to 9 of ours)."""
+    import grasplink.profiles
+    import grasplink.profiles.field as field
+    from grasplink.profiles import object_limits, shipped_profile
+
+    parses: list[str] = []
+    load_field, load_shipped = field.load_object_dictionary, grasplink.profiles.load_profile
+
+    def counted_field(path, *args, **kwargs):
+        parses.append(Path(path).name)
+        return load_field(path, *args, **kwargs)
+
+    def counted_shipped(kind, *args, **kwargs):
+        parses.append(str(kind))
+        return load_shipped(kind, *args, **kwargs)
+
+    monkeypatch.setattr(field, "load_object_dictionary", counted_field)
+    monkeypatch.setattr(grasplink.profiles, "load_profile", counted_shipped)
+    shipped_profile.cache_clear()  # a cold process: nothing parsed yet
+    object_limits.cache_clear()
+    e35 = FIELD / "python-canopen_e35.eds"
+    device = f'[nodes.vendor]\nnode_id = 0x35\neds = "{e35}"\n'
+    gw = gateway_for(tmp_path, device, kinds_off=False)
+    assert sorted(parses) == sorted([*KINDS, e35.name])
+    parses.clear()
+    gateway_for(tmp_path, device, kinds_off=False)  # ours stay parsed; the vendor file is reread
+    assert parses == [e35.name]
+    link = gw.links[0x35]
+    od = gw.config.nodes["vendor"].dictionary()
+    assert link.codec.od_entry(0x1017) is od[0x1017]  # the codec reads the description's
+
+
+# -- a foreign node that refuses its configuration or does not answer ------------------------
+class MuteSdo:
+    """A node that boots and sends its heartbeat but never answers SDO (its SDO server
+    hears nothing): what the gateway meets in a device with a broken SDO channel."""
+
+    def __init__(self, node: DeviceNode):
+        self.node, self.node_id = node, node.node_id
+
+    def start(self, t_us: int) -> list:
+        return self.node.start(t_us)
+
+    def receive(self, frame, t_us: int) -> list:
+        return [] if frame.can_id == SDO_RX_BASE + self.node_id else self.node.receive(frame, t_us)
+
+    def advance(self, t_us: int) -> list:
+        return self.node.advance(t_us)
+
+    def next_deadline_us(self) -> int | None:
+        return self.node.next_deadline_us()
+
+
+def refusing(vendor_eds: Path, change: str) -> Path:
+    """The device's own file, where the crush limit (2402h) is not what the integrator's
+    copy says: read-only, or a narrower range. The gateway is configured from the copy."""
+    text = vendor_eds.read_text()
+    section = f"[{obj.HAND_CRUSH_LIMIT_MN:04X}]\n"
+    start = text.index(section)
+    end = text.index("\n[", start)
+    body = text[start:end]
+    if change == "read-only":
+        body = body.replace("AccessType=rw", "AccessType=ro")
+    else:
+        body = (
+            "\n".join(line for line in body.splitlines() if not line.startswith("HighLimit="))
+            + "\nHighLimit=20000"
+        )
+    path = vendor_eds.with_name(f"firmware_{change}.eds")
+    path.write_text(text[:start] + body + text[end:])
+    return path
+
+
+@pytest.mark.parametrize(
+    ("change", "abort"),
+    [("read-only", "0x06010002 (READ_ONLY)"), ("range", "0x06090031 (VALUE_TOO_HIGH)")],
+)
+def test_a_device_refusing_its_configuration_is_an_alarm_and_not_started(
+    tmp_path, vendor_eds, change, abort
+):
+    """CiA 302-2 boot error J (configuration download failed): not started, retried, and
+    the loop and the other nodes go on as without it."""
+    firmware = refusing(vendor_eds, change)
+    device = f'[controller.nodes.gripper]\nnode_id = {GRIPPER}\neds = "{vendor_eds}"\n'
+    device += f'[controller.nodes.gripper.sdo]\n"{CRUSH}" = 30000\n'
+    other = f'[controller.nodes.wrist]\nnode_id = 0x31\neds = "{vendor_eds}"\n'
+    _, _, alone = run_scene(scene(duration=5.0))
+    sim = simulation(scene(duration=5.0, controller=device + other))
+    gripper_node, wrist = gripper(firmware), gripper(vendor_eds, 0x31)
+    sim.network.add(gripper_node)
+    sim.network.add(wrist)
+    frames: list = []
+    sim.network.taps.append(lambda t_us, frame, sender: frames.append((t_us, frame)))
+    sim.run()
+    gw = sim.controllers[0]
+    snap = gw.snapshot()
+    assert gripper_node.state is NmtState.PRE_OPERATIONAL
+    assert snap.nodes["gripper"].phase is NodePhase.FAILED
+    assert snap.alarms["gripper.provisioning"] == (
+        f"Crush limit [mN] = 30000: write 0x{obj.HAND_CRUSH_LIMIT_MN:04X}:00 aborted {abort}"
+    )
+    crush = obj.HAND_CRUSH_LIMIT_MN.to_bytes(2, "little")
+    refused = [t for t, f in frames if f.can_id == SDO_RX_BASE + GRIPPER and f.data[1:3] == crush]
+    assert len(refused) >= 2  # retried (every 2 s), never a hang
+    assert wrist.state is NmtState.OPERATIONAL
+    assert {n: s.phase for n, s in snap.nodes.items() if n != "gripper"} == dict.fromkeys(
+        ("skin", "belt", "hand", "wrist"), NodePhase.OPERATIONAL
+    )
+    # the loop's commands: the same, at the same times (a node coming up repeats the last)
+    assert set(hand_rpdos(frames)) == set(hand_rpdos(alone)) and len(hand_rpdos(alone)) > 10
+    assert set(belt_velocities(frames)) == set(belt_velocities(alone))
+    assert set(snap.alarms) == {"gripper.provisioning"}
+
+
+@pytest.mark.parametrize("identity", [False, True])
+def test_a_device_that_boots_but_never_answers_sdo_is_an_alarm_not_a_hang(
+    tmp_path, vendor_eds, identity
+):
+    """Its heartbeat comes, its SDO answers never do: each transfer gives up after the SDO
+    timeout, the alarm says which object had no answer, the node is retried and not
+    started, and the rest of the network starts and runs."""
+    ident = f"identity = {{ vendor_id = {VENDOR} }}\n" if identity else ""
+    gw = gateway_for(
+        tmp_path,
+        f'[nodes.gripper]\nnode_id = {GRIPPER}\neds = "vendor/gripper.eds"\n{ident}'
+        f'[nodes.wrist]\nnode_id = 0x31\neds = "vendor/gripper.eds"\n',
+    )
+    mute, wrist = MuteSdo(gripper(vendor_eds)), gripper(vendor_eds, 0x31)
+    requests: list[int] = []
+    network = LockstepNetwork([gw, mute, wrist])
+    network.taps.append(
+        lambda t_us, frame, sender: (
+            requests.append(t_us)
+            if frame.can_id == SDO_RX_BASE + GRIPPER and frame.data[0] >> 5 != 4  # not an abort
+            else None
+        )
+    )
+    network.start()
+    network.run_until(4_000_000)  # gave up at 0.5 s, retried at 2.5 s, gave up at 3 s
+    snap = gw.snapshot()
+    assert len(requests) == 2 and 2_500_000 <= requests[1] < 3_000_000
+    assert mute.node.state is NmtState.PRE_OPERATIONAL
+    assert snap.nodes["gripper"].phase is NodePhase.FAILED
+    what = "identity: read 0x1018:01" if identity else "heartbeat time: write 0x1017:00"
+    assert snap.alarms["gripper.provisioning"] == (
+        f"{what} aborted 0x05040000 (TIMEOUT): no answer after 500 ms"
+    )
+    assert wrist.state is NmtState.OPERATIONAL
+    assert snap.nodes["wrist"].phase is NodePhase.OPERATIONAL
+    assert set(snap.alarms) == {"gripper.provisioning"}
+
+
+@pytest.mark.parametrize("failure", ["refuses", "mute"])
+def test_a_mandatory_node_that_fails_its_boot_holds_the_start_saying_why(
+    tmp_path, vendor_eds, failure
+):
+    gw = gateway_for(
+        tmp_path,
+        f'[nodes.gripper]\nnode_id = {GRIPPER}\neds = "vendor/gripper.eds"\nmandatory = true\n'
+        f'[nodes.gripper.sdo]\n"{CRUSH}" = 30000\n'
+        f'[nodes.wrist]\nnode_id = 0x31\neds = "vendor/gripper.eds"\n',
+    )
+    if failure == "refuses":
+        device = gripper(refusing(vendor_eds, "read-only"))
+        why = f"Crush limit [mN] = 30000: write 0x{CRUSH[:4]}:00 aborted 0x06010002 (READ_ONLY)"
+    else:
+        device = MuteSdo(gripper(vendor_eds))
+        why = "heartbeat time: write 0x1017:00 aborted 0x05040000 (TIMEOUT): "
+        why += "no answer after 500 ms"
+    wrist = gripper(vendor_eds, 0x31)
+    run([gw, device, wrist], seconds=5.0)
+    snap = gw.snapshot()
+    assert wrist.state is NmtState.PRE_OPERATIONAL  # configured, held
+    assert snap.nodes["wrist"].phase is NodePhase.READY
+    assert snap.alarms["gripper.provisioning"] == why
+    assert snap.alarms[NETWORK_HELD] == f"waiting for mandatory node gripper (0x30): {why}"
+
+
+def test_restart_node_resets_a_device_by_its_name_and_it_is_configured_again(tmp_path, vendor_eds):
+    """Any node of the description, by its table name (posted as a surface does): NMT
+    reset node, then its boot-up is a reboot: configured again and started."""
+    from grasplink.gateway.commands import Command
+    from grasplink.gateway.edge import GatewayEdge
+
+    gw = gateway_for(
+        tmp_path,
+        f'[nodes.gripper]\nnode_id = 0x35\neds = "vendor/gripper.eds"\n'
+        f'[nodes.gripper.sdo]\n"{CRUSH}" = 30000\n',
+        kinds_off=False,
+    )
+    edge, device = GatewayEdge(gw), gripper(vendor_eds, 0x35)
+    network = run([edge, device])
+    assert device.state is NmtState.OPERATIONAL
+    device.store.set(obj.HAND_CRUSH_LIMIT_MN, 0, 12345)  # changed behind the gateway's back
+    boots = gw.snapshot().nodes["gripper"].boots
+    future = edge.post(Command("restart_node", "gripper"))
+    network.run_for(1_000_000)
+    result = future.result(timeout=0)
+    assert result.accepted and result.detail == "reset node gripper"
+    assert device.state is NmtState.OPERATIONAL
+    assert device.store.get(obj.HAND_CRUSH_LIMIT_MN) == 30000  # configured again
+    assert gw.snapshot().nodes["gripper"].boots == boots + 1
+    assert "gateway.second_master" not in gw.snapshot().alarms
+
+    result, frames = gw.execute(Command("restart_node", "arm"), network.t_us)
+    assert not result.accepted and frames == []
+    assert result.detail == "restart_node: no node 'arm'; nodes: skin, emg, belt, hand, gripper"
+    result, _ = gw.execute(Command("restart_node", 4), network.t_us)
+    assert not result.accepted and "restart_node: expected a node's name" in result.detail

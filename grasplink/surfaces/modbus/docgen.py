@@ -73,6 +73,7 @@ def render_modbus_markdown(rmap: RegisterMap | None = None) -> str:
     out += ["", *_enumerations(rmap)]
     out += _device_registers(rmap)
     out += _holding(rmap)
+    out += _device_holding(rmap)
     out += _examples(rmap)
     return "\n".join(out).rstrip() + "\n"
 
@@ -334,6 +335,40 @@ def _device_registers(rmap: RegisterMap) -> list[str]:
     return [*out, ""]
 
 
+def _device_holding(rmap: RegisterMap) -> list[str]:
+    """The configuration's device objects a client writes (`[[modbus.holding]]`)."""
+    if not rmap.device_holding:
+        return []
+    out = [
+        "## Device objects (holding registers, this configuration)",
+        "",
+        f"From `{rmap.source}` (`[[modbus.holding]]`, docs/gateway.md): objects that device "
+        f"nodes' RPDOs map, each at the holding registers its entry gives (at or above "
+        f"{MODBUS_DEVICE_BASE}). A write covers exactly one entry (function 06 for one "
+        "register, 16 for two) and becomes the command `write_object`: the gateway sends the "
+        "value at once in the node's RPDO, the RPDO's other objects with the value last sent "
+        "to them (else the file's ParameterValue or DefaultValue). A value the object does "
+        f"not accept (its limits, its type; float32: NaN, infinite, or a fraction for an "
+        f"integer object) is exception {ExceptionCode.ILLEGAL_VALUE:02X}, and so is a write "
+        "while the node is not operational: a value is never queued for later. A read "
+        "returns the value last sent, the sentinel before any and after the node rebooted.",
+        "",
+        "| address | name | type | unit | object | data type | accepts | node |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for register in rmap.device_holding:
+        entry = register.config
+        span = str(entry.address) if entry.words == 1 else f"{entry.address}–{entry.end - 1}"
+        low, high = entry.limits
+        accepts = "any finite number" if low == -high == float("inf") else f"{low:g}..{high:g}"
+        out.append(
+            f"| {span} | `{register.name}` | {entry.type} | {entry.unit} | "
+            f"{entry.index:04X}h:{entry.subindex:02X} {entry.name} | {entry.data_type} | "
+            f"{accepts} | {entry.node} |"
+        )
+    return [*out, ""]
+
+
 def _holding(rmap: RegisterMap) -> list[str]:
     out = [
         "## Holding registers (functions 03, 06, 16, 23): commands",
@@ -345,7 +380,10 @@ def _holding(rmap: RegisterMap) -> list[str]:
         "**A write must cover exactly one command**: one register, or both registers of "
         "the EMG calibration pair in one function 16 write; anything else is exception 02. "
         "Every value is checked before anything is sent (exception 03), and the gateway "
-        "checks again; a refused write changes nothing.",
+        "checks again; a refused write changes nothing. A configuration may add device "
+        f"nodes' RPDO-mapped objects at holding registers {MODBUS_DEVICE_BASE} and above "
+        "(`[[modbus.holding]]`, docs/gateway.md: a write is sent to the node in its RPDO); "
+        "`grasplink gateway --config FILE --print-register-map` lists them.",
         "",
         "| address | name | type | unit | scale | accepted raw values | reads | source |",
         "|---|---|---|---|---|---|---|---|",

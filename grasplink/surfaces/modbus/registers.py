@@ -21,6 +21,8 @@ blocks are generated per node kind the gateway masters.
 A configuration may add device objects (`[[modbus.registers]]`, `config.ModbusRegister`):
 each at its own input registers, at or above `MODBUS_DEVICE_BASE` (`DeviceRegister`,
 `register_map_for`); a read must lie inside the fixed map or on configured registers.
+Likewise `[[modbus.holding]]`: a device's RPDO-mapped objects at holding registers, a
+write of one becoming the command `write_object` (the gateway sends it in the RPDO).
 
 Conventions (docs/modbus.md): 32-bit values take two registers, high word
 first; signed values are two's complement; engineering value = raw × scale;
@@ -343,6 +345,8 @@ class RegisterMap:
     _compiled: dict[str, tuple[_Plan, ...]] = field(default_factory=dict, repr=False, compare=False)
     # a configuration's device objects (`register_map_for`), by address, above the fixed map
     device_registers: tuple[DeviceRegister, ...] = ()
+    # its device objects a client writes (`[[modbus.holding]]`), by address
+    device_holding: tuple[DeviceRegister, ...] = ()
     source: str = ""  # the configuration they come from
 
     def __post_init__(self) -> None:
@@ -396,30 +400,53 @@ class RegisterMap:
     def read_inputs(self, table: list[int], address: int, count: int) -> list[int]:
         """`read` of the served input table: ILLEGAL_ADDRESS also for a span that is not
         all in the fixed map or all on configured registers."""
+        return self._read_served(
+            "input", table, address, count, self.input_count, self.device_registers
+        )
+
+    @property
+    def holding_span(self) -> int:
+        """One past the last holding register served: the fixed map's, or a device's."""
+        return max((r.end for r in self.device_holding), default=self.holding_count)
+
+    def encode_served_holding(self, settings: Mapping[str, Any] | None) -> list[int]:
+        """Every holding register served: the fixed map, then each device object's value
+        as last sent to it (`settings[register name]`; the sentinel before any)."""
+        table = self.encode_holding(settings)
+        if not self.device_holding:
+            return table
+        table += [0] * (self.holding_span - len(table))
+        for register in self.device_holding:
+            value = None if settings is None else settings.get(register.name)
+            table[register.address : register.end] = register.encode_value(value)
+        return table
+
+    def read_holding(self, table: list[int], address: int, count: int) -> list[int]:
+        """`read` of the served holding table, as `read_inputs` reads the input one."""
+        return self._read_served(
+            "holding", table, address, count, self.holding_count, self.device_holding
+        )
+
+    def _read_served(
+        self,
+        what: str,
+        table: list[int],
+        address: int,
+        count: int,
+        fixed: int,
+        devices: tuple[DeviceRegister, ...],
+    ) -> list[int]:
         words = self.read(table, address, count)
         end = address + count
-        if end > self.input_count and (
-            address < self.input_count or not self._covered(address, end)
-        ):
+        if end > fixed and (address < fixed or not _covered(devices, address, end)):
             raise RegisterError(
                 ExceptionCode.ILLEGAL_ADDRESS,
-                f"input registers {address}..{end - 1} are not all mapped (fixed map "
-                f"0..{self.input_count - 1}; device objects: "
-                + ", ".join(f"{r.address}..{r.end - 1}" for r in self.device_registers)
+                f"{what} registers {address}..{end - 1} are not all mapped (fixed map "
+                f"0..{fixed - 1}; device objects: "
+                + ", ".join(f"{r.address}..{r.end - 1}" for r in devices)
                 + ")",
             )
         return words
-
-    def _covered(self, address: int, end: int) -> bool:
-        for register in self.device_registers:  # by address: a gap ends the run
-            if register.end <= address:
-                continue
-            if register.address > address:
-                return False
-            address = register.end
-            if address >= end:
-                return True
-        return False
 
     def read(self, table: list[int], address: int, count: int) -> list[int]:
         """`count` words from `address` of an encoded table; ILLEGAL_ADDRESS outside it."""
@@ -437,16 +464,23 @@ class RegisterMap:
 
         ILLEGAL_ADDRESS: not exactly one command group (an address outside the table, a
         write starting inside a group or covering part of one, or several groups).
-        ILLEGAL_VALUE: a value outside its range or codes, or e_min >= e_max.
+        ILLEGAL_VALUE: a value outside its range or codes, or e_min >= e_max; a device
+        object's value outside what the object accepts.
         """
         end = address + len(words)
+        device = next((r for r in self.device_holding if r.address == address), None)
+        if device is not None and end == device.end:
+            return device.command(words)
         group = next((g for g in self.groups if g.address == address), None)
         if group is None or end != group.end:
             span = f"{address}..{end - 1}" if len(words) > 1 else str(address)
             raise RegisterError(
                 ExceptionCode.ILLEGAL_ADDRESS,
                 f"holding registers {span} are not one command; commands: "
-                + ", ".join(f"{g.command} {_span(g)}" for g in self.groups),
+                + ", ".join(f"{g.command} {_span(g)}" for g in self.groups)
+                + "".join(
+                    f", write_object {r.name} {r.address}..{r.end - 1}" for r in self.device_holding
+                ),
             )
         raws: list[int] = []
         offset = 0
@@ -466,6 +500,19 @@ class RegisterMap:
         except ValueError as exc:
             raise RegisterError(ExceptionCode.ILLEGAL_VALUE, f"{group.command}: {exc}") from None
         return Command(group.command, value)
+
+
+def _covered(devices: Sequence[DeviceRegister], address: int, end: int) -> bool:
+    """Whether address..end-1 lies on consecutive configured registers."""
+    for register in devices:  # by address: a gap ends the run
+        if register.end <= address:
+            continue
+        if register.address > address:
+            return False
+        address = register.end
+        if address >= end:
+            return True
+    return False
 
 
 def _span(group: CommandGroup) -> str:
@@ -1141,7 +1188,8 @@ def _holding() -> tuple[tuple[Register, ...], tuple[CommandGroup, ...]]:
             "restart_node",
             (restart,),
             lambda r: KINDS[r[0] - 1],
-            "reset the node; the gateway provisions and starts it again",
+            "reset the node; the gateway provisions and starts it again (a device node: "
+            "by its name over MQTT, docs/telemetry.md)",
         )
     )
     return tuple(t.registers), tuple(groups)
@@ -1185,13 +1233,42 @@ class DeviceRegister:
         return None
 
     def encode(self, snapshot: Snapshot | None) -> list[int]:
-        value = self.value_of(snapshot)
+        return self.encode_value(self.value_of(snapshot))
+
+    def encode_value(self, value: Any) -> list[int]:
+        """`value` (None: unknown) in the register's type."""
         if self.type is None:
             return float32_words(value)
         if isinstance(value, int):  # (a BOOLEAN too)
             word_type = self.type
             return to_words(word_type, min(word_type.high, max(word_type.low, int(value))))
         return to_words(self.type, None)
+
+    def command(self, words: Sequence[int]) -> Command:
+        """A client's write (a holding register): `write_object` with the value the words
+        carry, checked against what the object accepts (ILLEGAL_VALUE otherwise)."""
+        entry = self.config
+        real = entry.data_type.startswith("REAL")
+        value: int | float
+        if self.type is None:
+            number = float(struct.unpack(">f", struct.pack(">HH", *words))[0])
+            whole = math.isfinite(number) and number.is_integer()
+            value = int(number) if whole and not real else number
+        else:
+            value = words_to_int(self.type, words)
+        low, high = entry.limits
+        why = ""
+        if isinstance(value, float) and not math.isfinite(value):
+            why = "not a finite number"
+        elif isinstance(value, float) and not real:
+            why = f"not an integer ({entry.data_type})"
+        elif not low <= value <= high:
+            why = f"outside {low:g}..{high:g}"
+        if why:
+            raise RegisterError(
+                ExceptionCode.ILLEGAL_VALUE, f"{self.name} ({entry.name}): {value} is {why}"
+            )
+        return Command("write_object", {"node": entry.node, "object": entry.key, "value": value})
 
 
 def float32_words(value: Any) -> list[int]:
@@ -1219,16 +1296,22 @@ _DEVICE_WORD_TYPES: dict[str, WordType | None] = {
 def register_map_for(config: GatewayConfig) -> RegisterMap:
     """The map a gateway with `config` serves: the fixed map, and the configuration's
     device objects (the fixed map itself when it names none)."""
-    if not config.modbus_registers:
+    if not config.modbus_registers and not config.modbus_holding:
         return register_map()
     fixed = register_map()
-    if fixed.input_count > MODBUS_DEVICE_BASE:  # never: the fixed map is one read at most
-        raise ValueError(f"the fixed map reaches {fixed.input_count}, past {MODBUS_DEVICE_BASE}")
-    devices = tuple(
-        DeviceRegister(entry, _DEVICE_WORD_TYPES[entry.type]) for entry in config.modbus_registers
-    )
+    if max(fixed.input_count, fixed.holding_count) > MODBUS_DEVICE_BASE:  # never: one read
+        raise ValueError(f"the fixed map reaches past {MODBUS_DEVICE_BASE}")
     return RegisterMap(
-        fixed.inputs, fixed.holding, fixed.groups, device_registers=devices, source=config.source
+        fixed.inputs,
+        fixed.holding,
+        fixed.groups,
+        device_registers=tuple(
+            DeviceRegister(e, _DEVICE_WORD_TYPES[e.type]) for e in config.modbus_registers
+        ),
+        device_holding=tuple(
+            DeviceRegister(e, _DEVICE_WORD_TYPES[e.type]) for e in config.modbus_holding
+        ),
+        source=config.source,
     )
 
 
@@ -1261,5 +1344,8 @@ def settings_of(
         calibration = decoder.calibration
         settings["emg_e_min_uv"] = calibration.e_min_uv
         settings["emg_e_max_uv"] = calibration.e_max_uv
+    for entry in gateway.config.modbus_holding:  # a device object: the value last sent to it
+        link = gateway.links[gateway.config.nodes[entry.node].node_id]
+        settings[f"{entry.node}.{entry.key}"] = link.written.get((entry.index, entry.subindex))
     settings.update(last_actions or {})
     return settings

@@ -203,9 +203,11 @@ class ModbusServer:
         devices = "".join(
             f", {r.name} at {r.address}" for r in self.map.device_registers
         )  # a configuration's device objects
+        written = "".join(f", {r.name} at {r.address}" for r in self.map.device_holding)
         return (
             f"modbus {self.address} ({units}): input registers 0..{self.map.input_count - 1}"
-            f"{devices}, holding registers 0..{self.map.holding_count - 1} (docs/modbus.md)"
+            f"{devices}, holding registers 0..{self.map.holding_count - 1}{written} "
+            "(docs/modbus.md)"
         )
 
     # -- the server thread ---------------------------------------------------------------
@@ -249,7 +251,7 @@ class ModbusServer:
                 simdata=(
                     [SimData(0, datatype=DataType.BITS)],  # coils, discrete inputs: none,
                     [SimData(0, datatype=DataType.BITS)],  # refused (request_classes)
-                    [SimData(0, count=self.map.holding_count, datatype=DataType.REGISTERS)],
+                    [SimData(0, count=self.map.holding_span, datatype=DataType.REGISTERS)],
                     [
                         SimData(
                             0,
@@ -365,8 +367,10 @@ class ModbusServer:
             if function_code == READ_INPUTS:
                 words = self.map.read_inputs(self._inputs(unit), address, count)
             else:
-                table = self.map.encode_holding(settings_of(unit.gateway, unit.last_actions))
-                words = self.map.read(table, address, count)
+                settings = settings_of(unit.gateway, unit.last_actions)
+                words = self.map.read_holding(
+                    self.map.encode_served_holding(settings), address, count
+                )
             registers[offset : offset + count] = words
         except RegisterError as exc:
             logger.debug("modbus: %s", exc)
