@@ -59,6 +59,16 @@ class BusWatch:
     first_us: int | None = None
     last_us: int | None = None
     heartbeat_times: dict[int, list[float]] = field(default_factory=dict)
+    spans_us: dict[int, tuple[int, int]] = field(default_factory=dict)  # first, last per ID
+
+    def rate_per_s(self, can_id: int, overall_s: float) -> float:
+        """Frames per second of one COB-ID while it flows (a TPDO starts only once its node
+        is started: the whole run's span would understate it by the boot time)."""
+        first, last = self.spans_us.get(can_id, (0, 0))
+        count = self.frames[can_id]
+        if count < 2 or last <= first:
+            return count / overall_s
+        return (count - 1) / ((last - first) / 1e6)
 
     def record(self, msg: can.Message) -> None:
         frame = message_to_frame(msg)
@@ -68,6 +78,8 @@ class BusWatch:
         self.first_us = t_us if self.first_us is None else self.first_us
         self.last_us = t_us
         self.frames[frame.can_id] += 1
+        first, _ = self.spans_us.get(frame.can_id, (t_us, t_us))
+        self.spans_us[frame.can_id] = (first, t_us)
         self.bytes[frame.can_id] += len(frame.data)
         self.bits += frame_bits_worst_case(frame.length, frame.rtr)
         function, node_id = function_of(frame.can_id)
@@ -141,9 +153,9 @@ def _report(url, duration_s, kinds, nodes, master, watch, out) -> dict:
     for can_id in sorted(watch.frames):
         count = watch.frames[can_id]
         name = describe(can_id, kinds)
-        rates[name] = count / span_s
+        rates[name] = watch.rate_per_s(can_id, span_s)
         out(
-            f"{can_id:#05x}   {name:<18}{count:>8}{count / span_s:>9.1f}"
+            f"{can_id:#05x}   {name:<18}{count:>8}{rates[name]:>9.1f}"
             f"{watch.bytes[can_id] / count:>13.1f}"
         )
     load = 100.0 * watch.bits / span_s / BITRATE
