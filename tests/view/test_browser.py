@@ -26,6 +26,7 @@ from pathlib import Path
 
 import pytest
 
+from grasplink import cli
 from grasplink.bus import CanHub
 from tests.telemetry.broker import Mosquitto
 from tests.test_hil import gateway_toml
@@ -219,3 +220,14 @@ def test_page_shows_the_broker_away_before_it_ever_connected(tmp_path: Path, bro
         assert "broker away" in message
     finally:
         view.close()
+
+
+def test_a_broker_refusing_the_credentials_is_one_line_and_exit_1(tmp_path: Path, capsys) -> None:
+    broker = Mosquitto(tmp_path / "secured", secured=True).start()
+    try:
+        url = broker.url_for("reader", "wrong")
+        assert cli.main(["view", "--mqtt", url, "--http", "127.0.0.1:0"]) == 1
+    finally:
+        broker.stop()
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "refused the connection" in err and "wrong" not in err

@@ -3,8 +3,11 @@ bad request heads refused, and the `--http` address checked."""
 
 from __future__ import annotations
 
+import socket
+
 import pytest
 
+from grasplink import cli
 from grasplink.errors import ConfigError
 from grasplink.surfaces.view.server import parse_http_address
 from grasplink.surfaces.view.web import (
@@ -138,3 +141,24 @@ def test_a_bad_http_address_is_one_line_naming_it(text: str, problem: str) -> No
     with pytest.raises(ConfigError, match=problem) as caught:
         parse_http_address(text)
     assert f"--http {text!r}" in str(caught.value)
+
+
+def test_a_port_already_taken_is_one_line_and_exit_1(capsys) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        code = cli.main(["view", "--mqtt", "mqtt://127.0.0.1:1", "--http", f"127.0.0.1:{port}"])
+    err = capsys.readouterr().err.strip()
+    assert code == 1 and err.count("\n") == 0 and f"--http 127.0.0.1:{port}" in err
+
+
+def test_bad_view_options_are_one_line_before_anything_starts(capsys) -> None:
+    for args, problem in (
+        (["--mqtt", "http://x"], "expected mqtt://"),
+        (["--mqtt", "mqtt://127.0.0.1", "--gateway-id", "a/b"], "--gateway-id 'a/b'"),
+        (["--mqtt", "mqtt://127.0.0.1", "--http", "nowhere"], "--http 'nowhere'"),
+    ):
+        assert cli.main(["view", *args]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and problem in err, err
