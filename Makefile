@@ -4,7 +4,7 @@
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-SYSTEM_PACKAGES := mosquitto mosquitto-clients mbpoll
+SYSTEM_PACKAGES := mosquitto mosquitto-clients mbpoll chromium chromium-driver
 STAMP_PY := $(VENV)/.stamp-install
 STAMP_SYS := $(VENV)/.stamp-system
 
@@ -15,7 +15,8 @@ STAMP_SYS := $(VENV)/.stamp-system
 setup: $(STAMP_PY) $(STAMP_SYS)
 	@$(PY) -m grasplink.decoding.warm_up
 
-# Debian packages the test-suite and the integration surfaces use (MQTT broker, Modbus client).
+# Debian packages the test-suite and the integration surfaces use (MQTT broker, Modbus client,
+# the headless browser and its driver for the live view's tests, tests/view/).
 $(STAMP_SYS): | $(VENV)/bin/python
 	@missing=""; for p in $(SYSTEM_PACKAGES); do \
 	  dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \

@@ -396,6 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
         "repeatable (default: the profiles' node-IDs and the gateway's 1)",
     )
     _add_log_commands(sub, DEFAULT_BUS_URL)
+    _add_view_command(sub)
     return parser
 
 
@@ -444,6 +445,31 @@ def _add_log_commands(sub: Subcommands, default_bus: str) -> None:
         default=None,
         help="with --nodes-only: the master whose heartbeat and EMCY are left out "
         "(default: the gateway's, 1)",
+    )
+
+
+def _add_view_command(sub: Subcommands) -> None:
+    """`view`: the live page over a broker's telemetry (docs/view.md)."""
+    view = sub.add_parser("view", help="serve a live web page of the gateways' telemetry")
+    view.add_argument(
+        "--mqtt",
+        required=True,
+        metavar="URL",
+        help="the broker the gateways publish to: mqtt://[user[:password]@]host[:port] "
+        "or mqtts://... (read only: the view publishes nothing)",
+    )
+    view.add_argument("--mqtt-ca", type=Path, default=None, metavar="FILE", help="CA for mqtts")
+    view.add_argument(
+        "--gateway-id", default=None, metavar="ID", help="show this gateway only (default: all)"
+    )
+    view.add_argument(
+        "--http",
+        default="127.0.0.1:8642",
+        metavar="HOST:PORT",
+        help="where to serve the page (default 127.0.0.1:8642; port 0: any free one)",
+    )
+    view.add_argument(
+        "--duration", type=positive_seconds, default=None, help="stop after this many seconds"
     )
 
 
@@ -1136,6 +1162,28 @@ def telemetry_options(args: argparse.Namespace) -> Callable[..., AbstractContext
     return start
 
 
+def cmd_view(args: argparse.Namespace) -> int:
+    from grasplink.surfaces.telemetry import check_id, parse_broker_url, tls_context
+    from grasplink.surfaces.view.server import parse_http_address, serve
+    from grasplink.terminal import StopSignals
+
+    broker = parse_broker_url(args.mqtt)
+    tls = tls_context(broker, args.mqtt_ca)
+    gateway_id = None if args.gateway_id is None else check_id(args.gateway_id, "--gateway-id")
+    http = parse_http_address(args.http)
+    with StopSignals() as stop:
+        serve(
+            broker,
+            http,
+            gateway_id=gateway_id,
+            tls=tls,
+            duration_s=args.duration,
+            log=lambda line: print(line, flush=True),
+            stop=stop,
+        )
+    return stop.exit_code
+
+
 def cmd_profiles_dbc(args: argparse.Namespace) -> int:
     from grasplink.profiles.dbc import dbc_text, write_dbc
 
@@ -1234,6 +1282,7 @@ COMMANDS = {
     "decode": cmd_decode,
     "bench": cmd_bench,
     "profiles": cmd_profiles,
+    "view": cmd_view,
 }
 
 

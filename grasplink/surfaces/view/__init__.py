@@ -1,0 +1,7 @@
+"""The live view: a web page showing the gateways' telemetry as it happens (docs/view.md).
+
+- `state.ViewState`: sans-IO, the JSON tree's messages in, the frames the page draws out;
+- `web`: the page's HTTP, sans-IO (a fixed list of files, the Host rule, read-only);
+- `server.LiveView`: the edge, aiomqtt's subscription and the asyncio HTTP server
+  streaming frames (Server-Sent Events); `static/`: the page and the vendored uPlot.
+"""

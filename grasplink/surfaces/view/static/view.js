@@ -1,0 +1,300 @@
+// grasplink live view: frames from /events (Server-Sent Events, 10 a second) are kept as
+// they come and drawn at most once per animation frame (requestAnimationFrame), so the
+// page does as much work as the screen shows, however fast frames arrive.
+// Everything from the broker is untrusted text: it goes into the page as textContent only.
+"use strict";
+
+const SERVER_AWAY_MS = 2000; // no frame this long (they come every 100 ms): the server is gone
+const CODES = {
+  belt: { none: 0, force: 1, slip: 2 },
+  reflex: { idle: 0, active: 1, hold: 2, release: 3 },
+};
+// Each plot: its title, the node kind whose values it draws, its series (field, label,
+// scale, colour), and its scales' units; `code` maps text states to numbers.
+const PLOTS = [
+  { title: "skin: grip force and decoded slip speed", kind: "skin", series: [
+    ["grip_force_n", "grip force (N)", "n", "#1f77b4"],
+    ["slip_speed_mm_s", "slip speed (mm/s)", "v", "#d62728"],
+    ["slip_speed_low_mm_s", "speed low (mm/s)", "v", "#f4a3a3"],
+  ], units: { n: "N", v: "mm/s" } },
+  { title: "skin: slip position and confidence", kind: "skin", series: [
+    ["position_mm", "position (mm)", "mm", "#2ca02c"],
+    ["confidence", "confidence (0..1)", "c", "#9467bd"],
+    ["slip", "slip (0/1)", "c", "#d62728"],
+  ], units: { mm: "mm", c: "0..1" } },
+  { title: "belt: commanded velocity, level, active belt", kind: "belt", series: [
+    ["velocity_mrad_s", "velocity (mrad/s)", "w", "#ff7f0e"],
+    ["level", "level", "l", "#1f77b4"],
+    ["belt", "belt (0 none, 1 force, 2 slip)", "l", "#7f7f7f"],
+  ], units: { w: "mrad/s", l: "level" } },
+  { title: "hand: grip setpoint, reported grip, reflex", kind: "hand", series: [
+    ["setpoint_n", "setpoint (N)", "n", "#1f77b4"],
+    ["grip_n", "grip (N)", "n", "#2ca02c"],
+    ["reflex", "reflex (0 idle, 1 active, 2 hold, 3 release)", "r", "#d62728"],
+  ], units: { n: "N", r: "state" } },
+  { title: "EMG: envelope and level", kind: "emg", series: [
+    ["envelope_uv", "envelope (µV)", "u", "#8c564b"],
+    ["level", "level (e0..e5)", "l", "#17becf"],
+  ], units: { u: "µV", l: "level" } },
+  { title: "loop latency (skin TPDO to RPDOs)", kind: "loop", series: [
+    ["latency_p50_us", "p50 (µs)", "us", "#1f77b4"],
+    ["latency_p99_us", "p99 (µs)", "us", "#d62728"],
+  ], units: { us: "µs" } },
+];
+
+const $ = (id) => document.getElementById(id);
+let latest = null; // the last frame's summary
+let lastFrameAt = 0; // performance.now() of the last frame
+let history = {}; // gateway -> kind -> {t: [...s], fields: {name: [...]}}
+let historyS = 30;
+let chosen = new URLSearchParams(location.search).get("gateway");
+let drawQueued = false;
+let lastSlip = {}; // gateway -> the last skin values with a slip and its speed
+const plots = [];
+// what the page did, for the browser tests: frames taken, draws made (at most one per frame)
+window.viewStats = { frames: 0, draws: 0 };
+
+function numeric(kind, field, value) {
+  if (value === null || value === undefined) return null;
+  if (typeof value === "boolean") return value ? 1 : 0;
+  if (typeof value === "string") {
+    const code = (CODES[field] || {})[value];
+    return code === undefined ? null : code;
+  }
+  return value;
+}
+
+function keep(gateway, kind, tsMs, values) {
+  if (kind === "skin" && values.slip && typeof values.slip_speed_mm_s === "number") {
+    lastSlip[gateway] = { tsMs, ...values }; // a slip lasts a second or two: keep it in view
+  }
+  const byKind = (history[gateway] ||= {});
+  const h = (byKind[kind] ||= { t: [], fields: {} });
+  const t = tsMs / 1000;
+  // a message replayed after an outage can be older than the newest: keep time order
+  let at = h.t.length;
+  while (at > 0 && h.t[at - 1] > t) at--;
+  h.t.splice(at, 0, t);
+  for (const [field, value] of Object.entries(values)) {
+    const column = (h.fields[field] ||= new Array(h.t.length - 1).fill(null));
+    column.splice(at, 0, numeric(kind, field, value));
+  }
+  for (const [field, column] of Object.entries(h.fields)) {
+    if (column.length < h.t.length) column.splice(at, 0, null); // absent from this message
+  }
+}
+
+function trim(h, from) {
+  let n = 0;
+  while (n < h.t.length && h.t[n] < from) n++;
+  if (n === 0) return;
+  h.t.splice(0, n);
+  for (const column of Object.values(h.fields)) column.splice(0, n);
+}
+
+function onFrame(frame) {
+  lastFrameAt = performance.now();
+  window.viewStats.frames++;
+  if (frame.reset) { history = {}; lastSlip = {}; }
+  historyS = frame.history_s;
+  for (const [gateway, kind, tsMs, values] of frame.points) keep(gateway, kind, tsMs, values);
+  latest = frame;
+  queueDraw();
+}
+
+function queueDraw() {
+  if (drawQueued) return;
+  drawQueued = true;
+  requestAnimationFrame(() => { drawQueued = false; draw(); });
+}
+
+function text(node, value) {
+  if (node.textContent !== value) node.textContent = value;
+}
+
+function fixed(value, digits, unit) {
+  return value === null || value === undefined ? "–" : `${Number(value).toFixed(digits)}${unit}`;
+}
+
+function chooseGateway(frame) {
+  const ids = Object.keys(frame.gateways);
+  const select = $("gateway");
+  if (select.dataset.ids !== ids.join(",")) {
+    select.replaceChildren(...ids.map((id) => new Option(id, id)));
+    select.dataset.ids = ids.join(",");
+  }
+  if (!ids.includes(chosen)) chosen = ids.length ? ids[0] : null;
+  if (chosen !== null) select.value = chosen;
+  return chosen;
+}
+
+function banner(state, message) {
+  const node = $("banner");
+  node.dataset.state = state;
+  text(node, message);
+  document.body.classList.toggle("stale", state !== "live");
+  document.body.classList.toggle("waiting", state === "waiting");
+}
+
+function judge(frame, gateway) {
+  // in order: the server, the broker, the gateway's status, the age of its last message
+  if (performance.now() - lastFrameAt > SERVER_AWAY_MS) {
+    return ["server-away", "view server not answering: this page is stale"];
+  }
+  if (!frame.broker.connected) {
+    const since = frame.broker.for_s === null ? "" : ` for ${frame.broker.for_s.toFixed(0)} s`;
+    return ["broker-away", `broker away${since}: ${frame.broker.error || "not connected yet"}`];
+  }
+  if (gateway === null) return ["waiting", "connected; no gateway has published yet"];
+  const g = frame.gateways[gateway];
+  if (g.online === false) return ["offline", `gateway ${gateway} offline (${g.offline_reason})`];
+  if (g.stale) {
+    const age = g.age_s === null ? "ever" : `${g.age_s.toFixed(1)} s`;
+    return ["stale", `stale: nothing from ${gateway} for ${age} (bound ${frame.stale_after_s} s)`];
+  }
+  return ["live", `live: ${gateway}`];
+}
+
+function cell(value, cls) {
+  const td = document.createElement("td");
+  td.textContent = value === null || value === undefined ? "–" : String(value);
+  if (cls) td.className = cls;
+  return td;
+}
+
+function drawNodes(g) {
+  const body = $("nodes").tBodies[0];
+  const rows = Object.entries(g.nodes).map(([name, n]) => {
+    const tr = document.createElement("tr");
+    tr.dataset.node = name;
+    tr.dataset.phase = n.phase || "unknown";
+    tr.append(
+      cell(name), cell(n.node_id, "num"), cell(n.phase, "phase"), cell(n.nmt_state),
+      cell(fixed(n.values_age_s, 1, " s"), "num"), cell(n.loss_lost_packets, "num"),
+      cell(n.loss_pdos_dropped, "num"), cell(n.times_lost ?? n.loss_times_lost, "num"),
+      cell(n.last_emcy),
+    );
+    return tr;
+  });
+  const key = rows.map((r) => r.outerHTML).join("");
+  if (body.dataset.key !== key) {
+    body.replaceChildren(...rows);
+    body.dataset.key = key;
+  }
+}
+
+function drawAlarms(g) {
+  const entries = Object.entries(g.alarms);
+  text($("alarm-count"), String(entries.length));
+  const key = JSON.stringify(entries);
+  const list = $("alarms");
+  if (list.dataset.key === key) return;
+  list.dataset.key = key;
+  list.replaceChildren(...entries.map(([k, v]) => {
+    const li = document.createElement("li");
+    li.dataset.alarm = k;
+    li.textContent = `${k}: ${v}`;
+    return li;
+  }));
+}
+
+function drawNow(g) {
+  const skin = (g.nodes.skin || {}).values || {};
+  const slip = $("slip");
+  slip.dataset.slip = skin.slip === undefined || skin.slip === null ? "unknown" : String(skin.slip);
+  slip.dataset.speed = skin.slip_speed_mm_s ?? "";
+  if (skin.slip) {
+    text(slip, `SLIP ${fixed(skin.slip_speed_mm_s, 1, " mm/s")} at ${fixed(skin.position_mm, 1, " mm")}` +
+      ` (confidence ${fixed(skin.confidence, 2, "")})`);
+  } else {
+    text(slip, skin.slip === false ? `no slip; grip ${fixed(skin.grip_force_n, 2, " N")}` : "slip: –");
+  }
+  const last = lastSlip[chosen];
+  const shown = $("last-slip");
+  shown.dataset.speed = last ? last.slip_speed_mm_s : "";
+  text(shown, last ? `last slip with a speed: ${fixed(last.slip_speed_mm_s, 1, " mm/s")} at ` +
+    `${new Date(last.tsMs).toLocaleTimeString()}` : "last slip with a speed: –");
+  const hand = (g.nodes.hand || {}).values || {};
+  $("reflex").dataset.reflex = hand.reflex || "unknown";
+  text($("reflex"), `reflex: ${hand.reflex || "–"} (${hand.source || "–"})`);
+}
+
+function makePlots() {
+  const box = $("plots");
+  for (const spec of PLOTS) {
+    const div = document.createElement("div");
+    div.className = "plot";
+    div.dataset.kind = spec.kind;
+    const h3 = document.createElement("h3");
+    h3.textContent = spec.title;
+    div.append(h3);
+    box.append(div);
+    const scales = { x: { time: true, range: () => plotWindow } };
+    const axes = [{}];
+    Object.entries(spec.units).forEach(([scale, unit], i) => {
+      scales[scale] = { auto: true };
+      axes.push({ scale, label: unit, side: i === 0 ? 3 : 1, grid: { show: i === 0 } });
+    });
+    const opts = {
+      width: Math.max(300, div.clientWidth || 460), height: 170, scales, axes,
+      series: [{}, ...spec.series.map(([, label, scale, stroke]) => ({ label, scale, stroke, width: 1.5 }))],
+      cursor: { show: false }, legend: { live: false },
+    };
+    plots.push({ spec, div, plot: new uPlot(opts, [[], ...spec.series.map(() => [])], div) });
+  }
+  window.addEventListener("resize", () => {
+    for (const p of plots) p.plot.setSize({ width: Math.max(300, p.div.clientWidth), height: 170 });
+  });
+}
+
+let plotWindow = [0, 1];
+
+function drawPlots(gateway, g) {
+  const byKind = history[gateway] || {};
+  const end = g.newest_ts_ms / 1000; // the gateway's clock: a skewed host still scrolls right
+  plotWindow = [end - historyS, end];
+  for (const h of Object.values(byKind)) trim(h, end - historyS - 1);
+  for (const { spec, plot } of plots) {
+    const h = byKind[spec.kind] || { t: [], fields: {} };
+    plot.setData([h.t, ...spec.series.map(([field]) => h.fields[field] || h.t.map(() => null))]);
+  }
+}
+
+function draw() {
+  const frame = latest;
+  if (frame === null) return;
+  window.viewStats.draws++;
+  const gateway = chooseGateway(frame);
+  const [state, message] = judge(frame, gateway);
+  banner(state, message);
+  text($("problems"), String(frame.problems + (gateway ? frame.gateways[gateway].problems : 0)));
+  const last = (gateway && frame.gateways[gateway].last_problem) || frame.last_problem;
+  text($("last-problem"), last ? `last: ${last}` : "");
+  if (gateway === null) return;
+  const g = frame.gateways[gateway];
+  text($("age"), fixed(g.age_s, 1, " s"));
+  text($("p50"), fixed(g.health.loop_latency_p50_us, 0, " µs"));
+  text($("p99"), fixed(g.health.loop_latency_p99_us, 0, " µs"));
+  text($("mode"), g.controls.feedback_mode || "–");
+  text($("uptime"), fixed(g.health.uptime_s, 0, " s"));
+  text($("messages"), String(g.messages));
+  drawNodes(g);
+  drawAlarms(g);
+  drawNow(g);
+  drawPlots(gateway, g);
+}
+
+function connect() {
+  const events = new EventSource("/events");
+  events.onmessage = (event) => onFrame(JSON.parse(event.data));
+  // EventSource reconnects by itself (retry: 1 s); the watch below greys the page meanwhile
+}
+
+$("gateway").addEventListener("change", (event) => { chosen = event.target.value; queueDraw(); });
+setInterval(() => {
+  if (latest !== null && performance.now() - lastFrameAt > SERVER_AWAY_MS) {
+    banner("server-away", "view server not answering: this page is stale");
+  }
+}, 500);
+makePlots();
+connect();
