@@ -16,8 +16,10 @@ setup: $(STAMP_PY) $(STAMP_SYS)
 	@$(PY) -m grasplink.decoding.warm_up
 
 # Debian packages the test-suite and the integration surfaces use (MQTT broker, Modbus client,
-# the headless browser and its driver for the live view's tests, tests/view/).
-$(STAMP_SYS): | $(VENV)/bin/python
+# the headless browser and its driver for the live view's tests, tests/view/). The stamp
+# depends on this Makefile, so a package added to the list is installed on a machine that
+# was set up before it (the check itself is quick: dpkg -s for each).
+$(STAMP_SYS): Makefile | $(VENV)/bin/python
 	@missing=""; for p in $(SYSTEM_PACKAGES); do \
 	  dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -n "$$missing" ]; then \
