@@ -72,7 +72,8 @@ from tests.decoding.reference.filters import SosFilter
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
 BUSY_MAX_S = 0.06  # ... in the hinge scales under this (s); wider ones count every block
-BUSY_SNR = 10.0  # a pulse this many white-noise units high marks its blocks busy (`_noise`)
+BUSY_SNR = 3.0  # a pulse this many white-noise units high marks its blocks busy (`_noise`)
+CLEAR_SNR = 10.0  # ... in the widest scale only while under this (a clear pulse's bends)
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
@@ -331,6 +332,7 @@ class ContactDetector:
         self._raw_blocks = 0  # raw blocks completed
         self._censored: dict[int, bool] = {}  # block -> sat on a rail (its noise unseen)
         self._busy: dict[int, int] = {}  # block -> earliest emit of a contact touching it
+        self._busy_wide: dict[int, int] = {}  # ... of a weak pulse (the widest scale's)
         self._floor: dict[int, float] = {}  # block -> quantisation noise floor (N per sample)
         self._white_by_block: dict[int, tuple[float, int]] = {}  # `_white` of final blocks
         keep = self.block + 4 * max(widths) + 2 * half + round(trend_s * self.fs_hz) + 8
@@ -409,7 +411,9 @@ class ContactDetector:
         )
         if oldest > self._kept_from:  # a block fell out of the history: forget it
             self._kept_from = oldest
-            caches: list[dict[int, Any]] = [self._censored, self._floor, self._busy]
+            caches: list[dict[int, Any]] = [
+                self._censored, self._floor, self._busy, self._busy_wide,
+            ]  # fmt: skip
             for cache in caches + [
                 c for ch in self.channels for c in (ch.block_noise, ch.noise_by_block)
             ]:
@@ -590,16 +594,20 @@ class ContactDetector:
         running peak by the level sample that told it): when the pulse stands out of the
         white noise (`BUSY_SNR` units or more), the blocks it
         touches in the hinge (from half the decision lag before its onset to the lag
-        after it) show the pulse, not the noise (`_noise`). Pulses in heavy noise (10 dB:
-        the pulse probe's domain) mark nothing: there the hinge's median is the noise's."""
+        after it) show the pulse, not the noise (`_noise`); in the widest scale too while
+        it stands under `CLEAR_SNR` units (ported: heavy noise, issue 22 item 3)."""
         B = self.block
         white = self._white(index // B)
-        if white is None or height < BUSY_SNR * max(white[0], NOISE_FLOOR_N):
+        if white is None:
             return
-        busy = self._busy
-        for b in range((index - self.lag // 2) // B, (index + self.lag) // B + 1):
-            if busy.get(b, emit) >= emit:
-                busy[b] = emit
+        unit = max(white[0], NOISE_FLOOR_N)
+        if height < BUSY_SNR * unit:
+            return
+        marks = (self._busy, self._busy_wide) if height < CLEAR_SNR * unit else (self._busy,)
+        for busy in marks:
+            for b in range((index - self.lag // 2) // B, (index + self.lag) // B + 1):
+                if busy.get(b, emit) >= emit:
+                    busy[b] = emit
 
     def _noise(self, ch: _Channel, block: int) -> float | None:
         """Noise of the hinge for centres of `block` (None: not known yet).
@@ -625,13 +633,12 @@ class ContactDetector:
             # they do not count, as known before the block before this one (a feed spans
             # at most a block: whatever the chunking). The blocks since the last settled
             # one (every pulse near it told by then) count unless the pulses went on to it
+            # (the widest: a weak pulse's only; a clear one's slow bends are its noise)
             told = (block - 1) * self.block
-            busy = self._busy
+            busy = self._busy_wide if ch.width >= BUSY_MAX_S * self.fs_hz else self._busy
             settled = (told - self.lag - self.lag // 2 - self.step_hold) // self.block
             going = any(busy.get(b, told) < told for b in (settled - 2, settled - 1))
             end = min(block, settled) if going else block
-            if ch.width >= BUSY_MAX_S * self.fs_hz:  # (the widest: the slow bends of dips)
-                busy, end = {}, block
             history = range(max(0, block - self.history_blocks), end)
             known_noise, censored = ch.block_noise, self._censored
             own = sorted(
