@@ -18,8 +18,8 @@ wall clock) and in virtual time. What it knows goes out as a typed
   the front end offline decoding shares) and feed the configured skin decoder;
   EMG envelopes become intent (`EmgIntentDecoder`).
 - **SYNC cycles**: with a SYNC producer, the skin and EMG TPDOs the description
-  makes synchronous are gathered as they arrive and handled once per cycle, at the
-  end of the SYNC's window (`sync.SYNC_WINDOW_US`): one decoder call, one control
+  makes synchronous are gathered as they arrive and handled together at the next
+  `advance` (after every frame that came with them): one decoder call, one control
   step, one set of RPDOs per cycle instead of per frame.
 - **Control**: every skin decoder update drives the feedback controller
   (belt) and the hybrid reflex, whose grip joins the wearer's EMG grip in
@@ -204,6 +204,9 @@ class Gateway(NmtMaster):
         self._batched = self._synchronous_can_ids() if self.sync is not None else frozenset()
         self._cycle: list[tuple[int, str, dict[Key, int | float]]] = []  # (arrival, role, values)
         self._cycle_due_us: int | None = None
+        # the earliest deadline besides the SYNC and the cycle, when nothing happened since
+        # it was computed (None: unknown, advance runs in full)
+        self._rest_due_us: int | None = None
         self.cycles = 0  # SYNC cycles handled
         self._skin_setup()
         self._emg_setup()
@@ -401,6 +404,7 @@ class Gateway(NmtMaster):
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
         self.now_us = t_us
+        self._rest_due_us = None  # a frame may make anything due: advance looks at all
         if frame.can_id == NMT_COB_ID or frame.can_id == HEARTBEAT_BASE + self.node_id:
             return self._second_master(frame, t_us)
         function, node_id = function_of(frame.can_id)
@@ -423,6 +427,12 @@ class Gateway(NmtMaster):
         frames = self.sync.advance(t_us) if self.sync is not None else []
         if self._cycle_due_us is not None and t_us >= self._cycle_due_us:
             frames += self._handle_cycle(t_us)
+        rest, self._rest_due_us = self._rest_due_us, None
+        if rest is not None and t_us < rest:
+            # a SYNC or a cycle alone (twice per cycle): the network master, provisioning
+            # and the control's timers had nothing due when last asked, and nothing came
+            # since; what the cycle made due is seen at the next deadline
+            return frames
         frames += super().advance(t_us)
         for link in self.links.values():
             frames += link.sdo.advance(t_us)
@@ -460,8 +470,6 @@ class Gateway(NmtMaster):
             self.arbiter.next_deadline_us(),
             self._next_ramp_us(),
             self._next_snapshot_us,
-            self.sync.next_deadline_us() if self.sync is not None else None,
-            self._cycle_due_us,
         ):
             if c is not None and (best is None or c < best):
                 best = c
@@ -470,6 +478,13 @@ class Gateway(NmtMaster):
                 if c is not None and (best is None or c < best):
                     best = c
         # (heartbeat loss, noticed when advance() runs: the master's deadline above)
+        if self.sync is None:
+            return best
+        # with SYNC: what is due apart from the SYNC and the cycle, for advance's short path
+        self._rest_due_us = best
+        for c in (self.sync.next_deadline_us(), self._cycle_due_us):
+            if c is not None and (best is None or c < best):
+                best = c
         return best
 
     # -- network management ------------------------------------------------------------------
@@ -781,12 +796,11 @@ class Gateway(NmtMaster):
 
     # -- SYNC cycles -------------------------------------------------------------------------
     def _gather(self, role: str, values: dict[Key, int | float], t_us: int) -> list[Frame]:
-        """A synchronous TPDO waits for the end of its SYNC's window (one arriving after it,
-        late, is handled right after the frames that came with it)."""
+        """A synchronous TPDO waits for the gateway's next `advance`, which a runner calls
+        once it has delivered every frame that arrived with this one: the cycle's."""
         self._cycle.append((t_us, role, values))
         if self._cycle_due_us is None:
-            window_end = self.sync.window_end_us() if self.sync is not None else None
-            self._cycle_due_us = t_us if window_end is None else max(t_us, window_end)
+            self._cycle_due_us = t_us
         return []
 
     def _drop_from_cycle(self, role: str) -> None:
@@ -918,6 +932,7 @@ class Gateway(NmtMaster):
     def execute(self, command: Command, t_us: int) -> tuple[CommandResult, list[Frame]]:
         """Validate and apply one command now; a refused command changes nothing."""
         t_us = max(t_us, self.now_us)
+        self._rest_due_us = None
         try:
             value = parse_value(command)
             detail, frames = self._apply(command.name, value, t_us)

@@ -11,11 +11,6 @@ from __future__ import annotations
 
 from grasplink.core.frames import SYNC_COB_ID_DEFAULT, Frame
 
-#: How long after a SYNC the gateway gathers the nodes' answers before it handles the
-#: cycle (CiA 301's synchronous window, 1007h): a node answers within ~0.1-1 ms, a cycle's
-#: frames take 0.4 ms of a 1 Mbit/s bus. A frame later than this is handled on arrival.
-SYNC_WINDOW_US = 1_000
-
 
 class SyncProducer:
     """SYNC every `period_us` from start; with `counter_overflow` (2-240) each SYNC carries
@@ -31,7 +26,6 @@ class SyncProducer:
         self.period_us = period_us
         self.counter_overflow = counter_overflow
         self.sent = 0
-        self.last_us: int | None = None  # when the last SYNC went out
         self._next_us: int | None = None
         self._counter = 0
 
@@ -42,17 +36,12 @@ class SyncProducer:
     def next_deadline_us(self) -> int | None:
         return self._next_us
 
-    def window_end_us(self) -> int | None:
-        """When the answers to the last SYNC are all in (None before the first SYNC)."""
-        return None if self.last_us is None else self.last_us + SYNC_WINDOW_US
-
     def advance(self, t_us: int) -> list[Frame]:
         if self._next_us is None or t_us < self._next_us:
             return []
         missed = (t_us - self._next_us) // self.period_us
         self._next_us += (missed + 1) * self.period_us
         self.sent += 1
-        self.last_us = t_us
         if not self.counter_overflow:
             return [Frame(SYNC_COB_ID_DEFAULT, b"")]
         self._counter = self._counter % self.counter_overflow + 1
