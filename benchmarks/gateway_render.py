@@ -950,6 +950,8 @@ def sync_section(sync: Figures, focused: Figures | None = None) -> list[str]:
                 f"{wakes:.0f} ({_ratio(wakes, _median(live_base, 'wakes_per_s'))})",
                 f"{_median(group, 'frames_per_s'):.0f}",
                 sum(r["lost_packets"] for r in group),
+                sum(r.get("node_dropped", 0) for r in group),
+                sum(r.get("skipped_syncs", 0) for r in group),
             ]
         )
     ten = runs.get("10")
@@ -966,6 +968,17 @@ def sync_section(sync: Figures, focused: Figures | None = None) -> list[str]:
             f"{_median(live['10'], 'wakes_per_s') / _median(live_base, 'wakes_per_s'):.2f} "
             f"in real time; the loop acts "
             f"{_first(ten[0]['belt_ms']) - base_belt:+.1f} ms later."  # type: ignore[operator]
+        )
+    lost = {k: sum(r["lost_packets"] for r in g) for k, g in live.items()}
+    dropped = {k: sum(r.get("node_dropped", 0) for r in g) for k, g in live.items()}
+    if any(lost[k] for k in live if k != "0"):
+        headline += (
+            f" Live, the gateway missed {' and '.join(str(lost[k]) for k in live if k != '0')} "
+            f"skin packets at {' and '.join(f'{k} ms' for k in live if k != '0')} "
+            f"(event-driven: {lost['0']}), of which the nodes dropped "
+            f"{' and '.join(str(dropped[k]) for k in live if k != '0')} with more than 32 "
+            "owed: a SYNC comes from the gateway's thread, so a stall of that thread holds "
+            "it back (the heartbeat has a pacer thread of its own; SYNC has not)."
         )
     machine = ""
     if focused is not None:
@@ -1014,7 +1027,9 @@ the grip (the same in every round: virtual time).
 Real time, python-can virtual bus: the gateway in one `NodeRunner` thread, the nodes in
 another, {rounds} round(s) of {live_s:.0f} s per mode, interleaved; the runner thread's CPU
 (gateway, runner and python-can), the gateway's share, the thread's wake-ups (voluntary
-context switches) and the frames it received.
+context switches) and the frames it received; the skin packets the gateway never saw,
+those the nodes dropped with more than 32 owed (a SYNC over 240 ms late), and the SYNC
+periods the gateway skipped (its thread stalled past one: a loaded host).
 """),
         "",
         *table(
@@ -1025,9 +1040,11 @@ context switches) and the frames it received.
                 "wake-ups [/s]",
                 "frames [/s]",
                 "lost packets",
+                "dropped by nodes",
+                "SYNCs skipped",
             ],
             live_rows,
-            "lrrrrr",
+            "lrrrrrrr",
         ),
         "",
         *block(f"""

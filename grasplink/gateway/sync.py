@@ -26,6 +26,7 @@ class SyncProducer:
         self.period_us = period_us
         self.counter_overflow = counter_overflow
         self.sent = 0
+        self.skipped = 0  # periods missed whole (the host stalled), not sent late
         self._next_us: int | None = None
         self._counter = 0
 
@@ -40,6 +41,7 @@ class SyncProducer:
         if self._next_us is None or t_us < self._next_us:
             return []
         missed = (t_us - self._next_us) // self.period_us
+        self.skipped += missed
         self._next_us += (missed + 1) * self.period_us
         self.sent += 1
         if not self.counter_overflow:
