@@ -975,10 +975,15 @@ def sync_section(sync: Figures, focused: Figures | None = None) -> list[str]:
         headline += (
             f" Live, the gateway missed {' and '.join(str(lost[k]) for k in live if k != '0')} "
             f"skin packets at {' and '.join(f'{k} ms' for k in live if k != '0')} "
-            f"(event-driven: {lost['0']}), of which the nodes dropped "
+            f"(event-driven: {lost['0']}); the nodes dropped "
             f"{' and '.join(str(dropped[k]) for k in live if k != '0')} with more than 32 "
-            "owed: a SYNC comes from the gateway's thread, so a stall of that thread holds "
-            "it back (the heartbeat has a pacer thread of its own; SYNC has not)."
+            "owed"
+        )
+        headline += (
+            ": a SYNC comes from the gateway's thread, so a stall of that thread holds it "
+            "back (the heartbeat has a pacer thread of its own; SYNC has not)."
+            if any(dropped[k] for k in live if k != "0")
+            else ", so those were lost between the nodes and the gateway."
         )
     machine = ""
     if focused is not None:

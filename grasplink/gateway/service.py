@@ -806,6 +806,8 @@ class Gateway(NmtMaster):
     def _drop_from_cycle(self, role: str) -> None:
         """A node restarted or lost: what it sent before is not handled after."""
         self._cycle = [entry for entry in self._cycle if entry[1] != role]
+        if not self._cycle:
+            self._cycle_due_us = None
 
     def _handle_cycle(self, t_us: int) -> list[Frame]:
         """A cycle's frames at once: the envelopes in order, the skin's packets placed by
