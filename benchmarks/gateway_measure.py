@@ -673,6 +673,7 @@ def sync_batching(seconds: float, rounds: int, live_s: float) -> dict:
     """Event-driven against batched per 5, 10 and 20 ms SYNC, in virtual time and (10 and
     20 ms) in real time, the modes interleaved round by round so a change in the machine's
     load falls on all of them."""
+    code = code_version()  # now: the code imported, not what the tree holds at the end
     runs: dict[str, list[dict]] = {}
     live: dict[str, list[dict]] = {}
     for _ in range(rounds):
@@ -690,7 +691,7 @@ def sync_batching(seconds: float, rounds: int, live_s: float) -> dict:
             "emg_uv": EMG_UV,
             "rounds": rounds,
         },
-        "code": code_version(),
+        "code": code,
         "date": time.strftime("%Y-%m-%d"),
         "loadavg": os.getloadavg()[0],
     }
