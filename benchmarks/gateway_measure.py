@@ -17,7 +17,12 @@ the machine, the library versions and the decoder's detection delays, all read h
    profile of where it goes), then N gateways in one process in real time,
    each on its own link to a second process that runs the N sets of nodes;
 4. memory over 10 simulated minutes of a slipping skin (RSS, in a fresh
-   process), confirmed by the RSS of the real-time runs of 1.
+   process), confirmed by the RSS of the real-time runs of 1;
+5. batching per SYNC: the same set in virtual time event-driven and with the skin's
+   and EMG's samples on a 5, 10 and 20 ms SYNC (every packet on it), interleaved: the
+   gateway's CPU, calls and wake-ups per simulated second, and first ridge contact to
+   the first slip-belt command and the reflex's first raise (`sync_batching`, alone:
+   `bench_gateway.py --only sync`).
 
 The skin plays repeated grasp-slip-release cycles (60 mm/s across alpha0.1, the
 gateway's default layout); EMG reads a steady level-1 contraction.
@@ -481,6 +486,215 @@ def onset_matrix(starts: int, speeds: tuple[float, ...]) -> dict:
                     rows.append(run)
     headline = onset_run(path=ROOT / "scenes" / "loop_headline.toml", onset_s=1.0)
     return {"runs": rows, "headline": headline}
+
+
+# -- 5. batching per SYNC ------------------------------------------------------------------
+SYNC_PERIODS_MS = (5, 10, 20)
+SYNC_WARM_S = 1.5  # provisioned, started and the decoder anchored before the meters run
+
+
+def sync_config(period_ms: int) -> GatewayConfig:
+    """The defaults, or the skin's and EMG's sample TPDOs on a `period_ms` SYNC with every
+    packet on it (docs/gateway.md, SYNC producer)."""
+    if not period_ms:
+        return gateway_config()
+    nodes = {
+        "skin": {"sdo": {"1800sub2": 1, "2122sub0": 1}},
+        "emg": {"sdo": {"1800sub2": 1, "2213sub0": 1}},
+    }
+    return parse_config({"gateway": {"sync_period_ms": period_ms}, "nodes": nodes}, "<bench>")
+
+
+class CallCountingGateway(MeteredGateway):
+    """Also counts every call that hands the gateway work (a frame, a due timer) and the
+    distinct instants of them: a live runner serves the calls of one instant in one wake."""
+
+    def __init__(self, config: GatewayConfig):
+        super().__init__(config)
+        self.calls = 0
+        self.instants = 0
+        self.decoder_calls = 0
+        self._last_t: int | None = None
+
+    def _count(self, t_us: int) -> None:
+        self.calls += 1
+        if t_us != self._last_t:
+            self.instants += 1
+            self._last_t = t_us
+
+    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
+        self._count(t_us)
+        return super().receive(frame, t_us)
+
+    def advance(self, t_us: int) -> list[Frame]:
+        self._count(t_us)
+        return super().advance(t_us)
+
+
+def _rpdo_value(kind: str, node_id: int, index: int) -> Callable[[bytes], int]:
+    rpdo = PdoCodec(kind, node_id).rpdo(1)
+    target = next(v for v in rpdo.map if v.od.index == index)
+
+    def value(data: bytes) -> int:
+        rpdo.data = bytearray(data)
+        return int(target.raw)
+
+    return value
+
+
+def sync_run(period_ms: int, seconds: float) -> dict:
+    """One set in virtual time, event-driven (0) or batched per SYNC: the gateway's CPU,
+    calls and wake-ups per simulated second after the warm-up, and per slip of the skin the
+    time from its first ridge contact to the first slip-belt command and to the reflex's
+    first raise (the first slip's: the grip it reaches is held through the later ones).
+    Virtual time: the latencies are the same in every round, the CPU is not."""
+    config = sync_config(period_ms)
+    gateway = CallCountingGateway(config)
+    net = LockstepNetwork([gateway, *set_nodes(config)])
+    assert gateway.decoder is not None
+    feed = gateway.decoder.feed
+
+    def counted(t_s: np.ndarray, force_n: np.ndarray) -> list:
+        gateway.decoder_calls += 1
+        return feed(t_s, force_n)
+
+    gateway.decoder.feed = counted  # type: ignore[method-assign]
+    belt, grip = _belt_velocity(), _rpdo_value("hand", HAND, obj.HAND_TARGET_GRIP_MN)
+    commands: list[tuple[int, int, int]] = []  # (t_us, can_id, value)
+
+    def tap(t_us: int, frame: Frame | ErrorFrame, sender: object) -> None:
+        if isinstance(frame, Frame) and frame.can_id in COMMANDS:
+            decode = belt if frame.can_id == BELT_RPDO1 else grip
+            commands.append((t_us, frame.can_id, decode(frame.data)))
+
+    net.taps.append(tap)
+    net.start()
+    net.run_for(round(SYNC_WARM_S * S))
+    gateway.busy_ns = gateway.calls = gateway.instants = gateway.decoder_calls = 0
+    cycles0, percepts0 = gateway.cycles, gateway.counters["percepts"]
+    net.run_for(round(seconds * S))
+    cycle = SlipCycle()
+    # the slip starts 0.3 s into each cycle (synth.slip_recording) and reaches the first
+    # ridge LEAD_MM later; the skin's clock starts at 0 with the network
+    contact_s = 0.3 + 6.0 / SLIP_MM_S
+    first_belt, first_raise = [], []
+    for m in range(int((SYNC_WARM_S + seconds) / cycle.period_s) + 1):
+        contact_us = round((m * cycle.period_s + contact_s) * S)
+        if contact_us > (SYNC_WARM_S + seconds - 1.0) * S:
+            continue
+        before = [v for t, c, v in commands if c == HAND_RPDO1 and t < contact_us]
+        held = before[-1] if before else 0
+        belt_t = next(
+            (t for t, c, v in commands if c == BELT_RPDO1 and v < 0 and t >= contact_us), None
+        )
+        raise_t = next(
+            (t for t, c, v in commands if c == HAND_RPDO1 and v > held and t >= contact_us),
+            None,
+        )
+        first_belt.append(None if belt_t is None else (belt_t - contact_us) / 1000)
+        first_raise.append(None if raise_t is None else (raise_t - contact_us) / 1000)
+    frames = gateway.skin_frames
+    return {
+        "period_ms": period_ms,
+        "seconds": seconds,
+        "gateway_cpu_s": gateway.busy_ns / 1e9,
+        "calls": gateway.calls,
+        "instants": gateway.instants,
+        "decoder_calls": gateway.decoder_calls,
+        "cycles": gateway.cycles - cycles0,
+        "percepts": gateway.counters["percepts"] - percepts0,
+        "lost_packets": frames.stats.lost_packets if frames is not None else None,
+        "belt_ms": first_belt,
+        "hand_ms": first_raise,
+    }
+
+
+def voluntary_switches(runner: NodeRunner) -> int:
+    """How often a runner's thread has blocked so far (each wait that slept; read from
+    /proc): its wake-ups."""
+    thread = runner._thread
+    assert thread is not None and thread.native_id is not None
+    with open(f"/proc/self/task/{thread.native_id}/status") as f:
+        line = next(x for x in f if x.startswith("voluntary_ctxt_switches:"))
+    return int(line.split()[1])
+
+
+def sync_live(period_ms: int, seconds: float) -> dict:
+    """The gateway in a `NodeRunner` thread, the nodes in another, on the python-can virtual
+    bus in real time: its thread's CPU (gateway, runner and python-can) and wake-ups per s."""
+    channel = f"bench-sync-{os.getpid()}-{time.monotonic_ns()}"
+    gw_bus, nodes_bus = (open_bus(f"virtual:{channel}") for _ in range(2))
+    config = sync_config(period_ms)
+    gateway = MeteredGateway(config)
+    devices = set_nodes(config)
+    nodes = NodeRunner(nodes_bus, devices, name="bench-sync-nodes")
+    runner = NodeRunner(gw_bus, [gateway], name="bench-sync-gateway")
+    prepare_to_go_live([gateway])
+    try:
+        nodes.start()
+        runner.start()
+        _wait(gateway.operational, 10.0, lambda: "nodes not operational: " + _phases([gateway]))
+        time.sleep(1.0)  # the decoder anchored, the first slip's start behind
+        lost0 = gateway.skin_frames.stats.lost_packets if gateway.skin_frames else 0
+        dropped0 = sum(d.pdo.dropped_packets for d in devices)
+        skipped0 = gateway.sync.skipped if gateway.sync is not None else 0
+        cpu0, busy0 = thread_cpu_s(runner), gateway.busy_ns
+        wakes0, frames0 = voluntary_switches(runner), runner.stats.frames_rx
+        t0 = time.monotonic()
+        time.sleep(seconds)
+        elapsed = time.monotonic() - t0
+        cpu_s = thread_cpu_s(runner) - cpu0
+        wakes = voluntary_switches(runner) - wakes0
+        frames = runner.stats.frames_rx - frames0
+        lost = (gateway.skin_frames.stats.lost_packets if gateway.skin_frames else 0) - lost0
+        dropped = sum(d.pdo.dropped_packets for d in devices) - dropped0
+        skipped = (gateway.sync.skipped if gateway.sync is not None else 0) - skipped0
+    finally:
+        runner.stop()
+        nodes.stop()
+        gw_bus.shutdown()
+        nodes_bus.shutdown()
+    return {
+        "period_ms": period_ms,
+        "seconds": elapsed,
+        "thread_percent": 100 * cpu_s / elapsed,
+        "gateway_percent": 100 * (gateway.busy_ns - busy0) / 1e9 / elapsed,
+        "wakes_per_s": wakes / elapsed,
+        "frames_per_s": frames / elapsed,
+        "lost_packets": lost,
+        # packets the nodes dropped with more owed than they keep (a SYNC > 240 ms late)
+        "node_dropped": dropped,
+        "skipped_syncs": skipped,
+        "boots": _boots([gateway]),
+    }
+
+
+def sync_batching(seconds: float, rounds: int, live_s: float) -> dict:
+    """Event-driven against batched per 5, 10 and 20 ms SYNC, in virtual time and (10 and
+    20 ms) in real time, the modes interleaved round by round so a change in the machine's
+    load falls on all of them."""
+    code = code_version()  # now: the code imported, not what the tree holds at the end
+    runs: dict[str, list[dict]] = {}
+    live: dict[str, list[dict]] = {}
+    for _ in range(rounds):
+        for period_ms in (0, *SYNC_PERIODS_MS):
+            runs.setdefault(str(period_ms), []).append(sync_run(period_ms, seconds))
+        for period_ms in (0, 10, 20):
+            live.setdefault(str(period_ms), []).append(sync_live(period_ms, live_s))
+    return {
+        "runs": runs,
+        "live": live,
+        "setup": {
+            "warm_s": SYNC_WARM_S,
+            "slip_mm_s": SLIP_MM_S,
+            "layout": LAYOUT,
+            "emg_uv": EMG_UV,
+            "rounds": rounds,
+        },
+        "code": code,
+        "date": time.strftime("%Y-%m-%d"),
+        "loadavg": os.getloadavg()[0],
+    }
 
 
 # -- 3. capacity ---------------------------------------------------------------------------
@@ -1056,6 +1270,8 @@ def measure(quick: bool) -> dict:
     fresh_bounded = virtual_set(10.0 if quick else 60.0, bounded=True)
     profiled = virtual_set(10.0 if quick else 30.0, profile=True)
     provisioning = provisioning_cost()
+    say("5. batching per SYNC against event-driven")
+    sync = sync_batching(5.0 if quick else 30.0, 1 if quick else 3, 5.0 if quick else 20.0)
     memory = {v: collect(child) for v, child in children.items()}
     say("measured")
     return {
@@ -1066,6 +1282,7 @@ def measure(quick: bool) -> dict:
         "fresh_bounded": fresh_bounded,
         "profiled": profiled,
         "provisioning": provisioning,
+        "sync": sync,
         "capacity": capacity,
         "capacity_multi": capacity_multi,
         "together": together,

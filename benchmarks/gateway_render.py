@@ -53,6 +53,7 @@ def render(figures: Figures) -> str:
         capacity_virtual,
         capacity_realtime,
         memory,
+        sync_batching,
         diagnosis,
     )
     return "\n".join(line for section in sections for line in section(figures, d))
@@ -868,6 +869,203 @@ hour): {verdict(d.flat)} ({mem["slope_second_half"]:+.3f} MiB/min as shipped,
 
 
 # -- diagnosis --------------------------------------------------------------------------------
+# -- 5. batching per SYNC -------------------------------------------------------------------
+SYNC_HEADING = "## 5. Batching per SYNC"
+
+
+def sync_batching(figures: Figures, d: Digest) -> list[str]:
+    return sync_section(figures["sync"]) if "sync" in figures else []
+
+
+def splice_sync(sync_figures: Figures, doc: Path) -> Path:
+    """The focused run (`bench_gateway.py --only sync`): section 5 of `doc` rendered from
+    its own figures, replacing the section there (or put before the diagnosis)."""
+    lines = doc.read_text().splitlines()
+    new = sync_section(sync_figures["sync"], sync_figures)
+    if SYNC_HEADING in lines:
+        start = lines.index(SYNC_HEADING)
+        end = next(
+            (i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines)
+        )
+    else:
+        start = end = next(
+            (i for i, line in enumerate(lines) if line == "## Diagnosis"), len(lines)
+        )
+    doc.write_text("\n".join([*lines[:start], *new, *lines[end:]]) + "\n")
+    return doc
+
+
+def _median(runs: list[dict], key: str) -> float:
+    return statistics.median(r[key] for r in runs)
+
+
+def _first(values: list[float | None]) -> float | None:
+    return next((v for v in values if v is not None), None)
+
+
+def _ratio(value: float, base: float) -> str:
+    return f"× {value / base:.2f}" if base else "-"
+
+
+def sync_section(sync: Figures, focused: Figures | None = None) -> list[str]:
+    """Event-driven against batched per SYNC, from `gateway_measure.sync_batching`; with
+    `focused` (a run of this part alone) its own machine line."""
+    runs, live, setup = sync["runs"], sync["live"], sync["setup"]
+    base = runs["0"]
+    seconds = base[0]["seconds"]
+    base_cpu = _median(base, "gateway_cpu_s")
+    base_belt, base_hand = _first(base[0]["belt_ms"]), _first(base[0]["hand_ms"])
+    rows = []
+    for key, group in runs.items():
+        cpu = _median(group, "gateway_cpu_s")
+        wakes = group[0]["instants"] / seconds
+        decoder = group[0]["decoder_calls"] / seconds
+        belt, hand = _first(group[0]["belt_ms"]), _first(group[0]["hand_ms"])
+        rows.append(
+            [
+                "event-driven" if key == "0" else f"{key} ms",
+                f"{cpu / seconds * 1000:.1f} ({_ratio(cpu, base_cpu)})",
+                f"{wakes:.0f} ({_ratio(wakes, base[0]['instants'] / seconds)})",
+                f"{decoder:.0f} ({_ratio(decoder, base[0]['decoder_calls'] / seconds)})",
+                f"{group[0]['calls'] / seconds:.0f}",
+                "-"
+                if belt is None or base_belt is None
+                else f"{belt:.1f} (+{belt - base_belt:.1f})",
+                "-"
+                if hand is None or base_hand is None
+                else f"{hand:.1f} (+{hand - base_hand:.1f})",
+                sum(r["lost_packets"] or 0 for r in group),
+            ]
+        )
+    live_base = live["0"]
+    live_rows = []
+    for key, group in live.items():
+        thread = _median(group, "thread_percent")
+        wakes = _median(group, "wakes_per_s")
+        live_rows.append(
+            [
+                "event-driven" if key == "0" else f"{key} ms",
+                f"{thread:.1f} % ({_ratio(thread, _median(live_base, 'thread_percent'))})",
+                f"{_median(group, 'gateway_percent'):.1f} %",
+                f"{wakes:.0f} ({_ratio(wakes, _median(live_base, 'wakes_per_s'))})",
+                f"{_median(group, 'frames_per_s'):.0f}",
+                sum(r["lost_packets"] for r in group),
+                sum(r.get("node_dropped", 0) for r in group),
+                sum(r.get("skipped_syncs", 0) for r in group),
+            ]
+        )
+    ten = runs.get("10")
+    headline = ""
+    if ten is not None and base_belt is not None and _first(ten[0]["belt_ms"]) is not None:
+        headline = (
+            f"At a 10 ms SYNC, in this run: gateway CPU × "
+            f"{_median(ten, 'gateway_cpu_s') / base_cpu:.2f}, wake-ups × "
+            f"{ten[0]['instants'] / base[0]['instants']:.2f} and decoder calls × "
+            f"{ten[0]['decoder_calls'] / base[0]['decoder_calls']:.2f} in virtual time; "
+            f"the runner thread's CPU × "
+            f"{_median(live['10'], 'thread_percent') / _median(live_base, 'thread_percent'):.2f} "
+            f"and its wake-ups × "
+            f"{_median(live['10'], 'wakes_per_s') / _median(live_base, 'wakes_per_s'):.2f} "
+            f"in real time; the loop acts "
+            f"{_first(ten[0]['belt_ms']) - base_belt:+.1f} ms later."  # type: ignore[operator]
+        )
+    lost = {k: sum(r["lost_packets"] for r in g) for k, g in live.items()}
+    dropped = {k: sum(r.get("node_dropped", 0) for r in g) for k, g in live.items()}
+    if any(lost[k] for k in live if k != "0"):
+        headline += (
+            f" Live, the gateway missed {' and '.join(str(lost[k]) for k in live if k != '0')} "
+            f"skin packets at {' and '.join(f'{k} ms' for k in live if k != '0')} "
+            f"(event-driven: {lost['0']}); the nodes dropped "
+            f"{' and '.join(str(dropped[k]) for k in live if k != '0')} with more than 32 "
+            "owed"
+        )
+        headline += (
+            ": a SYNC comes from the gateway's thread, so a stall of that thread holds it "
+            "back (the heartbeat has a pacer thread of its own; SYNC has not)."
+            if any(dropped[k] for k in live if k != "0")
+            else ", so those were lost between the nodes and the gateway."
+        )
+    machine = ""
+    if focused is not None:
+        env = focused["environment"]
+        machine = (
+            f"Measured alone (`bench_gateway.py --only sync`, figures in gateway_sync.json) "
+            f"on {sync['date']} at {sync['code']}: {env['platform']}, {env['cpu_count']} cores "
+            f"shared with other jobs (load average {sync['loadavg']:.1f}), Python "
+            f"{env['python']}; the other sections are from their own run."
+        )
+    rounds, live_s = setup["rounds"], live_base[0]["seconds"]
+    return [
+        *block(f"""
+{SYNC_HEADING}
+
+{machine}
+
+The same set with our skin's samples (TPDO1) and the EMG's envelope (TPDO1) on SYNC,
+every packet on it (`"1800sub2" = 1` with `"2122sub0" = 1` and `"2213sub0" = 1`,
+docs/gateway.md, SYNC producer), against the nodes event-driven as shipped; the gateway
+then handles a cycle's frames at once. Virtual time: {rounds} round(s) of \
+{seconds:g} simulated s per mode after {setup["warm_s"]:g} s of warm-up, the modes \
+interleaved; CPU is the gateway's own (its thread, in its calls; median of the rounds),
+wake-ups the distinct instants it was handed work at (a live runner serves one instant's
+calls in one wake), then its decoder calls and all its calls. Latency: from the slip's
+first ridge contact to the first slip-belt command and to the reflex's first raise of
+the grip (the same in every round: virtual time).
+"""),
+        "",
+        *table(
+            [
+                "SYNC",
+                "gateway CPU [ms per s]",
+                "wake-ups [/s]",
+                "decoder calls [/s]",
+                "calls [/s]",
+                "contact → belt [ms]",
+                "contact → reflex [ms]",
+                "lost packets",
+            ],
+            rows,
+            "lrrrrrrr",
+        ),
+        "",
+        *block(f"""
+Real time, python-can virtual bus: the gateway in one `NodeRunner` thread, the nodes in
+another, {rounds} round(s) of {live_s:.0f} s per mode, interleaved; the runner thread's CPU
+(gateway, runner and python-can), the gateway's share, the thread's wake-ups (voluntary
+context switches) and the frames it received; the skin packets the gateway never saw,
+those the nodes dropped with more than 32 owed (a SYNC over 240 ms late), and the SYNC
+periods the gateway skipped (its thread stalled past one: a loaded host).
+"""),
+        "",
+        *table(
+            [
+                "SYNC",
+                "runner thread CPU",
+                "gateway CPU",
+                "wake-ups [/s]",
+                "frames [/s]",
+                "lost packets",
+                "dropped by nodes",
+                "SYNCs skipped",
+            ],
+            live_rows,
+            "lrrrrrrr",
+        ),
+        "",
+        *block(f"""
+{headline}
+
+A SYNC adds its wait to the loop: a packet waits for the next SYNC, less than one
+period, and the gateway acts when the SYNC's answers are in (the same instant in virtual
+time). Batching saves decoder calls and, in virtual time, wake-ups; on a live runner the
+thread still wakes for each frame as it arrives (the skin's answers come one after the
+other, and its TPDO2, the heartbeats and the drives' TPDOs stay event-driven), so the
+saving there needs the runner to hold frames until the cycle is due (not done).
+"""),
+        "",
+    ]
+
+
 def diagnosis(figures: Figures, d: Digest) -> list[str]:
     """What each miss comes from and what to change, from the figures; then the to-do."""
     todo: list[str] = []

@@ -57,6 +57,11 @@ class DeviceApp:
     store: ObjectStore
     # TPDOs that stream samples: never re-sent on entering OPERATIONAL (stale samples).
     streamed_tpdos: tuple[int, ...] = ()
+    # TPDOs whose every trigger is a new packet of a stream: made synchronous while the
+    # manufacturer switch `packets_on_sync` (index, subindex) is 1, they carry every packet
+    # since the last due SYNC on it, not only the newest (devices/pdo.py).
+    packet_tpdos: tuple[int, ...] = ()
+    packets_on_sync: tuple[int, int] | None = None
 
     def attach(self, services: AppServices) -> None:
         self.services = services

@@ -41,6 +41,8 @@ def contraction_level(envelope_uv: float, e_min_uv: float, e_max_uv: float) -> i
 
 class EmgApp(DeviceApp):
     streamed_tpdos = (TPDO_RAW,)
+    packet_tpdos = (TPDO_ENVELOPE, TPDO_RAW)
+    packets_on_sync = (obj.EMG_PACKETS_ON_SYNC, 0)
 
     def __init__(self, source: SampleSource | None = None):
         self.source = source or ConstantSource(0.0)

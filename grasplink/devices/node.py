@@ -109,6 +109,8 @@ class DeviceNode:
         self.store.add_validator(obj.COB_ID_SYNC, self._validate_sync_cob_id)
         self.store.add_validator(obj.COB_ID_EMCY, self._validate_emcy_cob_id)
         self.pdo.streamed_tpdos = frozenset(self.app.streamed_tpdos)
+        self.pdo.packet_tpdos = frozenset(self.app.packet_tpdos)
+        self.pdo.packets_on_sync = self.app.packets_on_sync
         self.app.attach(NodeServices(self))
 
     # -- SansIoDevice ------------------------------------------------------------

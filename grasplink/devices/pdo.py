@@ -7,7 +7,13 @@ timer; the event is an application trigger for 254 and any change of a
 mapped value for 255). The event timer elapsing is itself an event (CiA 301
 7.2.2): it runs on a fixed grid from when it was (re)started, so late
 `advance` calls never push later transmissions back; a transmission caused
-by another event restarts it. RPDO types 0-240 apply
+by another event restarts it. A TPDO that carries a sample stream's packets
+(`packet_tpdos`: the skin's samples, the EMG's envelope), made synchronous while
+the application's manufacturer switch says so (`packets_on_sync`: skin 2122h, EMG
+2213h), keeps every packet the application makes and sends them all, in order, on
+the SYNC it is due on (at most `MAX_OWED_PACKETS`, the oldest dropped first): the
+stream keeps its rate and its sequence numbers, only batched. Off (the default),
+it is a CiA 301 synchronous TPDO: one frame per due SYNC. RPDO types 0-240 apply
 their data at the next SYNC, 254/255 at once. Mapping and communication
 parameters are checked as they are written, with the abort codes CiA 301
 names; the mapping procedure (invalidate the PDO, sub-index 0 = 0, write
@@ -17,6 +23,7 @@ entries, sub-index 0 = n, validate) is enforced.
 from __future__ import annotations
 
 import struct
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -35,6 +42,10 @@ MAX_PDOS = 512
 SYNC_TYPE_MAX = 240
 TYPE_EVENT_MANUFACTURER = 254
 TYPE_EVENT_PROFILE = 255
+# Packets a synchronous packet TPDO keeps for its next due SYNC; beyond, the oldest go
+# (the receiver sees the sequence gap, as for a lost frame). 32 is 240 ms of the skin at
+# 400 Hz, 3 samples a packet, and a burst of 32 frames holds a 1 Mbit/s bus ~4 ms.
+MAX_OWED_PACKETS = 32
 # Dummy objects (CiA 301 7.4.7.1): index -> size in bits.
 DUMMY_BITS = {0x0002: 8, 0x0003: 16, 0x0004: 32, 0x0005: 8, 0x0006: 16, 0x0007: 32}
 
@@ -70,6 +81,8 @@ class _Pdo:
     sync_count: int = 0
     sync_started: bool = False
     buffered: bytes | None = None  # RPDO data waiting for SYNC
+    # a synchronous packet TPDO's packets made since its last due SYNC, oldest first
+    owed: deque[Frame] = field(default_factory=lambda: deque(maxlen=MAX_OWED_PACKETS))
     last_rx_us: int | None = None  # RPDO deadline monitoring
     mapping: list[MapEntry] = field(default_factory=list)
     # Communication parameters as the store holds them, cached by `reload()` (which
@@ -95,6 +108,11 @@ class PdoEngine:
         self.now_us = 0
         # TPDOs carrying a sample stream (set by the application): sent only with new samples.
         self.streamed_tpdos: frozenset[int] = frozenset()
+        # TPDOs whose every trigger is a new packet of a stream: batched when synchronous.
+        self.packet_tpdos: frozenset[int] = frozenset()
+        # the application's switch for that (index, subindex); None: never batched
+        self.packets_on_sync: tuple[int, int] | None = None
+        self.dropped_packets = 0  # owed packets dropped for room (MAX_OWED_PACKETS)
         self.tpdos = self._discover(obj.TPDO_COMM, obj.TPDO_MAP, transmit=True)
         self.rpdos = self._discover(obj.RPDO_COMM, obj.RPDO_MAP, transmit=False)
         self._by_comm = {p.comm_index: p for p in self.tpdos + self.rpdos}
@@ -177,6 +195,7 @@ class PdoEngine:
         self.operational = operational
         for pdo in self._by_comm.values():
             pdo.buffered = None
+            pdo.owed.clear()
             pdo.sync_count = 0
             pdo.sync_started = False
             pdo.last_rx_us = None
@@ -200,10 +219,17 @@ class PdoEngine:
 
         Event-driven types (254/255) go out now, inhibit time permitting; an
         acyclic synchronous TPDO (type 0) goes with the next SYNC; a cyclic
-        synchronous one (1-240) is sent by the SYNC alone (CiA 301 7.2.2.2).
+        synchronous one (1-240) is sent by the SYNC alone (CiA 301 7.2.2.2). A packet
+        TPDO of either synchronous kind keeps this packet for its SYNC.
         """
         pdo = self.tpdos[number - 1]
         kind = self.transmission_type(pdo)
+        if kind <= SYNC_TYPE_MAX and self._batched(number):
+            if self.operational and self._sendable(pdo):
+                if len(pdo.owed) == MAX_OWED_PACKETS:
+                    self.dropped_packets += 1
+                pdo.owed.append(self._pack(pdo))
+            return []
         if 0 < kind <= SYNC_TYPE_MAX:
             return []
         pdo.pending = True
@@ -259,11 +285,28 @@ class PdoEngine:
             if not self._sendable(pdo):
                 continue
             kind = self.transmission_type(pdo)
-            if kind == 0:
+            if kind <= SYNC_TYPE_MAX and self._batched(pdo.number):
+                frames += self._owed(pdo, kind, counter)
+            elif kind == 0:
                 if pdo.pending:
                     frames.append(self._build(pdo, t_us))
             elif kind <= SYNC_TYPE_MAX and self._sync_due(pdo, kind, counter):
                 frames.append(self._build(pdo, t_us))
+        return frames
+
+    def _batched(self, number: int) -> bool:
+        """Whether TPDO `number`, when synchronous, carries every packet made since."""
+        switch = self.packets_on_sync
+        return number in self.packet_tpdos and switch is not None and bool(self.store.get(*switch))
+
+    def _owed(self, pdo: _Pdo, kind: int, counter: int | None) -> list[Frame]:
+        """A packet TPDO's packets, all of them in order, on the SYNC it is due on; with
+        none made since, nothing (a packet sent again would read as a new one)."""
+        pdo.pending = False
+        if (kind and not self._sync_due(pdo, kind, counter)) or not pdo.owed:
+            return []
+        frames = list(pdo.owed)
+        pdo.owed.clear()
         return frames
 
     def _sync_due(self, pdo: _Pdo, every: int, counter: int | None) -> bool:
@@ -376,11 +419,16 @@ class PdoEngine:
         """A TPDO whose mapping is disabled (0 objects) is not sent (CiA 301 7.5.2.36)."""
         return self.is_valid(pdo) and bool(pdo.mapping)
 
-    def _build(self, pdo: _Pdo, t_us: int) -> Frame:
+    def _pack(self, pdo: _Pdo) -> Frame:
+        """The TPDO's frame with the mapped values as they are now."""
         if pdo.packer is not None:
             data = pdo.packer.pack(*(self.store.get(e.index, e.subindex) for e in pdo.mapping))
         else:
             data = b"".join(self.store.encode(e.index, e.subindex) for e in pdo.mapping)
+        return Frame(self.cob_id(pdo) & CAN_ID_MASK, data)
+
+    def _build(self, pdo: _Pdo, t_us: int) -> Frame:
+        frame = self._pack(pdo)
         if not pdo.timer_due or pdo.pending:
             # Sent for another reason than the timer alone (an event, a remote request):
             # the event timer counts again from this transmission.
@@ -388,11 +436,15 @@ class PdoEngine:
         pdo.pending = False
         pdo.timer_due = False
         pdo.last_tx_us = t_us
-        return Frame(self.cob_id(pdo) & CAN_ID_MASK, data)
+        return frame
 
     def _on_change(self, index: int, subindex: int, value: Value) -> None:
         if index in self._by_comm or index in self._by_map:
             self._on_parameter_change(index, subindex)
+            return
+        if (index, subindex) == self.packets_on_sync:
+            for pdo in self.tpdos:
+                pdo.owed.clear()
             return
         # Type 254 events are the application's to call (trigger); types 0 and 255
         # treat any change of a mapped value as the event.
@@ -406,6 +458,7 @@ class PdoEngine:
         if index == pdo.comm_index:
             pdo.pending = False
             pdo.timer_due = False
+            pdo.owed.clear()
             pdo.sync_count = 0
             pdo.sync_started = False
             pdo.last_tx_us = None

@@ -8,6 +8,8 @@ count, which lets a receiver re-anchor sample times after a loss.
 Bus load at defaults (400 Hz, 3 samples per PDO): 133.3 TPDO1 frames/s of
 7 data bytes and 50 TPDO2 frames/s of 8 bytes, about 2.4 % of 1 Mbit/s
 with worst-case stuffing (see docs/benchmarks/network.md for measured figures).
+TPDO1 made synchronous with 2122h = 1 keeps sampling at its rate and sends every
+packet made since on the SYNC it is due on (devices/pdo.py).
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ CAL_BITS, CAL_FULL_SCALE_MN, CAL_ZERO = 1, 2, 3
 
 class SkinApp(DeviceApp):
     streamed_tpdos = (TPDO_SAMPLES,)
+    packet_tpdos = (TPDO_SAMPLES,)
+    packets_on_sync = (obj.SKIN_PACKETS_ON_SYNC, 0)
 
     def __init__(self, source: SampleSource | None = None):
         self.source = source or ConstantSource(0.0)

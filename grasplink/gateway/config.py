@@ -157,6 +157,7 @@ MODBUS_TYPES: dict[str, frozenset[str]] = {
         | {"UNSIGNED8", "UNSIGNED16", "UNSIGNED24"}
     ),
 }
+SYNC_TYPE_MAX = 240  # transmission types 0..240 are SYNC-synchronous (CiA 301)
 MODBUS_WORDS = {"int16": 1, "uint16": 1, "int32": 2, "uint32": 2, "float32": 2}
 #: Input registers below this are the fixed map's (it stays within one read of 125, and
 #: grows only at its end): a configured register starts here or above.
@@ -312,6 +313,7 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
             "no node's identity names vendor_id, product_code, revision and serial: LSS "
             "addresses a node by all four",
         )
+    _check_sync(top, config)
     config.feedback = _feedback(top.table_of("feedback", {}))
     hand = config.nodes.get("hand")
     crush_n = hand.crush_limit_n if isinstance(hand, HandConfig) else 40.0
@@ -324,6 +326,44 @@ def parse_config(data: dict[str, Any], source: str, prefix: str = "") -> Gateway
     )
     top.finish()
     return config
+
+
+def synchronous_tpdos(node: NodeConfig) -> dict[int, int]:
+    """The TPDOs (communication index -> transmission type 0..240) the node's `[sdo]` table
+    makes SYNC-synchronous: the last write to each 18xxh:02 counts."""
+    types = {
+        w.index: int.from_bytes(w.data, "little")
+        for w in node.sdo
+        if obj.TPDO_COMM <= w.index < obj.TPDO_MAP and w.subindex == 2
+    }
+    return {index: kind for index, kind in types.items() if kind <= SYNC_TYPE_MAX}
+
+
+def _check_sync(top: Params, config: GatewayConfig) -> None:
+    """A skin or EMG whose samples wait for SYNC needs the gateway to produce it (without,
+    its stream would never come); our skin's TPDO1 on SYNC needs 2122h = 1, or it would send
+    one of its 133 packets a second per SYNC and drop the rest."""
+    for role in ("skin", "emg"):
+        node = config.nodes.get(role)
+        if node is None:
+            continue
+        for index, kind in synchronous_tpdos(node).items():
+            key = f"nodes.{role}.sdo.{index:04X}sub2"
+            if not config.sync_period_us:
+                raise top.error(
+                    key,
+                    f"transmission type {kind} sends the {role}'s TPDO on SYNC, but the "
+                    "gateway produces none: set [gateway] sync_period_ms",
+                )
+            every_packet = {
+                (w.index, w.subindex): int.from_bytes(w.data, "little") for w in node.sdo
+            }.get((obj.SKIN_PACKETS_ON_SYNC, 0))
+            if role == "skin" and node.eds is None and index == obj.TPDO_COMM and not every_packet:
+                raise top.error(
+                    key,
+                    f"transmission type {kind} sends one sample packet per SYNC and drops "
+                    'the others: add "2122sub0" = 1 (every packet on SYNC)',
+                )
 
 
 _Built = TypeVar("_Built")

@@ -17,6 +17,10 @@ wall clock) and in virtual time. What it knows goes out as a typed
   get their node-clock times from the packet sequence (`decoding.skin_frames`,
   the front end offline decoding shares) and feed the configured skin decoder;
   EMG envelopes become intent (`EmgIntentDecoder`).
+- **SYNC cycles**: with a SYNC producer, the skin and EMG TPDOs the description
+  makes synchronous are gathered as they arrive and handled together at the next
+  `advance` (after every frame that came with them): one decoder call, one control
+  step, one set of RPDOs per cycle instead of per frame.
 - **Control**: every skin decoder update drives the feedback controller
   (belt) and the hybrid reflex, whose grip joins the wearer's EMG grip in
   the arbiter (hand). Commands go out as RPDOs packed through the mapping,
@@ -36,6 +40,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
+
 from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, Frame, function_of
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.core.params import Params
@@ -54,6 +60,7 @@ from grasplink.gateway.config import (
     NodeConfig,
     SkinConfig,
     scene_config,
+    synchronous_tpdos,
 )
 from grasplink.gateway.description import SdoWrite
 from grasplink.gateway.drives import DriveHandshake
@@ -195,6 +202,15 @@ class Gateway(NmtMaster):
             if config.sync_period_us
             else None
         )
+        # the skin's and EMG's synchronous TPDOs (CAN-IDs), handled once per SYNC cycle
+        self._batched = self._synchronous_can_ids() if self.sync is not None else frozenset()
+        # (arrival, role, values, the number of the SYNC a vendor's sample answered)
+        self._cycle: list[tuple[int, str, dict[Key, int | float], int | None]] = []
+        self._cycle_due_us: int | None = None
+        # the earliest deadline besides the SYNC and the cycle, when nothing happened since
+        # it was computed (None: unknown, advance runs in full)
+        self._rest_due_us: int | None = None
+        self.cycles = 0  # SYNC cycles handled
         self._skin_setup()
         self._emg_setup()
         self._bindings_setup()
@@ -234,6 +250,24 @@ class Gateway(NmtMaster):
         return cls(scene_config(options, nodes))
 
     # -- construction helpers --------------------------------------------------------------
+    def _synchronous_can_ids(self) -> frozenset[int]:
+        """CAN-IDs of the skin's and the EMG's TPDOs their `[sdo]` tables make synchronous."""
+        can_ids = set()
+        for role in ("skin", "emg"):
+            link = self.by_kind.get(role)
+            if link is None:
+                continue
+            written = {(w.index, w.subindex): w.data for w in link.config.sdo}
+            for comm in synchronous_tpdos(link.config):
+                data = written.get((comm, 1))
+                cob_id = (
+                    link.codec_od_entry(comm, 1).default
+                    if data is None
+                    else int.from_bytes(data, "little")
+                )
+                can_ids.add(int(cob_id) & 0x7FF)
+        return frozenset(can_ids)
+
     def _skin_setup(self) -> None:
         link = self.by_kind.get("skin")
         self.skin_frames: SkinFrames | None = None
@@ -355,6 +389,7 @@ class Gateway(NmtMaster):
 
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
         self.now_us = t_us
+        self._rest_due_us = None  # a frame may make anything due: advance looks at all
         if frame.can_id == NMT_COB_ID or frame.can_id == HEARTBEAT_BASE + self.node_id:
             return self._second_master(frame, t_us)
         function, node_id = function_of(frame.can_id)
@@ -378,6 +413,14 @@ class Gateway(NmtMaster):
         if frames and self._skin_sync_numbers is not None:
             assert self.sync is not None
             self._skin_sync_numbers.sent(self.sync.index)
+        if self._cycle_due_us is not None and t_us >= self._cycle_due_us:
+            frames += self._handle_cycle(t_us)
+        rest, self._rest_due_us = self._rest_due_us, None
+        if rest is not None and t_us < rest:
+            # a SYNC or a cycle alone (twice per cycle): the network master, provisioning
+            # and the control's timers had nothing due when last asked, and nothing came
+            # since; what the cycle made due is seen at the next deadline
+            return frames
         frames += super().advance(t_us)
         for link in self.links.values():
             frames += link.sdo.advance(t_us)
@@ -415,7 +458,6 @@ class Gateway(NmtMaster):
             self.arbiter.next_deadline_us(),
             self._next_ramp_us(),
             self._next_snapshot_us,
-            self.sync.next_deadline_us() if self.sync is not None else None,
         ):
             if c is not None and (best is None or c < best):
                 best = c
@@ -424,6 +466,13 @@ class Gateway(NmtMaster):
                 if c is not None and (best is None or c < best):
                     best = c
         # (heartbeat loss, noticed when advance() runs: the master's deadline above)
+        if self.sync is None:
+            return best
+        # with SYNC: what is due apart from the SYNC and the cycle, for advance's short path
+        self._rest_due_us = best
+        for c in (self.sync.next_deadline_us(), self._cycle_due_us):
+            if c is not None and (best is None or c < best):
+                best = c
         return best
 
     # -- network management ------------------------------------------------------------------
@@ -454,6 +503,7 @@ class Gateway(NmtMaster):
         if link.kind in self.drives:
             self.drives[link.kind].reset()
         if link.kind == "skin" and self.skin_frames is not None:
+            self._drop_from_cycle("skin")
             self.skin_frames.restart()
 
     def _provision(self, link: NodeLink, t_us: int) -> list[Frame]:
@@ -584,6 +634,7 @@ class Gateway(NmtMaster):
         link.sdo.cancel()
         self.alarms[f"{link.name}.lost"] = why
         if link.kind == "skin" and self.skin_frames is not None:
+            self._drop_from_cycle("skin")
             self.skin_frames.restart()
         return self._commands(t_us, refresh=True)
 
@@ -650,6 +701,8 @@ class Gateway(NmtMaster):
             return []
         link.pdos_rx += 1
         link.values.update(values)
+        if frame.can_id in self._batched and link.kind in ("skin", "emg"):
+            return self._gather(link.kind, values, t_us)
         if link.kind == "skin":
             return self._on_skin(values, t_us)
         if link.kind == "emg" and self._envelope_key in values:
@@ -715,27 +768,72 @@ class Gateway(NmtMaster):
         numbers = self._skin_sync_numbers
         number = numbers.answer() if numbers is not None else None
         t_s, force_n = self.skin_frames.feed(t_us, values, number)
-        if not len(t_s):
-            return []
+        return self._commands(t_us) if self._decode(t_s, force_n, t_us) else []
+
+    def _decode(self, t_s: np.ndarray, force_n: np.ndarray, t_us: int) -> bool:
+        """Samples through the decoder and each update through the control; whether any."""
+        if self.decoder is None or not len(t_s):
+            return False
         estimates = self.decoder.feed(t_s, force_n)
         if not estimates:
-            return []
+            return False
         self.last_estimate = estimates[-1]
         for estimate in estimates:
             self._control(estimate, t_us)
-        return self._commands(t_us)
+        return True
 
     def _on_emg(self, envelope_uv: float, t_us: int) -> list[Frame]:
+        return self._commands(t_us) if self._intent(envelope_uv, t_us) else []
+
+    def _intent(self, envelope_uv: float, t_us: int) -> bool:
+        """An envelope reading becomes the wearer's grip; whether it did."""
         if self.emg_decoder is None:
-            return []
+            return False
         intent = self.emg_decoder.update(t_us, envelope_uv)
         if intent is None:
-            return []
+            return False
         self.last_intent = intent
         self.calibration.add(envelope_uv)
         self._voluntary_known = True
         self.grip_command = self.arbiter.set_voluntary(t_us, intent.grip_n)
-        return self._commands(t_us)
+        return True
+
+    # -- SYNC cycles -------------------------------------------------------------------------
+    def _gather(self, role: str, values: dict[Key, int | float], t_us: int) -> list[Frame]:
+        """A synchronous TPDO waits for the gateway's next `advance`, which a runner calls
+        once it has delivered every frame that arrived with this one: the cycle's."""
+        numbers = self._skin_sync_numbers if role == "skin" else None
+        self._cycle.append((t_us, role, values, numbers.answer() if numbers else None))
+        if self._cycle_due_us is None:
+            self._cycle_due_us = t_us
+        return []
+
+    def _drop_from_cycle(self, role: str) -> None:
+        """A node restarted or lost: what it sent before is not handled after."""
+        self._cycle = [entry for entry in self._cycle if entry[1] != role]
+        if not self._cycle:
+            self._cycle_due_us = None
+
+    def _handle_cycle(self, t_us: int) -> list[Frame]:
+        """A cycle's frames at once: the envelopes in order, the skin's packets placed by
+        their sequence and decoded in one call, then one set of commands. The control acts
+        at `t_us`, the gateway's clock, as it does on a frame's arrival."""
+        cycle, self._cycle, self._cycle_due_us = self._cycle, [], None
+        self.cycles += 1
+        acted = False
+        times, forces = [], []
+        for arrived_us, role, values, number in cycle:
+            if role == "emg":
+                if self._envelope_key in values:
+                    acted |= self._intent(self._envelope_uv(values), t_us)
+            elif self.skin_frames is not None:
+                t_s, force_n = self.skin_frames.feed(arrived_us, values, number)
+                if len(t_s):
+                    times.append(t_s)
+                    forces.append(force_n)
+        if times:
+            acted |= self._decode(np.concatenate(times), np.concatenate(forces), t_us)
+        return self._commands(t_us) if acted else []
 
     # -- what the gateway knows, for status lines, telemetry and registers -------------------
     def snapshot(self) -> Snapshot:
@@ -841,6 +939,7 @@ class Gateway(NmtMaster):
     def execute(self, command: Command, t_us: int) -> tuple[CommandResult, list[Frame]]:
         """Validate and apply one command now; a refused command changes nothing."""
         t_us = max(t_us, self.now_us)
+        self._rest_due_us = None
         try:
             value = parse_value(command)
             detail, frames = self._apply(command.name, value, t_us)

@@ -29,6 +29,7 @@ class SyncProducer:
         self.counter_overflow = counter_overflow
         self.sent = 0
         self.index = -1  # grid index of the last SYNC sent (periods since start, minus one)
+        self.skipped = 0  # periods missed whole (the host stalled), not sent late
         self._next_us: int | None = None
         self._counter = 0
 
@@ -44,6 +45,7 @@ class SyncProducer:
         if self._next_us is None or t_us < self._next_us:
             return []
         missed = (t_us - self._next_us) // self.period_us
+        self.skipped += missed
         self._next_us += (missed + 1) * self.period_us
         self.index += missed + 1
         self.sent += 1

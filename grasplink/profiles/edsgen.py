@@ -287,6 +287,7 @@ def skin() -> tuple[list[Obj], list[Pdo], list[Pdo]]:
         var(ob.SKIN_STATIC_FORCE_MN, "Static force [mN]", I32, "ro", pdo=True),
         var(ob.SKIN_SAMPLE_RATE_HZ, "Sample rate [Hz]", U16, "rw", 400, 80, 1000),
         var(ob.SKIN_SAMPLES_PER_PDO, "Samples per TPDO", U8, "rw", 3, 1, 3),
+        var(ob.SKIN_PACKETS_ON_SYNC, "Every packet on SYNC", U8, "rw", 0, 0, 1),
         compound(
             ob.SKIN_FSR_CALIBRATION,
             "FSR calibration",
@@ -340,6 +341,7 @@ def emg() -> tuple[list[Obj], list[Pdo], list[Pdo]]:
         var(ob.EMG_SAMPLE_RATE_HZ, "Sample rate [Hz]", U16, "rw", 1500, 500, 4000),
         var(ob.EMG_WINDOW_MS, "Envelope window [ms]", U16, "rw", 100, 10, 1000),
         var(ob.EMG_ENVELOPE_PERIOD_MS, "Envelope period [ms]", U16, "rw", 10, 1, 1000),
+        var(ob.EMG_PACKETS_ON_SYNC, "Every packet on SYNC", U8, "rw", 0, 0, 1),
         compound(
             ob.EMG_CALIBRATION,
             "EMG calibration",

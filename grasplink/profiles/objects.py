@@ -41,6 +41,7 @@ SKIN_SAMPLE_COUNTER = 0x2102  # U32, samples acquired since boot
 SKIN_STATIC_FORCE_MN = 0x2110  # I32 [mN]
 SKIN_SAMPLE_RATE_HZ = 0x2120  # U16 [Hz]
 SKIN_SAMPLES_PER_PDO = 0x2121  # U8, 1..3
+SKIN_PACKETS_ON_SYNC = 0x2122  # U8: 1 = a synchronous TPDO1 carries every packet since
 SKIN_FSR_CALIBRATION = 0x2130  # RECORD: sub1 ADC bits, sub2 full scale [mN], sub3 zero [counts]
 SKIN_RIDGE_SPACING_UM = 0x2140  # ARRAY U32 [µm]; sub0 = number of spacings (1..40)
 SKIN_LAYOUT_PRESET = 0x2141  # U8: 0 custom, 1..7 named layouts (profiles.layouts)
@@ -55,6 +56,7 @@ EMG_RAW_SEQUENCE = 0x2204  # U8, +1 per raw packet
 EMG_SAMPLE_RATE_HZ = 0x2210  # U16 [Hz]
 EMG_WINDOW_MS = 0x2211  # U16 [ms], envelope smoothing window
 EMG_ENVELOPE_PERIOD_MS = 0x2212  # U16 [ms], envelope update period
+EMG_PACKETS_ON_SYNC = 0x2213  # U8: 1 = synchronous TPDO1/2 carry every packet since
 EMG_CALIBRATION = 0x2220  # RECORD: sub1 e_min [µV], sub2 e_max [µV]
 
 # --- CiA 402 drive objects (belt and hand) ---------------------------------
