@@ -73,7 +73,6 @@ NODE_NAME = re.compile(r"[a-z][a-z0-9_]{0,31}")  # one topic level, one register
 DEVICE_ROLE = "device"  # mastered and published, not in the loop
 ROLES = (*KINDS, DEVICE_ROLE)
 US_PER_S = 1_000_000
-SYNC_TYPE_MAX = 240  # TPDO transmission types 1-240: every n-th SYNC (CiA 301)
 
 
 @dataclass

@@ -70,14 +70,16 @@ def test_7_101_write_1017h(dut: Dut) -> None:
 def test_7_102_count_heartbeats(dut: Dut) -> None:
     """7.102 Heartbeat 02: "Count heartbeats of DUT"
 
-    With 1017h = 20 ms, 300 ms give 15 heartbeats (10..17 accepted for a
-    real-time bus whose OS may delay a frame), 1 byte each with the NMT state (7Fh pre-operational).
+    With 1017h = 20 ms, 300 ms give 15 heartbeats, 1 byte each with the NMT state (7Fh
+    pre-operational). Judged by the time the 15 really took, not by a wall-clock window:
+    a loaded host (load 10 on 2 cores) once stretched 300 ms of sleep past the window's
+    slack. The median gap is the period whatever one late frame does (`period`).
     """
     dut.set_heartbeat(20)
     mark = dut.log.mark()
-    time.sleep(0.3)
-    frames = heartbeats(dut, mark)
-    assert 10 <= len(frames) <= 17, len(frames)
+    frames = dut.log.wait_count(cob(dut.heartbeat_id), 15, since=mark)
+    assert len(frames) == 15
+    assert period(frames) == pytest.approx(0.020, abs=0.006)
     assert {bytes(f.data) for f in frames} == {bytes([STATE_PRE_OP])}
 
 

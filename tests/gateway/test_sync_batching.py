@@ -153,8 +153,8 @@ class SlippingSet:
         assert skin_frames is not None
         feed = skin_frames.feed
 
-        def timed(t_us, values):
-            released = feed(t_us, values)
+        def timed(t_us, values, number=None):
+            released = feed(t_us, values, number)
             self.sample_times.append(released[0])
             return released
 
