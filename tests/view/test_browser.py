@@ -21,6 +21,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -231,3 +232,31 @@ def test_a_broker_refusing_the_credentials_is_one_line_and_exit_1(tmp_path: Path
         broker.stop()
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "refused the connection" in err and "wrong" not in err
+
+
+def test_the_snapshot_saves_the_page_once_watching_and_names_what_it_never_saw(
+    tmp_path: Path,
+) -> None:
+    broker = Mosquitto(tmp_path / "broker").start()
+    view, url = start_view(broker.url, tmp_path)
+    snapshot = [sys.executable, "-m", "grasplink.surfaces.view.snapshot", url]
+    try:
+        ready, shot = tmp_path / "watching", tmp_path / "page.png"
+        taken = subprocess.run(
+            [*snapshot, str(shot), "--ready-file", str(ready)],
+            capture_output=True, text=True, timeout=READY_S * 2,
+        )  # fmt: skip
+        assert taken.returncode == 0, taken.stderr
+        assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and ready.read_text() == f"{url}\n"
+        # no gateway, so no slip: one line naming what the page never showed, and its banner
+        missed = subprocess.run(
+            [*snapshot, str(tmp_path / "slip.png"), "--until-slip", "--timeout", "3"],
+            capture_output=True, text=True, timeout=READY_S * 2,
+        )  # fmt: skip
+        assert missed.returncode == 1 and not (tmp_path / "slip.png").exists()
+        line = missed.stderr.strip()
+        assert "\n" not in line and "no decoded slip with its speed within 3 s" in line, line
+        assert "no gateway has published yet" in line
+    finally:
+        view.close()
+        broker.stop()
