@@ -17,9 +17,12 @@ const PLOTS = [
     ["slip_speed_mm_s", "slip speed (mm/s)", "v", "#d62728"],
     ["slip_speed_low_mm_s", "speed low (mm/s)", "v", "#f4a3a3"],
   ], units: { n: "N", v: "mm/s" } },
-  { title: "skin: slip position and confidence", kind: "skin", series: [
+  // `confidence` is the decoder's, of the whole estimate; the direction has its own
+  // (docs/decoding.md): both named so, never a bare "confidence"
+  { title: "skin: slip position, estimate and direction confidence", kind: "skin", series: [
     ["position_mm", "position (mm)", "mm", "#2ca02c"],
-    ["confidence", "confidence (0..1)", "c", "#9467bd"],
+    ["confidence", "estimate confidence (0..1)", "c", "#9467bd"],
+    ["slip_direction_confidence", "direction confidence (0..1)", "c", "#17becf"],
     ["slip", "slip (0/1)", "c", "#d62728"],
   ], units: { mm: "mm", c: "0..1" } },
   { title: "belt: commanded velocity, level, active belt", kind: "belt", series: [
@@ -204,8 +207,10 @@ function drawNow(g) {
   slip.dataset.slip = skin.slip === undefined || skin.slip === null ? "unknown" : String(skin.slip);
   slip.dataset.speed = skin.slip_speed_mm_s ?? "";
   if (skin.slip) {
+    const way = skin.slip_direction === null || skin.slip_direction === undefined ? "direction –"
+      : `direction ${skin.slip_direction > 0 ? "+" : "−"} (confidence ${fixed(skin.slip_direction_confidence, 2, "")})`;
     text(slip, `SLIP ${fixed(skin.slip_speed_mm_s, 1, " mm/s")} at ${fixed(skin.position_mm, 1, " mm")}` +
-      ` (confidence ${fixed(skin.confidence, 2, "")})`);
+      `, ${way}; estimate confidence ${fixed(skin.confidence, 2, "")}`);
   } else {
     text(slip, skin.slip === false ? `no slip; grip ${fixed(skin.grip_force_n, 2, " N")}` : "slip: –");
   }
