@@ -88,8 +88,10 @@ class Process:
                 self.process.wait(10)
 
 
-def start_view(mqtt_url: str, folder: Path) -> tuple[Process, str]:
+def start_view(mqtt_url: str, folder: Path, *options: str) -> tuple[Process, str]:
     """`grasplink view` on a free port; the process and the page's URL."""
-    view = Process(["view", "--mqtt", mqtt_url, "--http", "127.0.0.1:0"], folder / "view.log")
+    view = Process(
+        ["view", "--mqtt", mqtt_url, "--http", "127.0.0.1:0", *options], folder / "view.log"
+    )
     line = view.wait_for_line("view: http://")
     return view, line.split()[1]
