@@ -67,6 +67,11 @@ demo: setup
 # Nothing waits a fixed time: mosquitto and the hub are waited for until they accept a
 # connection, the gateway until its --ready-file says it is up (surfaces bound, bus open,
 # heartbeat running), each with a timeout and a message naming the log to read.
+# Beside the gateway, `grasplink view` (127.0.0.1, a free port) and headless Chromium on it
+# (grasplink/surfaces/view/snapshot.py): the replay starts once the page takes frames, and
+# the page is saved as out/telemetry/view.png when it shows the slip decoded with its speed.
+# No picture is one line and fails the demo at its end (make installed chromium).
+VIEW_SNAPSHOT_S := 120
 TELEMETRY_OUT := out/telemetry
 FREE_PORT := $(PY) -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'
 # WAIT_PORT NAME PORT LOG: until 127.0.0.1:PORT accepts a connection (20 s at most)
@@ -75,7 +80,7 @@ GATEWAY_READY_S := 60
 telemetry-demo: setup
 	@set -e; out=$(TELEMETRY_OUT); rm -rf $$out; mkdir -p $$out; \
 	test -f out/loop_headline/can.asc || { echo "telemetry-demo: no out/loop_headline/can.asc; run make demo first"; exit 1; }; \
-	mq=$$($(FREE_PORT)); hub=$$($(FREE_PORT)); pids=""; \
+	mq=$$($(FREE_PORT)); hub=$$($(FREE_PORT)); view=$$($(FREE_PORT)); pids=""; \
 	trap 'kill $$pids 2>/dev/null || true; wait 2>/dev/null || true' EXIT; \
 	printf 'listener %s 127.0.0.1\nallow_anonymous true\nuser %s\n' $$mq "$$(id -un)" > $$out/mosquitto.conf; \
 	mosquitto -c $$out/mosquitto.conf > $$out/mosquitto.log 2>&1 & pids="$$pids $$!"; \
@@ -84,7 +89,14 @@ telemetry-demo: setup
 	$(WAIT_PORT) "the CAN hub" $$hub $$out/hub.log; \
 	mosquitto_sub -p $$mq -v -t 'grasplink/#' > $$out/json.txt & pids="$$pids $$!"; \
 	mosquitto_sub -p $$mq -t 'spBv1.0/#' -F '%t %l bytes' > $$out/sparkplug.txt & pids="$$pids $$!"; \
-	echo "== mosquitto on 127.0.0.1:$$mq, hub on 127.0.0.1:$$hub; gateway with --mqtt, the loop headline's nodes replayed"; \
+	$(VENV)/bin/grasplink view --mqtt mqtt://127.0.0.1:$$mq --gateway-id demo \
+	  --http 127.0.0.1:$$view > $$out/view.log 2>&1 & pids="$$pids $$!"; \
+	$(WAIT_PORT) "grasplink view" $$view $$out/view.log; \
+	$(PY) -m grasplink.surfaces.view.snapshot http://127.0.0.1:$$view/ $$out/view.png \
+	  --until-slip --timeout $(VIEW_SNAPSHOT_S) --ready-file $$out/view.ready \
+	  > $$out/snapshot.log 2>&1 & snap=$$!; pids="$$pids $$snap"; \
+	echo "== mosquitto on 127.0.0.1:$$mq, hub on 127.0.0.1:$$hub, the live view on http://127.0.0.1:$$view/; gateway with --mqtt, the loop headline's nodes replayed"; \
+	until [ -f $$out/view.ready ] || ! kill -0 $$snap 2>/dev/null; do sleep 0.05; done; \
 	printf '[telemetry]\nstate_dir = "%s/state"\n' $$out > $$out/gateway.toml; \
 	$(VENV)/bin/grasplink gateway --bus remote:ws://127.0.0.1:$$hub/ --duration 10 \
 	  --config $$out/gateway.toml --mqtt mqtt://127.0.0.1:$$mq --mqtt-id demo \
@@ -104,7 +116,9 @@ telemetry-demo: setup
 	grep '"slip":true' $$out/json.txt | grep -m 2 -v '"slip_speed_mm_s":null' | cut -c1-200 || echo "(no slip speed decoded)"; \
 	grep -m 2 '"belt":"slip"' $$out/json.txt | cut -c1-200 || true; \
 	echo "== the end of the log: nodes lost, alarms retained:"; grep '/alarms ' $$out/json.txt | tail -n 1 | cut -c1-200; \
-	echo "all of it: $$out/json.txt, $$out/sparkplug.txt"
+	echo "all of it: $$out/json.txt, $$out/sparkplug.txt"; \
+	if wait $$snap; then echo "== the live view during the slip: $$out/view.png"; \
+	else echo "telemetry-demo: no picture of the live view: $$(tail -n 1 $$out/snapshot.log) (see $$out/snapshot.log, $$out/view.log)"; exit 1; fi
 
 # Hardware in the loop (docs/hil.md): the loop headline's nodes and physics in real time on a
 # loopback hub, `run --bus --master external`, mastered by a `grasplink gateway` in another

@@ -456,7 +456,7 @@ def _add_view_command(sub: Subcommands) -> None:
         required=True,
         metavar="URL",
         help="the broker the gateways publish to: mqtt://[user[:password]@]host[:port] "
-        "or mqtts://... (read only: the view publishes nothing)",
+        "or mqtts://... (read only unless --allow-commands)",
     )
     view.add_argument("--mqtt-ca", type=Path, default=None, metavar="FILE", help="CA for mqtts")
     view.add_argument(
@@ -470,6 +470,13 @@ def _add_view_command(sub: Subcommands) -> None:
     )
     view.add_argument(
         "--duration", type=positive_seconds, default=None, help="stop after this many seconds"
+    )
+    view.add_argument(
+        "--allow-commands",
+        action="store_true",
+        help="let the page send the gateway's tuning commands (feedback mode, reflex, EMG "
+        "calibration), checked against its limits first; give --mqtt a user with write "
+        "rights on grasplink/ID/cmd/# (docs/view.md)",
     )
 
 
@@ -1177,6 +1184,7 @@ def cmd_view(args: argparse.Namespace) -> int:
             http,
             gateway_id=gateway_id,
             tls=tls,
+            allow_commands=args.allow_commands,
             duration_s=args.duration,
             log=lambda line: print(line, flush=True),
             stop=stop,

@@ -4,7 +4,6 @@ page shows (never a fixed sleep)."""
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 import sys
 import time
@@ -13,38 +12,10 @@ from typing import Any
 
 from selenium import webdriver
 from selenium.common.exceptions import TimeoutException
-from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.support.wait import WebDriverWait
 
 GRASPLINK = [sys.executable, "-m", "grasplink.cli"]
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
-# The machine's network is closed and the test must not reach it: no QUIC, no background
-# fetches, no component or sync updates; a fresh profile each time.
-CHROMIUM_FLAGS = (
-    "--headless=new",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--disable-dev-shm-usage",
-    "--window-size=1400,1250",
-)
 PAGE_S = 60.0  # bounds for a loaded machine (load 6 on 2 cores), never waited through
-
-
-def chromium(profile: Path) -> webdriver.Chrome:
-    for path, package in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")):
-        assert Path(path).exists(), f"{path} missing: apt-get install {package} (make test does)"
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={profile}"):
-        options.add_argument(flag)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
-    return webdriver.Chrome(options=options, service=Service(CHROMEDRIVER))
 
 
 def wait_for_page(driver: webdriver.Chrome, script: str, what: str, timeout_s: float = PAGE_S):
@@ -117,8 +88,10 @@ class Process:
                 self.process.wait(10)
 
 
-def start_view(mqtt_url: str, folder: Path) -> tuple[Process, str]:
+def start_view(mqtt_url: str, folder: Path, *options: str) -> tuple[Process, str]:
     """`grasplink view` on a free port; the process and the page's URL."""
-    view = Process(["view", "--mqtt", mqtt_url, "--http", "127.0.0.1:0"], folder / "view.log")
+    view = Process(
+        ["view", "--mqtt", mqtt_url, "--http", "127.0.0.1:0", *options], folder / "view.log"
+    )
     line = view.wait_for_line("view: http://")
     return view, line.split()[1]

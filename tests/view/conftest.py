@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 from selenium import webdriver
 
+from grasplink.surfaces.view.snapshot import chromium
 from tests.telemetry.broker import Mosquitto
-from tests.view.browser import chromium
 
 
 @pytest.fixture

@@ -21,6 +21,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -28,7 +29,7 @@ import pytest
 
 from grasplink import cli
 from grasplink.bus import CanHub
-from tests.telemetry.broker import Mosquitto
+from tests.telemetry.broker import Mosquitto, Recorder
 from tests.test_hil import gateway_toml
 from tests.view.browser import (
     PAGE_S,
@@ -231,3 +232,106 @@ def test_a_broker_refusing_the_credentials_is_one_line_and_exit_1(tmp_path: Path
         broker.stop()
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "refused the connection" in err and "wrong" not in err
+
+
+def test_the_snapshot_saves_the_page_once_watching_and_names_what_it_never_saw(
+    tmp_path: Path,
+) -> None:
+    broker = Mosquitto(tmp_path / "broker").start()
+    view, url = start_view(broker.url, tmp_path)
+    snapshot = [sys.executable, "-m", "grasplink.surfaces.view.snapshot", url]
+    try:
+        ready, shot = tmp_path / "watching", tmp_path / "page.png"
+        taken = subprocess.run(
+            [*snapshot, str(shot), "--ready-file", str(ready)],
+            capture_output=True, text=True, timeout=READY_S * 2,
+        )  # fmt: skip
+        assert taken.returncode == 0, taken.stderr
+        assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and ready.read_text() == f"{url}\n"
+        # no gateway, so no slip: one line naming what the page never showed, and its banner
+        missed = subprocess.run(
+            [*snapshot, str(tmp_path / "slip.png"), "--until-slip", "--timeout", "3"],
+            capture_output=True, text=True, timeout=READY_S * 2,
+        )  # fmt: skip
+        assert missed.returncode == 1 and not (tmp_path / "slip.png").exists()
+        line = missed.stderr.strip()
+        assert "\n" not in line and "no decoded slip with its speed within 3 s" in line, line
+        assert "no gateway has published yet" in line
+    finally:
+        view.close()
+        broker.stop()
+
+
+def send_from_page(browser, command: str, values: tuple[str, ...]) -> None:
+    """Fill the page's form for `command` (a select's option or the boxes) and send it."""
+    browser.execute_script(
+        "const [name, values] = arguments;"
+        "const form = document.querySelector(`#commands form[data-command='${name}']`);"
+        "[...form.querySelectorAll('select, input')].forEach((f, i) => { f.value = values[i]; });"
+        "form.requestSubmit();",
+        command,
+        list(values),
+    )
+
+
+def reply_shown(command: str) -> str:
+    """JavaScript: the newest reply shown for `command`, as {by, accepted, text}, or null."""
+    return (
+        f"const li = document.querySelector('#command-replies li[data-command=\"{command}\"]');"
+        "return li && {by: li.dataset.by, accepted: li.dataset.accepted, text: li.textContent}"
+    )
+
+
+def test_with_commands_allowed_the_page_shows_the_reply_and_never_sends_a_refused_one(
+    broker: Mosquitto, browser, tmp_path: Path
+) -> None:
+    ready = tmp_path / "gateway.ready"
+    gateway = Process(
+        ["gateway", "--with-nodes", "--bus", f"virtual:cmd-{os.getpid()}", "--mqtt", broker.url,
+         "--mqtt-id", "arm-7", "--config", str(telemetry_config(tmp_path)),
+         "--ready-file", str(ready)],
+        tmp_path / "gateway.log",
+    )  # fmt: skip
+    view = recorder = None
+    try:
+        wait_ready(gateway, ready)
+        recorder = Recorder(broker, ["grasplink/+/cmd/#"])
+        view, url = start_view(broker.url, tmp_path, "--allow-commands")
+        browser.get(url)
+        wait_for_page(browser, "return document.getElementById('banner').dataset.state"
+                      " === 'live'", "a live page")  # fmt: skip
+        assert browser.execute_script("return !document.getElementById('commands').hidden")
+        # out of the gateway's limits: refused by the view, with the gateway's own words
+        send_from_page(browser, "reflex_threshold_mm_s", ("5000",))
+        refused = wait_for_page(browser, reply_shown("reflex_threshold_mm_s"), "the refusal")
+        assert refused["by"] == "view" and refused["accepted"] == "false"
+        assert "expected a number 1..1000, got 5000" in refused["text"]
+        # within them: published, and the gateway's reply shown, its effect too
+        send_from_page(browser, "feedback_mode", ("slip_speed",))
+        reply = wait_for_page(browser, reply_shown("feedback_mode"), "the gateway's reply")
+        assert reply["by"] == "gateway" and reply["accepted"] == "true", reply
+        assert "feedback mode slip_speed" in reply["text"]
+        wait_for_page(
+            browser,
+            "return document.getElementById('mode').textContent === 'slip_speed'",
+            "the new feedback mode",
+        )
+        sent = recorder.wait_for(lambda m: m.topic.endswith("/cmd/feedback_mode"), PAGE_S)
+        assert [m.topic for m in sent] == ["grasplink/arm-7/cmd/feedback_mode"]
+        assert [m.topic for m in recorder.taken()] == ["grasplink/arm-7/cmd/feedback_mode"]
+        assert page_errors(browser) == []
+        # a post from elsewhere (no page token) runs nothing
+        port = int(url.rsplit(":", 1)[1].strip("/"))
+        connection = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+        connection.request(
+            "POST", "/command", body=b'{"gateway":"arm-7","command":"feedback_mode","value":"off"}',
+            headers={"Content-Type": "application/json", "Origin": "http://evil.example"},
+        )  # fmt: skip
+        assert connection.getresponse().status == 403
+        connection.close()
+    finally:
+        if recorder is not None:
+            recorder.close()
+        if view is not None:
+            view.close()
+        gateway.close()

@@ -62,6 +62,8 @@ def test_the_event_stream_is_answered_as_one() -> None:
 def test_it_is_read_only(method: str) -> None:
     assert get("/", method=method).status == 405
     assert get("/events", method=method).status == 405
+    assert get("/command", method=method).status == 405  # without --allow-commands
+    assert b'grasplink-commands" content=""' in get("/").body  # no token, no commands
 
 
 @pytest.mark.parametrize(
@@ -99,7 +101,9 @@ def test_every_answer_says_where_the_page_may_load_from() -> None:
 
 def test_a_request_head_is_read_for_its_method_path_and_host() -> None:
     head = b"GET /view.js?v=2 HTTP/1.1\r\nHost: localhost:8642\r\nAccept: */*\r\n\r\n"
-    assert parse_head(head) == Request("GET", "/view.js", "localhost:8642")
+    request = parse_head(head)
+    assert (request.method, request.path, request.host) == ("GET", "/view.js", "localhost:8642")
+    assert request.headers == {"host": "localhost:8642", "accept": "*/*"}
 
 
 @pytest.mark.parametrize(

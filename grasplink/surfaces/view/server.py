@@ -2,7 +2,8 @@
 API only) and a small HTTP server streaming frames to each page (Server-Sent Events).
 
 Everything the page shows is `state.ViewState`'s; this module only moves bytes and
-reads the clock. It publishes nothing: the subscription is the view's only MQTT call.
+reads the clock. Read-only unless commands are allowed: then it publishes the commands
+`commands.prepare` passed, and nothing else, and hands the page the gateway's reply.
 """
 
 from __future__ import annotations
@@ -23,6 +24,14 @@ import aiomqtt
 from grasplink.core.hosts import host_problem
 from grasplink.errors import BrokerError, ConfigError
 from grasplink.surfaces.telemetry.url import BrokerUrl
+from grasplink.surfaces.view.commands import (
+    REPLY_TIMEOUT_S,
+    CommandRefused,
+    Reply,
+    Tokens,
+    prepare,
+    read_reply,
+)
 from grasplink.surfaces.view.state import ROOT, ViewState
 from grasplink.surfaces.view.web import (
     MAX_HEAD_BYTES,
@@ -43,6 +52,7 @@ SEND_TIMEOUT_S = 5.0  # a page that takes no frame for this long is dropped
 CONNECT_TIMEOUT_S = 5.0
 BACKOFF_MIN_S, BACKOFF_MAX_S = 0.5, 5.0  # short: the page shows the broker back soon
 RETRY_MS = 1000  # the browser's EventSource reconnects after this long
+MAX_PENDING = 16  # commands waiting for their reply at once; more are answered 503
 MQTT_LOGGER = logging.getLogger("grasplink.view.mqtt")
 MQTT_LOGGER.addHandler(logging.NullHandler())
 Log = Callable[[str], None]
@@ -82,6 +92,7 @@ class LiveView:
         *,
         gateway_id: str | None = None,
         tls: ssl.SSLContext | None = None,
+        allow_commands: bool = False,
         log: Log = print,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -97,6 +108,10 @@ class LiveView:
         self._files = load_files()
         self._hosts = HostRule(http.host, http.port)
         self._stop = asyncio.Event()
+        self.tokens = Tokens() if allow_commands else None
+        self._client_now: aiomqtt.Client | None = None  # while subscribed: commands go here
+        self._waiting: dict[str, asyncio.Future[Reply]] = {}
+        self._sent = 0
 
     async def run(self, stop: asyncio.Event, on_ready: Callable[[str], None]) -> None:
         """Bind, tell `on_ready` the page's URL, follow the broker until `stop`; a bind
@@ -140,8 +155,15 @@ class LiveView:
                     ever_up, delay = True, BACKOFF_MIN_S
                     self.log(f"view: subscribed to {self.topic} on {self.broker.display}")
                     reported = ""
-                    async for message in client.messages:
-                        self.state.feed(message.topic.value, message.payload, self.clock())
+                    self._client_now = client
+                    try:
+                        async for message in client.messages:
+                            topic, payload = message.topic.value, message.payload
+                            if self._waiting:
+                                self._take_reply(topic, payload)
+                            self.state.feed(topic, payload, self.clock())
+                    finally:
+                        self._client_now = None
             except aiomqtt.MqttError as exc:
                 why = str(exc) or type(exc).__name__
                 if not ever_up and isinstance(exc, aiomqtt.MqttCodeError):
@@ -154,6 +176,51 @@ class LiveView:
                     reported = why
             await asyncio.sleep(delay * random.uniform(0.8, 1.0))
             delay = min(BACKOFF_MAX_S, delay * 2)
+
+    def _take_reply(self, topic: str, payload: bytes) -> None:
+        """A reply to a command this view sent: to the request waiting for it."""
+        levels = topic.split("/")
+        if len(levels) != 4 or levels[2] != "reply":
+            return
+        reply = read_reply(payload)
+        if reply is None:
+            return
+        waiting = self._waiting.get(reply.id)
+        if waiting is not None and not waiting.done():
+            waiting.set_result(reply)
+
+    async def _send(self, body: bytes) -> dict[str, object]:
+        """Check one command from the page, publish it, wait for the gateway's reply: what
+        the page shows (`accepted`, `detail`, and `by`: who answered)."""
+        self._sent += 1
+        request_id = f"view-{os.getpid()}-{self._sent}"
+        try:
+            out = prepare(body, request_id, self.state.gateway_id)
+        except CommandRefused as exc:
+            return {"command": None, "accepted": False, "by": "view", "detail": str(exc)}
+        answer: dict[str, object] = {"command": out.name, "accepted": False, "by": "view"}
+        client = self._client_now
+        if client is None:
+            return {**answer, "detail": "not sent: the broker is away"}
+        if len(self._waiting) >= MAX_PENDING:
+            return {**answer, "detail": f"not sent: {MAX_PENDING} commands await replies"}
+        waiting: asyncio.Future[Reply] = asyncio.get_running_loop().create_future()
+        self._waiting[out.id] = waiting
+        try:
+            await client.publish(out.topic, out.payload, qos=1, timeout=REPLY_TIMEOUT_S)
+            self.log(f"view: sent {out.name} to {out.gateway} ({out.id})")
+            reply = await asyncio.wait_for(waiting, REPLY_TIMEOUT_S)
+        except aiomqtt.MqttError as exc:
+            return {**answer, "detail": f"not sent: {str(exc) or type(exc).__name__}"}
+        except TimeoutError:
+            return {
+                **answer,
+                "detail": f"sent, no reply from {out.gateway} within {REPLY_TIMEOUT_S:g} s "
+                f"(gateway away, or the broker user may not write {out.topic}?)",
+            }
+        finally:
+            del self._waiting[out.id]
+        return {**reply.as_dict(), "by": "gateway"}
 
     def _client(self) -> aiomqtt.Client:
         return aiomqtt.Client(
@@ -178,9 +245,15 @@ class LiveView:
                 request = parse_head(head)
             except asyncio.LimitOverrunError:
                 raise HttpError(431, "request head too large") from None
-            response = respond(request, self._hosts, self._files)
+            response = respond(request, self._hosts, self._files, self.tokens)
             head_only = request.method == "HEAD"
-            if response.events and not head_only:
+            if response.command:
+                length = request.content_length or 0
+                body = await asyncio.wait_for(reader.readexactly(length), HEAD_TIMEOUT_S)
+                answer = json.dumps(await self._send(body)).encode()
+                writer.write(encode(Response(200, answer, "application/json")))
+                await writer.drain()
+            elif response.events and not head_only:
                 await self._stream(writer)
             else:
                 writer.write(encode(response, head_only=head_only))
@@ -222,6 +295,7 @@ def serve(
     *,
     gateway_id: str | None = None,
     tls: ssl.SSLContext | None = None,
+    allow_commands: bool = False,
     duration_s: float | None = None,
     log: Log = print,
     stop: Callable[[], bool] = lambda: False,
@@ -230,7 +304,9 @@ def serve(
 
     async def main() -> None:
         done = asyncio.Event()
-        view = LiveView(broker, http, gateway_id=gateway_id, tls=tls, log=log)
+        view = LiveView(
+            broker, http, gateway_id=gateway_id, tls=tls, allow_commands=allow_commands, log=log
+        )
         end = None if duration_s is None else time.monotonic() + duration_s
 
         async def watch() -> None:
@@ -241,7 +317,8 @@ def serve(
 
         watcher = asyncio.create_task(watch())
         try:
-            await view.run(done, lambda url: log(f"view: {url} (broker {broker.display})"))
+            mode = "commands allowed" if allow_commands else "read-only"
+            await view.run(done, lambda url: log(f"view: {url} (broker {broker.display}, {mode})"))
         finally:
             watcher.cancel()
             await asyncio.gather(watcher, return_exceptions=True)

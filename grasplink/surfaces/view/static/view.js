@@ -17,9 +17,12 @@ const PLOTS = [
     ["slip_speed_mm_s", "slip speed (mm/s)", "v", "#d62728"],
     ["slip_speed_low_mm_s", "speed low (mm/s)", "v", "#f4a3a3"],
   ], units: { n: "N", v: "mm/s" } },
-  { title: "skin: slip position and confidence", kind: "skin", series: [
+  // `confidence` is the decoder's, of the whole estimate; the direction has its own
+  // (docs/decoding.md): both named so, never a bare "confidence"
+  { title: "skin: slip position, estimate and direction confidence", kind: "skin", series: [
     ["position_mm", "position (mm)", "mm", "#2ca02c"],
-    ["confidence", "confidence (0..1)", "c", "#9467bd"],
+    ["confidence", "estimate confidence (0..1)", "c", "#9467bd"],
+    ["slip_direction_confidence", "direction confidence (0..1)", "c", "#17becf"],
     ["slip", "slip (0/1)", "c", "#d62728"],
   ], units: { mm: "mm", c: "0..1" } },
   { title: "belt: commanded velocity, level, active belt", kind: "belt", series: [
@@ -204,8 +207,10 @@ function drawNow(g) {
   slip.dataset.slip = skin.slip === undefined || skin.slip === null ? "unknown" : String(skin.slip);
   slip.dataset.speed = skin.slip_speed_mm_s ?? "";
   if (skin.slip) {
+    const way = skin.slip_direction === null || skin.slip_direction === undefined ? "direction –"
+      : `direction ${skin.slip_direction > 0 ? "+" : "−"} (confidence ${fixed(skin.slip_direction_confidence, 2, "")})`;
     text(slip, `SLIP ${fixed(skin.slip_speed_mm_s, 1, " mm/s")} at ${fixed(skin.position_mm, 1, " mm")}` +
-      ` (confidence ${fixed(skin.confidence, 2, "")})`);
+      `, ${way}; estimate confidence ${fixed(skin.confidence, 2, "")}`);
   } else {
     text(slip, skin.slip === false ? `no slip; grip ${fixed(skin.grip_force_n, 2, " N")}` : "slip: –");
   }
@@ -290,6 +295,89 @@ function connect() {
   // EventSource reconnects by itself (retry: 1 s); the watch below greys the page meanwhile
 }
 
+// Commands: offered only when the server put its spec and this page's token in the page
+// (`grasplink view --allow-commands`). The server checks each with the gateway's own parser
+// before publishing it, so a value out of the gateway's limits is refused there, named.
+const commandsMeta = document.querySelector('meta[name="grasplink-commands"]');
+const COMMAND_SPEC = commandsMeta && commandsMeta.content ? JSON.parse(commandsMeta.content) : null;
+const TOKEN = commandsMeta ? commandsMeta.dataset.token : null;
+const REPLIES_SHOWN = 10;
+
+function input(type, placeholder) {
+  const node = document.createElement("input");
+  node.type = type;
+  node.placeholder = placeholder;
+  if (type === "number") node.step = "any";
+  return node;
+}
+
+function commandForm(name, spec) {
+  const form = document.createElement("form");
+  form.dataset.command = name;
+  form.title = `${name}: ${spec.expected}`;
+  const label = document.createElement("label");
+  label.textContent = name;
+  const fields = [];
+  let read;
+  if (spec.choices) {
+    const select = document.createElement("select");
+    select.append(...spec.choices.map((c) => new Option(String(c), String(c))));
+    fields.push(select);
+    read = () => spec.choices[select.selectedIndex];
+  } else if (spec.number) {
+    const box = input("number", `${spec.number[0]}..${spec.number[1]}`);
+    fields.push(box);
+    read = () => (box.value === "" ? null : Number(box.value));
+  } else {
+    const boxes = spec.pair.map((key) => input("number", key));
+    fields.push(...boxes);
+    read = () => Object.fromEntries(spec.pair.map((key, i) =>
+      [key, boxes[i].value === "" ? null : Number(boxes[i].value)]));
+  }
+  const button = document.createElement("button");
+  button.textContent = "send";
+  form.append(label, ...fields, button);
+  form.addEventListener("submit", (event) => { event.preventDefault(); send(name, read()); });
+  return form;
+}
+
+function showReply(name, value, answer) {
+  const li = document.createElement("li");
+  li.dataset.command = name;
+  li.dataset.accepted = String(answer.accepted === true);
+  li.dataset.by = answer.by || "";
+  const verdict = answer.accepted ? "accepted" : `refused by the ${answer.by || "view"}`;
+  li.textContent = `${new Date().toLocaleTimeString()} ${name} ${JSON.stringify(value)}: ` +
+    `${verdict}: ${answer.detail}`;
+  const list = $("command-replies");
+  list.prepend(li);
+  while (list.children.length > REPLIES_SHOWN) list.lastChild.remove();
+}
+
+async function send(name, value) {
+  let answer;
+  try {
+    const response = await fetch("/command", {
+      method: "POST",
+      headers: { "Content-Type": "application/json", "X-Grasplink-Token": TOKEN },
+      body: JSON.stringify({ gateway: chosen, command: name, value }),
+    });
+    answer = response.ok ? await response.json()
+      : { accepted: false, by: "view server", detail: (await response.text()).trim() };
+  } catch (error) {
+    answer = { accepted: false, by: "page", detail: `the view server did not answer (${error.message})` };
+  }
+  showReply(name, value, answer);
+}
+
+function makeCommands() {
+  if (COMMAND_SPEC === null) return;
+  $("commands").hidden = false;
+  $("footer").textContent = "commands allowed: each is checked against the gateway's limits " +
+    "before it is sent (docs/view.md)";
+  $("command-forms").append(...Object.entries(COMMAND_SPEC).map(([n, s]) => commandForm(n, s)));
+}
+
 $("gateway").addEventListener("change", (event) => { chosen = event.target.value; queueDraw(); });
 setInterval(() => {
   if (latest !== null && performance.now() - lastFrameAt > SERVER_AWAY_MS) {
@@ -297,4 +385,5 @@ setInterval(() => {
   }
 }, 500);
 makePlots();
+makeCommands();
 connect();
