@@ -85,6 +85,9 @@ def loop_recording(
     0.02 N white noise, 0.05 N drift, saturation; `seed` draws the pulses, dips and noise."""
     ctx = harness.context(seed=seed, rate_hz=fs_hz, layout_mm=layout)
     contacts = harness.make(skin.RidgeContacts, ctx)
+    # The object's travel before it first moves: which end of the skin it starts beyond.
+    first = next((v for _, v in speed_mm_s if v != 0), 0.0)
+    direction = "reverse" if first < 0 else "forward"
     effects = [
         harness.make(
             kinematics.ScriptedObject,
@@ -96,7 +99,7 @@ def loop_recording(
         harness.make(kinematics.RidgeDips, ctx),
         harness.make(actuators.ScriptedGrip, ctx, grip_n=grip_n),
         harness.make(actuators.ScriptedLoad, ctx, mass_kg=0.2),
-        harness.make(skin.FsrForce, ctx, object_length_mm=LOOP_OBJECT_MM),
+        harness.make(skin.FsrForce, ctx, object_length_mm=LOOP_OBJECT_MM, direction=direction),
         contacts,
         harness.make(skin.Hysteresis, ctx),
         harness.make(noise.WhiteNoise, ctx, std=LOOP_WHITE_N),
