@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import shutil
 import tomllib
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from grasplink.bus.lockstep import LockstepNetwork
@@ -80,3 +83,37 @@ def running(folder: Path, seconds: float = 1.0) -> tuple[Gateway, DeviceNode, Lo
     network.start()
     network.run_until(round(seconds * 1e6))
     return gateway, device, network
+
+
+@contextmanager
+def served_device(config: GatewayConfig, device: DeviceNode, name: str = "fsr") -> Iterator:
+    """The live gateway and `device` on one virtual bus, the Modbus server on a free port,
+    once the device is operational: yields (live gateway, Modbus server)."""
+    from grasplink.bus.runner import NodeRunner
+    from grasplink.bus.url import open_bus
+    from grasplink.gateway.live import LiveGateway
+    from grasplink.gateway.snapshot import NodePhase
+    from grasplink.surfaces.modbus.server import ModbusServer
+    from tests.live import wait_until
+
+    channel = f"virtual:device-{uuid.uuid4().hex[:12]}"
+    bus = open_bus(channel)
+    runner = NodeRunner(bus, [device], name=f"test {name}")
+    try:
+        with (
+            LiveGateway(channel, config) as live,
+            ModbusServer(live.edge, "tcp://127.0.0.1:0") as server,
+        ):
+            runner.start()
+            wait_until(
+                lambda: (
+                    live.gateway.latest is not None
+                    and live.gateway.latest.nodes[name].phase is NodePhase.OPERATIONAL
+                ),
+                timeout_s=30,
+                what="the device operational",
+            )
+            yield live, server
+    finally:
+        runner.stop()
+        bus.shutdown()

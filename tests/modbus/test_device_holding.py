@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import struct
 import tomllib
-import uuid
 from pathlib import Path
 
 import pytest
@@ -14,13 +13,10 @@ from pymodbus.client import ModbusTcpClient
 
 from grasplink import cli
 from grasplink.bus.lockstep import LockstepNetwork
-from grasplink.bus.runner import NodeRunner
-from grasplink.bus.url import open_bus
 from grasplink.errors import ConfigError
 from grasplink.gateway.commands import Command
 from grasplink.gateway.config import GatewayConfig, parse_config
 from grasplink.gateway.edge import GatewayEdge
-from grasplink.gateway.live import LiveGateway
 from grasplink.gateway.service import Gateway
 from grasplink.gateway.snapshot import NodePhase
 from grasplink.profiles import objects as obj
@@ -31,8 +27,7 @@ from grasplink.surfaces.modbus.registers import (
     register_map_for,
     settings_of,
 )
-from grasplink.surfaces.modbus.server import ModbusServer
-from tests.device_nodes import FSR, fsr_node, vendor_eds
+from tests.device_nodes import FSR, fsr_node, served_device, vendor_eds
 from tests.live import wait_until
 
 TARGET, CONTROLWORD = obj.HAND_TARGET_GRIP_MN, obj.CONTROLWORD  # RPDO1: 6040h, then 2400h
@@ -241,44 +236,25 @@ def test_print_register_map_documents_the_writable_device_objects(tmp_path, caps
 def test_a_modbus_client_writes_a_device_object_live(tmp_path):
     """The live gateway and the device on one virtual bus, the Modbus server on a free port,
     a pymodbus client writing the target (float32) and reading it back."""
-    channel = f"virtual:devhold-{uuid.uuid4().hex[:12]}"
     config = holding_config(tmp_path, REAL_TARGET, target="real")
     device = fsr_node(tmp_path)
-    bus = open_bus(channel)
-    runner = NodeRunner(bus, [device], name="test fsr")
-    try:
-        with (
-            LiveGateway(channel, config) as live,
-            ModbusServer(live.edge, "tcp://127.0.0.1:0") as server,
-        ):
-            runner.start()
-            wait_until(
-                lambda: (
-                    live.gateway.latest is not None
-                    and live.gateway.latest.nodes["fsr"].phase is NodePhase.OPERATIONAL
-                ),
-                timeout_s=30,
-                what="the device operational",
+    with served_device(config, device) as (_live, server):
+        assert "holding registers 0..6, fsr.2400sub0 at 400" in server.describe()
+        with ModbusTcpClient("127.0.0.1", port=server.address.port, timeout=3) as client:
+            words = ModbusTcpClient.convert_to_registers(12.5, ModbusTcpClient.DATATYPE.FLOAT32)
+            response = client.write_registers(400, words)
+            assert not response.isError(), response
+            wait_until(lambda: device.store.get(TARGET) == 12.5, what="the target on CAN")
+            response = client.read_holding_registers(400, count=2)
+            assert not response.isError() and response.registers == words
+            value = ModbusTcpClient.convert_from_registers(
+                response.registers, ModbusTcpClient.DATATYPE.FLOAT32
             )
-            assert "holding registers 0..6, fsr.2400sub0 at 400" in server.describe()
-            with ModbusTcpClient("127.0.0.1", port=server.address.port, timeout=3) as client:
-                words = ModbusTcpClient.convert_to_registers(12.5, ModbusTcpClient.DATATYPE.FLOAT32)
-                response = client.write_registers(400, words)
-                assert not response.isError(), response
-                wait_until(lambda: device.store.get(TARGET) == 12.5, what="the target on CAN")
-                response = client.read_holding_registers(400, count=2)
-                assert not response.isError() and response.registers == words
-                value = ModbusTcpClient.convert_from_registers(
-                    response.registers, ModbusTcpClient.DATATYPE.FLOAT32
-                )
-                assert value == 12.5
-                response = client.write_registers(400, [0x7FC0, 0])  # NaN
-                assert response.isError() and response.exception_code == 0x03
-                response = client.write_register(401, 1)  # half of it
-                assert response.isError() and response.exception_code == 0x02
-                response = client.read_holding_registers(0, count=7)
-                assert not response.isError()  # the fixed map, as before
-            assert device.store.get(TARGET) == 12.5
-    finally:
-        runner.stop()
-        bus.shutdown()
+            assert value == 12.5
+            response = client.write_registers(400, [0x7FC0, 0])  # NaN
+            assert response.isError() and response.exception_code == 0x03
+            response = client.write_register(401, 1)  # half of it
+            assert response.isError() and response.exception_code == 0x02
+            response = client.read_holding_registers(0, count=7)
+            assert not response.isError()  # the fixed map, as before
+    assert device.store.get(TARGET) == 12.5

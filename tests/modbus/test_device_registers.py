@@ -7,17 +7,13 @@ from __future__ import annotations
 import math
 import shutil
 import struct
-import uuid
 from pathlib import Path
 
 import pytest
 from pymodbus.client import ModbusTcpClient
 
 from grasplink import cli
-from grasplink.bus.runner import NodeRunner
-from grasplink.bus.url import open_bus
 from grasplink.errors import ConfigError
-from grasplink.gateway.live import LiveGateway
 from grasplink.gateway.snapshot import NodePhase
 from grasplink.surfaces.modbus.docgen import render_modbus_markdown
 from grasplink.surfaces.modbus.registers import (
@@ -26,8 +22,14 @@ from grasplink.surfaces.modbus.registers import (
     register_map,
     register_map_for,
 )
-from grasplink.surfaces.modbus.server import ModbusServer
-from tests.device_nodes import GRIP, STATUSWORD, device_config, fsr_node, running
+from tests.device_nodes import (
+    GRIP,
+    STATUSWORD,
+    device_config,
+    fsr_node,
+    running,
+    served_device,
+)
 from tests.live import wait_until
 from tests.modbus.conftest import mbpoll, mbpoll_values
 
@@ -146,29 +148,10 @@ def test_print_register_map_documents_a_configurations_device_objects(tmp_path, 
 @pytest.fixture
 def served(tmp_path: Path):
     """The live gateway and the device on one virtual bus, the Modbus server on a free port."""
-    channel = f"virtual:devregs-{uuid.uuid4().hex[:12]}"
     config = device_config(tmp_path, ENTRIES)
     device = fsr_node(tmp_path, values={(GRIP, 0): 4.75, (STATUSWORD, 0): 0x0237})
-    bus = open_bus(channel)
-    runner = NodeRunner(bus, [device], name="test fsr")
-    try:
-        with (
-            LiveGateway(channel, config) as live,
-            ModbusServer(live.edge, "tcp://127.0.0.1:0") as server,
-        ):
-            runner.start()
-            wait_until(
-                lambda: (
-                    live.gateway.latest is not None
-                    and live.gateway.latest.nodes["fsr"].phase is NodePhase.OPERATIONAL
-                ),
-                timeout_s=30,
-                what="the device operational",
-            )
-            yield live, server
-    finally:
-        runner.stop()
-        bus.shutdown()
+    with served_device(config, device) as served:
+        yield served
 
 
 @pytest.mark.slow
