@@ -15,6 +15,8 @@ HEARTBEAT_BASE = 0x700
 LSS_SLAVE_COB_ID = 0x7E4  # LSS slave -> master (CiA 305)
 LSS_MASTER_COB_ID = 0x7E5  # LSS master -> slaves
 NODE_ID_MASK = 0x7F
+CAN_ID_MASK = 0x7FF  # an 11-bit CAN-ID (the COB-ID objects' low bits)
+SYNC_TYPE_MAX = 240  # PDO transmission types 0..240 are SYNC-synchronous (CiA 301)
 UNCONFIGURED_NODE_ID = 0xFF  # no node-ID yet: the node answers only LSS (CiA 305)
 
 # CAN-IDs no PDO, SYNC or EMCY may use (CiA 301 7.3.5, "restricted CAN-IDs").

@@ -14,6 +14,7 @@ from __future__ import annotations
 import canopen.objectdictionary as cod
 
 from grasplink.core.frames import (
+    CAN_ID_MASK,
     HEARTBEAT_BASE,
     LSS_MASTER_COB_ID,
     LSS_SLAVE_COB_ID,
@@ -35,7 +36,7 @@ from grasplink.devices import emcy as em
 from grasplink.devices.app import DeviceApp
 from grasplink.devices.heartbeat import HeartbeatConsumer, HeartbeatProducer
 from grasplink.devices.lss import LssSlave
-from grasplink.devices.pdo import CAN_ID_MASK, PdoEngine
+from grasplink.devices.pdo import PdoEngine
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sdo_server import SdoServer
 from grasplink.devices.store import APPLICATION_AREA, COMMUNICATION_AREA, ObjectStore, Value

@@ -27,7 +27,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from grasplink.core.frames import Frame, is_restricted_can_id
+from grasplink.core.frames import CAN_ID_MASK, SYNC_TYPE_MAX, Frame, is_restricted_can_id
 from grasplink.devices import emcy as em
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.store import ObjectStore, Value
@@ -36,10 +36,8 @@ from grasplink.profiles import objects as obj
 COB_ID_INVALID = 0x80000000
 COB_ID_NO_RTR = 0x40000000
 COB_ID_EXTENDED = 0x20000000
-CAN_ID_MASK = 0x7FF
 MAX_PDO_BITS = 64
 MAX_PDOS = 512
-SYNC_TYPE_MAX = 240
 TYPE_EVENT_MANUFACTURER = 254
 TYPE_EVENT_PROFILE = 255
 # Packets a synchronous packet TPDO keeps for its next due SYNC; beyond, the oldest go

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 from canopen.objectdictionary.datatypes import FLOAT_TYPES
 
+from grasplink.core.frames import SYNC_TYPE_MAX
 from grasplink.core.params import Params
 from grasplink.decoding.registry import DEFAULT_DECODER, check_live_decoder
 from grasplink.errors import ConfigError
@@ -156,7 +157,6 @@ MODBUS_TYPES: dict[str, frozenset[str]] = {
         | {"UNSIGNED8", "UNSIGNED16", "UNSIGNED24"}
     ),
 }
-SYNC_TYPE_MAX = 240  # transmission types 0..240 are SYNC-synchronous (CiA 301)
 MODBUS_WORDS = {"int16": 1, "uint16": 1, "int32": 2, "uint32": 2, "float32": 2}
 #: Input registers below this are the fixed map's (it stays within one read of 125, and
 #: grows only at its end): a configured register starts here or above.

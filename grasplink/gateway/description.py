@@ -25,6 +25,7 @@ from typing import Any
 import canopen
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable, datatypes
 
+from grasplink.core.frames import CAN_ID_MASK
 from grasplink.core.params import Params
 from grasplink.errors import ConfigError
 from grasplink.profiles import find_variable, object_key
@@ -112,7 +113,6 @@ def sdo_writes(p: Params, od_of: Callable[[], canopen.ObjectDictionary]) -> tupl
 PDO_COMM = ((0x1400, 0x1600), (0x1800, 0x1A00))  # (first communication, first mapping) objects
 PDO_COUNT = 512  # PDOs of each direction (CiA 301)
 COB_ID_INVALID = 0x80000000
-CAN_ID_MASK = 0x7FF
 
 
 def dcf_writes(od: canopen.ObjectDictionary) -> tuple[SdoWrite, ...]:

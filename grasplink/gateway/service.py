@@ -42,7 +42,14 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.core.frames import EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, Frame, function_of
+from grasplink.core.frames import (
+    CAN_ID_MASK,
+    EMCY_BASE,
+    HEARTBEAT_BASE,
+    NMT_COB_ID,
+    Frame,
+    function_of,
+)
 from grasplink.core.nmt import NmtCommand, NmtState
 from grasplink.core.params import Params
 from grasplink.decoding.base import SlipEstimate
@@ -265,7 +272,7 @@ class Gateway(NmtMaster):
                     if data is None
                     else int.from_bytes(data, "little")
                 )
-                can_ids.add(int(cob_id) & 0x7FF)
+                can_ids.add(int(cob_id) & CAN_ID_MASK)
         return frozenset(can_ids)
 
     def _skin_setup(self) -> None:

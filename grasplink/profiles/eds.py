@@ -104,7 +104,8 @@ MANDATORY_OBJECTS = (0x1000, 0x1001, 0x1018)
 COMMUNICATION_AREA = range(0x1000, 0x2000)
 REQUIRED_SECTIONS = ("FileInfo", "DeviceInfo", "DummyUsage", "Comments", *OBJECT_LISTS)
 _OTHER_SECTIONS = {"DeviceComissioning"}
-_INT_KEYS_DEVICEINFO = (
+#: the [DeviceInfo] keys whose values are numbers (CiA 306)
+DEVICE_INFO_NUMBERS = (
     *(f"BaudRate_{r}" for r in (10, 20, 50, 125, 250, 500, 800, 1000)),
     "VendorNumber",
     "ProductNumber",
@@ -263,7 +264,7 @@ class _Checker:
                 keys.add(key.lower())
 
     def _check_info_sections(self) -> None:
-        for key in _INT_KEYS_DEVICEINFO:
+        for key in DEVICE_INFO_NUMBERS:
             self._int_option("DeviceInfo", key, required=False)
         lines = self._int_option("Comments", "Lines", required=True)
         for n in range(1, (lines or 0) + 1):

@@ -32,7 +32,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from grasplink.errors import ConfigError, EdsError
-from grasplink.profiles.eds import ACCESS_TYPES, DATA_TYPES, OBJECT_KEYS, OBJECT_LISTS
+from grasplink.profiles.eds import (
+    ACCESS_TYPES,
+    DATA_TYPES,
+    DEVICE_INFO_NUMBERS,
+    OBJECT_KEYS,
+    OBJECT_LISTS,
+)
 
 if TYPE_CHECKING:
     from canopen.objectdictionary import ObjectDictionary
@@ -62,21 +68,7 @@ _FILE_INFO_KEYS = (
     "LastEDS",
 )
 _DEVICE_INFO_STRINGS = ("VendorName", "ProductName", "OrderCode")
-_DEVICE_INFO_NUMBERS = (
-    "VendorNumber",
-    "ProductNumber",
-    "RevisionNumber",
-    *(f"BaudRate_{rate}" for rate in (10, 20, 50, 125, 250, 500, 800, 1000)),
-    "SimpleBootUpMaster",
-    "SimpleBootUpSlave",
-    "Granularity",
-    "DynamicChannelsSupported",
-    "CompactPDO",
-    "GroupMessaging",
-    "NrOfRXPDO",
-    "NrOfTXPDO",
-    "LSS_Supported",
-)
+_DEVICE_INFO_NUMBERS = (*DEVICE_INFO_NUMBERS, "CompactPDO")  # (read, and dropped: see below)
 _COMMISSIONING_KEYS = (
     "NodeID",
     "NodeName",
