@@ -304,6 +304,34 @@ def test_a_slip_still_felt_raises_the_level_every_repeat_period_up_to_max_level(
     assert np.allclose(np.diff([t for t, _ in landed]), 2.0)
 
 
+def test_a_wearer_trained_on_the_damped_task_adds_the_slip_level_to_the_level_held():
+    """slip_response_adds: the speed measures the grip missing, so at e2 a level-2 slip
+    asks for e4, and the next slow slip (level 1) for one more, e5."""
+    times = sample_times_us(1000, 10.0)
+    inputs = display(times, [(0.0, 2.0, slip(2)), (4.0, 10.0, slip(1))])
+    out, _ = drive(
+        times, inputs, **EXACT, slip_repeat_s=0, rest_level=2, max_level=5, slip_response_adds=True
+    )
+    assert [v for _, v in steps(times, out[LEVEL])] == [4.0, 5.0]
+
+
+def test_an_added_response_never_lowers_the_aim_and_repeats_add_one_step():
+    times = sample_times_us(1000, 12.0)
+    inputs = display(times, [(0.0, 12.0, slip(3))])
+    out, _ = drive(
+        times,
+        inputs,
+        **EXACT,
+        slip_repeat_s=3.0,
+        rest_level=1,
+        max_level=5,
+        slip_response_adds=True,
+    )
+    landed = steps(times, out[LEVEL])
+    assert [v for _, v in landed] == [4.0, 5.0]  # e1 + 3, then one step 3 s later, capped at e5
+    assert np.isclose(landed[1][0] - landed[0][0], 3.0)
+
+
 def test_the_slip_response_map_is_configurable():
     times = sample_times_us(1000, 4.0)
     inputs = display(times, [(0.0, 4.0, slip(1))])

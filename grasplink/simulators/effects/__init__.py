@@ -1,5 +1,5 @@
 """Every effect a scene can ask for; importing this package registers them all."""
 
-from grasplink.simulators.effects import actuators, emg, kinematics, noise, skin, wearer
+from grasplink.simulators.effects import actuators, damped, emg, kinematics, noise, skin, wearer
 
-__all__ = ["actuators", "emg", "kinematics", "noise", "skin", "wearer"]
+__all__ = ["actuators", "damped", "emg", "kinematics", "noise", "skin", "wearer"]

@@ -171,6 +171,7 @@ class Cue:
     belt: int  # NOTHING, FORCE or SLIP
     position: float  # fractional index into the belt's level table (nan for NOTHING)
     decide_us: int
+    held_level: int = 0  # the level the wearer aimed at when the display came up
 
 
 @register
@@ -264,6 +265,7 @@ class WearerVirtual(Effect):
                 f"expected levels that never fall for a faster slip, got {list(responses)}",
             )
         self.slip_response = tuple(int(r) for r in responses)
+        self.slip_adds = params.boolean("slip_response_adds", False)
         self.slip_step = params.integer("slip_step", 1, low=0, high=LEVELS)
         self.slip_repeat_us = _period_us(params, "slip_repeat_s", 2.0)
         self.relax_force_level = params.integer(
@@ -373,7 +375,9 @@ class WearerVirtual(Effect):
             self.counts["dropped_cues"] += 1
         previous_us = self._queue[-1].decide_us if self._queue else self._last_decide_us
         decide_us = max(onset_us + reaction_us - self.motor_delay_us, now_us, previous_us)
-        self._queue.append(Cue(onset_us, self._belt_of(key), float(position), decide_us))
+        self._queue.append(
+            Cue(onset_us, self._belt_of(key), float(position), decide_us, self.intended)
+        )
 
     def _identify(self, cue: Cue) -> int:
         """The level the wearer names for the cue's display: a draw from the confusion row."""
@@ -396,12 +400,22 @@ class WearerVirtual(Effect):
         self.perceived_belt, self.perceived_level = cue.belt, self._identify(cue)
         self._last_eval_us = now_us
         if cue.belt == SLIP:
-            self._contract(now_us, self._slip_target())
+            self._contract(now_us, self._slip_target(cue.held_level))
         self._arm_timer()
 
-    def _slip_target(self) -> int:
-        """Slip felt: at least the level mapped to the perceived slip, and `slip_step` harder."""
-        wanted = max(self.slip_response[self.perceived_level - 1], self.intended + self.slip_step)
+    def _slip_target(self, held_level: int | None = None) -> int:
+        """Slip felt: at least the level mapped to the perceived slip, and `slip_step` harder.
+
+        With `slip_response_adds` the mapped level is added to the level held when the
+        display came up (the speed measured the grip missing then), never lowering the aim;
+        a slip still felt `slip_repeat_s` later (`held_level` None) adds `slip_step`."""
+        response = self.slip_response[self.perceived_level - 1]
+        if not self.slip_adds:
+            wanted = max(response, self.intended + self.slip_step)
+        elif held_level is None:
+            wanted = self.intended + self.slip_step
+        else:
+            wanted = max(self.intended, held_level + response)
         return min(self.max_level, wanted)
 
     def _on_timer(self, now_us: int) -> None:
