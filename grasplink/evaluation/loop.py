@@ -36,6 +36,7 @@ from grasplink.bus.faults import ErrorFrame
 from grasplink.core.frames import Frame
 from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import ConfigError, PdoError
+from grasplink.evaluation import least_force
 from grasplink.gateway import roles
 from grasplink.gateway.config import EmgConfig, GatewayConfig, scene_config
 from grasplink.gateway.emg import EmgCalibration, EmgIntentDecoder
@@ -76,6 +77,7 @@ START_MM = -8.0  # the leading edge 8 mm before the first ridge (loop_headline.t
 # (2 s), release (2 N/s from at most 5 + 0.1 * 150 = 20 N: 7.5 s even with no floor) and
 # the object to slip again if that release went too far; see `Trial.duration_s`.
 SETTLE_S = 12.0
+TASKS = ("pulled", "least_force")
 THESIS_THRESHOLD_MM_S = 45.0  # ReflexConfig default: the human limit on an 80 mm skin
 MIN_REST_S = 0.1  # a rest shorter than this (a ridge dip touching 0 mm/s) is not a stop
 REFLEX = ReflexConfig()
@@ -99,6 +101,7 @@ class Trial:
     seed: int
     threshold_mm_s: float = THESIS_THRESHOLD_MM_S
     settle_s: float = SETTLE_S
+    task: str = "pulled"  # or "least_force" (evaluation/least_force.py)
 
     @property
     def duration_s(self) -> float:
@@ -109,7 +112,17 @@ class Trial:
 
 
 def scene_data(trial: Trial) -> dict:
-    """The scene of a trial: loop_headline.toml's nodes and physics, the trial's settings."""
+    """The scene of a trial: loop_headline.toml's nodes and physics, the trial's settings;
+    the least-force task swaps the object, its load and the wearer's training."""
+    if trial.task not in TASKS:
+        raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {trial.task!r}")
+    data = _headline_scene(trial)
+    if trial.task == "least_force":
+        return least_force.adapt(data, trial.speed_mm_s, START_S, START_MM)
+    return data
+
+
+def _headline_scene(trial: Trial) -> dict:
     return {
         "scene": {
             "name": f"loop-{trial.mode}-{'reflex' if trial.reflex else 'noreflex'}"

@@ -1,0 +1,156 @@
+"""The least-force task: its objects, its scene, its trials and its report."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grasplink.controllers import build_controllers
+from grasplink.errors import ConfigError
+from grasplink.evaluation import least_force, loop, loop_task
+from grasplink.simulators.effects.damped import DampedObject
+from grasplink.simulators.harness import context, make, run, sample_times_us
+from grasplink.simulators.scene import parse_scene
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize("speed_mm_s", least_force.SPEEDS_MM_S)
+def test_each_task_speed_is_as_many_levels_missing_as_its_display_level(speed_mm_s):
+    task = least_force.TaskObject(speed_mm_s)
+    display_level = 1 + int(speed_mm_s // least_force.LEVEL_SPAN_MM_S)
+    assert task.levels_missing == display_level
+    held_n = least_force.GRIP_LEVELS_N[task.stopping_level]
+    below_n = least_force.GRIP_LEVELS_N[task.stopping_level - 1]
+    assert below_n < task.holding_grip_n <= held_n  # the level below does not stop it
+    above = min(task.stopping_level + 1, len(least_force.GRIP_LEVELS_N) - 1)
+    if above != task.stopping_level:  # one level too many breaks it
+        assert least_force.GRIP_LEVELS_N[above] > task.crush_limit_n > held_n
+
+
+@pytest.mark.parametrize("speed_mm_s", least_force.SPEEDS_MM_S)
+def test_the_damped_object_slips_at_the_task_speed_at_rest_and_stops_at_its_level(speed_mm_s):
+    task = least_force.TaskObject(speed_mm_s)
+    times = sample_times_us(1000, 0.5)
+    for grip_n, expected_mm_s in (
+        (least_force.GRIP_LEVELS_N[least_force.REST_LEVEL], speed_mm_s),
+        (least_force.GRIP_LEVELS_N[task.stopping_level], 0.0),
+    ):
+        effect = make(
+            DampedObject,
+            context(seed=1, rate_hz=1000),
+            damping_n_s_per_mm=least_force.DAMPING_N_S_PER_MM,
+        )
+        out = run(
+            [effect],
+            times,
+            {
+                "hand.grip_n": np.full(len(times), grip_n),
+                "load.force_n": np.full(len(times), task.load_n),
+            },
+        )
+        assert np.allclose(out["object.speed_mm_s"], expected_mm_s)
+
+
+def test_the_shipped_scene_is_the_task_template_at_20_mm_s():
+    data = tomllib.loads((ROOT / "scenes" / "loop_least_force.toml").read_text())
+    trial = loop.Trial("slip_speed", False, 20.0, 7, task="least_force")
+    template = loop.scene_data(trial)
+    assert data["effects"] == template["effects"]
+    assert data["controller"]["feedback"] == template["controller"]["feedback"]
+    assert data["controller"]["reflex"]["enabled"] is False
+
+
+def test_a_task_trial_scene_parses_and_a_bad_task_or_speed_is_refused():
+    data = loop.scene_data(loop.Trial("slip_occurrence", False, 4.0, 1, task="least_force"))
+    scene = parse_scene(data, "<task>")
+    assert [e.kind for e in scene.effects][:3] == [
+        "hand.actuator",
+        "load.scripted",
+        "object.damped",
+    ]
+    with pytest.raises(ConfigError, match=r"task: expected one of pulled, least_force"):
+        loop.scene_data(loop.Trial("slip_speed", False, 20.0, 1, task="thrown"))
+    with pytest.raises(ValueError, match="slip speed must be > 0"):
+        least_force.adapt(data, float("nan"), 1.0, -8.0)
+
+
+def test_a_task_trial_never_slips_faster_than_the_task_speed():
+    """The wearer only adds grip, so the object never moves faster than at the resting
+    grip: a drop takes at least the crossing time at the task speed, a stop covers at most
+    the task speed times its time."""
+    speed_mm_s = 28.0
+    trial = loop.Trial("slip_speed", False, speed_mm_s, 2, settle_s=1.0, task="least_force")
+    out = loop.run_trial(trial, build_controllers)
+    assert out.onset_s == pytest.approx(loop.START_S, abs=0.002)
+    crossing_s = (loop.SKIN_END_MM - loop.START_MM) / speed_mm_s
+    if out.dropped:
+        assert out.end_s - out.onset_s >= crossing_s - 0.01
+    if out.first_stop_s is not None:
+        travelled_mm = out.first_stop_mm - loop.START_MM
+        assert travelled_mm <= speed_mm_s * (out.first_stop_s - out.onset_s) + 0.1
+    assert out.grip_mean_n >= least_force.GRIP_LEVELS_N[least_force.REST_LEVEL] - 0.01
+
+
+def rows_for(speed_mm_s, mode, outcomes):
+    """Result rows as run_trials gives them: (stopped, crushed, dropped) per trial."""
+    return [
+        {
+            "mode": mode,
+            "speed_mm_s": speed_mm_s,
+            "stopped": s,
+            "crushed": c,
+            "dropped": d,
+            "slip_distance_mm": 30.0 if s else None,
+            "time_to_stop_s": 2.0 if s else None,
+            "grip_mean_n": 9.0,
+            "i_emg": 0.3,
+            "belt_latency_s": 1.0,
+        }
+        for s, c, d in outcomes
+    ]
+
+
+def test_success_is_at_rest_unbroken_and_the_verdict_needs_two_standard_errors():
+    rows = []
+    for v in least_force.SPEEDS_MM_S:
+        rows += rows_for(v, "slip_speed", [(True, False, False)] * 9 + [(True, True, False)])
+        rows += rows_for(
+            v, "slip_occurrence", [(False, False, True)] * 8 + [(True, False, False)] * 2
+        )
+    figures = loop_task.aggregate(rows)
+    assert figures["speeds"]["slip_speed"]["20"]["success_pct"] == 90.0
+    assert figures["speeds"]["slip_speed"]["20"]["crushed_pct"] == 10.0
+    assert figures["compare"]["high"]["verdict"] == "beats"
+    assert figures["compare"]["high"]["diff_pct"] == pytest.approx(70.0)
+    close = rows_for(20.0, "slip_speed", [(True, False, False)] * 5 + [(False, False, True)] * 5)
+    close += rows_for(
+        20.0, "slip_occurrence", [(True, False, False)] * 4 + [(False, False, True)] * 6
+    )
+    assert loop_task.aggregate(close)["compare"]["20"]["verdict"] == "ties"
+
+
+def test_the_report_renders_the_verdict_and_every_speed(tmp_path):
+    rows = []
+    for v in least_force.SPEEDS_MM_S:
+        rows += rows_for(v, "slip_speed", [(True, False, False)])
+        rows += rows_for(v, "slip_occurrence", [(False, True, False)])
+    results = {
+        "grid": {
+            "modes": list(loop_task.TASK_MODES),
+            "speeds_mm_s": list(least_force.SPEEDS_MM_S),
+            "seeds": [1],
+            "trials": len(rows),
+        },
+        "objects": loop_task.objects(),
+        "figures": loop_task.aggregate(rows),
+    }
+    text = loop_task.render(results)
+    assert "slip speed ties slip occurrence" in text  # one trial each: no power
+    for v in least_force.SPEEDS_MM_S:
+        assert f"| {v:g} |" in text
+    loop_task.plot_report(results, tmp_path / "task.png")
+    assert (tmp_path / "task.png").stat().st_size > 10_000
