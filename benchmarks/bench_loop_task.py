@@ -1,18 +1,20 @@
 """The least-force task in the closed loop: slip-speed against slip-occurrence feedback.
 
 Writes docs/benchmarks/loop_task.md, .json and .png (grasplink/evaluation/loop_task.py).
-Usage: `python benchmarks/bench_loop_task.py [--quick] [--out DIR] [--workers N]`.
+Usage: `python benchmarks/bench_loop_task.py [--quick] [--out DIR] [--workers N]`;
+`--report-only loop_task.json` re-renders the doc and plot from a run's figures.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
 from grasplink.controllers import build_controllers
 from grasplink.evaluation.decoding_bench import default_out_dir
-from grasplink.evaluation.loop_task import run_report
+from grasplink.evaluation.loop_task import plot_report, render, run_report
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -20,8 +22,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="one seed (8 trials)")
     parser.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/")
     parser.add_argument("--workers", type=int, default=2, help="processes running trials")
+    parser.add_argument("--report-only", type=Path, default=None, metavar="JSON")
     args = parser.parse_args(argv)
     out = args.out if args.out is not None else default_out_dir()
+    if args.report_only is not None:
+        results = json.loads(args.report_only.read_text())
+        out.mkdir(parents=True, exist_ok=True)
+        plot_report(results, out / "loop_task.png")
+        (out / "loop_task.md").write_text(render(results))
+        print(f"rendered {out}/loop_task.md, loop_task.png from {args.report_only}")
+        return 0
     results = run_report(
         out, controllers_for=build_controllers, quick=args.quick, workers=args.workers
     )

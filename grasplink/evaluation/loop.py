@@ -311,6 +311,8 @@ class Outcome:
     belt_first_mrad_s: float | None = None  # its target velocity
     slip_belt_latency_s: float | None = None  # first slip-belt RPDO (velocity < 0) after onset
     force_belt_max_mrad_s: float | None = None  # fastest force-belt RPDO after onset
+    slip_belt_max_mrad_s: float | None = None  # fastest slip-belt RPDO after onset (magnitude)
+    slip_shown_after_stop_s: float | None = None  # last slip-belt RPDO after the final stop
     reflex_latency_s: float | None = None  # first hand RPDO after onset above voluntary grip
 
 
@@ -386,6 +388,11 @@ def outcome(
     slip_belt_latency = float(belt_t[slip_belt[0]] - onset_s) if len(slip_belt) else None
     force_belt = belt_v[(belt_t >= onset_s) & (belt_v > 0)]
     force_belt_max = float(np.max(force_belt)) if len(force_belt) else None
+    slip_belt_max = float(-np.min(belt_v[slip_belt])) if len(slip_belt) else None
+    shown_after_stop = None
+    if stop_s is not None:
+        late = belt_t[(belt_t >= stop_s) & (belt_v < 0)]
+        shown_after_stop = float(late[-1] - stop_s) if len(late) else 0.0
     hand_t, hand_n = hand
     # a command that rose above the wearer's grip: the grip command is slew-limited, so a
     # command still ramping down to a grip the wearer relaxed to is above it, yet no reflex
@@ -415,6 +422,8 @@ def outcome(
         belt_first_mrad_s=belt_first,
         slip_belt_latency_s=slip_belt_latency,
         force_belt_max_mrad_s=force_belt_max,
+        slip_belt_max_mrad_s=slip_belt_max,
+        slip_shown_after_stop_s=shown_after_stop,
         reflex_latency_s=reflex_latency,
     )
 

@@ -79,7 +79,19 @@ def summarise(rows: Sequence[dict]) -> dict:
         "grip_mean_n": median([r["grip_mean_n"] for r in rows]),
         "i_emg": median([r["i_emg"] for r in rows]),
         "belt_latency_median_s": median([r["belt_latency_s"] for r in rows]),
+        "shown_too_high_pct": pct([shown_too_high(r) for r in rows]),
+        "shown_after_stop_median_s": median([r.get("slip_shown_after_stop_s") for r in rows]),
     }
+
+
+def shown_too_high(row: dict) -> bool:
+    """The slip belt ran faster than the level of the object's slip at the resting grip
+    (the fastest it ever slid), so the display asked for more grip than was missing."""
+    shown = row.get("slip_belt_max_mrad_s")
+    if shown is None:
+        return False
+    level = least_force.TaskObject(row["speed_mm_s"]).levels_missing
+    return bool(shown > least_force.SLIP_TABLE[level - 1][1])
 
 
 def compare(a: dict, b: dict) -> dict:
@@ -255,8 +267,9 @@ def render(results: dict) -> str:
         "## Per mode and speed",
         "",
         "| mode | slip speed mm/s | trials | success % | crushed % | dropped % | distance mm | "
-        "time to stop s | grip N (median of means) | I_EMG | belt s |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "time to stop s | grip N (median of means) | I_EMG | belt s | shown too fast % | "
+        "slip shown after the stop s |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for mode in g["modes"]:
         for key, s in f["speeds"][mode].items():
@@ -265,7 +278,8 @@ def render(results: dict) -> str:
                 f"{_f(s['crushed_pct'])} | {_f(s['dropped_pct'])} | "
                 f"{_f(s['distance_median_mm'])} | {_f(s['time_to_stop_median_s'], 2)} | "
                 f"{_f(s['grip_mean_n'], 1)} | {_f(s['i_emg'], 2)} | "
-                f"{_f(s['belt_latency_median_s'], 2)} |"
+                f"{_f(s['belt_latency_median_s'], 2)} | {_f(s['shown_too_high_pct'])} | "
+                f"{_f(s['shown_after_stop_median_s'], 2)} |"
             )
     lines += ["", "![success against slip speed](loop_task.png)", ""]
     return "\n".join(lines)
