@@ -51,6 +51,20 @@ SLIPPING = "return document.getElementById('slip').dataset.slip === 'true'"
 SHOT_ENV = "GRASPLINK_VIEW_SCREENSHOT"  # where to copy the slip's screenshot (docs/view.png)
 
 
+# the heartbeat age column: {node: age in s} once every row shows one, none flagged overdue
+HEARTBEAT_AGES = """
+const rows = [...document.querySelectorAll('#nodes tbody tr')];
+const ages = rows.map((tr) => [tr.dataset.node, tr.querySelector('td.heartbeat')]);
+if (!rows.length || ages.some(([, td]) => !/^\\d+\\.\\d\\d s$/.test(td.textContent)
+    || td.dataset.overdue)) return null;
+return Object.fromEntries(ages.map(([node, td]) => [node, parseFloat(td.textContent)]));
+"""
+HEARTBEATS_OVERDUE = (
+    "const cells = [...document.querySelectorAll('#nodes tbody td.heartbeat')];"
+    "return cells.length > 0 && cells.every((td) => td.dataset.overdue === 'true')"
+)
+
+
 def headline(folder: Path) -> Path:
     text = (ROOT / "scenes" / "loop_headline.toml").read_text()
     text, n = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {DURATION_S}", text)
@@ -123,6 +137,8 @@ def test_the_headline_shows_live_nodes_then_a_decoded_slip_then_lost_nodes(
             wait_for_page(
                 browser, phases_are(browser, "lost", KINDS), "the stopped nodes lost", READY_S
             )
+            # their heartbeats older than the gateway's consumer time: flagged
+            wait_for_page(browser, HEARTBEATS_OVERDUE, "the lost nodes' heartbeats overdue")
             alarms = browser.execute_script(
                 "return [...document.querySelectorAll('#alarms li')].map((li) => li.dataset.alarm)"
             )
@@ -151,6 +167,8 @@ def test_garbage_a_broker_away_and_back_and_a_server_gone_show_on_the_page(
         wait_for_page(browser, phases_are(browser, "operational", KINDS), "four nodes live")
         wait_for_page(browser, "return document.body.dataset && !document.body.classList"
                       ".contains('stale')", "a live page")  # fmt: skip
+        ages = wait_for_page(browser, HEARTBEAT_AGES, "each node's heartbeat age")
+        assert set(ages) == set(KINDS), ages  # heard within its consumer time: not flagged
         # garbage on the gateway's tree: counted, named, and the page goes on
         subprocess.run(
             ["mosquitto_pub", "-p", str(broker.port), "-t", "grasplink/arm-7/node/skin/values",
