@@ -846,8 +846,10 @@ class Gateway(NmtMaster):
     def snapshot(self) -> Snapshot:
         """Everything a surface wants, typed, with units (see snapshot.py)."""
         nodes = {}
+        consumer_ms = self.node_consumer_us // 1000
         for link in self.links.values():
             status = self.nodes.get(link.node_id)
+            heard_us = status.last_seen_us if status else None
             lost_packets = None
             if link.kind == "skin" and self.skin_frames is not None:
                 lost_packets = self.skin_frames.stats.lost_packets
@@ -860,7 +862,10 @@ class Gateway(NmtMaster):
                 failure=link.failure or None,
                 pdos_dropped=sum(link.pdos_dropped.values()),
                 lost_packets=lost_packets,
+                heartbeat_consumer_ms=consumer_ms,
                 pdos_rx=link.pdos_rx,
+                # the gateway's clock, so a replay or a virtual-time run ages like a live one
+                heartbeat_age_s=None if heard_us is None else (self.now_us - heard_us) / 1e6,
             )
         est = self.last_estimate
         belt = self.belt_output.belt if self.belt_output else None

@@ -15,8 +15,8 @@ Field metadata says what the type alone does not:
 - `integer`: how a count is carried where it is not a signed 32-bit number
   ("uint32", "uint64");
 - `counter`: a count of events, reported with the counters (JSON health) rather than
-  as the node's state; `fast`: it changes with nearly every frame, so it is reported
-  once per period, not on change;
+  as the node's state; `fast`: it changes with nearly every frame (or every snapshot:
+  an age), so it is reported once per period, not on change;
 - `kinds`: the node kinds that have the field (the others leave it None);
 - `hex_code`: an error code, carried as "0xXXXX" text;
 - `node_values`: a section holding one node kind's decoded values;
@@ -102,7 +102,11 @@ class NodeSnapshot:
     lost_packets: int | None = field(
         metadata={**_COUNTER, "kinds": ("skin",), "omit_if_none": True}
     )
+    # how long the gateway waits for its heartbeat before the node is lost
+    heartbeat_consumer_ms: int = field(metadata=_UINT32)
     pdos_rx: int = field(metadata=_FAST_COUNTER)  # TPDOs received and decoded
+    # since its last heartbeat (a boot-up too) at the snapshot's time; None: not heard yet
+    heartbeat_age_s: float | None = field(metadata={"fast": True})
 
 
 @dataclass(frozen=True, slots=True)

@@ -7,6 +7,7 @@ import json
 
 import pytest
 
+from grasplink.core.frames import HEARTBEAT_BASE, Frame
 from grasplink.core.nmt import NmtState
 from grasplink.gateway.config import load_config
 from grasplink.gateway.plausibility import REJECTION_KEYS
@@ -49,6 +50,32 @@ def test_to_dict_is_json_ready_with_enums_by_name_and_the_emcy_code_as_text():
     assert snap.to_dict() is data, "made once per snapshot"
 
 
+def test_heartbeat_age_is_on_the_gateways_clock_from_each_nodes_last_heartbeat():
+    """None before a node is heard; its boot-up and each heartbeat start it again; a silent
+    node's age goes on past the consumer time, when the node is lost (virtual time)."""
+    gateway = Gateway(load_config(None))
+    skin = gateway.by_kind["skin"].node_id
+    consumer_ms = gateway.snapshot().nodes["skin"].heartbeat_consumer_ms
+    assert consumer_ms == gateway.node_consumer_us // 1000 == 500  # 3 x 100 ms + 200 ms
+    gateway.start(0)
+    gateway.advance(400_000)
+    assert {n.heartbeat_age_s for n in gateway.snapshot().nodes.values()} == {None}
+    gateway.receive(Frame(HEARTBEAT_BASE + skin, bytes([NmtState.INITIALISING])), 1_000_000)
+    gateway.advance(1_250_000)
+    ages = {kind: node.heartbeat_age_s for kind, node in gateway.snapshot().nodes.items()}
+    assert ages == {"skin": 0.25, "emg": None, "belt": None, "hand": None}
+    gateway.receive(Frame(HEARTBEAT_BASE + skin, bytes([NmtState.PRE_OPERATIONAL])), 1_300_000)
+    gateway.advance(1_300_000)
+    assert gateway.snapshot().nodes["skin"].heartbeat_age_s == 0.0
+    gateway.advance(1_300_000 + consumer_ms * 1000)
+    node = gateway.snapshot().nodes["skin"]
+    assert node.heartbeat_age_s == consumer_ms / 1000 and node.phase is not NodePhase.LOST
+    gateway.advance(4_300_000)
+    node = gateway.snapshot().nodes["skin"]
+    assert node.heartbeat_age_s == 3.0 and node.phase is NodePhase.LOST
+    assert gateway.snapshot().to_dict()["nodes"]["skin"]["heartbeat_age_s"] == 3.0
+
+
 def test_every_snapshot_field_has_a_wire_kind():
     for section in (Snapshot, NodeSnapshot, *node_sections().values(), Rejected):
         for name in section_fields(section):
@@ -75,9 +102,13 @@ def test_the_surfaces_field_lists_are_the_snapshot_classes_fields():
         "boots",
         "last_emcy",
         "failure",
+        "heartbeat_consumer_ms",
     )
     state = [name for name, _ in sparkplug.STATE_METRICS + sparkplug.COUNTER_STATE_METRICS]
     assert state == list(section_fields(NodeSnapshot))
+    # an age changes with every snapshot: Sparkplug sends it once a period, like a counter
+    assert ("heartbeat_age_s", sparkplug.DOUBLE) in sparkplug.COUNTER_STATE_METRICS
+    assert ("heartbeat_consumer_ms", sparkplug.UINT32) in sparkplug.STATE_METRICS
     skin = {spec.name: spec.datatype for spec in sparkplug.DEVICE_METRICS["skin"]}
     assert skin["slip"] == sparkplug.BOOLEAN and skin["grip_force_n"] == sparkplug.DOUBLE
     assert "State/lost_packets" in skin

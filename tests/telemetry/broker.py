@@ -1,5 +1,8 @@
 """Real peers for the telemetry tests: a mosquitto broker on a free 127.0.0.1 port (password
-file, ACL, TLS, persistence as asked), a recording MQTT client, TLS files, a gateway stand-in."""
+file, ACL, TLS, persistence as asked), a recording MQTT client, TLS files, a gateway stand-in.
+
+The `broker` and `secured` fixtures are shared: a conftest that wants them imports them
+(tests/telemetry and tests/view do), so every suite starts the same brokers."""
 
 from __future__ import annotations
 
@@ -11,10 +14,12 @@ import socket
 import subprocess
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import paho.mqtt.client as paho
+import pytest
 from paho.mqtt.enums import CallbackAPIVersion
 
 from grasplink.gateway.config import load_config
@@ -154,6 +159,23 @@ class Mosquitto:
                 self.process.kill()
                 self.process.wait(5)
         self.process = None
+
+
+@pytest.fixture
+def broker(tmp_path: Path) -> Iterator[Mosquitto]:
+    """mosquitto with anonymous clients allowed (stopped after the test)."""
+    server = Mosquitto(tmp_path / "broker").start()
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def secured(tmp_path: Path) -> Iterator[Mosquitto]:
+    """mosquitto with a password file and an ACL (`PASSWORDS`, `ACL`): gateway, reader
+    (read only), operator (reads, and writes the command topics)."""
+    server = Mosquitto(tmp_path / "secured", secured=True).start()
+    yield server
+    server.stop()
 
 
 @dataclass

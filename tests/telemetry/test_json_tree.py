@@ -57,6 +57,25 @@ def test_first_update_publishes_state_values_and_health_with_units_in_names() ->
     assert all(m.qos == 1 for m in messages)
 
 
+def test_heartbeat_ages_ride_in_health_and_never_make_a_state_message() -> None:
+    """An age changes with every snapshot: in the retained node state it would republish
+    every node 20 times a second; health, once a second, carries it with the counters."""
+    tree = JsonTree("gw")
+    ages = {"skin": 0.04, "emg": 0.09, "belt": None, "hand": 1.5}
+    first = by_topic(tree.update([Sample(1000, snapshot(1.0, nodes=_aged(ages)))], EXTRA))
+    assert first["grasplink/gw/health"]["heartbeat_age_s"] == ages
+    state = first["grasplink/gw/node/skin/state"]
+    assert state["heartbeat_consumer_ms"] == 500 and "heartbeat_age_s" not in state
+    older = {kind: None if age is None else age + 0.05 for kind, age in ages.items()}
+    assert tree.update([Sample(1050, snapshot(1.05, nodes=_aged(older)))], EXTRA) == []
+    later = by_topic(tree.update([Sample(2000, snapshot(2.0, nodes=_aged(older)))], EXTRA))
+    assert later["grasplink/gw/health"]["heartbeat_age_s"] == older
+
+
+def _aged(ages: dict[str, float | None]) -> dict[str, dict[str, float | None]]:
+    return {kind: {"heartbeat_age_s": age} for kind, age in ages.items()}
+
+
 def test_state_and_alarms_are_published_only_when_they_change() -> None:
     tree = JsonTree("gw")
     tree.update([Sample(1000, snapshot(1.0))], EXTRA)

@@ -15,7 +15,8 @@ EXTRA = {"controls": {"reflex_enabled": True}, "telemetry": {}}
 
 
 def a_gateway_mostly_at_rest(count: int) -> list[Sample]:
-    """Counters and uptime move every snapshot; values, states and alarms now and then."""
+    """Counters, uptime and heartbeat ages move every snapshot; values, states and alarms
+    now and then."""
     samples = []
     for k in range(count):
         changes: dict[str, Any] = {"loop": {"percepts": 3 * k, "latency_p50_us": 100.0 + k // 7}}
@@ -25,7 +26,10 @@ def a_gateway_mostly_at_rest(count: int) -> list[Sample]:
             changes["alarms"] = {"belt.emcy": "EMCY 0x8130"}
         if 200 <= k < 230:
             changes["nodes"] = {"hand": {"phase": "lost", "nmt_state": None}}
-        counted = {kind: {"pdos_rx": 17 * k} for kind in ("skin", "emg", "belt", "hand")}
+        counted = {
+            kind: {"pdos_rx": 17 * k, "heartbeat_age_s": (k % 3) / 20}
+            for kind in ("skin", "emg", "belt", "hand")
+        }
         for kind, fields in changes.get("nodes", {}).items():
             counted[kind].update(fields)
         changes["nodes"] = counted

@@ -76,6 +76,28 @@ def test_births_then_data_report_only_what_changed_with_its_snapshot_time() -> N
     assert not host.errors
 
 
+def test_a_devices_heartbeat_age_is_born_and_then_sent_once_a_second() -> None:
+    """It changes with every snapshot: reported like the fast counters, not on change."""
+    session, host, _ = connected()
+    aged = {"nodes": {"skin": {"heartbeat_age_s": 0.04}}}
+    send(session, host, session.update([Sample(2000, snapshot(1.0, **aged))], EXTRA))
+    birth = next(m for m in host.messages if m.kind == "DBIRTH" and m.device == "skin")
+    assert {m.name: m.datatype for m in birth.payload.metrics}["State/heartbeat_age_s"] == DOUBLE
+    assert birth.metrics()["State/heartbeat_age_s"] == 0.04
+    assert birth.metrics()["State/heartbeat_consumer_ms"] == 500
+    before = len(host.messages)
+    for k in range(1, 21):  # 2050 .. 3000 ms: one new second of the clock
+        older = {"nodes": {"skin": {"heartbeat_age_s": 0.04 + k / 20}}}
+        send(session, host, session.update([Sample(2000 + 50 * k, snapshot(1.0, **older))], EXTRA))
+    ages = [
+        value
+        for m in host.messages[before:]
+        if m.kind == "DDATA" and m.device == "skin"
+        for value in m.values_of("State/heartbeat_age_s")
+    ]
+    assert ages == [(3000, 1.04)] and not host.errors
+
+
 def test_a_batch_carries_every_change_with_its_own_timestamp() -> None:
     session, host, _ = connected()
     send(session, host, session.update([Sample(2000, snapshot(1.0))], EXTRA))

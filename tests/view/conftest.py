@@ -1,4 +1,5 @@
-"""A broker and a headless browser for each live-view test (stopped after)."""
+"""A broker (tests/telemetry's: open, or `secured` with its password file and ACL) and a
+headless browser for each live-view test (stopped after)."""
 
 from __future__ import annotations
 
@@ -9,14 +10,9 @@ import pytest
 from selenium import webdriver
 
 from grasplink.surfaces.view.snapshot import chromium
-from tests.telemetry.broker import Mosquitto
+from tests.telemetry.broker import broker, secured
 
-
-@pytest.fixture
-def broker(tmp_path: Path) -> Iterator[Mosquitto]:
-    server = Mosquitto(tmp_path / "broker").start()
-    yield server
-    server.stop()
+__all__ = ["broker", "browser", "secured"]
 
 
 @pytest.fixture

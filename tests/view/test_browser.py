@@ -48,7 +48,23 @@ SLIP_START_S = 6.0  # the headline's pull, moved from 1 s: a loaded machine boot
 DURATION_S = 8.5  # unstopped, the object leaves the skin ~2.3 s after the pull starts
 READY_S = 120.0
 SLIPPING = "return document.getElementById('slip').dataset.slip === 'true'"
+LIVE = "return document.getElementById('banner').dataset.state === 'live'"
+MODE_IS = "return document.getElementById('mode').textContent === '{}'"
 SHOT_ENV = "GRASPLINK_VIEW_SCREENSHOT"  # where to copy the slip's screenshot (docs/view.png)
+
+
+# the heartbeat age column: {node: age in s} once every row shows one, none flagged overdue
+HEARTBEAT_AGES = """
+const rows = [...document.querySelectorAll('#nodes tbody tr')];
+const ages = rows.map((tr) => [tr.dataset.node, tr.querySelector('td.heartbeat')]);
+if (!rows.length || ages.some(([, td]) => !/^\\d+\\.\\d\\d s$/.test(td.textContent)
+    || td.dataset.overdue)) return null;
+return Object.fromEntries(ages.map(([node, td]) => [node, parseFloat(td.textContent)]));
+"""
+HEARTBEATS_OVERDUE = (
+    "const cells = [...document.querySelectorAll('#nodes tbody td.heartbeat')];"
+    "return cells.length > 0 && cells.every((td) => td.dataset.overdue === 'true')"
+)
 
 
 def headline(folder: Path) -> Path:
@@ -123,6 +139,8 @@ def test_the_headline_shows_live_nodes_then_a_decoded_slip_then_lost_nodes(
             wait_for_page(
                 browser, phases_are(browser, "lost", KINDS), "the stopped nodes lost", READY_S
             )
+            # their heartbeats older than the gateway's consumer time: flagged
+            wait_for_page(browser, HEARTBEATS_OVERDUE, "the lost nodes' heartbeats overdue")
             alarms = browser.execute_script(
                 "return [...document.querySelectorAll('#alarms li')].map((li) => li.dataset.alarm)"
             )
@@ -151,6 +169,8 @@ def test_garbage_a_broker_away_and_back_and_a_server_gone_show_on_the_page(
         wait_for_page(browser, phases_are(browser, "operational", KINDS), "four nodes live")
         wait_for_page(browser, "return document.body.dataset && !document.body.classList"
                       ".contains('stale')", "a live page")  # fmt: skip
+        ages = wait_for_page(browser, HEARTBEAT_AGES, "each node's heartbeat age")
+        assert set(ages) == set(KINDS), ages  # heard within its consumer time: not flagged
         # garbage on the gateway's tree: counted, named, and the page goes on
         subprocess.run(
             ["mosquitto_pub", "-p", str(broker.port), "-t", "grasplink/arm-7/node/skin/values",
@@ -223,15 +243,14 @@ def test_page_shows_the_broker_away_before_it_ever_connected(tmp_path: Path, bro
         view.close()
 
 
-def test_a_broker_refusing_the_credentials_is_one_line_and_exit_1(tmp_path: Path, capsys) -> None:
-    broker = Mosquitto(tmp_path / "secured", secured=True).start()
-    try:
-        url = broker.url_for("reader", "wrong")
-        assert cli.main(["view", "--mqtt", url, "--http", "127.0.0.1:0"]) == 1
-    finally:
-        broker.stop()
+def test_a_broker_refusing_the_credentials_is_one_line_naming_it_and_the_user_and_exit_1(
+    secured: Mosquitto, capsys
+) -> None:
+    url = secured.url_for("reader", "wrong")
+    assert cli.main(["view", "--mqtt", url, "--http", "127.0.0.1:0"]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "refused the connection" in err and "wrong" not in err
+    assert err.count("\n") == 0 and "wrong" not in err, err  # never the password
+    assert f"mqtt://reader@127.0.0.1:{secured.port} refused the connection" in err, err
 
 
 def test_the_snapshot_saves_the_page_once_watching_and_names_what_it_never_saw(
@@ -333,5 +352,65 @@ def test_with_commands_allowed_the_page_shows_the_reply_and_never_sends_a_refuse
         if recorder is not None:
             recorder.close()
         if view is not None:
+            view.close()
+        gateway.close()
+
+
+def test_on_a_secured_broker_the_operator_commands_and_a_readers_command_times_out_said_why(
+    secured: Mosquitto, browser, tmp_path: Path
+) -> None:
+    """The broker's ACL decides who commands (tests/telemetry's password file and ACL): the
+    `operator` view's command reaches the gateway and its reply shows; the `reader`'s is
+    acknowledged by the broker and dropped, and its page says no reply came, and why that
+    may be, while everything else goes on."""
+    ready = tmp_path / "gateway.ready"
+    gateway = Process(
+        ["gateway", "--with-nodes", "--bus", f"virtual:acl-{os.getpid()}",
+         "--mqtt", secured.url_for("gateway"), "--mqtt-id", "arm-7",
+         "--config", str(telemetry_config(tmp_path)), "--ready-file", str(ready)],
+        tmp_path / "gateway.log",
+    )  # fmt: skip
+    views: list[Process] = []
+    recorder = None
+    try:
+        wait_ready(gateway, ready)
+        recorder = Recorder(secured, ["grasplink/+/cmd/#"], user="gateway")
+        urls = {}
+        for user in ("operator", "reader"):
+            (tmp_path / user).mkdir()
+            view, urls[user] = start_view(
+                secured.url_for(user), tmp_path / user, "--allow-commands"
+            )
+            views.append(view)
+        browser.get(urls["operator"])
+        wait_for_page(browser, LIVE, "the operator's page live")
+        send_from_page(browser, "feedback_mode", ("slip_speed",))
+        reply = wait_for_page(browser, reply_shown("feedback_mode"), "the gateway's reply")
+        assert reply["by"] == "gateway" and reply["accepted"] == "true", reply
+        wait_for_page(browser, MODE_IS.format("slip_speed"), "the new feedback mode")
+        # the reader: the broker takes its command and drops it (no write right on cmd/#)
+        browser.get(urls["reader"])
+        wait_for_page(browser, LIVE, "the reader's page live")
+        assert browser.execute_script("return !document.getElementById('commands').hidden")
+        send_from_page(browser, "feedback_mode", ("off",))
+        timed_out = wait_for_page(browser, reply_shown("feedback_mode"), "the missing reply")
+        assert timed_out["accepted"] == "false" and timed_out["by"] == "view", timed_out
+        assert "no reply from arm-7 within 5 s" in timed_out["text"], timed_out
+        assert "may not write grasplink/arm-7/cmd/feedback_mode" in timed_out["text"], timed_out
+        # nothing else broke: the page live, the mode unchanged, the view's own checks on
+        assert banner_state(browser) == "live"
+        assert browser.execute_script(MODE_IS.format("slip_speed"))
+        send_from_page(browser, "reflex_threshold_mm_s", ("5000",))
+        refused = wait_for_page(browser, reply_shown("reflex_threshold_mm_s"), "the refusal")
+        assert refused["by"] == "view" and "got 5000" in refused["text"], refused
+        assert page_errors(browser) == []
+        # only the operator's command ever reached the gateway's command topics
+        assert [m.topic for m in recorder.taken()] == ["grasplink/arm-7/cmd/feedback_mode"]
+        assert b'"slip_speed"' in recorder.taken()[0].payload
+        assert "sent feedback_mode to arm-7" in views[1].output()  # it did publish
+    finally:
+        if recorder is not None:
+            recorder.close()
+        for view in views:
             view.close()
         gateway.close()

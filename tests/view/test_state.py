@@ -61,6 +61,21 @@ def test_a_lost_node_and_its_alarm_show_as_the_gateway_reports_them() -> None:
     assert gateway["alarms"] == {"belt.lost": "heartbeat lost"}
 
 
+def test_each_nodes_heartbeat_age_shows_and_is_overdue_past_the_consumer_time() -> None:
+    """From health (once a second); overdue when older than the gateway's consumer time
+    (500 ms here), as a node the gateway is about to lose, or has lost."""
+    view, tree = connected(), JsonTree("gw")
+    publish(view, tree, 1.0, nodes={"skin": {"heartbeat_age_s": 0.04}})
+    nodes = view.frame(1.0)[0]["gateways"]["gw"]["nodes"]
+    assert nodes["skin"]["heartbeat_consumer_ms"] == 500
+    assert (nodes["skin"]["heartbeat_age_s"], nodes["skin"]["heartbeat_overdue"]) == (0.04, False)
+    assert (nodes["belt"]["heartbeat_age_s"], nodes["belt"]["heartbeat_overdue"]) == (None, None)
+    silent = {"skin": {"heartbeat_age_s": 0.501, "phase": "lost"}}
+    publish(view, tree, 2.0, nodes=silent, alarms={"skin.lost": "heartbeat lost"})
+    skin = view.frame(2.0)[0]["gateways"]["gw"]["nodes"]["skin"]
+    assert (skin["heartbeat_age_s"], skin["heartbeat_overdue"]) == (0.501, True)
+
+
 @pytest.mark.parametrize(
     ("topic", "payload", "problem"),
     [
@@ -89,6 +104,11 @@ def test_a_lost_node_and_its_alarm_show_as_the_gateway_reports_them() -> None:
             "grasplink/gw/health",
             b'{"ts_ms": 1, "loss": {"skin": 3}}',
             "health: loss.skin: expected",
+        ),
+        (
+            "grasplink/gw/health",
+            b'{"ts_ms": 1, "heartbeat_age_s": {"skin": "old"}}',
+            'health: heartbeat_age_s.skin: expected a number or null, got "old"',
         ),
         ("grasplink/gw/whatever", b'{"ts_ms": 1}', "whatever: not a topic of the JSON tree"),
     ],

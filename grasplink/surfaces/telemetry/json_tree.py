@@ -6,7 +6,7 @@
 | `health` | yes | every `health_period_ms`, and at once when the live node list changes |
 | `alarms` | yes | on change |
 | `controls` | yes | on change (feedback mode, reflex, EMG calibration) |
-| `node/<name>/state` | yes | on change (phase, NMT state, boots, EMCY, failure) |
+| `node/<name>/state` | yes | on change (phase, NMT state, boots, EMCY, failure, consumer time) |
 | `node/<name>/values` | no | latest decoded values, when one changed, else every second |
 | `node/<name>/objects` | yes | a device node's TPDO-mapped objects, described from its file |
 | `cmd/<name>` | — | in: `{"value": …, "id": …}` (id optional, echoed); one command, one reply |
@@ -233,6 +233,10 @@ class JsonTree:
             "nodes_down": [kind for kind in snap["nodes"] if kind not in live],
             "loss": loss,
             "pdos_rx": {kind: node.get("pdos_rx", 0) for kind, node in snap["nodes"].items()},
+            # since each node's last heartbeat, at this snapshot (null: not heard yet)
+            "heartbeat_age_s": {
+                kind: node.get("heartbeat_age_s") for kind, node in snap["nodes"].items()
+            },
             "loop_latency_p50_us": loop["latency_p50_us"],
             "loop_latency_p99_us": loop["latency_p99_us"],
             "percepts": loop["percepts"],

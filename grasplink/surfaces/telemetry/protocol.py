@@ -46,8 +46,11 @@ VALUE_FIELDS: dict[str, tuple[str, ...]] = {
     kind: section_fields(section) for kind, section in node_sections().items()
 }
 _NODE_FIELDS = dataclasses.fields(NodeSnapshot)
-#: node state fields of `snapshot.nodes[kind]`, published on change (the rest are counters)
-STATE_FIELDS = tuple(f.name for f in _NODE_FIELDS if not f.metadata.get("counter"))
+#: node state fields of `snapshot.nodes[kind]`, published on change (the rest are counters
+#: and what changes with every snapshot, a heartbeat's age: JSON health carries those)
+STATE_FIELDS = tuple(
+    f.name for f in _NODE_FIELDS if not f.metadata.get("counter") and not f.metadata.get("fast")
+)
 #: what either protocol reports on change of a node (the fast counters go on their own period)
 _REPORTED_NODE_FIELDS = operator.attrgetter(
     *(f.name for f in _NODE_FIELDS if not f.metadata.get("fast"))

@@ -46,6 +46,7 @@ STATE_KINDS: dict[str, str] = {
     "boots": "uint32",
     "last_emcy": "str",
     "failure": "str",
+    "heartbeat_consumer_ms": "uint32",
     "live": "bool",
     "times_lost": "uint64",
 }
@@ -70,6 +71,7 @@ class NodeView:
 
     state: dict[str, Any] = field(default_factory=dict)
     loss: dict[str, Any] = field(default_factory=dict)
+    heartbeat_age_s: float | None = None  # at its gateway's last health (once a second)
     values: dict[str, Any] = field(default_factory=dict)
     values_at_s: float | None = None  # when its last values message was received
 
@@ -179,6 +181,10 @@ class ViewState:
                 gateway.online = online
                 gateway.offline_reason = None if online else (reason or "offline")
             case ["health"]:
+                ages = {  # checked before anything changes
+                    name: _checked({name: age}, name, "float", "heartbeat_age_s.")
+                    for name, age in _mapping(body, "heartbeat_age_s").items()
+                }
                 gateway.health = {k: _checked(body, k, kind) for k, kind in HEALTH_KINDS.items()}
                 loss = _mapping(body, "loss")
                 for name, counts in loss.items():
@@ -189,6 +195,8 @@ class ViewState:
                         for k, kind in LOSS_KINDS.items()
                         if k in counts
                     }
+                for name, age in ages.items():
+                    self._node(gateway, name).heartbeat_age_s = age
                 self._point(gid, "loop", body["ts_ms"], {
                     "latency_p50_us": gateway.health["loop_latency_p50_us"],
                     "latency_p99_us": gateway.health["loop_latency_p99_us"],
@@ -294,12 +302,23 @@ class ViewState:
                 name: {
                     **node.state,
                     **{f"loss_{k}": v for k, v in node.loss.items()},
+                    "heartbeat_age_s": node.heartbeat_age_s,
+                    "heartbeat_overdue": _overdue(node),
                     "values_age_s": _age(t_s, node.values_at_s),
                     "values": node.values,
                 }
                 for name, node in sorted(gateway.nodes.items())
             },
         }
+
+
+def _overdue(node: NodeView) -> bool | None:
+    """Whether its heartbeat is older than the gateway's consumer time (the gateway loses
+    the node then); None while either is unknown."""
+    consumer_ms = node.state.get("heartbeat_consumer_ms")
+    if node.heartbeat_age_s is None or consumer_ms is None:
+        return None
+    return bool(node.heartbeat_age_s * 1000 > consumer_ms)
 
 
 def _parse(payload: bytes) -> dict[str, Any]:

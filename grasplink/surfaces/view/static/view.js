@@ -165,6 +165,17 @@ function cell(value, cls) {
   return td;
 }
 
+// The age of a node's last heartbeat (at the gateway's last health), flagged when older
+// than the gateway's consumer time: the gateway loses a node that silent.
+function heartbeatCell(n) {
+  const td = cell(fixed(n.heartbeat_age_s, 2, " s"), "num heartbeat");
+  if (n.heartbeat_overdue) {
+    td.dataset.overdue = "true";
+    td.title = `older than the gateway's consumer time (${n.heartbeat_consumer_ms} ms)`;
+  }
+  return td;
+}
+
 function drawNodes(g) {
   const body = $("nodes").tBodies[0];
   const rows = Object.entries(g.nodes).map(([name, n]) => {
@@ -173,7 +184,7 @@ function drawNodes(g) {
     tr.dataset.phase = n.phase || "unknown";
     tr.append(
       cell(name), cell(n.node_id, "num"), cell(n.phase, "phase"), cell(n.nmt_state),
-      cell(fixed(n.values_age_s, 1, " s"), "num"), cell(n.loss_lost_packets, "num"),
+      heartbeatCell(n), cell(fixed(n.values_age_s, 1, " s"), "num"), cell(n.loss_lost_packets, "num"),
       cell(n.loss_pdos_dropped, "num"), cell(n.times_lost ?? n.loss_times_lost, "num"),
       cell(n.last_emcy),
     );
