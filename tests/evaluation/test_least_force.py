@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import tomllib
 from pathlib import Path
 
@@ -101,6 +102,7 @@ def rows_for(speed_mm_s, mode, outcomes):
         {
             "mode": mode,
             "speed_mm_s": speed_mm_s,
+            "seed": seed,
             "stopped": s,
             "crushed": c,
             "dropped": d,
@@ -110,7 +112,7 @@ def rows_for(speed_mm_s, mode, outcomes):
             "i_emg": 0.3,
             "belt_latency_s": 1.0,
         }
-        for s, c, d in outcomes
+        for seed, (s, c, d) in enumerate(outcomes, start=1)
     ]
 
 
@@ -154,3 +156,22 @@ def test_the_report_renders_the_verdict_and_every_speed(tmp_path):
         assert f"| {v:g} |" in text
     loop_task.plot_report(results, tmp_path / "task.png")
     assert (tmp_path / "task.png").stat().st_size > 10_000
+
+
+def test_a_report_rendered_from_its_json_lists_the_speeds_in_order():
+    """JSON keys come back sorted as text ("12" before "4"); the tables stay in speed order."""
+    rows = []
+    for v in least_force.SPEEDS_MM_S:
+        rows += rows_for(v, "slip_speed", [(True, False, False)])
+        rows += rows_for(v, "slip_occurrence", [(False, False, True)])
+    results = {
+        "grid": {"modes": list(loop_task.TASK_MODES), "speeds_mm_s": [4.0, 12.0, 20.0, 28.0]},
+        "objects": loop_task.objects(),
+        "figures": loop_task.aggregate(rows),
+        "trials": rows,
+    }
+    results["grid"] |= {"seeds": [1], "trials": len(rows)}
+    text = loop_task.render(json.loads(loop.dump_json(results)))
+    at = [text.index(f"| slip speed | {v:g} |") for v in least_force.SPEEDS_MM_S]
+    assert at == sorted(at)
+    assert "4 mm/s 0 %" in text  # no seed ended the same way in both modes
