@@ -23,6 +23,11 @@ class SampleSource(Protocol):
         """
         ...
 
+    def final_until_us(self) -> int | None:
+        """The latest time whose samples are final (asking again gives the same values),
+        so a node may convert them ahead in one pass; None when every sample is final."""
+        ...
+
 
 class ConstantSource:
     """A sensor at rest: every sample reads `value`."""
@@ -32,6 +37,9 @@ class ConstantSource:
 
     def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
         return np.full(count, self.value)
+
+    def final_until_us(self) -> int | None:
+        return None
 
 
 class FunctionSource:
@@ -44,3 +52,6 @@ class FunctionSource:
         index = np.arange(start_index, start_index + count, dtype=np.int64)
         times_us = t0_us + index * 1_000_000 // rate_hz
         return np.asarray(self.fn(times_us / 1e6), dtype=np.float64)
+
+    def final_until_us(self) -> int | None:
+        return None
