@@ -246,8 +246,18 @@ class Simulation:
                 command = self.bindings[endpoint.node].command_value()
                 state.values[name] = np.full(len(times), command)
 
+        # An earlier domain's signal at this chunk's sample times is interpolated once
+        # however many effects read it; read-only, as every signal an effect is handed.
+        interpolated: dict[str, np.ndarray] = {}
+
         def read(name: str, at_us: np.ndarray, s: DomainState = state) -> np.ndarray:
-            return self._read(s, name, at_us)
+            if at_us is not times or self.domain_of[name] == s.name:
+                return self._read(s, name, at_us)
+            if name not in interpolated:
+                values = self._read(s, name, at_us)
+                values.flags.writeable = False
+                interpolated[name] = values
+            return interpolated[name]
 
         def write(name: str, values: np.ndarray, s: DomainState = state) -> None:
             s.values[name] = values
