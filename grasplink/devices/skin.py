@@ -22,7 +22,7 @@ from grasplink.devices import emcy as em
 from grasplink.devices.app import AppServices, DeviceApp
 from grasplink.devices.sampling import SampleClock
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
-from grasplink.devices.sources import ConstantSource, SampleSource
+from grasplink.devices.sources import ConstantSource, FinalSource, SampleSource
 from grasplink.devices.store import Value
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, PRESET_CODES
@@ -200,9 +200,13 @@ class SkinApp(DeviceApp):
         end = start + count
         offset = start - self._ahead_start
         if offset < 0 or end - self._ahead_start > len(self._ahead):
-            final_us = self.source.final_until_us()
-            ahead = start + self.read_ahead_samples
-            stop = max(end, ahead if final_us is None else min(ahead, clock.due_until(final_us)))
+            stop = end
+            if isinstance(self.source, FinalSource):
+                final_us = self.source.final_until_us()
+                ready = start + self.read_ahead_samples
+                if final_us is not None:
+                    ready = min(ready, clock.due_until(final_us))
+                stop = max(end, ready)
             forces = self.source.samples(clock.t0_us, start, stop - start, clock.rate_hz)
             self._ahead = self.to_counts(forces).tolist()
             self._ahead_start, offset = start, 0

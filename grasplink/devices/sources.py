@@ -9,7 +9,7 @@ simulates nothing a scene did not ask for. Simulators plug in here.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -23,9 +23,15 @@ class SampleSource(Protocol):
         """
         ...
 
+
+@runtime_checkable
+class FinalSource(SampleSource, Protocol):
+    """A source that says which samples are final, so a node may convert them ahead in
+    one pass (a source without it is read packet by packet, as it asks)."""
+
     def final_until_us(self) -> int | None:
-        """The latest time whose samples are final (asking again gives the same values),
-        so a node may convert them ahead in one pass; None when every sample is final."""
+        """The latest time whose samples are final (asking again gives the same values);
+        None when every sample is."""
         ...
 
 

@@ -95,3 +95,22 @@ def test_scene_with_an_actuator_keeps_its_chunk():
     path = Path(__file__).resolve().parents[2] / "scenes" / "headline_slip.toml"
     sim = simulation(load_scene(path))
     assert sim.coupled and sim.step_us == sim.scene.chunk_us
+
+
+class _PlainSource:
+    """A source that does not say which samples are final: read as the node asks."""
+
+    def __init__(self) -> None:
+        self.asked: list[int] = []
+
+    def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+        self.asked.append(count)
+        index = np.arange(start_index, start_index + count)
+        return _hard_force((t0_us + index * 1_000_000 // rate_hz) / 1e6)
+
+
+def test_skin_node_reads_a_source_without_final_samples_packet_by_packet():
+    plain = _PlainSource()
+    frames, _ = _skin_frames(plain, 256)
+    assert frames == _skin_frames(FunctionSource(_hard_force), 0)[0]
+    assert set(plain.asked) == {3}  # samples per PDO: never ahead of the packet
