@@ -380,7 +380,7 @@ WHAT_CHANGED = """
   samples) went. Recordings are byte-identical.
 - **The skin node converts ahead**: up to 256 samples to ADC counts in one numpy pass
   instead of five numpy calls per 3-sample packet, only over samples the scene has
-  made final (`SampleSource.final_until_us`). Frames are identical.
+  made final (`FinalSource.final_until_us`). Frames are identical.
 - **The engine interpolates** an earlier domain's signal once per chunk, however many
   effects read it.
 
