@@ -22,7 +22,7 @@ from grasplink.devices import emcy as em
 from grasplink.devices.app import AppServices, DeviceApp
 from grasplink.devices.sampling import SampleClock
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
-from grasplink.devices.sources import ConstantSource, SampleSource
+from grasplink.devices.sources import ConstantSource, FinalSource, SampleSource
 from grasplink.devices.store import Value
 from grasplink.profiles import objects as obj
 from grasplink.profiles.layouts import LAYOUTS_MM, PRESET_CODES
@@ -31,11 +31,15 @@ STATIC_WINDOW_S = 0.05  # static force = mean of the last 50 ms of samples
 MN_PER_N = 1000.0
 UM_PER_MM = 1000
 MAX_PACKETS_PER_ADVANCE = 4096  # bound work after a stall; older packets are dropped
+# Samples converted to counts in one numpy pass at most, when the source has them final:
+# per packet (3 samples) numpy's call overhead would cost more than the conversion.
+READ_AHEAD_SAMPLES = 256
 TPDO_SAMPLES = 1
 CAL_BITS, CAL_FULL_SCALE_MN, CAL_ZERO = 1, 2, 3
 
 
 class SkinApp(DeviceApp):
+    read_ahead_samples = READ_AHEAD_SAMPLES  # 0: convert each packet's samples alone
     streamed_tpdos = (TPDO_SAMPLES,)
     packet_tpdos = (TPDO_SAMPLES,)
     packets_on_sync = (obj.SKIN_PACKETS_ON_SYNC, 0)
@@ -49,6 +53,10 @@ class SkinApp(DeviceApp):
         self._ring_pos = 0
         self._loading_preset = False
         self._calibration: tuple[int, int, float] | None = None
+        # Counts of samples _ahead_start.. converted ahead (read_ahead); cleared when the
+        # clock restarts or the calibration changes.
+        self._ahead_start = 0
+        self._ahead: list[int] = []
         self.saturated_samples = 0
         self.dropped_packets = 0
 
@@ -104,6 +112,7 @@ class SkinApp(DeviceApp):
             self.store.set(obj.SKIN_LAYOUT_PRESET, 0, 0)
         elif index == obj.SKIN_FSR_CALIBRATION:
             self._calibration = None
+            self._ahead = []
         elif index == obj.SKIN_SAMPLE_RATE_HZ and self.clock is not None:
             self._restart_sampling(self.services.now_us())
 
@@ -127,6 +136,7 @@ class SkinApp(DeviceApp):
         self._static_sum = 0
         self._static_fill = 0
         self._ring_pos = 0
+        self._ahead = []
 
     def calibration(self) -> tuple[int, int, float]:
         """(zero counts, full-scale counts, mN per count), cached until 2130h changes."""
@@ -163,8 +173,7 @@ class SkinApp(DeviceApp):
             clock.next_index += skipped * per_pdo
             packets = MAX_PACKETS_PER_ADVANCE
         start = clock.next_index
-        forces = self.source.samples(clock.t0_us, start, packets * per_pdo, clock.rate_hz)
-        counts = self.to_counts(forces)
+        counts = self._counts(clock, start, packets * per_pdo)
         self._track_saturation(counts, t_us)
         self._track_static(counts)
         frames: list[Frame] = []
@@ -181,22 +190,40 @@ class SkinApp(DeviceApp):
             if operational:
                 frames += self.services.transmit_tpdo(TPDO_SAMPLES, clock.time_of(end_index - 1))
         clock.next_index = start + packets * per_pdo
+        zero, _, mn_per_count = self.calibration()
         mean_counts = self._static_sum / self._static_fill
-        self.store.set(obj.SKIN_STATIC_FORCE_MN, 0, round(float(self.to_force_mn(mean_counts))))
+        self.store.set(obj.SKIN_STATIC_FORCE_MN, 0, round((mean_counts - zero) * mn_per_count))
         return frames
+
+    def _counts(self, clock: SampleClock, start: int, count: int) -> list[int]:
+        """Counts of samples start .. start+count-1, converted ahead where the source allows."""
+        end = start + count
+        offset = start - self._ahead_start
+        if offset < 0 or end - self._ahead_start > len(self._ahead):
+            stop = end
+            if isinstance(self.source, FinalSource):
+                final_us = self.source.final_until_us()
+                ready = start + self.read_ahead_samples
+                if final_us is not None:
+                    ready = min(ready, clock.due_until(final_us))
+                stop = max(end, ready)
+            forces = self.source.samples(clock.t0_us, start, stop - start, clock.rate_hz)
+            self._ahead = self.to_counts(forces).tolist()
+            self._ahead_start, offset = start, 0
+        return self._ahead[offset : offset + count]
 
     def next_deadline_us(self) -> int | None:
         if self.clock is None:
             return None
         return self.clock.time_of(self.clock.next_index + self.samples_per_pdo - 1)
 
-    def _track_static(self, counts: np.ndarray) -> None:
+    def _track_static(self, counts: list[int]) -> None:
         """Ring buffer of the last STATIC_WINDOW_S of samples (bounded memory), with its sum.
 
         Counts are integers, so the running sum stays exact however long the node runs.
         """
         ring = self._static
-        tail = counts[-len(ring) :].tolist()
+        tail = counts[-len(ring) :]
         size, pos = len(ring), self._ring_pos
         for value in tail:
             self._static_sum += value - ring[pos]
@@ -205,8 +232,9 @@ class SkinApp(DeviceApp):
         self._ring_pos = pos
         self._static_fill = min(size, self._static_fill + len(tail))
 
-    def _track_saturation(self, counts: np.ndarray, t_us: int) -> None:
-        saturated = int(np.count_nonzero(counts >= self.calibration()[1]))
+    def _track_saturation(self, counts: list[int], t_us: int) -> None:
+        full = self.calibration()[1]
+        saturated = sum(c >= full for c in counts)
         self.saturated_samples += saturated
         if saturated and not self.services.error_active(em.SENSOR_SATURATED):
             self.services.raise_error(em.SENSOR_SATURATED, em.REG_MANUFACTURER, t_us)

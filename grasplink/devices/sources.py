@@ -9,7 +9,7 @@ simulates nothing a scene did not ask for. Simulators plug in here.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -24,6 +24,17 @@ class SampleSource(Protocol):
         ...
 
 
+@runtime_checkable
+class FinalSource(SampleSource, Protocol):
+    """A source that says which samples are final, so a node may convert them ahead in
+    one pass (a source without it is read packet by packet, as it asks)."""
+
+    def final_until_us(self) -> int | None:
+        """The latest time whose samples are final (asking again gives the same values);
+        None when every sample is."""
+        ...
+
+
 class ConstantSource:
     """A sensor at rest: every sample reads `value`."""
 
@@ -32,6 +43,9 @@ class ConstantSource:
 
     def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
         return np.full(count, self.value)
+
+    def final_until_us(self) -> int | None:
+        return None
 
 
 class FunctionSource:
@@ -44,3 +58,6 @@ class FunctionSource:
         index = np.arange(start_index, start_index + count, dtype=np.int64)
         times_us = t0_us + index * 1_000_000 // rate_hz
         return np.asarray(self.fn(times_us / 1e6), dtype=np.float64)
+
+    def final_until_us(self) -> int | None:
+        return None

@@ -92,6 +92,10 @@ class SceneSource:
             raise RuntimeError("a node sampled ahead of the simulation")
         return np.interp(times, self.times_us, self.values)
 
+    def final_until_us(self) -> int | None:
+        """Up to the last scene sample: later times would be held, not interpolated."""
+        return int(self.times_us[-1]) if len(self.times_us) else -1
+
 
 class NodeBinding:
     """Base binding: a node that neither senses nor actuates anything in the scene."""

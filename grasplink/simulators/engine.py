@@ -32,6 +32,11 @@ from grasplink.simulators.live import LiveBus, LiveNetwork
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import Scene
 
+# A scene whose physics hears nothing from the nodes steps in chunks this long at least:
+# every effect gives the same samples however time is chunked, and the bus runs exactly
+# to any chunk end, so only the per-chunk overhead changes (docs/scenes.md, Chunks).
+UNCOUPLED_STEP_US = 500_000
+
 
 @dataclass
 class DomainState:
@@ -133,6 +138,17 @@ class Simulation:
             ]
         )
         self.t_us = 0
+        self.step_us = scene.chunk_us
+        if not self.coupled:
+            self.step_us *= max(1, UNCOUPLED_STEP_US // scene.chunk_us)
+
+    @property
+    def coupled(self) -> bool:
+        """Whether nodes feed the physics: a command it holds per chunk or an actual value
+        it reports per chunk. Only then does the chunk size change what is simulated."""
+        return any(e.writes for e in self.scene.endpoints) or any(
+            b.actual_simulated for b in self.bindings.values()
+        )
 
     # -- running ---------------------------------------------------------------------
     def run(
@@ -160,7 +176,9 @@ class Simulation:
             while self.t_us < duration_us:
                 if should_stop is not None and should_stop():
                     break
-                t_end = min(self.t_us + self.scene.chunk_us, duration_us)
+                # Paced runs keep the scene's chunk: the wall clock is met per chunk.
+                step_us = self.scene.chunk_us if realtime else self.step_us
+                t_end = min(self.t_us + step_us, duration_us)
                 self.step(t_end)
                 if progress is not None:
                     progress(self.t_us, duration_us)
@@ -228,8 +246,18 @@ class Simulation:
                 command = self.bindings[endpoint.node].command_value()
                 state.values[name] = np.full(len(times), command)
 
+        # An earlier domain's signal at this chunk's sample times is interpolated once
+        # however many effects read it; read-only, as every signal an effect is handed.
+        interpolated: dict[str, np.ndarray] = {}
+
         def read(name: str, at_us: np.ndarray, s: DomainState = state) -> np.ndarray:
-            return self._read(s, name, at_us)
+            if at_us is not times or self.domain_of[name] == s.name:
+                return self._read(s, name, at_us)
+            if name not in interpolated:
+                values = self._read(s, name, at_us)
+                values.flags.writeable = False
+                interpolated[name] = values
+            return interpolated[name]
 
         def write(name: str, values: np.ndarray, s: DomainState = state) -> None:
             s.values[name] = values

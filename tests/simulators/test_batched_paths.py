@@ -1,0 +1,116 @@
+"""The batched fast paths give exactly what the per-sample and per-chunk paths give."""
+
+from __future__ import annotations
+
+import filecmp
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grasplink.bus.lockstep import LockstepNetwork
+from grasplink.controllers import simulation
+from grasplink.core.frames import Frame
+from grasplink.devices.factory import build_node
+from grasplink.devices.skin import SkinApp
+from grasplink.devices.sources import FunctionSource
+from grasplink.simulators.bindings import SceneSource
+from grasplink.simulators.engine import Simulation
+from grasplink.simulators.recording import Recorder
+from grasplink.simulators.scene import load_scene
+
+SKIN = 0x10
+MS = 1000
+
+
+def _hard_force(t_s: np.ndarray) -> np.ndarray:
+    """At rest, a ramp far past full scale (saturation), NaN (reads 0 N), at rest again."""
+    force = np.where(t_s < 0.2, 0.0, 1000.0 * (t_s - 0.2))
+    force = np.where((t_s > 0.5) & (t_s < 0.52), np.nan, force)
+    return np.where(t_s > 0.7, 0.0, force)
+
+
+def _skin_frames(source, read_ahead: int, feed=None) -> tuple[list[tuple[int, Frame]], SkinApp]:
+    app = SkinApp(source)
+    app.read_ahead_samples = read_ahead
+    net = LockstepNetwork([build_node("skin", SKIN, source, app)])
+    sent: list[tuple[int, Frame]] = []
+    net.taps.append(lambda t, frame, _origin: sent.append((t, frame)))
+    net.start()
+    net.inject(Frame(0x000, bytes([0x01, SKIN])))  # NMT start
+    for t_end in range(10 * MS, 1000 * MS + 1, 10 * MS):
+        if feed is not None:
+            feed(t_end)
+        net.run_until(t_end - 1)
+    return sent, app
+
+
+@pytest.mark.parametrize("read_ahead", [1, 7, 256])
+def test_skin_node_converting_ahead_sends_the_frames_of_converting_per_packet(read_ahead):
+    source = FunctionSource(_hard_force)
+    per_packet, app_a = _skin_frames(source, 0)
+    ahead, app_b = _skin_frames(source, read_ahead)
+    assert ahead == per_packet
+    assert app_b.saturated_samples == app_a.saturated_samples > 0
+
+
+def test_skin_node_converts_ahead_only_samples_the_scene_has_made_final():
+    """Fed chunk by chunk as a scene feeds it: never a held value instead of a later one."""
+
+    def run(read_ahead: int) -> list[tuple[int, Frame]]:
+        source = SceneSource(400)
+
+        def feed(t_end_us: int) -> None:  # the skin domain's samples of (t - 10 ms, t)
+            start = -(-(t_end_us - 10 * MS) * 400 // 1_000_000)
+            index = np.arange(start, -(-t_end_us * 400 // 1_000_000))
+            times = index * 1_000_000 // 400
+            source.append(times, _hard_force(times / 1e6))
+
+        return _skin_frames(source, read_ahead, feed)[0]
+
+    assert run(256) == run(0)
+
+
+def _record(path: Path, out: Path, *, per_chunk: bool) -> Simulation:
+    sim = simulation(load_scene(path), Recorder(out))
+    if per_chunk:
+        sim.step_us = sim.scene.chunk_us
+    sim.run()
+    return sim
+
+
+def test_scene_without_node_commands_runs_in_long_steps_with_the_same_recording(tmp_path):
+    path = Path(__file__).resolve().parents[2] / "scenes" / "slip_alpha0.1_60mm_s_forward.toml"
+    long = _record(path, tmp_path / "long", per_chunk=False)
+    _record(path, tmp_path / "chunked", per_chunk=True)
+    assert not long.coupled and long.step_us > long.scene.chunk_us
+    names = sorted(p.name for p in (tmp_path / "long").iterdir())
+    _, mismatch, errors = filecmp.cmpfiles(
+        tmp_path / "long", tmp_path / "chunked", names, shallow=False
+    )
+    assert names and mismatch == [] and errors == []
+
+
+def test_scene_with_an_actuator_keeps_its_chunk():
+    path = Path(__file__).resolve().parents[2] / "scenes" / "headline_slip.toml"
+    sim = simulation(load_scene(path))
+    assert sim.coupled and sim.step_us == sim.scene.chunk_us
+
+
+class _PlainSource:
+    """A source that does not say which samples are final: read as the node asks."""
+
+    def __init__(self) -> None:
+        self.asked: list[int] = []
+
+    def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+        self.asked.append(count)
+        index = np.arange(start_index, start_index + count)
+        return _hard_force((t0_us + index * 1_000_000 // rate_hz) / 1e6)
+
+
+def test_skin_node_reads_a_source_without_final_samples_packet_by_packet():
+    plain = _PlainSource()
+    frames, _ = _skin_frames(plain, 256)
+    assert frames == _skin_frames(FunctionSource(_hard_force), 0)[0]
+    assert set(plain.asked) == {3}  # samples per PDO: never ahead of the packet
