@@ -196,4 +196,3 @@ def serve_recording(
             await asyncio.gather(watcher, return_exceptions=True)
 
     asyncio.run(main())
-

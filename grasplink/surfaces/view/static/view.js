@@ -230,11 +230,23 @@ function drawNow(g) {
   shown.dataset.speed = last ? last.slip_speed_mm_s : "";
   const when = last && (RECORDING ? `${(last.tsMs / 1000).toFixed(2)} s in the run`
     : new Date(last.tsMs).toLocaleTimeString());
+  const truth = last && RECORDING ? trueSpeedAt(last.tsMs / 1000) : null;
+  shown.dataset.truth = truth === null ? "" : String(truth);
   text(shown, last ? `last slip with a speed: ${fixed(last.slip_speed_mm_s, 1, " mm/s")} at ` +
-    when : "last slip with a speed: –");
+    when + (truth === null ? "" : ` (true ${fixed(truth, 1, " mm/s")})`)
+    : "last slip with a speed: –");
   const hand = (g.nodes.hand || {}).values || {};
   $("reflex").dataset.reflex = hand.reflex || "unknown";
   text($("reflex"), `reflex: ${hand.reflex || "–"} (${hand.source || "–"})`);
+}
+
+function trueSpeedAt(t) {
+  // a recording's truth.csv speed at time t in the run (the last point at or before it)
+  const h = (history[chosen] || {}).truth;
+  if (!h) return null;
+  let i = h.t.length - 1;
+  while (i >= 0 && h.t[i] > t) i--;
+  return i < 0 ? null : h.fields.speed_mm_s[i];
 }
 
 function makePlots() {
