@@ -18,7 +18,7 @@ from grasplink.evaluation.loop_plot import read_loop
 from grasplink.surfaces.view.playback import PagePlayback, PlaybackClock
 from grasplink.surfaces.view.recording import TRUTH_KIND, Recording, load_recording
 from grasplink.surfaces.view.recording_server import page_for, playback_from
-from grasplink.surfaces.view.web import HttpError, load_files
+from grasplink.surfaces.view.web import HttpError, load_files, parse_head
 
 KINDS = ("skin", "emg", "belt", "hand")
 
@@ -59,6 +59,12 @@ def test_a_speed_change_keeps_the_position_and_only_the_offered_speeds_are_taken
         clock.set_rate(2.0, 8.0)
     with pytest.raises(ValueError, match="rate 3"):
         PlaybackClock(60.0, rate=3.0)
+
+
+def test_the_request_keeps_the_stream_query_apart_from_its_path() -> None:
+    request = parse_head(b"GET /events?at=1.5&rate=4 HTTP/1.1\r\nHost: 127.0.0.1:8642\r\n\r\n")
+    assert (request.path, request.query) == ("/events", "at=1.5&rate=4")
+    assert parse_head(b"GET / HTTP/1.1\r\nHost: 127.0.0.1:8642\r\n\r\n").query == ""
 
 
 def test_the_stream_query_sets_the_page_clock_and_garbage_is_refused_named() -> None:
@@ -227,7 +233,25 @@ def test_a_run_whose_scene_is_gone_plays_with_the_default_settings_said_so(
     summary["path"] = str(tmp_path / "gone.toml")
     (folder / "summary.json").write_text(json.dumps(summary))
     recording = load_recording(folder)
-    assert recording.settings == "default gateway settings (the run's scene file was not found)"
+    assert recording.settings == (
+        "default gateway settings (the run's scene file was not found): "
+        "the belt and hand commands shown may not be the run's"
+    )
+
+
+def test_a_truth_without_the_object_leaves_only_what_it_has(
+    headline_run: Path, tmp_path: Path
+) -> None:
+    folder = broken(headline_run, tmp_path)
+    rows = [line.split(",") for line in (folder / "truth.csv").read_text().splitlines()]
+    keep = [i for i, name in enumerate(rows[0]) if name in ("t_s", "hand.grip_n")]
+    text = "\n".join(",".join(row[i] for i in keep) for row in rows) + "\n"
+    (folder / "truth.csv").write_text(text)
+    recording = load_recording(folder)
+    assert list(recording.truth) == ["grip_n"]
+    page = PagePlayback(recording, PlaybackClock(recording.duration_s, since_s=0.0))
+    truth = [v for _, kind, _, v in page.frame(1.0)["points"] if kind == TRUTH_KIND]
+    assert truth and all(set(v) == {"grip_n"} for v in truth)
 
 
 # -- the command line -------------------------------------------------------------------------

@@ -64,7 +64,7 @@ class Recording:
     duration_s: float
     messages: tuple[Timed, ...]
     truth_t_s: np.ndarray
-    truth: dict[str, np.ndarray]  # TRUTH_FIELDS' fields, at truth_t_s
+    truth: dict[str, np.ndarray]  # TRUTH_FIELDS' fields truth.csv has, at truth_t_s
     settings: str  # where the gateway's settings came from, said on the page
 
     @property
@@ -91,11 +91,8 @@ def load_recording(folder: Path) -> Recording:
     for name in ("can.asc", "truth.csv"):
         if not (folder / name).is_file():
             raise RecordingError(f"{folder / name}: missing (every run folder has one)")
-    truth = read_csv(
-        folder / "truth.csv",
-        tuple(column for column, _ in TRUTH_FIELDS.values()),
-        (summary.get("samples") or {}).get("physics"),
-    )
+    # a scene without the object or the hand has fewer columns: the page shows what is there
+    truth = read_csv(folder / "truth.csv", (), (summary.get("samples") or {}).get("physics"))
     read_can_log(folder / "can.asc", summary)  # complete and well-formed, else named
     config, settings = _gateway_config(summary, summary_path)
     duration_s = float(summary.get("simulated_s") or summary.get("duration_s") or 0.0)
@@ -171,7 +168,10 @@ def _gateway_config(summary: dict[str, Any], summary_path: Path) -> tuple[Gatewa
         )
     source = str(summary_path)
     options = Params({}, source, "controller")
-    settings = "default gateway settings (the run's scene file was not found)"
+    settings = (
+        "default gateway settings (the run's scene file was not found): "
+        "the belt and hand commands shown may not be the run's"
+    )
     scene_path = summary.get("path")
     candidates = (
         [Path(scene_path), summary_path.parent / Path(scene_path).name]
@@ -192,7 +192,10 @@ def _gateway_config(summary: dict[str, Any], summary_path: Path) -> tuple[Gatewa
                     nodes[kind]["sample_rate_hz"] = scene_node["sample_rate_hz"]
             settings = f"gateway settings from {candidate} [controller]"
         else:
-            settings = f"default gateway settings ({candidate} has no gateway controller)"
+            settings = (
+                f"default gateway settings ({candidate} has no gateway controller): "
+                "the belt and hand commands shown were not the run's"
+            )
         break
     try:
         return scene_config(options, nodes), settings
@@ -204,11 +207,13 @@ def _truth_points(truth: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, n
     """The truth at TRUTH_PERIOD_S: the row at or just before each tick."""
     t = truth["t_s"]
     if not len(t):
-        return np.zeros(0), {name: np.zeros(0) for name in TRUTH_FIELDS}
+        return np.zeros(0), {}
     ticks = np.arange(t[0], t[-1] + TRUTH_PERIOD_S / 2, TRUTH_PERIOD_S)
     rows = np.clip(np.searchsorted(t, ticks, side="right") - 1, 0, len(t) - 1)
     fields = {}
     for name, (column, magnitude) in TRUTH_FIELDS.items():
+        if column not in truth:
+            continue
         values = truth[column][rows]
         fields[name] = np.abs(values) if magnitude else values
     return ticks, fields

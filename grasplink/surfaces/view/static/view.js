@@ -243,7 +243,7 @@ function drawNow(g) {
 function trueSpeedAt(t) {
   // a recording's truth.csv speed at time t in the run (the last point at or before it)
   const h = (history[chosen] || {}).truth;
-  if (!h) return null;
+  if (!h || !h.fields.speed_mm_s) return null;
   let i = h.t.length - 1;
   while (i >= 0 && h.t[i] > t) i--;
   return i < 0 ? null : h.fields.speed_mm_s[i];
