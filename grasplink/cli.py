@@ -1230,6 +1230,7 @@ def _view_recording(args: argparse.Namespace) -> int:
             f"{', '.join(live_only)} given with DIR"
         )
     http = parse_http_address(args.http)
+    print(f"view: replaying {args.folder} (once, before the page is served)", flush=True)
     recording = load_recording(args.folder)
     with StopSignals() as stop:
         serve_recording(

@@ -67,12 +67,6 @@ class Recording:
     truth: dict[str, np.ndarray]  # TRUTH_FIELDS' fields truth.csv has, at truth_t_s
     settings: str  # where the gateway's settings came from, said on the page
 
-    @property
-    def approx_bytes(self) -> int:
-        """What the replay holds in memory (payloads, topics, ~100 B of object per message)."""
-        messages = sum(len(m.payload) + len(m.topic) + 100 for m in self.messages)
-        return messages + sum(a.nbytes for a in self.truth.values()) + self.truth_t_s.nbytes
-
 
 def load_recording(folder: Path) -> Recording:
     """Check the folder's files and replay it; RecordingError naming the file otherwise."""

@@ -131,6 +131,8 @@ class RecordingView:
             except asyncio.LimitOverrunError:
                 raise HttpError(431, "request head too large") from None
             response = respond(request, self._hosts, self._files)
+            if response.status == 405:
+                response = Response(405, b"a recording: GET only\n")
             if response.events and request.method == "GET":
                 clock = playback_from(request.query, self.recording.duration_s, self.clock())
                 await self._stream(writer, PagePlayback(self.recording, clock))
