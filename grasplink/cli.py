@@ -450,10 +450,21 @@ def _add_log_commands(sub: Subcommands, default_bus: str) -> None:
 
 def _add_view_command(sub: Subcommands) -> None:
     """`view`: the live page over a broker's telemetry (docs/view.md)."""
-    view = sub.add_parser("view", help="serve a live web page of the gateways' telemetry")
+    view = sub.add_parser(
+        "view", help="serve a live web page of the gateways' telemetry, or of a recording"
+    )
+    view.add_argument(
+        "folder",
+        nargs="?",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="play this folder `grasplink run --out` wrote (pause, seek; truth beside the "
+        "decoded values) instead of following a broker",
+    )
     view.add_argument(
         "--mqtt",
-        required=True,
+        default=None,
         metavar="URL",
         help="the broker the gateways publish to: mqtt://[user[:password]@]host[:port] "
         "or mqtts://... (read only unless --allow-commands)",
@@ -1174,6 +1185,10 @@ def cmd_view(args: argparse.Namespace) -> int:
     from grasplink.surfaces.view.server import parse_http_address, serve
     from grasplink.terminal import StopSignals
 
+    if args.folder is not None:
+        return _view_recording(args)
+    if args.mqtt is None:
+        raise ConfigError("view: give a broker (--mqtt URL) or a run folder (DIR)")
     broker = parse_broker_url(args.mqtt)
     tls = tls_context(broker, args.mqtt_ca)
     gateway_id = None if args.gateway_id is None else check_id(args.gateway_id, "--gateway-id")
@@ -1185,6 +1200,42 @@ def cmd_view(args: argparse.Namespace) -> int:
             gateway_id=gateway_id,
             tls=tls,
             allow_commands=args.allow_commands,
+            duration_s=args.duration,
+            log=lambda line: print(line, flush=True),
+            stop=stop,
+        )
+    return stop.exit_code
+
+
+def _view_recording(args: argparse.Namespace) -> int:
+    """`view DIR`: the page over a recording, replayed once before it is served."""
+    from grasplink.surfaces.view.recording import load_recording
+    from grasplink.surfaces.view.recording_server import serve_recording
+    from grasplink.surfaces.view.server import parse_http_address
+    from grasplink.terminal import StopSignals
+
+    live_only = [
+        option
+        for option, given in (
+            ("--mqtt", args.mqtt is not None),
+            ("--mqtt-ca", args.mqtt_ca is not None),
+            ("--gateway-id", args.gateway_id is not None),
+            ("--allow-commands", args.allow_commands),
+        )
+        if given
+    ]
+    if live_only:
+        raise ConfigError(
+            f"view: give DIR (a recording) or --mqtt (a broker), not both: "
+            f"{', '.join(live_only)} given with DIR"
+        )
+    http = parse_http_address(args.http)
+    print(f"view: replaying {args.folder} (once, before the page is served)", flush=True)
+    recording = load_recording(args.folder)
+    with StopSignals() as stop:
+        serve_recording(
+            recording,
+            http,
             duration_s=args.duration,
             log=lambda line: print(line, flush=True),
             stop=stop,

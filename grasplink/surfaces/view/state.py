@@ -242,6 +242,12 @@ class ViewState:
             node = gateway.nodes[name] = NodeView()
         return node
 
+    def add_point(
+        self, gid: str, kind: str, ts_ms: int, values: dict[str, Any], t_s: float
+    ) -> None:
+        """A point from beside the JSON tree (a recording's truth), plotted like its values."""
+        self._point(gid, kind, ts_ms, values, t_s)
+
     def _point(self, gid: str, kind: str, ts_ms: int, values: dict[str, Any], t_s: float) -> None:
         self._seq += 1
         self.points.append(Point(self._seq, gid, kind, ts_ms, values, t_s))

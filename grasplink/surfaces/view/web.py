@@ -70,6 +70,7 @@ class Request:
     path: str  # without the query
     host: str | None
     headers: dict[str, str] = field(default_factory=dict)  # names in lower case
+    query: str = ""  # after the "?" (a recording's event stream: where to play from)
 
     @property
     def content_length(self) -> int | None:
@@ -114,7 +115,8 @@ def parse_head(head: bytes) -> Request:
         if key in headers and key in _SINGLE:
             raise HttpError(400, f"more than one {name.strip()} header")
         headers[key] = value.strip()
-    return Request(method, target.split("?", 1)[0], headers.get("host"), headers)
+    path, _, query = target.partition("?")
+    return Request(method, path, headers.get("host"), headers, query)
 
 
 _SINGLE = frozenset({"host", "content-length", "content-type", "origin", TOKEN_HEADER})

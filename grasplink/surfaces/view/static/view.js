@@ -46,6 +46,17 @@ const PLOTS = [
 ];
 
 const $ = (id) => document.getElementById(id);
+// A recording (`grasplink view DIR`): the server says so in the page. It is played with the
+// truth beside the decoded values (dashed), and the page says it is a recording, never live.
+const recordingMeta = document.querySelector('meta[name="grasplink-recording"]');
+const RECORDING = recordingMeta && recordingMeta.content ? JSON.parse(recordingMeta.content) : null;
+function plotDrawing(field) { return PLOTS.find((p) => p.series.some(([f]) => f === field)); }
+plotDrawing("slip_speed_mm_s").truth = [["speed_mm_s", "true |speed| (mm/s)", "v", "#444444"]];
+plotDrawing("position_mm").truth = [
+  ["position_mm", "true position (mm)", "mm", "#2ca02c"],
+  ["slipping", "truly slipping (0/1)", "c", "#d62728"],
+];
+plotDrawing("grip_n").truth = [["grip_n", "true grip (N)", "n", "#2ca02c"]];
 let latest = null; // the last frame's summary
 let lastFrameAt = 0; // performance.now() of the last frame
 let history = {}; // gateway -> kind -> {t: [...s], fields: {name: [...]}}
@@ -135,7 +146,7 @@ function banner(state, message) {
   const node = $("banner");
   node.dataset.state = state;
   text(node, message);
-  document.body.classList.toggle("stale", state !== "live");
+  document.body.classList.toggle("stale", state !== "live" && state !== "recording");
   document.body.classList.toggle("waiting", state === "waiting");
 }
 
@@ -228,11 +239,25 @@ function drawNow(g) {
   const last = lastSlip[chosen];
   const shown = $("last-slip");
   shown.dataset.speed = last ? last.slip_speed_mm_s : "";
+  const when = last && (RECORDING ? `${(last.tsMs / 1000).toFixed(2)} s in the run`
+    : new Date(last.tsMs).toLocaleTimeString());
+  const truth = last && RECORDING ? trueSpeedAt(last.tsMs / 1000) : null;
+  shown.dataset.truth = truth === null ? "" : String(truth);
   text(shown, last ? `last slip with a speed: ${fixed(last.slip_speed_mm_s, 1, " mm/s")} at ` +
-    `${new Date(last.tsMs).toLocaleTimeString()}` : "last slip with a speed: –");
+    when + (truth === null ? "" : ` (true ${fixed(truth, 1, " mm/s")})`)
+    : "last slip with a speed: –");
   const hand = (g.nodes.hand || {}).values || {};
   $("reflex").dataset.reflex = hand.reflex || "unknown";
   text($("reflex"), `reflex: ${hand.reflex || "–"} (${hand.source || "–"})`);
+}
+
+function trueSpeedAt(t) {
+  // a recording's truth.csv speed at time t in the run (the last point at or before it)
+  const h = (history[chosen] || {}).truth;
+  if (!h || !h.fields.speed_mm_s) return null;
+  let i = h.t.length - 1;
+  while (i >= 0 && h.t[i] > t) i--;
+  return i < 0 ? null : h.fields.speed_mm_s[i];
 }
 
 function makePlots() {
@@ -245,18 +270,22 @@ function makePlots() {
     h3.textContent = spec.title;
     div.append(h3);
     box.append(div);
-    const scales = { x: { time: true, range: () => plotWindow } };
-    const axes = [{}];
+    const scales = { x: { time: RECORDING === null, range: () => plotWindow } };
+    const axes = [RECORDING ? { label: "s in the run" } : {}];
+    const truth = (RECORDING && spec.truth) || [];
     Object.entries(spec.units).forEach(([scale, unit], i) => {
       scales[scale] = { auto: true };
       axes.push({ scale, label: unit, side: i === 0 ? 3 : 1, grid: { show: i === 0 } });
     });
     const opts = {
       width: Math.max(300, div.clientWidth || 460), height: 170, scales, axes,
-      series: [{}, ...spec.series.map(([, label, scale, stroke]) => ({ label, scale, stroke, width: 1.5 }))],
+      series: [{}, ...spec.series.map(([, label, scale, stroke]) => ({ label, scale, stroke, width: 1.5 })),
+        ...truth.map(([, label, scale, stroke]) =>
+          ({ label, scale, stroke, width: 1.5, dash: [6, 4], spanGaps: true }))],
       cursor: { show: false }, legend: { live: false },
     };
-    plots.push({ spec, div, plot: new uPlot(opts, [[], ...spec.series.map(() => [])], div) });
+    const empty = [[], ...spec.series.map(() => []), ...truth.map(() => [])];
+    plots.push({ spec, div, truth, plot: new uPlot(opts, empty, div) });
   }
   window.addEventListener("resize", () => {
     for (const p of plots) p.plot.setSize({ width: Math.max(300, p.div.clientWidth), height: 170 });
@@ -269,10 +298,18 @@ function drawPlots(gateway, g) {
   const byKind = history[gateway] || {};
   const end = g.newest_ts_ms / 1000; // the gateway's clock: a skewed host still scrolls right
   plotWindow = [end - historyS, end];
+  if (RECORDING && latest.recording) { // the run's time: its first 30 s fill the plot as played
+    const at = latest.recording.position_s;
+    plotWindow = [Math.max(0, at - historyS), Math.max(at, Math.min(RECORDING.duration_s, historyS))];
+  }
   for (const h of Object.values(byKind)) trim(h, end - historyS - 1);
-  for (const { spec, plot } of plots) {
+  for (const { spec, plot, truth } of plots) {
     const h = byKind[spec.kind] || { t: [], fields: {} };
-    plot.setData([h.t, ...spec.series.map(([field]) => h.fields[field] || h.t.map(() => null))]);
+    const data = [h.t, ...spec.series.map(([field]) => h.fields[field] || h.t.map(() => null))];
+    if (truth.length === 0) { plot.setData(data); continue; }
+    // the truth has its own times (truth.csv): both tables on one x (gaps where one has none)
+    const tt = byKind.truth || { t: [], fields: {} };
+    plot.setData(uPlot.join([data, [tt.t, ...truth.map(([f]) => tt.fields[f] || tt.t.map(() => null))]]));
   }
 }
 
@@ -282,7 +319,8 @@ function draw() {
   window.viewStats.draws++;
   const gateway = chooseGateway(frame);
   const [state, message] = judge(frame, gateway);
-  banner(state, message);
+  if (RECORDING && frame.recording) drawRecording(frame.recording, state, message);
+  else banner(state, message);
   text($("problems"), String(frame.problems + (gateway ? frame.gateways[gateway].problems : 0)));
   const last = (gateway && frame.gateways[gateway].last_problem) || frame.last_problem;
   text($("last-problem"), last ? `last: ${last}` : "");
@@ -301,9 +339,74 @@ function draw() {
 }
 
 function connect() {
+  if (RECORDING) { play(playing); return; }
   const events = new EventSource("/events");
   events.onmessage = (event) => onFrame(JSON.parse(event.data));
   // EventSource reconnects by itself (retry: 1 s); the watch below greys the page meanwhile
+}
+
+// Playback of a recording: the server keeps each page's clock, set by the stream's query;
+// pause, play, seek and speed open a new stream from where the page is (its history reset).
+let playing = { at: 0, rate: 1, paused: false };
+let stream = null;
+let seeking = false; // while the slider is held, frames do not move it
+
+function play(next) {
+  playing = next;
+  if (stream !== null) stream.close();
+  const query = `at=${next.at.toFixed(3)}&rate=${next.rate}&paused=${next.paused ? 1 : 0}`;
+  stream = new EventSource(`/events?${query}`);
+  stream.onmessage = (event) => onFrame(JSON.parse(event.data));
+  // a lost stream is reopened from where the page was, not from the last control's time
+  stream.onerror = () => {
+    stream.close();
+    stream = null;
+    setTimeout(() => { if (stream === null) play({ ...playing, at: shownPosition() }); }, 1000);
+  };
+}
+
+function shownPosition() {
+  return latest && latest.recording ? latest.recording.position_s : playing.at;
+}
+
+function drawRecording(r, state, message) {
+  // never live: the banner says recording, the folder and the time in the run
+  const where = `${r.position_s.toFixed(2)} s of ${r.duration_s.toFixed(2)} s`;
+  const how = r.ended ? "ended" : r.paused ? "paused" : `playing ×${r.rate}`;
+  const note = state === "live" ? "" : ` (${message})`;
+  banner(state === "server-away" ? state : "recording",
+    `recording ${r.folder}: ${where}, ${how}${note}`);
+  $("banner").dataset.position = String(r.position_s);
+  $("banner").dataset.paused = String(r.paused);
+  text($("run-time"), where);
+  text($("play"), r.paused || r.ended ? "play" : "pause");
+  if (!seeking) $("seek").value = String(r.position_s);
+}
+
+function makePlayback() {
+  if (RECORDING === null) return;
+  document.title = `grasplink recording ${RECORDING.folder}`;
+  document.querySelector("h1").textContent = "grasplink recording";
+  $("playback").hidden = false;
+  $("seek").max = String(RECORDING.duration_s);
+  $("rate").replaceChildren(...RECORDING.rates.map((r) => new Option(`×${r}`, String(r))));
+  $("rate").value = "1";
+  text($("settings"), RECORDING.settings);
+  $("footer").textContent = "a recording replayed through the gateway's decoding (docs/view.md): " +
+    "nothing here is live";
+  $("play").addEventListener("click", () => {
+    const r = latest && latest.recording;
+    const paused = !(r && (r.paused || r.ended));
+    play({ ...playing, at: r && r.ended && !paused ? 0 : shownPosition(), paused });
+  });
+  $("seek").addEventListener("input", () => { seeking = true; });
+  $("seek").addEventListener("change", () => {
+    seeking = false;
+    play({ ...playing, at: Number($("seek").value) });
+  });
+  $("rate").addEventListener("change", () => {
+    play({ ...playing, at: shownPosition(), rate: Number($("rate").value) });
+  });
 }
 
 // Commands: offered only when the server put its spec and this page's token in the page
@@ -395,6 +498,7 @@ setInterval(() => {
     banner("server-away", "view server not answering: this page is stale");
   }
 }, 500);
+makePlayback();
 makePlots();
 makeCommands();
 connect();
