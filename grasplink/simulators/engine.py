@@ -323,6 +323,11 @@ class Simulation:
 
     def summary(self) -> dict:
         scene = self.scene
+        rates = {
+            kind: {"sample_rate_hz": node["sample_rate_hz"]}
+            for kind, node in scene.node_settings().items()
+            if "sample_rate_hz" in node
+        }
         live = self.network if isinstance(self.network, LiveNetwork) else None
         summary = {
             "scene": scene.name,
@@ -336,9 +341,13 @@ class Simulation:
             "rates_hz": {d: scene.rate_hz(d) for d in self.domains},
             "layout": scene.layout_name or (list(scene.layout_mm) if scene.layout_mm else None),
             "nodes": {
-                k: {"node_id": n.node_id, "state": n.state.name} for k, n in self.nodes.items()
+                k: {"node_id": n.node_id, "state": n.state.name} | rates.get(k, {})
+                for k, n in self.nodes.items()
             },
             "controller": scene.controller.name if self.controllers or not live else "external",
+            # the [controller] table as run: a replay of the log needs the same settings,
+            # whatever the scene file says later
+            "controller_options": scene.controller.options if scene.controller.name else None,
             "effects": [e.kind for e in scene.effects],
             "bus_faults": vars(scene.bus) | {"power_loss": [vars(p) for p in scene.bus.power_loss]}
             if scene.bus

@@ -106,8 +106,7 @@ def first_slip_s(recording: Recording) -> float:
 def test_the_replay_says_where_its_settings_came_from_and_what_it_holds(
     recording: Recording,
 ) -> None:
-    assert recording.settings.startswith("gateway settings from ")
-    assert recording.settings.endswith("loop_headline.toml [controller]")
+    assert recording.settings == "gateway settings as run (summary.json controller_options)"
     assert recording.duration_s == 6.0
     assert recording.gateway_id == "loop-headline"
     assert len(recording.truth_t_s) == 301  # 50 Hz over 6 s
@@ -224,11 +223,38 @@ def test_an_empty_log_is_named(headline_run: Path, tmp_path: Path) -> None:
         load_recording(folder)
 
 
+def test_a_run_replays_with_its_recorded_settings_whatever_its_scene_file_says_now(
+    headline_run: Path, tmp_path: Path
+) -> None:
+    """summary.json keeps the [controller] as run: an edited or removed scene file does
+    not change what the replayed gateway commands."""
+    folder = broken(headline_run, tmp_path)
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["controller_options"]["reflex"] == {"threshold_mm_s": 30.0}
+    summary["path"] = str(tmp_path / "gone.toml")
+    (folder / "summary.json").write_text(json.dumps(summary))
+    recording = load_recording(folder)
+    assert recording.settings == "gateway settings as run (summary.json controller_options)"
+
+
+def test_a_run_from_before_the_record_falls_back_to_its_scene_file(
+    headline_run: Path, tmp_path: Path
+) -> None:
+    folder = broken(headline_run, tmp_path)
+    summary = json.loads((folder / "summary.json").read_text())
+    del summary["controller_options"]
+    (folder / "summary.json").write_text(json.dumps(summary))
+    recording = load_recording(folder)
+    assert recording.settings.startswith("gateway settings from ")
+    assert recording.settings.endswith("loop_headline.toml [controller]")
+
+
 def test_a_run_whose_scene_is_gone_plays_with_the_default_settings_said_so(
     headline_run: Path, tmp_path: Path
 ) -> None:
     folder = broken(headline_run, tmp_path)
     summary = json.loads((folder / "summary.json").read_text())
+    del summary["controller_options"]  # a run from before summary.json kept its settings
     summary["path"] = str(tmp_path / "gone.toml")
     (folder / "summary.json").write_text(json.dumps(summary))
     recording = load_recording(folder)

@@ -149,9 +149,10 @@ def replay(can_log: Path, config: GatewayConfig, gateway_id: str) -> tuple[Timed
 
 
 def _gateway_config(summary: dict[str, Any], summary_path: Path) -> tuple[GatewayConfig, str]:
-    """The run's gateway settings: its scene's `[controller]` when the scene file named in
-    summary.json is there (the node-IDs and skin always from summary.json), else the
-    defaults, said so (the belt and hand commands shown are then a default gateway's)."""
+    """The run's gateway settings: the `[controller]` summary.json recorded as run, else
+    its scene's when the scene file named in summary.json is there (runs from before the
+    record), else the defaults, said so (the belt and hand commands shown are then a
+    default gateway's). Node-IDs, skin and sample rates from summary.json."""
     nodes = {
         kind: {"node_id": node["node_id"]} for kind, node in (summary.get("nodes") or {}).items()
     }
@@ -167,11 +168,22 @@ def _gateway_config(summary: dict[str, Any], summary_path: Path) -> tuple[Gatewa
         "the belt and hand commands shown may not be the run's"
     )
     scene_path = summary.get("path")
-    candidates = (
-        [Path(scene_path), summary_path.parent / Path(scene_path).name]
-        if isinstance(scene_path, str)
-        else []
-    )
+    recorded = summary.get("controller_options")
+    if summary.get("controller") == "gateway" and isinstance(recorded, dict):
+        # as run; relative file names in it resolve against the run's scene file
+        base = scene_path if isinstance(scene_path, str) else source
+        options = Params(dict(recorded), base, "controller")
+        settings = f"gateway settings as run ({summary_path.name} controller_options)"
+        candidates: list[Path] = []
+    else:
+        candidates = (
+            [Path(scene_path), summary_path.parent / Path(scene_path).name]
+            if isinstance(scene_path, str)
+            else []
+        )
+    for kind, node in (summary.get("nodes") or {}).items():
+        if kind in nodes and "sample_rate_hz" in node:
+            nodes[kind]["sample_rate_hz"] = node["sample_rate_hz"]
     for candidate in candidates:
         if not candidate.is_file():
             continue
