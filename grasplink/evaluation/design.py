@@ -29,10 +29,11 @@ machine.
 from __future__ import annotations
 
 import csv
+import json
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +52,7 @@ THESIS_SPEEDS = "10:100:5"
 THESIS_ALPHAS = (0.1, 0.3, 0.5, 0.7, 0.9)
 PARETO_ALPHA = 0.5  # --pareto writes the front member best at this α as layout.toml
 POPULATION = 24
-GENERATIONS = 20  # with POPULATION and SLIPS: < 10 min on 2 cores (docs/benchmarks/layouts.md)
+GENERATIONS = 15  # with POPULATION and SLIPS: < 10 min on 2 cores (docs/benchmarks/layouts.md)
 SLIPS = 32  # slips per evaluation: the fidelity study's knee (docs/benchmarks/layouts.md)
 CONFIRM_FACTOR = 4  # the finalists are scored again on a plan this many times longer
 FINALISTS = 4
@@ -374,13 +375,30 @@ def reference_for(alpha: float | None) -> str:
 
 
 def write_outputs(result: DesignResult, out: Path) -> list[Path]:
-    """DIR/front.csv, DIR/layout.toml and DIR/report.md."""
+    """DIR/front.csv, DIR/layout.toml, DIR/report.md and DIR/search.json (all figures)."""
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / "front.csv", out / "layout.toml", out / "report.md"]
+    paths = [out / "front.csv", out / "layout.toml", out / "report.md", out / "search.json"]
     write_front(result, paths[0])
     paths[1].write_text(layout_toml(result))
     paths[2].write_text(render_report(result))
+    paths[3].write_text(json.dumps(summary(result), indent=1) + "\n")
     return paths
+
+
+def summary(result: DesignResult) -> dict[str, Any]:
+    """What search.json keeps: the settings, the cost and every layout's figures."""
+    return {
+        "settings": asdict(result.settings),
+        "chosen_mm": list(result.chosen),
+        "generations": result.generations,
+        "evaluations": result.evaluations,
+        "wall_s": result.wall_s,
+        "cpu_s": result.cpu_s,
+        "workers": result.workers,
+        "population": [{"spacings_mm": list(x), **f} for x, f in result.population],
+        "finalists": [{"spacings_mm": list(x), **f} for x, f in result.finalists.items()],
+        "references": result.references,
+    }
 
 
 def write_front(result: DesignResult, path: Path) -> None:

@@ -46,13 +46,15 @@ OBJECT_MM = 90.0  # the thesis object's long side (ch. 5.4)
 
 @dataclass(frozen=True)
 class SlipPlan:
-    """One slip of a plan: kind, speed (mm/s), direction and where it starts (0..1 of the
-    start ridges a layout has: the same share on every candidate)."""
+    """One slip of a plan: kind, speed (mm/s), direction, where it starts (0..1 of the
+    start ridges a layout has: the same share on every candidate) and how far before that
+    ridge the edge starts (mm, below the 3 mm shortest spacing)."""
 
     kind: str
     speed_mm_s: float
     reverse: bool
     start_share: float
+    lead_mm: float = LEAD_MM
 
 
 @dataclass(frozen=True)
@@ -73,12 +75,14 @@ def plan_slips(
     speeds_mm_s: Sequence[float],
     seed: int,
     kinds: Sequence[str] = KINDS,
+    leads_mm: tuple[float, float] | None = None,
 ) -> tuple[SlipPlan, ...]:
     """`count` slips: kinds and directions in turn, speeds and start shares drawn at random.
 
     Kinds and directions alternate so that every plan of 2 * len(kinds) slips or more has
     each kind both ways; speeds cycle through a shuffled grid so a plan as long as the grid
-    covers every speed.
+    covers every speed. `leads_mm` (low, high): the edge's start before its first ridge is
+    drawn from it (a validation set's other start positions), else LEAD_MM.
     """
     rng = np.random.default_rng(derive_seed(seed, "plan", count, tuple(speeds_mm_s)))
     speeds: list[float] = []
@@ -88,7 +92,9 @@ def plan_slips(
             speeds = [float(v) for v in rng.permutation(np.asarray(speeds_mm_s, dtype=float))]
         kind = kinds[i % len(kinds)]
         reverse = bool((i // len(kinds)) % 2)
-        out.append(SlipPlan(kind, speeds.pop(), reverse, float(rng.random())))
+        share = float(rng.random())
+        lead = LEAD_MM if leads_mm is None else float(rng.uniform(*leads_mm))
+        out.append(SlipPlan(kind, speeds.pop(), reverse, share, lead))
     return tuple(out)
 
 
@@ -165,13 +171,13 @@ def simulate(layout: tuple[float, ...], slip: SlipPlan, seed: int):
     skin = float(ridges[-1])
     along = skin - ridges[::-1] if slip.reverse else ridges  # ridges along the travel
     first = min(int(slip.start_share * start_ridges(layout)), start_ridges(layout) - 1)
-    start_u = along[first] - LEAD_MM
+    start_u = along[first] - slip.lead_mm
     third_u = along[first + 2]
     rng = np.random.default_rng(seed)
     v = slip.speed_mm_s
     extra: dict = {}
     if slip.kind == "accelerating":
-        script = Script(ONSET_S).ramp(v / ACCEL, START_S).reach(LEAD_MM)
+        script = Script(ONSET_S).ramp(v / ACCEL, START_S).reach(slip.lead_mm)
         script.reach(third_u - start_u, v * ACCEL)
     elif slip.kind == "stick-slip":
         script = Script(ONSET_S).ramp(v, START_S)

@@ -125,7 +125,9 @@ def test_layout_toml_round_trips_through_parse_layout_and_grasplink_decode(
     in_process, tmp_path, capsys
 ):
     paths = design.write_outputs(in_process, tmp_path / "out")
-    assert [p.name for p in paths] == ["front.csv", "layout.toml", "report.md"]
+    assert [p.name for p in paths] == ["front.csv", "layout.toml", "report.md", "search.json"]
+    saved = json.loads(paths[3].read_text())
+    assert saved["chosen_mm"] == list(in_process.chosen) and saved["generations"] == 2
     toml = tmp_path / "out" / "layout.toml"
     assert parse_layout(str(toml)) == in_process.chosen
     front = (tmp_path / "out" / "front.csv").read_text().splitlines()
