@@ -186,3 +186,16 @@ def test_bad_input_is_one_error_before_any_work(tmp_path, capsys, args, message)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
     assert not out.exists()
+
+
+def test_a_scene_takes_a_layout_file_for_its_skin(in_process, tmp_path):
+    from grasplink.simulators.scene import load_scene
+
+    design.write_outputs(in_process, tmp_path / "out")
+    scene = tmp_path / "slip.toml"
+    layout = tmp_path / "out" / "layout.toml"
+    scene.write_text(
+        f'[scene]\nduration_s = 0.5\n\n[nodes.skin]\nlayout = "{layout}"\n'
+        '\n[[effects]]\ntype = "object.scripted"\nspeed_mm_s = [[0.0, 60.0]]\nstart_mm = -5.0\n'
+    )
+    assert load_scene(scene).layout_mm == in_process.chosen
