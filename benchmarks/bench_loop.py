@@ -28,7 +28,7 @@ from pathlib import Path
 
 from grasplink.controllers import build_controllers
 from grasplink.errors import GrasplinkError
-from grasplink.evaluation.loop import MAX_WORKERS, console_table, report_to
+from grasplink.evaluation.loop import console_table, report_to
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -36,12 +36,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="reduced grid (< 2 min)")
     parser.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/")
     parser.add_argument(
-        "--workers", type=int, default=MAX_WORKERS, help="processes running trials at once"
+        "--workers", type=int, default=None, help="processes running trials (default: all cores)"
     )
+    parser.add_argument("--dask", default=None, help="a Dask scheduler tcp://HOST:PORT instead")
     args = parser.parse_args(argv)
     try:
         results, out = report_to(
-            quick=args.quick, out=args.out, controllers_for=build_controllers, workers=args.workers
+            quick=args.quick,
+            out=args.out,
+            controllers_for=build_controllers,
+            workers=args.workers,
+            dask=args.dask,
         )
     except GrasplinkError as exc:
         print(f"bench_loop: error: {exc}", file=sys.stderr)

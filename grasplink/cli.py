@@ -290,9 +290,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--skin",
         default=None,
         metavar="LAYOUT",
-        help="ridge layout: a name (alpha0.1, fibonacci, uniform4, ...) or "
+        help="ridge layout: a name (alpha0.1, fibonacci, uniform4, ...), "
         "comma-separated spacings in mm, 0.5-200 mm each, at most 40 (the skin node's "
-        "0x2140); default for a run folder: the layout in its summary.json",
+        "0x2140), or a layout file PATH.toml (`grasplink skin design`); default for a run "
+        "folder: the layout in its summary.json",
     )
     decode.add_argument(
         "--fs",
@@ -356,13 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder for loop.md/.json/.png (default: docs/benchmarks/ of the grasplink "
         "checkout the current folder is in)",
     )
-    bench_loop.add_argument(
-        "--workers",
-        type=int,
-        default=2,
-        metavar="N",
-        help="trials run in N processes at once (default 2, at most the cores)",
-    )
+    add_worker_arguments(bench_loop, "trials")
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
     prof_sub = profiles.add_subparsers(
@@ -397,7 +392,112 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_log_commands(sub, DEFAULT_BUS_URL)
     _add_view_command(sub)
+    _add_skin_commands(sub)
     return parser
+
+
+def _add_skin_commands(sub: Subcommands) -> None:
+    """`skin design`: search a ridge layout for a skin (docs/design.md)."""
+    from grasplink.decoding.registry import DECODERS, DEFAULT_DECODER
+    from grasplink.evaluation import design
+
+    skin = sub.add_parser("skin", help="skin design tools")
+    skin_sub = skin.add_subparsers(dest="skin_command", required=True, metavar="SKIN_COMMAND")
+    d = skin_sub.add_parser(
+        "design",
+        help="search ridge layouts (NSGA-II) by a decoder's accuracy on simulated slips "
+        "and the resolution; writes front.csv, layout.toml and report.md",
+    )
+    d.add_argument(
+        "--length-mm",
+        type=float,
+        default=design.THESIS_LENGTH_MM,
+        help=f"skin length in mm (default {design.THESIS_LENGTH_MM:g}, the thesis's palm)",
+    )
+    goal = d.add_mutually_exclusive_group()
+    goal.add_argument(
+        "--alpha",
+        type=float,
+        default=None,
+        metavar="A",
+        help="minimise table 5.1's F = A·(1 - accuracy) + (1 - A)·(1 - resolution)",
+    )
+    goal.add_argument(
+        "--pareto",
+        action="store_true",
+        help="keep the front of speed error, position error and resolution (the default); "
+        f"layout.toml gets its member best at α = {design.PARETO_ALPHA:g}",
+    )
+    d.add_argument(
+        "--speeds",
+        default=design.THESIS_SPEEDS,
+        metavar="START:STOP:STEP",
+        help=f"slip speeds in mm/s, or a comma list (default {design.THESIS_SPEEDS}, ch. 5.3.3)",
+    )
+    d.add_argument(
+        "--decoder",
+        default=DEFAULT_DECODER,
+        metavar="NAME",
+        help=f"the decoder judged ({', '.join(DECODERS)}; default {DEFAULT_DECODER})",
+    )
+    stop = d.add_mutually_exclusive_group()
+    stop.add_argument(
+        "--generations",
+        type=int,
+        default=None,
+        metavar="G",
+        help=f"a fixed amount of work: the same result on any workers "
+        f"(default {design.GENERATIONS})",
+    )
+    stop.add_argument(
+        "--budget-min",
+        type=float,
+        default=None,
+        metavar="M",
+        help="stop after the generation that ends past M minutes (machine-dependent result)",
+    )
+    d.add_argument(
+        "--population",
+        type=int,
+        default=design.POPULATION,
+        metavar="P",
+        help=f"layouts per generation (default {design.POPULATION})",
+    )
+    d.add_argument(
+        "--slips",
+        type=int,
+        default=design.SLIPS,
+        metavar="K",
+        help=f"simulated slips per fitness evaluation (default {design.SLIPS}; "
+        "docs/benchmarks/layouts.md: fidelity against time)",
+    )
+    add_worker_arguments(d, "fitness evaluations")
+    d.add_argument("--seed", type=int, default=1, help="the run's seed (default 1)")
+    d.add_argument(
+        "--out",
+        type=Path,
+        default=Path("skin_design"),
+        metavar="DIR",
+        help="folder for front.csv, layout.toml and report.md (default ./skin_design)",
+    )
+
+
+def add_worker_arguments(parser: argparse.ArgumentParser, what: str) -> None:
+    """`--workers N | --dask ADDRESS`: where a study's independent tasks run."""
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help=f"{what} run in N local processes at once (default: all cores; 1: in this process)",
+    )
+    where.add_argument(
+        "--dask",
+        default=None,
+        metavar="tcp://HOST:PORT",
+        help=f"{what} run on the workers of this Dask scheduler instead (docs/design.md)",
+    )
 
 
 class Subcommands(Protocol):
@@ -952,7 +1052,11 @@ def cmd_bench_loop(args: argparse.Namespace) -> int:
     from grasplink.evaluation.loop import console_table, report_to
 
     results, out = report_to(
-        quick=args.quick, out=args.out, controllers_for=build_controllers, workers=args.workers
+        quick=args.quick,
+        out=args.out,
+        controllers_for=build_controllers,
+        workers=args.workers,
+        dask=args.dask,
     )
     print(console_table(results))
     print(f"wrote {out}/loop.md, loop.json, loop.png")
@@ -1329,7 +1433,39 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return stop.exit_code if stop.received is not None and stop.exit_code != 130 else 0
 
 
+def cmd_skin(args: argparse.Namespace) -> int:
+    """`skin design`: every setting checked and the workers reached before the search."""
+    from grasplink.evaluation import design
+    from grasplink.evaluation.workers import open_workers
+
+    settings = design.DesignSettings(
+        length_mm=args.length_mm,
+        alpha=args.alpha,
+        speeds_mm_s=design.parse_speeds(args.speeds),
+        decoder=args.decoder,
+        generations=(
+            args.generations
+            if args.generations is not None or args.budget_min is not None
+            else design.GENERATIONS
+        ),
+        budget_min=args.budget_min,
+        population=args.population,
+        slips=args.slips,
+        seed=args.seed,
+    ).check()
+    if args.out.exists() and not args.out.is_dir():
+        raise ConfigError(f"--out {args.out}: exists and is not a folder")
+    with open_workers(args.workers, args.dask) as workers:
+        result = design.search(settings, workers, log=lambda line: print(line, flush=True))
+    paths = design.write_outputs(result, args.out)
+    print(
+        f"layout {','.join(f'{x:g}' for x in result.chosen)} mm; wrote {', '.join(map(str, paths))}"
+    )
+    return 0
+
+
 COMMANDS = {
+    "skin": cmd_skin,
     "record": cmd_record,
     "replay": cmd_replay,
     "gateway": cmd_gateway,

@@ -16,9 +16,10 @@ not what the gateway thought it sent. Both are collected in memory while
 the scene runs (a network tap and the physics domain after each chunk),
 bounded by the trial's length; a dropped object ends its trial.
 
-`run_report` runs the grid (mode × reflex × speed × seed) on a process pool
-and writes loop.md, loop.json and loop.png. Drivers: `grasplink bench loop`
-and benchmarks/bench_loop.py.
+`run_report` runs the grid (mode × reflex × speed × seed) on every local core
+or a Dask cluster (`grasplink.evaluation.workers`) and writes loop.md,
+loop.json and loop.png. Drivers: `grasplink bench loop` and
+benchmarks/bench_loop.py.
 """
 
 from __future__ import annotations
@@ -476,7 +477,6 @@ QUICK_SPEEDS_MM_S = (20, 60, 150)
 SEEDS = tuple(range(1, 11))
 QUICK_SEEDS = (1,)
 HEADLINE_THRESHOLD_MM_S = 30.0  # loop_headline.toml's reflex threshold
-MAX_WORKERS = 2
 # The fastest slip this loop's wearer stops (loop_headline.toml): shown after the second
 # ridge contact (the first spacing, 19 mm, on alpha0.1), reaction 1.75 s (ch. 2.4.4) plus
 # ~0.35 s of EMG envelope, motor delay and hand: (84 - 19) / (1.75 + 0.35) ≈ 31 mm/s.
@@ -533,30 +533,29 @@ def trial_job(trial: Trial, controllers_for: ControllerFactory) -> dict:
 def run_trials(
     trials: Sequence[Trial],
     controllers_for: ControllerFactory,
-    workers: int = MAX_WORKERS,
+    workers: int | None = None,
     log: Callable[[str], None] = print,
+    dask: str | None = None,
 ) -> list[dict]:
-    """Every trial, on `workers` processes (1: in this process); results in trial order."""
-    import multiprocessing
-    import os
+    """Every trial on `workers` local processes (None: all cores; 1: in this process) or on
+    the Dask scheduler at `dask`; results in trial order (a trial's seed is its own)."""
+    import functools
     import time
-    from concurrent.futures import ProcessPoolExecutor
+
+    from grasplink.evaluation import workers as wk
 
     started = time.monotonic()
-    workers = max(1, min(workers, os.cpu_count() or 1, len(trials)))
-    if workers == 1:
-        rows = [trial_job(t, controllers_for) for t in trials]
-    else:
-        # spawn: workers start clean, whatever threads or state the caller has
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(workers, mp_context=context) as pool:
-            jobs = [pool.submit(trial_job, t, controllers_for) for t in trials]
-            rows = []
-            for i, job in enumerate(jobs, 1):
-                rows.append(job.result())
-                if i % 50 == 0 or i == len(jobs):
-                    log(f"  {i}/{len(jobs)} trials, {time.monotonic() - started:.0f} s")
-    log(f"{len(trials)} trials in {time.monotonic() - started:.1f} s on {workers} workers")
+
+    def progress(done: int, total: int) -> None:
+        if done % 50 == 0 or done == total:
+            log(f"  {done}/{total} trials, {time.monotonic() - started:.0f} s")
+
+    if dask is None:
+        workers = max(1, min(wk.local_cores() if workers is None else workers, len(trials)))
+    with wk.open_workers(workers, dask) as pool:
+        job = functools.partial(trial_job, controllers_for=controllers_for)
+        rows = pool.map(job, trials, progress if pool.count > 1 else None)
+        log(f"{len(trials)} trials in {time.monotonic() - started:.1f} s on {pool.describe()}")
     return rows
 
 
@@ -648,15 +647,16 @@ def run_report(
     *,
     controllers_for: ControllerFactory,
     quick: bool = False,
-    workers: int = MAX_WORKERS,
+    workers: int | None = None,
     log: Callable[[str], None] = print,
     trials: Sequence[Trial] | None = None,
+    dask: str | None = None,
 ) -> dict:
     """Run the grid (or `trials`) and write loop.md, loop.json and loop.png into `out`."""
     grid_name = ("quick" if quick else "full") + " grid" if trials is None else "as given"
     trials = grid(quick) if trials is None else list(trials)
     log(f"closed-loop trials: {len(trials)} ({grid_name})")
-    rows = run_trials(trials, controllers_for, workers, log)
+    rows = run_trials(trials, controllers_for, workers, log, dask)
     results: dict[str, Any] = {
         "quick": quick,
         "grid": {
@@ -701,17 +701,18 @@ def report_to(
     quick: bool,
     out: Path | None,
     controllers_for: ControllerFactory,
-    workers: int = MAX_WORKERS,
+    workers: int | None = None,
     log: Callable[[str], None] = print,
+    dask: str | None = None,
 ) -> tuple[dict, Path]:
     """What the drivers call: docs/benchmarks/ of the checkout unless `out`; (results, out)."""
     from grasplink.evaluation.decoding_bench import default_out_dir
+    from grasplink.evaluation.workers import open_workers
 
-    if workers < 1:
-        raise ConfigError(f"workers: expected at least 1 process, got {workers}")
+    open_workers(workers, dask).close()  # a bad count or an unreachable scheduler fails now
     out = out if out is not None else default_out_dir()
     results = run_report(
-        out, controllers_for=controllers_for, quick=quick, workers=workers, log=log
+        out, controllers_for=controllers_for, quick=quick, workers=workers, log=log, dask=dask
     )
     return results, out
 

@@ -4,12 +4,16 @@ A layout is the list of spacings between successive ridges, in mm, along an
 84 mm skin. The skin node stores the spacings in 0x2140 (in µm, at most
 `MAX_NODE_SPACINGS`) and the preset number in 0x2141, so a layout given on
 the command line or in a scene file has to be turned into those numbers; this
-module is the one place that knows the names and checks user input.
+module is the one place that knows the names, the layout files (`PATH.toml`
+with `spacings_mm = [...]`, as `grasplink skin design` writes them) and
+checks user input.
 """
 
 from __future__ import annotations
 
 import math
+import tomllib
+from pathlib import Path
 
 from grasplink.errors import ConfigError
 
@@ -40,19 +44,26 @@ MIN_SPACING_MM = 0.1
 MAX_SPACING_MM = 1000.0
 
 
-def parse_layout(text: str) -> tuple[float, ...]:
-    """Turn a layout name or "19,12,5" (mm) into spacings in mm.
+LAYOUT_FILE_SUFFIX = ".toml"
+LAYOUT_FILE_KEYS = ("spacings_mm", "design")  # the layout, and how it was found (not read)
 
-    Raises ConfigError naming the offending value, so a typo in a command
-    line reports what was wrong rather than a bare ValueError. More than
-    `MAX_NODE_SPACINGS` spacings are accepted here (simulators can use
-    them); only the node's object dictionary is limited.
+
+def parse_layout(text: str) -> tuple[float, ...]:
+    """Turn a layout name, "19,12,5" (mm) or a layout file PATH.toml into spacings in mm.
+
+    Raises ConfigError naming the offending value (and file), so a typo in a
+    command line reports what was wrong rather than a bare ValueError. More
+    than `MAX_NODE_SPACINGS` spacings are accepted here (simulators can use
+    them); only the node's object dictionary is limited. A relative PATH is
+    taken from the current folder.
     """
     stripped = text.strip()
     if not stripped:
         raise ConfigError("ridge layout is empty; give a name or comma-separated spacings in mm")
     if stripped in LAYOUTS_MM:
         return LAYOUTS_MM[stripped]
+    if stripped.lower().endswith(LAYOUT_FILE_SUFFIX):
+        return read_layout_file(Path(stripped))
     if "," not in stripped and not _is_number(stripped):
         raise ConfigError(
             f"unknown ridge layout {stripped!r}; valid names: {', '.join(LAYOUTS_MM)} "
@@ -61,6 +72,42 @@ def parse_layout(text: str) -> tuple[float, ...]:
     spacings: list[float] = []
     for position, item in enumerate(stripped.split(","), start=1):
         spacings.append(_parse_spacing(item.strip(), position))
+    return tuple(spacings)
+
+
+def read_layout_file(path: Path) -> tuple[float, ...]:
+    """The spacings of a layout file: `spacings_mm = [19, 12, 5]` (a `[design]` table may
+    say how they were found; any other key is an error, so a misspelt key is not ignored)."""
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"ridge layout file {path}: not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"ridge layout file {path}: cannot be read ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"ridge layout file {path}: not valid TOML ({exc})") from None
+    unknown = [key for key in data if key not in LAYOUT_FILE_KEYS]
+    if unknown:
+        raise ConfigError(
+            f"ridge layout file {path}: unknown key {unknown[0]!r}; expected spacings_mm = [...] "
+            "(and an optional [design] table)"
+        )
+    values = data.get("spacings_mm")
+    if not isinstance(values, list) or not values:
+        raise ConfigError(
+            f"ridge layout file {path}: spacings_mm must be a non-empty list of spacings in mm, "
+            "e.g. spacings_mm = [19, 12, 5]"
+        )
+    spacings = []
+    for position, value in enumerate(values, start=1):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(
+                f"ridge layout file {path}: spacings_mm #{position} {value!r} is not a number (mm)"
+            )
+        try:
+            spacings.append(_parse_spacing(repr(float(value)), position))
+        except ConfigError as exc:
+            raise ConfigError(f"ridge layout file {path}: {exc}") from None
     return tuple(spacings)
 
 
