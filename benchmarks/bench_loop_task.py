@@ -1,7 +1,8 @@
 """The least-force task in the closed loop: slip-speed against slip-occurrence feedback.
 
 Writes docs/benchmarks/loop_task.md, .json and .png (grasplink/evaluation/loop_task.py).
-Usage: `python benchmarks/bench_loop_task.py [--quick] [--out DIR] [--workers N]`;
+Usage: `python benchmarks/bench_loop_task.py [--quick] [--out DIR] [--workers N | --dask
+tcp://HOST:PORT]` (also `grasplink bench loop --task least-force`);
 `--report-only loop_task.json` re-renders the doc and plot from a run's figures.
 """
 
@@ -21,7 +22,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one seed (8 trials)")
     parser.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/")
-    parser.add_argument("--workers", type=int, default=2, help="processes running trials")
+    parser.add_argument(
+        "--workers", type=int, default=None, help="local processes (default: every core)"
+    )
+    parser.add_argument("--dask", default=None, metavar="tcp://HOST:PORT")
     parser.add_argument("--report-only", type=Path, default=None, metavar="JSON")
     args = parser.parse_args(argv)
     out = args.out if args.out is not None else default_out_dir()
@@ -33,7 +37,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rendered {out}/loop_task.md, loop_task.png from {args.report_only}")
         return 0
     results = run_report(
-        out, controllers_for=build_controllers, quick=args.quick, workers=args.workers
+        out,
+        controllers_for=build_controllers,
+        quick=args.quick,
+        workers=args.workers,
+        dask=args.dask,
     )
     high = results["figures"]["compare"]["high"]
     print(

@@ -357,6 +357,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder for loop.md/.json/.png (default: docs/benchmarks/ of the grasplink "
         "checkout the current folder is in)",
     )
+    bench_loop.add_argument(
+        "--task",
+        choices=("pulled", "least-force"),
+        default="pulled",
+        help="pulled (default): loop_headline's pull, every mode with and without the reflex "
+        "(loop.md); least-force: the object pulled through a damper, whose slip speed is the "
+        "grip missing, fragile, slip speed against occurrence (loop_task.md)",
+    )
     add_worker_arguments(bench_loop, "trials")
 
     profiles = sub.add_parser("profiles", help="object dictionaries (EDS)")
@@ -1051,6 +1059,8 @@ def cmd_bench_loop(args: argparse.Namespace) -> int:
     from grasplink.controllers import build_controllers
     from grasplink.evaluation.loop import console_table, report_to
 
+    if args.task == "least-force":
+        return cmd_bench_loop_task(args)
     results, out = report_to(
         quick=args.quick,
         out=args.out,
@@ -1060,6 +1070,30 @@ def cmd_bench_loop(args: argparse.Namespace) -> int:
     )
     print(console_table(results))
     print(f"wrote {out}/loop.md, loop.json, loop.png")
+    return 0
+
+
+def cmd_bench_loop_task(args: argparse.Namespace) -> int:
+    from grasplink.controllers import build_controllers
+    from grasplink.evaluation import loop_task
+    from grasplink.evaluation.decoding_bench import default_out_dir
+    from grasplink.evaluation.workers import open_workers
+
+    open_workers(args.workers, args.dask).close()  # a bad count or scheduler fails first
+    out = args.out if args.out is not None else default_out_dir()
+    results = loop_task.run_report(
+        out,
+        controllers_for=build_controllers,
+        quick=args.quick,
+        workers=args.workers,
+        dask=args.dask,
+    )
+    high = results["figures"]["compare"]["high"]
+    print(
+        f"least-force task, high speeds: slip speed {high['verdict']} slip occurrence "
+        f"({high['diff_pct']:+.0f} points, Fisher p {high['p']:.2g})"
+    )
+    print(f"wrote {out}/loop_task.md, loop_task.json, loop_task.png")
     return 0
 
 

@@ -165,13 +165,15 @@ def run_report(
     *,
     controllers_for: ControllerFactory,
     quick: bool = False,
-    workers: int = 2,
+    workers: int | None = None,
     log: Callable[[str], None] = print,
+    dask: str | None = None,
 ) -> dict:
-    """Run the task's grid and write loop_task.md, .json and .png into `out`."""
+    """Run the task's grid (local cores, or the Dask scheduler at `dask`) and write
+    loop_task.md, .json and .png into `out`."""
     trials = grid(quick)
     log(f"least-force task: {len(trials)} trials ({'quick' if quick else 'full'} grid)")
-    rows = run_trials(trials, controllers_for, workers, log)
+    rows = run_trials(trials, controllers_for, workers, log, dask)
     results: dict[str, Any] = {
         "quick": quick,
         "grid": {

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from grasplink.cli import main as cli_main
 from grasplink.controllers import build_controllers
 from grasplink.errors import ConfigError
 from grasplink.evaluation import least_force, loop, loop_task
@@ -175,3 +176,17 @@ def test_a_report_rendered_from_its_json_lists_the_speeds_in_order():
     at = [text.index(f"| slip speed | {v:g} |") for v in least_force.SPEEDS_MM_S]
     assert at == sorted(at)
     assert "4 mm/s 0 %" in text  # no seed ended the same way in both modes
+
+
+@pytest.mark.parametrize(
+    ("options", "said"),
+    [(["--workers", "0"], "workers"), (["--dask", "tcp://127.0.0.1:9"], "127.0.0.1:9")],
+)
+def test_the_task_from_the_cli_refuses_bad_workers_before_running_anything(
+    tmp_path, capsys, options, said
+):
+    out = tmp_path / "x"
+    argv = ["bench", "loop", "--task", "least-force", "--out", str(out), *options]
+    assert cli_main(argv) == 1
+    assert said in capsys.readouterr().err
+    assert not out.exists()
