@@ -119,6 +119,9 @@ def test_the_headline_shows_live_nodes_then_a_decoded_slip_then_lost_nodes(
                 browser, phases_are(browser, "operational", KINDS), "four nodes live", READY_S
             )
             assert banner_state(browser) == "live"
+            # a live page has no playback controls (they belong to `view DIR`)
+            shown = "return getComputedStyle(document.getElementById('playback')).display"
+            assert browser.execute_script(shown) == "none"
             speed = wait_for_page(
                 browser,
                 "const s = document.getElementById('last-slip').dataset.speed;"
