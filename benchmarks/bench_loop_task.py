@@ -15,7 +15,7 @@ from pathlib import Path
 
 from grasplink.controllers import build_controllers
 from grasplink.evaluation.decoding_bench import default_out_dir
-from grasplink.evaluation.loop_task import plot_report, render, run_report
+from grasplink.evaluation.loop_task import headline, plot_report, render, report_to
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -28,26 +28,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dask", default=None, metavar="tcp://HOST:PORT")
     parser.add_argument("--report-only", type=Path, default=None, metavar="JSON")
     args = parser.parse_args(argv)
-    out = args.out if args.out is not None else default_out_dir()
     if args.report_only is not None:
+        out = args.out if args.out is not None else default_out_dir()
         results = json.loads(args.report_only.read_text())
         out.mkdir(parents=True, exist_ok=True)
         plot_report(results, out / "loop_task.png")
         (out / "loop_task.md").write_text(render(results))
         print(f"rendered {out}/loop_task.md, loop_task.png from {args.report_only}")
         return 0
-    results = run_report(
-        out,
-        controllers_for=build_controllers,
+    results, out = report_to(
         quick=args.quick,
+        out=args.out,
+        controllers_for=build_controllers,
         workers=args.workers,
         dask=args.dask,
     )
-    high = results["figures"]["compare"]["high"]
-    print(
-        f"high speeds: slip speed {high['verdict']} slip occurrence "
-        f"({high['diff_pct']:+.0f} points)"
-    )
+    print(headline(results))
     print(f"wrote {out}/loop_task.md, loop_task.json, loop_task.png")
     return 0
 

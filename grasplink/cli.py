@@ -1076,23 +1076,15 @@ def cmd_bench_loop(args: argparse.Namespace) -> int:
 def cmd_bench_loop_task(args: argparse.Namespace) -> int:
     from grasplink.controllers import build_controllers
     from grasplink.evaluation import loop_task
-    from grasplink.evaluation.decoding_bench import default_out_dir
-    from grasplink.evaluation.workers import open_workers
 
-    open_workers(args.workers, args.dask).close()  # a bad count or scheduler fails first
-    out = args.out if args.out is not None else default_out_dir()
-    results = loop_task.run_report(
-        out,
-        controllers_for=build_controllers,
+    results, out = loop_task.report_to(
         quick=args.quick,
+        out=args.out,
+        controllers_for=build_controllers,
         workers=args.workers,
         dask=args.dask,
     )
-    high = results["figures"]["compare"]["high"]
-    print(
-        f"least-force task, high speeds: slip speed {high['verdict']} slip occurrence "
-        f"({high['diff_pct']:+.0f} points, Fisher p {high['p']:.2g})"
-    )
+    print(loop_task.headline(results))
     print(f"wrote {out}/loop_task.md, loop_task.json, loop_task.png")
     return 0
 

@@ -194,6 +194,37 @@ def run_report(
     return results
 
 
+def report_to(
+    *,
+    quick: bool,
+    out: Path | None,
+    controllers_for: ControllerFactory,
+    workers: int | None = None,
+    dask: str | None = None,
+    log: Callable[[str], None] = print,
+) -> tuple[dict, Path]:
+    """What the drivers call: a bad worker count or an unreachable scheduler fails before
+    any trial; docs/benchmarks/ of the checkout unless `out`; (results, out)."""
+    from grasplink.evaluation.decoding_bench import default_out_dir
+    from grasplink.evaluation.workers import open_workers
+
+    open_workers(workers, dask).close()
+    out = out if out is not None else default_out_dir()
+    results = run_report(
+        out, controllers_for=controllers_for, quick=quick, workers=workers, log=log, dask=dask
+    )
+    return results, out
+
+
+def headline(results: dict) -> str:
+    """One line for a console: the high speeds' verdict."""
+    high = results["figures"]["compare"]["high"]
+    return (
+        f"least-force task, high speeds: slip speed {high['verdict']} slip occurrence "
+        f"({high['diff_pct']:+.0f} points, Fisher p {high['p']:.2g})"
+    )
+
+
 def _f(value: float | None, digits: int = 0) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
