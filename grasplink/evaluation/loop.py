@@ -622,8 +622,9 @@ def aggregate(rows: Sequence[dict]) -> dict:
 
 
 def trial_of(row: dict) -> Trial:
-    """The trial a result row (trial and outcome fields, as in loop.json) came from."""
-    return Trial(**{f.name: row[f.name] for f in fields(Trial)})
+    """The trial a result row (trial and outcome fields, as in loop.json) came from; a field
+    added since the row was written takes its default (loop.json from before `task`)."""
+    return Trial(**{f.name: row[f.name] for f in fields(Trial) if f.name in row})
 
 
 def compare(a: dict, b: dict) -> tuple[str, float | None]:
