@@ -562,43 +562,45 @@ def run_trials(
 # -- figures -----------------------------------------------------------------------------------
 
 
-def _median(values: Sequence[float | None]) -> float | None:
+def median_of(values: Sequence[float | None]) -> float | None:
+    """The median of the values measured (None: not measured); None if there are none."""
     finite = [v for v in values if v is not None]
     return float(np.median(finite)) if finite else None
 
 
-def _mean(values: Sequence[float | None]) -> float | None:
+def mean_of(values: Sequence[float | None]) -> float | None:
     finite = [v for v in values if v is not None]
     return float(np.mean(finite)) if finite else None
 
 
-def _pct(flags: Sequence[bool]) -> float | None:
+def pct_of(flags: Sequence[bool]) -> float | None:
+    """The share of true flags in %; None for no flags."""
     return 100.0 * sum(flags) / len(flags) if flags else None
 
 
 def summarise(rows: Sequence[dict]) -> dict:
     """The figures of a group of trials (empty group: n = 0 and None everywhere)."""
     stopped = [r for r in rows if r["stopped"]]
-    effort = _mean([r["i_emg"] for r in rows])
-    stopped_pct = _pct([r["stopped"] for r in rows])
+    effort = mean_of([r["i_emg"] for r in rows])
+    stopped_pct = pct_of([r["stopped"] for r in rows])
     return {
         "n": len(rows),
         "stopped_pct": stopped_pct,
-        "first_stop_pct": _pct([r["first_stop_s"] is not None for r in rows]),
-        "dropped_pct": _pct([r["dropped"] for r in rows]),
+        "first_stop_pct": pct_of([r["first_stop_s"] is not None for r in rows]),
+        "dropped_pct": pct_of([r["dropped"] for r in rows]),
         "crushed": sum(r["crushed"] for r in rows),
-        "reslip_pct": _pct([r["slip_episodes"] > 1 for r in rows]),
-        "slip_distance_median_mm": _median([r["slip_distance_mm"] for r in stopped]),
-        "time_to_stop_median_s": _median([r["time_to_stop_s"] for r in stopped]),
-        "grip_mean_n": _mean([r["grip_mean_n"] for r in rows]),
+        "reslip_pct": pct_of([r["slip_episodes"] > 1 for r in rows]),
+        "slip_distance_median_mm": median_of([r["slip_distance_mm"] for r in stopped]),
+        "time_to_stop_median_s": median_of([r["time_to_stop_s"] for r in stopped]),
+        "grip_mean_n": mean_of([r["grip_mean_n"] for r in rows]),
         "i_emg": effort,
         "success_to_effort": None
         if stopped_pct is None or not effort
         else stopped_pct / 100.0 / effort,
-        "belt_latency_median_s": _median([r["belt_latency_s"] for r in rows]),
-        "slip_belt_latency_median_s": _median([r.get("slip_belt_latency_s") for r in rows]),
-        "reflex_pct": _pct([r["reflex_latency_s"] is not None for r in rows]),
-        "reflex_latency_median_s": _median([r["reflex_latency_s"] for r in rows]),
+        "belt_latency_median_s": median_of([r["belt_latency_s"] for r in rows]),
+        "slip_belt_latency_median_s": median_of([r.get("slip_belt_latency_s") for r in rows]),
+        "reflex_pct": pct_of([r["reflex_latency_s"] is not None for r in rows]),
+        "reflex_latency_median_s": median_of([r["reflex_latency_s"] for r in rows]),
     }
 
 
@@ -779,35 +781,35 @@ def mechanisms(rows: Sequence[dict]) -> dict:
     return {
         "reflex_at_threshold": {
             "trials": len(at),
-            "reflex_pct": _pct([r["reflex_latency_s"] is not None for r in at]),
+            "reflex_pct": pct_of([r["reflex_latency_s"] is not None for r in at]),
         },
         "reflex_below_threshold": {
             "trials": len(below),
-            "reflex_pct": _pct([r["reflex_latency_s"] is not None for r in below]),
+            "reflex_pct": pct_of([r["reflex_latency_s"] is not None for r in below]),
             "speeds_mm_s": fired_below,
         },
         "slip_speed_trials_with_display": len(speed_rows),
-        "slip_speed_first_shown_as_occurrence_pct": _pct(
+        "slip_speed_first_shown_as_occurrence_pct": pct_of(
             [r["belt_first_mrad_s"] == -OCCURRENCE_MRAD_S for r in speed_rows]
         ),
         "force_trials": len(force_rows),
-        "force_display_at_relax_level_pct": _pct(
+        "force_display_at_relax_level_pct": pct_of(
             [(r.get("force_belt_max_mrad_s") or 0) >= relax_mrad_s for r in force_rows]
         ),
-        "force_belt_max_median_mrad_s": _median(
+        "force_belt_max_median_mrad_s": median_of(
             [r.get("force_belt_max_mrad_s") for r in force_rows]
         ),
         "reflex_without_slip_display": {
             "trials": len(blind),
-            "first_stop_pct": _pct([r["first_stop_s"] is not None for r in blind]),
-            "reslip_pct": _pct([r["slip_episodes"] > 1 for r in blind]),
-            "dropped_after_reslip_pct": _pct([r["dropped"] for r in reslipped]),
-            "first_stop_median_mm": _median([r.get("first_stop_mm") for r in blind]),
+            "first_stop_pct": pct_of([r["first_stop_s"] is not None for r in blind]),
+            "reslip_pct": pct_of([r["slip_episodes"] > 1 for r in blind]),
+            "dropped_after_reslip_pct": pct_of([r["dropped"] for r in reslipped]),
+            "first_stop_median_mm": median_of([r.get("first_stop_mm") for r in blind]),
         },
         "reflex_with_slip_display": {
             "trials": len(told),
-            "reslip_pct": _pct([r["slip_episodes"] > 1 for r in told]),
-            "stopped_pct": _pct([r["stopped"] for r in told]),
+            "reslip_pct": pct_of([r["slip_episodes"] > 1 for r in told]),
+            "stopped_pct": pct_of([r["stopped"] for r in told]),
         },
     }
 

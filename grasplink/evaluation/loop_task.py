@@ -29,6 +29,8 @@ from grasplink.evaluation.loop import (
     ControllerFactory,
     Trial,
     dump_json,
+    median_of,
+    pct_of,
     run_trials,
 )
 
@@ -56,31 +58,22 @@ def success(row: dict) -> bool:
 
 def summarise(rows: Sequence[dict]) -> dict:
     """Shares (%) of success, crush, drop and still sliding; medians over the successes."""
-    n = len(rows)
     won = [r for r in rows if success(r)]
-
-    def pct(flags: list[bool]) -> float | None:
-        return 100.0 * sum(flags) / n if n else None
-
-    def median(values: list[float | None]) -> float | None:
-        finite = [v for v in values if v is not None]
-        return float(np.median(finite)) if finite else None
-
     return {
-        "n": n,
-        "success_pct": pct([success(r) for r in rows]),
-        "crushed_pct": pct([bool(r["crushed"]) for r in rows]),
-        "dropped_pct": pct([bool(r["dropped"]) and not r["crushed"] for r in rows]),
-        "sliding_pct": pct(
+        "n": len(rows),
+        "success_pct": pct_of([success(r) for r in rows]),
+        "crushed_pct": pct_of([bool(r["crushed"]) for r in rows]),
+        "dropped_pct": pct_of([bool(r["dropped"]) and not r["crushed"] for r in rows]),
+        "sliding_pct": pct_of(
             [not r["stopped"] and not r["dropped"] and not r["crushed"] for r in rows]
         ),
-        "distance_median_mm": median([r["slip_distance_mm"] for r in won]),
-        "time_to_stop_median_s": median([r["time_to_stop_s"] for r in won]),
-        "grip_mean_n": median([r["grip_mean_n"] for r in rows]),
-        "i_emg": median([r["i_emg"] for r in rows]),
-        "belt_latency_median_s": median([r["belt_latency_s"] for r in rows]),
-        "shown_too_high_pct": pct([shown_too_high(r) for r in rows]),
-        "shown_after_stop_median_s": median([r.get("slip_shown_after_stop_s") for r in rows]),
+        "distance_median_mm": median_of([r["slip_distance_mm"] for r in won]),
+        "time_to_stop_median_s": median_of([r["time_to_stop_s"] for r in won]),
+        "grip_mean_n": median_of([r["grip_mean_n"] for r in rows]),
+        "i_emg": median_of([r["i_emg"] for r in rows]),
+        "belt_latency_median_s": median_of([r["belt_latency_s"] for r in rows]),
+        "shown_too_high_pct": pct_of([shown_too_high(r) for r in rows]),
+        "shown_after_stop_median_s": median_of([r.get("slip_shown_after_stop_s") for r in rows]),
     }
 
 
