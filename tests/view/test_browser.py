@@ -85,6 +85,19 @@ def wait_ready(gateway: Process, ready: Path) -> None:
         time.sleep(0.05)
 
 
+def gateway_with_nodes(mqtt_url: str, folder: Path, bus: str) -> tuple[Process, Path]:
+    """A gateway process mastering the four nodes in-process on a virtual bus, publishing
+    to `mqtt_url` as arm-7; (the process, the file it writes once ready)."""
+    ready = folder / "gateway.ready"
+    gateway = Process(
+        ["gateway", "--with-nodes", "--bus", f"virtual:{bus}-{os.getpid()}", "--mqtt", mqtt_url,
+         "--mqtt-id", "arm-7", "--config", str(telemetry_config(folder)),
+         "--ready-file", str(ready)],
+        folder / "gateway.log",
+    )  # fmt: skip
+    return gateway, ready
+
+
 def telemetry_config(folder: Path, text: str = "") -> Path:
     config = folder / "gateway.toml"
     config.write_text(f'{text}[telemetry]\nstate_dir = "{folder / "state"}"\n')
@@ -157,13 +170,7 @@ def test_the_headline_shows_live_nodes_then_a_decoded_slip_then_lost_nodes(
 def test_garbage_a_broker_away_and_back_and_a_server_gone_show_on_the_page(
     broker: Mosquitto, browser, tmp_path: Path
 ) -> None:
-    ready = tmp_path / "gateway.ready"
-    gateway = Process(
-        ["gateway", "--with-nodes", "--bus", f"virtual:view-{os.getpid()}", "--mqtt", broker.url,
-         "--mqtt-id", "arm-7", "--config", str(telemetry_config(tmp_path)),
-         "--ready-file", str(ready)],
-        tmp_path / "gateway.log",
-    )  # fmt: skip
+    gateway, ready = gateway_with_nodes(broker.url, tmp_path, "view")
     view = None
     try:
         wait_ready(gateway, ready)
@@ -307,13 +314,7 @@ def reply_shown(command: str) -> str:
 def test_with_commands_allowed_the_page_shows_the_reply_and_never_sends_a_refused_one(
     broker: Mosquitto, browser, tmp_path: Path
 ) -> None:
-    ready = tmp_path / "gateway.ready"
-    gateway = Process(
-        ["gateway", "--with-nodes", "--bus", f"virtual:cmd-{os.getpid()}", "--mqtt", broker.url,
-         "--mqtt-id", "arm-7", "--config", str(telemetry_config(tmp_path)),
-         "--ready-file", str(ready)],
-        tmp_path / "gateway.log",
-    )  # fmt: skip
+    gateway, ready = gateway_with_nodes(broker.url, tmp_path, "cmd")
     view = recorder = None
     try:
         wait_ready(gateway, ready)
@@ -366,13 +367,7 @@ def test_on_a_secured_broker_the_operator_commands_and_a_readers_command_times_o
     `operator` view's command reaches the gateway and its reply shows; the `reader`'s is
     acknowledged by the broker and dropped, and its page says no reply came, and why that
     may be, while everything else goes on."""
-    ready = tmp_path / "gateway.ready"
-    gateway = Process(
-        ["gateway", "--with-nodes", "--bus", f"virtual:acl-{os.getpid()}",
-         "--mqtt", secured.url_for("gateway"), "--mqtt-id", "arm-7",
-         "--config", str(telemetry_config(tmp_path)), "--ready-file", str(ready)],
-        tmp_path / "gateway.log",
-    )  # fmt: skip
+    gateway, ready = gateway_with_nodes(secured.url_for("gateway"), tmp_path, "acl")
     views: list[Process] = []
     recorder = None
     try:
