@@ -25,9 +25,10 @@ from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
 from grasplink.simulators.effects.kinematics import (
     MU_SKIN,
     OBJECT_OUTPUTS,
-    US_PER_S,
     Profile,
+    integrate_mm,
     put_object,
+    sample_steps_s,
 )
 
 
@@ -100,9 +101,8 @@ class DampedObject(Effect):
             sliding, np.minimum(shortfall_n / self.damping, self.max_speed_mm_s), 0.0
         )
         speed_mm_s *= np.sign(load_n)
-        previous = times[0] if self.last_us is None else self.last_us
-        dt_s = np.diff(times, prepend=previous) / US_PER_S
-        position = np.cumsum(np.concatenate(([self.position_mm], speed_mm_s * dt_s)))[1:]
+        dt_s = sample_steps_s(times, self.last_us)
+        position = integrate_mm(self.position_mm, speed_mm_s, dt_s)
         self.position_mm, self.last_us = float(position[-1]), int(times[-1])
         put_object(io, position, speed_mm_s)
 
@@ -125,5 +125,5 @@ class DampedObject(Effect):
                 if following == starts.size:
                     break
                 i, moving = int(starts[following]), True
-        self.sliding = bool(sliding[-1]) if n else self.sliding
+        self.sliding = bool(sliding[-1])  # step() never asks about an empty chunk
         return sliding

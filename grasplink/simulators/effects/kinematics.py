@@ -101,6 +101,18 @@ def put_object(io: Io, position_mm: np.ndarray, speed_mm_s: np.ndarray) -> None:
     io.put(SLIPPING, (speed_mm_s != 0).astype(np.float64))
 
 
+def sample_steps_s(times_us: np.ndarray, last_us: int | None) -> np.ndarray:
+    """Seconds from each sample's predecessor: the first from the previous chunk's last
+    sample (0 at the very first), so chunked stepping integrates as one-shot does."""
+    previous = times_us[0] if last_us is None else last_us
+    return np.diff(times_us, prepend=previous) / US_PER_S
+
+
+def integrate_mm(start_mm: float, speed_mm_s: np.ndarray, dt_s: np.ndarray) -> np.ndarray:
+    """Positions x_k = x_{k-1} + v_k·dt_k from `start_mm`, summed sequentially."""
+    return np.cumsum(np.concatenate(([start_mm], speed_mm_s * dt_s)))[1:]
+
+
 def _direction_sign(params: Params) -> tuple[float, bool]:
     """(+1 or -1, whether `direction` was given)."""
     if not params.has("direction"):
@@ -240,8 +252,7 @@ class CoulombObject(Effect):
             return
         grip = np.maximum(io.get(sig.HAND_GRIP_N), 0.0)
         load = io.get(sig.LOAD_FORCE_N)
-        previous = times[0] if self.last_us is None else self.last_us
-        dt_s = np.diff(times, prepend=previous) / US_PER_S
+        dt_s = sample_steps_s(times, self.last_us)
         static_n = self.surfaces * self.mu_static * grip
         kinetic_n = self.surfaces * self.mu_kinetic * grip
         breaks = np.flatnonzero(np.abs(load) > static_n)  # samples where a resting object moves
@@ -333,9 +344,7 @@ class PulledObject(Effect):
         grip = np.maximum(io.get(sig.HAND_GRIP_N), 0.0)
         sliding = (times >= self.start_us) & (self.pull_n > self.surfaces * self.mu * grip)
         speed = np.where(sliding, self.velocity_mm_s, 0.0)
-        previous = times[0] if self.last_us is None else self.last_us
-        dt_s = np.diff(times, prepend=previous) / US_PER_S
-        position = np.cumsum(np.concatenate(([self.position_mm], speed * dt_s)))[1:]
+        position = integrate_mm(self.position_mm, speed, sample_steps_s(times, self.last_us))
         self.position_mm, self.last_us = float(position[-1]), int(times[-1])
         put_object(io, position, speed)
 
