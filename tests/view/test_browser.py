@@ -68,10 +68,15 @@ HEARTBEATS_OVERDUE = (
 
 
 def headline(folder: Path) -> Path:
+    """loop_headline.toml, later and without the reflex: with it the object is held 0.1 s
+    after the third ridge contact and a trusted speed (confidence >= 0.25) lasted 40 ms
+    in a run, shorter than the 50 ms between values messages, so the page saw one by luck.
+    Sliding on until the wearer acts or it leaves the skin, the speed stays up."""
     text = (ROOT / "scenes" / "loop_headline.toml").read_text()
     text, n = re.subn(r"(?m)^duration_s = .*$", f"duration_s = {DURATION_S}", text)
     text, m = re.subn(r"(?m)^start_s = 1\.0$", f"start_s = {SLIP_START_S}", text)
-    assert n == 1 and m == 1, "loop_headline.toml changed: update this test's edits"
+    text, k = re.subn(r"(?m)^\[controller\.reflex\]$", "[controller.reflex]\nenabled = false", text)
+    assert n == 1 and m == 1 and k == 1, "loop_headline.toml changed: update this test's edits"
     path = folder / "headline.toml"
     path.write_text(text)
     return path
