@@ -20,7 +20,7 @@ from grasplink.evaluation.loop_task import headline, plot_report, render, report
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="one seed (8 trials)")
+    parser.add_argument("--quick", action="store_true", help="one seed (14 trials: 8 dry, 6 wet)")
     parser.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/")
     parser.add_argument(
         "--workers", type=int, default=None, help="local processes (default: every core)"

@@ -363,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="pulled",
         help="pulled (default): loop_headline's pull, every mode with and without the reflex "
         "(loop.md); least-force: the object pulled through a damper, whose slip speed is the "
-        "grip missing, fragile, slip speed against occurrence (loop_task.md)",
+        "grip missing, fragile, dry and getting wet, slip speed against occurrence (loop_task.md)",
     )
     add_worker_arguments(bench_loop, "trials")
 

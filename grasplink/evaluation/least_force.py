@@ -40,13 +40,24 @@ REPEAT_S = 4.0
 FRAGILITY_MARGIN_N = 2.0  # the object breaks this far above the grip of the level that stops it
 #: Slips in the middle of each display level: one, two, three and four levels of grip missing.
 SPEEDS_MM_S = (4.0, 12.0, 20.0, 28.0)
+#: Friction that changes: the object gets wet one phase after a wearer adding a level per
+#: phase would hold it, and its friction falls (over WETTING_S) until the held grip lets it
+#: slide again at RESLIP_MM_S, the middle of the first display level: one level short again.
+RESLIP_MM_S = 4.0
+WETTING_S = 0.5
+#: After the wetting: two of the wearer's phases to answer the new slip.
+AFTER_WETTING_S = 2 * REPEAT_S
+#: 28 mm/s already needs e5, the strongest level: wet, nothing would hold it.
+WET_SPEEDS_MM_S = (4.0, 12.0, 20.0)
 
 
 @dataclass(frozen=True)
 class TaskObject:
-    """The object a slip speed at the resting grip implies."""
+    """The object a slip speed at the resting grip implies; `wet`: its friction falls
+    mid-task (`friction_after`), and it breaks above the level that holds it then."""
 
     speed_mm_s: float
+    wet: bool = False
 
     @property
     def load_n(self) -> float:
@@ -55,32 +66,63 @@ class TaskObject:
 
     @property
     def holding_grip_n(self) -> float:
-        """The grip whose kinetic friction equals the load: the least that stops it."""
+        """The grip whose kinetic friction equals the load: the least that stops it (dry)."""
         return self.load_n / (SURFACES * MU_SKIN)
 
     @property
     def stopping_level(self) -> int:
-        """The lowest contraction level whose grip stops it (e5 if none below does)."""
-        for level, grip_n in enumerate(GRIP_LEVELS_N):
-            if grip_n >= self.holding_grip_n - 1e-9:
-                return level
-        return len(GRIP_LEVELS_N) - 1
+        """The lowest contraction level whose grip stops it dry (e5 if none below does)."""
+        return _level_holding(self.holding_grip_n)
+
+    @property
+    def friction_after(self) -> float:
+        """The friction factor once wet: the dry stopping level's grip slides at RESLIP_MM_S."""
+        if not self.wet:
+            return 1.0
+        held_n = GRIP_LEVELS_N[self.stopping_level]
+        return (self.load_n - DAMPING_N_S_PER_MM * RESLIP_MM_S) / (SURFACES * MU_SKIN * held_n)
+
+    @property
+    def final_level(self) -> int:
+        """The level that holds it at the end: the dry one, or the one that holds it wet."""
+        return _level_holding(self.holding_grip_n / self.friction_after)
 
     @property
     def crush_limit_n(self) -> float:
-        return GRIP_LEVELS_N[self.stopping_level] + FRAGILITY_MARGIN_N
+        return GRIP_LEVELS_N[self.final_level] + FRAGILITY_MARGIN_N
 
     @property
     def levels_missing(self) -> int:
+        """Levels short at the resting grip, dry: what the first slip's speed says."""
         return self.stopping_level - REST_LEVEL
 
+    def wetting_s(self, start_s: float) -> float:
+        """When the friction starts to fall: one phase after a wearer adding one level per
+        phase from `start_s` would hold the dry object."""
+        return start_s + REPEAT_S * (self.levels_missing + 1)
 
-def adapt(data: dict, speed_mm_s: float, start_s: float, start_mm: float) -> dict:
+
+def _level_holding(grip_n: float) -> int:
+    for level, level_n in enumerate(GRIP_LEVELS_N):
+        if level_n >= grip_n - 1e-9:
+            return level
+    return len(GRIP_LEVELS_N) - 1
+
+
+def adapt(
+    data: dict, speed_mm_s: float, start_s: float, start_mm: float, *, wet: bool = False
+) -> dict:
     """A headline loop scene (`loop.scene_data`) turned into the task at `speed_mm_s`: the
-    damped object, its load and fragility, the task's slip table and the trained wearer."""
+    damped object, its load and fragility (and, `wet`, its falling friction), the task's
+    slip table and the trained wearer."""
     if not (math.isfinite(speed_mm_s) and speed_mm_s > 0):
         raise ValueError(f"the task's slip speed must be > 0 mm/s, got {speed_mm_s!r}")
-    task = TaskObject(speed_mm_s)
+    task = TaskObject(speed_mm_s, wet)
+    if wet and task.final_level == task.stopping_level:
+        raise ValueError(
+            f"a wet object at {speed_mm_s:g} mm/s needs more than e{task.stopping_level}, the "
+            f"strongest level: the wet task's speeds are {WET_SPEEDS_MM_S}"
+        )
     out = copy.deepcopy(data)
     out["scene"]["name"] = out["scene"]["name"].replace("loop-", "least-force-", 1)
     out["scene"]["description"] = "grasplink bench loop trial: the least-force task"
@@ -106,6 +148,13 @@ def adapt(data: dict, speed_mm_s: float, start_s: float, start_mm: float) -> dic
                 "damping_n_s_per_mm": DAMPING_N_S_PER_MM,
                 "start_mm": start_mm,
             }
+            if wet:
+                at_s = task.wetting_s(start_s)
+                effect["friction_scale"] = [
+                    [0.0, 1.0],
+                    [at_s, 1.0],
+                    [at_s + WETTING_S, task.friction_after],
+                ]
         elif kind == "wearer.virtual":
             effect = effect | {
                 "max_level": 5,

@@ -78,7 +78,7 @@ START_MM = -8.0  # the leading edge 8 mm before the first ridge (loop_headline.t
 # (2 s), release (2 N/s from at most 5 + 0.1 * 150 = 20 N: 7.5 s even with no floor) and
 # the object to slip again if that release went too far; see `Trial.duration_s`.
 SETTLE_S = 12.0
-TASKS = ("pulled", "least_force")
+TASKS = ("pulled", "least_force", "least_force_wet")
 THESIS_THRESHOLD_MM_S = 45.0  # ReflexConfig default: the human limit on an 80 mm skin
 MIN_REST_S = 0.1  # a rest shorter than this (a ridge dip touching 0 mm/s) is not a stop
 REFLEX = ReflexConfig()
@@ -102,14 +102,18 @@ class Trial:
     seed: int
     threshold_mm_s: float = THESIS_THRESHOLD_MM_S
     settle_s: float = SETTLE_S
-    task: str = "pulled"  # or "least_force" (evaluation/least_force.py)
+    task: str = "pulled"  # or "least_force", "least_force_wet" (evaluation/least_force.py)
 
     @property
     def duration_s(self) -> float:
         """Until an unstopped slip has certainly left the skin, then `settle_s` to see the
-        object stay put."""
+        object stay put; a wet object's also until the wearer has answered the wetting."""
         crossing_s = (SKIN_END_MM - START_MM) / self.speed_mm_s
-        return round(START_S + crossing_s + self.settle_s, 3)
+        end_s = START_S + crossing_s
+        if self.task == "least_force_wet":
+            wet = least_force.TaskObject(self.speed_mm_s, wet=True)
+            end_s = max(end_s, wet.wetting_s(START_S) + least_force.AFTER_WETTING_S)
+        return round(end_s + self.settle_s, 3)
 
 
 def scene_data(trial: Trial) -> dict:
@@ -118,8 +122,9 @@ def scene_data(trial: Trial) -> dict:
     if trial.task not in TASKS:
         raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {trial.task!r}")
     data = _headline_scene(trial)
-    if trial.task == "least_force":
-        return least_force.adapt(data, trial.speed_mm_s, START_S, START_MM)
+    if trial.task != "pulled":
+        wet = trial.task == "least_force_wet"
+        return least_force.adapt(data, trial.speed_mm_s, START_S, START_MM, wet=wet)
     return data
 
 

@@ -2,11 +2,11 @@
 
 The grid is feedback mode (slip occurrence, slip speed) × the task's slip speeds (one to
 four contraction levels of grip missing, `least_force.SPEEDS_MM_S`) × seeds, reflex off:
-the question is the wearer's. A trial *succeeds* when the object ends at rest, on the
-skin, unbroken. The verdict per speed compares success with the binomial standard error
-(`loop.compare`'s rule); *why* comes from what the wearer was shown and what the grip
-did: a crush is a grip past the object's limit (too many levels), a drop one that was
-too little too late.
+the question is the wearer's; and the same for objects that get wet mid-task (friction
+that changes, `least_force.WET_SPEEDS_MM_S`). A trial *succeeds* when the object ends at
+rest, on the skin, unbroken. The verdict per speed is Fisher's exact test on success;
+*why* comes from what the wearer was shown and what the grip did: a crush is a grip past
+the object's limit (too many levels), a drop one that was too little too late.
 
 Drivers: benchmarks/bench_loop_task.py (docs/benchmarks/loop_task.md, .json, .png).
 """
@@ -26,6 +26,7 @@ from grasplink.evaluation.loop import (
     MODES,
     SKIN_END_MM,
     START_MM,
+    START_S,
     ControllerFactory,
     Trial,
     dump_json,
@@ -42,14 +43,23 @@ ALPHA = 0.05  # Fisher's exact test, two-sided
 HIGH_SPEEDS_MM_S = (20.0, 28.0)  # three and four levels missing: the thesis's "high speeds"
 
 
+DRY, WET = "least_force", "least_force_wet"
+TASK_SPEEDS_MM_S = {DRY: least_force.SPEEDS_MM_S, WET: least_force.WET_SPEEDS_MM_S}
+
+
 def grid(quick: bool) -> list[Trial]:
     seeds = QUICK_SEEDS if quick else SEEDS
     return [
-        Trial(mode, False, speed, seed, settle_s=SETTLE_S, task="least_force")
+        Trial(mode, False, speed, seed, settle_s=SETTLE_S, task=task)
+        for task, speeds in TASK_SPEEDS_MM_S.items()
         for mode in TASK_MODES
-        for speed in least_force.SPEEDS_MM_S
+        for speed in speeds
         for seed in seeds
     ]
+
+
+def task_of(row: dict) -> str:
+    return str(row.get("task", DRY))
 
 
 def success(row: dict) -> bool:
@@ -112,13 +122,19 @@ def compare(a: dict, b: dict) -> dict:
 
 
 def aggregate(rows: Sequence[dict]) -> dict:
-    """Figures per mode and speed, per mode over the high speeds, and the comparisons."""
+    """Figures per mode and speed, per mode over the high speeds, and the comparisons, for
+    the dry objects; the same (without high speeds) under "wet" for the wet ones."""
+    out = _aggregate([r for r in rows if task_of(r) == DRY], least_force.SPEEDS_MM_S)
+    out["wet"] = _aggregate([r for r in rows if task_of(r) == WET], least_force.WET_SPEEDS_MM_S)
+    return out
+
+
+def _aggregate(rows: Sequence[dict], speeds: Sequence[float]) -> dict:
     out: dict[str, Any] = {"speeds": {}, "high": {}, "all": {}, "compare": {}}
     for mode in TASK_MODES:
         mine = [r for r in rows if r["mode"] == mode]
         out["speeds"][mode] = {
-            f"{v:g}": summarise([r for r in mine if r["speed_mm_s"] == v])
-            for v in least_force.SPEEDS_MM_S
+            f"{v:g}": summarise([r for r in mine if r["speed_mm_s"] == v]) for v in speeds
         }
         out["high"][mode] = summarise([r for r in mine if r["speed_mm_s"] in HIGH_SPEEDS_MM_S])
         out["all"][mode] = summarise(mine)
@@ -126,7 +142,7 @@ def aggregate(rows: Sequence[dict]) -> dict:
     out["compare"] = {
         **{
             f"{v:g}": compare(out["speeds"][speed][f"{v:g}"], out["speeds"][occurrence][f"{v:g}"])
-            for v in least_force.SPEEDS_MM_S
+            for v in speeds
         },
         "high": compare(out["high"][speed], out["high"][occurrence]),
         "all": compare(out["all"][speed], out["all"][occurrence]),
@@ -134,11 +150,11 @@ def aggregate(rows: Sequence[dict]) -> dict:
     return out
 
 
-def objects() -> list[dict]:
+def objects(wet: bool = False) -> list[dict]:
     """The task's objects, one per slip speed: what the physics asks of the wearer."""
     rows = []
-    for v in least_force.SPEEDS_MM_S:
-        task = least_force.TaskObject(v)
+    for v in least_force.WET_SPEEDS_MM_S if wet else least_force.SPEEDS_MM_S:
+        task = least_force.TaskObject(v, wet)
         rows.append(
             {
                 "speed_mm_s": v,
@@ -148,6 +164,9 @@ def objects() -> list[dict]:
                 "levels_missing": task.levels_missing,
                 "crush_limit_n": task.crush_limit_n,
                 "crossing_s": (SKIN_END_MM - START_MM) / v,
+                "wetting_s": task.wetting_s(START_S) if wet else None,
+                "friction_after": task.friction_after,
+                "final_level": task.final_level,
             }
         )
     return rows
@@ -172,11 +191,13 @@ def run_report(
         "grid": {
             "modes": list(TASK_MODES),
             "speeds_mm_s": list(least_force.SPEEDS_MM_S),
+            "wet_speeds_mm_s": list(least_force.WET_SPEEDS_MM_S),
             "seeds": sorted({t.seed for t in trials}),
             "settle_s": SETTLE_S,
             "trials": len(trials),
         },
         "objects": objects(),
+        "wet_objects": objects(wet=True),
         "figures": aggregate(rows),
         "trials": rows,
     }
@@ -210,12 +231,16 @@ def report_to(
 
 
 def headline(results: dict) -> str:
-    """One line for a console: the high speeds' verdict."""
+    """One line for a console: the high speeds' verdict, and the wet objects'."""
     high = results["figures"]["compare"]["high"]
-    return (
+    wet = results["figures"].get("wet", {}).get("compare", {}).get("all")
+    line = (
         f"least-force task, high speeds: slip speed {high['verdict']} slip occurrence "
         f"({high['diff_pct']:+.0f} points, Fisher p {high['p']:.2g})"
     )
+    if wet and wet["p"] is not None:
+        line += f"; wet objects: {wet['verdict']} ({wet['diff_pct']:+.0f}, p {wet['p']:.2g})"
+    return line
 
 
 def _f(value: float | None, digits: int = 0) -> str:
@@ -307,7 +332,58 @@ def render(results: dict) -> str:
                 f"{_f(s['shown_after_stop_median_s'], 2)} |"
             )
     lines += ["", "![success against slip speed](loop_task.png)", ""]
+    if "wet" in f and results.get("wet_objects"):
+        lines += render_wet(results)
     return "\n".join(lines)
+
+
+def render_wet(results: dict) -> list[str]:
+    """The friction-that-changes section: the wet objects and the verdicts on them."""
+    f = results["figures"]["wet"]
+    every = f["compare"]["all"]
+    lines = [
+        "## Friction that changes: the object gets wet",
+        "",
+        "The same objects, except that one of the wearer's phases after a wearer adding a "
+        "level per phase would hold it, the object gets wet: over "
+        f"{least_force.WETTING_S:g} s its friction falls until the grip of the level that "
+        f"held it lets it slide again at {least_force.RESLIP_MM_S:g} mm/s, one level short. "
+        "It breaks above the level that holds it wet, so a grip one level too strong before "
+        "the wetting no longer crushes it and never lets it slip again. "
+        f"{least_force.SPEEDS_MM_S[-1]:g} mm/s is left out: it already needs the strongest "
+        "level.",
+        "",
+        "| slip speed at e1 mm/s | gets wet at s | friction after | held dry by | held wet by "
+        "| breaks above N |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for o in results["wet_objects"]:
+        lines.append(
+            f"| {o['speed_mm_s']:g} | {o['wetting_s']:g} | {o['friction_after']:.3f} | "
+            f"e{o['stopping_level']} | e{o['final_level']} | {o['crush_limit_n']:g} |"
+        )
+    lines += [
+        "",
+        f"**Over every wet object: slip speed {every['verdict']} slip occurrence**, success "
+        f"{_f(f['all']['slip_speed']['success_pct'])} % against "
+        f"{_f(f['all']['slip_occurrence']['success_pct'])} % (difference "
+        f"{_f(every['diff_pct'])} points, 95 % interval {_ci(every)}, Fisher's exact p = "
+        f"{_p(every)}).",
+        "",
+        "| slip speed mm/s | slip speed: success · crushed · dropped · sliding % | "
+        "slip occurrence: success · crushed · dropped · sliding % | difference, 95 % interval "
+        "| p | verdict |",
+        "|---:|---|---|---:|---:|---|",
+    ]
+    for key in (f"{v:g}" for v in results["grid"]["wet_speeds_mm_s"]):
+        a, b = f["speeds"]["slip_speed"][key], f["speeds"]["slip_occurrence"][key]
+        c = f["compare"][key]
+        lines.append(
+            f"| {key} | {_cells(a)} | {_cells(b)} | {_f(c['diff_pct'])}, {_ci(c)} | {_p(c)} "
+            f"| {c['verdict']} |"
+        )
+    lines.append("")
+    return lines
 
 
 def why(results: dict) -> list[str]:
@@ -328,7 +404,7 @@ def why(results: dict) -> list[str]:
             f"{_f(s['shown_after_stop_median_s'], 1)} s after the object stopped, against the "
             f"wearer's {least_force.REPEAT_S:g} s before one more level."
         )
-    same = identical_share(results.get("trials", []))
+    same = identical_share([r for r in results.get("trials", []) if task_of(r) == DRY])
     if same:
         lines.append(
             "- Trials with the same seed and speed that ended the same way in both modes: "

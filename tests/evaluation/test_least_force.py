@@ -190,3 +190,87 @@ def test_the_task_from_the_cli_refuses_bad_workers_before_running_anything(
     assert cli_main(argv) == 1
     assert said in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("speed_mm_s", least_force.WET_SPEEDS_MM_S)
+def test_a_wet_object_slides_again_at_the_level_that_held_it_dry_and_holds_one_above(
+    speed_mm_s,
+):
+    task = least_force.TaskObject(speed_mm_s, wet=True)
+    assert task.final_level == task.stopping_level + 1
+    final_n = least_force.GRIP_LEVELS_N[task.final_level]
+    assert final_n < task.crush_limit_n  # the grip that holds it wet does not break it
+    times = sample_times_us(1000, 0.5)
+    for grip_n, expected_mm_s in (
+        (least_force.GRIP_LEVELS_N[task.stopping_level], least_force.RESLIP_MM_S),
+        (final_n, 0.0),
+    ):
+        effect = make(
+            DampedObject,
+            context(seed=1, rate_hz=1000),
+            damping_n_s_per_mm=least_force.DAMPING_N_S_PER_MM,
+            friction_scale=[[0.0, task.friction_after]],
+        )
+        out = run(
+            [effect],
+            times,
+            {
+                "hand.grip_n": np.full(len(times), grip_n),
+                "load.force_n": np.full(len(times), task.load_n),
+            },
+        )
+        assert np.allclose(out["object.speed_mm_s"], expected_mm_s)
+
+
+def test_a_wet_trial_gets_wet_after_the_dry_hold_and_runs_until_the_wearer_answered():
+    trial = loop.Trial("slip_speed", False, 12.0, 1, settle_s=8.0, task="least_force_wet")
+    task = least_force.TaskObject(12.0, wet=True)
+    damped = next(e for e in loop.scene_data(trial)["effects"] if e["type"] == "object.damped")
+    at_s = task.wetting_s(loop.START_S)
+    assert at_s == loop.START_S + least_force.REPEAT_S * (task.levels_missing + 1)
+    assert damped["friction_scale"] == [
+        [0.0, 1.0],
+        [at_s, 1.0],
+        [at_s + least_force.WETTING_S, task.friction_after],
+    ]
+    hand = next(e for e in loop.scene_data(trial)["effects"] if e["type"] == "hand.actuator")
+    assert hand["crush_limit_n"] == task.crush_limit_n
+    assert trial.duration_s == at_s + least_force.AFTER_WETTING_S + 8.0
+    with pytest.raises(ValueError, match="strongest level"):
+        loop.scene_data(loop.Trial("slip_speed", False, 28.0, 1, task="least_force_wet"))
+
+
+def test_wet_trials_are_judged_apart_from_the_dry_ones_and_rendered():
+    rows = []
+    for v in least_force.SPEEDS_MM_S:
+        rows += rows_for(v, "slip_speed", [(True, False, False)] * 10)
+        rows += rows_for(v, "slip_occurrence", [(True, False, False)] * 10)
+    wet = []
+    for v in least_force.WET_SPEEDS_MM_S:
+        wet += rows_for(v, "slip_speed", [(True, False, False)] * 10)
+        wet += rows_for(v, "slip_occurrence", [(False, False, True)] * 10)
+    for row in wet:
+        row["task"] = "least_force_wet"
+    figures = loop_task.aggregate(rows + wet)
+    assert figures["compare"]["all"]["verdict"] == "ties"  # dry: the same in both modes
+    assert figures["wet"]["compare"]["all"]["verdict"] == "beats"
+    assert figures["wet"]["speeds"]["slip_occurrence"]["12"]["dropped_pct"] == 100.0
+    assert {t.task for t in loop_task.grid(quick=True)} == {"least_force", "least_force_wet"}
+    results = {
+        "grid": {
+            "modes": list(loop_task.TASK_MODES),
+            "speeds_mm_s": list(least_force.SPEEDS_MM_S),
+            "wet_speeds_mm_s": list(least_force.WET_SPEEDS_MM_S),
+            "seeds": list(range(1, 11)),
+            "trials": len(rows) + len(wet),
+        },
+        "objects": loop_task.objects(),
+        "wet_objects": loop_task.objects(wet=True),
+        "figures": figures,
+        "trials": rows + wet,
+    }
+    text = loop_task.render(json.loads(loop.dump_json(results)))
+    assert "## Friction that changes: the object gets wet" in text
+    assert "**Over every wet object: slip speed beats slip occurrence**" in text
+    at = [text.index(f"| {v:g} | 100 · 0 · 0 · 0 | 0 · 0 · 100 · 0 |") for v in (4, 12, 20)]
+    assert at == sorted(at)
