@@ -31,6 +31,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -236,6 +237,16 @@ class DesignResult:
     wall_s: float
     cpu_s: float
     workers: str
+    #: the host's 1-minute load average at the start and the end: what else the machine
+    #: ran while `wall_s` was measured (None where the OS has none)
+    load_avg: tuple[float | None, float | None] = (None, None)
+
+
+def load_average() -> float | None:
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return None
 
 
 def search(
@@ -249,7 +260,7 @@ def search(
     from pymoo.problems.static import StaticProblem
 
     settings.check()
-    started = time.monotonic()
+    started, load_at_start = time.monotonic(), load_average()
     plan = ds.plan_slips(settings.slips, settings.speeds_mm_s, settings.seed)
     evaluator = Evaluator(settings, workers, plan, settings.seed)
     length, most = settings.length_mm, settings.max_spacings
@@ -314,6 +325,7 @@ def search(
         time.monotonic() - started,
         cpu,
         workers.describe(),
+        (load_at_start, load_average()),
     )
 
 
@@ -395,6 +407,7 @@ def summary(result: DesignResult) -> dict[str, Any]:
         "wall_s": result.wall_s,
         "cpu_s": result.cpu_s,
         "workers": result.workers,
+        "load_avg": list(result.load_avg),
         "population": [{"spacings_mm": list(x), **f} for x, f in result.population],
         "finalists": [{"spacings_mm": list(x), **f} for x, f in result.finalists.items()],
         "references": result.references,

@@ -128,6 +128,8 @@ def test_layout_toml_round_trips_through_parse_layout_and_grasplink_decode(
     assert [p.name for p in paths] == ["front.csv", "layout.toml", "report.md", "search.json"]
     saved = json.loads(paths[3].read_text())
     assert saved["chosen_mm"] == list(in_process.chosen) and saved["generations"] == 2
+    start, end = saved["load_avg"]  # what else the host ran while wall_s was measured
+    assert start >= 0.0 and end >= 0.0
     toml = tmp_path / "out" / "layout.toml"
     assert parse_layout(str(toml)) == in_process.chosen
     front = (tmp_path / "out" / "front.csv").read_text().splitlines()
