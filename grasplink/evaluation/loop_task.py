@@ -188,11 +188,15 @@ def run_report(
     log(f"least-force task: {len(trials)} trials ({'quick' if quick else 'full'} grid)")
     from grasplink.evaluation.slip_reporting import git_state
 
-    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    # the tree as the trials start: a commit made while they run is not what they ran
+    run = {
+        "started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        **git_state(Path(__file__).resolve().parents[2]),
+    }
     rows = run_trials(trials, controllers_for, workers, log, dask)
     results: dict[str, Any] = {
         "quick": quick,
-        "run": {"started": started, **git_state(Path(__file__).resolve().parents[2])},
+        "run": run,
         "grid": {
             "modes": list(TASK_MODES),
             "speeds_mm_s": list(least_force.SPEEDS_MM_S),
