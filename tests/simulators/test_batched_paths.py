@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import filecmp
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ from grasplink.devices.sources import FunctionSource
 from grasplink.simulators.bindings import SceneSource
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
-from grasplink.simulators.scene import load_scene
+from grasplink.simulators.scene import load_scene, parse_scene
 
 SKIN = 0x10
 MS = 1000
@@ -95,6 +96,39 @@ def test_scene_with_an_actuator_keeps_its_chunk():
     path = Path(__file__).resolve().parents[2] / "scenes" / "headline_slip.toml"
     sim = simulation(load_scene(path))
     assert sim.coupled and sim.step_us == sim.scene.chunk_us
+
+
+def _loop_scene(duration_s: float):
+    """loop_headline cut short: the belt's and the hand's first command ramps (1.67-2.4 s)."""
+    path = Path(__file__).resolve().parents[2] / "scenes" / "loop_headline.toml"
+    data = tomllib.loads(path.read_text())
+    data["scene"]["duration_s"] = duration_s
+    return parse_scene(data, str(path))
+
+
+def test_closed_loop_physics_running_ahead_records_what_chunk_by_chunk_records(tmp_path):
+    """Commands that change at chunk ends roll the run-ahead back: same files, byte for byte."""
+    ahead = simulation(_loop_scene(2.5), Recorder(tmp_path / "ahead"))
+    chunked = simulation(_loop_scene(2.5), Recorder(tmp_path / "chunked"))
+    chunked.run_ahead_us = 0
+    ahead.run()
+    chunked.run()
+    assert ahead.rollbacks > 0 and chunked.rollbacks == 0
+    assert ahead.effect_steps < chunked.effect_steps  # it did run ahead
+    names = sorted(p.name for p in (tmp_path / "ahead").iterdir())
+    _, mismatch, errors = filecmp.cmpfiles(
+        tmp_path / "ahead", tmp_path / "chunked", names, shallow=False
+    )
+    assert names and mismatch == [] and errors == []
+
+
+def test_a_run_stopped_mid_run_ahead_ends_at_the_chunk_it_was_stopped_in():
+    """A loop trial stops at a chunk end (a drop): physics run ahead past it is not seen."""
+    seen: list[int] = []
+    sim = simulation(_loop_scene(1.0))
+    sim.run(progress=lambda t_us, _end: seen.append(t_us), should_stop=lambda: len(seen) == 37)
+    assert sim.t_us == 37 * sim.scene.chunk_us == seen[-1]
+    assert seen == [k * sim.scene.chunk_us for k in range(1, 38)]
 
 
 class _PlainSource:
