@@ -81,6 +81,31 @@ class Io:
         self._write(name, values)
 
 
+class AheadStream:
+    """A signal that depends on no input (noise), made in blocks ahead of its use.
+
+    `make(count)` returns the next `count` values (rows); an element's value must not
+    depend on how the stream is cut, so taking it block by block equals taking it chunk by
+    chunk, and a chunk of a few samples costs a slice instead of a generator and a filter.
+    """
+
+    def __init__(self, make: Callable[[int], np.ndarray], block: int):
+        self.make = make
+        self.block = block
+        self.buffer: np.ndarray | None = None
+        self.at = 0
+
+    def take(self, count: int) -> np.ndarray:
+        buffer = self.buffer
+        if buffer is None or self.at + count > len(buffer):
+            fresh = self.make(max(count, self.block))
+            buffer = fresh if buffer is None else np.concatenate([buffer[self.at :], fresh])
+            self.buffer, self.at = buffer, 0
+        out = buffer[self.at : self.at + count]
+        self.at += count
+        return out
+
+
 class Effect:
     """Base of every effect; subclasses set the class variables and `step`."""
 

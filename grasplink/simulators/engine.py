@@ -235,7 +235,8 @@ class Simulation:
         quiet_us = 0  # how long the commands have held, up to now
         while self.t_us < duration_us:
             t0 = self.t_us
-            ahead_us = min(max(chunk_us, quiet_us), self.run_ahead_us)
+            # whole chunks: the chunk ends stay on the scene's grid
+            ahead_us = max(chunk_us, min(quiet_us, self.run_ahead_us) // chunk_us * chunk_us)
             horizon = min(t0 + ahead_us, duration_us)
             snapshot = self._snapshot() if horizon > t0 + chunk_us else None
             held = self._commands()

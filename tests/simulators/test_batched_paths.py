@@ -98,18 +98,23 @@ def test_scene_with_an_actuator_keeps_its_chunk():
     assert sim.coupled and sim.step_us == sim.scene.chunk_us
 
 
-def _loop_scene(duration_s: float):
-    """loop_headline cut short: the belt's and the hand's first command ramps (1.67-2.4 s)."""
-    path = Path(__file__).resolve().parents[2] / "scenes" / "loop_headline.toml"
+def _loop_scene(duration_s: float, name: str = "loop_headline"):
+    """A shipped scene cut short (loop_headline's first command ramps: 1.67-2.4 s)."""
+    path = Path(__file__).resolve().parents[2] / "scenes" / f"{name}.toml"
     data = tomllib.loads(path.read_text())
     data["scene"]["duration_s"] = duration_s
     return parse_scene(data, str(path))
 
 
-def test_closed_loop_physics_running_ahead_records_what_chunk_by_chunk_records(tmp_path):
+@pytest.mark.parametrize(
+    ("name", "duration_s"), [("loop_headline", 2.5), ("headline_slip", 1.5)]
+)  # 10 and 50 ms chunks
+def test_closed_loop_physics_running_ahead_records_what_chunk_by_chunk_records(
+    tmp_path, name, duration_s
+):
     """Commands that change at chunk ends roll the run-ahead back: same files, byte for byte."""
-    ahead = simulation(_loop_scene(2.5), Recorder(tmp_path / "ahead"))
-    chunked = simulation(_loop_scene(2.5), Recorder(tmp_path / "chunked"))
+    ahead = simulation(_loop_scene(duration_s, name), Recorder(tmp_path / "ahead"))
+    chunked = simulation(_loop_scene(duration_s, name), Recorder(tmp_path / "chunked"))
     chunked.run_ahead_us = 0
     ahead.run()
     chunked.run()
