@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import filecmp
+import itertools
 import tomllib
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from grasplink.devices.factory import build_node
 from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import FunctionSource
 from grasplink.simulators.bindings import SceneSource
+from grasplink.simulators.effects.actuators import SAMPLE_BY_SAMPLE, CrushLatch, FirstOrderLag
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import load_scene, parse_scene
@@ -153,3 +155,32 @@ def test_skin_node_reads_a_source_without_final_samples_packet_by_packet():
     frames, _ = _skin_frames(plain, 256)
     assert frames == _skin_frames(FunctionSource(_hard_force), 0)[0]
     assert set(plain.asked) == {3}  # samples per PDO: never ahead of the packet
+
+
+@pytest.mark.parametrize("initial", [0.0, 5.0])
+def test_first_order_lag_steps_short_chunks_in_floats_as_lfilter_steps_long_ones(initial):
+    """Chunks of 1-20 samples (floats) against one-shot (lfilter): the same bits, through
+    a first sample, an uneven interval, a zero target, a huge one and a NaN."""
+    times = np.concatenate([np.arange(0, 40_000, 1000), 40_500 + np.arange(0, 60_000, 1000)])
+    target = np.full(len(times), 7.5)
+    target[10:20] = 0.0
+    target[30:35] = 1e12
+    target[60] = np.nan
+    target[61:] = -3.0
+    one_shot = FirstOrderLag(0.05, initial).step(times, target)
+    assert len(times) > SAMPLE_BY_SAMPLE  # the one-shot run is lfilter's
+    lag = FirstOrderLag(0.05, initial)
+    bounds = [0, 1, 4, 5, 25, 31, 40, 41, 59, 62, 80, len(times)]
+    chunked = np.concatenate(
+        [lag.step(times[a:b], target[a:b]) for a, b in itertools.pairwise(bounds)]
+    )
+    assert chunked.tobytes() == one_shot.tobytes()
+    assert np.isnan(chunked[60:]).all() and np.isfinite(chunked[:60]).all()
+
+
+def test_crush_latch_latches_at_the_first_sample_over_the_limit_whatever_the_chunks():
+    grip = np.array([1.0, np.nan, 24.9, 25.0, 25.1, 3.0, np.nan, 0.0])
+    latch = CrushLatch(25.0)
+    chunks = [latch.step(grip[a:b]) for a, b in ((0, 0), (0, 3), (3, 4), (4, 6), (6, 8))]
+    assert np.concatenate(chunks).tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
+    assert CrushLatch(None).step(grip).tolist() == [0.0] * len(grip)
