@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from grasplink.bus.lockstep import LockstepNetwork
 from grasplink.controllers import simulation
@@ -18,6 +19,7 @@ from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import FunctionSource
 from grasplink.simulators.bindings import SceneSource
 from grasplink.simulators.effects.actuators import SAMPLE_BY_SAMPLE, CrushLatch, FirstOrderLag
+from grasplink.simulators.effects.emg import sosfilt_floats
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import load_scene, parse_scene
@@ -184,3 +186,15 @@ def test_crush_latch_latches_at_the_first_sample_over_the_limit_whatever_the_chu
     chunks = [latch.step(grip[a:b]) for a, b in ((0, 0), (0, 3), (3, 4), (4, 6), (6, 8))]
     assert np.concatenate(chunks).tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
     assert CrushLatch(None).step(grip).tolist() == [0.0] * len(grip)
+
+
+def test_one_section_filter_in_floats_gives_sosfilts_bits():
+    """The EMG onset filter's short-chunk path: signed zeros, NaN and a settled start too."""
+    a = 1.0 - np.exp(-1.0 / (1500 * 0.05))
+    sos = np.array([[a, 0.0, 0.0, 1.0, a - 1.0, 0.0]])
+    x = np.array([0.0, 0.0, 5.0, 1e9, -3.0, 0.0, 7.0, np.nan, 2.0])
+    for zi in (np.zeros((1, 2)), signal.sosfilt_zi(sos) * 4.0, np.array([[-0.0, 0.0]])):
+        for stop in (3, 7, len(x)):  # a NaN poisons the state from then on, in both
+            want, want_z = signal.sosfilt(sos, x[:stop], zi=zi)
+            got, got_z = sosfilt_floats(sos, x[:stop], zi)
+            assert got.tobytes() == want.tobytes() and got_z.tobytes() == want_z.tobytes()
