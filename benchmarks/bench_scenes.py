@@ -108,10 +108,13 @@ def effect_costs(path: Path, repeats: int) -> dict[str, float]:
     return {k: sorted(r[k] for r in runs)[len(runs) // 2] for k in runs[0]}
 
 
-def _timed(costs: dict[str, float], name: str, device: Any) -> None:
-    """Charge `device`'s sans-IO calls to `costs[name]` (instance attributes shadow its
-    methods for this run only)."""
-    for method in ("start", "receive", "advance", "next_deadline_us"):
+SANS_IO_CALLS = ("start", "receive", "advance", "next_deadline_us")
+
+
+def _timed(costs: dict[str, float], calls: dict[str, int], name: str, device: Any) -> None:
+    """Charge `device`'s sans-IO calls to `costs[name]` and count them in `calls[name]`
+    (instance attributes shadow its methods for this run only)."""
+    for method in SANS_IO_CALLS:
         call: Callable[..., Any] = getattr(device, method)
 
         def timed(*args: Any, _call: Callable[..., Any] = call) -> Any:
@@ -120,8 +123,44 @@ def _timed(costs: dict[str, float], name: str, device: Any) -> None:
                 return _call(*args)
             finally:
                 costs[name] = costs.get(name, 0.0) + time.process_time() - t0
+                calls[name] = calls.get(name, 0) + 1
 
         setattr(device, method, timed)
+
+
+class _Idle:
+    """A participant whose sans-IO calls do nothing: what the timing wrappers cost."""
+
+    def start(self, t_us: int) -> list:
+        return []
+
+    receive = advance = start
+
+    def next_deadline_us(self) -> None:
+        return None
+
+
+def wrapper_cost_s(calls: int = 50_000) -> tuple[float, float]:
+    """(inside, outside): seconds per call a timing wrapper adds to the participant it
+    times and to the bus around it, from timing an idle participant (best of 5)."""
+    best_inside = best_outside = float("inf")
+    for _ in range(5):
+        costs: dict[str, float] = {}
+        counted: dict[str, int] = {}
+        idle = _Idle()
+        plain = time.process_time()
+        for _ in range(calls):
+            _Idle.advance(idle, 0)
+        plain = time.process_time() - plain
+        _timed(costs, counted, "idle", idle)
+        t0 = time.process_time()
+        for _ in range(calls):
+            idle.advance(0)
+        total = time.process_time() - t0 - plain
+        inside = costs["idle"] - plain
+        best_inside = min(best_inside, max(inside, 0.0) / calls)
+        best_outside = min(best_outside, max(total - inside, 0.0) / calls)
+    return best_inside, best_outside
 
 
 def _participants(sim: Simulation) -> dict[str, Any]:
@@ -179,24 +218,38 @@ def _profile_split(path: Path) -> dict[str, dict[str, float]]:
 
 
 def stages(path: Path, repeats: int) -> dict:
-    """Where one run's CPU goes, in ms per simulated second (median of runs)."""
+    """Where one run's CPU goes, in ms per simulated second (median of runs).
+
+    The timing wrappers' own cost (calls × `wrapper_cost_s`) is taken off the participants
+    and the bus they were charged to, and shown on its own line."""
     runs: list[dict[str, float]] = []
     duration = load_scene(path).duration_s
+    inside_s, outside_s = wrapper_cost_s()
+    simulation(load_scene(path)).run()  # warm: imports, compiled kernels
     for _ in range(repeats):
         sim = simulation(load_scene(path), measure=True)
         costs: dict[str, float] = {}
+        calls: dict[str, int] = {}
         for name, device in _participants(sim).items():
-            _timed(costs, name, device)
+            _timed(costs, calls, name, device)
         t0 = time.process_time()
         sim.run()
         total = time.process_time() - t0
         network = sim.cost_s.pop("network (nodes + bus)")
-        run = {f"physics: {k}": v for k, v in sim.cost_s.items()} | costs
-        run["bus (lock-step delivery)"] = network - sum(costs.values())
+        timing = sum(calls.values()) * (inside_s + outside_s)
+        participants = {k: v - calls[k] * inside_s for k, v in costs.items()}
+        run = {f"physics: {k}": v for k, v in sim.cost_s.items()} | participants
+        run["bus (lock-step delivery)"] = network - sum(participants.values()) - timing
+        run["timing wrappers (measurement)"] = timing
         run["engine (chunks, signal plumbing)"] = total - network - sum(sim.cost_s.values())
         runs.append({k: 1e3 * v / duration for k, v in run.items()})
     median = {k: sorted(r[k] for r in runs)[len(runs) // 2] for k in runs[0]}
-    return {"ms_per_s": median, "split": _profile_split(path)}
+    return {
+        "ms_per_s": median,
+        "split": _profile_split(path),
+        "effect_steps_per_s": sim.effect_steps / duration,
+        "rollbacks": sim.rollbacks,
+    }
 
 
 def chunk_study(repeats: int, trials: tuple[Trial, ...]) -> list[dict]:
@@ -374,6 +427,19 @@ small chunks pay numpy's per-call overhead on few samples.
 WHAT_CHANGED = """
 ## What was changed, and where the floor is
 
+- **A closed loop's physics runs ahead** (issue 26, item 4): a command that a node
+  holds changes at few chunk ends (loop_headline: ~200 of 600, in ramps), so the
+  physics steps as far ahead as the commands have held so far (up to 0.32 s, whole
+  chunks), the network then runs chunk by chunk on what it made, and a command that
+  changes before the horizon rolls the effects back to their snapshots
+  (`Effect.snapshot`) and replays to that chunk end with the old commands. Every
+  chunk gets the commands of its start as before: recordings and `grasplink bench
+  loop --quick` are byte-identical. A ramp still runs chunk by chunk.
+- **Input-free noise is made ahead** (`noise.white`, `noise.drift`, the EMG noise
+  bank: 1024 samples at a time, the same draws in the same order), and **short
+  chunks of the first-order lags and the EMG onset filter step in floats** with
+  lfilter's and sosfilt's own arithmetic (same bits, tested), instead of paying a
+  filter call for ten samples.
 - **Scenes whose nodes command nothing** (no belt or hand node) step in chunks of at
   least 0.5 s: every effect gives the same samples at any chunk size and the bus runs
   exactly to any chunk end, so only the per-chunk overhead (numpy calls on a few
@@ -383,16 +449,23 @@ WHAT_CHANGED = """
   made final (`FinalSource.final_until_us`). Frames are identical.
 - **The engine interpolates** an earlier domain's signal once per chunk, however many
   effects read it.
+- The stage tables take the timing wrappers' own cost off the bus and the
+  participants (it had been charged to them: ~2 µs a call, tens of thousands of calls).
 
-What is left is per frame and per chunk, not per sample. In a skin-only slip the skin
-node's sans-IO work per packet (object dictionary writes, the TPDO, its deadlines),
-the lock-step bus and the scripted master are most of the time: a further step is a
-node that hands the bus many packets at once, each stamped with its own send time (a
-change of the device/bus contract, not done here). In a closed loop the gateway
-alone (its skin decoding about half of it, grasplink/decoding, not changed here)
-bounds the scene below the 20× target whatever the rest costs (the line under the
-loop_headline table); the physics there runs in 10 ms chunks that the actuators
-need, and a larger chunk buys speed at the cost the chunk table shows.
+What is left is per frame and per chunk, not per sample. In a closed loop the
+physics still steps every effect every 10 ms through a command ramp (the gateway
+ramps grip and belt commands chunk by chunk), where each of the 13 effects pays
+numpy's per-call cost on 4-15 samples; the next step would be rolling back only the
+effects downstream of the command that changed (a ramp of the hand's grip leaves the
+belt, wearer and EMG chain alone), which needs a time frontier per effect instead of
+one per domain. The gateway alone (its skin decoding about half of it,
+grasplink/decoding, not changed here) bounds the scene below the 20× target whatever
+the rest costs (the line under the loop_headline table). In a skin-only slip the skin
+node's sans-IO work per packet (object dictionary writes, the TPDO, its deadlines)
+and the scripted master are most of the time: with the bus, the physics and the
+engine free it would still miss 200×; a further step is a node that hands the bus
+many packets at once, each stamped with its own send time (a change of the
+device/bus contract, grasplink/devices, not done here).
 """
 
 
@@ -432,14 +505,16 @@ One run per scene (median of several), CPU ms per simulated second. Physics per 
 the engine's own accounting; each participant (the scene's master, each node) is timed
 around its sans-IO calls (start, receive, advance, next deadline); the bus is the rest
 of the network (deadline scheduling, delivery, taps), the engine the rest of the run
-(chunks, domain plumbing, sensor rings, actuator hand-over; no recording here). Below
+(chunks, run-ahead snapshots, domain plumbing, sensor rings, actuator hand-over; no
+recording here), after a warm-up run (imports, compiled kernels). Below
 each table, the master's and the nodes' time split by cProfile (shares of their own
 time; the profiler inflates small Python calls, so these are shares, not timings).
 """),
         "",
     ]
     for name, stage in figures["stages"].items():
-        ms = stage["ms_per_s"]
+        ms = dict(stage["ms_per_s"])
+        timing = ms.pop("timing wrappers (measurement)", None)
         total = sum(ms.values())
         rows = [
             [part, f"{v:.2f}", f"{100 * v / total:.0f} %"]
@@ -459,12 +534,27 @@ time; the profiler inflates small Python calls, so these are shares, not timings
                 lines += [f"- {side}: {parts}", ""]
         physics = sum(v for k, v in ms.items() if k.startswith("physics"))
         engine = sum(v for k, v in ms.items() if k.startswith("engine"))
+        bus = ms.get("bus (lock-step delivery)", 0.0)
         lines += [
             f"Physics {100 * physics / total:.0f} %, network (master, nodes, bus) "
             f"{100 * (total - physics - engine) / total:.0f} %, engine "
-            f"{100 * engine / total:.0f} %.",
+            f"{100 * engine / total:.0f} %. Physics, engine and bus together: "
+            f"{physics + engine + bus:.1f} ms per simulated s.",
             "",
         ]
+        if "effect_steps_per_s" in stage:
+            lines += [
+                f"Effect steps: {stage['effect_steps_per_s']:.0f} per simulated s "
+                f"(run-ahead rollbacks: {stage['rollbacks']}).",
+                "",
+            ]
+        if timing is not None:
+            lines += [
+                f"Timing the participants' calls cost {timing:.1f} ms per simulated s more "
+                "(an idle participant's wrapper cost times the calls), taken off the "
+                "participants and the bus above and left out of the total.",
+                "",
+            ]
         master = sum(v for k, v in ms.items() if k.startswith("controller"))
         if name in figures["targets"] and master:
             target = figures["targets"][name]

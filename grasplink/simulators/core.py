@@ -15,10 +15,12 @@ speed dips, noise): it runs after the producer and before the consumers.
 
 from __future__ import annotations
 
+import copy
 import hashlib
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -79,6 +81,31 @@ class Io:
         self._write(name, values)
 
 
+class AheadStream:
+    """A signal that depends on no input (noise), made in blocks ahead of its use.
+
+    `make(count)` returns the next `count` values (rows); an element's value must not
+    depend on how the stream is cut, so taking it block by block equals taking it chunk by
+    chunk, and a chunk of a few samples costs a slice instead of a generator and a filter.
+    """
+
+    def __init__(self, make: Callable[[int], np.ndarray], block: int):
+        self.make = make
+        self.block = block
+        self.buffer: np.ndarray | None = None
+        self.at = 0
+
+    def take(self, count: int) -> np.ndarray:
+        buffer = self.buffer
+        if buffer is None or self.at + count > len(buffer):
+            fresh = self.make(max(count, self.block))
+            buffer = fresh if buffer is None else np.concatenate([buffer[self.at :], fresh])
+            self.buffer, self.at = buffer, 0
+        out = buffer[self.at : self.at + count]
+        self.at += count
+        return out
+
+
 class Effect:
     """Base of every effect; subclasses set the class variables and `step`."""
 
@@ -98,6 +125,65 @@ class Effect:
 
     def step(self, io: Io) -> None:
         raise NotImplementedError
+
+    def snapshot(self) -> Snapshot:
+        """The effect's state now, to come back to (the engine's run-ahead rolls back)."""
+        return Snapshot(self)
+
+
+# What an effect is built from, never changed by stepping: not saved in a snapshot.
+_BUILT_FROM = frozenset({"params", "ctx"})
+_CONTAINERS = (list, dict, deque, set)
+
+
+class Snapshot:
+    """An object's state, restorable any number of times.
+
+    State is what `step` changes: attributes that are numbers or arrays replaced (never
+    written into), containers whose items are replaced (copied one level deep), random
+    generators (their bit generator's state), and grasplink objects holding the same
+    (saved alike, restored into the same object). An effect whose state is otherwise
+    overrides `Effect.snapshot`.
+    """
+
+    def __init__(self, target: object):
+        self.target = target
+        self.saved = {k: _save(v) for k, v in vars(target).items() if k not in _BUILT_FROM}
+
+    def restore(self) -> None:
+        state = vars(self.target)
+        for name in [k for k in state if k not in self.saved and k not in _BUILT_FROM]:
+            del state[name]
+        for name, value in self.saved.items():
+            state[name] = _restored(value)
+
+
+class _GeneratorState:
+    def __init__(self, generator: np.random.Generator):
+        self.generator = generator
+        self.state = generator.bit_generator.state
+
+
+def _save(value: Any) -> Any:
+    if isinstance(value, np.random.Generator):
+        return _GeneratorState(value)
+    if isinstance(value, _CONTAINERS):
+        return copy.copy(value)
+    if type(value).__module__.startswith("grasplink.") and hasattr(value, "__dict__"):
+        return Snapshot(value)
+    return value
+
+
+def _restored(value: Any) -> Any:
+    if isinstance(value, _GeneratorState):
+        value.generator.bit_generator.state = value.state
+        return value.generator
+    if isinstance(value, _CONTAINERS):
+        return copy.copy(value)
+    if isinstance(value, Snapshot):
+        value.restore()
+        return value.target
+    return value
 
 
 REGISTRY: dict[str, type[Effect]] = {}

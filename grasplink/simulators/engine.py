@@ -10,12 +10,18 @@ time, as fast as the machine allows, or paced to the wall clock (same code,
 same results); a live bus (`simulators/live.py`) runs the nodes in real time
 on a python-can bus beside other participants (an external master), and
 steps the same per-chunk physics from its own clock as each chunk begins.
+
+In virtual time a closed loop's physics runs ahead: while the nodes' commands have
+not changed for a while, it steps many chunks at once with the commands held,
+then hands them to the network chunk by chunk; a command that changes at a chunk
+end rolls the physics back to that chunk end (effect snapshots). Every chunk
+still gets the commands of its start, so results are the same as chunk by chunk.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,6 +42,9 @@ from grasplink.simulators.scene import Scene
 # every effect gives the same samples however time is chunked, and the bus runs exactly
 # to any chunk end, so only the per-chunk overhead changes (docs/scenes.md, Chunks).
 UNCOUPLED_STEP_US = 500_000
+# A coupled scene's physics runs ahead at most this far, and only as far as its
+# commands have stayed the same (a rollback throws away what was run past a change).
+RUN_AHEAD_US = 320_000
 
 
 @dataclass
@@ -141,6 +150,10 @@ class Simulation:
         self.step_us = scene.chunk_us
         if not self.coupled:
             self.step_us *= max(1, UNCOUPLED_STEP_US // scene.chunk_us)
+        # How far a coupled scene's physics may run ahead of the network (0: chunk by chunk).
+        self.run_ahead_us = RUN_AHEAD_US if self.coupled and live is None else 0
+        self.rollbacks = 0  # run-aheads cut short by a command that changed
+        self._command_nodes = [e.node for e in scene.endpoints if e.writes]
 
     @property
     def coupled(self) -> bool:
@@ -173,19 +186,21 @@ class Simulation:
         duration_us = self.scene.duration_us
         lost: BusError | None = None
         try:
-            while self.t_us < duration_us:
-                if should_stop is not None and should_stop():
-                    break
-                # Paced runs keep the scene's chunk: the wall clock is met per chunk.
-                step_us = self.scene.chunk_us if realtime else self.step_us
-                t_end = min(self.t_us + step_us, duration_us)
-                self.step(t_end)
-                if progress is not None:
-                    progress(self.t_us, duration_us)
-                if realtime and not live:
-                    delay = wall0 + t_end / 1e6 - time.monotonic()
-                    if delay > 0:
-                        time.sleep(delay)
+            # Paced runs keep the scene's chunk: the wall clock is met per chunk.
+            ahead = self.run_ahead_us and not realtime
+            chunks = (
+                self._chunks_ahead(duration_us) if ahead else self._chunks(duration_us, realtime)
+            )
+            if should_stop is None or not should_stop():
+                for t_end in chunks:
+                    if progress is not None:
+                        progress(self.t_us, duration_us)
+                    if realtime and not live:
+                        delay = wall0 + t_end / 1e6 - time.monotonic()
+                        if delay > 0:
+                            time.sleep(delay)
+                    if should_stop is not None and should_stop():
+                        break
         except BusError as exc:  # a live bus lost for good: the files up to then are kept
             lost = exc
         finally:
@@ -200,6 +215,79 @@ class Simulation:
             raise lost
         return summary
 
+    def _chunks(self, duration_us: int, realtime: bool) -> Iterator[int]:
+        """Step by step to the end; yields each step's end."""
+        while self.t_us < duration_us:
+            step_us = self.scene.chunk_us if realtime else self.step_us
+            t_end = min(self.t_us + step_us, duration_us)
+            self.step(t_end)
+            yield t_end
+
+    def _chunks_ahead(self, duration_us: int) -> Iterator[int]:
+        """Chunk by chunk to the end, the physics running ahead while commands hold;
+        yields each chunk's end once the network has run to it.
+
+        The physics runs ahead as far as the commands have held so far (up to
+        `run_ahead_us`): a ramp of commands runs chunk by chunk, a quiet stretch in ever
+        longer steps, and a rollback throws away at most what the quiet before it bought.
+        """
+        chunk_us = self.scene.chunk_us
+        quiet_us = 0  # how long the commands have held, up to now
+        while self.t_us < duration_us:
+            t0 = self.t_us
+            # whole chunks: the chunk ends stay on the scene's grid
+            ahead_us = max(chunk_us, min(quiet_us, self.run_ahead_us) // chunk_us * chunk_us)
+            horizon = min(t0 + ahead_us, duration_us)
+            snapshot = self._snapshot() if horizon > t0 + chunk_us else None
+            held = self._commands()
+            self._compute(horizon, held)
+            full = {d: (s.times_us, s.values) for d, s in self.domains.items()}
+            start = dict.fromkeys(full, 0)
+            t = t0
+            while t < horizon:
+                t_end = min(t + chunk_us, horizon)
+                for domain, (times, values) in full.items():
+                    # physics up to and including t_end, the sensors to t_end - 1
+                    b = int(np.searchsorted(times, t_end, "right" if domain == PHYSICS else "left"))
+                    a = start[domain]
+                    state = self.domains[domain]
+                    state.times_us = times[a:b]
+                    state.values = {n: v[a:b] for n, v in values.items()}
+                    start[domain] = b
+                    self._publish(state)
+                self._read_actuators()
+                self._network_to(t_end)
+                t = t_end
+                yield t_end
+                if self._commands() == held:
+                    quiet_us += chunk_us
+                    continue
+                quiet_us = 0
+                if t_end < horizon:
+                    # what ran past t_end held the old commands: back to t0, then to t_end
+                    assert snapshot is not None
+                    self.rollbacks += 1
+                    for restore in snapshot:
+                        restore()
+                    self._compute(t_end, held)
+                    break
+
+    def _commands(self) -> list[float]:
+        return [self.bindings[node].command_value() for node in self._command_nodes]
+
+    def _snapshot(self) -> list[Callable[[], None]]:
+        """How to come back to now: each effect's state and each domain's last chunk."""
+        restores: list[Callable[[], None]] = [e.snapshot().restore for e in self.scene.ordered]
+        for state in self.domains.values():
+            saved = (state.clock.next_index, state.times_us, state.values, dict(state.last))
+
+            def restore(s: DomainState = state, saved: tuple = saved) -> None:
+                s.clock.next_index, s.times_us, s.values, last = saved
+                s.last = dict(last)
+
+            restores.append(restore)
+        return restores
+
     def step(self, t_end_us: int) -> None:
         """Advance signals and network from self.t_us to t_end_us.
 
@@ -211,6 +299,9 @@ class Simulation:
             self.t_us = t_end_us
             return
         self.step_physics(t_end_us)
+        self._network_to(t_end_us)
+
+    def _network_to(self, t_end_us: int) -> None:
         t0 = time.process_time() if self.measure else 0.0
         self._run_network(t_end_us)
         if self.measure:
@@ -220,17 +311,25 @@ class Simulation:
     def step_physics(self, t_end_us: int) -> None:
         """Step every domain of one chunk, up to t_end_us, and tell the nodes the actual
         values at its end: the one per-chunk physics step, in virtual and in real time."""
+        self._compute(t_end_us)
+        for state in self.domains.values():
+            self._publish(state)
+        self._read_actuators()
+
+    def _compute(self, t_end_us: int, commands: list[float] | None = None) -> None:
+        """Step every domain's effects up to t_end_us (nothing reaches the nodes yet), with
+        the nodes' commands now or, replaying a chunk, those it was run with."""
+        held = dict(zip(self._command_nodes, commands or self._commands(), strict=True))
         for domain in DOMAINS:
             state = self.domains.get(domain)
             if state is not None:
                 # Physics includes the sample at t_end so sensors can interpolate up to it.
-                self._step_domain(state, t_end_us if domain == PHYSICS else t_end_us - 1)
-        self._read_actuators()
+                self._step_domain(state, t_end_us if domain == PHYSICS else t_end_us - 1, held)
 
     def _charge(self, what: str, since: float) -> None:
         self.cost_s[what] = self.cost_s.get(what, 0.0) + time.process_time() - since
 
-    def _step_domain(self, state: DomainState, t_last_us: int) -> None:
+    def _step_domain(self, state: DomainState, t_last_us: int, commands: dict[str, float]) -> None:
         clock = state.clock
         end = clock.due_until(t_last_us)
         index = np.arange(clock.next_index, end, dtype=np.int64)
@@ -243,8 +342,7 @@ class Simulation:
         state.values = {}
         for endpoint in self._endpoints_by_domain[state.name]:
             for name in endpoint.writes:
-                command = self.bindings[endpoint.node].command_value()
-                state.values[name] = np.full(len(times), command)
+                state.values[name] = np.full(len(times), commands[endpoint.node])
 
         # An earlier domain's signal at this chunk's sample times is interpolated once
         # however many effects read it; read-only, as every signal an effect is handed.
@@ -273,6 +371,10 @@ class Simulation:
                     self._charge(effect.kind, t0)
                 else:
                     effect.step(io)
+
+    def _publish(self, state: DomainState) -> None:
+        """A domain's chunk reaches the sensor nodes and the recorder."""
+        times = state.times_us
         for binding in self.bindings.values():
             sensor = binding.sensor
             if sensor and self.domain_of.get(sensor[0]) == state.name and sensor[0] in state.values:

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import filecmp
+import itertools
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from grasplink.bus.lockstep import LockstepNetwork
 from grasplink.controllers import simulation
@@ -15,9 +18,11 @@ from grasplink.devices.factory import build_node
 from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import FunctionSource
 from grasplink.simulators.bindings import SceneSource
+from grasplink.simulators.effects.actuators import SAMPLE_BY_SAMPLE, CrushLatch, FirstOrderLag
+from grasplink.simulators.effects.emg import sosfilt_floats
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
-from grasplink.simulators.scene import load_scene
+from grasplink.simulators.scene import load_scene, parse_scene
 
 SKIN = 0x10
 MS = 1000
@@ -97,6 +102,44 @@ def test_scene_with_an_actuator_keeps_its_chunk():
     assert sim.coupled and sim.step_us == sim.scene.chunk_us
 
 
+def _loop_scene(duration_s: float, name: str = "loop_headline"):
+    """A shipped scene cut short (loop_headline's first command ramps: 1.67-2.4 s)."""
+    path = Path(__file__).resolve().parents[2] / "scenes" / f"{name}.toml"
+    data = tomllib.loads(path.read_text())
+    data["scene"]["duration_s"] = duration_s
+    return parse_scene(data, str(path))
+
+
+@pytest.mark.parametrize(
+    ("name", "duration_s"), [("loop_headline", 2.5), ("headline_slip", 1.5)]
+)  # 10 and 50 ms chunks
+def test_closed_loop_physics_running_ahead_records_what_chunk_by_chunk_records(
+    tmp_path, name, duration_s
+):
+    """Commands that change at chunk ends roll the run-ahead back: same files, byte for byte."""
+    ahead = simulation(_loop_scene(duration_s, name), Recorder(tmp_path / "ahead"))
+    chunked = simulation(_loop_scene(duration_s, name), Recorder(tmp_path / "chunked"))
+    chunked.run_ahead_us = 0
+    ahead.run()
+    chunked.run()
+    assert ahead.rollbacks > 0 and chunked.rollbacks == 0
+    assert ahead.effect_steps < chunked.effect_steps  # it did run ahead
+    names = sorted(p.name for p in (tmp_path / "ahead").iterdir())
+    _, mismatch, errors = filecmp.cmpfiles(
+        tmp_path / "ahead", tmp_path / "chunked", names, shallow=False
+    )
+    assert names and mismatch == [] and errors == []
+
+
+def test_a_run_stopped_mid_run_ahead_ends_at_the_chunk_it_was_stopped_in():
+    """A loop trial stops at a chunk end (a drop): physics run ahead past it is not seen."""
+    seen: list[int] = []
+    sim = simulation(_loop_scene(1.0))
+    sim.run(progress=lambda t_us, _end: seen.append(t_us), should_stop=lambda: len(seen) == 37)
+    assert sim.t_us == 37 * sim.scene.chunk_us == seen[-1]
+    assert seen == [k * sim.scene.chunk_us for k in range(1, 38)]
+
+
 class _PlainSource:
     """A source that does not say which samples are final: read as the node asks."""
 
@@ -114,3 +157,44 @@ def test_skin_node_reads_a_source_without_final_samples_packet_by_packet():
     frames, _ = _skin_frames(plain, 256)
     assert frames == _skin_frames(FunctionSource(_hard_force), 0)[0]
     assert set(plain.asked) == {3}  # samples per PDO: never ahead of the packet
+
+
+@pytest.mark.parametrize("initial", [0.0, 5.0])
+def test_first_order_lag_steps_short_chunks_in_floats_as_lfilter_steps_long_ones(initial):
+    """Chunks of 1-20 samples (floats) against one-shot (lfilter): the same bits, through
+    a first sample, an uneven interval, a zero target, a huge one and a NaN."""
+    times = np.concatenate([np.arange(0, 40_000, 1000), 40_500 + np.arange(0, 60_000, 1000)])
+    target = np.full(len(times), 7.5)
+    target[10:20] = 0.0
+    target[30:35] = 1e12
+    target[60] = np.nan
+    target[61:] = -3.0
+    one_shot = FirstOrderLag(0.05, initial).step(times, target)
+    assert len(times) > SAMPLE_BY_SAMPLE  # the one-shot run is lfilter's
+    lag = FirstOrderLag(0.05, initial)
+    bounds = [0, 1, 4, 5, 25, 31, 40, 41, 59, 62, 80, len(times)]
+    chunked = np.concatenate(
+        [lag.step(times[a:b], target[a:b]) for a, b in itertools.pairwise(bounds)]
+    )
+    assert chunked.tobytes() == one_shot.tobytes()
+    assert np.isnan(chunked[60:]).all() and np.isfinite(chunked[:60]).all()
+
+
+def test_crush_latch_latches_at_the_first_sample_over_the_limit_whatever_the_chunks():
+    grip = np.array([1.0, np.nan, 24.9, 25.0, 25.1, 3.0, np.nan, 0.0])
+    latch = CrushLatch(25.0)
+    chunks = [latch.step(grip[a:b]) for a, b in ((0, 0), (0, 3), (3, 4), (4, 6), (6, 8))]
+    assert np.concatenate(chunks).tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
+    assert CrushLatch(None).step(grip).tolist() == [0.0] * len(grip)
+
+
+def test_one_section_filter_in_floats_gives_sosfilts_bits():
+    """The EMG onset filter's short-chunk path: signed zeros, NaN and a settled start too."""
+    a = 1.0 - np.exp(-1.0 / (1500 * 0.05))
+    sos = np.array([[a, 0.0, 0.0, 1.0, a - 1.0, 0.0]])
+    x = np.array([0.0, 0.0, 5.0, 1e9, -3.0, 0.0, 7.0, np.nan, 2.0])
+    for zi in (np.zeros((1, 2)), signal.sosfilt_zi(sos) * 4.0, np.array([[-0.0, 0.0]])):
+        for stop in (3, 7, len(x)):  # a NaN poisons the state from then on, in both
+            want, want_z = signal.sosfilt(sos, x[:stop], zi=zi)
+            got, got_z = sosfilt_floats(sos, x[:stop], zi)
+            assert got.tobytes() == want.tobytes() and got_z.tobytes() == want_z.tobytes()

@@ -24,26 +24,35 @@ from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
 from grasplink.simulators.effects.kinematics import INTERPOLATIONS, US_PER_S, Profile
 
 G_M_S2 = 9.81
+SAMPLE_BY_SAMPLE = 64  # a lag steps this many samples or fewer in floats, not with lfilter
 
 
 class FirstOrderLag:
     """y_k = α_k·y_{k−1} + (1 − α_k)·u_k, α_k = exp(−dt_k/τ), state carried across chunks.
 
-    Runs of equal sample intervals are filtered in one `lfilter` call each;
-    every sample is computed by the same two products and one sum whatever
-    the chunking, so chunked and one-shot outputs agree bit for bit.
+    Runs of equal sample intervals are filtered in one `lfilter` call each, a
+    short chunk sample by sample in floats (lfilter's call costs more than a
+    few samples); every sample is computed by the same two products and one
+    sum either way, so chunked and one-shot outputs agree bit for bit.
     """
 
     def __init__(self, time_constant_s: float, initial: float = 0.0):
         self.time_constant_s = time_constant_s
         self.value = initial
         self.last_us: int | None = None
+        self._alphas: dict[int, float] = {}  # sample interval (µs) -> α
+
+    def _alpha(self, dt_us: int) -> float:
+        alpha = self._alphas.get(dt_us)
+        if alpha is None:
+            alpha = self._alphas[dt_us] = math.exp(-(dt_us / US_PER_S) / self.time_constant_s)
+        return alpha
 
     def step(self, times_us: np.ndarray, target: np.ndarray) -> np.ndarray:
         n = len(times_us)
+        if n <= SAMPLE_BY_SAMPLE:
+            return self._step_floats(times_us.tolist(), target.tolist())
         out = np.empty(n)
-        if n == 0:
-            return out
         previous = times_us[0] if self.last_us is None else self.last_us
         dt_us = np.diff(times_us, prepend=previous)
         edges = [0, *(np.flatnonzero(np.diff(dt_us)) + 1).tolist(), n]
@@ -55,6 +64,20 @@ class FirstOrderLag:
         self.value, self.last_us = y, int(times_us[-1])
         return out
 
+    def _step_floats(self, times_us: list[int], target: list[float]) -> np.ndarray:
+        if not times_us:
+            return np.empty(0)
+        previous = times_us[0] if self.last_us is None else self.last_us
+        y = self.value
+        out = []
+        for t_us, u in zip(times_us, target, strict=True):
+            alpha = self._alpha(t_us - previous)
+            y = alpha * y + (1.0 - alpha) * u  # lfilter's y = z + b0·x with z = α·y
+            out.append(y)
+            previous = t_us
+        self.value, self.last_us = y, previous
+        return np.array(out)
+
 
 class CrushLatch:
     """1.0 from the first sample whose grip exceeds the limit on (None: never)."""
@@ -64,11 +87,14 @@ class CrushLatch:
         self.crushed = False
 
     def step(self, grip_n: np.ndarray) -> np.ndarray:
-        if self.limit_n is None:
-            return np.zeros(len(grip_n))
-        over = np.logical_or.accumulate(np.concatenate(([self.crushed], grip_n > self.limit_n)))
-        self.crushed = bool(over[-1])
-        return over[1:].astype(np.float64)
+        if self.limit_n is None or self.crushed:
+            return np.full(len(grip_n), float(self.crushed))
+        over = grip_n > self.limit_n  # NaN: not over
+        latched = np.zeros(len(grip_n))
+        if over.any():
+            latched[int(over.argmax()) :] = 1.0
+            self.crushed = True
+        return latched
 
 
 @register

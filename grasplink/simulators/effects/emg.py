@@ -53,7 +53,7 @@ from scipy import signal
 
 from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
-from grasplink.simulators.core import EMG, Context, Effect, Io, register
+from grasplink.simulators.core import EMG, AheadStream, Context, Effect, Io, register
 
 LEVEL, RAW = sig.WEARER_LEVEL, sig.EMG_RAW_UV
 LEVELS = 4  # e1..e4 between e_min and e_max
@@ -62,6 +62,23 @@ FATIGUE_SCALES = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)  # spectral compression bank
 WARMUP_CYCLES = 40  # warm-up length in periods of the band's lower edge
 DEFAULT_BLOCK_S = 0.25  # noise generation block when not regulating
 RECTIFIED_MEAN_TO_SIGMA = math.sqrt(math.pi / 2)
+AHEAD_SAMPLES = 1024  # the noise is taken from the bank this many samples ahead of its use
+SAMPLE_BY_SAMPLE = 64  # the onset filter steps this many samples or fewer in floats
+
+
+def sosfilt_floats(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`scipy.signal.sosfilt(sos, x, zi=zi)` for one section, sample by sample in floats: the
+    same arithmetic in the same order (transposed direct form II), the same bits, without
+    sosfilt's call cost, which is most of a chunk of a few samples."""
+    b0, b1, b2, _, a1, a2 = sos[0].tolist()
+    z0, z1 = zi[0].tolist()
+    out = []
+    for value in x.tolist():
+        y = b0 * value + z0
+        z0 = b1 * value - a1 * y + z1
+        z1 = b2 * value - a2 * y
+        out.append(y)
+    return np.array(out), np.array([[z0, z1]])
 
 
 def level_targets_uv(rest_uv: float, e_min_uv: float, e_max_uv: float) -> np.ndarray:
@@ -219,7 +236,8 @@ class SurfaceEmg(Effect):
             warmup=math.ceil(WARMUP_CYCLES * self.rate_hz / lowest_hz),
             impulse_length=max(4096, math.ceil(5 * WARMUP_CYCLES * self.rate_hz / lowest_hz)),
         )
-        self._sample = 0  # absolute index of the next sample
+        self._sample = 0  # absolute index of the next sample the bank makes
+        self._bank = AheadStream(self._take, AHEAD_SAMPLES)
 
         self._smooth_sos = None
         if self.onset_s > 0:
@@ -227,6 +245,11 @@ class SurfaceEmg(Effect):
             self._smooth_sos = np.array([[a, 0.0, 0.0, 1.0, a - 1.0, 0.0]])
         self._smooth_state: np.ndarray | None = None  # set at the first sample
         self._contraction_s = 0.0  # accumulated contraction A, seconds at level 4
+
+    def _take(self, count: int) -> np.ndarray:
+        bank = self._noise.take(self._sample, count)
+        self._sample += count
+        return bank
 
     def sigma_uv(self, level: np.ndarray) -> np.ndarray:
         """Gaussian amplitude whose rectified mean is the level's target."""
@@ -243,12 +266,10 @@ class SurfaceEmg(Effect):
         if self._smooth_sos is not None:
             if self._smooth_state is None:
                 self._smooth_state = signal.sosfilt_zi(self._smooth_sos) * sigma[0]
-            sigma, self._smooth_state = signal.sosfilt(
-                self._smooth_sos, sigma, zi=self._smooth_state
-            )
+            smooth = sosfilt_floats if n <= SAMPLE_BY_SAMPLE else signal.sosfilt
+            sigma, self._smooth_state = smooth(self._smooth_sos, sigma, zi=self._smooth_state)
 
-        bank = self._noise.take(self._sample, n)
-        self._sample += n
+        bank = self._bank.take(n)
 
         if self.fatigue_per_s > 0:
             contraction = (

@@ -14,7 +14,8 @@ and `isinstance(effect, WhiteNoise)` holds. The registered classes' own class
 variables describe the default (`skin.force_n`, skin domain).
 
 Randomness comes from `ctx.rng("<kind>:<signal>[:<stream>]")`, consumed in
-sample order, so chunking does not change the draws. The optional `stream`
+sample order, so chunking does not change the draws; the noise is drawn (and the
+drift filtered) in blocks ahead of its use, which gives the same samples. The optional `stream`
 parameter separates two otherwise identical noise effects on one signal
 (which would otherwise draw identical, fully correlated noise). An effect
 with std 0 draws nothing.
@@ -30,9 +31,10 @@ from scipy import linalg, signal
 
 from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
-from grasplink.simulators.core import EMG, SKIN, Context, Effect, Io, register
+from grasplink.simulators.core import EMG, SKIN, AheadStream, Context, Effect, Io, register
 
 DOMAIN_OF_PREFIX = {"skin": SKIN, "emg": EMG}
+AHEAD_SAMPLES = 1024  # noise is drawn (and filtered) this many samples ahead of its use
 DEFAULT_SIGNAL = sig.SKIN_FORCE_N
 
 _VARIANTS: dict[tuple[type, str], type] = {}
@@ -99,11 +101,16 @@ class WhiteNoise(SignalModifier):
         super().__init__(params, ctx)
         self.std = params.number("std", 0.01, low=0.0)
         self._rng = ctx.rng(self.rng_key) if self.std > 0 else None
+        self._noise = AheadStream(self._draw, AHEAD_SAMPLES)
+
+    def _draw(self, count: int) -> np.ndarray:
+        assert self._rng is not None
+        return self.std * self._rng.standard_normal(count)
 
     def step(self, io: Io) -> None:
         values = io.get(self.signal)
         if self._rng is not None:
-            values = values + self.std * self._rng.standard_normal(len(values))
+            values = values + self._noise.take(len(values))
         io.put(self.signal, values)
 
 
@@ -162,12 +169,15 @@ class Drift(SignalModifier):
         if self._rng is not None:
             root = np.linalg.cholesky(cov + 1e-15 * np.trace(cov) * np.eye(2))
             self._zi = (root @ self._rng.standard_normal(2)).reshape(1, 2)
+        self._drift = AheadStream(self._filtered, AHEAD_SAMPLES)
+
+    def _filtered(self, count: int) -> np.ndarray:
+        assert self._rng is not None
+        drift, self._zi = signal.sosfilt(self.sos, self._rng.standard_normal(count), zi=self._zi)
+        return self.gain * drift
 
     def step(self, io: Io) -> None:
         values = io.get(self.signal) + self.offset
         if self._rng is not None:
-            drift, self._zi = signal.sosfilt(
-                self.sos, self._rng.standard_normal(len(values)), zi=self._zi
-            )
-            values = values + self.gain * drift
+            values = values + self._drift.take(len(values))
         io.put(self.signal, values)
