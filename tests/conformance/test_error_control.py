@@ -9,6 +9,7 @@ need guarding (7.203, 7.206, 7.207) and the guarding cases 7.1-7.6 do not apply
 
 from __future__ import annotations
 
+import threading
 import time
 from itertools import pairwise
 from statistics import median
@@ -118,22 +119,66 @@ def test_7_104_write_1016h_same_value_twice(dut: Dut) -> None:
     dut.set(obj.HEARTBEAT_CONSUMER, 4, (MONITORED + 1) << 16 | 100)
 
 
+class Producer(threading.Thread):
+    """Node 05h beating every `period_s` until stopped, as a producer does, with the times
+    its beats really went out: a loaded host can hold this thread past the consumer time,
+    and then the device is right to report the heartbeat event."""
+
+    def __init__(self, dut: Dut, period_s: float) -> None:
+        super().__init__(daemon=True)
+        self.dut, self.period_s = dut, period_s
+        self.sent: list[float] = []
+        self._stop_event = threading.Event()
+
+    def run(self) -> None:
+        while True:
+            beat(self.dut)
+            self.sent.append(time.monotonic())
+            if self._stop_event.wait(self.period_s):
+                return
+
+    def stop(self) -> float:
+        """Stop; the longest time between two beats (or from the last to now)."""
+        self._stop_event.set()
+        self.join()
+        times = [*self.sent, time.monotonic()]
+        return max(b - a for a, b in pairwise(times))
+
+
 def test_7_105_consumer_producer_faster(dut: Dut) -> None:
     """7.105 Heartbeat 05: "Test heartbeat consumer (producer time < consumer time)"
 
-    The device watches node 05h with 200 ms; node 05h beats every 40 ms for
-    320 ms: no EMCY 8130h, the device stays OPERATIONAL.
+    The device watches node 05h with 200 ms; node 05h beats every 40 ms for 320 ms and
+    on while the device is read: no EMCY 8130h, every heartbeat of the device says
+    OPERATIONAL, its error register is 0. Judged on an attempt whose beats really went
+    out within 150 ms of each other (a loaded host once held the beating thread longer,
+    and the device rightly reported it); up to five attempts.
     """
     dut.set(obj.HEARTBEAT_CONSUMER, 2, MONITORED << 16 | 200)
     dut.set_heartbeat(20)
-    dut.start()
-    mark = dut.log.mark()
-    for _ in range(8):
-        beat(dut)
-        time.sleep(0.04)
-    assert hb_consumer_emcys(dut, mark) == []
-    assert dut.wait_heartbeat(since=dut.log.mark()).data[0] == STATE_OPERATIONAL
-    assert dut.get(obj.ERROR_REGISTER) == 0
+    gaps = []
+    for _ in range(5):
+        dut.start()
+        mark = dut.log.mark()
+        producer = Producer(dut, 0.04)
+        producer.start()
+        try:
+            time.sleep(0.32)
+            emcys = hb_consumer_emcys(dut, mark)
+            beats = dut.log.wait_count(cob(dut.heartbeat_id), 3, since=mark)
+            error_register = dut.get(obj.ERROR_REGISTER)
+            states = {f.data[0] for f in heartbeats(dut, mark)}
+        finally:
+            gaps.append(producer.stop())
+        if gaps[-1] <= 0.15:
+            assert emcys == [] and hb_consumer_emcys(dut, mark) == []
+            assert len(beats) == 3 and states == {STATE_OPERATIONAL}
+            assert error_register == 0
+            return
+        # the host held the producer past the consumer time: clear the event, try again
+        dut.set(obj.HEARTBEAT_CONSUMER, 2, 0)
+        dut.set(obj.HEARTBEAT_CONSUMER, 2, MONITORED << 16 | 200)
+    pytest.fail(f"the host never let the producer beat within 150 ms: longest gaps {gaps}")
 
 
 def test_7_106_consumer_producer_slower(dut: Dut) -> None:
