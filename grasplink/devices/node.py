@@ -107,6 +107,12 @@ class DeviceNode:
         # Any change in the dictionary (SDO, RPDO, the application, a simulator
         # pushing an actual value) may move a timer: recompute the deadline.
         self.store.add_listener(self._mark_stale)
+        # The SYNC COB-ID, read from the store once per change: every frame on the bus
+        # asks whether it is the SYNC, and a store lookup per frame is most of that.
+        self._sync_cob_id: int | None = None
+        if self.store.has(obj.COB_ID_SYNC):
+            self._sync_cob_id = int(self.store.get(obj.COB_ID_SYNC)) & CAN_ID_MASK
+        self.store.add_listener(self._on_sync_cob_id, (obj.COB_ID_SYNC,))
         self.store.add_validator(obj.COB_ID_SYNC, self._validate_sync_cob_id)
         self.store.add_validator(obj.COB_ID_EMCY, self._validate_emcy_cob_id)
         self.pdo.streamed_tpdos = frozenset(self.app.streamed_tpdos)
@@ -339,7 +345,10 @@ class DeviceNode:
     def _sync_can_id(self) -> int | None:
         if self.state not in SYNC_ALLOWED:
             return None
-        return int(self.store.get(obj.COB_ID_SYNC)) & CAN_ID_MASK
+        return self._sync_cob_id
+
+    def _on_sync_cob_id(self, index: int, subindex: int, value: Value) -> None:
+        self._sync_cob_id = int(value) & CAN_ID_MASK
 
     def _touch(self, t_us: int) -> None:
         self.heartbeat.now_us = t_us
