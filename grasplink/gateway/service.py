@@ -170,6 +170,17 @@ class NodeLink:
         return self.config.node_id
 
 
+@dataclass(frozen=True, slots=True)
+class TpdoRoute:
+    """What a node's TPDO asks of the gateway, worked out once from the configuration:
+    the frame path looks this up by CAN-ID instead of parsing the CAN-ID, the node's kind
+    and each mapped object's EDS limits per frame."""
+
+    link: NodeLink
+    limits: tuple[tuple[Key, float, float], ...]  # mapped objects the EDS bounds
+    sample_keys: tuple[Key, ...]  # the skin's sample slots it maps (their sensor's range)
+
+
 class Gateway(NmtMaster):
     """See module docstring."""
 
@@ -231,6 +242,7 @@ class Gateway(NmtMaster):
         self.last_intent: EmgIntent | None = None
         self.counters: Counter[str] = Counter()
         self._plausibility_setup()
+        self._routes = self._tpdo_routes()
         self.calibration = CalibrationRecorder()
         # Called with (t_us, estimate) for every skin decoder update (telemetry, replays).
         self.estimate_listeners: list[Callable[[int, SlipEstimate], None]] = []
@@ -274,6 +286,28 @@ class Gateway(NmtMaster):
                 )
                 can_ids.add(int(cob_id) & CAN_ID_MASK)
         return frozenset(can_ids)
+
+    def _tpdo_routes(self) -> dict[int, TpdoRoute]:
+        """Each configured node's TPDOs by CAN-ID: only those whose CAN-ID names the node
+        itself (the predefined connection set), as `receive` finds the node by it."""
+        routes = {}
+        for link in self.links.values():
+            for can_id in link.codec.tpdo_can_ids():
+                function, node_id = function_of(can_id)
+                if node_id != link.node_id or not function.startswith("TPDO"):
+                    continue
+                keys = link.codec.tpdo_keys(can_id)
+                limits = []
+                for key in dict.fromkeys(keys):
+                    bounds = self._eds_limit(link, key)
+                    if bounds is not None:
+                        limits.append((key, *bounds))
+                routes[can_id] = TpdoRoute(
+                    link,
+                    tuple(limits),
+                    tuple(k for k in dict.fromkeys(keys) if k[0] == obj.SKIN_SAMPLE_SLOTS),
+                )
+        return routes
 
     def _skin_setup(self) -> None:
         link = self.by_kind.get("skin")
@@ -397,6 +431,9 @@ class Gateway(NmtMaster):
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
         self.now_us = t_us
         self._rest_due_us = None  # a frame may make anything due: advance looks at all
+        route = self._routes.get(frame.can_id)
+        if route is not None:  # a configured node's TPDO: most frames
+            return self._on_tpdo(route, frame, t_us)
         if frame.can_id == NMT_COB_ID or frame.can_id == HEARTBEAT_BASE + self.node_id:
             return self._second_master(frame, t_us)
         function, node_id = function_of(frame.can_id)
@@ -409,8 +446,8 @@ class Gateway(NmtMaster):
             return link.sdo.receive(frame, t_us) + self._check_provisioning(link, t_us)
         if function == "EMCY" and frame.can_id == EMCY_BASE + node_id:
             return super().receive(frame, t_us) + self._emcy_alarm(link, frame, t_us)
-        if function.startswith("TPDO"):
-            return self._on_tpdo(link, frame, t_us)
+        if function.startswith("TPDO"):  # one the node's file does not map: dropped
+            return self._on_tpdo(TpdoRoute(link, (), ()), frame, t_us)
         return []
 
     def advance(self, t_us: int) -> list[Frame]:
@@ -696,13 +733,14 @@ class Gateway(NmtMaster):
             self.alarms.pop("gateway.second_master", None)
 
     # -- process data ----------------------------------------------------------------------
-    def _on_tpdo(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
+    def _on_tpdo(self, route: TpdoRoute, frame: Frame, t_us: int) -> list[Frame]:
+        link = route.link
         try:
             values = link.codec.decode(frame.can_id, frame.data)
         except PdoError:
             link.pdos_dropped["does not fit its mapping"] += 1
             return []
-        rejected = self._implausible(link, values, t_us)
+        rejected = self._implausible(route, values, t_us)
         if rejected is not None:  # counted; the frame changes nothing
             self.rejected[rejected] += 1
             return []
@@ -725,18 +763,18 @@ class Gateway(NmtMaster):
                     self.grip_command = self.arbiter.set_voluntary(t_us, self.hand_grip_n)
         return []
 
-    def _implausible(self, link: NodeLink, values: dict[Key, int | float], t_us: int) -> str | None:
+    def _implausible(
+        self, route: TpdoRoute, values: dict[Key, int | float], t_us: int
+    ) -> str | None:
         """Why a decoded TPDO cannot be true (a `REJECTION_KEYS` key), None if it can."""
-        for key, value in values.items():
-            limits = self._eds_limit(link, key)
-            if limits is not None and not limits[0] <= value <= limits[1]:
+        for key, low, high in route.limits:
+            if not low <= values[key] <= high:
                 return "tpdo_out_of_range"
+        link = route.link
         kind = link.kind
         if kind == "skin" and self.skin_binding is not None:  # what the sensor can report
             top = self.skin_binding.max_units
-            if top is not None and any(
-                v > top for (i, _), v in values.items() if i == obj.SKIN_SAMPLE_SLOTS
-            ):
+            if top is not None and any(values[k] > top for k in route.sample_keys):
                 return "skin_sample_out_of_range"
             static = self.skin_binding.static_force_range_mn
             if (
