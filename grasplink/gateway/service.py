@@ -228,6 +228,11 @@ class Gateway(NmtMaster):
         # the earliest deadline besides the SYNC and the cycle, when nothing happened since
         # it was computed (None: unknown, advance runs in full)
         self._rest_due_us: int | None = None
+        # The network side's earliest deadline (heartbeats, lost nodes, SDO, provisioning
+        # retries, command refresh, snapshot), kept until a call that can move it: a
+        # TPDO moves only the control's deadlines, and most frames are TPDOs.
+        self._network_due_us: int | None = None
+        self._network_stale = True
         self.cycles = 0  # SYNC cycles handled
         self._skin_setup()
         self._emg_setup()
@@ -419,6 +424,7 @@ class Gateway(NmtMaster):
     # -- SansIoDevice ----------------------------------------------------------------------
     def start(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
+        self._network_stale = True
         self._next_refresh_us = t_us + COMMAND_REFRESH_US
         self._next_snapshot_us = t_us
         self._started_us = t_us
@@ -434,6 +440,7 @@ class Gateway(NmtMaster):
         route = self._routes.get(frame.can_id)
         if route is not None:  # a configured node's TPDO: most frames
             return self._on_tpdo(route, frame, t_us)
+        self._network_stale = True
         if frame.can_id == NMT_COB_ID or frame.can_id == HEARTBEAT_BASE + self.node_id:
             return self._second_master(frame, t_us)
         function, node_id = function_of(frame.can_id)
@@ -452,6 +459,7 @@ class Gateway(NmtMaster):
 
     def advance(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
+        self._network_stale = True
         # SYNC first: the nodes sample and answer on it, the rest can wait a frame
         frames = self.sync.advance(t_us) if self.sync is not None else []
         if frames and self._skin_sync_numbers is not None:
@@ -494,22 +502,17 @@ class Gateway(NmtMaster):
 
     def next_deadline_us(self) -> int | None:
         # The runner asks after every frame: a plain running minimum, no lists (~3x cheaper).
-        best = None
+        if self._network_stale:
+            self._network_due_us = self._network_deadline_us()
+            self._network_stale = False
+        best = self._network_due_us
         for c in (
-            super().next_deadline_us(),
-            self._next_refresh_us,
             self.feedback.next_deadline_us(),
             self.arbiter.next_deadline_us(),
             self._next_ramp_us(),
-            self._next_snapshot_us,
         ):
             if c is not None and (best is None or c < best):
                 best = c
-        for link in self.links.values():
-            for c in (link.sdo.next_deadline_us(), link.retry_at_us):
-                if c is not None and (best is None or c < best):
-                    best = c
-        # (heartbeat loss, noticed when advance() runs: the master's deadline above)
         if self.sync is None:
             return best
         # with SYNC: what is due apart from the SYNC and the cycle, for advance's short path
@@ -517,6 +520,19 @@ class Gateway(NmtMaster):
         for c in (self.sync.next_deadline_us(), self._cycle_due_us):
             if c is not None and (best is None or c < best):
                 best = c
+        return best
+
+    def _network_deadline_us(self) -> int | None:
+        """The network side's earliest deadline (heartbeat loss is noticed when advance()
+        runs: the master's deadline)."""
+        best = None
+        for c in (super().next_deadline_us(), self._next_refresh_us, self._next_snapshot_us):
+            if c is not None and (best is None or c < best):
+                best = c
+        for link in self.links.values():
+            for c in (link.sdo.next_deadline_us(), link.retry_at_us):
+                if c is not None and (best is None or c < best):
+                    best = c
         return best
 
     # -- network management ------------------------------------------------------------------
@@ -990,6 +1006,7 @@ class Gateway(NmtMaster):
         """Validate and apply one command now; a refused command changes nothing."""
         t_us = max(t_us, self.now_us)
         self._rest_due_us = None
+        self._network_stale = True
         try:
             value = parse_value(command)
             detail, frames = self._apply(command.name, value, t_us)
