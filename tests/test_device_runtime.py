@@ -366,6 +366,27 @@ def test_rpdo_drives_the_belt_and_the_sign_selects_the_belt():
     assert read_uint(net, BELT, obj.BELT_SURFACE_SPEED_MM_S) == 143  # 5.3 rad/s * 27 mm
 
 
+def test_a_moved_rpdo_is_heard_on_its_new_can_id_only():
+    """The node's acceptance filter (DeviceNode) follows the communication parameters."""
+    net, _ = network("belt")
+    write_uint(net, BELT, obj.RPDO_COMM, 1, 0x80000220, 4)  # invalid, then moved
+    write_uint(net, BELT, obj.RPDO_COMM, 1, 0x00000321, 4)
+    nmt(net, 0x01, BELT)
+    for cw in (0x06, 0x07, 0x0F):
+        net.inject(Frame(0x220, struct.pack("<Hi", cw, 5300)))  # the old CAN-ID: ignored
+    net.run_for(500 * MS)
+    assert read_int(net, BELT, obj.BELT_VELOCITY_ACTUAL_MRAD_S) == 0
+    for cw in (0x06, 0x07, 0x0F):
+        net.inject(Frame(0x321, struct.pack("<Hi", cw, 5300)))
+    net.run_for(500 * MS)
+    assert read_int(net, BELT, obj.BELT_VELOCITY_ACTUAL_MRAD_S) == 5300
+    nmt(net, 0x82, BELT)  # reset communication: back to 0x220
+    nmt(net, 0x01, BELT)
+    net.inject(Frame(0x220, struct.pack("<Hi", 0x0F, -5300)))
+    net.run_for(1000 * MS)
+    assert read_int(net, BELT, obj.BELT_VELOCITY_ACTUAL_MRAD_S) == -5300
+
+
 @pytest.mark.parametrize(("target", "actual"), [(9000, 8000), (-500, -2000), (-9000, -7400)])
 def test_belt_limits_out_of_range_rpdo_targets_and_flags_them(target, actual):
     net, _ = network("belt")

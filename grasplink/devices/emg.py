@@ -108,12 +108,17 @@ class EmgApp(DeviceApp):
         if count <= 0:
             return []
         values = self.source.samples(clock.t0_us, clock.next_index, count, clock.rate_hz)
-        values = np.nan_to_num(values)
+        if not np.isfinite(values).all():  # (nan_to_num's checks cost more than a period)
+            values = np.nan_to_num(values)
         clock.next_index += count
-        rectified = np.abs(values)[-len(self._window) :]
-        self._window[(self._pos + np.arange(len(rectified))) % len(self._window)] = rectified
-        self._pos = (self._pos + len(rectified)) % len(self._window)
-        self._fill = min(len(self._window), self._fill + len(rectified))
+        size = len(self._window)
+        rectified = np.abs(values)[-size:]
+        # into the ring at _pos, wrapping once at most: two slices, no index array
+        head = min(len(rectified), size - self._pos)
+        self._window[self._pos : self._pos + head] = rectified[:head]
+        self._window[: len(rectified) - head] = rectified[head:]
+        self._pos = (self._pos + len(rectified)) % size
+        self._fill = min(size, self._fill + len(rectified))
         return self._stream_raw(values, t_us)
 
     def _publish_envelope(self, t_us: int) -> list[Frame]:

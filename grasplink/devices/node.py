@@ -101,12 +101,22 @@ class DeviceNode:
         self.powered = False
         self._deadline: int | None = None
         self._deadline_stale = True
+        # The CAN-IDs a frame may concern one of our services on: an acceptance filter,
+        # as a CAN controller has. Nine in ten frames on a loop's bus are other nodes'
+        # process data; they stop here instead of going through every service's checks.
+        self._listened: frozenset[int] | None = None
         # Frames on our own heartbeat COB-ID that we did not send: another node has our ID.
         self.duplicate_frames = 0
         self._collision_clear_us: int | None = None
         # Any change in the dictionary (SDO, RPDO, the application, a simulator
         # pushing an actual value) may move a timer: recompute the deadline.
         self.store.add_listener(self._mark_stale)
+        # The SYNC COB-ID, read from the store once per change: every frame on the bus
+        # asks whether it is the SYNC, and a store lookup per frame is most of that.
+        self._sync_cob_id: int | None = None
+        if self.store.has(obj.COB_ID_SYNC):
+            self._sync_cob_id = int(self.store.get(obj.COB_ID_SYNC)) & CAN_ID_MASK
+        self.store.add_listener(self._on_sync_cob_id, (obj.COB_ID_SYNC,))
         self.store.add_validator(obj.COB_ID_SYNC, self._validate_sync_cob_id)
         self.store.add_validator(obj.COB_ID_EMCY, self._validate_emcy_cob_id)
         self.pdo.streamed_tpdos = frozenset(self.app.streamed_tpdos)
@@ -115,8 +125,10 @@ class DeviceNode:
         self.app.attach(NodeServices(self))
 
     # -- SansIoDevice ------------------------------------------------------------
-    def _mark_stale(self, *_change: object) -> None:
+    def _mark_stale(self, index: int, *_change: object) -> None:
         self._deadline_stale = True
+        if index < APPLICATION_AREA.start:  # COB-IDs and PDO parameters live below
+            self._listened = None
 
     @property
     def configured(self) -> bool:
@@ -147,11 +159,23 @@ class DeviceNode:
         if self.state == NmtState.INITIALISING:
             return []
         self._touch(t_us)
+        if frame.can_id not in self._listened_can_ids():
+            return []  # not for this node: nothing in it changed
         frames = self._dispatch(frame, t_us)
         if frames is None:
-            return []  # not for this node: nothing in it changed
+            return []
         self._deadline_stale = True
         return frames
+
+    def _listened_can_ids(self) -> frozenset[int]:
+        """Every CAN-ID `_dispatch` may handle (a superset: it decides by state and
+        content); rebuilt after a change of the communication area or the node-ID."""
+        if self._listened is None:
+            heartbeats = range(HEARTBEAT_BASE + 1, HEARTBEAT_BASE + 128)
+            own = (NMT_COB_ID, HEARTBEAT_BASE + self.node_id, SDO_RX_BASE + self.node_id)
+            sync = () if self._sync_cob_id is None else (self._sync_cob_id,)
+            self._listened = frozenset((*own, *heartbeats, *sync, *self.pdo.can_ids()))
+        return self._listened
 
     def _dispatch(self, frame: Frame, t_us: int) -> list[Frame] | None:
         """Handle a frame; None when the frame concerns no service of this node."""
@@ -258,6 +282,7 @@ class DeviceNode:
         """
         self.state = NmtState.INITIALISING
         self.node_id = self.lss.pending_node_id
+        self._listened = None
         if self.configured:
             self.store.node_id = self.node_id  # $NODEID defaults follow it
         self.lss.reset()
@@ -339,7 +364,10 @@ class DeviceNode:
     def _sync_can_id(self) -> int | None:
         if self.state not in SYNC_ALLOWED:
             return None
-        return int(self.store.get(obj.COB_ID_SYNC)) & CAN_ID_MASK
+        return self._sync_cob_id
+
+    def _on_sync_cob_id(self, index: int, subindex: int, value: Value) -> None:
+        self._sync_cob_id = int(value) & CAN_ID_MASK
 
     def _touch(self, t_us: int) -> None:
         self.heartbeat.now_us = t_us

@@ -322,6 +322,10 @@ class PdoEngine:
             return True
         return False
 
+    def can_ids(self) -> frozenset[int]:
+        """The CAN-IDs of the valid PDOs (the frames `on_frame` may handle)."""
+        return frozenset(self._by_can_id)
+
     def on_frame(self, frame: Frame, t_us: int) -> list[Frame] | None:
         """Handle a frame addressed to one of our PDOs; None if it is not ours."""
         pdo = self._by_can_id.get(frame.can_id)

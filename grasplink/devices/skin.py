@@ -60,6 +60,17 @@ class SkinApp(DeviceApp):
         self.saturated_samples = 0
         self.dropped_packets = 0
 
+    @property
+    def source(self) -> SampleSource:
+        return self._source
+
+    @source.setter
+    def source(self, source: SampleSource) -> None:
+        # Whether it says which samples are final, asked once: a runtime Protocol check
+        # costs more than converting a packet, and the advance path needs it per chunk.
+        self._source = source
+        self._final: FinalSource | None = source if isinstance(source, FinalSource) else None
+
     def attach(self, services: AppServices) -> None:
         super().attach(services)
         self.store.add_validator(obj.SKIN_RIDGE_SPACING_UM, self._validate_spacing)
@@ -201,8 +212,8 @@ class SkinApp(DeviceApp):
         offset = start - self._ahead_start
         if offset < 0 or end - self._ahead_start > len(self._ahead):
             stop = end
-            if isinstance(self.source, FinalSource):
-                final_us = self.source.final_until_us()
+            if self._final is not None:
+                final_us = self._final.final_until_us()
                 ready = start + self.read_ahead_samples
                 if final_us is not None:
                     ready = min(ready, clock.due_until(final_us))

@@ -170,6 +170,17 @@ class NodeLink:
         return self.config.node_id
 
 
+@dataclass(frozen=True, slots=True)
+class TpdoRoute:
+    """What a node's TPDO asks of the gateway, worked out once from the configuration:
+    the frame path looks this up by CAN-ID instead of parsing the CAN-ID, the node's kind
+    and each mapped object's EDS limits per frame."""
+
+    link: NodeLink
+    limits: tuple[tuple[Key, float, float], ...]  # mapped objects the EDS bounds
+    sample_keys: tuple[Key, ...]  # the skin's sample slots it maps (their sensor's range)
+
+
 class Gateway(NmtMaster):
     """See module docstring."""
 
@@ -217,6 +228,11 @@ class Gateway(NmtMaster):
         # the earliest deadline besides the SYNC and the cycle, when nothing happened since
         # it was computed (None: unknown, advance runs in full)
         self._rest_due_us: int | None = None
+        # The network side's earliest deadline (heartbeats, lost nodes, SDO, provisioning
+        # retries, command refresh, snapshot), kept until a call that can move it: a
+        # TPDO moves only the control's deadlines, and most frames are TPDOs.
+        self._network_due_us: int | None = None
+        self._network_stale = True
         self.cycles = 0  # SYNC cycles handled
         self._skin_setup()
         self._emg_setup()
@@ -231,6 +247,7 @@ class Gateway(NmtMaster):
         self.last_intent: EmgIntent | None = None
         self.counters: Counter[str] = Counter()
         self._plausibility_setup()
+        self._routes = self._tpdo_routes()
         self.calibration = CalibrationRecorder()
         # Called with (t_us, estimate) for every skin decoder update (telemetry, replays).
         self.estimate_listeners: list[Callable[[int, SlipEstimate], None]] = []
@@ -274,6 +291,28 @@ class Gateway(NmtMaster):
                 )
                 can_ids.add(int(cob_id) & CAN_ID_MASK)
         return frozenset(can_ids)
+
+    def _tpdo_routes(self) -> dict[int, TpdoRoute]:
+        """Each configured node's TPDOs by CAN-ID: only those whose CAN-ID names the node
+        itself (the predefined connection set), as `receive` finds the node by it."""
+        routes = {}
+        for link in self.links.values():
+            for can_id in link.codec.tpdo_can_ids():
+                function, node_id = function_of(can_id)
+                if node_id != link.node_id or not function.startswith("TPDO"):
+                    continue
+                keys = link.codec.tpdo_keys(can_id)
+                limits = []
+                for key in dict.fromkeys(keys):
+                    bounds = self._eds_limit(link, key)
+                    if bounds is not None:
+                        limits.append((key, *bounds))
+                routes[can_id] = TpdoRoute(
+                    link,
+                    tuple(limits),
+                    tuple(k for k in dict.fromkeys(keys) if k[0] == obj.SKIN_SAMPLE_SLOTS),
+                )
+        return routes
 
     def _skin_setup(self) -> None:
         link = self.by_kind.get("skin")
@@ -385,6 +424,7 @@ class Gateway(NmtMaster):
     # -- SansIoDevice ----------------------------------------------------------------------
     def start(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
+        self._network_stale = True
         self._next_refresh_us = t_us + COMMAND_REFRESH_US
         self._next_snapshot_us = t_us
         self._started_us = t_us
@@ -397,6 +437,10 @@ class Gateway(NmtMaster):
     def receive(self, frame: Frame, t_us: int) -> list[Frame]:
         self.now_us = t_us
         self._rest_due_us = None  # a frame may make anything due: advance looks at all
+        route = self._routes.get(frame.can_id)
+        if route is not None:  # a configured node's TPDO: most frames
+            return self._on_tpdo(route, frame, t_us)
+        self._network_stale = True
         if frame.can_id == NMT_COB_ID or frame.can_id == HEARTBEAT_BASE + self.node_id:
             return self._second_master(frame, t_us)
         function, node_id = function_of(frame.can_id)
@@ -409,12 +453,13 @@ class Gateway(NmtMaster):
             return link.sdo.receive(frame, t_us) + self._check_provisioning(link, t_us)
         if function == "EMCY" and frame.can_id == EMCY_BASE + node_id:
             return super().receive(frame, t_us) + self._emcy_alarm(link, frame, t_us)
-        if function.startswith("TPDO"):
-            return self._on_tpdo(link, frame, t_us)
+        if function.startswith("TPDO"):  # one the node's file does not map: dropped
+            return self._on_tpdo(TpdoRoute(link, (), ()), frame, t_us)
         return []
 
     def advance(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
+        self._network_stale = True
         # SYNC first: the nodes sample and answer on it, the rest can wait a frame
         frames = self.sync.advance(t_us) if self.sync is not None else []
         if frames and self._skin_sync_numbers is not None:
@@ -457,22 +502,17 @@ class Gateway(NmtMaster):
 
     def next_deadline_us(self) -> int | None:
         # The runner asks after every frame: a plain running minimum, no lists (~3x cheaper).
-        best = None
+        if self._network_stale:
+            self._network_due_us = self._network_deadline_us()
+            self._network_stale = False
+        best = self._network_due_us
         for c in (
-            super().next_deadline_us(),
-            self._next_refresh_us,
             self.feedback.next_deadline_us(),
             self.arbiter.next_deadline_us(),
             self._next_ramp_us(),
-            self._next_snapshot_us,
         ):
             if c is not None and (best is None or c < best):
                 best = c
-        for link in self.links.values():
-            for c in (link.sdo.next_deadline_us(), link.retry_at_us):
-                if c is not None and (best is None or c < best):
-                    best = c
-        # (heartbeat loss, noticed when advance() runs: the master's deadline above)
         if self.sync is None:
             return best
         # with SYNC: what is due apart from the SYNC and the cycle, for advance's short path
@@ -480,6 +520,19 @@ class Gateway(NmtMaster):
         for c in (self.sync.next_deadline_us(), self._cycle_due_us):
             if c is not None and (best is None or c < best):
                 best = c
+        return best
+
+    def _network_deadline_us(self) -> int | None:
+        """The network side's earliest deadline (heartbeat loss is noticed when advance()
+        runs: the master's deadline)."""
+        best = None
+        for c in (super().next_deadline_us(), self._next_refresh_us, self._next_snapshot_us):
+            if c is not None and (best is None or c < best):
+                best = c
+        for link in self.links.values():
+            for c in (link.sdo.next_deadline_us(), link.retry_at_us):
+                if c is not None and (best is None or c < best):
+                    best = c
         return best
 
     # -- network management ------------------------------------------------------------------
@@ -696,13 +749,14 @@ class Gateway(NmtMaster):
             self.alarms.pop("gateway.second_master", None)
 
     # -- process data ----------------------------------------------------------------------
-    def _on_tpdo(self, link: NodeLink, frame: Frame, t_us: int) -> list[Frame]:
+    def _on_tpdo(self, route: TpdoRoute, frame: Frame, t_us: int) -> list[Frame]:
+        link = route.link
         try:
             values = link.codec.decode(frame.can_id, frame.data)
         except PdoError:
             link.pdos_dropped["does not fit its mapping"] += 1
             return []
-        rejected = self._implausible(link, values, t_us)
+        rejected = self._implausible(route, values, t_us)
         if rejected is not None:  # counted; the frame changes nothing
             self.rejected[rejected] += 1
             return []
@@ -725,18 +779,18 @@ class Gateway(NmtMaster):
                     self.grip_command = self.arbiter.set_voluntary(t_us, self.hand_grip_n)
         return []
 
-    def _implausible(self, link: NodeLink, values: dict[Key, int | float], t_us: int) -> str | None:
+    def _implausible(
+        self, route: TpdoRoute, values: dict[Key, int | float], t_us: int
+    ) -> str | None:
         """Why a decoded TPDO cannot be true (a `REJECTION_KEYS` key), None if it can."""
-        for key, value in values.items():
-            limits = self._eds_limit(link, key)
-            if limits is not None and not limits[0] <= value <= limits[1]:
+        for key, low, high in route.limits:
+            if not low <= values[key] <= high:
                 return "tpdo_out_of_range"
+        link = route.link
         kind = link.kind
         if kind == "skin" and self.skin_binding is not None:  # what the sensor can report
             top = self.skin_binding.max_units
-            if top is not None and any(
-                v > top for (i, _), v in values.items() if i == obj.SKIN_SAMPLE_SLOTS
-            ):
+            if top is not None and any(values[k] > top for k in route.sample_keys):
                 return "skin_sample_out_of_range"
             static = self.skin_binding.static_force_range_mn
             if (
@@ -952,6 +1006,7 @@ class Gateway(NmtMaster):
         """Validate and apply one command now; a refused command changes nothing."""
         t_us = max(t_us, self.now_us)
         self._rest_due_us = None
+        self._network_stale = True
         try:
             value = parse_value(command)
             detail, frames = self._apply(command.name, value, t_us)

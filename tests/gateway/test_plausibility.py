@@ -227,3 +227,27 @@ def test_rejections_reach_the_json_health_topic_and_sparkplug_metrics():
     health = next(m for m in messages if m.topic.endswith("/health"))
     assert json.loads(health.payload)["rejected"]["emcy_invalid"] == 1
     assert all(f"Rejected/{key}" in ALIASES[None] for key in REJECTION_KEYS)
+
+
+def test_each_tpdo_is_judged_by_its_own_mapped_objects_whatever_arrives_before():
+    """The gateway works out each TPDO's checks once (service.TpdoRoute): the EMG level's
+    EDS range (0..5), the skin's ADC full scale on its sample slots only, and a TPDO
+    COB-ID of a configured node that its file does not map is dropped, not decoded."""
+    sim, gateway = loop_gateway(seconds=0.5)
+    skin = gateway.by_kind["skin"]
+    full = gateway.skin_binding.max_units
+    rejected = dict(gateway.rejected)
+    dropped = sum(skin.pdos_dropped.values())
+    sim.network.inject(emg_tpdo1(100, 6, 1))  # level e6: beyond 2201h's high limit
+    assert gateway.rejected["tpdo_out_of_range"] == rejected.get("tpdo_out_of_range", 0) + 1
+    sim.network.inject(Frame(TPDO_BASES[0] + 0x10, struct.pack("<HHHB", 1, full + 1, 2, 9)))
+    assert (
+        gateway.rejected["skin_sample_out_of_range"]
+        == rejected.get("skin_sample_out_of_range", 0) + 1
+    )
+    # the static force and sample count (TPDO2) carry no sample slot: full scale is no limit
+    before_rx = skin.pdos_rx
+    sim.network.inject(Frame(TPDO_BASES[1] + 0x10, struct.pack("<iI", 2000, 2 * full)))
+    assert skin.pdos_rx == before_rx + 1
+    sim.network.inject(Frame(TPDO_BASES[3] + 0x10, bytes(8)))  # TPDO4: not in its file
+    assert sum(skin.pdos_dropped.values()) == dropped + 1

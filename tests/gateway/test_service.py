@@ -332,3 +332,24 @@ def test_loop_headline_recording_shows_the_loop_on_the_bus(tmp_path, caplog):
     assert reached_n > np.max(grip_before) + 3
     # the replay listens to the skin: the recorded master is no second master to it
     assert not [r for r in caplog.records if "another master" in r.getMessage()]
+
+
+def test_a_node_whose_heartbeat_stops_is_lost_on_time_while_its_tpdos_keep_coming():
+    """Process data is no heartbeat: the hand is lost one consumer time after its last
+    heartbeat however many TPDOs it sends (the gateway keeps its network deadlines
+    across TPDOs, which move only the control's)."""
+    import struct
+
+    _, gateway = loop_gateway()
+    hand, values = gateway.nodes[HAND], gateway.by_kind["hand"].values
+    lost_at = hand.last_seen_us + gateway.node_consumer_us + 1
+    tpdo = Frame(TPDO_BASES[0] + HAND, struct.pack("<HI", values[(0x6041, 0)], values[(0x2401, 0)]))
+    t_us = gateway.now_us
+    while t_us < lost_at + 20_000:
+        t_us += 1000
+        gateway.receive(tpdo, t_us)
+        due = gateway.next_deadline_us()
+        if due is not None and due <= t_us:
+            gateway.advance(t_us)
+        assert hand.lost == (t_us >= lost_at), t_us
+    assert gateway.alarms["hand.lost"] == "heartbeat lost"
