@@ -289,11 +289,12 @@ def render(results: dict) -> str:
         "R = spacings / 10; F = α·(1 − A) + (1 − α)·(1 − R), lower is better (table 5.1).",
         "",
         f"Measured {results['when']} on a machine with {results['cores']} cores shared "
-        "with four other engineers' builds and test suites (load average "
+        "with other engineers' builds and test suites (load average "
         f"{fid.get('load_at_start', float('nan')):.1f} when the fidelity study started, "
-        f"{results['load']:.1f} when this page was written): wall times are what one run "
-        "took here, not what an idle machine does; CPU seconds and ratios within one run "
-        "are the comparable figures (an idle 2-core machine runs 2 CPU s a second).",
+        f"{results['load']:.1f} when this page was written; each search's beside its "
+        "time): a wall time is what one run took with that load; CPU seconds and ratios "
+        "within one run are the comparable figures (an idle 2-core machine runs 2 CPU s a "
+        "second).",
         "",
     ]
     for run in results["found"]:
@@ -428,6 +429,8 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 results["fidelity"] = fidelity(workers, log)
             results["found"] = found(workers, args.found, log)
+        for run in results["found"]:
+            run.pop("population")  # compared with the replicas; search.json keeps it
     except GrasplinkError as exc:
         print(f"bench_layouts: error: {exc}", file=sys.stderr)
         return 1
