@@ -36,25 +36,27 @@ def test_each_task_speed_is_as_many_levels_missing_as_its_display_level(speed_mm
 @pytest.mark.parametrize("speed_mm_s", least_force.SPEEDS_MM_S)
 def test_the_damped_object_slips_at_the_task_speed_at_rest_and_stops_at_its_level(speed_mm_s):
     task = least_force.TaskObject(speed_mm_s)
-    times = sample_times_us(1000, 0.5)
     for grip_n, expected_mm_s in (
         (least_force.GRIP_LEVELS_N[least_force.REST_LEVEL], speed_mm_s),
         (least_force.GRIP_LEVELS_N[task.stopping_level], 0.0),
     ):
-        effect = make(
-            DampedObject,
-            context(seed=1, rate_hz=1000),
-            damping_n_s_per_mm=least_force.DAMPING_N_S_PER_MM,
-        )
-        out = run(
-            [effect],
-            times,
-            {
-                "hand.grip_n": np.full(len(times), grip_n),
-                "load.force_n": np.full(len(times), task.load_n),
-            },
-        )
-        assert np.allclose(out["object.speed_mm_s"], expected_mm_s)
+        assert np.allclose(damped_speed_mm_s(task, grip_n), expected_mm_s)
+
+
+def damped_speed_mm_s(task, grip_n, friction=1.0):
+    """The task object's speed over 0.5 s at a steady grip (and friction factor)."""
+    times = sample_times_us(1000, 0.5)
+    effect = make(
+        DampedObject,
+        context(seed=1, rate_hz=1000),
+        damping_n_s_per_mm=least_force.DAMPING_N_S_PER_MM,
+        friction_scale=[[0.0, friction]],
+    )
+    inputs = {
+        "hand.grip_n": np.full(len(times), grip_n),
+        "load.force_n": np.full(len(times), task.load_n),
+    }
+    return run([effect], times, inputs)["object.speed_mm_s"]
 
 
 def test_the_shipped_scene_is_the_task_template_at_20_mm_s():
@@ -200,26 +202,12 @@ def test_a_wet_object_slides_again_at_the_level_that_held_it_dry_and_holds_one_a
     assert task.final_level == task.stopping_level + 1
     final_n = least_force.GRIP_LEVELS_N[task.final_level]
     assert final_n < task.crush_limit_n  # the grip that holds it wet does not break it
-    times = sample_times_us(1000, 0.5)
     for grip_n, expected_mm_s in (
         (least_force.GRIP_LEVELS_N[task.stopping_level], least_force.RESLIP_MM_S),
         (final_n, 0.0),
     ):
-        effect = make(
-            DampedObject,
-            context(seed=1, rate_hz=1000),
-            damping_n_s_per_mm=least_force.DAMPING_N_S_PER_MM,
-            friction_scale=[[0.0, task.friction_after]],
-        )
-        out = run(
-            [effect],
-            times,
-            {
-                "hand.grip_n": np.full(len(times), grip_n),
-                "load.force_n": np.full(len(times), task.load_n),
-            },
-        )
-        assert np.allclose(out["object.speed_mm_s"], expected_mm_s)
+        speed_mm_s = damped_speed_mm_s(task, grip_n, task.friction_after)
+        assert np.allclose(speed_mm_s, expected_mm_s)
 
 
 def test_a_wet_trial_gets_wet_after_the_dry_hold_and_runs_until_the_wearer_answered():
