@@ -49,6 +49,8 @@ WETTING_S = 0.5
 AFTER_WETTING_S = 2 * REPEAT_S
 #: 28 mm/s already needs e5, the strongest level: wet, nothing would hold it.
 WET_SPEEDS_MM_S = (4.0, 12.0, 20.0)
+#: The loop trials' names of the task, dry and wet (`loop.Trial.task`).
+DRY_TASK, WET_TASK = "least_force", "least_force_wet"
 
 
 @dataclass(frozen=True)

@@ -78,7 +78,7 @@ START_MM = -8.0  # the leading edge 8 mm before the first ridge (loop_headline.t
 # (2 s), release (2 N/s from at most 5 + 0.1 * 150 = 20 N: 7.5 s even with no floor) and
 # the object to slip again if that release went too far; see `Trial.duration_s`.
 SETTLE_S = 12.0
-TASKS = ("pulled", "least_force", "least_force_wet")
+TASKS = ("pulled", least_force.DRY_TASK, least_force.WET_TASK)
 THESIS_THRESHOLD_MM_S = 45.0  # ReflexConfig default: the human limit on an 80 mm skin
 MIN_REST_S = 0.1  # a rest shorter than this (a ridge dip touching 0 mm/s) is not a stop
 REFLEX = ReflexConfig()
@@ -110,7 +110,7 @@ class Trial:
         object stay put; a wet object's also until the wearer has answered the wetting."""
         crossing_s = (SKIN_END_MM - START_MM) / self.speed_mm_s
         end_s = START_S + crossing_s
-        if self.task == "least_force_wet":
+        if self.task == least_force.WET_TASK:
             wet = least_force.TaskObject(self.speed_mm_s, wet=True)
             end_s = max(end_s, wet.wetting_s(START_S) + least_force.AFTER_WETTING_S)
         return round(end_s + self.settle_s, 3)
@@ -123,7 +123,7 @@ def scene_data(trial: Trial) -> dict:
         raise ConfigError(f"task: expected one of {', '.join(TASKS)}, got {trial.task!r}")
     data = _headline_scene(trial)
     if trial.task != "pulled":
-        wet = trial.task == "least_force_wet"
+        wet = trial.task == least_force.WET_TASK
         return least_force.adapt(data, trial.speed_mm_s, START_S, START_MM, wet=wet)
     return data
 

@@ -44,7 +44,7 @@ ALPHA = 0.05  # Fisher's exact test, two-sided
 HIGH_SPEEDS_MM_S = (20.0, 28.0)  # three and four levels missing: the thesis's "high speeds"
 
 
-DRY, WET = "least_force", "least_force_wet"
+DRY, WET = least_force.DRY_TASK, least_force.WET_TASK
 TASK_SPEEDS_MM_S = {DRY: least_force.SPEEDS_MM_S, WET: least_force.WET_SPEEDS_MM_S}
 
 
@@ -124,9 +124,9 @@ def compare(a: dict, b: dict) -> dict:
 
 def aggregate(rows: Sequence[dict]) -> dict:
     """Figures per mode and speed, per mode over the high speeds, and the comparisons, for
-    the dry objects; the same (without high speeds) under "wet" for the wet ones."""
-    out = _aggregate([r for r in rows if task_of(r) == DRY], least_force.SPEEDS_MM_S)
-    out["wet"] = _aggregate([r for r in rows if task_of(r) == WET], least_force.WET_SPEEDS_MM_S)
+    the dry objects; the same under "wet" for the wet ones."""
+    out = _aggregate([r for r in rows if task_of(r) == DRY], TASK_SPEEDS_MM_S[DRY])
+    out["wet"] = _aggregate([r for r in rows if task_of(r) == WET], TASK_SPEEDS_MM_S[WET])
     return out
 
 
@@ -154,7 +154,7 @@ def _aggregate(rows: Sequence[dict], speeds: Sequence[float]) -> dict:
 def objects(wet: bool = False) -> list[dict]:
     """The task's objects, one per slip speed: what the physics asks of the wearer."""
     rows = []
-    for v in least_force.WET_SPEEDS_MM_S if wet else least_force.SPEEDS_MM_S:
+    for v in TASK_SPEEDS_MM_S[WET if wet else DRY]:
         task = least_force.TaskObject(v, wet)
         rows.append(
             {
@@ -310,20 +310,12 @@ def render(results: dict) -> str:
         f"(difference {_f(high['diff_pct'])} points, 95 % interval {_ci(high)}, Fisher's "
         f"exact p = {_p(high)}; *beats* needs p < {ALPHA:g}).",
         "",
-        "| slip speed mm/s | slip speed: success · crushed · dropped · sliding % | "
-        "slip occurrence: success · crushed · dropped · sliding % | difference, 95 % interval "
-        "| p | verdict |",
-        "|---:|---|---|---:|---:|---|",
+        *verdict_table(f, g["speeds_mm_s"]),
+        "",
+        *why(results),
+        "",
+        "## Per mode and speed",
     ]
-    for v in g["speeds_mm_s"]:
-        key = f"{v:g}"
-        a, b = f["speeds"]["slip_speed"][key], f["speeds"]["slip_occurrence"][key]
-        c = f["compare"][key]
-        lines.append(
-            f"| {key} | {_cells(a)} | {_cells(b)} | {_f(c['diff_pct'])}, {_ci(c)} | {_p(c)} "
-            f"| {c['verdict']} |"
-        )
-    lines += ["", *why(results), "", "## Per mode and speed"]
     lines += [
         "",
         "| mode | slip speed mm/s | trials | success % | crushed % | dropped % | distance mm | "
@@ -380,19 +372,28 @@ def render_wet(results: dict) -> list[str]:
         f"{_f(every['diff_pct'])} points, 95 % interval {_ci(every)}, Fisher's exact p = "
         f"{_p(every)}).",
         "",
+        *verdict_table(f, results["grid"]["wet_speeds_mm_s"]),
+        "",
+    ]
+    return lines
+
+
+def verdict_table(figures: dict, speeds_mm_s: Sequence[float]) -> list[str]:
+    """Per speed: each mode's outcome shares and the comparison."""
+    lines = [
         "| slip speed mm/s | slip speed: success · crushed · dropped · sliding % | "
         "slip occurrence: success · crushed · dropped · sliding % | difference, 95 % interval "
         "| p | verdict |",
         "|---:|---|---|---:|---:|---|",
     ]
-    for key in (f"{v:g}" for v in results["grid"]["wet_speeds_mm_s"]):
-        a, b = f["speeds"]["slip_speed"][key], f["speeds"]["slip_occurrence"][key]
-        c = f["compare"][key]
+    for v in speeds_mm_s:
+        key = f"{v:g}"
+        a, b = figures["speeds"]["slip_speed"][key], figures["speeds"]["slip_occurrence"][key]
+        c = figures["compare"][key]
         lines.append(
             f"| {key} | {_cells(a)} | {_cells(b)} | {_f(c['diff_pct'])}, {_ci(c)} | {_p(c)} "
             f"| {c['verdict']} |"
         )
-    lines.append("")
     return lines
 
 
