@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from grasplink.controllers import build_controllers
+from grasplink.errors import GrasplinkError
 from grasplink.evaluation.decoding_bench import default_out_dir
 from grasplink.evaluation.loop_task import headline, plot_report, render, report_to
 
@@ -30,19 +31,27 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.report_only is not None:
         out = args.out if args.out is not None else default_out_dir()
-        results = json.loads(args.report_only.read_text())
+        try:
+            results = json.loads(args.report_only.read_text())
+        except (OSError, ValueError) as exc:
+            print(f"bench_loop_task: error: {args.report_only}: {exc}", file=sys.stderr)
+            return 1
         out.mkdir(parents=True, exist_ok=True)
         plot_report(results, out / "loop_task.png")
         (out / "loop_task.md").write_text(render(results))
         print(f"rendered {out}/loop_task.md, loop_task.png from {args.report_only}")
         return 0
-    results, out = report_to(
-        quick=args.quick,
-        out=args.out,
-        controllers_for=build_controllers,
-        workers=args.workers,
-        dask=args.dask,
-    )
+    try:
+        results, out = report_to(
+            quick=args.quick,
+            out=args.out,
+            controllers_for=build_controllers,
+            workers=args.workers,
+            dask=args.dask,
+        )
+    except GrasplinkError as exc:
+        print(f"bench_loop_task: error: {exc}", file=sys.stderr)
+        return 1
     print(headline(results))
     print(f"wrote {out}/loop_task.md, loop_task.json, loop_task.png")
     return 0
