@@ -81,6 +81,13 @@ class Io:
         self._write(name, values)
 
 
+#: An input-free stream (noise) is made this many samples ahead of its use.
+AHEAD_SAMPLES = 1024
+#: A filter steps a chunk of this many samples or fewer in Python floats: the same
+#: arithmetic in the same order as scipy's, without its call cost on a few samples.
+SHORT_CHUNK_SAMPLES = 64
+
+
 class AheadStream:
     """A signal that depends on no input (noise), made in blocks ahead of its use.
 
@@ -89,7 +96,7 @@ class AheadStream:
     chunk, and a chunk of a few samples costs a slice instead of a generator and a filter.
     """
 
-    def __init__(self, make: Callable[[int], np.ndarray], block: int):
+    def __init__(self, make: Callable[[int], np.ndarray], block: int = AHEAD_SAMPLES):
         self.make = make
         self.block = block
         self.buffer: np.ndarray | None = None

@@ -18,7 +18,8 @@ from grasplink.devices.factory import build_node
 from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import FunctionSource
 from grasplink.simulators.bindings import SceneSource
-from grasplink.simulators.effects.actuators import SAMPLE_BY_SAMPLE, CrushLatch, FirstOrderLag
+from grasplink.simulators.core import SHORT_CHUNK_SAMPLES
+from grasplink.simulators.effects.actuators import CrushLatch, FirstOrderLag
 from grasplink.simulators.effects.emg import sosfilt_floats
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
@@ -170,7 +171,7 @@ def test_first_order_lag_steps_short_chunks_in_floats_as_lfilter_steps_long_ones
     target[60] = np.nan
     target[61:] = -3.0
     one_shot = FirstOrderLag(0.05, initial).step(times, target)
-    assert len(times) > SAMPLE_BY_SAMPLE  # the one-shot run is lfilter's
+    assert len(times) > SHORT_CHUNK_SAMPLES  # the one-shot run is lfilter's
     lag = FirstOrderLag(0.05, initial)
     bounds = [0, 1, 4, 5, 25, 31, 40, 41, 59, 62, 80, len(times)]
     chunked = np.concatenate(

@@ -20,11 +20,17 @@ from scipy.signal import lfilter
 
 from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
-from grasplink.simulators.core import PHYSICS, Context, Effect, Io, register
+from grasplink.simulators.core import (
+    PHYSICS,
+    SHORT_CHUNK_SAMPLES,
+    Context,
+    Effect,
+    Io,
+    register,
+)
 from grasplink.simulators.effects.kinematics import INTERPOLATIONS, US_PER_S, Profile
 
 G_M_S2 = 9.81
-SAMPLE_BY_SAMPLE = 64  # a lag steps this many samples or fewer in floats, not with lfilter
 
 
 class FirstOrderLag:
@@ -50,7 +56,7 @@ class FirstOrderLag:
 
     def step(self, times_us: np.ndarray, target: np.ndarray) -> np.ndarray:
         n = len(times_us)
-        if n <= SAMPLE_BY_SAMPLE:
+        if n <= SHORT_CHUNK_SAMPLES:
             return self._step_floats(times_us.tolist(), target.tolist())
         out = np.empty(n)
         previous = times_us[0] if self.last_us is None else self.last_us

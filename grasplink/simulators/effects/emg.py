@@ -53,7 +53,15 @@ from scipy import signal
 
 from grasplink.core.params import Params
 from grasplink.simulators import signals as sig
-from grasplink.simulators.core import EMG, AheadStream, Context, Effect, Io, register
+from grasplink.simulators.core import (
+    EMG,
+    SHORT_CHUNK_SAMPLES,
+    AheadStream,
+    Context,
+    Effect,
+    Io,
+    register,
+)
 
 LEVEL, RAW = sig.WEARER_LEVEL, sig.EMG_RAW_UV
 LEVELS = 4  # e1..e4 between e_min and e_max
@@ -62,8 +70,6 @@ FATIGUE_SCALES = (1.0, 0.9, 0.8, 0.7, 0.6, 0.5)  # spectral compression bank
 WARMUP_CYCLES = 40  # warm-up length in periods of the band's lower edge
 DEFAULT_BLOCK_S = 0.25  # noise generation block when not regulating
 RECTIFIED_MEAN_TO_SIGMA = math.sqrt(math.pi / 2)
-AHEAD_SAMPLES = 1024  # the noise is taken from the bank this many samples ahead of its use
-SAMPLE_BY_SAMPLE = 64  # the onset filter steps this many samples or fewer in floats
 
 
 def sosfilt_floats(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -237,7 +243,7 @@ class SurfaceEmg(Effect):
             impulse_length=max(4096, math.ceil(5 * WARMUP_CYCLES * self.rate_hz / lowest_hz)),
         )
         self._sample = 0  # absolute index of the next sample the bank makes
-        self._bank = AheadStream(self._take, AHEAD_SAMPLES)
+        self._bank = AheadStream(self._take)
 
         self._smooth_sos = None
         if self.onset_s > 0:
@@ -266,7 +272,7 @@ class SurfaceEmg(Effect):
         if self._smooth_sos is not None:
             if self._smooth_state is None:
                 self._smooth_state = signal.sosfilt_zi(self._smooth_sos) * sigma[0]
-            smooth = sosfilt_floats if n <= SAMPLE_BY_SAMPLE else signal.sosfilt
+            smooth = sosfilt_floats if n <= SHORT_CHUNK_SAMPLES else signal.sosfilt
             sigma, self._smooth_state = smooth(self._smooth_sos, sigma, zi=self._smooth_state)
 
         bank = self._bank.take(n)

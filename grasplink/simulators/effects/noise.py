@@ -34,7 +34,6 @@ from grasplink.simulators import signals as sig
 from grasplink.simulators.core import EMG, SKIN, AheadStream, Context, Effect, Io, register
 
 DOMAIN_OF_PREFIX = {"skin": SKIN, "emg": EMG}
-AHEAD_SAMPLES = 1024  # noise is drawn (and filtered) this many samples ahead of its use
 DEFAULT_SIGNAL = sig.SKIN_FORCE_N
 
 _VARIANTS: dict[tuple[type, str], type] = {}
@@ -101,7 +100,7 @@ class WhiteNoise(SignalModifier):
         super().__init__(params, ctx)
         self.std = params.number("std", 0.01, low=0.0)
         self._rng = ctx.rng(self.rng_key) if self.std > 0 else None
-        self._noise = AheadStream(self._draw, AHEAD_SAMPLES)
+        self._noise = AheadStream(self._draw)
 
     def _draw(self, count: int) -> np.ndarray:
         assert self._rng is not None
@@ -169,7 +168,7 @@ class Drift(SignalModifier):
         if self._rng is not None:
             root = np.linalg.cholesky(cov + 1e-15 * np.trace(cov) * np.eye(2))
             self._zi = (root @ self._rng.standard_normal(2)).reshape(1, 2)
-        self._drift = AheadStream(self._filtered, AHEAD_SAMPLES)
+        self._drift = AheadStream(self._filtered)
 
     def _filtered(self, count: int) -> np.ndarray:
         assert self._rng is not None
