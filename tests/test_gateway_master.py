@@ -296,7 +296,7 @@ def test_lost_node_in_consumer_fault_is_reset_only_once_the_fault_clears():
 
 
 # -- a stalled runner hears the heartbeats queued meanwhile before it judges loss --------------
-def _stalled_master(max_batch: int) -> NmtMaster:
+def _stalled_master(max_batch: int, supersede: bool = True) -> NmtMaster:
     """A master on a runner whose thread stalls 1 s (> 300 ms consumer time) while a node
     keeps talking: 20 TPDOs and then its heartbeat wait in the bus when the runner wakes.
 
@@ -308,7 +308,9 @@ def _stalled_master(max_batch: int) -> NmtMaster:
     node_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
     now = [0]
     master = NmtMaster(heartbeat_ms=100, node_heartbeat_ms=100, autostart=False)
-    runner = NodeRunner(runner_bus, [master], clock_us=lambda: now[0], max_batch=max_batch)
+    runner = NodeRunner(
+        runner_bus, [master], clock_us=lambda: now[0], max_batch=max_batch, supersede=supersede
+    )
     try:
         runner.power_on()
         node_bus.send(frame_to_message(Frame(0x700 + 5, bytes([NmtState.OPERATIONAL]))))
@@ -332,6 +334,11 @@ def test_runner_after_a_stall_delivers_queued_heartbeats_before_the_loss_check()
 
 
 def test_runner_delivering_one_frame_per_step_would_lose_the_node_after_a_stall():
-    # What a batch of one (the runner before batching) does: the loss check runs while
-    # the heartbeat still waits behind the TPDOs.
-    assert _stalled_master(max_batch=1).nodes[5].lost
+    # What a batch of one (the runner before batching) does without reading the backlog
+    # at once: the loss check runs while the heartbeat still waits behind the TPDOs.
+    assert _stalled_master(max_batch=1, supersede=False).nodes[5].lost
+
+
+def test_runner_behind_by_more_than_a_batch_hears_the_heartbeat_behind_the_pdos():
+    # a batch of one, then the backlog read at once: the 19 TPDOs but the newest dropped
+    assert not _stalled_master(max_batch=1).nodes[5].lost

@@ -17,7 +17,7 @@ import can
 from grasplink.bus.priority import raise_thread_nice, raise_thread_priority
 from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S, FIRST_DELAY_US, Backoff
 from grasplink.bus.url import BusDisconnected, frame_to_message, message_to_frame
-from grasplink.core.frames import Frame
+from grasplink.core.frames import NODE_ID_MASK, RPDO_BASES, TPDO_BASES, Frame
 from grasplink.core.protocol import SansIoDevice
 from grasplink.errors import BusError
 
@@ -29,6 +29,14 @@ DEVICE_BACKOFF_US = 100_000
 # hear it before a heartbeat consumer judges loss; bounded so timers (own heartbeat,
 # SDO timeouts) still run while a backlog lasts. 128 frames is ~0.4 s of a set's traffic.
 MAX_BATCH = 128
+# Behind by more than a batch (a starved host: the queue grows faster than the devices
+# read it), the runner reads the whole backlog at once and delivers it in order, but for
+# PDOs a newer frame of the same COB-ID in it supersedes: process data is state or a
+# counted stream (the skin's packet sequence tells the gap), and a control loop wants the
+# newest. Service frames (NMT, SYNC, EMCY, TIME, SDO, heartbeat, LSS) are never dropped: an
+# SDO answer queued behind a flood of PDOs is heard before its client's timeout runs.
+MAX_CATCH_UP = 65_536  # frames read in one catch-up (memory stays bounded)
+BEHIND_LOG_EVERY_US = 10_000_000
 # The pacer serves urgent timers only while the runner's thread makes progress: a heartbeat
 # stands for a living gateway, so a thread stuck this long lets the nodes' consumers fire.
 DEFAULT_STALL_LIMIT_S = 2.0
@@ -58,6 +66,9 @@ class RunnerStats:
     offline_drops: int = 0  # frames not sent because the bus was down
     reconnects: int = 0  # outages that ended with the bus back
     urgent_between_frames: int = 0  # urgent timers the runner's thread served amid a batch
+    superseded: int = 0  # PDOs of a backlog dropped for a newer one of their COB-ID
+    superseded_by_cob_id: Counter[int] = field(default_factory=Counter)
+    catch_ups: int = 0  # steps that found more than a batch queued and read it all
     urgent_paced: int = 0  # urgent timers the pacer thread served
     stalls: int = 0  # times the pacer withheld urgent timers: the runner's thread was stuck
 
@@ -75,7 +86,11 @@ class NodeRunner:
     Each step delivers every frame that has already arrived (up to
     ``max_batch``, each one's replies sent before the next is read) before it
     runs due timers: after a stall the heartbeats queued meanwhile reach a
-    heartbeat consumer before its timer can declare their senders lost.
+    heartbeat consumer before its timer can declare their senders lost. A backlog longer
+    than that (a host too slow for the traffic) is read at once and delivered in order
+    with every PDO that a newer frame of its COB-ID supersedes dropped and counted
+    (``supersede``, on by default): latency stays bounded instead of growing with the
+    queue, and no service frame (SDO, heartbeat, EMCY, NMT, SYNC) is ever dropped.
 
     ``urgent`` devices hold timers that must never wait behind received frames (the
     master's own heartbeat, `gateway.master.HeartbeatProducer`): they are started with
@@ -125,6 +140,7 @@ class NodeRunner:
         pace_urgent: bool = False,
         stall_limit_s: float = DEFAULT_STALL_LIMIT_S,
         nice: int | None = None,
+        supersede: bool = True,
     ) -> None:
         if not devices:
             raise ValueError("NodeRunner needs at least one device")
@@ -161,6 +177,8 @@ class NodeRunner:
         self._due_us: int | None = None  # earliest device deadline after the last step
         self._checked_us = 0  # when the timers were last looked at
         self._backlog = False  # the last step stopped at max_batch frames
+        self._supersede = supersede
+        self._behind_logged_us: int | None = None
         self._bus_dead = False  # the current handle is gone for good: only reopen() helps
         self._last_bus_error = ""
         self._owned: can.BusABC | None = None  # the bus reopen() gave us, ours to shut down
@@ -328,6 +346,8 @@ class NodeRunner:
                 self._backlog = True  # more may wait: the next step does not wait
                 break
             msg = self._recv(0.0)
+        if self._backlog and self._supersede and self._outage is None and not self.failure:
+            self._catch_up()
         now = self._clock()
         if self._urgent_due_us is not None and now >= self._urgent_due_us:
             self._serve_urgent(now)
@@ -392,6 +412,43 @@ class NodeRunner:
         replies = self._replies(frame, None, now)
         if replies:
             self._dispatch(replies, now)
+
+    def _catch_up(self) -> None:
+        """Read everything queued; deliver it in order but the superseded PDOs (`MAX_CATCH_UP`)."""
+        queued: list[can.Message] = []
+        while len(queued) < MAX_CATCH_UP and (msg := self._recv(0.0)) is not None:
+            queued.append(msg)
+        newest = {m.arbitration_id: i for i, m in enumerate(queued) if _is_pdo(m)}
+        superseded: Counter[int] = Counter()
+        for i, msg in enumerate(queued):
+            if newest.get(msg.arbitration_id, i) != i and _is_pdo(msg):
+                superseded[msg.arbitration_id] += 1
+                continue
+            urgent = self._urgent_due_us
+            if urgent is not None and self._clock() >= urgent:
+                self._serve_urgent(self._clock(), between_frames=True)
+            self._deliver(msg)
+            if self._outage is not None or self.failure:
+                break
+        self._backlog = len(queued) >= MAX_CATCH_UP
+        dropped = sum(superseded.values())
+        with self._lock:
+            self._stats.catch_ups += 1
+            self._stats.superseded += dropped
+            self._stats.superseded_by_cob_id.update(superseded)
+            total = self._stats.superseded
+        now = self._clock()
+        last = self._behind_logged_us
+        if dropped and (last is None or now - last >= BEHIND_LOG_EVERY_US):
+            self._behind_logged_us = now
+            logger.warning(
+                "%s: behind the bus by %d frames; dropped %d PDOs a newer one superseded "
+                "(%d so far; service frames all delivered)",
+                self._name,
+                self._max_batch + len(queued),
+                dropped,
+                total,
+            )
 
     def _earliest_deadline(self) -> int | None:
         deadlines = [d for d in map(self._effective_deadline, self.devices) if d is not None]
@@ -873,3 +930,14 @@ def _stop_thread(owner: NodeRunner | MultiRunner, timeout: float) -> bool:
             logger.warning("%s did not stop within %.1f s", owner._name, timeout)
             return False
     return True
+
+
+_PDO_BASES = frozenset(TPDO_BASES + RPDO_BASES)
+
+
+def _is_pdo(msg: can.Message) -> bool:
+    """A classic data frame on a predefined-connection-set PDO CAN-ID (181h-57Fh)."""
+    if msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame or msg.is_fd:
+        return False
+    can_id = msg.arbitration_id
+    return can_id & NODE_ID_MASK != 0 and can_id & ~NODE_ID_MASK in _PDO_BASES
