@@ -20,6 +20,7 @@ import hashlib
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, ClassVar
 
 import numpy as np
@@ -64,9 +65,13 @@ class Io:
         write: Callable[[str, np.ndarray], None],
     ):
         self.times_us = times_us
-        self.t_s = times_us / 1e6
         self._read = read
         self._write = write
+
+    @cached_property
+    def t_s(self) -> np.ndarray:
+        """The sample times in seconds, worked out only for an effect that asks."""
+        return self.times_us / 1e6
 
     def __len__(self) -> int:
         return len(self.times_us)

@@ -328,10 +328,14 @@ class Simulation:
                 if computed is None:
                     continue
                 times = computed.times_us
-                a = int(np.searchsorted(times, first, "right"))
-                b = int(np.searchsorted(times, t_end_us, side))
-                state.times_us = times[a:b]
-                state.values.update({n: v[a:b] for n, v in computed.values.items()})
+                a = int(times.searchsorted(first, "right"))
+                b = int(times.searchsorted(t_end_us, side))
+                if a == 0 and b == len(times):  # the block is this chunk (chunk by chunk)
+                    state.times_us = times
+                    state.values.update(computed.values)
+                else:
+                    state.times_us = times[a:b]
+                    state.values.update({n: v[a:b] for n, v in computed.values.items()})
             self._publish(state)
 
     def step(self, t_end_us: int) -> None:

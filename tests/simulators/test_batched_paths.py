@@ -238,3 +238,20 @@ def test_one_section_filter_in_floats_gives_sosfilts_bits():
             want, want_z = signal.sosfilt(sos, x[:stop], zi=zi)
             got, got_z = sosfilt_floats(sos, x[:stop], zi)
             assert got.tobytes() == want.tobytes() and got_z.tobytes() == want_z.tobytes()
+
+
+def test_scene_source_holds_the_last_capacity_samples_as_concatenating_would():
+    """Chunks of 0 to more than the ring's capacity, through many wraps of its buffers."""
+    source = SceneSource(100)  # capacity 200
+    rng = np.random.default_rng(3)
+    all_times, all_values, t = np.zeros(0, np.int64), np.zeros(0), 0
+    for count in [*rng.integers(0, 40, 200), 250, 3, 199, 200, 201, 0, 7]:
+        times = np.arange(t, t + count * 10_000, 10_000, dtype=np.int64)
+        values = rng.normal(size=count)
+        t += count * 10_000
+        source.append(times, values)
+        all_times = np.concatenate([all_times, times])[-source.capacity :]
+        all_values = np.concatenate([all_values, values])[-source.capacity :]
+        assert np.array_equal(source.times_us, all_times)
+        assert np.array_equal(source.values, all_values)
+        assert source.final_until_us() == (int(all_times[-1]) if len(all_times) else -1)
