@@ -435,6 +435,12 @@ WHAT_CHANGED = """
   (`Effect.snapshot`) and replays to that chunk end with the old commands. Every
   chunk gets the commands of its start as before: recordings and `grasplink bench
   loop --quick` are byte-identical. A ramp still runs chunk by chunk.
+- **Parts of the physics that share no signal run ahead apart**
+  (`core.independent_parts`): loop_headline's hand part (grip, object, skin chain)
+  and belt part (motor, wearer, EMG) each run ahead on their own node's commands, so
+  a ramp of the grip no longer steps the belt, wearer and EMG chunk by chunk (the
+  belt part: 84 blocks in 6 s instead of 252). Outputs are byte-identical
+  (`benchmarks/check_runs_unchanged.py`).
 - **Input-free noise is made ahead** (`noise.white`, `noise.drift`, the EMG noise
   bank: 1024 samples at a time, the same draws in the same order), and **short
   chunks of the first-order lags and the EMG onset filter step in floats** with
@@ -452,13 +458,11 @@ WHAT_CHANGED = """
 - The stage tables take the timing wrappers' own cost off the bus and the
   participants (it had been charged to them: ~2 µs a call, tens of thousands of calls).
 
-What is left is per frame and per chunk, not per sample. In a closed loop the
-physics still steps every effect every 10 ms through a command ramp (the gateway
-ramps grip and belt commands chunk by chunk), where each of the 13 effects pays
-numpy's per-call cost on 4-15 samples; the next step would be rolling back only the
-effects downstream of the command that changed (a ramp of the hand's grip leaves the
-belt, wearer and EMG chain alone), which needs a time frontier per effect instead of
-one per domain. The gateway alone (its skin decoding about half of it,
+What is left is per frame and per chunk, not per sample. In a closed loop a part's
+physics still steps every 10 ms through a ramp of its own commands (the gateway
+ramps grip and belt commands chunk by chunk), where each of its effects pays
+numpy's per-call cost on 4-15 samples (the hand's part: 212 blocks in 6 s). The
+gateway alone (its skin decoding about half of it,
 grasplink/decoding, not changed here) bounds the scene below the 20× target whatever
 the rest costs (the line under the loop_headline table). In a skin-only slip the skin
 node's sans-IO work per packet (object dictionary writes, the TPDO, its deadlines)

@@ -68,17 +68,38 @@ class DriveWiring:
 
 
 class SceneSource:
-    """A node's SampleSource fed by a sensor domain: a bounded ring of recent samples."""
+    """A node's SampleSource fed by a sensor domain: a bounded ring of recent samples.
+
+    `times_us` and `values` are the last `capacity` samples appended (fewer at first),
+    views into buffers twice as long: a chunk is written after the last one, and only
+    when the buffers are full are the samples kept moved to their front, so a chunk
+    costs copying its own samples, not the whole ring.
+    """
 
     def __init__(self, rate_hz: int):
         self.period_us = -(-1_000_000 // rate_hz)
         self.capacity = max(16, int(rate_hz * RING_SECONDS))
-        self.times_us = np.zeros(0, dtype=np.int64)
-        self.values = np.zeros(0)
+        self._times_us = np.zeros(2 * self.capacity, dtype=np.int64)
+        self._values = np.zeros(2 * self.capacity)
+        self._end = 0  # samples held in the buffers
+        self.times_us = self._times_us[:0]
+        self.values = self._values[:0]
 
     def append(self, times_us: np.ndarray, values: np.ndarray) -> None:
-        self.times_us = np.concatenate([self.times_us, times_us])[-self.capacity :]
-        self.values = np.concatenate([self.values, values])[-self.capacity :]
+        count = min(len(times_us), self.capacity)
+        times_us, values = times_us[len(times_us) - count :], values[len(values) - count :]
+        if self._end + count > len(self._times_us):  # full: keep the last ones at the front
+            kept = min(self._end, self.capacity - count)
+            self._times_us[:kept] = self._times_us[self._end - kept : self._end]
+            self._values[:kept] = self._values[self._end - kept : self._end]
+            self._end = kept
+        end = self._end + count
+        self._times_us[self._end : end] = times_us
+        self._values[self._end : end] = values
+        self._end = end
+        start = max(0, end - self.capacity)
+        self.times_us = self._times_us[start:end]
+        self.values = self._values[start:end]
 
     def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
         index = np.arange(start_index, start_index + count, dtype=np.int64)

@@ -20,6 +20,7 @@ import hashlib
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, ClassVar
 
 import numpy as np
@@ -64,9 +65,13 @@ class Io:
         write: Callable[[str, np.ndarray], None],
     ):
         self.times_us = times_us
-        self.t_s = times_us / 1e6
         self._read = read
         self._write = write
+
+    @cached_property
+    def t_s(self) -> np.ndarray:
+        """The sample times in seconds, worked out only for an effect that asks."""
+        return self.times_us / 1e6
 
     def __len__(self) -> int:
         return len(self.times_us)
@@ -304,3 +309,41 @@ def _topological(effects: list[Effect], source: str) -> list[Effect]:
             kinds = ", ".join(effects[i].kind for i in remaining)
             raise SceneError(source, "effects", f"effects depend on each other in a loop: {kinds}")
     return [effects[i] for i in ordered]
+
+
+def independent_parts(
+    effects: list[Effect], endpoints: list[Endpoint]
+) -> list[tuple[list[Effect], list[Endpoint]]]:
+    """Split the graph where no signal passes: each part's effects (in the given order) and
+    the command endpoints writing into them, no signal shared between parts.
+
+    A part's samples depend only on its own effects and commands, so the engine runs each
+    ahead on its own and rolls one back only when a command of its own changed (a ramp of
+    the hand's grip leaves the belt, the wearer and the EMG alone). Parts come in the order
+    of their first effect (or endpoint), so a scene always splits the same way.
+    """
+    members: list[Effect | Endpoint] = [*effects, *(e for e in endpoints if e.writes)]
+    parent = list(range(len(members)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    holder: dict[str, int] = {}  # a signal -> a member that reads or writes it
+    for i, member in enumerate(members):
+        names = member.writes if isinstance(member, Endpoint) else member.inputs + member.outputs
+        for name in names:
+            if name in holder:
+                parent[root(i)] = root(holder[name])
+            else:
+                holder[name] = i
+    parts: dict[int, tuple[list[Effect], list[Endpoint]]] = {}
+    for i, member in enumerate(members):
+        part = parts.setdefault(root(i), ([], []))
+        if isinstance(member, Endpoint):
+            part[1].append(member)
+        else:
+            part[0].append(member)
+    return list(parts.values())

@@ -16,6 +16,9 @@ not changed for a while, it steps many chunks at once with the commands held,
 then hands them to the network chunk by chunk; a command that changes at a chunk
 end rolls the physics back to that chunk end (effect snapshots). Every chunk
 still gets the commands of its start, so results are the same as chunk by chunk.
+Effects that share no signal (the hand's grip and skin, the belt's wearer and EMG)
+form independent parts: each runs ahead as far as its own commands have held and is
+rolled back only by a change of its own commands.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -33,7 +37,7 @@ from grasplink.devices.node import DeviceNode
 from grasplink.devices.sampling import SampleClock
 from grasplink.errors import BusError, ConfigError
 from grasplink.simulators.bindings import NodeBinding, bind
-from grasplink.simulators.core import DOMAINS, PHYSICS, Io
+from grasplink.simulators.core import DOMAINS, PHYSICS, Effect, Endpoint, Io, independent_parts
 from grasplink.simulators.live import LiveBus, LiveNetwork
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import Scene
@@ -49,12 +53,30 @@ RUN_AHEAD_US = 320_000
 
 @dataclass
 class DomainState:
+    """A domain's samples: a part's last computed block (stepped by its clock), or the
+    chunk the nodes and the recorder last got (`Simulation.domains`: every part's)."""
+
     name: str
     clock: SampleClock
     signals: list[str]
     times_us: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     values: dict[str, np.ndarray] = field(default_factory=dict)
     last: dict[str, tuple[int, float]] = field(default_factory=dict)
+
+
+@dataclass
+class Part:
+    """Effects that share signals with no others (`core.independent_parts`), the nodes whose
+    commands drive them, their domains' samples, and how far they have run ahead."""
+
+    effects: dict[str, list[Effect]]  # by domain, in step order
+    endpoints: dict[str, list[Endpoint]]  # the command endpoints, by domain
+    command_nodes: list[str]
+    domains: dict[str, DomainState]
+    horizon_us: int = 0  # computed up to here (the last block's end)
+    quiet_us: int = 0  # how long its commands have held, up to now
+    held: list[float] = field(default_factory=list)  # the commands its last block ran with
+    snapshot: list[Callable[[], None]] | None = None  # back to the last block's start
 
 
 class Simulation:
@@ -87,10 +109,6 @@ class Simulation:
         self.effect_steps = 0
         self.controllers = list(controllers)
         self.domain_of = scene.domain_of
-        self.effects = {d: [e for e in scene.ordered if e.domain == d] for d in DOMAINS}
-        self._endpoints_by_domain = {
-            d: [e for e in scene.endpoints if e.domain == d] for d in DOMAINS
-        }
         produced = {name for e in scene.effects for name in e.outputs}
         self.bindings: dict[str, NodeBinding] = {
             kind: bind(spec, scene, produced) for kind, spec in scene.nodes.items()
@@ -124,13 +142,11 @@ class Simulation:
                 duration_us=scene.duration_us,
                 name=f"scene {scene.name} on {live.url}",
             )
-        self.domains: dict[str, DomainState] = {}
-        for domain in DOMAINS:
-            signals = sorted({n for n, d in self.domain_of.items() if d == domain})
-            if signals:
-                self.domains[domain] = DomainState(
-                    domain, SampleClock(scene.rate_hz(domain), 0), signals
-                )
+        # What the nodes and the recorder get, chunk by chunk; the parts compute it.
+        self.domains = self._domain_states(set(self.domain_of))
+        self.parts = [
+            self._part(e, p) for e, p in independent_parts(scene.ordered, scene.endpoints)
+        ]
         if recorder is not None:
             for domain, state in self.domains.items():
                 recorder.open_domain(domain, state.signals)
@@ -153,7 +169,25 @@ class Simulation:
         # How far a coupled scene's physics may run ahead of the network (0: chunk by chunk).
         self.run_ahead_us = RUN_AHEAD_US if self.coupled and live is None else 0
         self.rollbacks = 0  # run-aheads cut short by a command that changed
-        self._command_nodes = [e.node for e in scene.endpoints if e.writes]
+
+    def _domain_states(self, signals: set[str]) -> dict[str, DomainState]:
+        """A state for each domain some of `signals` belong to, at sample 0."""
+        states = {}
+        for domain in DOMAINS:
+            names = sorted(n for n in signals if self.domain_of[n] == domain)
+            if names:
+                clock = SampleClock(self.scene.rate_hz(domain), 0)
+                states[domain] = DomainState(domain, clock, names)
+        return states
+
+    def _part(self, effects: list[Effect], endpoints: list[Endpoint]) -> Part:
+        signals = {n for e in effects for n in e.outputs} | {n for e in endpoints for n in e.writes}
+        return Part(
+            {d: [e for e in effects if e.domain == d] for d in DOMAINS},
+            {d: [e for e in endpoints if e.domain == d] for d in DOMAINS},
+            [e.node for e in endpoints],
+            self._domain_states(signals),
+        )
 
     @property
     def coupled(self) -> bool:
@@ -224,61 +258,55 @@ class Simulation:
             yield t_end
 
     def _chunks_ahead(self, duration_us: int) -> Iterator[int]:
-        """Chunk by chunk to the end, the physics running ahead while commands hold;
-        yields each chunk's end once the network has run to it.
+        """Chunk by chunk to the end, each part's physics running ahead while its commands
+        hold; yields each chunk's end once the network has run to it.
 
-        The physics runs ahead as far as the commands have held so far (up to
-        `run_ahead_us`): a ramp of commands runs chunk by chunk, a quiet stretch in ever
-        longer steps, and a rollback throws away at most what the quiet before it bought.
+        A part runs ahead as far as its commands have held so far (up to `run_ahead_us`):
+        a ramp of its commands runs chunk by chunk, a quiet stretch in ever longer steps,
+        and a rollback throws away at most what the quiet before it bought.
         """
         chunk_us = self.scene.chunk_us
-        quiet_us = 0  # how long the commands have held, up to now
         while self.t_us < duration_us:
             t0 = self.t_us
-            # whole chunks: the chunk ends stay on the scene's grid
-            ahead_us = max(chunk_us, min(quiet_us, self.run_ahead_us) // chunk_us * chunk_us)
-            horizon = min(t0 + ahead_us, duration_us)
-            snapshot = self._snapshot() if horizon > t0 + chunk_us else None
-            held = self._commands()
-            self._compute(horizon, held)
-            full = {d: (s.times_us, s.values) for d, s in self.domains.items()}
-            start = dict.fromkeys(full, 0)
-            t = t0
-            while t < horizon:
-                t_end = min(t + chunk_us, horizon)
-                for domain, (times, values) in full.items():
-                    # physics up to and including t_end, the sensors to t_end - 1
-                    b = int(np.searchsorted(times, t_end, "right" if domain == PHYSICS else "left"))
-                    a = start[domain]
-                    state = self.domains[domain]
-                    state.times_us = times[a:b]
-                    state.values = {n: v[a:b] for n, v in values.items()}
-                    start[domain] = b
-                    self._publish(state)
-                self._read_actuators()
-                self._network_to(t_end)
-                t = t_end
-                yield t_end
-                if self._commands() == held:
-                    quiet_us += chunk_us
+            t_end = min(t0 + chunk_us, duration_us)
+            for part in self.parts:
+                if part.horizon_us < t_end:  # its last block is used up: the next from t0
+                    self._run_ahead(part, t0, duration_us)
+            self._publish_until(t_end)
+            self._read_actuators()
+            self._network_to(t_end)
+            yield t_end
+            for part in self.parts:
+                if self._commands(part) == part.held:
+                    part.quiet_us += chunk_us
                     continue
-                quiet_us = 0
-                if t_end < horizon:
+                part.quiet_us = 0
+                if t_end < part.horizon_us:
                     # what ran past t_end held the old commands: back to t0, then to t_end
-                    assert snapshot is not None
+                    assert part.snapshot is not None
                     self.rollbacks += 1
-                    for restore in snapshot:
+                    for restore in part.snapshot:
                         restore()
-                    self._compute(t_end, held)
-                    break
+                    self._compute(part, t_end, part.held)
 
-    def _commands(self) -> list[float]:
-        return [self.bindings[node].command_value() for node in self._command_nodes]
+    def _run_ahead(self, part: Part, t0_us: int, duration_us: int) -> None:
+        """Compute `part` from t0 as far ahead as its commands have held (whole chunks: the
+        chunk ends stay on the scene's grid), keeping how to come back to t0."""
+        chunk_us = self.scene.chunk_us
+        ahead_us = max(chunk_us, min(part.quiet_us, self.run_ahead_us) // chunk_us * chunk_us)
+        horizon = min(t0_us + ahead_us, duration_us)
+        part.snapshot = self._snapshot(part) if horizon > t0_us + chunk_us else None
+        part.held = self._commands(part)
+        self._compute(part, horizon, part.held)
 
-    def _snapshot(self) -> list[Callable[[], None]]:
-        """How to come back to now: each effect's state and each domain's last chunk."""
-        restores: list[Callable[[], None]] = [e.snapshot().restore for e in self.scene.ordered]
-        for state in self.domains.values():
+    def _commands(self, part: Part) -> list[float]:
+        return [self.bindings[node].command_value() for node in part.command_nodes]
+
+    def _snapshot(self, part: Part) -> list[Callable[[], None]]:
+        """How to come back to now: each effect's state and each domain's last block."""
+        effects = [e for domain in DOMAINS for e in part.effects[domain]]
+        restores: list[Callable[[], None]] = [e.snapshot().restore for e in effects]
+        for state in part.domains.values():
             saved = (state.clock.next_index, state.times_us, state.values, dict(state.last))
 
             def restore(s: DomainState = state, saved: tuple = saved) -> None:
@@ -287,6 +315,28 @@ class Simulation:
 
             restores.append(restore)
         return restores
+
+    def _publish_until(self, t_end_us: int) -> None:
+        """The chunk ending at t_end_us reaches the nodes and the recorder: every part's
+        samples of it, physics up to and including t_end, the sensors to t_end - 1."""
+        for domain, state in self.domains.items():
+            side: Literal["left", "right"] = "right" if domain == PHYSICS else "left"
+            first = state.times_us[-1] if len(state.times_us) else -1
+            state.values = {}
+            for part in self.parts:
+                computed = part.domains.get(domain)
+                if computed is None:
+                    continue
+                times = computed.times_us
+                a = int(times.searchsorted(first, "right"))
+                b = int(times.searchsorted(t_end_us, side))
+                if a == 0 and b == len(times):  # the block is this chunk (chunk by chunk)
+                    state.times_us = times
+                    state.values.update(computed.values)
+                else:
+                    state.times_us = times[a:b]
+                    state.values.update({n: v[a:b] for n, v in computed.values.items()})
+            self._publish(state)
 
     def step(self, t_end_us: int) -> None:
         """Advance signals and network from self.t_us to t_end_us.
@@ -311,25 +361,29 @@ class Simulation:
     def step_physics(self, t_end_us: int) -> None:
         """Step every domain of one chunk, up to t_end_us, and tell the nodes the actual
         values at its end: the one per-chunk physics step, in virtual and in real time."""
-        self._compute(t_end_us)
-        for state in self.domains.values():
-            self._publish(state)
+        for part in self.parts:
+            self._compute(part, t_end_us, self._commands(part))
+        self._publish_until(t_end_us)
         self._read_actuators()
 
-    def _compute(self, t_end_us: int, commands: list[float] | None = None) -> None:
-        """Step every domain's effects up to t_end_us (nothing reaches the nodes yet), with
-        the nodes' commands now or, replaying a chunk, those it was run with."""
-        held = dict(zip(self._command_nodes, commands or self._commands(), strict=True))
+    def _compute(self, part: Part, t_end_us: int, commands: list[float]) -> None:
+        """Step a part's effects, domain by domain, up to t_end_us with these commands of
+        its nodes (nothing reaches the nodes yet)."""
+        held = dict(zip(part.command_nodes, commands, strict=True))
         for domain in DOMAINS:
-            state = self.domains.get(domain)
+            state = part.domains.get(domain)
             if state is not None:
                 # Physics includes the sample at t_end so sensors can interpolate up to it.
-                self._step_domain(state, t_end_us if domain == PHYSICS else t_end_us - 1, held)
+                t_last_us = t_end_us if domain == PHYSICS else t_end_us - 1
+                self._step_domain(part, state, t_last_us, held)
+        part.horizon_us = t_end_us
 
     def _charge(self, what: str, since: float) -> None:
         self.cost_s[what] = self.cost_s.get(what, 0.0) + time.process_time() - since
 
-    def _step_domain(self, state: DomainState, t_last_us: int, commands: dict[str, float]) -> None:
+    def _step_domain(
+        self, part: Part, state: DomainState, t_last_us: int, commands: dict[str, float]
+    ) -> None:
         clock = state.clock
         end = clock.due_until(t_last_us)
         index = np.arange(clock.next_index, end, dtype=np.int64)
@@ -340,7 +394,7 @@ class Simulation:
                 state.last[name] = (int(state.times_us[-1]), float(values[-1]))
         state.times_us = times
         state.values = {}
-        for endpoint in self._endpoints_by_domain[state.name]:
+        for endpoint in part.endpoints[state.name]:
             for name in endpoint.writes:
                 state.values[name] = np.full(len(times), commands[endpoint.node])
 
@@ -350,9 +404,9 @@ class Simulation:
 
         def read(name: str, at_us: np.ndarray, s: DomainState = state) -> np.ndarray:
             if at_us is not times or self.domain_of[name] == s.name:
-                return self._read(s, name, at_us)
+                return self._read(part, s, name, at_us)
             if name not in interpolated:
-                values = self._read(s, name, at_us)
+                values = self._read(part, s, name, at_us)
                 values.flags.writeable = False
                 interpolated[name] = values
             return interpolated[name]
@@ -363,7 +417,7 @@ class Simulation:
         io = Io(times, read, write)
         if len(times):
             self.samples[state.name] = self.samples.get(state.name, 0) + len(times)
-            for effect in self.effects[state.name]:
+            for effect in part.effects[state.name]:
                 self.effect_steps += 1
                 if self.measure:
                     t0 = time.process_time()
@@ -386,11 +440,11 @@ class Simulation:
                 {n: state.values.get(n, np.full(len(times), np.nan)) for n in state.signals},
             )
 
-    def _read(self, state: DomainState, name: str, at_us: np.ndarray) -> np.ndarray:
+    def _read(self, part: Part, state: DomainState, name: str, at_us: np.ndarray) -> np.ndarray:
         home = self.domain_of[name]
         if home == state.name:
             return state.values[name]
-        source = self.domains[home]
+        source = part.domains[home]
         times, values = source.times_us, source.values[name]
         if name in source.last:
             t_prev, v_prev = source.last[name]

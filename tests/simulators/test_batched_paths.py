@@ -18,8 +18,13 @@ from grasplink.devices.factory import build_node
 from grasplink.devices.skin import SkinApp
 from grasplink.devices.sources import FunctionSource
 from grasplink.simulators.bindings import SceneSource
-from grasplink.simulators.core import SHORT_CHUNK_SAMPLES
-from grasplink.simulators.effects.actuators import CrushLatch, FirstOrderLag
+from grasplink.simulators.core import SHORT_CHUNK_SAMPLES, independent_parts
+from grasplink.simulators.effects.actuators import (
+    BeltMotor,
+    CrushLatch,
+    FirstOrderLag,
+    HandActuator,
+)
 from grasplink.simulators.effects.emg import sosfilt_floats
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
@@ -132,6 +137,40 @@ def test_closed_loop_physics_running_ahead_records_what_chunk_by_chunk_records(
     assert names and mismatch == [] and errors == []
 
 
+def test_the_hand_and_the_belt_parts_run_ahead_each_as_its_commands_hold(monkeypatch):
+    """loop_headline splits into the hand's part (grip, object, skin) and the belt's (belt,
+    wearer, EMG): each runs ahead as its own commands allow (its first 2.5 s: the belt
+    ramps longer than the hand), as one they stepped together, as often as the two ramps
+    together forced."""
+    sim = simulation(_loop_scene(2.5))
+    parts = [sorted(e.kind for d in p.effects.values() for e in d) for p in sim.parts]
+    assert [p.command_nodes for p in sim.parts] == [["hand"], ["belt"]]
+    assert parts[1] == ["belt.motor", "emg.surface", "wearer.virtual"]
+    steps: dict[str, int] = {}
+    for cls in (HandActuator, BeltMotor):
+        step = cls.step
+
+        def counted(self, io, _step=step):
+            steps[self.kind] = steps.get(self.kind, 0) + 1
+            _step(self, io)
+
+        monkeypatch.setattr(cls, "step", counted)
+    sim.run()
+    assert sim.rollbacks > 0
+    assert steps == {"hand.actuator": 34, "belt.motor": 59}
+
+
+def test_effects_sharing_no_signal_split_into_parts_with_their_commands():
+    scene = _loop_scene(1.0)
+    parts = independent_parts(scene.ordered, scene.endpoints)
+    kinds = [[e.kind for e in effects] for effects, _ in parts]
+    assert [[e.node for e in endpoints] for _, endpoints in parts] == [["hand"], ["belt"]]
+    assert kinds[0][:2] == ["hand.actuator", "load.scripted"]  # load meets the grip in skin.fsr
+    assert sorted(kinds[0] + kinds[1]) == sorted(e.kind for e in scene.ordered)
+    alone = independent_parts([e for e in scene.ordered if e.kind == "noise.white"], [])
+    assert [[e.kind for e in effects] for effects, _ in alone] == [["noise.white"]]
+
+
 def test_a_run_stopped_mid_run_ahead_ends_at_the_chunk_it_was_stopped_in():
     """A loop trial stops at a chunk end (a drop): physics run ahead past it is not seen."""
     seen: list[int] = []
@@ -199,3 +238,20 @@ def test_one_section_filter_in_floats_gives_sosfilts_bits():
             want, want_z = signal.sosfilt(sos, x[:stop], zi=zi)
             got, got_z = sosfilt_floats(sos, x[:stop], zi)
             assert got.tobytes() == want.tobytes() and got_z.tobytes() == want_z.tobytes()
+
+
+def test_scene_source_holds_the_last_capacity_samples_as_concatenating_would():
+    """Chunks of 0 to more than the ring's capacity, through many wraps of its buffers."""
+    source = SceneSource(100)  # capacity 200
+    rng = np.random.default_rng(3)
+    all_times, all_values, t = np.zeros(0, np.int64), np.zeros(0), 0
+    for count in [*rng.integers(0, 40, 200), 250, 3, 199, 200, 201, 0, 7]:
+        times = np.arange(t, t + count * 10_000, 10_000, dtype=np.int64)
+        values = rng.normal(size=count)
+        t += count * 10_000
+        source.append(times, values)
+        all_times = np.concatenate([all_times, times])[-source.capacity :]
+        all_values = np.concatenate([all_values, values])[-source.capacity :]
+        assert np.array_equal(source.times_us, all_times)
+        assert np.array_equal(source.values, all_values)
+        assert source.final_until_us() == (int(all_times[-1]) if len(all_times) else -1)
