@@ -5,6 +5,11 @@ device deadline to the next, so tests and scenes run as fast as the machine
 allows and give the same result every run. Taps observe every frame
 (logging, bus load); `inject` plays an external tool on the bus. An optional
 `FaultyLink` delays, jitters or drops frames and raises error frames.
+
+A device that says which CAN-IDs concern it (`FilteringDevice`: the grasplink nodes)
+receives only those frames, as behind a CAN controller's acceptance filter: in a loop
+most frames are other nodes' process data, and a call per node per frame was most of
+what the bus cost. Every other device (a master, a log player) receives every frame.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from collections.abc import Callable, Iterable
 
 from grasplink.bus.faults import ErrorFrame, FaultyLink
 from grasplink.core.frames import UNCONFIGURED_NODE_ID, Frame
-from grasplink.core.protocol import SansIoDevice
+from grasplink.core.protocol import FilteringDevice, SansIoDevice
 from grasplink.errors import ConfigError
 
 Tap = Callable[[int, Frame | ErrorFrame, object], None]  # (t_us, frame, sender or None)
@@ -26,6 +31,8 @@ MAX_STEPS_AT_ONE_TIME = 100_000
 class LockstepNetwork:
     def __init__(self, devices: Iterable[SansIoDevice] = (), link: FaultyLink | None = None):
         self.devices: list[SansIoDevice] = []
+        # Per device, its acceptance filter (`FilteringDevice.accepted_can_ids`) or None.
+        self._filters: list[Callable[[], frozenset[int]] | None] = []
         self.t_us = 0
         self.taps: list[Tap] = []
         self.frames_delivered = 0
@@ -47,6 +54,9 @@ class LockstepNetwork:
         ):
             raise ConfigError(f"two nodes with node-ID 0x{device.node_id:02X} on one bus")
         self.devices.append(device)
+        self._filters.append(
+            device.accepted_can_ids if isinstance(device, FilteringDevice) else None
+        )
 
     def start(self) -> None:
         for device in self.devices:
@@ -57,11 +67,6 @@ class LockstepNetwork:
         self._deadlines.pop(self.devices.index(device), None)
         self._deliver(device, device.start(self.t_us))
 
-    def _deadline(self, i: int) -> int | None:
-        if i not in self._deadlines:
-            self._deadlines[i] = self.devices[i].next_deadline_us()
-        return self._deadlines[i]
-
     def inject(self, frame: Frame) -> list[Frame]:
         """Send a frame as an external tool would; returns every frame it caused."""
         caused: list[Frame] = []
@@ -70,10 +75,22 @@ class LockstepNetwork:
 
     def run_until(self, t_end_us: int) -> None:
         self._deadlines.clear()
+        deadlines = self._deadlines
         steps_at_t = 0
         while True:
-            due = [(t, i) for i in range(len(self.devices)) if (t := self._deadline(i)) is not None]
-            t_next = min((t for t, _ in due), default=None)
+            # Every device's deadline (asked again only of those called since), and the
+            # earliest: this loop runs once per tick of any device.
+            due: list[tuple[int, int]] = []
+            t_next: int | None = None
+            for i, device in enumerate(self.devices):
+                if i in deadlines:
+                    t = deadlines[i]
+                else:
+                    t = deadlines[i] = device.next_deadline_us()
+                if t is not None:
+                    due.append((t, i))
+                    if t_next is None or t < t_next:
+                        t_next = t
             t_next = _earliest(t_next, self._in_flight[0][0] if self._in_flight else None)
             t_error = self.link.next_error_us(self.t_us) if self.link else None
             t_next = _earliest(t_next, t_error)
@@ -107,6 +124,8 @@ class LockstepNetwork:
         self, sender: SansIoDevice | None, frames: list[Frame], caused: list[Frame] | None = None
     ) -> None:
         """Put frames on the bus; replies cascade at once (or later on a slow link)."""
+        if not frames:
+            return  # most ticks send nothing
         queue: deque[tuple[SansIoDevice | None, Frame]] = deque((sender, f) for f in frames)
         while queue:
             origin, frame = queue.popleft()
@@ -126,10 +145,17 @@ class LockstepNetwork:
 
     def _replies(self, origin: object, frame: Frame) -> list[tuple[SansIoDevice, Frame]]:
         replies: list[tuple[SansIoDevice, Frame]] = []
+        can_id = frame.can_id
         for i, device in enumerate(self.devices):
-            if device is not origin:
-                self._deadlines.pop(i, None)
-                replies.extend((device, f) for f in device.receive(frame, self.t_us))
+            if device is origin:
+                continue
+            accepted = self._filters[i]
+            if accepted is not None and can_id not in accepted():
+                continue  # its filter drops the frame: nothing in it changes
+            self._deadlines.pop(i, None)
+            sent = device.receive(frame, self.t_us)
+            if sent:
+                replies.extend([(device, f) for f in sent])
         return replies
 
     def _arrive(self, origin: object, frame: Frame) -> None:

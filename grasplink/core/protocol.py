@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 from grasplink.core.frames import Frame
 
@@ -32,4 +32,18 @@ class SansIoDevice(Protocol):
 
     def next_deadline_us(self) -> int | None:
         """The earliest time `advance` has something to do, or None."""
+        ...
+
+
+@runtime_checkable
+class FilteringDevice(SansIoDevice, Protocol):
+    """A device that says which frames can concern it, as a CAN controller's acceptance
+    filter does: a frame on any other CAN-ID would change nothing in it and make it send
+    nothing, so a bus may leave it out of `receive` (the lock-step network does; a runner
+    may keep calling `receive` for every frame).
+    """
+
+    def accepted_can_ids(self) -> frozenset[int]:
+        """The CAN-IDs `receive` may act on now (a superset); it changes only when the
+        device is called (start, receive, advance) or its configuration is written."""
         ...

@@ -95,6 +95,8 @@ class EmcyProducer:
     # -- transmission --------------------------------------------------------
     def poll(self, t_us: int) -> list[Frame]:
         """Frames due now, honouring the inhibit time."""
+        if not self._queue:  # the common case, asked on every tick: nothing to send
+            return []
         if not self.store.has(obj.COB_ID_EMCY):  # 1014h is optional: a device without EMCY
             self._queue.clear()
             return []

@@ -115,10 +115,13 @@ class HeartbeatConsumer:
         return any(m.timed_out for m in self._monitors.values())
 
     def next_deadline_us(self) -> int | None:
-        deadlines = [
-            m.last_us + m.timeout_us + 1 for m in self._monitors.values() if m.last_us is not None
-        ]
-        return min(deadlines, default=None)
+        earliest = None
+        for m in self._monitors.values():
+            if m.last_us is not None:
+                deadline = m.last_us + m.timeout_us + 1
+                if earliest is None or deadline < earliest:
+                    earliest = deadline
+        return earliest
 
     def _subindices(self) -> list[int]:
         if not self.store.has(obj.HEARTBEAT_CONSUMER, 0):  # optional (CiA 301): no watch

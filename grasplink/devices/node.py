@@ -52,6 +52,8 @@ COB_ID_EXTENDED = 0x20000000
 # configured like us beats as often as we do.
 COLLISION_CLEAR_US = 1_000_000
 
+_LSS_ONLY = frozenset((LSS_MASTER_COB_ID,))
+
 # 1029h:01 communication-error behaviour
 ON_ERROR_PRE_OPERATIONAL = 0
 ON_ERROR_NO_CHANGE = 1
@@ -101,16 +103,24 @@ class DeviceNode:
         self.powered = False
         self._deadline: int | None = None
         self._deadline_stale = True
+        # Any change in the dictionary (SDO, RPDO, the application, a simulator
+        # pushing an actual value) may move a timer: the deadline is computed again
+        # when the store's change count has moved since (a count, not a listener: a
+        # sample stream writes its objects hundreds of times a second).
+        self._deadline_changes = -1
         # The CAN-IDs a frame may concern one of our services on: an acceptance filter,
         # as a CAN controller has. Nine in ten frames on a loop's bus are other nodes'
         # process data; they stop here instead of going through every service's checks.
+        # Built for the node-ID, the SYNC COB-ID and the PDOs' CAN-IDs it was built with
+        # (`_listened_pdo_ids`); a change of either of the first two drops it.
         self._listened: frozenset[int] | None = None
+        self._listened_pdo_ids: frozenset[int] | None = None
+        # `_listened` and LSS, for a bus's filter (`accepted_can_ids`).
+        self._accepted_for: frozenset[int] | None = None
+        self._accepted: frozenset[int] = _LSS_ONLY
         # Frames on our own heartbeat COB-ID that we did not send: another node has our ID.
         self.duplicate_frames = 0
         self._collision_clear_us: int | None = None
-        # Any change in the dictionary (SDO, RPDO, the application, a simulator
-        # pushing an actual value) may move a timer: recompute the deadline.
-        self.store.add_listener(self._mark_stale)
         # The SYNC COB-ID, read from the store once per change: every frame on the bus
         # asks whether it is the SYNC, and a store lookup per frame is most of that.
         self._sync_cob_id: int | None = None
@@ -125,11 +135,6 @@ class DeviceNode:
         self.app.attach(NodeServices(self))
 
     # -- SansIoDevice ------------------------------------------------------------
-    def _mark_stale(self, index: int, *_change: object) -> None:
-        self._deadline_stale = True
-        if index < APPLICATION_AREA.start:  # COB-IDs and PDO parameters live below
-            self._listened = None
-
     @property
     def configured(self) -> bool:
         """Whether the node has a node-ID (else it waits for an LSS master)."""
@@ -167,14 +172,31 @@ class DeviceNode:
         self._deadline_stale = True
         return frames
 
+    def accepted_can_ids(self) -> frozenset[int]:
+        """The CAN-IDs `receive` may act on (`FilteringDevice`): none while off, LSS alone
+        while initialising or unconfigured, else those `_dispatch` may handle and LSS.
+        A frame on another CAN-ID would only note the time of the call, which matters to
+        nothing the bus can see: a bus may leave the node out of it."""
+        if not self.powered:
+            return frozenset()
+        if self.state == NmtState.INITIALISING:
+            return _LSS_ONLY
+        listened = self._listened_can_ids()
+        if self._accepted_for is not listened:
+            self._accepted_for = listened
+            self._accepted = listened | _LSS_ONLY
+        return self._accepted
+
     def _listened_can_ids(self) -> frozenset[int]:
         """Every CAN-ID `_dispatch` may handle (a superset: it decides by state and
         content); rebuilt after a change of the communication area or the node-ID."""
-        if self._listened is None:
+        pdo_ids = self.pdo.can_ids()
+        if self._listened is None or pdo_ids is not self._listened_pdo_ids:
+            self._listened_pdo_ids = pdo_ids
             heartbeats = range(HEARTBEAT_BASE + 1, HEARTBEAT_BASE + 128)
             own = (NMT_COB_ID, HEARTBEAT_BASE + self.node_id, SDO_RX_BASE + self.node_id)
             sync = () if self._sync_cob_id is None else (self._sync_cob_id,)
-            self._listened = frozenset((*own, *heartbeats, *sync, *self.pdo.can_ids()))
+            self._listened = frozenset((*own, *heartbeats, *sync, *pdo_ids))
         return self._listened
 
     def _dispatch(self, frame: Frame, t_us: int) -> list[Frame] | None:
@@ -225,24 +247,30 @@ class DeviceNode:
 
     def next_deadline_us(self) -> int | None:
         """The earliest timer; cached until a frame, a tick or a store change can move it."""
-        if self._deadline_stale:
+        changes = self.store.changes
+        if self._deadline_stale or changes != self._deadline_changes:
             self._deadline = self._compute_deadline()
             self._deadline_stale = False
+            self._deadline_changes = changes
         return self._deadline
 
     def _compute_deadline(self) -> int | None:
         if not self.powered or self.state == NmtState.INITIALISING:
             return None  # off, or unconfigured: nothing runs until LSS gives a node-ID
-        candidates = [
+        candidates: tuple[int | None, ...] = (
             self.heartbeat.next_deadline_us(),
             self.consumer.next_deadline_us(),
             self.app.next_deadline_us(),
             self._collision_clear_us,
-        ]
+            self.pdo.next_deadline_us(),
+        )
         if self.state in SDO_ALLOWED:
-            candidates += [self.sdo.next_deadline_us(), self.emcy.next_deadline_us()]
-        candidates.append(self.pdo.next_deadline_us())
-        return min((c for c in candidates if c is not None), default=None)
+            candidates += (self.sdo.next_deadline_us(), self.emcy.next_deadline_us())
+        earliest = None
+        for candidate in candidates:
+            if candidate is not None and (earliest is None or candidate < earliest):
+                earliest = candidate
+        return earliest
 
     # -- NMT -------------------------------------------------------------------------
     def _on_nmt(self, frame: Frame, t_us: int) -> list[Frame]:
@@ -359,6 +387,8 @@ class DeviceNode:
         return self.emcy.poll(t_us) if self.state in EMCY_ALLOWED else []
 
     def _sdo_frames(self, payloads: list[bytes]) -> list[Frame]:
+        if not payloads:
+            return []
         return [Frame(SDO_TX_BASE + self.node_id, p) for p in payloads]
 
     def _sync_can_id(self) -> int | None:
@@ -368,6 +398,7 @@ class DeviceNode:
 
     def _on_sync_cob_id(self, index: int, subindex: int, value: Value) -> None:
         self._sync_cob_id = int(value) & CAN_ID_MASK
+        self._listened = None
 
     def _touch(self, t_us: int) -> None:
         self.heartbeat.now_us = t_us

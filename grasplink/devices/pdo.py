@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from grasplink.core.frames import CAN_ID_MASK, SYNC_TYPE_MAX, Frame, is_restricted_can_id
 from grasplink.devices import emcy as em
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
-from grasplink.devices.store import ObjectStore, Value
+from grasplink.devices.store import Entry, ObjectStore, Value
 from grasplink.profiles import objects as obj
 
 COB_ID_INVALID = 0x80000000
@@ -86,8 +86,12 @@ class _Pdo:
     # Communication parameters as the store holds them, cached by `reload()` (which
     # runs on every change of a PDO parameter): the hot path reads these, not the store.
     params: dict[int, int] = field(default_factory=dict)
-    # struct packer for the mapped values (None if a mapped type has no fixed size).
+    timer_us: int = 0  # event timer (sub-index 5), from `params`
+    inhibit_us: int = 0  # inhibit time (sub-index 3), from `params`
+    # struct packer for the mapped values (None if a mapped type has no fixed size),
+    # and the store's entries it packs, in mapping order (kept by `reload()`).
     packer: struct.Struct | None = None
+    packed: list[Entry] = field(default_factory=list)
 
 
 class PdoEngine:
@@ -109,7 +113,7 @@ class PdoEngine:
         # TPDOs whose every trigger is a new packet of a stream: batched when synchronous.
         self.packet_tpdos: frozenset[int] = frozenset()
         # the application's switch for that (index, subindex); None: never batched
-        self.packets_on_sync: tuple[int, int] | None = None
+        self._packets_on_sync: tuple[int, int] | None = None
         self.dropped_packets = 0  # owed packets dropped for room (MAX_OWED_PACKETS)
         self.tpdos = self._discover(obj.TPDO_COMM, obj.TPDO_MAP, transmit=True)
         self.rpdos = self._discover(obj.RPDO_COMM, obj.RPDO_MAP, transmit=False)
@@ -118,10 +122,15 @@ class PdoEngine:
         self._watchers: dict[tuple[int, int], list[_Pdo]] = {}
         self._event_tpdos: list[_Pdo] = []  # valid TPDOs of type 254/255, kept by reload()
         self._by_can_id: dict[int, _Pdo] = {}  # CAN-ID of each valid PDO, kept by reload()
+        self._can_ids: frozenset[int] = frozenset()
+        # The indices `_on_change` acts on (PDO parameters, the packets switch, objects
+        # mapped into a TPDO that a change sends), kept by reload(): the store calls it
+        # for these only, not for every sample a stream writes.
+        self._interest: set[int] = set()
         for pdo in self._by_comm.values():
             store.add_validator(pdo.comm_index, self._validate_comm)
             store.add_validator(pdo.map_index, self._validate_map)
-        store.add_listener(self._on_change)
+        store.add_listener(self._on_change, interest=self._interest)
         self.reload()
 
     def _discover(self, comm_base: int, map_base: int, transmit: bool) -> list[_Pdo]:
@@ -130,6 +139,15 @@ class PdoEngine:
             for n in range(MAX_PDOS)
             if self.store.has(comm_base + n, 1) and self.store.has(map_base + n, 0)
         ]
+
+    @property
+    def packets_on_sync(self) -> tuple[int, int] | None:
+        return self._packets_on_sync
+
+    @packets_on_sync.setter
+    def packets_on_sync(self, switch: tuple[int, int] | None) -> None:
+        self._packets_on_sync = switch
+        self.reload()
 
     # -- parameters ----------------------------------------------------------
     def cob_id(self, pdo: _Pdo) -> int:
@@ -145,31 +163,46 @@ class PdoEngine:
         return pdo.params.get(sub, 0)
 
     def inhibit_us(self, pdo: _Pdo) -> int:
-        return self._param(pdo, 3) * 100
+        return pdo.inhibit_us
 
     def event_timer_us(self, pdo: _Pdo) -> int:
-        return self._param(pdo, 5) * 1000
+        return pdo.timer_us
 
     def reload(self) -> None:
         """Re-read every mapping (after a reset or a parameter change)."""
         self._watchers.clear()
         self._event_tpdos = []
         self._by_can_id = {}
+        interest = {*self._by_comm, *self._by_map}
+        if self._packets_on_sync is not None:
+            interest.add(self._packets_on_sync[0])
         for pdo in self._by_comm.values():
             pdo.params = {
                 sub: int(self.store.get(pdo.comm_index, sub))
                 for sub in range(1, 7)
                 if self.store.has(pdo.comm_index, sub)
             }
+            pdo.inhibit_us = self._param(pdo, 3) * 100
+            pdo.timer_us = self._param(pdo, 5) * 1000
             if self.is_valid(pdo):
                 self._by_can_id.setdefault(self.cob_id(pdo) & CAN_ID_MASK, pdo)
             pdo.mapping = self._mapping(pdo)
             if pdo.transmit:
                 for entry in pdo.mapping:
                     self._watchers.setdefault((entry.index, entry.subindex), []).append(pdo)
+                if self.transmission_type(pdo) in (0, TYPE_EVENT_PROFILE):
+                    interest.update(entry.index for entry in pdo.mapping)
                 pdo.packer = self._packer(pdo)
+                pdo.packed = (
+                    [self.store.entry(e.index, e.subindex) for e in pdo.mapping]
+                    if pdo.packer is not None
+                    else []
+                )
                 if self._sendable(pdo) and self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER:
                     self._event_tpdos.append(pdo)
+        self._can_ids = frozenset(self._by_can_id)
+        self._interest.clear()
+        self._interest.update(interest)
 
     def _packer(self, pdo: _Pdo) -> struct.Struct | None:
         codes = []
@@ -241,7 +274,7 @@ class PdoEngine:
             return []
         frames: list[Frame] = []
         for pdo in self._event_tpdos:
-            timer = self.event_timer_us(pdo)
+            timer = pdo.timer_us
             if timer:
                 deadline = self._timer_deadline(pdo, timer)
                 if t_us >= deadline:
@@ -249,26 +282,28 @@ class PdoEngine:
                     # Next expiry on the grid; periods missed entirely are skipped, not
                     # sent in a burst (the timer elapsed once, as far as CiA 301 goes).
                     pdo.timer_next_us = deadline + ((t_us - deadline) // timer + 1) * timer
-            frames += self._flush(pdo, t_us)
+            if pdo.pending or pdo.timer_due:
+                frames += self._flush(pdo, t_us)
         for pdo in self.rpdos:
-            self._check_rpdo_deadline(pdo, t_us)
+            if pdo.last_rx_us is not None:
+                self._check_rpdo_deadline(pdo, t_us)
         return frames
 
     def next_deadline_us(self) -> int | None:
         if not self.operational:
             return None
-        deadlines = []
+        # The earliest of the candidates, without building a list: asked after every
+        # call that may have moved one, i.e. for every packet a stream sends.
+        earliest: int | None = None
         for pdo in self._event_tpdos:
             if pdo.pending or pdo.timer_due:
-                deadlines.append(self._inhibit_end(pdo))
-            timer = self.event_timer_us(pdo)
-            if timer:
-                deadlines.append(self._timer_deadline(pdo, timer))
+                earliest = _earlier(earliest, self._inhibit_end(pdo))
+            if pdo.timer_us:
+                earliest = _earlier(earliest, self._timer_deadline(pdo, pdo.timer_us))
         for pdo in self.rpdos:
-            timer = self.event_timer_us(pdo)
-            if timer and pdo.last_rx_us is not None and self.is_valid(pdo):
-                deadlines.append(pdo.last_rx_us + timer + 1)
-        return min(deadlines, default=None)
+            if pdo.timer_us and pdo.last_rx_us is not None and self.is_valid(pdo):
+                earliest = _earlier(earliest, pdo.last_rx_us + pdo.timer_us + 1)
+        return earliest
 
     # -- bus side --------------------------------------------------------------
     def on_sync(self, counter: int | None, t_us: int) -> list[Frame]:
@@ -294,7 +329,7 @@ class PdoEngine:
 
     def _batched(self, number: int) -> bool:
         """Whether TPDO `number`, when synchronous, carries every packet made since."""
-        switch = self.packets_on_sync
+        switch = self._packets_on_sync
         return number in self.packet_tpdos and switch is not None and bool(self.store.get(*switch))
 
     def _owed(self, pdo: _Pdo, kind: int, counter: int | None) -> list[Frame]:
@@ -323,8 +358,9 @@ class PdoEngine:
         return False
 
     def can_ids(self) -> frozenset[int]:
-        """The CAN-IDs of the valid PDOs (the frames `on_frame` may handle)."""
-        return frozenset(self._by_can_id)
+        """The CAN-IDs of the valid PDOs (the frames `on_frame` may handle); the same
+        object until a reload changes them."""
+        return self._can_ids
 
     def on_frame(self, frame: Frame, t_us: int) -> list[Frame] | None:
         """Handle a frame addressed to one of our PDOs; None if it is not ours."""
@@ -424,7 +460,7 @@ class PdoEngine:
     def _pack(self, pdo: _Pdo) -> Frame:
         """The TPDO's frame with the mapped values as they are now."""
         if pdo.packer is not None:
-            data = pdo.packer.pack(*(self.store.get(e.index, e.subindex) for e in pdo.mapping))
+            data = pdo.packer.pack(*[entry.value for entry in pdo.packed])
         else:
             data = b"".join(self.store.encode(e.index, e.subindex) for e in pdo.mapping)
         return Frame(self.cob_id(pdo) & CAN_ID_MASK, data)
@@ -444,7 +480,7 @@ class PdoEngine:
         if index in self._by_comm or index in self._by_map:
             self._on_parameter_change(index, subindex)
             return
-        if (index, subindex) == self.packets_on_sync:
+        if (index, subindex) == self._packets_on_sync:
             for pdo in self.tpdos:
                 pdo.owed.clear()
             return
@@ -560,3 +596,7 @@ class PdoEngine:
                 f"0x{entry.index:04X}:{entry.subindex:02X} is {len(var)} bits, "
                 f"mapping says {entry.bits}",
             )
+
+
+def _earlier(a: int | None, b: int) -> int:
+    return b if a is None or b < a else a

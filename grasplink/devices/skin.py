@@ -244,10 +244,11 @@ class SkinApp(DeviceApp):
         self._static_fill = min(size, self._static_fill + len(tail))
 
     def _track_saturation(self, counts: list[int], t_us: int) -> None:
-        full = self.calibration()[1]
-        saturated = sum(c >= full for c in counts)
+        # Counts are clipped to full scale (to_counts): a saturated sample reads exactly it.
+        saturated = counts.count(self.calibration()[1])
         self.saturated_samples += saturated
-        if saturated and not self.services.error_active(em.SENSOR_SATURATED):
+        active = self.services.error_active(em.SENSOR_SATURATED)
+        if saturated and not active:
             self.services.raise_error(em.SENSOR_SATURATED, em.REG_MANUFACTURER, t_us)
-        elif not saturated and self.services.error_active(em.SENSOR_SATURATED):
+        elif not saturated and active:
             self.services.clear_error(em.SENSOR_SATURATED, t_us)

@@ -18,7 +18,7 @@ default keeps following the node-ID (as CANopenNode does).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Container, Iterator
 from dataclasses import dataclass
 
 import canopen.objectdictionary as cod
@@ -33,6 +33,8 @@ Value = int | float | str | bytes
 # (index, subindex, new value) -> None; raise SdoAbort to refuse a write.
 Validator = Callable[[int, int, Value], None]
 Listener = Callable[[int, int, Value], None]
+# The indices a listener on every index cares about; None: all of them.
+Interest = Container[int] | None
 # A command object acts on a write instead of storing it (1010h "save", 1003h:00 = 0).
 Command = Callable[[int, Value], None]
 
@@ -99,10 +101,13 @@ class ObjectStore:
             self._entries[(var.index, var.subindex)] = Entry(var, _default_of(var))
             self._objects.add(var.index)
         self._validators: dict[int, list[Validator]] = {}
-        self._listeners: list[Listener] = []
+        self._listeners: list[tuple[Listener, Interest]] = []
         self._listeners_by_index: dict[int, list[Listener]] = {}
         self._commands: dict[int, Command] = {}
         self.nvm: dict[Key, Value] = {}
+        # How many writes changed a value (or re-wrote one as a command): a cache of
+        # anything derived from the dictionary is valid while this count stays the same.
+        self.changes = 0
         self._od_node_id = node_id
         self.node_id = node_id  # the one `default` computes `$NODEID` defaults for
         self.add_command(obj.STORE_PARAMETERS, self._on_store)
@@ -128,19 +133,23 @@ class ObjectStore:
 
     # -- device side -------------------------------------------------------
     def get(self, index: int, subindex: int = 0) -> Value:
-        return self.entry(index, subindex).value
+        # The dictionary lookup inline: a node reads its objects many times per packet.
+        entry = self._entries.get((index, subindex))
+        return (entry or self.entry(index, subindex)).value
 
     def set(self, index: int, subindex: int, value: Value) -> None:
         """Write from the device itself: no access check, listeners notified on change."""
-        entry = self.entry(index, subindex)
+        entry = self._entries.get((index, subindex)) or self.entry(index, subindex)
         if entry.value == value:
             return
         entry.value = value
         self._notify(index, subindex, value)
 
     def _notify(self, index: int, subindex: int, value: Value) -> None:
-        for listener in self._listeners:
-            listener(index, subindex, value)
+        self.changes += 1
+        for listener, interest in self._listeners:
+            if interest is None or index in interest:
+                listener(index, subindex, value)
         for listener in self._listeners_by_index.get(index, ()):
             listener(index, subindex, value)
 
@@ -154,10 +163,22 @@ class ObjectStore:
     def add_validator(self, index: int, validator: Validator) -> None:
         self._validators.setdefault(index, []).append(validator)
 
-    def add_listener(self, listener: Listener, indices: tuple[int, ...] | None = None) -> None:
-        """Call `listener` on every change, or only on changes of `indices`."""
+    def add_listener(
+        self,
+        listener: Listener,
+        indices: tuple[int, ...] | None = None,
+        *,
+        interest: Interest = None,
+    ) -> None:
+        """Call `listener` on every change, or only on changes of `indices`.
+
+        `interest` (with no `indices`): a container the caller keeps up to date, of the
+        indices whose changes the listener acts on; the store skips the call for the
+        others. Unlike `indices` the set may change, and the listener keeps its place
+        among the listeners of every change (they are called in the order they came).
+        """
         if indices is None:
-            self._listeners.append(listener)
+            self._listeners.append((listener, interest))
         else:
             for index in indices:
                 self._listeners_by_index.setdefault(index, []).append(listener)
