@@ -30,18 +30,24 @@ class DriveHandshake:
     """The controlword to send next to one drive."""
 
     def __init__(self) -> None:
-        self.state: DriveState | None = None
+        self.reset()
 
     def reset(self) -> None:
         """The drive rebooted: it is in SWITCH ON DISABLED again."""
-        self.state = None
+        self._set(None)
 
     def on_statusword(self, statusword: int) -> None:
-        self.state = state_of(statusword)
+        self._set(state_of(statusword))
+
+    def _set(self, state: DriveState | None) -> None:
+        # The controlword is looked up when the state changes: it is asked for every
+        # command the master sends (several per TPDO it gets), the state changes rarely.
+        self.state = state
+        self._controlword = NEXT_CONTROLWORD.get(state or DriveState.SWITCH_ON_DISABLED, SHUTDOWN)
 
     @property
     def enabled(self) -> bool:
         return self.state is DriveState.OPERATION_ENABLED
 
     def controlword(self) -> int:
-        return NEXT_CONTROLWORD.get(self.state or DriveState.SWITCH_ON_DISABLED, SHUTDOWN)
+        return self._controlword

@@ -104,7 +104,7 @@ class NodeStatus:
     @property
     def in_consumer_fault(self) -> bool:
         """An active EMCY holds the node in its safe state (heartbeat consumer timed out)."""
-        return any(code in HOLD_CODES for code in self.active_emcy)
+        return not HOLD_CODES.isdisjoint(self.active_emcy)  # (asked per command sent)
 
     def on_emcy(self, emcy: Emcy) -> None:
         """Update the active errors from one EMCY (it carries the node's current 1001h)."""

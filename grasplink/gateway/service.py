@@ -177,8 +177,10 @@ class TpdoRoute:
     and each mapped object's EDS limits per frame."""
 
     link: NodeLink
+    kind: str  # the node's (link.kind, looked up per frame otherwise)
     limits: tuple[tuple[Key, float, float], ...]  # mapped objects the EDS bounds
     sample_keys: tuple[Key, ...]  # the skin's sample slots it maps (their sensor's range)
+    batched: bool = False  # a skin's or EMG's synchronous TPDO: handled once per SYNC cycle
 
 
 class Gateway(NmtMaster):
@@ -233,6 +235,10 @@ class Gateway(NmtMaster):
         # TPDO moves only the control's deadlines, and most frames are TPDOs.
         self._network_due_us: int | None = None
         self._network_stale = True
+        # The control's earliest deadline (feedback, reflex, command ramps), likewise kept
+        # until the control or a command moves: most TPDOs move neither.
+        self._control_due_us: int | None = None
+        self._control_stale = True
         self.cycles = 0  # SYNC cycles handled
         self._skin_setup()
         self._emg_setup()
@@ -309,8 +315,10 @@ class Gateway(NmtMaster):
                         limits.append((key, *bounds))
                 routes[can_id] = TpdoRoute(
                     link,
+                    link.kind,
                     tuple(limits),
                     tuple(k for k in dict.fromkeys(keys) if k[0] == obj.SKIN_SAMPLE_SLOTS),
+                    can_id in self._batched and link.kind in ("skin", "emg"),
                 )
         return routes
 
@@ -398,9 +406,10 @@ class Gateway(NmtMaster):
     def _envelope_uv(self, values: Mapping[Key, int | float]) -> float:
         return float(values[self._envelope_key]) * self._uv_per_unit
 
-    def _actual_grip_n(self, link: NodeLink, values: Mapping[Key, int | float]) -> float | None:
-        """The grip the hand reports, in N (None: this frame does not carry it)."""
-        if link.kind != "hand":
+    def _actual_grip_n(self, kind: str, values: Mapping[Key, int | float]) -> float | None:
+        """The grip the hand reports, in N (None: this frame is not the hand's or does not
+        carry it); `kind`: the sending node's."""
+        if kind != "hand":
             return None
         binding = self.drive_bindings["hand"]
         if binding.actual is None or binding.actual not in values:
@@ -424,7 +433,7 @@ class Gateway(NmtMaster):
     # -- SansIoDevice ----------------------------------------------------------------------
     def start(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
-        self._network_stale = True
+        self._network_stale = self._control_stale = True
         self._next_refresh_us = t_us + COMMAND_REFRESH_US
         self._next_snapshot_us = t_us
         self._started_us = t_us
@@ -440,7 +449,7 @@ class Gateway(NmtMaster):
         route = self._routes.get(frame.can_id)
         if route is not None:  # a configured node's TPDO: most frames
             return self._on_tpdo(route, frame, t_us)
-        self._network_stale = True
+        self._network_stale = self._control_stale = True
         if frame.can_id == NMT_COB_ID or frame.can_id == HEARTBEAT_BASE + self.node_id:
             return self._second_master(frame, t_us)
         function, node_id = function_of(frame.can_id)
@@ -454,12 +463,12 @@ class Gateway(NmtMaster):
         if function == "EMCY" and frame.can_id == EMCY_BASE + node_id:
             return super().receive(frame, t_us) + self._emcy_alarm(link, frame, t_us)
         if function.startswith("TPDO"):  # one the node's file does not map: dropped
-            return self._on_tpdo(TpdoRoute(link, (), ()), frame, t_us)
+            return self._on_tpdo(TpdoRoute(link, link.kind, (), ()), frame, t_us)
         return []
 
     def advance(self, t_us: int) -> list[Frame]:
         self.now_us = t_us
-        self._network_stale = True
+        self._network_stale = self._control_stale = True
         # SYNC first: the nodes sample and answer on it, the rest can wait a frame
         frames = self.sync.advance(t_us) if self.sync is not None else []
         if frames and self._skin_sync_numbers is not None:
@@ -505,14 +514,19 @@ class Gateway(NmtMaster):
         if self._network_stale:
             self._network_due_us = self._network_deadline_us()
             self._network_stale = False
-        best = self._network_due_us
-        for c in (
-            self.feedback.next_deadline_us(),
-            self.arbiter.next_deadline_us(),
-            self._next_ramp_us(),
-        ):
-            if c is not None and (best is None or c < best):
-                best = c
+        if self._control_stale:
+            self._control_due_us = None
+            for c in (
+                self.feedback.next_deadline_us(),
+                self.arbiter.next_deadline_us(),
+                self._next_ramp_us(),
+            ):
+                if c is not None and (self._control_due_us is None or c < self._control_due_us):
+                    self._control_due_us = c
+            self._control_stale = False
+        best, control = self._network_due_us, self._control_due_us
+        if control is not None and (best is None or control < best):
+            best = control
         if self.sync is None:
             return best
         # with SYNC: what is due apart from the SYNC and the cycle, for advance's short path
@@ -750,7 +764,7 @@ class Gateway(NmtMaster):
 
     # -- process data ----------------------------------------------------------------------
     def _on_tpdo(self, route: TpdoRoute, frame: Frame, t_us: int) -> list[Frame]:
-        link = route.link
+        link, kind = route.link, route.kind
         try:
             values = link.codec.decode(frame.can_id, frame.data)
         except PdoError:
@@ -762,20 +776,21 @@ class Gateway(NmtMaster):
             return []
         link.pdos_rx += 1
         link.values.update(values)
-        if frame.can_id in self._batched and link.kind in ("skin", "emg"):
-            return self._gather(link.kind, values, t_us)
-        if link.kind == "skin":
+        if route.batched:
+            return self._gather(kind, values, t_us)
+        if kind == "skin":
             return self._on_skin(values, t_us)
-        if link.kind == "emg" and self._envelope_key in values:
+        if kind == "emg" and self._envelope_key in values:
             return self._on_emg(self._envelope_uv(values), t_us)
-        if link.kind in self.drives and STATUSWORD_KEY in values:
-            self.drives[link.kind].on_statusword(int(values[STATUSWORD_KEY]))
-            grip_n = self._actual_grip_n(link, values)
+        if kind in self.drives and STATUSWORD_KEY in values:
+            self.drives[kind].on_statusword(int(values[STATUSWORD_KEY]))
+            grip_n = self._actual_grip_n(kind, values)
             if grip_n is not None:
                 self.hand_grip_n = grip_n
                 if self.emg_decoder is None and not self._voluntary_known:
                     # No EMG: the wearer's grip is whatever the hand holds when we start.
                     self._voluntary_known = True
+                    self._control_stale = True
                     self.grip_command = self.arbiter.set_voluntary(t_us, self.hand_grip_n)
         return []
 
@@ -786,8 +801,7 @@ class Gateway(NmtMaster):
         for key, low, high in route.limits:
             if not low <= values[key] <= high:
                 return "tpdo_out_of_range"
-        link = route.link
-        kind = link.kind
+        kind = route.kind
         if kind == "skin" and self.skin_binding is not None:  # what the sensor can report
             top = self.skin_binding.max_units
             if top is not None and any(values[k] > top for k in route.sample_keys):
@@ -802,7 +816,7 @@ class Gateway(NmtMaster):
         elif kind == "emg" and self._envelope_key in values and self._envelope_check is not None:
             return self._envelope_check.check(t_us, self._envelope_uv(values))
         elif kind == "hand" and self._grip_check is not None:
-            grip_n = self._actual_grip_n(link, values)
+            grip_n = self._actual_grip_n(kind, values)
             if grip_n is not None:
                 return self._grip_check.check(t_us, grip_n)
         return None
@@ -856,6 +870,7 @@ class Gateway(NmtMaster):
         self.last_intent = intent
         self.calibration.add(envelope_uv)
         self._voluntary_known = True
+        self._control_stale = True
         self.grip_command = self.arbiter.set_voluntary(t_us, intent.grip_n)
         return True
 
@@ -987,6 +1002,7 @@ class Gateway(NmtMaster):
         controller time never runs backwards whatever the decoder's grid does.
         """
         percept = Percept.from_estimate(estimate, t_us=t_us)
+        self._control_stale = True
         self.counters["percepts"] += 1
         for listener in self.estimate_listeners:
             listener(t_us, estimate)
@@ -1006,7 +1022,7 @@ class Gateway(NmtMaster):
         """Validate and apply one command now; a refused command changes nothing."""
         t_us = max(t_us, self.now_us)
         self._rest_due_us = None
-        self._network_stale = True
+        self._network_stale = self._control_stale = True
         try:
             value = parse_value(command)
             detail, frames = self._apply(command.name, value, t_us)
@@ -1104,10 +1120,12 @@ class Gateway(NmtMaster):
 
     def _commands(self, t_us: int, *, refresh: bool = False) -> list[Frame]:
         """RPDOs to the belt and the hand: when a command changed, or as a periodic refresh."""
+        self._control_stale = True  # the command ramps may step
         frames = []
+        lost = self._sensing_lost()  # (once: each command below asks)
         belt = self.by_kind.get("belt")
         if belt is not None and self._commandable(belt):
-            velocity = self._belt_velocity()
+            velocity = self._belt_velocity(lost)
             if velocity == 0:  # a stop is never slowed (the belt decelerates at 6084h)
                 self.belt_ramp.start_from(0)
             else:  # at most the belt's acceleration, one change per command interval
@@ -1115,12 +1133,12 @@ class Gateway(NmtMaster):
             frames += self._rpdo(belt, velocity, refresh)
         hand = self.by_kind.get("hand")
         if hand is not None and self._commandable(hand):
-            grip_mn = self._hand_grip_mn()
+            grip_mn = self._hand_grip_mn(lost)
             if grip_mn is not None:
                 # held while sensing is lost: where the ramp is, not where it was going;
                 # the ramp stops there too, or its next step would stay due for ever
                 at = self.grip_ramp.value
-                if at is not None and self._sensing_lost():
+                if at is not None and lost:
                     self.grip_ramp.start_from(at)
                     grip_mn = round(at)
                 else:
@@ -1159,44 +1177,48 @@ class Gateway(NmtMaster):
             if k in self.by_kind and self.by_kind[k].phase is not NodePhase.OPERATIONAL
         ]
 
-    def _belt_velocity(self) -> int:
-        """The belt stops whenever the skin cannot be trusted (lost, not running)."""
-        if "skin" in self._sensing_lost() or self.belt_output is None:
+    def _belt_velocity(self, sensing_lost: list[str] | None = None) -> int:
+        """The belt stops whenever the skin cannot be trusted (lost, not running);
+        `sensing_lost`: `_sensing_lost()` when the caller has it."""
+        if sensing_lost is None:
+            sensing_lost = self._sensing_lost()
+        if "skin" in sensing_lost or self.belt_output is None:
             return 0
         return self.belt_output.belt.velocity_mrad_s
 
-    def _hand_grip_mn(self) -> int | None:
+    def _hand_grip_mn(self, sensing_lost: list[str]) -> int | None:
         """The grip to command; held (last value sent) while a sensing node is lost."""
         command = self.grip_command
         if command is None or not (self._voluntary_known or command.reflex_active):
             return None
-        if self._sensing_lost():
+        if sensing_lost:
             return self._held_grip_mn
         self._held_grip_mn = command.target_grip_mn
         return self._held_grip_mn
 
     def _rpdo(self, link: NodeLink, value: int, refresh: bool) -> list[Frame]:
         """The drive's RPDO with `value` (mN of grip, mrad/s of belt) in its own units."""
-        binding = self.drive_bindings[link.kind]
+        kind = link.kind
+        binding = self.drive_bindings[kind]
         target = binding.target
         if binding.units_per_command != 1.0:
             value = round(value * binding.units_per_command)
-        low, high = self._command_limits[link.kind]
+        low, high = self._command_limits[kind]
         if not low <= value <= high:
             self.alarms[f"{link.name}.clamped"] = f"command {value} clamped to {low}..{high}"
             value = min(high, max(low, value))
-        controlword = self.drives[link.kind].controlword()
+        controlword = self.drives[kind].controlword()
         # Most calls repeat the last command (every skin update and EMG intent asks):
         # packing through the mapping costs ~10 µs, the comparison nothing.
         inputs = (controlword, target, value)
-        last = self._packed.get(link.kind)
+        last = self._packed.get(kind)
         if last is not None and last[0] == inputs:
             can_id, data = last[1]
         else:
             can_id, data = link.codec.encode(
                 binding.rpdo, {CONTROLWORD_KEY: controlword, target: value}
             )
-            self._packed[link.kind] = (inputs, (can_id, data))
+            self._packed[kind] = (inputs, (can_id, data))
         if not refresh and self._sent.get(can_id) == data:
             return []
         self._sent[can_id] = data

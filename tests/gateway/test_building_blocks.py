@@ -190,6 +190,8 @@ def test_handshake_walks_the_drive_to_operation_enabled_from_its_statusword():
     assert drive.state is DriveState.QUICK_STOP_ACTIVE and drive.controlword() == 0x00
     drive.on_statusword(0x0208)
     assert drive.controlword() == 0x80
+    drive.reset()  # the drive rebooted: the walk starts blind again
+    assert drive.state is None and drive.controlword() == 0x06
 
 
 def test_configuration_reference_in_the_docs_is_the_defaults():

@@ -353,3 +353,38 @@ def test_a_node_whose_heartbeat_stops_is_lost_on_time_while_its_tpdos_keep_comin
             gateway.advance(t_us)
         assert hand.lost == (t_us >= lost_at), t_us
     assert gateway.alarms["hand.lost"] == "heartbeat lost"
+
+
+@pytest.mark.parametrize("name", ["loop_headline", "loop_fast_reflex"])
+def test_the_deadlines_the_gateway_keeps_are_those_its_parts_give_now(name):
+    """The gateway keeps its network's and its control's earliest deadlines until a call
+    that can move them: after every call of a closed loop (a slip, the reflex, EMG
+    intents, command ramps) its deadline is what each part says when asked afresh."""
+    from grasplink.simulators.scene import load_scene
+
+    sim = simulation(load_scene(ROOT / "scenes" / f"{name}.toml"))
+    gateway = sim.controllers[0]
+    checked = []
+
+    def fresh() -> int | None:
+        parts = (
+            gateway._network_deadline_us(),
+            gateway.feedback.next_deadline_us(),
+            gateway.arbiter.next_deadline_us(),
+            gateway._next_ramp_us(),
+        )
+        return min((d for d in parts if d is not None), default=None)
+
+    def checking(call):
+        def checked_call(*args):
+            frames = call(*args)
+            assert gateway.next_deadline_us() == fresh(), (call.__name__, args)
+            checked.append(call.__name__)
+            return frames
+
+        return checked_call
+
+    for method in ("start", "receive", "advance"):
+        setattr(gateway, method, checking(getattr(gateway, method)))
+    sim.run()
+    assert checked.count("receive") > 1000 and gateway.counters["percepts"] > 100

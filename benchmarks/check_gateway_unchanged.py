@@ -1,0 +1,287 @@
+"""Check that this tree's gateway does what a base tree's does, byte for byte, and time it.
+
+    .venv/bin/python benchmarks/check_gateway_unchanged.py BASE [--part runs,replay]
+    .venv/bin/python benchmarks/check_gateway_unchanged.py BASE --cost ROUNDS [--profile]
+
+BASE is a checkout (e.g. `git worktree add /tmp/base REV`); each tree runs in its own
+interpreter (the same module names).
+
+- **runs**: `grasplink run SCENE --out DIR` for each of `RUN_SCENES` in both trees; every
+  file the run writes (can.asc, truth.csv, summary.json, ...) must be the same bytes.
+- **replay**: the scene's master (`[controller]`, the gateway in the `loop_*` scenes of
+  `REPLAY_SCENES`) is recorded call by call in BASE's run (start, receive, advance,
+  next_deadline_us: the arguments, the frames returned, the deadline) together with the
+  snapshot it publishes (`latest`, compared by repr when it changes); this tree's master,
+  built from the same scene, is fed the same calls and must answer each the same way.
+  That checks the gateway's frames, their order and its deadlines, not only what reached
+  the bus.
+- **--cost ROUNDS**: the gateway alone, the recorded calls of each replay scene replayed in
+  each tree (the trees alternating, ROUNDS rounds, the least CPU of each), in ms of CPU
+  per simulated second and their ratio: what a change of the gateway's own work buys,
+  without the nodes, the bus and the physics. `--profile` prints this tree's cProfile
+  of one replay of each scene (the top functions by own time).
+
+Prints what differs (the first call or file) and exits 1 when anything does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN_SCENES = (
+    "loop_headline",
+    "headline_slip",
+    "slip_alpha0.1_20mm_s_forward",
+    "loop_fast_reflex",
+    "loop_vendor_modules",
+    "loop_slow_wearer",
+    "bus_faults",
+    "boot",
+)
+REPLAY_SCENES = ("loop_headline", "loop_fast_reflex", "loop_slow_wearer", "loop_vendor_modules")
+
+RUN = "import sys; from grasplink.cli import main; sys.exit(main())"
+
+# Run inside a tree's interpreter. `record SCENE OUT`: the scene's run with its master's
+# calls recorded, pickled to OUT. `replay SCENE CALLS`: this tree's master fed them,
+# compared call by call (prints a JSON verdict). `cost ROUNDS SCENE CALLS`: the least
+# CPU of ROUNDS replays, unchecked. `profile SCENE CALLS`: one replay under cProfile.
+REPLAY = r"""
+import cProfile, json, pickle, pstats, sys, time
+from grasplink.controllers import build_controllers, simulation
+from grasplink.core.frames import Frame
+from grasplink.simulators.scene import load_scene
+
+CALLS = ("start", "receive", "advance", "next_deadline_us")
+
+
+def frames(out):
+    return None if out is None else [(f.can_id, bytes(f.data), f.rtr, f.dlc) for f in out]
+
+
+def record(scene_path, out_path):
+    sim = simulation(load_scene(scene_path))
+    (master,) = sim.controllers
+    calls = []
+    shown = [None]
+
+    def wrap(name):
+        call = getattr(master, name)
+
+        def recorded(*args):
+            out = call(*args)
+            wire = [(a.can_id, bytes(a.data), a.rtr, a.dlc) if isinstance(a, Frame) else a
+                    for a in args]
+            latest = getattr(master, "latest", None)
+            snap = None
+            if latest is not shown[0]:
+                shown[0] = latest
+                snap = repr(latest)
+            calls.append((name, wire, out if name == "next_deadline_us" else frames(out), snap))
+            return out
+
+        setattr(master, name, recorded)
+
+    for name in CALLS:
+        wrap(name)
+    sim.run()
+    with open(out_path, "wb") as f:
+        pickle.dump({"duration_s": sim.scene.duration_s, "calls": calls}, f)
+
+
+def fresh(scene_path):
+    (master,) = build_controllers(load_scene(scene_path))
+    return master
+
+
+def built(calls):  # the calls with their frames built (outside what a cost measures)
+    return [(name, [Frame(*a) if isinstance(a, tuple) else a for a in wire])
+            for name, wire, _, _ in calls]
+
+
+def feed(master, calls):
+    for name, args in calls:
+        yield name, getattr(master, name)(*args)
+
+
+def replay(scene_path, calls_path):
+    with open(calls_path, "rb") as f:
+        calls = pickle.load(f)["calls"]
+    master = fresh(scene_path)
+    shown = None
+    answers = feed(master, built(calls))
+    for k, ((name, wire, want, want_snap), (_, out)) in enumerate(zip(calls, answers)):
+        got = out if name == "next_deadline_us" else frames(out)
+        snap = None
+        latest = getattr(master, "latest", None)
+        if latest is not shown:
+            shown = latest
+            snap = repr(latest)
+        if got != want or snap != want_snap:
+            what = "snapshot" if got == want else "answer"
+            print(json.dumps({"calls": len(calls), "first_difference": k, "call": name,
+                              "what": what, "base": repr(want if got != want else want_snap)[:300],
+                              "this": repr(got if got != want else snap)[:300]}))
+            return
+    frames_out = sum(len(c[2]) for c in calls if c[0] != "next_deadline_us")
+    print(json.dumps({"calls": len(calls), "frames": frames_out, "first_difference": None}))
+
+
+def cost(rounds, scene_path, calls_path):
+    with open(calls_path, "rb") as f:
+        recorded = pickle.load(f)
+    calls = built(recorded["calls"])
+    best = float("inf")
+    for _ in range(rounds):
+        master = fresh(scene_path)
+        t0 = time.process_time()
+        for _ in feed(master, calls):
+            pass
+        best = min(best, time.process_time() - t0)
+    print(json.dumps({"ms_per_s": 1e3 * best / recorded["duration_s"]}))
+
+
+def profile(scene_path, calls_path):
+    with open(calls_path, "rb") as f:
+        calls = built(pickle.load(f)["calls"])
+    for _ in feed(fresh(scene_path), calls):  # warm: imports, compiled kernels
+        pass
+    master = fresh(scene_path)
+    prof = cProfile.Profile(time.process_time)  # CPU time: a shared machine's load stays out
+    prof.enable()
+    for _ in feed(master, calls):
+        pass
+    prof.disable()
+    pstats.Stats(prof).sort_stats("tottime").print_stats(30)
+
+
+mode = sys.argv[1]
+if mode == "record":
+    record(sys.argv[2], sys.argv[3])
+elif mode == "replay":
+    replay(sys.argv[2], sys.argv[3])
+elif mode == "cost":
+    cost(int(sys.argv[2]), sys.argv[3], sys.argv[4])
+else:
+    profile(sys.argv[2], sys.argv[3])
+"""
+
+
+def _python(tree: Path, *argv: str) -> str:
+    """Run `argv` in a child interpreter importing `tree`'s grasplink; its stdout."""
+    env = os.environ | {"PYTHONPATH": str(tree)}
+    done = subprocess.run(
+        [sys.executable, *argv], cwd=tree, env=env, capture_output=True, text=True
+    )
+    if done.returncode != 0:
+        raise SystemExit(f"{tree}: {' '.join(argv[:3])}... failed:\n{done.stderr[-2000:]}")
+    return done.stdout
+
+
+def check_runs(base: Path, tmp: Path) -> bool:
+    """Every file of each scene's run, base against this tree: the same bytes."""
+    same = True
+    for scene in RUN_SCENES:
+        dirs = []
+        for name, tree in (("base", base), ("this", ROOT)):
+            out = tmp / name / scene
+            scene_path = str(ROOT / "scenes" / f"{scene}.toml")
+            _python(tree, "-c", RUN, "run", scene_path, "--out", str(out))
+            dirs.append(out)
+        files = sorted(p.name for p in dirs[0].iterdir())
+        if files != sorted(p.name for p in dirs[1].iterdir()):
+            print(f"runs  {scene}: different files written")
+            same = False
+            continue
+        _, differ, errors = filecmp.cmpfiles(dirs[0], dirs[1], files, shallow=False)
+        verdict = "same bytes" if not differ and not errors else f"DIFFER: {differ + errors}"
+        print(f"runs  {scene}: {len(files)} files ({', '.join(files)}), {verdict}")
+        same &= not differ and not errors
+    return same
+
+
+def record(base: Path, tmp: Path) -> dict[str, Path]:
+    """Each replay scene's master calls, recorded in `base`'s run."""
+    recorded = {}
+    for scene in REPLAY_SCENES:
+        path = tmp / f"{scene}.calls"
+        _python(base, "-c", REPLAY, "record", str(ROOT / "scenes" / f"{scene}.toml"), str(path))
+        recorded[scene] = path
+    return recorded
+
+
+def check_replay(recorded: dict[str, Path]) -> bool:
+    same = True
+    for scene, path in recorded.items():
+        scene_path = str(ROOT / "scenes" / f"{scene}.toml")
+        verdict = json.loads(_python(ROOT, "-c", REPLAY, "replay", scene_path, str(path)))
+        if verdict["first_difference"] is None:
+            print(
+                f"replay {scene}: {verdict['calls']} calls, {verdict['frames']} frames out, "
+                "every answer and snapshot the same"
+            )
+        else:
+            same = False
+            print(f"replay {scene}: DIFFERS {json.dumps(verdict)}")
+    return same
+
+
+def cost(base: Path, recorded: dict[str, Path], rounds: int) -> None:
+    """The gateway alone per scene, both trees alternating round by round, least of each."""
+    best: dict[tuple[str, str], float] = {}
+    for _ in range(rounds):
+        for name, tree in (("base", base), ("this", ROOT)):
+            for scene, path in recorded.items():
+                scene_path = str(ROOT / "scenes" / f"{scene}.toml")
+                out = _python(tree, "-c", REPLAY, "cost", "3", scene_path, str(path))
+                ms = json.loads(out.splitlines()[-1])["ms_per_s"]
+                best[name, scene] = min(best.get((name, scene), float("inf")), ms)
+    print(f"gateway alone, ms of CPU per simulated s (least of {rounds} rounds x 3 replays):")
+    for scene in recorded:
+        before, after = best["base", scene], best["this", scene]
+        print(f"  {scene:22s} base {before:6.2f}  this {after:6.2f}  ratio {before / after:.2f}x")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("base", type=Path, help="a checkout of the base tree")
+    parser.add_argument("--part", default="runs,replay", help="runs, replay or both")
+    parser.add_argument("--cost", type=int, metavar="ROUNDS", help="time the gateway alone")
+    parser.add_argument("--profile", action="store_true", help="with --cost: cProfile here")
+    args = parser.parse_args()
+    base = args.base.resolve()
+    if not (base / "grasplink").is_dir():
+        parser.error(f"{base} is not a grasplink checkout (no grasplink/ in it)")
+    parts = set(args.part.split(","))
+    if unknown := parts - {"runs", "replay"}:
+        parser.error(f"--part: unknown {', '.join(sorted(unknown))}; parts: runs, replay")
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        if args.cost is not None:
+            recorded = record(base, tmp)
+            if args.profile:
+                for scene, path in recorded.items():
+                    print(f"== {scene}")
+                    scene_path = str(ROOT / "scenes" / f"{scene}.toml")
+                    print(_python(ROOT, "-c", REPLAY, "profile", scene_path, str(path)))
+            cost(base, recorded, args.cost)
+            return 0
+        same = True
+        if "runs" in parts:
+            same &= check_runs(base, tmp)
+        if "replay" in parts:
+            same &= check_replay(record(base, tmp))
+    print("same as the base" if same else "NOT the same as the base")
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
