@@ -7,9 +7,10 @@ and absent). This tells, for each judged stop cleared later (or never), what the
 default decoder's likeliest hypothesis was at the update that held it up (the first
 update after the report was due that still flagged a slip or gave a speed):
 
-- *contact after the stop*: a slipping track whose last contact came after the stop
-  began (the level's step as the object sticks, or noise, taken as a ridge); by that
-  contact's pulse verdict at the time (pulse, step, unclear, noise, not yet told);
+- *a contact no ridge made*: a slipping track whose last contact is no truth ridge
+  contact (within RIDGE_MATCH_S): the level's step as the object sticks (at the stop,
+  within NEAR_STOP_S of its start: the braking takes 30 ms), or noise, taken as a ridge;
+  by that contact's pulse verdict at the time (pulse, step, unclear, noise, not told);
 - *coasting past the last ridge*: a slipping track on the skin's last ridge (an alias
   that no silence can stop before its coast ends);
 - *silence not yet read*: a slipping track still waiting for its next ridge; by its
@@ -46,6 +47,7 @@ from grasplink.evaluation import slip_reporting as sr
 
 STOP_KINDS = ("stick-slip", "stop", "rates-drops", "loop")
 NEAR_STOP_S = 0.1  # a contact this close to a stop's start is its step (or the last ridge)
+RIDGE_MATCH_S = 0.03  # a decoder contact this close to a truth ridge contact is that ridge
 VERDICTS = {0: "not told", 1: "pulse", 2: "step", 3: "unclear", 4: "noise"}
 
 
@@ -88,7 +90,20 @@ class _Watch(TrackerDecoder):
         super()._add_check(check)
 
 
-def classify(decoder: _Watch, t_upd: np.ndarray, stop: sr.StopScore, due_s: float) -> tuple:
+def _decoder(rec: ns.Recorded, tuning: dict) -> _Watch:
+    """The watching decoder with a tuning (`tune_tracker.config`: `watch.NAME` the
+    detector's), as `slip_reporting.build_decoder` builds the default one."""
+    config = tune_tracker.config(tuning)
+    probe = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, config)
+    return _Watch(
+        rec.truth.layout_mm, rec.fs_hz, tuning=config["tuning"],
+        detector=probe.detector if "watch" in config else None,
+    )  # fmt: skip
+
+
+def classify(
+    decoder: _Watch, t_upd: np.ndarray, stop: sr.StopScore, due_s: float, ridges: np.ndarray
+) -> tuple:
     """(cause, detail, the stop's step) for one stop cleared late."""
     during = np.flatnonzero((t_upd > due_s) & (t_upd < stop.end_s))
     dirty = [i for i in during if decoder.rows[i][0] == "slipping"]
@@ -99,8 +114,13 @@ def classify(decoder: _Watch, t_upd: np.ndarray, stop: sr.StopScore, due_s: floa
     if not dirty:  # flagged with no hypothesis slipping: cannot happen, say so if it does
         return ("other", "no slipping hypothesis", step)
     _, t_last, ridge, n, verdict = decoder.rows[dirty[0]]
-    if t_last > stop.start_s + 1e-3:
-        return ("contact after the stop", f"told {VERDICTS[verdict]}", step)
+    if not len(ridges) or np.min(np.abs(ridges - t_last)) > RIDGE_MATCH_S:
+        when = (
+            "at the stop"
+            if abs(t_last - stop.start_s) <= NEAR_STOP_S
+            else ("after it" if t_last > stop.start_s else "before it")
+        )
+        return ("a contact no ridge made", f"{when}, told {VERDICTS[verdict]}", step)
     if ridge == decoder.count - 1:
         return ("coasting past the last ridge", f"{min(n, 4)} contacts", step)
     return ("silence not yet read", f"{min(n, 4)}{'+' if n >= 4 else ''} contacts", step)
@@ -125,7 +145,7 @@ def _stop_step(decoder: _Watch, start_s: float, due_s: float) -> str:
 def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple]]:
     """(case, per judged stop: (delay s, cause, detail, step) with cause "" if in time)."""
     rec = case.make()
-    decoder = _Watch(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
+    decoder = _decoder(rec, tuning)
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     scored = sr.score(estimates, rec.truth)
@@ -138,7 +158,8 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple]]:
             out.append((stop.delay_s, "", "", ""))
             continue
         due = stop.observable_s + sr.CLEAR_WITHIN_S
-        out.append((stop.delay_s, *classify(decoder, t_upd, stop, due)))
+        ridges = np.asarray(rec.truth.contact_times_s, dtype=float)
+        out.append((stop.delay_s, *classify(decoder, t_upd, stop, due, ridges)))
     return case, out
 
 
@@ -199,7 +220,7 @@ def trace(case: sr.Case, tuning: dict) -> None:
     """One case's timeline around each stop: the truth's ridge contacts, the decoder's
     contacts and verdicts (with the update that saw them) and its chosen hypothesis."""
     rec = case.make()
-    decoder = _Watch(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
+    decoder = _decoder(rec, tuning)
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     scored = sr.score(estimates, rec.truth)
