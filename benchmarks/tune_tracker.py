@@ -2,7 +2,8 @@
 
 `slip_reporting`'s full benchmark runs every figure on every set (~4 min); this runs
 its quick set (or the full one, one seed) with the shipped tracker and with each
-`--try NAME=VALUE[,NAME=VALUE]` setting (`TrackerDecoder(tuning=...)`) in the same
+`--try NAME=VALUE[,NAME=VALUE]` setting (`TrackerDecoder(tuning=...)`; `watch.NAME`: the
+detector's `WatchSettings` field) in the same
 worker pool, so a change's cost and gain are read side by side in one run.
 
 Run: `.venv/bin/python benchmarks/tune_tracker.py --try LOG_STOP=-0.69 [--full]`.
@@ -36,6 +37,16 @@ def job(case: sr.Case, configs: dict[str, dict]) -> dict[str, sr.CaseScore]:
     return sr.case_job(case, "tracker", configs, baseline=False)["scores"]
 
 
+def config(tuning: dict) -> dict:
+    """A `slip_reporting.build_decoder` config from a parsed setting: tracker constants as
+    the tuning, `watch.NAME` as the detector's `WatchSettings` field NAME."""
+    watch = {k.removeprefix("watch."): v for k, v in tuning.items() if k.startswith("watch.")}
+    out: dict = {"tuning": {k: v for k, v in tuning.items() if not k.startswith("watch.")}}
+    if watch:
+        out["watch"] = watch
+    return out
+
+
 def parse(text: str) -> dict:
     """NAME=VALUE[,NAME=VALUE]; a table as NAME=V1/V2/V3 (e.g. DETECT_P=0.5/0.6/0.7)."""
     out: dict = {}
@@ -54,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     plan = replace(sr.FULL if args.full else sr.QUICK, seeds=1)
     todo = sr.cases(plan)
     tunings = [{}, *args.tries]
-    configs = {str(k): {"tuning": t} for k, t in enumerate(tunings)}
+    configs = {str(k): config(t) for k, t in enumerate(tunings)}
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [configs] * len(todo), chunksize=4))
     n = len(todo)

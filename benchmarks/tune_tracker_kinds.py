@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         plan = replace(plan, variants={k: v for k, v in plan.variants.items() if k in chosen})
     todo = sr.cases(plan)
     tunings = [{}, *args.tries]
-    configs = {str(k): {"tuning": t} for k, t in enumerate(tunings)}
+    configs = {str(k): tune_tracker.config(t) for k, t in enumerate(tunings)}
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(tune_tracker.job, todo, [configs] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({plan.name} plan, {args.seeds} seed(s))")

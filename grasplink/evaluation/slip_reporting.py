@@ -28,7 +28,7 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -37,7 +37,12 @@ import numpy as np
 
 from grasplink.decoding import tracker as tr
 from grasplink.decoding.base import Decoder, SlipEstimate
-from grasplink.decoding.contacts import ContactDetector, DetectorSettings, HingeSettings
+from grasplink.decoding.contacts import (
+    ContactDetector,
+    DetectorSettings,
+    HingeSettings,
+    WatchSettings,
+)
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import LOOP_OBJECT_MM, loop_recording
@@ -793,9 +798,16 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
     """`make_decoder` with a sweep's settings (`detector_threshold`: a detector of its own)."""
     settings = dict(settings)
     threshold = settings.pop("detector_threshold", None)
-    if threshold is not None:
-        hinges = HingeSettings(threshold=threshold)
-        settings["detector"] = ContactDetector(fs_hz, DetectorSettings(hinges=hinges))
+    watch = settings.pop("watch", None)  # WatchSettings fields by name (a trial's)
+    if threshold is not None or watch:
+        hinges = HingeSettings() if threshold is None else HingeSettings(threshold=threshold)
+        watching = WatchSettings()
+        for key, value in (watch or {}).items():
+            if not hasattr(watching, key):
+                raise ValueError(f"build_decoder: no WatchSettings field {key!r}")
+            watching = replace(watching, **{key: type(getattr(watching, key))(value)})
+        detector = DetectorSettings(hinges=hinges, watch=watching)
+        settings["detector"] = ContactDetector(fs_hz, detector)
     return make_decoder(name, layout_mm, fs_hz, **settings)
 
 

@@ -267,3 +267,14 @@ def test_motion_past_the_last_ridge_is_not_scored():
     assert quiet.dropped_from2 == 0 and quiet.missing_from3 == 0
     inside = sr.score(told(clear_s=4.4), rec)  # ... 0.1 s before it: counted
     assert inside.dropped_from2 == 10 and inside.missing_from3 == 10
+
+
+def test_a_trial_reaches_the_detectors_watch_settings_by_name_and_refuses_unknown_ones():
+    """`build_decoder`'s "watch" setting (`benchmarks/tune_tracker.py --try watch.NAME=V`)."""
+    decoder = sr.build_decoder(
+        "tracker", (6.0, 8.0), 400.0, {"watch": {"tail_trough": 1.0, "drop_fraction": 0.4}}
+    )
+    watch = decoder.detector.settings.watch
+    assert watch.tail_trough is True and watch.drop_fraction == 0.4
+    with pytest.raises(ValueError, match="no WatchSettings field 'tail_trouf'"):
+        sr.build_decoder("tracker", (6.0, 8.0), 400.0, {"watch": {"tail_trouf": 1.0}})

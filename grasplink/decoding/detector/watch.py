@@ -52,6 +52,9 @@ class WatchSettings:
     sure_drop: float = 0.3  # share of its top it may fall back by then
     revise_s: float = 0.35  # a step told at the hold that falls back by then: a slow pulse
     long_trend_s: float = 0.6  # the slip's trend from an earlier contact's base this far back
+    # a tail step's size and sharpness from the trough the tail fell to under its rise, not
+    # from the level before the onset (`PulseWatcher._tail_step`); False: from that level
+    tail_trough: bool = False
 
 
 def step_hold_samples(fs_hz: float, settings: WatchSettings) -> int:
@@ -574,7 +577,10 @@ class PulseWatcher:
             return False
         level, r, noise = watch.plain, self.step_rise, watch.noise
         first = float(np.mean(level[r : 2 * r + 1]))
-        if first < 6.0 * noise or int(np.argmax(level >= 0.8 * first)) > r:
+        # the tail goes on falling between the base and the onset (the base is the level
+        # 2 level_half + 1 samples before it): the step rises from the trough it reached
+        low = min(0.0, float(level[: r + 1].min())) if self.settings.tail_trough else 0.0
+        if first - low < 6.0 * noise or int(np.argmax(level - low >= 0.8 * (first - low))) > r:
             return False  # too small, or not sharp: a slow pulse
         if float(np.mean(level[2 * r : 4 * r + 1])) > 1.15 * first + 2.0 * noise:
             return False  # still rising: a slow pulse
