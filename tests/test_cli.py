@@ -23,6 +23,10 @@ from grasplink.profiles import eds_path
 
 GRASPLINK = [sys.executable, "-m", "grasplink.cli"]
 ROOT = Path(__file__).resolve().parents[1]
+# How long a spawned grasplink process may take to say it is up. Its imports alone took
+# 4.4 s at load 8 on 2 cores, and 15 s was not enough at load 15 under xdist; the wait
+# ends at the line, so a passing run costs no more and a broken start still fails.
+START_WAIT_S = 60.0
 
 
 def run_cli(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
@@ -111,7 +115,7 @@ def _spawn_node(kind: str, url: str, *extra: str) -> subprocess.Popen:
     )
 
 
-def _wait_line(proc: subprocess.Popen, needle: str, timeout_s: float = 15) -> str:
+def _wait_line(proc: subprocess.Popen, needle: str, timeout_s: float = START_WAIT_S) -> str:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
@@ -177,7 +181,7 @@ class _Lines:
         )
         self._thread.start()
 
-    def wait_for(self, pattern: str, timeout_s: float = 15) -> re.Match:
+    def wait_for(self, pattern: str, timeout_s: float = START_WAIT_S) -> re.Match:
         deadline = time.monotonic() + timeout_s
         for line in self.seen:
             if found := re.search(pattern, line):
