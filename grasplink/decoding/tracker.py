@@ -98,7 +98,6 @@ from grasplink.decoding.kernels.layout import (
     IDS,
 )
 from grasplink.decoding.kernels.prune import prune_choice
-from grasplink.decoding.ridge_pulses import onset_kinks
 from grasplink.errors import ConfigError
 
 V_MIN_MM_S = 2.0
@@ -275,17 +274,12 @@ class TrackerDecoder(Decoder):
     name = "tracker"
 
     # model constants (see module doc); all times in s, distances in mm
-    # chance a ridge contact is detected, by the kink its pulse makes at its onset
-    # (`ridge_pulses.onset_kinks`: its pulse is 1 - exp(-spacing / 10 mm) high and starts
-    # on the previous one's tail, so a short spacing after a tall pulse hides the ridge):
-    # measured by benchmarks/detector_contacts.py --spacings (kink table); interpolated
-    # between, flat beyond. By the spacing before alone (3 mm 22 %, 4 mm 91 %, 5 mm 99 %)
-    # the 4 mm ridge after alpha0.3's first (found about half the time) was taken as seen
-    # 9 times in 10, and the tracks that skipped it lost the posterior (issue 22)
-    # (kink bands < 0.03: 5 % of 102, 0.03-0.08: 35 % of 81, 0.08-0.13: 53 % of 53,
-    # 0.13-0.27: 96 % of 1173, above: 99-100 %; 8-120 mm/s, every layout, both ways)
-    DETECT_KINKS = (0.015, 0.055, 0.105, 0.165, 0.243, 0.248)
-    DETECT_P = (0.22, 0.6, 0.6, 0.9, 0.9, 0.99)
+    # chance a ridge contact is detected, by the spacing crossed before it (its pulse is
+    # 1 - exp(-spacing / 10 mm) high and starts on the previous one's decay): measured by
+    # benchmarks/detector_contacts.py --spacings (ba7160a: 3 mm 22 %, 4 mm 91 %, 5 mm 99 %,
+    # 6-34 mm 100 % of 3964 contacts, 8-120 mm/s); interpolated between, flat beyond
+    DETECT_SPACINGS_MM = (3.0, 4.0, 5.0)
+    DETECT_P = (0.22, 0.9, 0.99)
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
     LOG_NEW_TRACK = math.log(0.01)  # slips starting per s
     LOG_REVERSE = math.log(0.2)  # a contact while slipping is the first after a reversal
@@ -471,7 +465,7 @@ class TrackerDecoder(Decoder):
         self._log_prior = np.log(before / total)  # (2, R): where a new track starts
         # the spacing after each ridge, travel order (0 after the last)
         self._gap = np.concatenate([before[:, 1:], np.zeros((2, 1))], axis=1)
-        pd = np.stack([self._detect_probabilities(row) for row in before])
+        pd = np.vectorize(self._detect_probability)(before)
         self._pd = np.concatenate([pd, np.zeros((2, 1))], axis=1)  # the coast end: never seen
         with np.errstate(divide="ignore"):
             self._log_pd = np.log(self._pd)
@@ -613,18 +607,8 @@ class TrackerDecoder(Decoder):
             throwaway.feed(t[i : i + 3], x[i : i + 3])
         _WARM = True
 
-    def _detect_probabilities(self, spacings_before_mm: np.ndarray) -> np.ndarray:
-        """P(detected) of each ridge in travel order, from the spacings crossed before them
-        (the first: a skin length): by the kink at each one's onset (`DETECT_KINKS`)."""
-        kinks, chance = np.asarray(self.DETECT_KINKS), np.asarray(self.DETECT_P)
-        if len(kinks) != len(chance) or not len(kinks) or np.any(np.diff(kinks) <= 0):
-            raise ConfigError(
-                f"tracker DETECT_KINKS {self.DETECT_KINKS} must rise, one DETECT_P each "
-                f"(DETECT_P {self.DETECT_P})"
-            )
-        if np.any((chance <= 0.0) | (chance >= 1.0)):
-            raise ConfigError(f"tracker DETECT_P {self.DETECT_P}: each strictly between 0 and 1")
-        return np.interp(onset_kinks(spacings_before_mm), kinks, chance)
+    def _detect_probability(self, spacing_before: float) -> float:
+        return float(np.interp(spacing_before, self.DETECT_SPACINGS_MM, self.DETECT_P))
 
     # ------------------------------------------------------------------ streaming
     def process(self, t: np.ndarray, x: np.ndarray) -> list[SlipEstimate]:
