@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -160,9 +161,14 @@ def spacings(json_path: str | None = None) -> dict:
     rows: dict[str, dict[str, list[int]]] = defaultdict(lambda: defaultdict(lambda: [0, 0]))
     why: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     false: dict[str, int] = defaultdict(int)
+    kinks: dict[str, list[int]] = defaultdict(lambda: [0, 0])
     for set_name, rec in spacing_signals():
         told = ct.by_contact(rec.truth, rec.t_s, rec.force_n, rec.fs_hz)
         false[set_name] += told.false
+        for kink, hit in zip(ct.onset_kinks_met(rec.truth), told.found, strict=True):
+            cell = kinks[kink_label(kink)]
+            cell[0] += 1
+            cell[1] += hit
         for d, band, hit, reason in zip(told.spacing, told.band, told.found, told.why, strict=True):
             for key in ("all", set_name, band):
                 rows[d][key][0] += 1
@@ -191,11 +197,34 @@ def spacings(json_path: str | None = None) -> dict:
         print("| " + " | ".join(line) + " |")
     told = ", ".join(f"{k} {v}" for k, v in sorted(false.items()))
     print(f"False contacts (within +-20 ms of no true ridge contact): {told}")
+    print("\nThe same contacts by the kink at their onset (`ridge_pulses.onset_kinks`, the")
+    print("tracker's detection model `DETECT_KINKS`; the first ridge met: kink 1):")
+    print("| kink | true | found |")
+    print("|---|---:|---:|")
+    for label in sorted(kinks, key=lambda k: float(k.split(" ")[0])):
+        total, hit = kinks[label]
+        print(f"| {label} | {total} | {hit / total:.1%} |")
     figures = {d: {k: list(v) for k, v in rows[d].items()} for d in order}
-    result = {"found": figures, "why": {d: dict(why[d]) for d in order}, "false": dict(false)}
+    result = {
+        "found": figures,
+        "why": {d: dict(why[d]) for d in order},
+        "false": dict(false),
+        "kinks": {k: list(v) for k, v in kinks.items()},
+    }
     if json_path:
         Path(json_path).write_text(json.dumps(result, indent=1))
     return result
+
+
+KINK_EDGES = (0.0, 0.03, 0.08, 0.13, 0.2, 0.27, 0.35, 0.5, 0.75, 0.999)
+
+
+def kink_label(kink: float) -> str:
+    """A kink's row label: the band of `KINK_EDGES` it falls in ("0.08 - 0.13")."""
+    edges = (-math.inf, *KINK_EDGES, math.inf)
+    i = int(np.searchsorted(edges, kink, side="right")) - 1
+    lo, hi = edges[i], edges[i + 1]
+    return f"{lo:.3g} - {hi:.3g}"
 
 
 def decoder_snr10() -> None:

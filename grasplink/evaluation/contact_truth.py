@@ -27,6 +27,7 @@ from grasplink.decoding.contacts import (
     DetectorSettings,
     PulseCheck,
 )
+from grasplink.decoding.ridge_pulses import onset_kinks
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import harness
 from grasplink.simulators.effects import actuators, kinematics, noise, skin
@@ -204,13 +205,12 @@ def speed_band(speed_mm_s: float) -> str:
     return "?"
 
 
-def spacings_before_mm(truth: SkinRecording) -> list[float | None]:
-    """Per true ridge contact: the spacing the edge crossed before reaching that ridge, in
-    its direction of travel (None: the first ridge met, after the lead-in). The ridge is the
-    one at the edge's position at the contact's time; the direction is the speed's sign."""
+def ridges_met(truth: SkinRecording) -> list[tuple[int, int]]:
+    """Per true ridge contact: (the ridge's index along the skin, the direction of travel,
+    +1 or -1). The ridge is the one at the edge's position at the contact's time; the
+    direction is the speed's sign."""
     ridges = ridge_positions_mm(truth.layout_mm)
-    spacings = truth.layout_mm
-    out: list[float | None] = []
+    out: list[tuple[int, int]] = []
     for t in truth.contact_times_s:
         x = float(np.interp(t, truth.t_s, truth.position_mm))
         i = int(np.argmin(np.abs(ridges - x)))
@@ -218,11 +218,34 @@ def spacings_before_mm(truth: SkinRecording) -> list[float | None]:
         v = float(truth.speed_mm_s[min(k, len(truth.t_s) - 1)])
         if v == 0.0 and k > 0:
             v = float(truth.speed_mm_s[k - 1])
-        if v >= 0:
+        out.append((i, 1 if v >= 0 else -1))
+    return out
+
+
+def spacings_before_mm(truth: SkinRecording) -> list[float | None]:
+    """Per true ridge contact: the spacing the edge crossed before reaching that ridge, in
+    its direction of travel (None: the first ridge met, after the lead-in; `ridges_met`)."""
+    spacings = truth.layout_mm
+    out: list[float | None] = []
+    for i, way in ridges_met(truth):
+        if way > 0:
             out.append(None if i == 0 else float(spacings[i - 1]))
         else:
             out.append(None if i == len(spacings) else float(spacings[i]))
     return out
+
+
+def onset_kinks_met(truth: SkinRecording) -> list[float]:
+    """Per true ridge contact: the kink its pulse makes on the previous one's tail
+    (`decoding.ridge_pulses.onset_kinks`) as the tracker models it - the whole skin's
+    length before the first ridge met, every ridge before it in travel order pulsed."""
+    spacings = np.asarray(truth.layout_mm, dtype=float)
+    length = float(spacings.sum())
+    kinks = {
+        1: onset_kinks(np.concatenate([[length], spacings])),
+        -1: onset_kinks(np.concatenate([[length], spacings[::-1]]))[::-1],
+    }
+    return [float(kinks[way][i]) for i, way in ridges_met(truth)]
 
 
 def speeds_at_mm_s(truth: SkinRecording) -> np.ndarray:
