@@ -28,6 +28,7 @@ from tests.conformance.conftest import (
     cob,
     emcy_code,
 )
+from tests.conformance.host_timing import heartbeats_on_a_kept_grid
 
 MONITORED = 0x05  # a node the device's heartbeat consumer watches
 
@@ -62,8 +63,7 @@ def test_7_101_write_1017h(dut: Dut) -> None:
     assert dut.get(obj.HEARTBEAT_PRODUCER_MS) == dut.od[obj.HEARTBEAT_PRODUCER_MS].default
     dut.set_heartbeat(20)
     assert dut.get(obj.HEARTBEAT_PRODUCER_MS) == 20
-    mark = dut.log.mark()
-    frames = dut.log.wait_count(cob(dut.heartbeat_id), 6, since=mark)
+    frames = heartbeats_on_a_kept_grid(dut, 0.020, 6)
     assert len(frames) == 6
     assert period(frames) == pytest.approx(0.020, abs=0.006)
 
@@ -77,8 +77,7 @@ def test_7_102_count_heartbeats(dut: Dut) -> None:
     slack. The median gap is the period whatever one late frame does (`period`).
     """
     dut.set_heartbeat(20)
-    mark = dut.log.mark()
-    frames = dut.log.wait_count(cob(dut.heartbeat_id), 15, since=mark)
+    frames = heartbeats_on_a_kept_grid(dut, 0.020, 15)
     assert len(frames) == 15
     assert period(frames) == pytest.approx(0.020, abs=0.006)
     assert {bytes(f.data) for f in frames} == {bytes([STATE_PRE_OP])}
@@ -273,8 +272,7 @@ def test_7_204_guarding_off_heartbeat_on(dut: Dut) -> None:
     come every 20 ms with the current state: 7Fh, then 05h after NMT start.
     """
     dut.set_heartbeat(20)
-    mark = dut.log.mark()
-    frames = dut.log.wait_count(cob(dut.heartbeat_id), 5, since=mark)
+    frames = heartbeats_on_a_kept_grid(dut, 0.020, 5)
     assert [f.data[0] for f in frames] == [STATE_PRE_OP] * 5
     assert period(frames) == pytest.approx(0.020, abs=0.006)
     dut.start()
@@ -286,14 +284,18 @@ def test_7_205_heartbeat_on_guarding_rtrs(dut: Dut) -> None:
 
     With a 40 ms heartbeat and guarding RTRs on 700h+node-ID every 10 ms for
     200 ms, the device keeps sending only its heartbeats (about 5, not one
-    per RTR), all without the guarding toggle bit.
+    per RTR), all without the guarding toggle bit. Counted against the time the 20 RTRs
+    really took: at load 15 the loop of 10 ms sleeps ran long enough for an eighth beat.
     """
     dut.set_heartbeat(40)
     dut.wait_heartbeat()
     mark = dut.log.mark()
+    started = time.monotonic()
     for _ in range(20):
         dut.send(dut.heartbeat_id, rtr=True, dlc=1)
         time.sleep(0.01)
+    beats_due = (time.monotonic() - started) / 0.040
+    dut.log.wait_count(cob(dut.heartbeat_id), 3, since=mark)  # a starved device: wait (bounded)
     frames = heartbeats(dut, mark)
-    assert 3 <= len(frames) <= 7, len(frames)
+    assert 3 <= len(frames) <= beats_due + 2 < 20, (len(frames), beats_due)
     assert {bytes(f.data) for f in frames} == {bytes([STATE_PRE_OP])}

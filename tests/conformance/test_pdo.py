@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import math
 import struct
-import threading
 import time
 from itertools import pairwise
 from statistics import median
@@ -48,6 +47,7 @@ from tests.conformance.conftest import (
     mappable_objects,
     slow_app,
 )
+from tests.conformance.host_timing import GridTicker
 
 WRONG_LENGTH = {ABORT_NOT_MAPPABLE, ABORT_PARAMETER_INCOMPATIBLE}
 EVENT_TIMER_MS = 25
@@ -258,38 +258,6 @@ def check_event_driven(dut: Dut, numbers: list[int], window: float = WINDOW_S) -
             frames = frames_of(dut, mark, can_id)
             assert 1 <= len(frames) <= allowed, f"0x{can_id:03X}: {len(frames)} frames"
             assert struct.unpack_from("<H", frames[-1].data)[0] == statusword
-
-
-class GridTicker(threading.Thread):
-    """A plain thread ticking on a fixed grid, missed periods skipped (as the device's event
-    timer does), stamped on the bus's clock: what this host let a timer thread do while the
-    device ran beside it, so a live check is judged by the scheduling that really happened."""
-
-    def __init__(self, period_s: float) -> None:
-        super().__init__(daemon=True)
-        self.period_s = period_s
-        self.ticks: list[float] = []
-        self._stop_event = threading.Event()
-
-    def run(self) -> None:
-        due = time.time() + self.period_s
-        while not self._stop_event.wait(max(0.0, due - time.time())):
-            now = time.time()
-            self.ticks.append(now)
-            due += ((now - due) // self.period_s + 1) * self.period_s
-
-    def stop(self) -> None:
-        self._stop_event.set()
-        self.join()
-
-    def median_gap(self, start: float, end: float) -> float:
-        inside = [t for t in self.ticks if start <= t <= end]
-        return median(b - a for a, b in pairwise(inside)) if len(inside) > 1 else 0.0
-
-    def silent(self, start: float, end: float, at_least_s: float) -> bool:
-        """Did the ticker also go `at_least_s` without a tick somewhere in [start, end]?"""
-        inside = [start, *(t for t in self.ticks if start < t < end), end]
-        return any(b - a >= at_least_s for a, b in pairwise(inside))
 
 
 def check_event_timer(dut: Dut, numbers: list[int], window: float = WINDOW_S) -> None:

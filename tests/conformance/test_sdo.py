@@ -36,6 +36,7 @@ from tests.conformance.conftest import (
     raw_upload,
     upload_request,
 )
+from tests.conformance.host_timing import heartbeats_on_a_kept_grid
 
 STRING_OBJECTS = (obj.DEVICE_NAME, obj.HARDWARE_VERSION, obj.SOFTWARE_VERSION)
 TOO_LONG = {ABORT_LENGTH_MISMATCH, ABORT_LENGTH_HIGH}  # CiA 301 allows either
@@ -256,7 +257,7 @@ def test_2_15_write_1017h_segmented(dut: Dut) -> None:
     """
     dut.write(obj.HEARTBEAT_PRODUCER_MS, 0, struct.pack("<H", 30), force_segment=True)
     assert dut.get(obj.HEARTBEAT_PRODUCER_MS) == 30
-    beats = dut.log.wait_count(cob(dut.heartbeat_id), 5)
+    beats = heartbeats_on_a_kept_grid(dut, 0.030, 5)
     assert len(beats) == 5
     gaps = [b.timestamp - a.timestamp for a, b in pairwise(beats)]
     assert median(gaps) == pytest.approx(0.030, abs=0.008)
