@@ -6,8 +6,8 @@
 BASE is a checkout (e.g. `git worktree add /tmp/base REV`); each tree runs in its own
 interpreter (the same module names).
 
-- **runs**: `grasplink run SCENE --out DIR` for each of `RUN_SCENES` in both trees; every
-  file the run writes (can.asc, truth.csv, summary.json, ...) must be the same bytes.
+- **runs**: `check_runs_unchanged.py BASE THIS`: every file `grasplink run` writes for
+  each of its scenes (and the float64 bits of every recorded chunk) the same in both trees.
 - **replay**: the scene's master (`[controller]`, the gateway in the `loop_*` scenes of
   `REPLAY_SCENES`) is recorded call by call in BASE's run (start, receive, advance,
   next_deadline_us: the arguments, the frames returned, the deadline) together with the
@@ -27,7 +27,6 @@ Prints what differs (the first call or file) and exits 1 when anything does.
 from __future__ import annotations
 
 import argparse
-import filecmp
 import json
 import os
 import subprocess
@@ -35,20 +34,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-RUN_SCENES = (
-    "loop_headline",
-    "headline_slip",
-    "slip_alpha0.1_20mm_s_forward",
-    "loop_fast_reflex",
-    "loop_vendor_modules",
-    "loop_slow_wearer",
-    "bus_faults",
-    "boot",
-)
-REPLAY_SCENES = ("loop_headline", "loop_fast_reflex", "loop_slow_wearer", "loop_vendor_modules")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import check_runs_unchanged
 
-RUN = "import sys; from grasplink.cli import main; sys.exit(main())"
+ROOT = Path(__file__).resolve().parents[1]
+REPLAY_SCENES = ("loop_headline", "loop_fast_reflex", "loop_slow_wearer", "loop_vendor_modules")
 
 # Run inside a tree's interpreter. `record SCENE OUT`: the scene's run with its master's
 # calls recorded, pickled to OUT. `replay SCENE CALLS`: this tree's master fed them,
@@ -186,28 +176,6 @@ def _python(tree: Path, *argv: str) -> str:
     return done.stdout
 
 
-def check_runs(base: Path, tmp: Path) -> bool:
-    """Every file of each scene's run, base against this tree: the same bytes."""
-    same = True
-    for scene in RUN_SCENES:
-        dirs = []
-        for name, tree in (("base", base), ("this", ROOT)):
-            out = tmp / name / scene
-            scene_path = str(ROOT / "scenes" / f"{scene}.toml")
-            _python(tree, "-c", RUN, "run", scene_path, "--out", str(out))
-            dirs.append(out)
-        files = sorted(p.name for p in dirs[0].iterdir())
-        if files != sorted(p.name for p in dirs[1].iterdir()):
-            print(f"runs  {scene}: different files written")
-            same = False
-            continue
-        _, differ, errors = filecmp.cmpfiles(dirs[0], dirs[1], files, shallow=False)
-        verdict = "same bytes" if not differ and not errors else f"DIFFER: {differ + errors}"
-        print(f"runs  {scene}: {len(files)} files ({', '.join(files)}), {verdict}")
-        same &= not differ and not errors
-    return same
-
-
 def record(base: Path, tmp: Path) -> dict[str, Path]:
     """Each replay scene's master calls, recorded in `base`'s run."""
     recorded = {}
@@ -276,7 +244,7 @@ def main() -> int:
             return 0
         same = True
         if "runs" in parts:
-            same &= check_runs(base, tmp)
+            same &= check_runs_unchanged.main([str(base), str(ROOT)]) == 0
         if "replay" in parts:
             same &= check_replay(record(base, tmp))
     print("same as the base" if same else "NOT the same as the base")

@@ -31,6 +31,7 @@ SCENES = (
     "slip_alpha0.1_20mm_s_forward",
     "loop_fast_reflex",
     "loop_vendor_modules",
+    "loop_slow_wearer",
     "bus_faults",
     "boot",
     "wearer_demo",
