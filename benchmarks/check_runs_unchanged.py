@@ -18,11 +18,10 @@ Issue 26 item 4's speed work keeps these equal; commits quote the digests.
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
+
+from tree_script import last_json, run_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = (
@@ -91,18 +90,9 @@ print(json.dumps(result))
 def collect(tree: Path, scenes: list[str], loop: bool) -> dict[str, str]:
     """Run the scenes (and the loop report) in `tree`'s own interpreter; a digest for each."""
     paths = [str(ROOT / "scenes" / f"{name}.toml") for name in scenes]
-    with tempfile.TemporaryDirectory() as tmp:
-        script = Path(tmp) / "collect.py"
-        script.write_text(COLLECT)
-        env_path = f"import sys; sys.path.insert(0, {str(tree)!r}); "
-        out = subprocess.run(
-            [sys.executable, "-c", env_path + f"exec(open({str(script)!r}).read())",
-             tmp, "1" if loop else "0", *paths],
-            check=False, cwd=tmp, capture_output=True, text=True,
-        )  # fmt: skip
-    if out.returncode:
-        raise SystemExit(f"the runs failed in {tree}:\n{out.stderr}")
-    return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+    with tempfile.TemporaryDirectory() as out_dir:
+        out = run_in_tree(tree, COLLECT, out_dir, "1" if loop else "0", *paths, what="the runs")
+    return last_json(out)  # type: ignore[no-any-return]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -28,11 +28,9 @@ digits of SHA-256) and what it covers; two trees agree when their digests are eq
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
+
+from tree_script import last_json, run_in_tree
 
 # Run inside TREE's interpreter: only names both sides of a change have (the snapshot
 # may be a dict or a typed object; every surface takes what that tree's gateway makes).
@@ -179,18 +177,8 @@ print(json.dumps({"digest": digest.hexdigest()[:16], **counts}))
 
 def collect(tree: Path, seconds: float) -> dict[str, object]:
     """Run the scenario in `tree`'s own interpreter; its digest and counts."""
-    with tempfile.TemporaryDirectory() as tmp:
-        script = Path(tmp) / "collect.py"
-        script.write_text(COLLECT)
-        env_path = f"import sys; sys.path.insert(0, {str(tree)!r}); "
-        out = subprocess.run(
-            [sys.executable, "-c", env_path + f"exec(open({str(script)!r}).read())",
-             str(tree), str(seconds)],
-            check=False, cwd=tmp, capture_output=True, text=True,
-        )  # fmt: skip
-    if out.returncode:
-        raise SystemExit(f"the scenario failed in {tree}:\n{out.stderr}")
-    return json.loads(out.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+    out = run_in_tree(tree, COLLECT, str(tree), str(seconds), what="the scenario")
+    return last_json(out)  # type: ignore[no-any-return]
 
 
 def main() -> int:
