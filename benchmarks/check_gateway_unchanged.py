@@ -28,14 +28,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import check_runs_unchanged
+from tree_script import last_json, run_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
 REPLAY_SCENES = ("loop_headline", "loop_fast_reflex", "loop_slow_wearer", "loop_vendor_modules")
@@ -165,23 +164,19 @@ else:
 """
 
 
-def _python(tree: Path, *argv: str) -> str:
-    """Run `argv` in a child interpreter importing `tree`'s grasplink; its stdout."""
-    env = os.environ | {"PYTHONPATH": str(tree)}
-    done = subprocess.run(
-        [sys.executable, *argv], cwd=tree, env=env, capture_output=True, text=True
-    )
-    if done.returncode != 0:
-        raise SystemExit(f"{tree}: {' '.join(argv[:3])}... failed:\n{done.stderr[-2000:]}")
-    return done.stdout
-
-
 def record(base: Path, tmp: Path) -> dict[str, Path]:
     """Each replay scene's master calls, recorded in `base`'s run."""
     recorded = {}
     for scene in REPLAY_SCENES:
         path = tmp / f"{scene}.calls"
-        _python(base, "-c", REPLAY, "record", str(ROOT / "scenes" / f"{scene}.toml"), str(path))
+        run_in_tree(
+            base,
+            REPLAY,
+            "record",
+            str(ROOT / "scenes" / f"{scene}.toml"),
+            str(path),
+            what=f"recording {scene}",
+        )
         recorded[scene] = path
     return recorded
 
@@ -190,7 +185,9 @@ def check_replay(recorded: dict[str, Path]) -> bool:
     same = True
     for scene, path in recorded.items():
         scene_path = str(ROOT / "scenes" / f"{scene}.toml")
-        verdict = json.loads(_python(ROOT, "-c", REPLAY, "replay", scene_path, str(path)))
+        verdict = last_json(
+            run_in_tree(ROOT, REPLAY, "replay", scene_path, str(path), what=f"replaying {scene}")
+        )
         if verdict["first_difference"] is None:
             print(
                 f"replay {scene}: {verdict['calls']} calls, {verdict['frames']} frames out, "
@@ -209,8 +206,10 @@ def cost(base: Path, recorded: dict[str, Path], rounds: int) -> None:
         for name, tree in (("base", base), ("this", ROOT)):
             for scene, path in recorded.items():
                 scene_path = str(ROOT / "scenes" / f"{scene}.toml")
-                out = _python(tree, "-c", REPLAY, "cost", "3", scene_path, str(path))
-                ms = json.loads(out.splitlines()[-1])["ms_per_s"]
+                out = run_in_tree(
+                    tree, REPLAY, "cost", "3", scene_path, str(path), what=f"timing {scene}"
+                )
+                ms = last_json(out)["ms_per_s"]
                 best[name, scene] = min(best.get((name, scene), float("inf")), ms)
     print(f"gateway alone, ms of CPU per simulated s (least of {rounds} rounds x 3 replays):")
     for scene in recorded:
@@ -239,7 +238,16 @@ def main() -> int:
                 for scene, path in recorded.items():
                     print(f"== {scene}")
                     scene_path = str(ROOT / "scenes" / f"{scene}.toml")
-                    print(_python(ROOT, "-c", REPLAY, "profile", scene_path, str(path)))
+                    print(
+                        run_in_tree(
+                            ROOT,
+                            REPLAY,
+                            "profile",
+                            scene_path,
+                            str(path),
+                            what=f"profiling {scene}",
+                        )
+                    )
             cost(base, recorded, args.cost)
             return 0
         same = True
