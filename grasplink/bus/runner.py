@@ -335,12 +335,8 @@ class NodeRunner:
         delivered = 0
         self._backlog = False
         while msg is not None:  # everything that has arrived, before any timer runs
-            urgent = self._urgent_due_us  # ... but an urgent one: before the next frame
-            if urgent is not None and self._clock() >= urgent:
-                self._serve_urgent(self._clock(), between_frames=True)
-            self._deliver(msg)
             delivered += 1
-            if self._outage is not None or self.failure:
+            if not self._deliver_in_turn(msg):
                 break
             if delivered >= self._max_batch:
                 self._backlog = True  # more may wait: the next step does not wait
@@ -413,22 +409,28 @@ class NodeRunner:
         if replies:
             self._dispatch(replies, now)
 
+    def _deliver_in_turn(self, msg: can.Message) -> bool:
+        """One received frame after any urgent timer now due (before the next frame, not
+        after the batch); False once the bus is down or the runner has given up."""
+        urgent = self._urgent_due_us
+        if urgent is not None and self._clock() >= urgent:
+            self._serve_urgent(self._clock(), between_frames=True)
+        self._deliver(msg)
+        return self._outage is None and not self.failure
+
     def _catch_up(self) -> None:
         """Read everything queued; deliver it in order but the superseded PDOs (`MAX_CATCH_UP`)."""
         queued: list[can.Message] = []
         while len(queued) < MAX_CATCH_UP and (msg := self._recv(0.0)) is not None:
             queued.append(msg)
-        newest = {m.arbitration_id: i for i, m in enumerate(queued) if _is_pdo(m)}
+        pdo = [_is_pdo(m) for m in queued]
+        newest = {m.arbitration_id: i for i, m in enumerate(queued) if pdo[i]}
         superseded: Counter[int] = Counter()
         for i, msg in enumerate(queued):
-            if newest.get(msg.arbitration_id, i) != i and _is_pdo(msg):
+            if pdo[i] and newest[msg.arbitration_id] != i:
                 superseded[msg.arbitration_id] += 1
                 continue
-            urgent = self._urgent_due_us
-            if urgent is not None and self._clock() >= urgent:
-                self._serve_urgent(self._clock(), between_frames=True)
-            self._deliver(msg)
-            if self._outage is not None or self.failure:
+            if not self._deliver_in_turn(msg):
                 break
         self._backlog = len(queued) >= MAX_CATCH_UP
         dropped = sum(superseded.values())
