@@ -4,6 +4,7 @@ python-canopen's LssMaster used directly, and the gateway's `assign_node_ids` on
 from __future__ import annotations
 
 import queue
+import time
 import uuid
 from collections.abc import Callable, Iterator
 
@@ -78,6 +79,20 @@ def first_frame(frames: queue.Queue[bytes]) -> bytes:
     return frames.get(timeout=BOOT_WAIT_S)
 
 
+def boot_up_after_power_cycle(frames: queue.Queue[bytes]) -> bytes:
+    """The boot-up of the cycled node, past the heartbeats the node sent before it was cut
+    off: subscribing before the cycle races with the last of them (seen at load 15)."""
+    deadline = time.monotonic() + BOOT_WAIT_S
+    while (left_s := deadline - time.monotonic()) > 0:
+        try:
+            data = frames.get(timeout=left_s)
+        except queue.Empty:
+            break
+        if data == b"\x00":
+            return data
+    raise AssertionError(f"no boot-up within {BOOT_WAIT_S} s of the power cycle")
+
+
 @pytest.mark.slow
 def test_python_canopen_assigns_a_node_id_the_node_boots_and_keeps_it(virtual_bus):
     node = build_node("skin", UNCONFIGURED, serial=5)
@@ -97,7 +112,7 @@ def test_python_canopen_assigns_a_node_id_the_node_boots_and_keeps_it(virtual_bu
 
     boot_ups = bus.boot_ups(0x21)
     bus.power_cycle()
-    assert first_frame(boot_ups) == b"\x00"  # the stored node-ID, not FFh
+    boot_up_after_power_cycle(boot_ups)  # at the stored node-ID: an FFh node sends none
     assert node.node_id == 0x21
 
 
@@ -143,7 +158,7 @@ def test_the_gateway_assigns_known_nodes_and_reports_the_unknown_one(virtual_bus
     boot_ups = {node_id: bus.boot_ups(node_id) for node_id in (0x11, 0x41)}
     bus.power_cycle()
     for frames in boot_ups.values():
-        assert first_frame(frames) == b"\x00"
+        boot_up_after_power_cycle(frames)
 
 
 @pytest.mark.parametrize(
