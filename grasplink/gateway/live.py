@@ -34,7 +34,7 @@ import can
 
 from grasplink.bus import MultiRunner, NodeRunner, open_bus
 from grasplink.bus.reconnect import DEFAULT_RECONNECT_TIMEOUT_S
-from grasplink.bus.runner import DEFAULT_STALL_LIMIT_S
+from grasplink.bus.runner import DEFAULT_STALL_LIMIT_S, RunnerStats
 from grasplink.devices.factory import build_from_file, build_node
 from grasplink.errors import BusError
 from grasplink.gateway.config import GatewayConfig
@@ -208,11 +208,27 @@ class LiveGateway:
     def status_line(self) -> str:
         """Node states, decoded values and loop latency, for a log every few seconds
         (one line per bus when there are several)."""
-        if len(self.gateways) == 1:
-            return status_of(self.gateway)
-        return "\n".join(
-            f"[{url}] {status_of(g)}" for url, g in zip(self.bus_urls, self.gateways, strict=True)
-        )
+        runners: list[NodeRunner | None] = [*self._gateway_runners] or [None] * len(self.gateways)
+        lines = [
+            status_of(g) + ("" if r is None else behind_text(r.stats))
+            for g, r in zip(self.gateways, runners, strict=True)
+        ]
+        if len(lines) == 1:
+            return lines[0]
+        return "\n".join(f"[{url}] {line}" for url, line in zip(self.bus_urls, lines, strict=True))
+
+
+def behind_text(stats: RunnerStats) -> str:
+    """What a gateway too slow for its bus has skipped so far ("" while it kept up): the
+    PDOs its runner dropped for a newer one of their COB-ID, which the log only warns
+    about every 10 s."""
+    if not stats.superseded:
+        return ""
+    worst_cob_id, worst = stats.superseded_by_cob_id.most_common(1)[0]
+    return (
+        f" | behind the bus: {stats.superseded} PDOs superseded in {stats.catch_ups} "
+        f"catch-ups (most 0x{worst_cob_id:03X}: {worst})"
+    )
 
 
 def status_of(gateway: Gateway) -> str:

@@ -69,3 +69,18 @@ def test_with_nodes_runs_a_vendors_device_from_its_file_beside_ours() -> None:
         wait_until(lambda: operational(live.gateway), 30.0, "our four nodes and the device")
         assert set(live.gateway.latest.nodes) == {"skin", "emg", "belt", "hand", "io"}
         assert live.failure is None
+
+
+def test_the_status_line_says_what_a_gateway_behind_its_bus_skipped() -> None:
+    from collections import Counter
+
+    from grasplink.bus import RunnerStats
+    from grasplink.gateway.live import behind_text
+
+    assert behind_text(RunnerStats()) == ""  # kept up: nothing to say
+    stats = RunnerStats(
+        superseded=7, catch_ups=2, superseded_by_cob_id=Counter({0x191: 5, 0x2A1: 2})
+    )
+    assert behind_text(stats) == (
+        " | behind the bus: 7 PDOs superseded in 2 catch-ups (most 0x191: 5)"
+    )
