@@ -35,6 +35,7 @@ from tests.telemetry.host import SparkplugHost
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
+REPLY_WAIT_S = 30.0  # a bound, not a delay: replies come within milliseconds
 
 
 def publisher(gateway, url: str, gateway_id: str = "gw", **options) -> TelemetryPublisher:
@@ -92,10 +93,12 @@ def test_a_client_without_write_rights_cannot_command(secured: Mosquitto, fake) 
         time.sleep(0.5)
         assert reader.taken() == [] and fake.real.feedback.mode.value == "force_and_slip"
         operator.publish("grasplink/gw/cmd/feedback_mode", b'{"value": "off", "id": "o"}')
-        (reply,) = operator.wait_for(lambda m: True)
+        (reply,) = operator.wait_for(lambda m: True, timeout_s=REPLY_WAIT_S)
         assert json_of(reply)["id"] == "o" and json_of(reply)["accepted"] is True
         assert fake.real.feedback.mode.value == "off"
-        assert [json_of(m)["id"] for m in reader.taken()] == ["o"]  # readers see replies
+        # readers see replies too, each in its own time: the operator's copy may come first
+        assert reader.wait_for(lambda m: json_of(m)["id"] == "o", timeout_s=REPLY_WAIT_S)
+        assert [json_of(m)["id"] for m in reader.taken()] == ["o"]
     reader.close()
     operator.close()
 
