@@ -10,11 +10,12 @@ gives an application task, so an app cannot reach into the protocol engines.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
-from grasplink.devices.store import ObjectStore
+from grasplink.devices.store import Key, ObjectStore
 
 
 class AppServices(Protocol):
@@ -48,6 +49,18 @@ class AppServices(Protocol):
         ...
 
     def error_active(self, code: int) -> bool: ...
+
+    def direct_tpdo(
+        self, number: int, given: tuple[Key, ...], unmapped: tuple[Key, ...] = ()
+    ) -> Callable[..., Frame] | None:
+        """TPDO `number`'s frame as a function of the objects `given`, when a trigger
+        right after writing them sends it at once and changes nothing else (a stream told
+        ahead packs its packets without the store; `PdoEngine.direct_tpdo`), else None."""
+        ...
+
+    def sent_directly(self, number: int, t_us: int) -> None:
+        """Frames `direct_tpdo` made went out, the last at `t_us`."""
+        ...
 
 
 class DeviceApp:
@@ -84,4 +97,15 @@ class DeviceApp:
         return []
 
     def next_deadline_us(self) -> int | None:
+        return None
+
+    def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
+        """Its ticks from `t_us` (its deadline) up to `until_us` told ahead, when nothing
+        else is due meanwhile (`core.protocol.StreamingDevice`): what `advance` would
+        return at each, with its time, changing nothing yet. Empty: ticked one by one."""
+        return []
+
+    def commit_stream(self, ticks: int) -> int | None:
+        """The first `ticks` ticks of the last `stream_ahead` happened (0: none did):
+        the application is as after `advance` at each. Returns the last one's time."""
         return None

@@ -11,6 +11,8 @@ answers LSS only, and boots once an LSS master has given it a node-ID.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import canopen.objectdictionary as cod
 
 from grasplink.core.frames import (
@@ -39,7 +41,7 @@ from grasplink.devices.lss import LssSlave
 from grasplink.devices.pdo import PdoEngine
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sdo_server import SdoServer
-from grasplink.devices.store import APPLICATION_AREA, COMMUNICATION_AREA, ObjectStore, Value
+from grasplink.devices.store import APPLICATION_AREA, COMMUNICATION_AREA, Key, ObjectStore, Value
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
 
@@ -245,6 +247,29 @@ class DeviceNode:
             frames.append(Frame(HEARTBEAT_BASE + self.node_id, bytes([self.state])))
         return frames
 
+    def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
+        """`StreamingDevice`: the application's next ticks told ahead, while OPERATIONAL and
+        up to the protocol's next timer (a heartbeat, an event timer, a timeout, an EMCY
+        held back: each goes through `advance` at its time, the span ends before it)."""
+        if not self.powered or self.state != NmtState.OPERATIONAL:
+            return []
+        if self.next_deadline_us() != t_us or self.app.next_deadline_us() != t_us:
+            return []
+        protocol = self._protocol_deadline()
+        if protocol is not None:
+            until_us = min(until_us, protocol - 1)
+        if until_us < t_us:
+            return []
+        return self.app.stream_ahead(t_us, until_us)
+
+    def commit_stream(self, ticks: int) -> None:
+        """`StreamingDevice`: the first `ticks` ticks of the last span happened; the node
+        notes the last one's time as `advance` there would have."""
+        t_us = self.app.commit_stream(ticks)
+        if t_us is not None:
+            self._deadline_stale = True
+            self._touch(t_us)
+
     def next_deadline_us(self) -> int | None:
         """The earliest timer; cached until a frame, a tick or a store change can move it."""
         changes = self.store.changes
@@ -257,10 +282,17 @@ class DeviceNode:
     def _compute_deadline(self) -> int | None:
         if not self.powered or self.state == NmtState.INITIALISING:
             return None  # off, or unconfigured: nothing runs until LSS gives a node-ID
+        protocol = self._protocol_deadline()
+        app = self.app.next_deadline_us()
+        if app is None or (protocol is not None and protocol < app):
+            return protocol
+        return app
+
+    def _protocol_deadline(self) -> int | None:
+        """The earliest timer of the node's services (all but the application's)."""
         candidates: tuple[int | None, ...] = (
             self.heartbeat.next_deadline_us(),
             self.consumer.next_deadline_us(),
-            self.app.next_deadline_us(),
             self._collision_clear_us,
             self.pdo.next_deadline_us(),
         )
@@ -460,3 +492,11 @@ class NodeServices:
 
     def error_active(self, code: int) -> bool:
         return self._node.emcy.is_active(code)
+
+    def direct_tpdo(
+        self, number: int, given: tuple[Key, ...], unmapped: tuple[Key, ...] = ()
+    ) -> Callable[..., Frame] | None:
+        return self._node.pdo.direct_tpdo(number, given, unmapped)
+
+    def sent_directly(self, number: int, t_us: int) -> None:
+        self._node.pdo.sent_directly(number, t_us)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from grasplink.core.frames import CAN_ID_MASK, SYNC_TYPE_MAX, Frame, is_restricted_can_id
 from grasplink.devices import emcy as em
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
-from grasplink.devices.store import Entry, ObjectStore, Value
+from grasplink.devices.store import Entry, Key, ObjectStore, Value
 from grasplink.profiles import objects as obj
 
 COB_ID_INVALID = 0x80000000
@@ -467,6 +467,10 @@ class PdoEngine:
 
     def _build(self, pdo: _Pdo, t_us: int) -> Frame:
         frame = self._pack(pdo)
+        self._sent(pdo, t_us)
+        return frame
+
+    def _sent(self, pdo: _Pdo, t_us: int) -> None:
         if not pdo.timer_due or pdo.pending:
             # Sent for another reason than the timer alone (an event, a remote request):
             # the event timer counts again from this transmission.
@@ -474,7 +478,62 @@ class PdoEngine:
         pdo.pending = False
         pdo.timer_due = False
         pdo.last_tx_us = t_us
-        return frame
+
+    # -- streams told ahead (core.protocol.StreamingDevice) ---------------------------
+    def direct_tpdo(
+        self, number: int, given: tuple[Key, ...], unmapped: tuple[Key, ...] = ()
+    ) -> Callable[..., Frame] | None:
+        """How TPDO `number` goes out when the application triggers it right after writing
+        the objects `given`, while it also writes `unmapped`: a function of the values of
+        `given` (in that order) returning the frame `trigger` would send, without the
+        store. None unless the trigger sends it at once and changes nothing else: an
+        event-driven TPDO with no inhibit time, no event timer and nothing owed, whose
+        mapping packs, and no TPDO made to send by a change (types 0, 255) mapping any of
+        the objects written, nor this one mapping `unmapped`. Once frames made so went
+        out, `sent_directly` tells the engine the last one's time."""
+        if not (self.operational and 1 <= number <= len(self.tpdos)):
+            return None
+        pdo = self.tpdos[number - 1]
+        if (
+            not self._sendable(pdo)
+            or self.transmission_type(pdo) < TYPE_EVENT_MANUFACTURER
+            or pdo.inhibit_us
+            or pdo.timer_us
+            or pdo.pending
+            or pdo.timer_due
+            or pdo.packer is None
+        ):
+            return None
+        for key in (*given, *unmapped):
+            for watcher in self._watchers.get(key, ()):
+                if self.transmission_type(watcher) in (0, TYPE_EVENT_PROFILE):
+                    return None
+        keys = [(e.index, e.subindex) for e in pdo.mapping]
+        if any(key in unmapped for key in keys):
+            return None
+        # Per mapped object, its place among the given values, or its value now (nothing
+        # else writes the store until the frames went out: the span ends at any frame
+        # reaching the node).
+        places = [given.index(key) if key in given else -1 for key in keys]
+        constants = [entry.value for entry in pdo.packed]
+        pack, can_id = pdo.packer.pack, self.cob_id(pdo) & CAN_ID_MASK
+        mapped = len(places)
+        if places == list(range(mapped)):  # the mapping is the first given objects in order
+
+            def frame(*values: Value) -> Frame:
+                return Frame(can_id, pack(*values[:mapped]))
+
+            return frame
+
+        def mixed(*values: Value) -> Frame:
+            row = [values[p] if p >= 0 else c for p, c in zip(places, constants, strict=True)]
+            return Frame(can_id, pack(*row))
+
+        return mixed
+
+    def sent_directly(self, number: int, t_us: int) -> None:
+        """Frames made by `direct_tpdo`'s function went out, the last at `t_us`."""
+        self._sent(self.tpdos[number - 1], t_us)
 
     def _on_change(self, index: int, subindex: int, value: Value) -> None:
         if index in self._by_comm or index in self._by_map:
