@@ -1,7 +1,8 @@
 """A node telling its ticks ahead (`StreamingDevice`) sends what ticking one by one sends.
 
 The lock-step bus asks a streaming node for a span of ticks and delivers each tick's
-frames at its time; anything reaching the node mid-span (an SDO read of the samples or
+frames at its time, with the node's own timers among them (its 50 Hz TPDO2 of the static
+force and the sample count, its heartbeat); anything reaching the node mid-span (an SDO read of the samples or
 the sequence, NMT, SYNC, a heartbeat, a reply to one of its own frames) must find it as
 the per-tick path leaves it. Each test runs the same script on a bus with `stream=False`
 and on one with streaming, and compares every frame every tap saw, with its time and

@@ -150,11 +150,15 @@ class LockstepNetwork:
                 if t <= self.t_us:
                     device = self.devices[i]
                     self._deadlines.pop(i, None)
-                    self._deliver(device, self._tick(i, device, t_end_us))
+                    self._deliver(device, self._tick(i, device, t_end_us, due))
 
-    def _tick(self, index: int, device: SansIoDevice, t_end_us: int) -> list[Frame]:
+    def _tick(
+        self, index: int, device: SansIoDevice, t_end_us: int, due: list[tuple[int, int]]
+    ) -> list[Frame]:
         """The frames device `index` sends at its deadline now: its span's next tick, or a
-        new span's first (told up to the run's end), or those of `advance`."""
+        new span's first, or those of `advance`. A span is told up to the run's end or
+        the next time another device acts (any frame could concern it and end the span:
+        ticks told beyond are often told in vain), whichever is first."""
         span = self._spans.get(index)
         if span is not None:
             frames = span.take()
@@ -163,7 +167,13 @@ class LockstepNetwork:
             return frames
         streamer = self._streamers[index]
         if streamer is not None:
-            ticks = streamer.stream_ahead(self.t_us, t_end_us)
+            until_us = t_end_us
+            for t, i in due:
+                if self.t_us < t < until_us and i != index:
+                    until_us = t
+            if self._in_flight:
+                until_us = max(self.t_us, min(until_us, self._in_flight[0][0]))
+            ticks = streamer.stream_ahead(self.t_us, until_us)
             if ticks:
                 span = self._spans[index] = _Span(ticks)
                 frames = span.take()

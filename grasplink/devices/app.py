@@ -11,11 +11,12 @@ gives an application task, so an app cannot reach into the protocol engines.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol
 
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
-from grasplink.devices.store import Key, ObjectStore
+from grasplink.devices.store import Key, ObjectStore, Value
 
 
 class AppServices(Protocol):
@@ -63,6 +64,19 @@ class AppServices(Protocol):
         ...
 
 
+@dataclass(slots=True)
+class StreamSpan:
+    """An application's ticks told ahead: what `advance` returns at each, and the objects
+    it writes with their values after each (what its node's timers send in between, say
+    an event-timer TPDO of the newest sample count, is packed from these)."""
+
+    times_us: list[int]
+    frames: list[list[Frame]]
+    keys: tuple[Key, ...]
+    values: list[tuple[Value, ...]]
+    next_us: int  # its first tick not told: the span holds before it only
+
+
 class DeviceApp:
     """Base application: does nothing (a bare communication-only device)."""
 
@@ -99,13 +113,12 @@ class DeviceApp:
     def next_deadline_us(self) -> int | None:
         return None
 
-    def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
-        """Its ticks from `t_us` (its deadline) up to `until_us` told ahead, when nothing
-        else is due meanwhile (`core.protocol.StreamingDevice`): what `advance` would
-        return at each, with its time, changing nothing yet. Empty: ticked one by one."""
-        return []
-
-    def commit_stream(self, ticks: int) -> int | None:
-        """The first `ticks` ticks of the last `stream_ahead` happened (0: none did):
-        the application is as after `advance` at each. Returns the last one's time."""
+    def stream_ahead(self, t_us: int, until_us: int) -> StreamSpan | None:
+        """Its ticks from its deadline (not before `t_us`) up to `until_us` told ahead, when
+        nothing else reaches it meanwhile (`core.protocol.StreamingDevice`): what `advance`
+        would return at each, changing nothing yet. None: ticked one by one."""
         return None
+
+    def commit_stream(self, ticks: int) -> None:
+        """The first `ticks` ticks of the last `stream_ahead` happened (0: none did): the
+        application is as after `advance` at each."""

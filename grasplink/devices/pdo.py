@@ -127,6 +127,8 @@ class PdoEngine:
         # mapped into a TPDO that a change sends), kept by reload(): the store calls it
         # for these only, not for every sample a stream writes.
         self._interest: set[int] = set()
+        # TPDO packings for streams told ahead, by (number, objects given), until reload.
+        self._packings: dict[tuple[int, tuple[Key, ...]], Callable[..., Frame]] = {}
         for pdo in self._by_comm.values():
             store.add_validator(pdo.comm_index, self._validate_comm)
             store.add_validator(pdo.map_index, self._validate_map)
@@ -170,6 +172,7 @@ class PdoEngine:
 
     def reload(self) -> None:
         """Re-read every mapping (after a reset or a parameter change)."""
+        self._packings.clear()
         self._watchers.clear()
         self._event_tpdos = []
         self._by_can_id = {}
@@ -511,9 +514,17 @@ class PdoEngine:
         keys = [(e.index, e.subindex) for e in pdo.mapping]
         if any(key in unmapped for key in keys):
             return None
-        # Per mapped object, its place among the given values, or its value now (nothing
-        # else writes the store until the frames went out: the span ends at any frame
-        # reaching the node).
+        return self._packing(pdo, given)
+
+    def _packing(self, pdo: _Pdo, given: tuple[Key, ...]) -> Callable[..., Frame]:
+        """TPDO `pdo`'s frame as a function of the values of `given`, the other mapped
+        objects as they are now (nothing else writes the store until the frames went out:
+        a span told ahead ends at any frame reaching the node)."""
+        cached = self._packings.get((pdo.number, given))
+        if cached is not None:
+            return cached
+        assert pdo.packer is not None
+        keys = [(e.index, e.subindex) for e in pdo.mapping]
         places = [given.index(key) if key in given else -1 for key in keys]
         constants = [entry.value for entry in pdo.packed]
         pack, can_id = pdo.packer.pack, self.cob_id(pdo) & CAN_ID_MASK
@@ -523,13 +534,57 @@ class PdoEngine:
             def frame(*values: Value) -> Frame:
                 return Frame(can_id, pack(*values[:mapped]))
 
+            self._packings[(pdo.number, given)] = frame  # no value of now in it: kept
             return frame
+
+        if -1 not in places:
+
+            def ordered(*values: Value) -> Frame:
+                return Frame(can_id, pack(*[values[p] for p in places]))
+
+            self._packings[(pdo.number, given)] = ordered
+            return ordered
 
         def mixed(*values: Value) -> Frame:
             row = [values[p] if p >= 0 else c for p, c in zip(places, constants, strict=True)]
             return Frame(can_id, pack(*row))
 
         return mixed
+
+    def timer_sends(
+        self, until_us: int, given: tuple[Key, ...]
+    ) -> list[tuple[int, Callable[..., Frame], int]] | None:
+        """The event-timer transmissions due up to `until_us` if nothing else in the
+        engine runs meanwhile: (time, its frame as a function of the values of `given`,
+        TPDO number) in the order `advance` sends them. None when something else would
+        (a TPDO pending or held by its inhibit time, RPDO deadline monitoring)."""
+        sends: list[tuple[int, int, Callable[..., Frame], int]] = []
+        for order, pdo in enumerate(self._event_tpdos):
+            if pdo.pending or pdo.timer_due:
+                return None
+            timer = pdo.timer_us
+            if not timer:
+                continue
+            due = self._timer_deadline(pdo, timer)
+            if due > until_us:
+                continue
+            if pdo.packer is None or pdo.inhibit_us > timer or due < self._inhibit_end(pdo):
+                return None
+            frame = self._packing(pdo, given)
+            for t_us in range(due, until_us + 1, timer):
+                sends.append((t_us, order, frame, pdo.number))
+        if any(pdo.timer_us and pdo.last_rx_us is not None for pdo in self.rpdos):
+            return None
+        sends.sort(key=lambda send: send[:2])
+        return [(t_us, frame, number) for t_us, _, frame, number in sends]
+
+    def timer_sent(self, number: int, t_us: int) -> None:
+        """TPDO `number` went out on its event timer at `t_us` (told by `timer_sends`), as
+        `advance` would have sent it there."""
+        pdo = self.tpdos[number - 1]
+        pdo.timer_next_us = t_us + pdo.timer_us
+        pdo.timer_due = True
+        self._sent(pdo, t_us)
 
     def sent_directly(self, number: int, t_us: int) -> None:
         """Frames made by `direct_tpdo`'s function went out, the last at `t_us`."""
