@@ -150,11 +150,9 @@ class LockstepNetwork:
                 if t <= self.t_us:
                     device = self.devices[i]
                     self._deadlines.pop(i, None)
-                    self._deliver(device, self._tick(i, device, t_end_us, due))
+                    self._deliver(device, self._tick(i, device, t_end_us))
 
-    def _tick(
-        self, index: int, device: SansIoDevice, t_end_us: int, due: list[tuple[int, int]]
-    ) -> list[Frame]:
+    def _tick(self, index: int, device: SansIoDevice, t_end_us: int) -> list[Frame]:
         """The frames device `index` sends at its deadline now: its span's next tick, or a
         new span's first, or those of `advance`. A span is told up to the run's end or
         the next time another device acts (any frame could concern it and end the span:
@@ -168,8 +166,15 @@ class LockstepNetwork:
         streamer = self._streamers[index]
         if streamer is not None:
             until_us = t_end_us
-            for t, i in due:
-                if self.t_us < t < until_us and i != index:
+            deadlines = self._deadlines
+            for i, other in enumerate(self.devices):
+                if i == index:
+                    continue
+                if i not in deadlines:  # called at this time already: asked again
+                    span = self._spans.get(i)
+                    deadlines[i] = span.next_us() if span else other.next_deadline_us()
+                t = deadlines[i]
+                if t is not None and self.t_us < t < until_us:
                     until_us = t
             if self._in_flight:
                 until_us = max(self.t_us, min(until_us, self._in_flight[0][0]))
