@@ -64,6 +64,10 @@ class LockstepNetwork:
         # run it is asked again only then (device index -> deadline; missing = ask).
         # Each run starts afresh: callers may have changed devices in between.
         self._deadlines: dict[int, int | None] = {}
+        # The deadline each device last gave, kept when called since: where a span told
+        # ahead should end is a guess (a frame ends it anyway), and asking a master again
+        # after every frame it hears would cost more than the span saves.
+        self._last_deadlines: dict[int, int | None] = {}
         for device in devices:
             self.add(device)
 
@@ -78,7 +82,9 @@ class LockstepNetwork:
             device.accepted_can_ids if isinstance(device, FilteringDevice) else None
         )
         self._streamers.append(
-            device if self.stream and isinstance(device, StreamingDevice) else None
+            device
+            if self.stream and isinstance(device, StreamingDevice) and device.streaming
+            else None
         )
 
     def start(self) -> None:
@@ -108,6 +114,7 @@ class LockstepNetwork:
 
     def _run(self, t_end_us: int) -> None:
         deadlines = self._deadlines
+        last = self._last_deadlines
         spans = self._spans
         steps_at_t = 0
         while True:
@@ -121,7 +128,7 @@ class LockstepNetwork:
                 elif i in spans:
                     t = deadlines[i] = spans[i].next_us()
                 else:
-                    t = deadlines[i] = device.next_deadline_us()
+                    t = deadlines[i] = last[i] = device.next_deadline_us()
                 if t is not None:
                     due.append((t, i))
                     if t_next is None or t < t_next:
@@ -166,14 +173,16 @@ class LockstepNetwork:
         streamer = self._streamers[index]
         if streamer is not None:
             until_us = t_end_us
-            deadlines = self._deadlines
+            deadlines, last = self._deadlines, self._last_deadlines
             for i, other in enumerate(self.devices):
                 if i == index:
                     continue
-                if i not in deadlines:  # called at this time already: asked again
+                t = deadlines[i] if i in deadlines else last.get(i)
+                if i not in deadlines and (t is None or t <= self.t_us):
+                    # called since it gave a deadline, which is now: asked again
                     span = self._spans.get(i)
-                    deadlines[i] = span.next_us() if span else other.next_deadline_us()
-                t = deadlines[i]
+                    t = deadlines[i] = span.next_us() if span else other.next_deadline_us()
+                    last[i] = t
                 if t is not None and self.t_us < t < until_us:
                     until_us = t
             if self._in_flight:

@@ -63,6 +63,12 @@ class StreamingDevice(FilteringDevice, Protocol):
     per-tick path would have left it. A real-time runner just calls `advance`.
     """
 
+    @property
+    def streaming(self) -> bool:
+        """Whether it ever tells ticks ahead (a node whose application cannot: False, and
+        a bus treats it as any other device); constant for the device's life."""
+        ...
+
     def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
         """What `advance` would return at each of the device's deadlines from `t_us` (its
         deadline now) up to `until_us`, if nothing reached it meanwhile: (time, frames)

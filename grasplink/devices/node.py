@@ -143,8 +143,9 @@ class DeviceNode:
         self.pdo.packet_tpdos = frozenset(self.app.packet_tpdos)
         self.pdo.packets_on_sync = self.app.packets_on_sync
         self.app.attach(NodeServices(self))
-        # Whether the application tells its ticks ahead at all (a belt, a hand do not).
-        self._app_streams = type(self.app).stream_ahead is not DeviceApp.stream_ahead
+        # `StreamingDevice.streaming`: whether the application tells its ticks ahead at
+        # all (a belt, a hand do not).
+        self.streaming = type(self.app).stream_ahead is not DeviceApp.stream_ahead
 
     # -- SansIoDevice ------------------------------------------------------------
     @property
@@ -263,7 +264,7 @@ class DeviceNode:
         (a heartbeat consumer, an SDO timeout, an EMCY held back: each goes through
         `advance` at its time, the span ends before it)."""
         self._told = None
-        if not self._app_streams or not self.powered or self.state != NmtState.OPERATIONAL:
+        if not self.streaming or not self.powered or self.state != NmtState.OPERATIONAL:
             return []
         if self.next_deadline_us() != t_us:
             return []  # late: `advance` catches up

@@ -32,6 +32,9 @@ MN_PER_N = 1000.0
 UM_PER_MM = 1000
 MAX_PACKETS_PER_ADVANCE = 4096  # bound work after a stall; older packets are dropped
 MAX_PACKETS_PER_SPAN = 1024  # packets told ahead in one call (a bus asks again after)
+# Fewer packets due before the bus's bound (a 10 ms chunk holds one or two) tick one by
+# one: a span of one costs more than the tick it replaces.
+MIN_PACKETS_PER_SPAN = 2
 # Samples converted to counts in one numpy pass at most, when the source has them final:
 # per packet (3 samples) numpy's call overhead would cost more than the conversion.
 READ_AHEAD_SAMPLES = 256
@@ -219,18 +222,18 @@ class SkinApp(DeviceApp):
         if clock is None or self._final is None:
             return None  # a source that does not say which samples are final: as it asks
         per_pdo = self.samples_per_pdo
-        slots = tuple((obj.SKIN_SAMPLE_SLOTS, slot) for slot in range(1, per_pdo + 1))
-        given = (*slots, (obj.SKIN_PACKET_SEQUENCE, 0), (obj.SKIN_SAMPLE_COUNTER, 0))
-        static_key = (obj.SKIN_STATIC_FORCE_MN, 0)
-        pack = self.services.direct_tpdo(TPDO_SAMPLES, given, (static_key,))
-        if pack is None:
-            return None
         final_us = self._final.final_until_us()
         if final_us is not None:
             until_us = min(until_us, final_us)
         start = clock.next_index
         packets = min((clock.due_until(until_us) - start) // per_pdo, MAX_PACKETS_PER_SPAN)
-        if packets <= 0:
+        if packets < MIN_PACKETS_PER_SPAN:
+            return None
+        slots = tuple((obj.SKIN_SAMPLE_SLOTS, slot) for slot in range(1, per_pdo + 1))
+        given = (*slots, (obj.SKIN_PACKET_SEQUENCE, 0), (obj.SKIN_SAMPLE_COUNTER, 0))
+        static_key = (obj.SKIN_STATIC_FORCE_MN, 0)
+        pack = self.services.direct_tpdo(TPDO_SAMPLES, given, (static_key,))
+        if pack is None:
             return None
         counts = self._counts(clock, start, packets * per_pdo)
         zero, full, mn_per_count = self.calibration()
