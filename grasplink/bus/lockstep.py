@@ -53,6 +53,7 @@ class LockstepNetwork:
         self.stream = stream
         self._streamers: list[StreamingDevice | None] = []
         self._spans: dict[int, _Span] = {}
+        self._declined: set[int] = set()  # told nothing up to this run's end: not asked
         self.t_us = 0
         self.taps: list[Tap] = []
         self.frames_delivered = 0
@@ -106,6 +107,7 @@ class LockstepNetwork:
 
     def run_until(self, t_end_us: int) -> None:
         self._deadlines.clear()
+        self._declined.clear()
         try:
             self._run(t_end_us)
         finally:
@@ -171,7 +173,7 @@ class LockstepNetwork:
                 self._settle(index)
             return frames
         streamer = self._streamers[index]
-        if streamer is not None:
+        if streamer is not None and index not in self._declined:
             until_us = t_end_us
             deadlines, last = self._deadlines, self._last_deadlines
             for i, other in enumerate(self.devices):
@@ -188,6 +190,9 @@ class LockstepNetwork:
             if self._in_flight:
                 until_us = max(self.t_us, min(until_us, self._in_flight[0][0]))
             ticks = streamer.stream_ahead(self.t_us, until_us)
+            if not ticks and until_us == t_end_us:
+                # Nothing to tell up to the run's end: later in the run there is less.
+                self._declined.add(index)
             if ticks:
                 span = self._spans[index] = _Span(ticks)
                 frames = span.take()

@@ -34,7 +34,7 @@ MAX_PACKETS_PER_ADVANCE = 4096  # bound work after a stall; older packets are dr
 MAX_PACKETS_PER_SPAN = 1024  # packets told ahead in one call (a bus asks again after)
 # Fewer packets due before the bus's bound (a 10 ms chunk holds one or two) tick one by
 # one: a span of one costs more than the tick it replaces.
-MIN_PACKETS_PER_SPAN = 2
+MIN_PACKETS_PER_SPAN = 4
 # Samples converted to counts in one numpy pass at most, when the source has them final:
 # per packet (3 samples) numpy's call overhead would cost more than the conversion.
 READ_AHEAD_SAMPLES = 256
