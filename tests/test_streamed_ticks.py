@@ -2,11 +2,11 @@
 
 The lock-step bus asks a streaming node for a span of ticks and delivers each tick's
 frames at its time, with the node's own timers among them (its 50 Hz TPDO2 of the static
-force and the sample count, its heartbeat); anything reaching the node mid-span (an SDO read of the samples or
-the sequence, NMT, SYNC, a heartbeat, a reply to one of its own frames) must find it as
-the per-tick path leaves it. Each test runs the same script on a bus with `stream=False`
-and on one with streaming, and compares every frame every tap saw, with its time and
-sender, and the node's dictionary at the end.
+force and the sample count, its heartbeat); anything reaching the node mid-span (an SDO
+read of the samples or the sequence, NMT, SYNC, a heartbeat, a reply to one of its own
+frames) must find it as the per-tick path leaves it. Each test runs the same script on
+a bus with `stream=False` and on one with streaming, and compares every frame every tap
+saw, with its time and sender, and the node's dictionary at the end.
 """
 
 from __future__ import annotations
