@@ -308,10 +308,12 @@ def _rates(tree: Path, paths: list[Path], repeats: int) -> dict[str, float]:
     return {Path(k).stem: v for k, v in json.loads(done.stdout.splitlines()[-1]).items()}
 
 
-def before_after(against: Path, repeats: int, rounds: int = 3) -> dict:
+def before_after(
+    against: Path, repeats: int, rounds: int = 3, names: tuple[str, ...] = COMPARED
+) -> dict:
     """Speed of the same scenes in `against` (before) and this tree (after), interleaved
     round by round; the ratio of the best of each (scene files from this tree)."""
-    paths = [SCENES / f"{name}.toml" for name in COMPARED]
+    paths = [SCENES / f"{name}.toml" for name in names]
     before: dict[str, float] = {}
     after: dict[str, float] = {}
     for _ in range(rounds):
@@ -323,7 +325,7 @@ def before_after(against: Path, repeats: int, rounds: int = 3) -> dict:
         "rounds": rounds,
         "rows": [
             {"name": n, "before_x": before[n], "after_x": after[n], "ratio": after[n] / before[n]}
-            for n in COMPARED
+            for n in names
         ],
     }
 
@@ -650,7 +652,30 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--against", type=Path, metavar="DIR", help="an older tree to compare speed with"
     )
+    parser.add_argument(
+        "--compare-only",
+        nargs="*",
+        metavar="SCENE",
+        help="with --against: only the interleaved before/after of these scenes (default: "
+        "the compared ones), printed, nothing written",
+    )
+    parser.add_argument("--rounds", type=int, default=3, help="--compare-only rounds")
     args = parser.parse_args(argv)
+    if args.compare_only is not None:
+        if args.against is None:
+            parser.error("--compare-only needs --against DIR")
+        unknown = [n for n in args.compare_only if not (SCENES / f"{n}.toml").is_file()]
+        if unknown:
+            parser.error(f"no scene {', '.join(unknown)} in {SCENES}")
+        names = tuple(args.compare_only) or COMPARED
+        compared = before_after(args.against, 1 if args.quick else 3, args.rounds, names)
+        print(f"load average {os.getloadavg()[0]:.1f}; best of {args.rounds} rounds")
+        for row in compared["rows"]:
+            print(
+                f"{row['name']}: before {row['before_x']:.1f}x, after {row['after_x']:.1f}x"
+                f" real time, ratio {row['ratio']:.3f}"
+            )
+        return 0
     if args.report_only:
         figures = figures_json.read(args.report_only)
     else:

@@ -10,6 +10,15 @@ A device that says which CAN-IDs concern it (`FilteringDevice`: the grasplink no
 receives only those frames, as behind a CAN controller's acceptance filter: in a loop
 most frames are other nodes' process data, and a call per node per frame was most of
 what the bus cost. Every other device (a master, a log player) receives every frame.
+
+A device that can tell its next ticks ahead (`StreamingDevice`: a sensor node streaming
+packets) is asked for a span of them in one call when its deadline comes; each tick's
+frames then go out at its own time, in its turn among the devices due then, as if
+`advance` had been called there. Before anything reaches the device (a frame its filter
+accepts, a restart) and at the end of every run the bus tells it how many ticks happened
+(`commit_stream`): the rest are dropped and told again later, so every participant, tap
+and recording sees the frames the per-tick path sends, at the same times, in the same
+order (`stream=False` takes that path).
 """
 
 from __future__ import annotations
@@ -21,7 +30,7 @@ from collections.abc import Callable, Iterable
 
 from grasplink.bus.faults import ErrorFrame, FaultyLink
 from grasplink.core.frames import UNCONFIGURED_NODE_ID, Frame
-from grasplink.core.protocol import FilteringDevice, SansIoDevice
+from grasplink.core.protocol import FilteringDevice, SansIoDevice, StreamingDevice
 from grasplink.errors import ConfigError
 
 Tap = Callable[[int, Frame | ErrorFrame, object], None]  # (t_us, frame, sender or None)
@@ -29,10 +38,22 @@ MAX_STEPS_AT_ONE_TIME = 100_000
 
 
 class LockstepNetwork:
-    def __init__(self, devices: Iterable[SansIoDevice] = (), link: FaultyLink | None = None):
+    def __init__(
+        self,
+        devices: Iterable[SansIoDevice] = (),
+        link: FaultyLink | None = None,
+        *,
+        stream: bool = True,
+    ):
         self.devices: list[SansIoDevice] = []
         # Per device, its acceptance filter (`FilteringDevice.accepted_can_ids`) or None.
         self._filters: list[Callable[[], frozenset[int]] | None] = []
+        # Per device, itself if it tells its ticks ahead (and `stream` is on), else None;
+        # the spans told and not yet settled (device index -> span).
+        self.stream = stream
+        self._streamers: list[StreamingDevice | None] = []
+        self._spans: dict[int, _Span] = {}
+        self._declined: set[int] = set()  # told nothing up to this run's end: not asked
         self.t_us = 0
         self.taps: list[Tap] = []
         self.frames_delivered = 0
@@ -44,6 +65,10 @@ class LockstepNetwork:
         # run it is asked again only then (device index -> deadline; missing = ask).
         # Each run starts afresh: callers may have changed devices in between.
         self._deadlines: dict[int, int | None] = {}
+        # The deadline each device last gave, kept when called since: where a span told
+        # ahead should end is a guess (a frame ends it anyway), and asking a master again
+        # after every frame it hears would cost more than the span saves.
+        self._last_deadlines: dict[int, int | None] = {}
         for device in devices:
             self.add(device)
 
@@ -57,6 +82,11 @@ class LockstepNetwork:
         self._filters.append(
             device.accepted_can_ids if isinstance(device, FilteringDevice) else None
         )
+        self._streamers.append(
+            device
+            if self.stream and isinstance(device, StreamingDevice) and device.streaming
+            else None
+        )
 
     def start(self) -> None:
         for device in self.devices:
@@ -64,7 +94,9 @@ class LockstepNetwork:
 
     def start_device(self, device: SansIoDevice) -> None:
         """Power one device (again) at the current time."""
-        self._deadlines.pop(self.devices.index(device), None)
+        index = self.devices.index(device)
+        self._settle(index)
+        self._deadlines.pop(index, None)
         self._deliver(device, device.start(self.t_us))
 
     def inject(self, frame: Frame) -> list[Frame]:
@@ -75,7 +107,17 @@ class LockstepNetwork:
 
     def run_until(self, t_end_us: int) -> None:
         self._deadlines.clear()
+        self._declined.clear()
+        try:
+            self._run(t_end_us)
+        finally:
+            for index in list(self._spans):
+                self._settle(index)
+
+    def _run(self, t_end_us: int) -> None:
         deadlines = self._deadlines
+        last = self._last_deadlines
+        spans = self._spans
         steps_at_t = 0
         while True:
             # Every device's deadline (asked again only of those called since), and the
@@ -85,8 +127,10 @@ class LockstepNetwork:
             for i, device in enumerate(self.devices):
                 if i in deadlines:
                     t = deadlines[i]
+                elif i in spans:
+                    t = deadlines[i] = spans[i].next_us()
                 else:
-                    t = deadlines[i] = device.next_deadline_us()
+                    t = deadlines[i] = last[i] = device.next_deadline_us()
                 if t is not None:
                     due.append((t, i))
                     if t_next is None or t < t_next:
@@ -115,7 +159,55 @@ class LockstepNetwork:
                 if t <= self.t_us:
                     device = self.devices[i]
                     self._deadlines.pop(i, None)
-                    self._deliver(device, device.advance(self.t_us))
+                    self._deliver(device, self._tick(i, device, t_end_us))
+
+    def _tick(self, index: int, device: SansIoDevice, t_end_us: int) -> list[Frame]:
+        """The frames device `index` sends at its deadline now: its span's next tick, or a
+        new span's first, or those of `advance`. A span is told up to the run's end or
+        the next time another device acts (any frame could concern it and end the span:
+        ticks told beyond are often told in vain), whichever is first."""
+        span = self._spans.get(index)
+        if span is not None:
+            frames = span.take()
+            if span.taken == len(span.ticks):
+                self._settle(index)
+            return frames
+        streamer = self._streamers[index]
+        if streamer is not None and index not in self._declined:
+            until_us = t_end_us
+            deadlines, last = self._deadlines, self._last_deadlines
+            for i, other in enumerate(self.devices):
+                if i == index:
+                    continue
+                t = deadlines[i] if i in deadlines else last.get(i)
+                if i not in deadlines and (t is None or t <= self.t_us):
+                    # called since it gave a deadline, which is now: asked again
+                    span = self._spans.get(i)
+                    t = deadlines[i] = span.next_us() if span else other.next_deadline_us()
+                    last[i] = t
+                if t is not None and self.t_us < t < until_us:
+                    until_us = t
+            if self._in_flight:
+                until_us = max(self.t_us, min(until_us, self._in_flight[0][0]))
+            ticks = streamer.stream_ahead(self.t_us, until_us)
+            if not ticks and until_us == t_end_us:
+                # Nothing to tell up to the run's end: later in the run there is less.
+                self._declined.add(index)
+            if ticks:
+                span = self._spans[index] = _Span(ticks)
+                frames = span.take()
+                if len(ticks) == 1:
+                    self._settle(index)
+                return frames
+        return device.advance(self.t_us)
+
+    def _settle(self, index: int) -> None:
+        """Tell device `index` how much of its span happened; the rest is dropped."""
+        span = self._spans.pop(index, None)
+        if span is not None:
+            streamer = self._streamers[index]
+            assert streamer is not None
+            streamer.commit_stream(span.taken)
 
     def run_for(self, duration_us: int) -> None:
         self.run_until(self.t_us + duration_us)
@@ -153,6 +245,8 @@ class LockstepNetwork:
             if accepted is not None and can_id not in accepted():
                 continue  # its filter drops the frame: nothing in it changes
             self._deadlines.pop(i, None)
+            if i in self._spans:
+                self._settle(i)  # it is as the ticks so far left it, no further
             sent = device.receive(frame, self.t_us)
             if sent:
                 replies.extend([(device, f) for f in sent])
@@ -162,6 +256,24 @@ class LockstepNetwork:
         """A delayed frame reaches the receivers; their replies go on the bus."""
         for device, reply in self._replies(origin, frame):
             self._deliver(device, [reply])
+
+
+class _Span:
+    """A streaming device's ticks told ahead, and how many of them went out."""
+
+    __slots__ = ("taken", "ticks")
+
+    def __init__(self, ticks: list[tuple[int, list[Frame]]]):
+        self.ticks = ticks
+        self.taken = 0
+
+    def next_us(self) -> int:
+        return self.ticks[self.taken][0]
+
+    def take(self) -> list[Frame]:
+        frames = self.ticks[self.taken][1]
+        self.taken += 1
+        return frames
 
 
 def _earliest(a: int | None, b: int | None) -> int | None:

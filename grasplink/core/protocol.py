@@ -47,3 +47,37 @@ class FilteringDevice(SansIoDevice, Protocol):
         """The CAN-IDs `receive` may act on now (a superset); it changes only when the
         device is called (start, receive, advance) or its configuration is written."""
         ...
+
+
+@runtime_checkable
+class StreamingDevice(FilteringDevice, Protocol):
+    """A device whose next ticks can be told ahead: a sensor node streaming packets.
+
+    Until a frame it accepts reaches it, what its `advance` returns at each of its
+    deadlines depends on nothing a bus does, so a bus may ask for a span of ticks in one
+    call and deliver each tick's frames at its own time, merged with everyone else's: a
+    call per packet and the store writes of every packet were most of what a stream cost.
+    The device's state moves only when the bus says how much of the span happened
+    (`commit_stream`), which it must do before any other call to the device, so a frame
+    reaching it mid-span (an SDO read, NMT, SYNC, an RPDO) finds it exactly as the
+    per-tick path would have left it. A real-time runner just calls `advance`.
+    """
+
+    @property
+    def streaming(self) -> bool:
+        """Whether it ever tells ticks ahead (a node whose application cannot: False, and
+        a bus treats it as any other device); constant for the device's life."""
+        ...
+
+    def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
+        """What `advance` would return at each of the device's deadlines from `t_us` (its
+        deadline now) up to `until_us`, if nothing reached it meanwhile: (time, frames)
+        per tick, in time order. Empty when it cannot tell (then `advance` as usual).
+        Changes nothing until `commit_stream`."""
+        ...
+
+    def commit_stream(self, ticks: int) -> None:
+        """The first `ticks` ticks of the last `stream_ahead` happened (their frames went
+        out at their times), the rest did not: the device is as if `advance` had run at
+        each of those. 0 drops the span."""
+        ...

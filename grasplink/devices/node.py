@@ -11,6 +11,9 @@ answers LSS only, and boots once an LSS master has given it a node-ID.
 
 from __future__ import annotations
 
+import bisect
+from collections.abc import Callable
+
 import canopen.objectdictionary as cod
 
 from grasplink.core.frames import (
@@ -39,7 +42,7 @@ from grasplink.devices.lss import LssSlave
 from grasplink.devices.pdo import PdoEngine
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sdo_server import SdoServer
-from grasplink.devices.store import APPLICATION_AREA, COMMUNICATION_AREA, ObjectStore, Value
+from grasplink.devices.store import APPLICATION_AREA, COMMUNICATION_AREA, Key, ObjectStore, Value
 from grasplink.errors import ConfigError
 from grasplink.profiles import objects as obj
 
@@ -58,6 +61,11 @@ _LSS_ONLY = frozenset((LSS_MASTER_COB_ID,))
 ON_ERROR_PRE_OPERATIONAL = 0
 ON_ERROR_NO_CHANGE = 1
 ON_ERROR_STOPPED = 2
+
+
+# A span told ahead: per tick (time, application ticks by then), the event-timer TPDOs
+# sent (time, number) and the heartbeats (times).
+_Told = tuple[list[tuple[int, int]], list[tuple[int, int]], list[int]]
 
 
 def dummy_usage(od: cod.ObjectDictionary) -> frozenset[int]:
@@ -120,6 +128,8 @@ class DeviceNode:
         self._accepted: frozenset[int] = _LSS_ONLY
         # Frames on our own heartbeat COB-ID that we did not send: another node has our ID.
         self.duplicate_frames = 0
+        # The last span told ahead and not yet committed (`stream_ahead`).
+        self._told: _Told | None = None
         self._collision_clear_us: int | None = None
         # The SYNC COB-ID, read from the store once per change: every frame on the bus
         # asks whether it is the SYNC, and a store lookup per frame is most of that.
@@ -133,6 +143,9 @@ class DeviceNode:
         self.pdo.packet_tpdos = frozenset(self.app.packet_tpdos)
         self.pdo.packets_on_sync = self.app.packets_on_sync
         self.app.attach(NodeServices(self))
+        # `StreamingDevice.streaming`: whether the application tells its ticks ahead at
+        # all (a belt, a hand do not).
+        self.streaming = type(self.app).stream_ahead is not DeviceApp.stream_ahead
 
     # -- SansIoDevice ------------------------------------------------------------
     @property
@@ -245,6 +258,90 @@ class DeviceNode:
             frames.append(Frame(HEARTBEAT_BASE + self.node_id, bytes([self.state])))
         return frames
 
+    def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
+        """`StreamingDevice`: the application's next ticks told ahead, with the event-timer
+        TPDOs and heartbeats due among them, while OPERATIONAL and up to any other timer
+        (a heartbeat consumer, an SDO timeout, an EMCY held back: each goes through
+        `advance` at its time, the span ends before it)."""
+        self._told = None
+        if not self.streaming or not self.powered or self.state != NmtState.OPERATIONAL:
+            return []
+        if self.next_deadline_us() != t_us:
+            return []  # late: `advance` catches up
+        for bound in self._untold_deadlines():
+            if bound is not None:
+                until_us = min(until_us, bound - 1)
+        if until_us < t_us:
+            return []
+        span = self.app.stream_ahead(t_us, until_us)
+        if span is None or not span.times_us:
+            return []
+        until_us = min(until_us, span.next_us - 1)
+        sends = self.pdo.timer_sends(until_us, span.keys)
+        if sends is None:
+            return []
+        beats: list[int] = []
+        beat, period = self.heartbeat.next_deadline_us(), self.heartbeat.period_us
+        if beat is not None and period:
+            beats = list(range(beat, until_us + 1, period))
+        if len(sends) + len(beats) == 0:
+            self._told = ([(t, n) for n, t in enumerate(span.times_us, start=1)], [], [])
+            return list(zip(span.times_us, span.frames, strict=True))
+        # What the node's own timers send at a time, after the application's frames then.
+        extra: dict[int, list[Frame]] = {}
+        now = tuple(self.store.get(*key) for key in span.keys)
+        for t, frame, _ in sends:
+            told = bisect.bisect_right(span.times_us, t)
+            values = span.values[told - 1] if told else now
+            extra.setdefault(t, []).append(frame(*values))
+        heartbeat = Frame(HEARTBEAT_BASE + self.node_id, bytes([self.state]))
+        for t in beats:
+            extra.setdefault(t, []).append(heartbeat)
+        ticks: list[tuple[int, list[Frame]]] = []
+        app_ticks: list[tuple[int, int]] = []  # per tick: (time, application ticks by then)
+        told = 0
+        for t in sorted({*span.times_us, *extra}):
+            frames: list[Frame] = []
+            if told < len(span.times_us) and span.times_us[told] == t:
+                frames = list(span.frames[told])
+                told += 1
+            frames += extra.get(t, ())
+            ticks.append((t, frames))
+            app_ticks.append((t, told))
+        self._told = (app_ticks, [(t, n) for t, _, n in sends], beats)
+        return ticks
+
+    def commit_stream(self, ticks: int) -> None:
+        """`StreamingDevice`: the first `ticks` ticks of the last span happened; the
+        application, the event timers and the heartbeat are as `advance` there left them."""
+        told, self._told = self._told, None
+        if told is None:
+            return
+        app_ticks, sends, beats = told
+        if not ticks:
+            self.app.commit_stream(0)
+            return
+        t_us, app_told = app_ticks[ticks - 1]
+        self.app.commit_stream(app_told)
+        for t, number in sends:
+            if t <= t_us:
+                self.pdo.timer_sent(number, t)
+        done = [t for t in beats if t <= t_us]
+        if done:
+            self.heartbeat.due(done[-1])
+        self._deadline_stale = True
+        self._touch(t_us)
+
+    def _untold_deadlines(self) -> tuple[int | None, ...]:
+        """The timers a span told ahead does not cover: it ends before the earliest."""
+        deadlines: tuple[int | None, ...] = (
+            self.consumer.next_deadline_us(),
+            self._collision_clear_us,
+        )
+        if self.state in SDO_ALLOWED:
+            deadlines += (self.sdo.next_deadline_us(), self.emcy.next_deadline_us())
+        return deadlines
+
     def next_deadline_us(self) -> int | None:
         """The earliest timer; cached until a frame, a tick or a store change can move it."""
         changes = self.store.changes
@@ -257,10 +354,17 @@ class DeviceNode:
     def _compute_deadline(self) -> int | None:
         if not self.powered or self.state == NmtState.INITIALISING:
             return None  # off, or unconfigured: nothing runs until LSS gives a node-ID
+        protocol = self._protocol_deadline()
+        app = self.app.next_deadline_us()
+        if app is None or (protocol is not None and protocol < app):
+            return protocol
+        return app
+
+    def _protocol_deadline(self) -> int | None:
+        """The earliest timer of the node's services (all but the application's)."""
         candidates: tuple[int | None, ...] = (
             self.heartbeat.next_deadline_us(),
             self.consumer.next_deadline_us(),
-            self.app.next_deadline_us(),
             self._collision_clear_us,
             self.pdo.next_deadline_us(),
         )
@@ -460,3 +564,11 @@ class NodeServices:
 
     def error_active(self, code: int) -> bool:
         return self._node.emcy.is_active(code)
+
+    def direct_tpdo(
+        self, number: int, given: tuple[Key, ...], unmapped: tuple[Key, ...] = ()
+    ) -> Callable[..., Frame] | None:
+        return self._node.pdo.direct_tpdo(number, given, unmapped)
+
+    def sent_directly(self, number: int, t_us: int) -> None:
+        self._node.pdo.sent_directly(number, t_us)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from grasplink.core.frames import CAN_ID_MASK, SYNC_TYPE_MAX, Frame, is_restricted_can_id
 from grasplink.devices import emcy as em
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
-from grasplink.devices.store import Entry, ObjectStore, Value
+from grasplink.devices.store import Entry, Key, ObjectStore, Value
 from grasplink.profiles import objects as obj
 
 COB_ID_INVALID = 0x80000000
@@ -127,6 +127,8 @@ class PdoEngine:
         # mapped into a TPDO that a change sends), kept by reload(): the store calls it
         # for these only, not for every sample a stream writes.
         self._interest: set[int] = set()
+        # TPDO packings for streams told ahead, by (number, objects given), until reload.
+        self._packings: dict[tuple[int, tuple[Key, ...]], Callable[..., Frame]] = {}
         for pdo in self._by_comm.values():
             store.add_validator(pdo.comm_index, self._validate_comm)
             store.add_validator(pdo.map_index, self._validate_map)
@@ -170,6 +172,7 @@ class PdoEngine:
 
     def reload(self) -> None:
         """Re-read every mapping (after a reset or a parameter change)."""
+        self._packings.clear()
         self._watchers.clear()
         self._event_tpdos = []
         self._by_can_id = {}
@@ -467,6 +470,10 @@ class PdoEngine:
 
     def _build(self, pdo: _Pdo, t_us: int) -> Frame:
         frame = self._pack(pdo)
+        self._sent(pdo, t_us)
+        return frame
+
+    def _sent(self, pdo: _Pdo, t_us: int) -> None:
         if not pdo.timer_due or pdo.pending:
             # Sent for another reason than the timer alone (an event, a remote request):
             # the event timer counts again from this transmission.
@@ -474,7 +481,114 @@ class PdoEngine:
         pdo.pending = False
         pdo.timer_due = False
         pdo.last_tx_us = t_us
-        return frame
+
+    # -- streams told ahead (core.protocol.StreamingDevice) ---------------------------
+    def direct_tpdo(
+        self, number: int, given: tuple[Key, ...], unmapped: tuple[Key, ...] = ()
+    ) -> Callable[..., Frame] | None:
+        """How TPDO `number` goes out when the application triggers it right after writing
+        the objects `given`, while it also writes `unmapped`: a function of the values of
+        `given` (in that order) returning the frame `trigger` would send, without the
+        store. None unless the trigger sends it at once and changes nothing else: an
+        event-driven TPDO with no inhibit time, no event timer and nothing owed, whose
+        mapping packs, and no TPDO made to send by a change (types 0, 255) mapping any of
+        the objects written, nor this one mapping `unmapped`. Once frames made so went
+        out, `sent_directly` tells the engine the last one's time."""
+        if not (self.operational and 1 <= number <= len(self.tpdos)):
+            return None
+        pdo = self.tpdos[number - 1]
+        if (
+            not self._sendable(pdo)
+            or self.transmission_type(pdo) < TYPE_EVENT_MANUFACTURER
+            or pdo.inhibit_us
+            or pdo.timer_us
+            or pdo.pending
+            or pdo.timer_due
+            or pdo.packer is None
+        ):
+            return None
+        for key in (*given, *unmapped):
+            for watcher in self._watchers.get(key, ()):
+                if self.transmission_type(watcher) in (0, TYPE_EVENT_PROFILE):
+                    return None
+        keys = [(e.index, e.subindex) for e in pdo.mapping]
+        if any(key in unmapped for key in keys):
+            return None
+        return self._packing(pdo, given)
+
+    def _packing(self, pdo: _Pdo, given: tuple[Key, ...]) -> Callable[..., Frame]:
+        """TPDO `pdo`'s frame as a function of the values of `given`, the other mapped
+        objects as they are now (nothing else writes the store until the frames went out:
+        a span told ahead ends at any frame reaching the node)."""
+        cached = self._packings.get((pdo.number, given))
+        if cached is not None:
+            return cached
+        assert pdo.packer is not None
+        keys = [(e.index, e.subindex) for e in pdo.mapping]
+        places = [given.index(key) if key in given else -1 for key in keys]
+        constants = [entry.value for entry in pdo.packed]
+        pack, can_id = pdo.packer.pack, self.cob_id(pdo) & CAN_ID_MASK
+        mapped = len(places)
+        if places == list(range(mapped)):  # the mapping is the first given objects in order
+
+            def frame(*values: Value) -> Frame:
+                return Frame(can_id, pack(*values[:mapped]))
+
+            self._packings[(pdo.number, given)] = frame  # no value of now in it: kept
+            return frame
+
+        if -1 not in places:
+
+            def ordered(*values: Value) -> Frame:
+                return Frame(can_id, pack(*[values[p] for p in places]))
+
+            self._packings[(pdo.number, given)] = ordered
+            return ordered
+
+        def mixed(*values: Value) -> Frame:
+            row = [values[p] if p >= 0 else c for p, c in zip(places, constants, strict=True)]
+            return Frame(can_id, pack(*row))
+
+        return mixed
+
+    def timer_sends(
+        self, until_us: int, given: tuple[Key, ...]
+    ) -> list[tuple[int, Callable[..., Frame], int]] | None:
+        """The event-timer transmissions due up to `until_us` if nothing else in the
+        engine runs meanwhile: (time, its frame as a function of the values of `given`,
+        TPDO number) in the order `advance` sends them. None when something else would
+        (a TPDO pending or held by its inhibit time, RPDO deadline monitoring)."""
+        sends: list[tuple[int, int, Callable[..., Frame], int]] = []
+        for order, pdo in enumerate(self._event_tpdos):
+            if pdo.pending or pdo.timer_due:
+                return None
+            timer = pdo.timer_us
+            if not timer:
+                continue
+            due = self._timer_deadline(pdo, timer)
+            if due > until_us:
+                continue
+            if pdo.packer is None or pdo.inhibit_us > timer or due < self._inhibit_end(pdo):
+                return None
+            frame = self._packing(pdo, given)
+            for t_us in range(due, until_us + 1, timer):
+                sends.append((t_us, order, frame, pdo.number))
+        if any(pdo.timer_us and pdo.last_rx_us is not None for pdo in self.rpdos):
+            return None
+        sends.sort(key=lambda send: send[:2])
+        return [(t_us, frame, number) for t_us, _, frame, number in sends]
+
+    def timer_sent(self, number: int, t_us: int) -> None:
+        """TPDO `number` went out on its event timer at `t_us` (told by `timer_sends`), as
+        `advance` would have sent it there."""
+        pdo = self.tpdos[number - 1]
+        pdo.timer_next_us = t_us + pdo.timer_us
+        pdo.timer_due = True
+        self._sent(pdo, t_us)
+
+    def sent_directly(self, number: int, t_us: int) -> None:
+        """Frames made by `direct_tpdo`'s function went out, the last at `t_us`."""
+        self._sent(self.tpdos[number - 1], t_us)
 
     def _on_change(self, index: int, subindex: int, value: Value) -> None:
         if index in self._by_comm or index in self._by_map:

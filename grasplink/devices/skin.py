@@ -19,8 +19,8 @@ import numpy as np
 from grasplink.core.frames import Frame
 from grasplink.core.nmt import NmtState
 from grasplink.devices import emcy as em
-from grasplink.devices.app import AppServices, DeviceApp
-from grasplink.devices.sampling import SampleClock
+from grasplink.devices.app import AppServices, DeviceApp, StreamSpan
+from grasplink.devices.sampling import US_PER_S, SampleClock
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.sources import ConstantSource, FinalSource, SampleSource
 from grasplink.devices.store import Value
@@ -31,6 +31,10 @@ STATIC_WINDOW_S = 0.05  # static force = mean of the last 50 ms of samples
 MN_PER_N = 1000.0
 UM_PER_MM = 1000
 MAX_PACKETS_PER_ADVANCE = 4096  # bound work after a stall; older packets are dropped
+MAX_PACKETS_PER_SPAN = 1024  # packets told ahead in one call (a bus asks again after)
+# Fewer packets due before the bus's bound (a 10 ms chunk holds one or two) tick one by
+# one: a span of one costs more than the tick it replaces.
+MIN_PACKETS_PER_SPAN = 4
 # Samples converted to counts in one numpy pass at most, when the source has them final:
 # per packet (3 samples) numpy's call overhead would cost more than the conversion.
 READ_AHEAD_SAMPLES = 256
@@ -59,6 +63,8 @@ class SkinApp(DeviceApp):
         self._ahead: list[int] = []
         self.saturated_samples = 0
         self.dropped_packets = 0
+        # The last span told ahead (counts, samples per packet, span), until committed.
+        self._span: tuple[list[int], int, StreamSpan] | None = None
 
     @property
     def source(self) -> SampleSource:
@@ -201,10 +207,88 @@ class SkinApp(DeviceApp):
             if operational:
                 frames += self.services.transmit_tpdo(TPDO_SAMPLES, clock.time_of(end_index - 1))
         clock.next_index = start + packets * per_pdo
+        self._set_static_force()
+        return frames
+
+    def stream_ahead(self, t_us: int, until_us: int) -> StreamSpan | None:
+        """The packets due up to `until_us`, each TPDO1 at its time, told ahead
+        (`core.protocol.StreamingDevice`) up to the last final sample and to the first
+        packet that raises or clears the saturation EMCY (that one ticks as usual); only
+        when TPDO1 goes out at once on each packet (`AppServices.direct_tpdo`) and the
+        source says which samples are final (`FinalSource`). Nothing changes until
+        `commit_stream`: the samples converted ahead are only a cache."""
+        self._span = None
+        clock = self.clock
+        if clock is None or self._final is None:
+            return None  # a source that does not say which samples are final: as it asks
+        per_pdo = self.samples_per_pdo
+        final_us = self._final.final_until_us()
+        if final_us is not None:
+            until_us = min(until_us, final_us)
+        start = clock.next_index
+        packets = min((clock.due_until(until_us) - start) // per_pdo, MAX_PACKETS_PER_SPAN)
+        if packets < MIN_PACKETS_PER_SPAN:
+            return None
+        slots = tuple((obj.SKIN_SAMPLE_SLOTS, slot) for slot in range(1, per_pdo + 1))
+        given = (*slots, (obj.SKIN_PACKET_SEQUENCE, 0), (obj.SKIN_SAMPLE_COUNTER, 0))
+        static_key = (obj.SKIN_STATIC_FORCE_MN, 0)
+        pack = self.services.direct_tpdo(TPDO_SAMPLES, given, (static_key,))
+        if pack is None:
+            return None
+        counts = self._counts(clock, start, packets * per_pdo)
+        zero, full, mn_per_count = self.calibration()
+        saturated = self.services.error_active(em.SENSOR_SATURATED)
+        sequence = int(self.store.get(obj.SKIN_PACKET_SEQUENCE))
+        # The static force after each packet (a TPDO2 on its timer may carry it), from a
+        # copy of the window: `_track_static` on the packets' samples, one by one.
+        ring, pos, size = list(self._static), self._ring_pos, len(self._static)
+        total, fill = self._static_sum, self._static_fill
+        t0_us, rate_hz = clock.t0_us, clock.rate_hz
+        span = StreamSpan([], [], (*given, static_key), [], 0)
+        for first in range(0, packets * per_pdo, per_pdo):
+            block = counts[first : first + per_pdo]
+            if (full in block) != saturated:
+                break  # this packet raises or clears the EMCY: it ticks through advance
+            for value in block[-size:]:
+                total += value - ring[pos]
+                ring[pos] = value
+                pos = (pos + 1) % size
+            fill = min(size, fill + min(per_pdo, size))
+            static_mn = round((total / fill - zero) * mn_per_count)
+            sequence = (sequence + 1) & 0xFF
+            end = start + first + per_pdo
+            counter = end & 0xFFFFFFFF
+            span.times_us.append(t0_us + (end - 1) * US_PER_S // rate_hz)
+            span.frames.append([pack(*block, sequence, counter)])
+            span.values.append((*block, sequence, counter, static_mn))
+        told = len(span.times_us)
+        span.next_us = clock.time_of(start + (told + 1) * per_pdo - 1)
+        self._span = (counts, per_pdo, span)
+        return span
+
+    def commit_stream(self, ticks: int) -> None:
+        held, self._span = self._span, None
+        if held is None or not ticks:
+            return
+        counts, per_pdo, span = held
+        clock = self.clock
+        assert clock is not None and ticks <= len(span.times_us)
+        done = counts[: ticks * per_pdo]
+        self.saturated_samples += done.count(self.calibration()[1])
+        self._track_static(done)
+        for slot, value in enumerate(done[-per_pdo:], start=1):
+            self.store.set(obj.SKIN_SAMPLE_SLOTS, slot, value)
+        sequence = (int(self.store.get(obj.SKIN_PACKET_SEQUENCE)) + ticks) & 0xFF
+        self.store.set(obj.SKIN_PACKET_SEQUENCE, 0, sequence)
+        clock.next_index += ticks * per_pdo
+        self.store.set(obj.SKIN_SAMPLE_COUNTER, 0, clock.next_index & 0xFFFFFFFF)
+        self._set_static_force()
+        self.services.sent_directly(TPDO_SAMPLES, span.times_us[ticks - 1])
+
+    def _set_static_force(self) -> None:
         zero, _, mn_per_count = self.calibration()
         mean_counts = self._static_sum / self._static_fill
         self.store.set(obj.SKIN_STATIC_FORCE_MN, 0, round((mean_counts - zero) * mn_per_count))
-        return frames
 
     def _counts(self, clock: SampleClock, start: int, count: int) -> list[int]:
         """Counts of samples start .. start+count-1, converted ahead where the source allows."""
