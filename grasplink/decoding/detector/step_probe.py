@@ -209,6 +209,8 @@ class StepProbe:
     def events(self) -> tuple[list[ContactEvent], list[PulseCheck]]:
         """Probes judged steps, told once every contact near them would have been decided:
         a contact and its verdict - unless the kink bank found that onset itself."""
+        if not (self.probes or self.confirmed):
+            return [], []  # no probe out (most blocks): what the loops below give
         still = []
         for watch, z, w in self.probes:
             done = self.watcher.advance(watch, small=True)
