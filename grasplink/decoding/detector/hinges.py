@@ -45,6 +45,7 @@ from grasplink.decoding.kernels.detector import (
     channel_hinge,
     channels_fast,
     hinge_maxima,
+    lattice_median_of,
 )
 from grasplink.decoding.kernels.layout import (
     CH_ABS_N,
@@ -234,6 +235,8 @@ class HingeBank:
 
     def trim(self, keep: int) -> None:
         """Keep the last `keep` rows of each channel once twice that many are held."""
+        if max(self.bank.ints[:, CH_SIZE].tolist(), default=0) <= 2 * keep:
+            return  # (every block: one read of the sizes, not a property each)
         for ch in self.channels:
             if ch.rows.size > 2 * keep:
                 cut = ch.rows.size - keep
@@ -400,7 +403,10 @@ class HingeBank:
         """Block complete (centres up to n - 1): its noise, and perhaps the waiting blocks'."""
         values = ch.block_abs[: ch.abs_n]
         ch.abs_n = 0
-        self.noise.tell(ch.index, block, lattice_median(values, floor=0.0) * MEDIAN_TO_STD)
+        median = lattice_median_of(values, 0.0)  # (compiled; NaN: numpy's rules, below)
+        if median != median:
+            median = lattice_median(values, floor=0.0)
+        self.noise.tell(ch.index, block, median * MEDIAN_TO_STD)
         self._release(ch, n - 1 + ch.width)
 
     def _release(self, ch: _Channel, ready: int) -> None:
