@@ -179,7 +179,8 @@ class ContactDetector:
         self.watcher.run_level(x)
         self.steps.run(x)
         events = self._merge(candidates)
-        self.ledger.onsets.extend((ev.index, ev.emit_index) for ev in events)
+        if events:
+            self.ledger.onsets.extend((ev.index, ev.emit_index) for ev in events)
         checks = self.watcher.check(events)
         steps, step_checks = self.steps.events()
         if self.pulses.widths:

@@ -21,11 +21,12 @@ import pytest
 from scipy import signal
 
 from grasplink.decoding.contacts import ContactDetector
-from grasplink.decoding.filters import SosFilter
+from grasplink.decoding.filters import SosFilter, lattice_median
 from grasplink.decoding.kernels.detector import (
     channel_hinge,
     fir_run,
     hinge_maxima,
+    lattice_median_of,
     step_scale,
 )
 from tests.decoding.reference.contacts import ContactDetector as NumpyDetector
@@ -245,6 +246,28 @@ def test_compiled_maxima_match_the_numpy_test_at_the_edges(z: list[float]) -> No
 
 def test_compiled_maxima_of_an_empty_range_are_none() -> None:
     assert hinge_maxima(np.zeros((4, 8)), 5, 4, 2, 4.5, 0.1, np.empty(0, dtype=np.int64)) == 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_lattice_median_matches_the_numpy_one_bit_for_bit(seed: int) -> None:
+    """A block's noise (`HingeBank._block_done`) from the compiled median is numpy's: on
+    continuous values, on ADC lattices (ties, the cell interpolation and its floor), on
+    one value repeated, one value and none."""
+    rng = np.random.default_rng(seed)
+    sets = [np.zeros(0), np.array([0.7]), np.full(50, 0.0244), np.array([0.0, 0.0, 0.5])]
+    for n in (2, 3, 4, 49, 50):
+        sets += [np.abs(rng.normal(0, 1, n)) for _ in range(20)]
+        sets += [np.abs(np.round(rng.normal(0, 1.5, n)) * 0.0244) for _ in range(20)]
+        sets += [np.abs(np.round(rng.normal(0, 0.4, n)) * 0.0061) for _ in range(20)]
+    for values in sets:
+        for floor in (0.0, 0.01, None):
+            want = lattice_median(values, floor=floor)
+            got = lattice_median_of(values, -np.inf if floor is None else floor)
+            assert np.float64(got).tobytes() == np.float64(want).tobytes(), (values, floor)
+
+
+def test_compiled_lattice_median_leaves_a_nan_to_numpy() -> None:
+    assert np.isnan(lattice_median_of(np.array([0.1, np.nan, 0.2]), 0.0))
 
 
 def test_compiled_step_scale_with_nothing_to_test_only_filters() -> None:

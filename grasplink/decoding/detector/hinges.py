@@ -45,6 +45,7 @@ from grasplink.decoding.kernels.detector import (
     channel_hinge,
     channels_fast,
     hinge_maxima,
+    lattice_median_of,
 )
 from grasplink.decoding.kernels.layout import (
     CH_ABS_N,
@@ -64,6 +65,8 @@ from grasplink.decoding.kernels.layout import (
 )
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
+_NONE_FOUND = np.empty(0, np.int64)  # `_maxima` with no centre to test
+_NONE_FOUND.flags.writeable = False
 
 
 @dataclass(frozen=True)
@@ -232,6 +235,8 @@ class HingeBank:
 
     def trim(self, keep: int) -> None:
         """Keep the last `keep` rows of each channel once twice that many are held."""
+        if max(self.bank.ints[:, CH_SIZE].tolist(), default=0) <= 2 * keep:
+            return  # (every block: one read of the sizes, not a property each)
         for ch in self.channels:
             if ch.rows.size > 2 * keep:
                 cut = ch.rows.size - keep
@@ -280,9 +285,8 @@ class HingeBank:
         contact candidates among them. Usually (the centres in one block whose noise is
         known, none waiting) one kernel does it all (`_one_block`); else the slopes come
         from a kernel and `_normalise` sorts them into blocks."""
-        w = ch.width
-        count = ch.held + len(x) - w  # centres completed
-        start = ch.next_n
+        w, held, start = ch.width, ch.held, ch.next_n  # (each bank int read once)
+        count = held + len(x) - w  # centres completed
         block = start // self.block
         noise = None
         if count > 0 and not ch.waiting and (start + count - 1) // self.block == block:
@@ -292,11 +296,11 @@ class HingeBank:
         if noise is not None:
             found = self._one_block(ch, x, count, noise, start)
         else:
-            hinge, slope_after = channel_hinge(x, ch.taps, ch.state, ch.after, ch.held)
-            ch.held = min(w, ch.held + len(x))
+            hinge, slope_after = channel_hinge(x, ch.taps, ch.state, ch.after, held)
+            ch.held = min(w, held + len(x))
             if count <= 0:
                 return
-            ch.next_n += count
+            ch.next_n = start + count
             self._normalise(ch, start, hinge, slope_after)
             found = self._maxima(ch)
         if len(found):
@@ -309,12 +313,13 @@ class HingeBank:
         one block whose noise is known and none wait (the usual case: a CAN frame's few
         samples), as one kernel writing the z rows in place: the same numbers."""
         w, rows = ch.width, ch.rows
-        ch.next_n += count
+        ch.next_n = start + count  # (start: the channel's next centre, as the caller read it)
         at = rows.size
         rows.extend(count)
         ch.refresh_views()
         lo, hi = self._test_range(ch)  # (after the extend: rows.size is at + count)
         found = self.found.room(hi - lo + 1)
+        abs_n = ch.abs_n
         told = channel_fast(
             x,
             ch.taps,
@@ -326,14 +331,14 @@ class HingeBank:
             start + w,
             noise,
             ch.block_abs,
-            ch.abs_n,
+            abs_n,
             lo - ch.z_start,
             self.threshold,
             ch.needed,
             found,
         )
         ch.held = w
-        ch.abs_n += count
+        ch.abs_n = abs_n + count
         if (start + count) % self.block == 0:
             self._block_done(ch, start // self.block, start + count)
         return found[:told]
@@ -342,8 +347,9 @@ class HingeBank:
     def _test_range(ch: _Channel) -> tuple[int, int]:
         """Centres lo .. hi to test for a local maximum (z known over +-w): the next ones
         from now on (hi < lo: none yet)."""
-        lo = max(ch.next_test, ch.z_start + ch.width)
-        hi = ch.z_start + ch.rows.size - 1 - ch.width
+        z_start = ch.z_start
+        lo = max(ch.next_test, z_start + ch.width)
+        hi = z_start + ch.rows.size - 1 - ch.width
         if hi >= lo:
             ch.next_test = hi + 1
         return lo, hi
@@ -351,7 +357,10 @@ class HingeBank:
     def _maxima(self, ch: _Channel) -> np.ndarray:
         """Rows of the candidates among the centres not yet tested (`hinge_maxima`)."""
         lo, hi = self._test_range(ch)
-        i0, i1 = lo - ch.z_start, hi - ch.z_start
+        if hi < lo:  # none to test (no new rows: a channel waiting for a noise)
+            return _NONE_FOUND
+        z_start = ch.z_start
+        i0, i1 = lo - z_start, hi - z_start
         found = self.found.room(i1 - i0 + 1)
         told = hinge_maxima(ch.rows.data, i0, i1, ch.width, self.threshold, ch.needed, found)
         return found[:told]
@@ -371,12 +380,14 @@ class HingeBank:
         B = self.block
         pos = 0
         n = start
+        block_abs, abs_n = ch.block_abs, ch.abs_n
         while pos < len(hinge):
             block = n // B
             end = min(len(hinge), pos + (block + 1) * B - n)
             seg_h, seg_a = hinge[pos:end], slope_after[pos:end]
-            np.abs(seg_h, out=ch.block_abs[ch.abs_n : ch.abs_n + len(seg_h)])
-            ch.abs_n += len(seg_h)
+            np.abs(seg_h, out=block_abs[abs_n : abs_n + len(seg_h)])
+            abs_n += len(seg_h)
+            ch.abs_n = abs_n
             noise = None if ch.waiting else self.noise.of(ch.index, block)
             if noise is None:
                 ch.waiting.append((block, seg_h, seg_a))
@@ -386,12 +397,16 @@ class HingeBank:
             pos = end
             if n % B == 0:
                 self._block_done(ch, block, n)
+                abs_n = 0  # (`_block_done` starts the next block's)
 
     def _block_done(self, ch: _Channel, block: int, n: int) -> None:
         """Block complete (centres up to n - 1): its noise, and perhaps the waiting blocks'."""
         values = ch.block_abs[: ch.abs_n]
         ch.abs_n = 0
-        self.noise.tell(ch.index, block, lattice_median(values, floor=0.0) * MEDIAN_TO_STD)
+        median = lattice_median_of(values, 0.0)  # (compiled; NaN: numpy's rules, below)
+        if median != median:
+            median = lattice_median(values, floor=0.0)
+        self.noise.tell(ch.index, block, median * MEDIAN_TO_STD)
         self._release(ch, n - 1 + ch.width)
 
     def _release(self, ch: _Channel, ready: int) -> None:
@@ -470,6 +485,8 @@ class HingeBank:
         return best
 
     def merge(self, candidates: list) -> list[ContactEvent]:
+        if not candidates:  # (most blocks)
+            return []
         events = []
         candidates.sort(key=lambda c: (c[0], c[1], c[2]))
         for emit, w, n, delta, z, jump, placed in candidates:

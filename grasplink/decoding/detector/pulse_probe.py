@@ -99,6 +99,8 @@ class PulseProbe:
             gates = {b: self._gate(b) for b in blocks}
             if any(gates[b] is not None for b in range(lo // self.block, hi // self.block + 1)):
                 self._candidates(lo, hi, gates)
+        if not (self.watches or self._ready):
+            return events, checks  # nothing watched or told (most blocks): as below
         still = []
         for watch, z, w in self.watches:
             done = self.watcher.advance(watch)

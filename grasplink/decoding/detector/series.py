@@ -61,7 +61,9 @@ class BankInt:
         self.col = col
 
     def __get__(self, owner_of: Any, owner: type | None = None) -> int:
-        return int(owner_of.bank.ints[owner_of.index, self.col])
+        # `item`: the Python int straight away (indexing makes a numpy scalar first, then
+        # int() of it; read tens of times a block, on every channel)
+        return owner_of.bank.ints.item(owner_of.index, self.col)
 
     def __set__(self, owner_of: Any, value: int) -> None:
         owner_of.bank.ints[owner_of.index, self.col] = value
@@ -79,7 +81,7 @@ class BankRows(Series):
 
     @property
     def size(self) -> int:
-        return int(self.ints[self.index, self.col])
+        return self.ints.item(self.index, self.col)  # (a Python int, as `BankInt`)
 
     @size.setter
     def size(self, value: int) -> None:

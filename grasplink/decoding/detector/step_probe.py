@@ -141,6 +141,8 @@ class StepProbe:
 
     def trim(self, keep: int) -> None:
         """Keep the last `keep` differences of each scale once twice that many are held."""
+        if max(self.bank.ints[:, S_SIZE].tolist(), default=0) <= 2 * keep:
+            return  # (every block: one read of the sizes, not a property each)
         for sc in self.scales:
             if sc.store.size > 2 * keep:
                 cut = sc.store.size - keep
@@ -209,6 +211,8 @@ class StepProbe:
     def events(self) -> tuple[list[ContactEvent], list[PulseCheck]]:
         """Probes judged steps, told once every contact near them would have been decided:
         a contact and its verdict - unless the kink bank found that onset itself."""
+        if not (self.probes or self.confirmed):
+            return [], []  # no probe out (most blocks): what the loops below give
         still = []
         for watch, z, w in self.probes:
             done = self.watcher.advance(watch, small=True)

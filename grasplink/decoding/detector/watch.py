@@ -328,6 +328,8 @@ class PulseWatcher:
         return float(watch.history[told]) if told >= 0 else 0.0
 
     def check(self, events: list[ContactEvent]) -> list[PulseCheck]:
+        if not (events or self._watches or self._stepped):
+            return []  # nothing to start or watch (most blocks): what the loops below give
         checks: list[PulseCheck] = []
         for ev in events:
             watch = self.start(ev.id, ev.index, ev.emit_index)
