@@ -1,0 +1,128 @@
+"""Tail kinks: a ridge contact whose pulse starts on the previous pulse's falling tail.
+
+Physics (thesis ch. 5.3.1, `decoding.ridge_pulses`): after a short spacing the new pulse
+starts from the previous pulse's value, so the force does not rise at the onset - the
+tail merely stops falling for a rise time (the new pulse rising by about what the old one
+falls), then falls again with the new pulse's decay. The kink bank sees the slope jump
+(often 10-20 noise units at 20-80 ms: the kink is 0.05-0.1 of a lone pulse's onset slope,
+`onset_kinks`), but its rise check (`HingeSettings.rise_fraction`: the force rising after
+a contact) drops it: alpha0.3's 4 and 7 mm ridges after the tall first pulse, uniform4's
+4 mm ridges after a 3 mm one (issue 22: constant speed missing from the 3rd contact).
+
+The rise check is there for kinks with a flat level after them that are no contact: the
+end of a grip release or ramp, the slow bend at the end of a pulse's decay. This module
+tells a tail kink from those by the tail's own decay model: a candidate the rise check
+dropped is a contact when
+
+* it lies on the falling tail of a pulse: the level peaked within `look_s` before it, at
+  least `tall` white-noise units above the level at the kink, after rising to that peak
+  by at least as much (a pulse, not the start of a ramp down);
+* the tail from the peak to the kink is a ridge pulse's decay (u e^(1 - u) from its peak,
+  the rise from a grid, base and height least squares) that fits it within `fit_rms`
+  noise units RMS (a tail, not a corner of two ramps);
+* over the kink's scale after it, the level stands above that decay's extrapolation by
+  `residual_z` standard errors of the mean (the decay's own extrapolation error
+  included): the new pulse lifting the tail. The slow bend at a decay's end IS the decay
+  (extrapolated, no residual); a grip ramp's end has no pulse before it.
+
+False alarms: under white noise the residual mean is N(0, 1) in its own standard errors,
+so at `residual_z` 4 a candidate that is noise passes about 3e-5 of the time - and only
+after a kink over the bank's threshold on a tall pulse's tail, never on a held object's
+flat level (no tall pulse before it: measured on the held sets,
+`benchmarks/detector_contacts.py --held`).
+
+Pure functions of the samples before and up to the kink's scale after it (all held when
+the kink bank tests a candidate: its z is known over +-w), so chunking changes nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TailKinkSettings:
+    """When a kink the rise check dropped is a contact on a pulse's tail (module doc).
+
+    `residual_z` 0 turns the test off (the rise check alone, as before issue 22's tail
+    kinks)."""
+
+    residual_z: float = 4.0  # the lift over the decay, standard errors of its mean
+    floor: float = -0.5  # slope after / hinge at least this (a tail that falls on less)
+    look_s: float = 0.35  # the pulse under the kink peaked within this before it
+    tall: float = 8.0  # ... this many white-noise units above the level at the kink
+    fit_rms: float = 1.6  # the decay fits the tail within this (white-noise units, RMS)
+    min_fit: int = 6  # samples of tail to fit, at least
+
+
+# the pulse's rise times tried, in units of the tail's length (peak to kink)
+RISE_GRID = (0.08, 0.12, 0.17, 0.24, 0.33, 0.45, 0.6, 0.8, 1.1, 1.5, 2.0)
+
+
+def decay_shape(n: int, rise: float) -> np.ndarray:
+    """A ridge pulse's decay from its peak (thesis ch. 5.3.1: u e^(1 - u), u = 1 at the
+    peak), at 0 .. n - 1 samples after it, for a rise of `rise` samples."""
+    u = 1.0 + np.arange(n, dtype=np.float64) / rise
+    return u * np.exp(1.0 - u)
+
+
+@cache
+def _design(n_fit: int, n_after: int, rise_share: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """For a tail of n_fit samples (its peak first, the kink last) and a pulse rise of
+    rise_share * n_fit: the least-squares map from the tail to (base, height), the map
+    from the tail to the mean of the decay's extrapolation over the n_after samples after
+    the kink, and that mean's variance per unit white noise."""
+    shape = decay_shape(n_fit + n_after, rise_share * n_fit)
+    basis = np.vstack([np.ones(n_fit), shape[:n_fit]]).T
+    pinv = np.linalg.pinv(basis)  # (2, n_fit)
+    after = np.array([1.0, float(np.mean(shape[n_fit:]))])
+    mean_map = after @ pinv  # (n_fit,)
+    return pinv, mean_map, float(mean_map @ mean_map)
+
+
+def tail_kink(
+    x: np.ndarray, k: int, width: int, white_n: float, fs_hz: float, settings: TailKinkSettings
+) -> bool:
+    """Is the kink at x[k] (found at a scale of `width` samples, dropped by the rise
+    check) a ridge contact on a pulse's falling tail (module doc)? `white_n`: the white
+    noise (N per sample); x must hold k - look_s .. k + width."""
+    if settings.residual_z <= 0.0 or white_n <= 0.0:
+        return False
+    look = max(2, round(settings.look_s * fs_hz))
+    lo = k - look
+    if lo < 0 or k + width >= len(x):
+        return False
+    window = x[lo : k + 1]
+    p = int(np.argmax(window))
+    top = float(window[p])
+    drop = top - float(x[k])
+    if drop < settings.tall * white_n or p < 2:
+        return False  # not under a tall peak, or the peak is the window's edge: a ramp
+    if top - float(window[:p].min()) < drop:
+        return False  # no rise to the peak as tall as the fall since: no pulse
+    tail = x[lo + p : k + 1]
+    n_fit = len(tail)
+    if n_fit < settings.min_fit:
+        return False
+    after = float(np.mean(x[k + 1 : k + width + 1]))
+    best: tuple[float, float, float] | None = None  # (sse, mean extrapolated, its variance)
+    for share in RISE_GRID:
+        pinv, mean_map, var = _design(n_fit, width, share)
+        coef = pinv @ tail
+        if coef[1] <= 0.0:
+            continue  # not a pulse's decay
+        fitted = coef[0] + coef[1] * decay_shape(n_fit, share * n_fit)
+        sse = float(np.sum((tail - fitted) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, float(mean_map @ tail), var)
+    if best is None:
+        return False
+    sse, predicted, var = best
+    if math.sqrt(sse / n_fit) > settings.fit_rms * white_n:
+        return False  # the tail is no decay
+    error = white_n * math.sqrt(1.0 / width + var)
+    return after - predicted >= settings.residual_z * error
