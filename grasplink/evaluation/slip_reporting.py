@@ -805,7 +805,8 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
         for key, value in (tails or {}).items():
             if not hasattr(hinges.tails, key):
                 raise ValueError(f"build_decoder: no TailKinkSettings field {key!r}")
-            hinges = replace(hinges, tails=replace(hinges.tails, **{key: float(value)}))
+            kind = type(getattr(hinges.tails, key))
+            hinges = replace(hinges, tails=replace(hinges.tails, **{key: kind(value)}))
         watching = WatchSettings()
         for key, value in (watch or {}).items():
             if not hasattr(watching, key):
