@@ -17,12 +17,14 @@ dropped is a contact when
 * it lies on the falling tail of a pulse: the level peaked within `look_s` before it, at
   least `tall` white-noise units above the level at the kink, after rising to that peak
   by at least as much (a pulse, not the start of a ramp down);
-* the tail from the peak to the kink is a ridge pulse's decay (u e^(1 - u) from its peak,
-  the rise from a grid, base and height least squares) that fits it within `fit_rms`
-  noise units RMS (a tail, not a corner of two ramps);
+* the tail from the peak to the kink is a ridge pulse's decay (u e^(1 - u); where on it
+  the highest sample sits and the rise from a grid, base and height least squares) that
+  fits it within `fit_rms` noise units RMS (a tail, not a corner of two ramps);
 * over the kink's scale after it, the level stands above that decay's extrapolation by
   `residual_z` standard errors of the mean (the decay's own extrapolation error
-  included): the new pulse lifting the tail. The slow bend at a decay's end IS the decay
+  included) - and above every other decay that fits the tail about as well
+  (`spread_chi2`: a short tail leaves the rise open, and its extrapolation with it): the
+  new pulse lifting the tail. The slow bend at a decay's end IS the decay
   (extrapolated, no residual); a grip ramp's end has no pulse before it.
 
 False alarms: under white noise the residual mean is N(0, 1) in its own standard errors,
@@ -39,7 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cache
+from functools import lru_cache
 
 import numpy as np
 
@@ -56,32 +58,36 @@ class TailKinkSettings:
     look_s: float = 0.35  # the pulse under the kink peaked within this before it
     tall: float = 8.0  # ... this many white-noise units above the level at the kink
     fit_rms: float = 1.6  # the decay fits the tail within this (white-noise units, RMS)
+    spread_chi2: float = 6.0  # decays fitting within this (noise variances) of the best
     min_fit: int = 6  # samples of tail to fit, at least
 
 
-# the pulse's rise times tried, in units of the tail's length (peak to kink)
-RISE_GRID = (0.08, 0.12, 0.17, 0.24, 0.33, 0.45, 0.6, 0.8, 1.1, 1.5, 2.0)
+# the decay models tried (`_models`): where the tail's first sample (the highest, in
+# noise) sits on the pulse (u, 1 at its peak) and the pulse's rise (in units of the
+# tail's length, peak to kink)
+PEAK_U = tuple(np.linspace(0.6, 1.6, 11))
+RISE_SHARES = tuple(np.geomspace(0.05, 2.5, 24))
 
 
-def decay_shape(n: int, rise: float) -> np.ndarray:
-    """A ridge pulse's decay from its peak (thesis ch. 5.3.1: u e^(1 - u), u = 1 at the
-    peak), at 0 .. n - 1 samples after it, for a rise of `rise` samples."""
-    u = 1.0 + np.arange(n, dtype=np.float64) / rise
+def decay_shape(u: np.ndarray) -> np.ndarray:
+    """A ridge pulse's shape past its onset (thesis ch. 5.3.1: u e^(1 - u), 1 at the peak
+    u = 1; u in rise times since the onset)."""
     return u * np.exp(1.0 - u)
 
 
-@cache
-def _design(n_fit: int, n_after: int, rise_share: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """For a tail of n_fit samples (its peak first, the kink last) and a pulse rise of
-    rise_share * n_fit: the least-squares map from the tail to (base, height), the map
-    from the tail to the mean of the decay's extrapolation over the n_after samples after
-    the kink, and that mean's variance per unit white noise."""
-    shape = decay_shape(n_fit + n_after, rise_share * n_fit)
-    basis = np.vstack([np.ones(n_fit), shape[:n_fit]]).T
-    pinv = np.linalg.pinv(basis)  # (2, n_fit)
-    after = np.array([1.0, float(np.mean(shape[n_fit:]))])
-    mean_map = after @ pinv  # (n_fit,)
-    return pinv, mean_map, float(mean_map @ mean_map)
+@lru_cache(maxsize=64)
+def _models(n_fit: int, n_after: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every decay model (`PEAK_U` x `RISE_SHARES`) over a tail of n_fit samples and
+    n_after after it: the shapes (model x sample), their means over the tail and their
+    sums of squares about that mean - what a least-squares base and height need."""
+    u0, share = np.meshgrid(np.array(PEAK_U), np.array(RISE_SHARES), indexing="ij")
+    k = np.arange(n_fit + n_after, dtype=np.float64)
+    u = u0.reshape(-1, 1) + k / (share.reshape(-1, 1) * n_fit)
+    shapes = decay_shape(u)
+    tail = shapes[:, :n_fit]
+    mean = tail.mean(axis=1)
+    spread = ((tail - mean[:, None]) ** 2).sum(axis=1)
+    return shapes, mean, spread
 
 
 def tail_kink(
@@ -109,20 +115,21 @@ def tail_kink(
     if n_fit < settings.min_fit:
         return False
     after = float(np.mean(x[k + 1 : k + width + 1]))
-    best: tuple[float, float, float] | None = None  # (sse, mean extrapolated, its variance)
-    for share in RISE_GRID:
-        pinv, mean_map, var = _design(n_fit, width, share)
-        coef = pinv @ tail
-        if coef[1] <= 0.0:
-            continue  # not a pulse's decay
-        fitted = coef[0] + coef[1] * decay_shape(n_fit, share * n_fit)
-        sse = float(np.sum((tail - fitted) ** 2))
-        if best is None or sse < best[0]:
-            best = (sse, float(mean_map @ tail), var)
-    if best is None:
-        return False
-    sse, predicted, var = best
-    if math.sqrt(sse / n_fit) > settings.fit_rms * white_n:
-        return False  # the tail is no decay
-    error = white_n * math.sqrt(1.0 / width + var)
-    return after - predicted >= settings.residual_z * error
+    shapes, mean, spread = _models(n_fit, width)
+    centred = tail - float(tail.mean())
+    cross = shapes[:, :n_fit] @ centred  # per model: sum (shape - its mean)(tail - mean)
+    height = cross / spread
+    sse = float(centred @ centred) - cross * height
+    sse[height <= 0.0] = np.inf  # not a pulse's decay
+    best = float(sse.min())
+    if not math.isfinite(best) or math.sqrt(max(best, 0.0) / n_fit) > settings.fit_rms * white_n:
+        return False  # the tail is no pulse's decay
+    # every model that fits about as well (within `spread_chi2` noise variances of the best
+    # one's squared residual: the tail cannot tell them apart) must fall short of the level
+    # after the kink, by residual_z standard errors of its extrapolated mean
+    near = sse <= best + settings.spread_chi2 * white_n * white_n
+    lift = shapes[near, n_fit:].mean(axis=1) - mean[near]
+    predicted = float(tail.mean()) + height[near] * lift
+    var = 1.0 / width + 1.0 / n_fit + lift * lift / spread[near]  # per unit noise
+    bound = predicted + settings.residual_z * white_n * np.sqrt(var)
+    return after >= float(bound.max())
