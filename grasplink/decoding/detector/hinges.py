@@ -9,9 +9,10 @@ pulses (weak slope, long rise) on the long ones. Each scale is normalised by its
 above `threshold`, after which the force rises (the end of a grip release is a kink too,
 but flat after) - or, with no rise, one on a pulse's falling tail (`tail_kinks`: a ridge
 whose pulse starts on the previous one's tail; the kernels pass such candidates at the
-lower `TailKinkSettings.floor` and `_candidates` judges them); its time is refined coarse to fine (the finest scale that still sees it
-places it) and to a fraction of a sample by a parabola; a candidate within its own reach
-of an earlier contact is that contact again (long scales decide later).
+lower `TailKinkSettings.floor` and `_candidates` judges them); its time is refined coarse
+to fine (the finest scale that still sees it places it) and to a fraction of a sample by
+a parabola; a candidate within its own reach of an earlier contact is that contact again
+(long scales decide later).
 
 The per-block numeric path (filters, hinges, normalising, local maxima) runs compiled,
 one crossing for every channel (`kernels.detector.channels_fast`).
