@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from detector_contacts import kink_label, spacing_signals
 
 from grasplink.decoding.contacts import ContactDetector, DetectorSettings, HingeSettings
-from grasplink.decoding.detector.tail_kinks import TailKinkSettings
+from grasplink.decoding.detector.tail_kinks import ON_RESIDUAL_Z, TailKinkSettings
 from grasplink.evaluation import contact_truth as ct
 from grasplink.evaluation import slip_reporting as sr
 
@@ -44,7 +44,7 @@ def settings(residual_z: float) -> DetectorSettings:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--residual-z", type=float, default=TailKinkSettings().residual_z)
+    parser.add_argument("--residual-z", type=float, default=ON_RESIDUAL_Z)
     args = parser.parse_args(argv)
     trials = {
         "off": settings(0.0),
