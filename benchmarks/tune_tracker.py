@@ -39,11 +39,16 @@ def job(case: sr.Case, configs: dict[str, dict]) -> dict[str, sr.CaseScore]:
 
 def config(tuning: dict) -> dict:
     """A `slip_reporting.build_decoder` config from a parsed setting: tracker constants as
-    the tuning, `watch.NAME` as the detector's `WatchSettings` field NAME."""
+    the tuning, `watch.NAME` as the detector's `WatchSettings` field NAME, `tails.NAME` as
+    its kink bank's `TailKinkSettings` field NAME (`detector.tail_kinks`)."""
     watch = {k.removeprefix("watch."): v for k, v in tuning.items() if k.startswith("watch.")}
-    out: dict = {"tuning": {k: v for k, v in tuning.items() if not k.startswith("watch.")}}
+    tails = {k.removeprefix("tails."): v for k, v in tuning.items() if k.startswith("tails.")}
+    tracker = {k: v for k, v in tuning.items() if not k.startswith(("watch.", "tails."))}
+    out: dict = {"tuning": tracker}
     if watch:
         out["watch"] = watch
+    if tails:
+        out["tails"] = tails
     return out
 
 

@@ -12,7 +12,9 @@ trends of the signal (drift, the object covering more of the sensor).
 frozen settings (`DetectorSettings` holds them all, today's defaults):
 
 * the hinge (kink) bank (`HingeBank`, `HingeSettings`): slope jumps at 5-80 ms, their
-  local maxima above a threshold in noise units, timed coarse to fine - the contacts;
+  local maxima above a threshold in noise units, timed coarse to fine - the contacts; a
+  kink the force does not rise after counts only on a pulse's falling tail
+  (`tail_kinks`: a ridge after a short spacing, its pulse starting on that tail);
 * the noise floor (`NoiseFloor`, `NoiseSettings`): each scale's noise per block, the
   white noise the other parts judge against;
 * the pulse watcher (`PulseWatcher`, `WatchSettings`): the level after each contact,

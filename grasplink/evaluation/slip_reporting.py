@@ -799,8 +799,14 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
     settings = dict(settings)
     threshold = settings.pop("detector_threshold", None)
     watch = settings.pop("watch", None)  # WatchSettings fields by name (a trial's)
-    if threshold is not None or watch:
+    tails = settings.pop("tails", None)  # TailKinkSettings fields by name (a trial's)
+    if threshold is not None or watch or tails:
         hinges = HingeSettings() if threshold is None else HingeSettings(threshold=threshold)
+        for key, value in (tails or {}).items():
+            if not hasattr(hinges.tails, key):
+                raise ValueError(f"build_decoder: no TailKinkSettings field {key!r}")
+            kind = type(getattr(hinges.tails, key))
+            hinges = replace(hinges, tails=replace(hinges.tails, **{key: kind(value)}))
         watching = WatchSettings()
         for key, value in (watch or {}).items():
             if not hasattr(watching, key):

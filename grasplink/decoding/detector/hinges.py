@@ -7,9 +7,12 @@ so the best scale is about half the rise: fast pulses show on the short scales, 
 pulses (weak slope, long rise) on the long ones. Each scale is normalised by its noise
 (`noise_floor`). A contact candidate is a local maximum of z_w = h_w / noise_w over +-w
 above `threshold`, after which the force rises (the end of a grip release is a kink too,
-but flat after); its time is refined coarse to fine (the finest scale that still sees it
-places it) and to a fraction of a sample by a parabola; a candidate within its own reach
-of an earlier contact is that contact again (long scales decide later).
+but flat after) - or, with no rise, one on a pulse's falling tail (`tail_kinks`: a ridge
+whose pulse starts on the previous one's tail; the kernels pass such candidates at the
+lower `TailKinkSettings.floor` and `_candidates` judges them); its time is refined coarse
+to fine (the finest scale that still sees it places it) and to a fraction of a sample by
+a parabola; a candidate within its own reach of an earlier contact is that contact again
+(long scales decide later).
 
 The per-block numeric path (filters, hinges, normalising, local maxima) runs compiled,
 one crossing for every channel (`kernels.detector.channels_fast`).
@@ -24,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from grasplink.decoding.detector.events import ContactEvent, Ledger
-from grasplink.decoding.detector.noise_floor import MEDIAN_TO_STD, NoiseFloor
+from grasplink.decoding.detector.noise_floor import MEDIAN_TO_STD, NOISE_FLOOR_N, NoiseFloor
 from grasplink.decoding.detector.series import (
     BankInt,
     BankRows,
@@ -33,6 +36,7 @@ from grasplink.decoding.detector.series import (
     Series,
     mean,
 )
+from grasplink.decoding.detector.tail_kinks import TailKinkSettings, tail_kink
 from grasplink.decoding.filters import SosFilter, lattice_median
 from grasplink.decoding.kernels.detector import (
     BLOCK_DONE,
@@ -82,6 +86,8 @@ class HingeSettings:
     # pulse's decay is no contact)
     rise_fraction: float = 0.1
     coarse_rise_fraction: float = 0.3
+    # ... unless a kink on a pulse's falling tail (`tail_kinks`: a ridge after a short spacing)
+    tails: TailKinkSettings = field(default_factory=TailKinkSettings)
 
 
 def hinge_widths(fs_hz: float, settings: HingeSettings) -> list[int]:
@@ -136,6 +142,7 @@ class _Channel:
     width: int  # w, samples
     slope: SosFilter  # LS slope over the last w + 1 samples (FIR)
     needed: float  # the rise after a candidate, per unit of its hinge (`hinge_maxima`)
+    rise: float  # ... that the rise check asks (`needed` lower: tail kinks, `_candidates`)
     bank: _ChannelBank  # where its numbers live: row `index`
     index: int
     waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
@@ -211,14 +218,18 @@ class HingeBank:
         self.threshold = float(settings.threshold)
         self.refine_z = float(settings.refine_z)
         self.merge_widths = float(settings.merge_widths)
-        needed = [
+        rise = [
             settings.rise_fraction if w / fs_hz < 0.03 else settings.coarse_rise_fraction
             for w in widths
         ]
+        # the kernels pass the tail kinks' candidates too (`_candidates` judges them)
+        self.tails = settings.tails
+        floor = self.tails.floor if self.tails.residual_z > 0.0 else math.inf
+        needed = [min(r, floor) for r in rise]
         self.bank = _ChannelBank(widths, needed, self.block)
         self.constants = tuple(ChannelSettings(block=self.block, threshold=self.threshold))
         self.channels = [
-            _Channel(w, SosFilter.fir(slope_taps(w)), needed[ci], self.bank, ci)
+            _Channel(w, SosFilter.fir(slope_taps(w)), needed[ci], rise[ci], self.bank, ci)
             for ci, w in enumerate(widths)
         ]
         self.bank.rows = tuple(ch.rows.data for ch in self.channels)
@@ -437,12 +448,24 @@ class HingeBank:
         w = ch.width
         for i in found.tolist():
             n = ch.z_start + i
+            if ch.za[i] < ch.rise * ch.zh[i] and not self._on_tail(n, w):
+                continue
             n_at, delta, placed = self._refine(ci, n)
             if self._after_drop(n_at, w):
                 continue
             # decided once z is known over +-w (late where the noise had to be waited for)
             emit = max(n + 2 * w, int(ch.zready[i - w : i + w + 1].max()))
             candidates.append((emit, w, n_at, delta, float(ch.z[i]), float(ch.zh[i]), placed))
+
+    def _on_tail(self, n: int, w: int) -> bool:
+        """A candidate the rise check drops: a ridge's kink on a pulse's tail after all
+        (`tail_kinks`)?"""
+        white = self.noise.white(n // self.block)
+        if white is None:
+            return False
+        sigma = max(white[0], NOISE_FLOOR_N)
+        x = self.samples.x
+        return tail_kink(x, n - self.samples.start, w, sigma, self.fs_hz, self.tails)
 
     def _after_drop(self, n: int, w: int) -> bool:
         """Is the kink at sample n the bottom of a sharp fall (the level stepping down: a
