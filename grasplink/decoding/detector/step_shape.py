@@ -21,10 +21,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-PRE_S = 0.06  # the level before the onset: its base, slope and white noise
+PRE_S = 0.06  # the level before the onset: its base and slope
+NOISE_S = 0.15  # ... and its white noise, over this long (at least NOISE_SAMPLES)
+NOISE_SAMPLES = 16
 POST_S = 0.03  # the level held at the verdict: the last this long before it
 SMOOTH_S = 0.01  # the peak is read on a moving mean this long (noise would raise a max)
 NOISE_FLOOR_N = 1e-3  # the quietest white noise assumed (an ideal FSR), N per sample
+RISE_NOISE = 1.5  # the rise ends within this many noise units of the level held (`measure`)
 
 
 class StepShape(NamedTuple):
@@ -57,14 +60,17 @@ def measure(x: np.ndarray, onset: int, verdict: int, fs_hz: float) -> StepShape 
     if fs_hz <= 0:
         raise ValueError(f"step shape: sample rate {fs_hz!r} Hz is not positive")
     pre = max(3, round(PRE_S * fs_hz))
+    quiet = max(pre, NOISE_SAMPLES, round(NOISE_S * fs_hz))
     post = max(2, round(POST_S * fs_hz))
-    if onset - pre < 0 or verdict >= len(x) or verdict - onset < post + 1:
+    if onset - quiet < 0 or verdict >= len(x) or verdict - onset < post + 1:
         return None
     before = x[onset - pre : onset]
     after = x[onset : verdict + 1]
-    if not (np.all(np.isfinite(before)) and np.all(np.isfinite(after))):
+    if not (np.all(np.isfinite(x[onset - quiet : onset])) and np.all(np.isfinite(after))):
         return None
-    noise = max(float(np.median(np.abs(np.diff(before)))) * 1.4826 / np.sqrt(2.0), NOISE_FLOOR_N)
+    # white noise from first differences (robust: a pulse or a step among them moves a few)
+    diffs = np.abs(np.diff(x[onset - quiet : onset]))
+    noise = max(float(np.median(diffs)) * 1.4826 / math.sqrt(2.0), NOISE_FLOOR_N)
     t_pre = np.arange(-pre, 0) / fs_hz
     pre_slope, _ = _fit(t_pre, before)
     base = float(np.median(before))
@@ -76,7 +82,9 @@ def measure(x: np.ndarray, onset: int, verdict: int, fs_hz: float) -> StepShape 
     smooth = np.convolve(after, np.full(width, 1.0 / width), mode="valid")
     height = held - base
     peak = float(smooth.max()) if len(smooth) else held
-    reached = np.flatnonzero(smooth - base >= 0.9 * height) if height > 0 else np.zeros(0)
+    # within 10 % of the height or RISE_NOISE units of the (smoothed) noise of it
+    near = max(0.1 * height, RISE_NOISE * noise / math.sqrt(width))
+    reached = np.flatnonzero(smooth - base >= height - near) if height > 0 else np.zeros(0)
     rise = (float(reached[0]) + (width - 1) / 2.0) / fs_hz if len(reached) else float("nan")
     return StepShape(
         height_n=height,
