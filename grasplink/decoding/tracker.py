@@ -544,6 +544,7 @@ class TrackerDecoder(Decoder):
         self._steps: dict[int, bool | None] = {}
         self._sure: set[int] = set()  # ... of which told at the sure hold (`PulseCheck.sure`)
         self._shapes: dict[int, int] = {}  # ... their shapes' verdicts (`step_shape.classify`)
+        self._recent = step_shape.Recent(fs_hz)  # the samples their shapes are read from
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
@@ -647,6 +648,7 @@ class TrackerDecoder(Decoder):
             self._pending_t, self._pending_x = self._pending_t[count:], self._pending_x[count:]
             self._n_in = upto
             events, checks = self.detector.feed(t, x)
+            self._recent.append(x)  # (a step's shape is read from them: `_step_shape`)
             for ev in events:
                 bisect.insort(self._items, (ev.emit_index, 0, ev.id, ev))
             for ck in checks:
@@ -694,16 +696,12 @@ class TrackerDecoder(Decoder):
 
     def _step_shape(self, check: PulseCheck) -> int:
         """The shape verdict of a contact told a step (`step_shape.classify`), read from the
-        detector's samples up to the verdict (the same however the input is chunked);
-        UNTOLD when its contact or samples are no longer held."""
+        samples up to the verdict (the same however the input is chunked); UNTOLD when its
+        contact or samples are no longer held."""
         onset = next((c.index for c in self._contacts if c.id == check.id), None)
         if onset is None or check.sure:
             return step_shape.UNTOLD
-        samples = self.detector.samples
-        shape = step_shape.measure(
-            samples.x, onset - samples.start, check.emit_index - samples.start, self.fs_hz
-        )
-        return step_shape.classify(shape, self.fs_hz)
+        return self._recent.verdict(onset, check.emit_index)
 
     # ------------------------------------------------------------------ hypotheses
     def _add_contact(self, ev: ContactEvent) -> None:

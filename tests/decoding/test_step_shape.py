@@ -87,3 +87,27 @@ def test_samples_not_held_tell_nothing_and_a_bad_rate_is_named():
     assert ss.classify(None, fs_hz) == ss.UNTOLD
     with pytest.raises(ValueError, match="sample rate"):
         ss.measure(x, 200, 240, 0.0)
+
+
+@pytest.mark.parametrize("chunk", [1, 3, 7, 400])
+def test_recent_samples_tell_a_late_verdict_by_the_rise_however_chunked(chunk):
+    """A verdict told 0.5 s after its onset (a revision) is read on the rise it told of;
+    one told long after `RECENT_S` (at least that long is held) finds its samples gone:
+    untold, never guessed."""
+    fs_hz = 400.0
+    t, x = level(fs_hz, 0.005, 1)
+    x = np.concatenate([x, x, x])  # 3 s
+    x[round(ONSET_S * fs_hz) :] += 0.15  # a stop's step ...
+    onset = round(ONSET_S * fs_hz)
+    x[onset + 120 :] += 0.5  # ... and a slow grip rise long after it
+    recent = ss.Recent(fs_hz)
+    told = {}
+    for i in range(0, len(x), chunk):
+        recent.append(x[i : i + chunk])
+        n = min(i + chunk, len(x))
+        for late in (40, 200, 900):
+            if onset + late < n and late not in told:
+                told[late] = recent.verdict(onset, onset + late)
+    assert told == {40: ss.STOP_LIKE, 200: ss.STOP_LIKE, 900: ss.UNTOLD}
+    with pytest.raises(ValueError, match="sample rate"):
+        ss.Recent(0.0)

@@ -125,3 +125,49 @@ def classify(shape: StepShape | None, fs_hz: float) -> int:
         and shape.overshoot_n > PULSE_OVERSHOOT_SNR * shape.noise_n
     )
     return STOP_LIKE if fast and not peaked else RIDGE_LIKE
+
+
+# a verdict told late (a revision, a probe's contact) is read on the rise it told of: the
+# samples up to this long after the onset at most
+HELD_S = 0.2
+RECENT_S = 1.0  # `Recent` holds at least this long (twice that at most)
+
+
+class Recent:
+    """The last RECENT_S of samples by global index (the detector's numbering: every
+    sample fed, in order), what a step's shape is read from however late its verdict
+    comes. Appends copy the new samples only; the buffer is cut from the front when
+    full."""
+
+    __slots__ = ("_x", "fs_hz", "size", "span", "start")
+
+    def __init__(self, fs_hz: float):
+        if not fs_hz > 0:
+            raise ValueError(f"step shape: sample rate {fs_hz!r} Hz is not positive")
+        self.fs_hz = float(fs_hz)
+        self.span = max(64, round(RECENT_S * fs_hz))
+        self._x = np.empty(2 * self.span)
+        self.start = 0  # global index of _x[0]
+        self.size = 0
+
+    def append(self, x: np.ndarray) -> None:
+        if self.size + len(x) > len(self._x):
+            keep = min(self.size, self.span)
+            self._x[:keep] = self._x[self.size - keep : self.size]
+            self.start += self.size - keep
+            self.size = keep
+            if keep + len(x) > len(self._x):
+                grown = np.empty(2 * (keep + len(x)))
+                grown[:keep] = self._x[:keep]
+                self._x = grown
+        self._x[self.size : self.size + len(x)] = x
+        self.size += len(x)
+
+    def verdict(self, onset: int, told: int) -> int:
+        """`classify` of the step whose onset and verdict are global sample indices."""
+        told = min(told, onset + round(HELD_S * self.fs_hz))
+        x = self._x[: self.size]
+        if onset - self.start < 0:
+            return UNTOLD
+        shape = measure(x, onset - self.start, told - self.start, self.fs_hz)
+        return classify(shape, self.fs_hz)
