@@ -95,7 +95,7 @@ def test_recent_samples_tell_a_late_verdict_by_the_rise_however_chunked(chunk):
     one told long after `RECENT_S` (at least that long is held) finds its samples gone:
     untold, never guessed."""
     fs_hz = 400.0
-    t, x = level(fs_hz, 0.005, 1)
+    _, x = level(fs_hz, 0.005, 1)
     x = np.concatenate([x, x, x])  # 3 s
     x[round(ONSET_S * fs_hz) :] += 0.15  # a stop's step ...
     onset = round(ONSET_S * fs_hz)
