@@ -284,7 +284,9 @@ def shapes_job(case: sr.Case, tuning: dict) -> list[dict]:
             continue
         seen.add(check.id)
         c = contacts[check.id]
-        shape = step_shape.measure(x, c.index, check.emit_index, rec.fs_hz)
+        # as the tracker reads it (`step_shape.Recent.verdict`): at most HELD_S after the onset
+        told = min(check.emit_index, c.index + round(step_shape.HELD_S * rec.fs_hz))
+        shape = step_shape.measure(x, c.index, told, rec.fs_hz)
         out.append({
             "kind": case.kind, "layout": case.layout, "variant": case.variant,
             "seed": case.seed, "fs_hz": rec.fs_hz, "t_s": c.t_s, "sure": check.sure,
@@ -340,6 +342,14 @@ def shapes(todo: list[sr.Case], tuning: dict, seeds: int, out_path: str | None) 
             print(
                 f"  {label:6s} {len(mine):5d} told, {sure} sure, {len(mine) - len(ok)} unmeasured"
             )
+            for sure_too in (True, False):
+                told = Counter(
+                    _SHAPE_VERDICTS[step_shape.classify(_shape(r), r["fs_hz"])]
+                    for r in mine
+                    if r["sure"] == sure_too
+                )
+                what = "sure" if sure_too else "not sure"
+                print(f"    classified ({what}): " + ", ".join(f"{k} {c}" for k, c in told.items()))
             for cue, f in CUES.items():
                 v = np.array([f(s) for s in ok], dtype=float)
                 v = v[np.isfinite(v)]

@@ -319,8 +319,8 @@ class TrackerDecoder(Decoder):
     # verdict): a fast monotone rise is a stop's - taken as a ridge the slip went on from
     # with this prior -, a slow one (or a peak over its held level) a ridge pulse the FSR's
     # hysteresis held up - taken as a stop (there or at the ridge) with this one; 0: off.
-    # Measured (stop_causes.py --shapes, full plan): 87 % of the stops' plain steps fast,
-    # 94 % of the ridges' slow (the loop's 97 %). Full plan, 2 seeds, one run
+    # Measured (stop_causes.py --shapes, full plan): 89 % of the stops' plain steps fast,
+    # 94 % of the ridges' slow (the loop's 96 %). Full plan, 2 seeds, one run
     # (tune_tracker_kinds.py), against both off: the stop side alone clears stops in time
     # 87.0 -> 89.9 % (speed after a stop's report due 1.1 -> 1.0 %) at no cost; both sides
     # lower slip dropped 18.0 -> 15.8 % and moving missing 29.7 -> 27.3 % but clear 86.6 %
