@@ -27,6 +27,7 @@ Run: `.venv/bin/python benchmarks/stop_causes.py --seeds 2`.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from collections import Counter, defaultdict
@@ -39,13 +40,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import tune_tracker
 
-from grasplink.decoding.contacts import ContactEvent, PulseCheck
+from grasplink.decoding.contacts import STEP_IDS, ContactEvent, PulseCheck
+from grasplink.decoding.detector import step_shape
 from grasplink.decoding.kernels.common import ring_slot
 from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 
 STOP_KINDS = ("stick-slip", "stop", "rates-drops", "loop")
+# --shapes: the stop kinds and the kinds that slide on (a step there is a ridge or a grip)
+SHAPE_KINDS = (*STOP_KINDS, "constant", "accelerating", "decelerating", "reversal", "snr10",
+               "saturation")  # fmt: skip
 NEAR_STOP_S = 0.1  # a contact this close to a stop's start is its step (or the last ridge)
 RIDGE_MATCH_S = 0.03  # a decoder contact this close to a truth ridge contact is that ridge
 VERDICTS = {0: "not told", 1: "pulse", 2: "step", 3: "unclear", 4: "noise"}
@@ -170,7 +175,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--try", dest="tuning", default={}, type=tune_tracker.parse)
     parser.add_argument("--worst", type=int, default=30, help="late stops listed")
     parser.add_argument("--trace", type=int, default=None, help="one case's seed: its timeline")
+    parser.add_argument(
+        "--shapes", action="store_true",
+        help="every contact told a step: its shape (step_shape) by what it was (stop, ridge)",
+    )  # fmt: skip
+    parser.add_argument("--shapes-out", default=None, help="--shapes: its rows as JSON here")
     args = parser.parse_args(argv)
+    if args.shapes and args.kinds == ",".join(STOP_KINDS):
+        args.kinds = ",".join(SHAPE_KINDS)
     kinds = args.kinds.split(",")
     unknown = set(kinds) - set(sr.KINDS)
     if unknown:
@@ -182,6 +194,8 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"no case with seed {args.trace} among --kinds and --seeds")
         trace(chosen[0], args.tuning)
         return 0
+    if args.shapes:
+        return shapes(todo, args.tuning, args.seeds, args.shapes_out)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     stops = [(case, s) for case, out in results for s in out]
@@ -238,6 +252,112 @@ def trace(case: sr.Case, tuning: dict) -> None:
         for e, row in zip(estimates, decoder.rows, strict=True):
             if stop.start_s - 0.3 <= e.t_s <= min(stop.end_s, stop.start_s + 1.5):
                 print(f"  {e.t_s:.3f} slip {e.slip:d} speed {e.speed_mm_s} {row}")
+
+
+def _label(t_c: float, stops: list[tuple[float, float]], ridges: np.ndarray) -> str:
+    """What made a contact at t_c: a stop's step (a stop starts within NEAR_STOP_S of it),
+    a ridge the slip went on from (a truth ridge contact within RIDGE_MATCH_S, no stop
+    near), or something else (a grip change, noise, a contact at rest)."""
+    if any(abs(t_c - start) <= NEAR_STOP_S for start, _ in stops):
+        return "stop"
+    near_ridge = len(ridges) and float(np.min(np.abs(ridges - t_c))) <= RIDGE_MATCH_S
+    if near_ridge and not any(start - NEAR_STOP_S <= t_c <= end for start, end in stops):
+        return "ridge"
+    return "other"
+
+
+def shapes_job(case: sr.Case, tuning: dict) -> list[dict]:
+    """Every contact the default decoder was told a step (its first such verdict): what
+    made it (`_label`) and its shape (`step_shape.measure`, the samples up to the
+    verdict)."""
+    rec = case.make()
+    decoder = _decoder(rec, tuning)
+    decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
+    ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
+    stops = ns.motion(rec.truth).stops
+    ridges = np.asarray(rec.truth.contact_times_s, dtype=float)
+    contacts = {c.id: c for c, _ in decoder.contacts}
+    x = np.asarray(rec.force_n, dtype=float)
+    out, seen = [], set()
+    for check, _ in decoder.checks:
+        if check.pulse is not False or check.id in seen or check.id not in contacts:
+            continue
+        seen.add(check.id)
+        c = contacts[check.id]
+        # as the tracker reads it (`step_shape.Recent.verdict`): at most HELD_S after the onset
+        told = min(check.emit_index, c.index + round(step_shape.HELD_S * rec.fs_hz))
+        shape = step_shape.measure(x, c.index, told, rec.fs_hz)
+        out.append({
+            "kind": case.kind, "layout": case.layout, "variant": case.variant,
+            "seed": case.seed, "fs_hz": rec.fs_hz, "t_s": c.t_s, "sure": check.sure,
+            "probe": c.id >= STEP_IDS, "label": _label(c.t_s, stops, ridges),
+            "shape": None if shape is None else shape._asdict(),
+        })  # fmt: skip
+    return out
+
+
+# the shape's cues, each in noise units or a ratio (`shapes`)
+CUES = {
+    "height/noise": lambda s: s["height_n"] / s["noise_n"],
+    "overshoot/noise": lambda s: s["overshoot_n"] / s["noise_n"],
+    "overshoot/height": lambda s: s["overshoot_n"] / max(s["height_n"], 1e-9),
+    "rise ms": lambda s: 1e3 * s["rise_s"],
+    "pre slope/noise per 60ms": lambda s: s["pre_slope_n_s"] * 0.06 / s["noise_n"],
+    "post slope/noise per 30ms": lambda s: s["post_slope_n_s"] * 0.03 / s["noise_n"],
+    "post slope/height per 30ms": lambda s: s["post_slope_n_s"] * 0.03 / max(s["height_n"], 1e-9),
+    "post rough/noise": lambda s: s["post_rough_snr"],
+}
+
+
+_SHAPE_VERDICTS = {step_shape.STOP_LIKE: "stop-like", step_shape.RIDGE_LIKE: "ridge-like",
+                   step_shape.UNTOLD: "untold"}  # fmt: skip
+
+
+def _shape(row: dict) -> step_shape.StepShape | None:
+    return None if row["shape"] is None else step_shape.StepShape(**row["shape"])
+
+
+def shapes(todo: list[sr.Case], tuning: dict, seeds: int, out_path: str | None) -> int:
+    """The table of step shapes: per label (stop, ridge, other) the quartiles of each cue,
+    over all kinds and per group of kinds (stop kinds, loop, sliding kinds)."""
+    with ProcessPoolExecutor(2) as pool:
+        rows = [r for out in pool.map(shapes_job, todo, [tuning] * len(todo), chunksize=2)
+                for r in out]  # fmt: skip
+    if out_path:
+        Path(out_path).write_text(json.dumps(rows))
+    print(f"{len(todo)} cases (full plan, {seeds} seed(s)), {tuning}: {len(rows)} steps told")
+    groups = {
+        "all": lambda r: True,
+        "loop": lambda r: r["kind"] == "loop",
+        "stop kinds but loop": lambda r: r["kind"] in STOP_KINDS and r["kind"] != "loop",
+        "sliding kinds": lambda r: r["kind"] not in STOP_KINDS,
+    }
+    for gname, pick in groups.items():
+        chosen = [r for r in rows if pick(r)]
+        print(f"\n{gname}: steps by label (unmeasured: no samples held)")
+        for label in ("stop", "ridge", "other"):
+            mine = [r for r in chosen if r["label"] == label]
+            ok = [r["shape"] for r in mine if r["shape"] is not None]
+            sure = sum(r["sure"] for r in mine)
+            print(
+                f"  {label:6s} {len(mine):5d} told, {sure} sure, {len(mine) - len(ok)} unmeasured"
+            )
+            for sure_too in (True, False):
+                told = Counter(
+                    _SHAPE_VERDICTS[step_shape.classify(_shape(r), r["fs_hz"])]
+                    for r in mine
+                    if r["sure"] == sure_too
+                )
+                what = "sure" if sure_too else "not sure"
+                print(f"    classified ({what}): " + ", ".join(f"{k} {c}" for k, c in told.items()))
+            for cue, f in CUES.items():
+                v = np.array([f(s) for s in ok], dtype=float)
+                v = v[np.isfinite(v)]
+                if not len(v):
+                    continue
+                q = np.percentile(v, [10, 25, 50, 75, 90])
+                print(f"    {cue:28s} " + " ".join(f"{x:8.2f}" for x in q))
+    return 0
 
 
 def _bucket(step: str) -> str:

@@ -81,6 +81,7 @@ from grasplink.decoding.contacts import (
     ContactEvent,
     PulseCheck,
 )
+from grasplink.decoding.detector import step_shape
 from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.decoding.kernels.branch import Model, branch, pack_constants
 from grasplink.decoding.kernels.common import ring_slot
@@ -314,6 +315,18 @@ class TrackerDecoder(Decoder):
     # where the next ridge was due is that ridge by its timing (issue 22 item 4); 0: any step
     LOG_SURE_STEP_RIDGE = math.log(0.01)
     LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
+    # a step not sure by its shape (`step_shape.classify`, from its samples up to the
+    # verdict): a fast monotone rise is a stop's - taken as a ridge the slip went on from
+    # with this prior -, a slow one (or a peak over its held level) a ridge pulse the FSR's
+    # hysteresis held up - taken as a stop (there or at the ridge) with this one; 0: off.
+    # Measured (stop_causes.py --shapes, full plan): 89 % of the stops' plain steps fast,
+    # 94 % of the ridges' slow (the loop's 96 %). Full plan, 2 seeds, one run
+    # (tune_tracker_kinds.py), against both off: the stop side alone clears stops in time
+    # 87.0 -> 89.9 % (speed after a stop's report due 1.1 -> 1.0 %) at no cost; both sides
+    # lower slip dropped 18.0 -> 15.8 % and moving missing 29.7 -> 27.3 % but clear 86.6 %
+    # (the ridge side alone 83.8: ridge-like stop steps held as ridges): the ridge side off
+    LOG_SHAPE_STOP_RIDGE = math.log(0.1)
+    LOG_SHAPE_RIDGE_STOP = 0.0
     # a track whose last contact came from a probe waits this share of the probes' latency
     # for its next (`_latency_floor`; 0: the kink bank's latency for every track)
     PROBE_WAIT = 1.0
@@ -534,6 +547,8 @@ class TrackerDecoder(Decoder):
         # contacts told to be steps (replayed as such): id -> did the trend go on after it
         self._steps: dict[int, bool | None] = {}
         self._sure: set[int] = set()  # ... of which told at the sure hold (`PulseCheck.sure`)
+        self._shapes: dict[int, int] = {}  # ... their shapes' verdicts (`step_shape.classify`)
+        self._recent = step_shape.Recent(fs_hz)  # the samples their shapes are read from
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
@@ -637,6 +652,7 @@ class TrackerDecoder(Decoder):
             self._pending_t, self._pending_x = self._pending_t[count:], self._pending_x[count:]
             self._n_in = upto
             events, checks = self.detector.feed(t, x)
+            self._recent.append(x)  # (a step's shape is read from them: `_step_shape`)
             for ev in events:
                 bisect.insort(self._items, (ev.emit_index, 0, ev.id, ev))
             for ck in checks:
@@ -661,6 +677,7 @@ class TrackerDecoder(Decoder):
         if check.pulse is True and check.id in self._steps:  # a step revised: a slow pulse
             del self._steps[check.id]
             self._sure.discard(check.id)
+            self._shapes.pop(check.id, None)
             for at, c in enumerate(self._contacts):
                 if c.id == check.id:
                     self._replay(at, [])
@@ -669,15 +686,26 @@ class TrackerDecoder(Decoder):
             self._steps[check.id] = check.trend_on
             if check.sure:
                 self._sure.add(check.id)
+            self._shapes[check.id] = self._step_shape(check)
             while len(self._steps) > 64:
                 oldest = next(iter(self._steps))
                 del self._steps[oldest]
                 self._sure.discard(oldest)
+                self._shapes.pop(oldest, None)
             # replay from that contact, now a step (stop or grip change)
             for at, c in enumerate(self._contacts):
                 if c.id == check.id:
                     self._replay(at, [])
                     break
+
+    def _step_shape(self, check: PulseCheck) -> int:
+        """The shape verdict of a contact told a step (`step_shape.classify`), read from the
+        samples up to the verdict (the same however the input is chunked); UNTOLD when its
+        contact or samples are no longer held."""
+        onset = next((c.index for c in self._contacts if c.id == check.id), None)
+        if onset is None or check.sure:
+            return step_shape.UNTOLD
+        return self._recent.verdict(onset, check.emit_index)
 
     # ------------------------------------------------------------------ hypotheses
     def _add_contact(self, ev: ContactEvent) -> None:
@@ -714,7 +742,10 @@ class TrackerDecoder(Decoder):
         same bank object - banks are immutable -, null score, contact and step verdict):
         a step told and then revised to a pulse replays the very contacts first taken,
         and only the pruning can differ (a replay holds one contact fewer)."""
-        key = (ev, self._null, ev.id in self._steps, self._steps.get(ev.id), ev.id in self._sure)
+        key = (
+            ev, self._null, ev.id in self._steps, self._steps.get(ev.id), ev.id in self._sure,
+            self._shapes.get(ev.id),
+        )  # fmt: skip
         known = self._memo.get(key)
         if known is not None and known[0] is self._tracks:
             self._null, pool = known[1], known[2]
@@ -749,9 +780,16 @@ class TrackerDecoder(Decoder):
         log_stop = math.log(stop_rate)
         contact = (ev.t_s, ev.id, ev.sigma_s, sigma_s, log_strength, log_stop, step, probe)
         floats, ints, self._null = branch(tracks, contact, self._null, self._branch_model)
-        if ev.id in self._sure:  # a step beyond doubt: seldom a ridge the slip went on from
+        shape = self._shapes.get(ev.id, step_shape.UNTOLD) if step else step_shape.UNTOLD
+        if ev.id in self._sure or shape == step_shape.STOP_LIKE:
+            # a step beyond doubt (or shaped as a stop's): seldom a ridge the slip went on from
             ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_N] >= 2) & np.isnan(floats[:, F_STOP])
-            floats[ridge, F_SCORE] += self.LOG_SURE_STEP_RIDGE
+            sure = ev.id in self._sure
+            floats[ridge, F_SCORE] += (
+                self.LOG_SURE_STEP_RIDGE if sure else self.LOG_SHAPE_STOP_RIDGE
+            )
+        elif shape == step_shape.RIDGE_LIKE:  # a ridge pulse held up: seldom a stop (here)
+            floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
 
     def _branch_constant_values(self) -> dict[str, float]:

@@ -31,7 +31,19 @@ def test_a_stop_whose_step_reads_as_a_restart_is_cleared_in_time():
     assert all(d <= sr.CLEAR_WITHIN_S for d in delays), delays
 
 
+# the step's shape (`detector.step_shape`: a fast monotone rise, a stop's) now clears it too
+SHAPE_OFF = {"LOG_SHAPE_STOP_RIDGE": 0.0, "LOG_SHAPE_RIDGE_STOP": 0.0}
+
+
 def test_the_restart_rule_off_leaves_that_stop_uncleared():
     """RESTART_CONFIRM = 0 is the tracker before the rule: the case still shows the miss
-    (so the test above checks the rule, not a changed signal)."""
-    assert max(stop_delays(STICK_SLIP, {"RESTART_CONFIRM": 0.0})) > sr.CLEAR_WITHIN_S
+    (so the test above checks the rule, not a changed signal) - with the step's shape
+    unweighed, which clears it on its own (test_a_stop_shaped_step_clears_it_on_its_own)."""
+    assert max(stop_delays(STICK_SLIP, {"RESTART_CONFIRM": 0.0, **SHAPE_OFF})) > sr.CLEAR_WITHIN_S
+
+
+def test_a_stop_shaped_step_clears_it_on_its_own():
+    """The friction step rose fast and stayed: taken as no ridge (nor restart) the slip
+    went on from, the stop is cleared in time without the restart rule."""
+    delays = stop_delays(STICK_SLIP, {"RESTART_CONFIRM": 0.0})
+    assert delays and all(d <= sr.CLEAR_WITHIN_S for d in delays), delays

@@ -1,0 +1,173 @@
+"""The shape of a contact told a step: a slip's stop, or a ridge pulse held by hysteresis?
+
+Physics (thesis ch. 4.3, 3.4): while slipping the FSR reads M = (1 - k mu) W + k P plus
+the ridge pulses; at rest it reads W. When the object sticks the static level moves once
+(over the braking, tens of ms) and then stays flat: no pulses, only noise and slow
+drift. A ridge pulse rises fast (the edge pushing the ridge over) and relaxes; under the
+FSR's hysteresis (a play operator) its fall is held when the level under it rises, so it
+too rises and stays - a step by the watcher's verdict. Both reach the tracker as "a step
+at the time a ridge was due". This module measures what the signal itself tells of the
+two, from the samples up to the verdict only (so the evidence is the same however the
+input is chunked): the step's height, the overshoot of its peak over the level it holds
+(a pulse rises past its held level, a stop's level change does not), how fast it rose,
+and the level's slope and roughness before and after, each in units of the white noise
+measured just before the onset.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+PRE_S = 0.06  # the level before the onset: its base and slope
+NOISE_S = 0.15  # ... and its white noise, over this long (at least NOISE_SAMPLES)
+NOISE_SAMPLES = 16
+POST_S = 0.03  # the level held at the verdict: the last this long before it
+SMOOTH_S = 0.01  # the peak is read on a moving mean this long (noise would raise a max)
+NOISE_FLOOR_N = 1e-3  # the quietest white noise assumed (an ideal FSR), N per sample
+RISE_NOISE = 1.5  # the rise ends within this many noise units of the level held (`measure`)
+
+
+class StepShape(NamedTuple):
+    """What a step's samples show (heights in N, slopes in N/s, *_snr in noise units)."""
+
+    height_n: float  # level held at the verdict less the base before the onset
+    overshoot_n: float  # the smoothed peak since the onset above the level held
+    rise_s: float  # from the onset to the first smoothed sample at 90 % of the height
+    pre_slope_n_s: float  # the level's slope over PRE_S before the onset
+    post_slope_n_s: float  # ... over POST_S before the verdict
+    post_rough_snr: float  # the residual of that fit (rms) in noise units
+    noise_n: float  # white noise before the onset (first differences, robust)
+
+
+def _fit(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
+    """(slope, rms residual) of a least-squares line through (t, x)."""
+    if len(x) < 3:
+        return 0.0, 0.0
+    tc = t - t.mean()
+    den = float(tc @ tc)
+    slope = float(tc @ (x - x.mean())) / den if den > 0 else 0.0
+    resid = x - x.mean() - slope * tc
+    return slope, float(np.sqrt(np.mean(resid * resid)))
+
+
+def measure(x: np.ndarray, onset: int, verdict: int, fs_hz: float) -> StepShape | None:
+    """The step's shape from samples x (x[0] is the first held; onset and verdict index
+    into x): None when the samples before the onset or up to the verdict are not all held
+    or not finite (nothing is guessed)."""
+    if fs_hz <= 0:
+        raise ValueError(f"step shape: sample rate {fs_hz!r} Hz is not positive")
+    pre = max(3, round(PRE_S * fs_hz))
+    quiet = max(pre, NOISE_SAMPLES, round(NOISE_S * fs_hz))
+    post = max(2, round(POST_S * fs_hz))
+    if onset - quiet < 0 or verdict >= len(x) or verdict - onset < post + 1:
+        return None
+    before = x[onset - pre : onset]
+    after = x[onset : verdict + 1]
+    if not (np.all(np.isfinite(x[onset - quiet : onset])) and np.all(np.isfinite(after))):
+        return None
+    # white noise from first differences (robust: a pulse or a step among them moves a few)
+    diffs = np.abs(np.diff(x[onset - quiet : onset]))
+    noise = max(float(np.median(diffs)) * 1.4826 / math.sqrt(2.0), NOISE_FLOOR_N)
+    t_pre = np.arange(-pre, 0) / fs_hz
+    pre_slope, _ = _fit(t_pre, before)
+    base = float(np.median(before))
+    held_x = after[-post:]
+    held = float(np.median(held_x))
+    t_post = np.arange(post) / fs_hz
+    post_slope, rough = _fit(t_post, held_x)
+    width = max(1, round(SMOOTH_S * fs_hz))
+    smooth = np.convolve(after, np.full(width, 1.0 / width), mode="valid")
+    height = held - base
+    peak = float(smooth.max()) if len(smooth) else held
+    # within 10 % of the height or RISE_NOISE units of the (smoothed) noise of it
+    near = max(0.1 * height, RISE_NOISE * noise / math.sqrt(width))
+    reached = np.flatnonzero(smooth - base >= height - near) if height > 0 else np.zeros(0)
+    rise = (float(reached[0]) + (width - 1) / 2.0) / fs_hz if len(reached) else float("nan")
+    return StepShape(
+        height_n=height,
+        overshoot_n=peak - held,
+        rise_s=rise,
+        pre_slope_n_s=pre_slope,
+        post_slope_n_s=post_slope,
+        post_rough_snr=rough / noise,
+        noise_n=noise,
+    )
+
+
+# the verdicts of `classify`
+RIDGE_LIKE, UNTOLD, STOP_LIKE = -1, 0, 1
+# a stop's level change is over within the braking (the object sticks): told fast when it
+# reached 90 % of its height this soon after the onset (or within this many samples of a
+# slow input); a ridge pulse rises over the ~1.25 mm the edge needs to push a ridge over,
+# held pulses on a rising level later still (benchmarks/stop_causes.py --shapes)
+FAST_RISE_S = 0.011
+FAST_RISE_SAMPLES = 2.5
+# ... and a pulse rises past the level it is held at (the hysteresis holds only part of
+# its fall): a peak this share of the height above the held level, and this many noise
+# units, is a pulse's
+PULSE_OVERSHOOT = 0.25
+PULSE_OVERSHOOT_SNR = 3.0
+
+
+def classify(shape: StepShape | None, fs_hz: float) -> int:
+    """STOP_LIKE (a fast, monotone level change), RIDGE_LIKE (a slow rise, no rise at all,
+    or a peak well above the level held: a ridge pulse held up), or UNTOLD (no shape)."""
+    if shape is None:
+        return UNTOLD
+    if not shape.height_n > 0 or not math.isfinite(shape.rise_s):
+        return RIDGE_LIKE  # the level held is no higher than before: no stop's step
+    fast = shape.rise_s <= max(FAST_RISE_S, FAST_RISE_SAMPLES / fs_hz)
+    peaked = (
+        shape.overshoot_n > PULSE_OVERSHOOT * shape.height_n
+        and shape.overshoot_n > PULSE_OVERSHOOT_SNR * shape.noise_n
+    )
+    return STOP_LIKE if fast and not peaked else RIDGE_LIKE
+
+
+# a verdict told late (a revision, a probe's contact) is read on the rise it told of: the
+# samples up to this long after the onset at most
+HELD_S = 0.2
+RECENT_S = 1.0  # `Recent` holds at least this long (twice that at most)
+
+
+class Recent:
+    """The last RECENT_S of samples by global index (the detector's numbering: every
+    sample fed, in order), what a step's shape is read from however late its verdict
+    comes. Appends copy the new samples only; the buffer is cut from the front when
+    full."""
+
+    __slots__ = ("_x", "fs_hz", "size", "span", "start")
+
+    def __init__(self, fs_hz: float):
+        if not fs_hz > 0:
+            raise ValueError(f"step shape: sample rate {fs_hz!r} Hz is not positive")
+        self.fs_hz = float(fs_hz)
+        self.span = max(64, round(RECENT_S * fs_hz))
+        self._x = np.empty(2 * self.span)
+        self.start = 0  # global index of _x[0]
+        self.size = 0
+
+    def append(self, x: np.ndarray) -> None:
+        if self.size + len(x) > len(self._x):
+            keep = min(self.size, self.span)
+            self._x[:keep] = self._x[self.size - keep : self.size]
+            self.start += self.size - keep
+            self.size = keep
+            if keep + len(x) > len(self._x):
+                grown = np.empty(2 * (keep + len(x)))
+                grown[:keep] = self._x[:keep]
+                self._x = grown
+        self._x[self.size : self.size + len(x)] = x
+        self.size += len(x)
+
+    def verdict(self, onset: int, told: int) -> int:
+        """`classify` of the step whose onset and verdict are global sample indices."""
+        told = min(told, onset + round(HELD_S * self.fs_hz))
+        x = self._x[: self.size]
+        if onset - self.start < 0:
+            return UNTOLD
+        shape = measure(x, onset - self.start, told - self.start, self.fs_hz)
+        return classify(shape, self.fs_hz)
