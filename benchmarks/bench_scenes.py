@@ -455,6 +455,16 @@ WHAT_CHANGED = """
 - **The skin node converts ahead**: up to 256 samples to ADC counts in one numpy pass
   instead of five numpy calls per 3-sample packet, only over samples the scene has
   made final (`FinalSource.final_until_us`). Frames are identical.
+- **A streaming skin node tells its packets ahead** (`StreamingDevice`,
+  core/protocol.py): the lock-step bus asks for a span of ticks in one call, up to
+  the next time another device acts, delivers each tick's frames at its own time,
+  and commits the ticks that happened before anything reaches the node, so an SDO
+  read, NMT, SYNC or RPDO mid-span finds it as ticking one by one would have.
+  Outputs are byte-identical. It pays where spans are long: the skin-only slip
+  (0.5 s chunks, spans of 10 packets) about 1.7× faster; headline_slip pays about
+  5 % for it (its hand node's timers and heartbeats cut spans: 219 of 298 asks
+  held under the 4 packets a span needs, 45 % of the ticks told dropped), and a
+  closed loop's 10 ms chunks tick one by one (`benchmarks/bench_streamed_ticks.py`).
 - **The engine interpolates** an earlier domain's signal once per chunk, however many
   effects read it.
 - The stage tables take the timing wrappers' own cost off the bus and the
@@ -464,14 +474,14 @@ What is left is per frame and per chunk, not per sample. In a closed loop a part
 physics still steps every 10 ms through a ramp of its own commands (the gateway
 ramps grip and belt commands chunk by chunk), where each of its effects pays
 numpy's per-call cost on 4-15 samples (the hand's part: 212 blocks in 6 s). The
-gateway alone (its skin decoding about half of it,
-grasplink/decoding, not changed here) bounds the scene below the 20× target whatever
-the rest costs (the line under the loop_headline table). In a skin-only slip the skin
-node's sans-IO work per packet (object dictionary writes, the TPDO, its deadlines)
-and the scripted master are most of the time: with the bus, the physics and the
-engine free it would still miss 200×; a further step is a node that hands the bus
-many packets at once, each stamped with its own send time (a change of the
-device/bus contract, grasplink/devices, not done here).
+gateway alone (its skin decoding a quarter to half of it; the detector's per-block
+glue was cut by 10-20 %, outputs bit-identical) bounds the scene below the 20×
+target whatever the rest costs (the line under the loop_headline table). In a
+skin-only slip the skin
+node streams its packets in spans (above), which took it past 200×. Left: every
+node accepts all 127 heartbeat CAN-IDs (its consumer may watch any), so another
+node's heartbeat ends a skin span; a filter of the heartbeats 1016h actually
+watches would lengthen spans where a hand or belt node shares the bus.
 """
 
 
