@@ -7,7 +7,9 @@ best of N, as ratios (the machine is shared: absolute times move with its load):
 
 1. a skin node alone on the bus, run in steps of 10-100 ms (a scene's chunk: a span
    ends at the run's end, so short runs leave short spans);
-2. scenes run both ways (default: the skin-only slip, the closed loop, the headline).
+2. scenes run both ways (default: the skin-only slip, the closed loop, the headline);
+3. with `--spans`, how each scene's spans went (asks, asks told nothing, ticks told,
+   ticks that happened): where streaming costs more than it saves, and why.
 
 Run: `.venv/bin/python benchmarks/bench_streamed_ticks.py [--repeats N] [--scenes ...]`.
 """
@@ -67,6 +69,35 @@ def scene_ms_per_s(stream: bool, path: Path) -> float:
         lockstep.LockstepNetwork.__init__ = plain  # type: ignore[method-assign]
 
 
+def span_counts(path: Path) -> dict[str, int]:
+    """How a scene's streaming devices' spans went, counted around their own calls."""
+    from grasplink.controllers import simulation
+    from grasplink.core.protocol import StreamingDevice
+    from grasplink.simulators.scene import load_scene
+
+    counts = {"asks": 0, "told nothing": 0, "ticks told": 0, "ticks happened": 0}
+    sim = simulation(load_scene(path))
+    for device in sim.network.devices:
+        if not (isinstance(device, StreamingDevice) and device.streaming):
+            continue
+        ahead, commit = device.stream_ahead, device.commit_stream
+
+        def counted_ahead(t_us: int, until_us: int, ahead=ahead) -> list:
+            ticks = ahead(t_us, until_us)
+            counts["asks"] += 1
+            counts["told nothing"] += not ticks
+            counts["ticks told"] += len(ticks)
+            return ticks
+
+        def counted_commit(ticks: int, commit=commit) -> None:
+            counts["ticks happened"] += ticks
+            commit(ticks)
+
+        device.stream_ahead, device.commit_stream = counted_ahead, counted_commit
+    sim.run()
+    return counts
+
+
 def best_of(repeats: int, measure: Callable[[bool], float]) -> tuple[float, float]:
     """(per-tick, streamed) best of `repeats` rounds, the two interleaved."""
     best = {False: float("inf"), True: float("inf")}
@@ -81,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="rounds (best of)")
     parser.add_argument("--scenes", nargs="*", default=list(SCENES), metavar="NAME")
     parser.add_argument("--no-skin-alone", action="store_true", help="scenes only")
+    parser.add_argument("--spans", action="store_true", help="count each scene's spans")
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error("--repeats must be at least 1")
@@ -104,6 +136,12 @@ def main(argv: list[str] | None = None) -> int:
         scene_ms_per_s(True, path)  # warm: imports, compiled kernels
         plain, streamed = best_of(args.repeats, lambda s, p=path: scene_ms_per_s(s, p))
         print(f"| {path.stem} | {plain:.2f} | {streamed:.2f} | {plain / streamed:.2f} |")
+    if args.spans:
+        print("\n| scene | asks | told nothing | ticks told | ticks happened |")
+        print("|---|---:|---:|---:|---:|")
+        for path in paths:
+            c = span_counts(path)
+            print(f"| {path.stem} | " + " | ".join(str(v) for v in c.values()) + " |")
     return 0
 
 
