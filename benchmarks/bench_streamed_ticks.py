@@ -9,7 +9,8 @@ best of N, as ratios (the machine is shared: absolute times move with its load):
    ends at the run's end, so short runs leave short spans);
 2. scenes run both ways (default: the skin-only slip, the closed loop, the headline);
 3. with `--spans`, how each scene's spans went (asks, asks told nothing, ticks told,
-   ticks that happened): where streaming costs more than it saves, and why.
+   ticks that happened, and the run's Python calls: a count, not a time, so two trees
+   compare exactly on a noisy machine): where streaming costs more than it saves, and why.
 
 Run: `.venv/bin/python benchmarks/bench_streamed_ticks.py [--repeats N] [--scenes ...]`.
 """
@@ -17,7 +18,9 @@ Run: `.venv/bin/python benchmarks/bench_streamed_ticks.py [--repeats N] [--scene
 from __future__ import annotations
 
 import argparse
+import cProfile
 import os
+import pstats
 import sys
 import time
 from collections.abc import Callable
@@ -94,7 +97,9 @@ def span_counts(path: Path) -> dict[str, int]:
             commit(ticks)
 
         device.stream_ahead, device.commit_stream = counted_ahead, counted_commit
-    sim.run()
+    profile = cProfile.Profile()
+    profile.runcall(sim.run)
+    counts["python calls"] = pstats.Stats(profile).total_calls  # type: ignore[attr-defined]
     return counts
 
 
@@ -137,8 +142,8 @@ def main(argv: list[str] | None = None) -> int:
         plain, streamed = best_of(args.repeats, lambda s, p=path: scene_ms_per_s(s, p))
         print(f"| {path.stem} | {plain:.2f} | {streamed:.2f} | {plain / streamed:.2f} |")
     if args.spans:
-        print("\n| scene | asks | told nothing | ticks told | ticks happened |")
-        print("|---|---:|---:|---:|---:|")
+        print("\n| scene | asks | told nothing | ticks told | ticks happened | python calls |")
+        print("|---|---:|---:|---:|---:|---:|")
         for path in paths:
             c = span_counts(path)
             print(f"| {path.stem} | " + " | ".join(str(v) for v in c.values()) + " |")

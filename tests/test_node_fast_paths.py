@@ -88,12 +88,27 @@ def test_a_node_accepts_nothing_off_lss_alone_unconfigured_and_its_services_runn
     assert node.accepted_can_ids() == frozenset()
     net = operational(node)
     accepted = node.accepted_can_ids()
-    assert {NMT_COB_ID, SDO_RX, LSS_MASTER_COB_ID, 0x080, 0x701, 0x77F} <= accepted
+    assert {NMT_COB_ID, SDO_RX, LSS_MASTER_COB_ID, 0x080, 0x701} <= accepted  # 701h: 1016h
+    assert 0x700 + SKIN in accepted  # its own heartbeat COB-ID: another node with its ID
     assert 0x181 not in accepted  # another node's process data concerns none of its services
+    assert 0x77F not in accepted  # nor a heartbeat its consumer (1016h) does not watch
     unconfigured = build_node("skin", 0xFF)
     LockstepNetwork([unconfigured]).start()
     assert unconfigured.accepted_can_ids() == frozenset({LSS_MASTER_COB_ID})
     assert net.frames_delivered
+
+
+def test_the_heartbeats_accepted_follow_what_1016h_watches() -> None:
+    node = skin()
+    net = operational(node)
+    net.inject(Frame(0x725, bytes([5])))  # not watched: filtered out, nothing follows
+    net.run_until(net.t_us + 2_000_000)
+    assert 0x725 not in node.accepted_can_ids() and not node.consumer.any_timed_out()
+    sdo_write(net, obj.HEARTBEAT_CONSUMER, 1, 0x25_01F4, 4)  # watch node 25h, 500 ms
+    assert 0x725 in node.accepted_can_ids() and 0x701 not in node.accepted_can_ids()
+    net.inject(Frame(0x725, bytes([5])))  # its first beat arms the monitor
+    net.run_until(net.t_us + 600_000)
+    assert node.consumer.any_timed_out()  # the beat reached the consumer, then stopped
 
 
 def test_a_pdo_moved_to_another_can_id_by_sdo_is_accepted_there() -> None:

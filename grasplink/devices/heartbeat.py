@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from grasplink.core.frames import HEARTBEAT_BASE
 from grasplink.devices.sdo_abort import AbortCode, SdoAbort
 from grasplink.devices.store import ObjectStore, Value
 from grasplink.profiles import objects as obj
@@ -66,6 +67,9 @@ class HeartbeatConsumer:
     def __init__(self, store: ObjectStore):
         self.store = store
         self._monitors: dict[int, _Monitor] = {}
+        # The heartbeat CAN-IDs 1016h watches (a new set on every change, so a holder can
+        # tell by identity): a node's acceptance filter needs no other node's beats.
+        self.watched_can_ids: frozenset[int] = frozenset()
         store.add_validator(obj.HEARTBEAT_CONSUMER, self._validate)
         store.add_listener(self._on_change, (obj.HEARTBEAT_CONSUMER,))
         self.reload()
@@ -81,6 +85,7 @@ class HeartbeatConsumer:
                 if monitor is None or monitor.timeout_us != time_ms * US_PER_MS:
                     monitor = _Monitor(node_id, time_ms * US_PER_MS)
                 self._monitors[node_id] = monitor
+        self.watched_can_ids = frozenset(HEARTBEAT_BASE + n for n in self._monitors)
 
     def reset(self) -> None:
         """NMT reset node / communication: forget every monitor's state, so that

@@ -119,10 +119,12 @@ class DeviceNode:
         # The CAN-IDs a frame may concern one of our services on: an acceptance filter,
         # as a CAN controller has. Nine in ten frames on a loop's bus are other nodes'
         # process data; they stop here instead of going through every service's checks.
-        # Built for the node-ID, the SYNC COB-ID and the PDOs' CAN-IDs it was built with
-        # (`_listened_pdo_ids`); a change of either of the first two drops it.
+        # Built for the node-ID, the SYNC COB-ID, the PDOs' CAN-IDs and the heartbeats
+        # 1016h watches it was built with (`_listened_pdo_ids`, `_listened_heartbeats`);
+        # a change of either of the first two drops it.
         self._listened: frozenset[int] | None = None
         self._listened_pdo_ids: frozenset[int] | None = None
+        self._listened_heartbeats: frozenset[int] | None = None
         # `_listened` and LSS, for a bus's filter (`accepted_can_ids`).
         self._accepted_for: frozenset[int] | None = None
         self._accepted: frozenset[int] = _LSS_ONLY
@@ -204,12 +206,17 @@ class DeviceNode:
         """Every CAN-ID `_dispatch` may handle (a superset: it decides by state and
         content); rebuilt after a change of the communication area or the node-ID."""
         pdo_ids = self.pdo.can_ids()
-        if self._listened is None or pdo_ids is not self._listened_pdo_ids:
+        watched = self.consumer.watched_can_ids
+        if (
+            self._listened is None
+            or pdo_ids is not self._listened_pdo_ids
+            or watched is not self._listened_heartbeats
+        ):
             self._listened_pdo_ids = pdo_ids
-            heartbeats = range(HEARTBEAT_BASE + 1, HEARTBEAT_BASE + 128)
+            self._listened_heartbeats = watched
             own = (NMT_COB_ID, HEARTBEAT_BASE + self.node_id, SDO_RX_BASE + self.node_id)
             sync = () if self._sync_cob_id is None else (self._sync_cob_id,)
-            self._listened = frozenset((*own, *heartbeats, *sync, *pdo_ids))
+            self._listened = frozenset((*own, *watched, *sync, *pdo_ids))
         return self._listened
 
     def _dispatch(self, frame: Frame, t_us: int) -> list[Frame] | None:
