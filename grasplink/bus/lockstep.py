@@ -116,21 +116,14 @@ class LockstepNetwork:
 
     def _run(self, t_end_us: int) -> None:
         deadlines = self._deadlines
-        last = self._last_deadlines
-        spans = self._spans
         steps_at_t = 0
         while True:
             # Every device's deadline (asked again only of those called since), and the
             # earliest: this loop runs once per tick of any device.
             due: list[tuple[int, int]] = []
             t_next: int | None = None
-            for i, device in enumerate(self.devices):
-                if i in deadlines:
-                    t = deadlines[i]
-                elif i in spans:
-                    t = deadlines[i] = spans[i].next_us()
-                else:
-                    t = deadlines[i] = last[i] = device.next_deadline_us()
+            for i in range(len(self.devices)):
+                t = deadlines[i] if i in deadlines else self._ask_deadline(i)
                 if t is not None:
                     due.append((t, i))
                     if t_next is None or t < t_next:
@@ -176,15 +169,12 @@ class LockstepNetwork:
         if streamer is not None and index not in self._declined:
             until_us = t_end_us
             deadlines, last = self._deadlines, self._last_deadlines
-            for i, other in enumerate(self.devices):
+            for i in range(len(self.devices)):
                 if i == index:
                     continue
                 t = deadlines[i] if i in deadlines else last.get(i)
                 if i not in deadlines and (t is None or t <= self.t_us):
-                    # called since it gave a deadline, which is now: asked again
-                    span = self._spans.get(i)
-                    t = deadlines[i] = span.next_us() if span else other.next_deadline_us()
-                    last[i] = t
+                    t = self._ask_deadline(i)  # called since it gave one, which is now
                 if t is not None and self.t_us < t < until_us:
                     until_us = t
             if self._in_flight:
@@ -200,6 +190,14 @@ class LockstepNetwork:
                     self._settle(index)
                 return frames
         return device.advance(self.t_us)
+
+    def _ask_deadline(self, index: int) -> int | None:
+        """Device `index`'s deadline, asked now (its span's next tick while it has one),
+        kept for this run and as the last it gave."""
+        span = self._spans.get(index)
+        t = span.next_us() if span else self.devices[index].next_deadline_us()
+        self._deadlines[index] = self._last_deadlines[index] = t
+        return t
 
     def _settle(self, index: int) -> None:
         """Tell device `index` how much of its span happened; the rest is dropped."""

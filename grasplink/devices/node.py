@@ -291,7 +291,7 @@ class DeviceNode:
         beat, period = self.heartbeat.next_deadline_us(), self.heartbeat.period_us
         if beat is not None and period:
             beats = list(range(beat, until_us + 1, period))
-        if len(sends) + len(beats) == 0:
+        if not sends and not beats:
             self._told = ([(t, n) for n, t in enumerate(span.times_us, start=1)], [], [])
             return list(zip(span.times_us, span.frames, strict=True))
         # What the node's own timers send at a time, after the application's frames then.
@@ -340,7 +340,9 @@ class DeviceNode:
         self._touch(t_us)
 
     def _untold_deadlines(self) -> tuple[int | None, ...]:
-        """The timers a span told ahead does not cover: it ends before the earliest."""
+        """The timers a span told ahead does not cover (it ends before the earliest); the
+        node's deadline is the earliest of these, the heartbeat's, the PDOs' and the
+        application's."""
         deadlines: tuple[int | None, ...] = (
             self.consumer.next_deadline_us(),
             self._collision_clear_us,
@@ -361,22 +363,12 @@ class DeviceNode:
     def _compute_deadline(self) -> int | None:
         if not self.powered or self.state == NmtState.INITIALISING:
             return None  # off, or unconfigured: nothing runs until LSS gives a node-ID
-        protocol = self._protocol_deadline()
-        app = self.app.next_deadline_us()
-        if app is None or (protocol is not None and protocol < app):
-            return protocol
-        return app
-
-    def _protocol_deadline(self) -> int | None:
-        """The earliest timer of the node's services (all but the application's)."""
-        candidates: tuple[int | None, ...] = (
+        candidates = (
             self.heartbeat.next_deadline_us(),
-            self.consumer.next_deadline_us(),
-            self._collision_clear_us,
+            self.app.next_deadline_us(),
             self.pdo.next_deadline_us(),
+            *self._untold_deadlines(),
         )
-        if self.state in SDO_ALLOWED:
-            candidates += (self.sdo.next_deadline_us(), self.emcy.next_deadline_us())
         earliest = None
         for candidate in candidates:
             if candidate is not None and (earliest is None or candidate < earliest):

@@ -249,10 +249,7 @@ class SkinApp(DeviceApp):
             block = counts[first : first + per_pdo]
             if (full in block) != saturated:
                 break  # this packet raises or clears the EMCY: it ticks through advance
-            for value in block[-size:]:
-                total += value - ring[pos]
-                ring[pos] = value
-                pos = (pos + 1) % size
+            pos, total = _push_window(ring, pos, total, block[-size:])
             fill = min(size, fill + min(per_pdo, size))
             static_mn = round((total / fill - zero) * mn_per_count)
             sequence = (sequence + 1) & 0xFF
@@ -319,13 +316,10 @@ class SkinApp(DeviceApp):
         """
         ring = self._static
         tail = counts[-len(ring) :]
-        size, pos = len(ring), self._ring_pos
-        for value in tail:
-            self._static_sum += value - ring[pos]
-            ring[pos] = value
-            pos = (pos + 1) % size
-        self._ring_pos = pos
-        self._static_fill = min(size, self._static_fill + len(tail))
+        self._ring_pos, self._static_sum = _push_window(
+            ring, self._ring_pos, self._static_sum, tail
+        )
+        self._static_fill = min(len(ring), self._static_fill + len(tail))
 
     def _track_saturation(self, counts: list[int], t_us: int) -> None:
         # Counts are clipped to full scale (to_counts): a saturated sample reads exactly it.
@@ -336,3 +330,14 @@ class SkinApp(DeviceApp):
             self.services.raise_error(em.SENSOR_SATURATED, em.REG_MANUFACTURER, t_us)
         elif not saturated and active:
             self.services.clear_error(em.SENSOR_SATURATED, t_us)
+
+
+def _push_window(ring: list[int], pos: int, total: int, values: list[int]) -> tuple[int, int]:
+    """`values` into the ring from `pos`, oldest out: the next position and the new sum
+    (the static force's window, kept by a node and copied by a span told ahead)."""
+    size = len(ring)
+    for value in values:
+        total += value - ring[pos]
+        ring[pos] = value
+        pos = (pos + 1) % size
+    return pos, total
