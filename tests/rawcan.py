@@ -76,6 +76,38 @@ def nmt(net: LockstepNetwork, command: int, node_id: int = 0) -> list[Frame]:
     return net.inject(Frame(0x000, bytes([command, node_id])))
 
 
+class Listener:
+    """A device on the network that keeps the CAN-ID of every frame it hears."""
+
+    def __init__(self, node_id: int) -> None:
+        self.node_id = node_id
+        self.heard: list[int] = []
+
+    def start(self, t_us: int) -> list[Frame]:
+        return []
+
+    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
+        self.heard.append(frame.can_id)
+        return []
+
+    def advance(self, t_us: int) -> list[Frame]:
+        return []
+
+    def next_deadline_us(self) -> int | None:
+        return None
+
+
+class FilteringListener(Listener):
+    """A Listener with an acceptance filter (a `FilteringDevice`)."""
+
+    def __init__(self, node_id: int, accepted: frozenset[int]) -> None:
+        super().__init__(node_id)
+        self.accepted = accepted
+
+    def accepted_can_ids(self) -> frozenset[int]:
+        return self.accepted
+
+
 class Recorder:
     """A tap keeping (t_us, frame) of every frame on the network."""
 

@@ -19,6 +19,7 @@ from grasplink.devices.node import DeviceNode
 from grasplink.devices.sources import FunctionSource
 from grasplink.devices.store import ObjectStore
 from grasplink.profiles import objects as obj
+from tests.rawcan import FilteringListener
 
 SKIN = 0x10
 SDO_RX, SDO_TX = 0x600 + SKIN, 0x580 + SKIN
@@ -44,34 +45,8 @@ def operational(node: DeviceNode) -> LockstepNetwork:
     return net
 
 
-class Recorder:
-    """A filtering device that records what it receives (and has no timers)."""
-
-    node_id = 0x42
-
-    def __init__(self, accepted: frozenset[int]):
-        self.accepted = accepted
-        self.received: list[int] = []
-
-    def start(self, t_us: int) -> list[Frame]:
-        return []
-
-    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
-        self.received.append(frame.can_id)
-        return []
-
-    def advance(self, t_us: int) -> list[Frame]:
-        return []
-
-    def next_deadline_us(self) -> int | None:
-        return None
-
-    def accepted_can_ids(self) -> frozenset[int]:
-        return self.accepted
-
-
 def test_the_bus_leaves_a_filtering_device_out_of_frames_it_drops_but_taps_see_all() -> None:
-    recorder = Recorder(frozenset({TPDO2}))
+    recorder = FilteringListener(0x42, frozenset({TPDO2}))
     node = skin()
     assert isinstance(recorder, FilteringDevice) and isinstance(node, FilteringDevice)
     net = operational(node)
@@ -80,7 +55,7 @@ def test_the_bus_leaves_a_filtering_device_out_of_frames_it_drops_but_taps_see_a
     net.taps.append(lambda t_us, frame, sender: tapped.append(frame.can_id))
     net.run_until(200_000)
     assert TPDO1 in tapped and TPDO2 in tapped
-    assert recorder.received and set(recorder.received) == {TPDO2}
+    assert recorder.heard and set(recorder.heard) == {TPDO2}
 
 
 def test_a_node_accepts_nothing_off_lss_alone_unconfigured_and_its_services_running() -> None:

@@ -25,6 +25,7 @@ from grasplink.gateway.config import parse_config
 from grasplink.gateway.master import HeartbeatProducer, NmtMaster
 from grasplink.gateway.provisioning import Provisioner
 from grasplink.profiles import objects as obj
+from tests.rawcan import Listener
 
 MS = 1000
 DECODE_US = 10 * MS  # what one skin frame costs the slow decoder below
@@ -136,32 +137,11 @@ def test_urgent_timers_do_not_break_frames_first_for_the_loss_check(buses):
     assert master.heartbeat.beats == 1  # the grid slots missed meanwhile: one beat, not ten
 
 
-class Recorder:
-    """A device that keeps what it hears."""
-
-    def __init__(self, node_id: int) -> None:
-        self.node_id = node_id
-        self.heard: list[int] = []
-
-    def start(self, t_us: int) -> list[Frame]:
-        return []
-
-    def receive(self, frame: Frame, t_us: int) -> list[Frame]:
-        self.heard.append(frame.can_id)
-        return []
-
-    def advance(self, t_us: int) -> list[Frame]:
-        return []
-
-    def next_deadline_us(self) -> int | None:
-        return None
-
-
 def test_the_heartbeats_owner_does_not_hear_it_back_and_the_other_devices_do(buses):
     # A master hearing its own heartbeat would take it for a second master on the bus.
     runner_bus, node_bus = buses
     clock = Clock()
-    owner, node = Recorder(obj.GATEWAY_NODE_ID), Recorder(0x20)
+    owner, node = Listener(obj.GATEWAY_NODE_ID), Listener(0x20)
     producer = HeartbeatProducer(obj.GATEWAY_NODE_ID, period_us=100 * MS, consumer_us=500 * MS)
     runner = NodeRunner(runner_bus, [owner, node], clock_us=clock, urgent=[producer])
     runner.power_on()
