@@ -1001,7 +1001,7 @@ class Gateway(NmtMaster):
         The percept is stamped with the gateway's clock (the time the samples arrived), so
         controller time never runs backwards whatever the decoder's grid does.
         """
-        percept = Percept.from_estimate(estimate, t_us=t_us)
+        percept = Percept.from_estimate(estimate, t_us=t_us).clean()  # (once for both)
         self._control_stale = True
         self.counters["percepts"] += 1
         for listener in self.estimate_listeners:
