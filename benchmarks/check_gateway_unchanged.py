@@ -16,10 +16,10 @@ interpreter (the same module names).
   That checks the gateway's frames, their order and its deadlines, not only what reached
   the bus.
 - **--cost ROUNDS**: the gateway alone, the recorded calls of each replay scene replayed in
-  each tree (the trees alternating, ROUNDS rounds, the least CPU of each), in ms of CPU
-  per simulated second and their ratio: what a change of the gateway's own work buys,
-  without the nodes, the bus and the physics. `--profile` prints this tree's cProfile
-  of one replay of each scene (the top functions by own time).
+  each tree (a warmed child per tree, asked in turn ROUNDS times; the least and the median
+  CPU of each), in ms of CPU per simulated second and their ratios: what a change of
+  the gateway's own work buys, without the nodes, the bus and the physics. `--profile`
+  prints this tree's cProfile of one replay of each scene (the top functions by own time).
 
 Prints what differs (the first call or file) and exits 1 when anything does.
 """
@@ -28,21 +28,23 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import check_runs_unchanged
-from tree_script import last_json, run_in_tree
+from tree_script import ask, last_json, run_in_tree, served_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
 REPLAY_SCENES = ("loop_headline", "loop_fast_reflex", "loop_slow_wearer", "loop_vendor_modules")
 
 # Run inside a tree's interpreter. `record SCENE OUT`: the scene's run with its master's
 # calls recorded, pickled to OUT. `replay SCENE CALLS`: this tree's master fed them,
-# compared call by call (prints a JSON verdict). `cost ROUNDS SCENE CALLS`: the least
-# CPU of ROUNDS replays, unchecked. `profile SCENE CALLS`: one replay under cProfile.
+# compared call by call (prints a JSON verdict). `serve SCENE CALLS`: warmed, then one
+# unchecked replay per line read, its CPU printed. `profile SCENE CALLS`: one replay
+# under cProfile.
 REPLAY = r"""
 import cProfile, json, pickle, pstats, sys, time
 from grasplink.controllers import build_controllers, simulation
@@ -124,18 +126,22 @@ def replay(scene_path, calls_path):
     print(json.dumps({"calls": len(calls), "frames": frames_out, "first_difference": None}))
 
 
-def cost(rounds, scene_path, calls_path):
+def serve(scene_path, calls_path):
+    # warmed twice (imports, compiled kernels), then one replay per line asked: its CPU ms
+    # per simulated s
     with open(calls_path, "rb") as f:
         recorded = pickle.load(f)
     calls = built(recorded["calls"])
-    best = float("inf")
-    for _ in range(rounds):
+    for _ in range(2):
+        for _ in feed(fresh(scene_path), calls):
+            pass
+    print("ready", flush=True)
+    for _ in sys.stdin:
         master = fresh(scene_path)
         t0 = time.process_time()
         for _ in feed(master, calls):
             pass
-        best = min(best, time.process_time() - t0)
-    print(json.dumps({"ms_per_s": 1e3 * best / recorded["duration_s"]}))
+        print(1e3 * (time.process_time() - t0) / recorded["duration_s"], flush=True)
 
 
 def profile(scene_path, calls_path):
@@ -157,8 +163,8 @@ if mode == "record":
     record(sys.argv[2], sys.argv[3])
 elif mode == "replay":
     replay(sys.argv[2], sys.argv[3])
-elif mode == "cost":
-    cost(int(sys.argv[2]), sys.argv[3], sys.argv[4])
+elif mode == "serve":
+    serve(sys.argv[2], sys.argv[3])
 else:
     profile(sys.argv[2], sys.argv[3])
 """
@@ -200,21 +206,32 @@ def check_replay(recorded: dict[str, Path]) -> bool:
 
 
 def cost(base: Path, recorded: dict[str, Path], rounds: int) -> None:
-    """The gateway alone per scene, both trees alternating round by round, least of each."""
-    best: dict[tuple[str, str], float] = {}
-    for _ in range(rounds):
-        for name, tree in (("base", base), ("this", ROOT)):
-            for scene, path in recorded.items():
-                scene_path = str(ROOT / "scenes" / f"{scene}.toml")
-                out = run_in_tree(
-                    tree, REPLAY, "cost", "3", scene_path, str(path), what=f"timing {scene}"
-                )
-                ms = last_json(out)["ms_per_s"]
-                best[name, scene] = min(best.get((name, scene), float("inf")), ms)
-    print(f"gateway alone, ms of CPU per simulated s (least of {rounds} rounds x 3 replays):")
-    for scene in recorded:
-        before, after = best["base", scene], best["this", scene]
-        print(f"  {scene:22s} base {before:6.2f}  this {after:6.2f}  ratio {before / after:.2f}x")
+    """The gateway alone per scene: one child per tree stays up (warmed), and the two are
+    asked in turn, ROUNDS replays each (the order alternating round by round, so a load
+    that changes favours neither); the least and the median CPU of each, and their ratios."""
+    print(f"gateway alone, ms of CPU per simulated s ({rounds} replays each, trees in turn):")
+    for scene, path in recorded.items():
+        scene_path = str(ROOT / "scenes" / f"{scene}.toml")
+        times: dict[str, list[float]] = {"base": [], "this": []}
+        with (
+            served_in_tree(base, REPLAY, "serve", scene_path, str(path)) as before,
+            served_in_tree(ROOT, REPLAY, "serve", scene_path, str(path)) as after,
+        ):
+            children = {"base": before, "this": after}
+            for name, child in children.items():
+                if ask(child, None, what=f"warming {scene} ({name})") != "ready":
+                    raise SystemExit(f"warming {scene} ({name}): no ready line")
+            for k in range(rounds):
+                for name in ("base", "this") if k % 2 == 0 else ("this", "base"):
+                    ms = float(ask(children[name], "go", what=f"timing {scene} ({name})"))
+                    times[name].append(ms)
+        b, t = times["base"], times["this"]
+        mid_b, mid_t = statistics.median(b), statistics.median(t)
+        print(
+            f"  {scene:22s} least: base {min(b):6.2f}  this {min(t):6.2f}  "
+            f"ratio {min(b) / min(t):.2f}x;  median: base {mid_b:6.2f}  this {mid_t:6.2f}  "
+            f"ratio {mid_b / mid_t:.2f}x"
+        )
 
 
 def main() -> int:

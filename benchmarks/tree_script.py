@@ -11,6 +11,8 @@ import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +30,40 @@ def run_in_tree(tree: Path, script: str, *args: str, what: str) -> str:
     if out.returncode:
         raise SystemExit(f"{what} failed in {tree}:\n{out.stderr}")
     return out.stdout
+
+
+@contextmanager
+def served_in_tree(tree: Path, script: str, *args: str) -> Iterator[subprocess.Popen[str]]:
+    """`script` running with `tree`'s grasplink as a child that stays up (its stdin and
+    stdout are pipes, text lines): a timing asks it round after round, so each round
+    costs neither an interpreter's start nor its imports and compiled kernels."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "script.py"
+        path.write_text(script)
+        prelude = f"import sys; sys.path.insert(0, {str(tree)!r}); "
+        child = subprocess.Popen(
+            [sys.executable, "-c", prelude + f"exec(open({str(path)!r}).read())", *args],
+            cwd=tmp, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        try:
+            yield child
+        finally:
+            assert child.stdin is not None
+            child.stdin.close()
+            child.wait()
+
+
+def ask(child: subprocess.Popen[str], line: str | None, *, what: str) -> str:
+    """One line sent to a served script (None: nothing sent, its next line read), its one
+    line of answer; exits naming `what` if the child ended instead."""
+    assert child.stdin is not None and child.stdout is not None
+    if line is not None:
+        child.stdin.write(line + "\n")
+        child.stdin.flush()
+    answer = child.stdout.readline()
+    if not answer:
+        raise SystemExit(f"{what}: the child ended (exit code {child.wait()})")
+    return answer.strip()
 
 
 def last_json(stdout: str) -> Any:

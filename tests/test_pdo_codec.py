@@ -72,7 +72,9 @@ def test_whole_byte_mappings_decode_in_one_struct_as_canopen_decodes_them(kind):
 
     codec = PdoCodec(kind, 0x20)
     rng = random.Random(kind)
-    assert set(codec._tpdo_structs) == codec.tpdo_can_ids()
+    assert {c for c, (_, _, unpack) in codec._tpdo_layouts.items() if unpack} == (
+        codec.tpdo_can_ids()
+    )
     for can_id, pdo in codec._tpdo_by_can_id.items():
         for _ in range(200):
             data = bytes(rng.randrange(256) for _ in range((pdo.length + 7) // 8))

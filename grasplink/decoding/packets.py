@@ -338,10 +338,13 @@ class SampleStream:
                 self._recent_set.discard(self._recent.popleft())
             values = held.pop(n)
             self._track_drift(n, heapq.heappop(self._stamps))
-            ticks = self._tick0 + n * self.per_packet + np.arange(len(values))
-            times = ticks / self.rate_hz + self._shift_s
-            if len(values):
-                self._last_t_s = float(times[-1])
+            # tick / rate + shift per sample, in floats (a packet's few: numpy's numbers,
+            # without its temporaries)
+            first, rate, shift = self._tick0 + n * self.per_packet, self.rate_hz, self._shift_s
+            stamps = [(first + k) / rate + shift for k in range(len(values))]
+            times = np.array(stamps, dtype=np.float64)
+            if stamps:
+                self._last_t_s = stamps[-1]
             self.stats.released += 1
             self.stats.samples += len(values)
             self._out.append((times, values))

@@ -91,6 +91,9 @@ class SampleObjects:
     sequence: Key | None = None  # a packet number: sample times from it, not from arrival
 
     def to_newton(self, values: Sequence[int | float] | np.ndarray) -> np.ndarray:
+        if isinstance(values, list):  # a TPDO's few counts: in floats, the same numbers
+            zero, per_unit = self.zero_units, self.newtons_per_unit
+            return np.array([(float(v) - zero) * per_unit for v in values], dtype=np.float64)
         return (np.asarray(values, dtype=np.float64) - self.zero_units) * self.newtons_per_unit
 
     @classmethod

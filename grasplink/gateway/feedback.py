@@ -277,18 +277,23 @@ class FeedbackController:
 
     def next_deadline_us(self) -> int | None:
         """When the command changes next without a new input (None: not before one)."""
-        cfg = self.config
-        deadlines = [self._slip.deadline_us()]
+        # asked after every frame the gateway takes: a running minimum, no lists
+        cfg, shown, now = self.config, self._shown, self._clock.now_us
         ended = self._slip.ended_us
-        if self.mode == FeedbackMode.FORCE_AND_SLIP and ended is not None:
-            deadlines.append(ended + cfg.force_return_us)
-        if self._shown.pending:
-            deadlines.append(self._shown.since_us + cfg.level_dwell_us)
-        if self._force_known_us is not None and self._shown.channel == "force":
-            deadlines.append(self._force_known_us + cfg.stale_us)
-        now = self._clock.now_us
-        future = [d for d in deadlines if d is not None and (now is None or d > now)]
-        return min(future, default=None)
+        best = None
+        for due in (
+            self._slip.deadline_us(),
+            ended + cfg.force_return_us
+            if ended is not None and self.mode == FeedbackMode.FORCE_AND_SLIP
+            else None,
+            shown.since_us + cfg.level_dwell_us if shown.pending else None,
+            self._force_known_us + cfg.stale_us
+            if self._force_known_us is not None and shown.channel == "force"
+            else None,
+        ):
+            if due is not None and (now is None or due > now) and (best is None or due < best):
+                best = due
+        return best
 
     # --- decision ---------------------------------------------------------------
 

@@ -10,7 +10,7 @@ into None (unknown), so no NaN ever reaches a command.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from grasplink.decoding.base import SlipEstimate
 
@@ -55,6 +55,9 @@ class Percept:
     slip_speed_high_mm_s: float | None = None
     slip_direction: int | None = None
     slip_direction_confidence: float | None = None
+    # set on what `clean()` returns: cleaning it again gives it back as it is (the gateway
+    # cleans a decoder update once; the feedback controller and the reflex each ask again)
+    _clean: bool = field(default=False, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for name in ("slip_speed_mm_s", "slip_speed_low_mm_s", "slip_speed_high_mm_s"):
@@ -88,6 +91,8 @@ class Percept:
     def clean(self) -> Percept:
         """The same reading with every unusable number made unknown, confidences in 0..1,
         and a direction only with a usable confidence (and none without)."""
+        if self._clean:
+            return self
         confidence = finite_or_none(self.confidence)
         direction = self.slip_direction
         way = finite_or_none(self.slip_direction_confidence)
@@ -95,7 +100,7 @@ class Percept:
             direction = way = None
         else:
             way = min(1.0, max(0.0, way))
-        return Percept(  # (not dataclasses.replace: a few times a decoder update, 4x its cost)
+        clean = Percept(  # (not dataclasses.replace: a few times a decoder update, 4x its cost)
             self.t_us,
             finite_or_none(self.grip_force_n),
             bool(self.slipping),
@@ -106,6 +111,8 @@ class Percept:
             direction,
             way,
         )
+        object.__setattr__(clean, "_clean", True)  # (frozen: the dataclass idiom)
+        return clean
 
     @property
     def velocity_mm_s(self) -> float | None:

@@ -608,15 +608,17 @@ class Gateway(NmtMaster):
             return self._check_identity(link, t_us)
         if not link.provisioning:
             return []
-        failed = next(((w, t) for w, t in link.provisioning if t.done and not t.ok), None)
-        if failed is not None:
-            write, transfer = failed
-            return self._failed(link, f"{write.what}: {transfer.describe()}", t_us)
-        if all(t.ok for _, t in link.provisioning):
-            link.provisioning = []
-            self.alarms.pop(f"{link.name}.provisioning", None)
-            return self._ready(link, t_us)
-        return []
+        # The client runs the writes one at a time in the order queued (a cancel fails the
+        # rest at once): the first not yet ok is the first to fail, or the one under way.
+        # (One pass, from every advance while provisioning runs.)
+        for write, transfer in link.provisioning:
+            if not transfer.ok:
+                if transfer.done:
+                    return self._failed(link, f"{write.what}: {transfer.describe()}", t_us)
+                return []
+        link.provisioning = []
+        self.alarms.pop(f"{link.name}.provisioning", None)
+        return self._ready(link, t_us)
 
     def _failed(self, link: NodeLink, why: str, t_us: int, *, retry: bool = True) -> list[Frame]:
         """A configuration step failed: alarmed, and retried later unless `retry` is False
@@ -1001,7 +1003,7 @@ class Gateway(NmtMaster):
         The percept is stamped with the gateway's clock (the time the samples arrived), so
         controller time never runs backwards whatever the decoder's grid does.
         """
-        percept = Percept.from_estimate(estimate, t_us=t_us)
+        percept = Percept.from_estimate(estimate, t_us=t_us).clean()  # (once for both)
         self._control_stale = True
         self.counters["percepts"] += 1
         for listener in self.estimate_listeners:

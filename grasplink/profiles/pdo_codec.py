@@ -77,10 +77,10 @@ class PdoCodec:
         self._tpdo_by_can_id = {
             m.cob_id: m for m in tpdos if m.cob_id is not None and m.enabled and len(m.map)
         }
-        self._tpdo_structs = {
-            can_id: layout
+        # per CAN-ID: (payload bytes, keys in map order, their struct's unpack or None)
+        self._tpdo_layouts = {
+            can_id: ((pdo.length + 7) // 8, *(_byte_layout(pdo) or ((), None)))
             for can_id, pdo in self._tpdo_by_can_id.items()
-            if (layout := _byte_layout(pdo)) is not None
         }
 
     def od_entry(self, index: int, subindex: int = 0) -> ODVariable:
@@ -111,20 +111,24 @@ class PdoCodec:
     def _tpdo(self, can_id: int) -> PdoMap:
         pdo = self._tpdo_by_can_id.get(can_id)
         if pdo is None:
-            raise PdoError(f"0x{can_id:03X} is no TPDO of node 0x{self.node_id:02X}")
+            raise self._no_tpdo(can_id)
         return pdo
+
+    def _no_tpdo(self, can_id: int) -> PdoError:
+        return PdoError(f"0x{can_id:03X} is no TPDO of node 0x{self.node_id:02X}")
 
     def decode(self, can_id: int, data: bytes) -> dict[Key, int | float]:
         """The mapped values of a TPDO frame; PdoError for a frame that does not fit its map."""
-        pdo = self._tpdo(can_id)
-        expected = (pdo.length + 7) // 8
+        layout = self._tpdo_layouts.get(can_id)  # (one look-up: on every TPDO the gateway takes)
+        if layout is None:
+            raise self._no_tpdo(can_id)
+        expected, keys, unpack = layout
         if len(data) != expected:
+            pdo = self._tpdo(can_id)
             raise PdoError(f"{pdo.name}: {len(data)} bytes, its mapping needs {expected}")
-        layout = self._tpdo_structs.get(can_id)
-        if layout is not None:  # (every TPDO of the shipped profiles)
-            keys, unpack = layout
+        if unpack is not None:  # (every TPDO of the shipped profiles)
             return dict(zip(keys, unpack(data), strict=True))
-        return self._decode_by_map(pdo, data)
+        return self._decode_by_map(self._tpdo(can_id), data)
 
     @staticmethod
     def _decode_by_map(pdo: PdoMap, data: bytes) -> dict[Key, int | float]:

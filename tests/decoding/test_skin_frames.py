@@ -82,3 +82,33 @@ def test_a_single_analogue_value_without_a_sequence_is_timed_by_arrival():
     assert len(out_t) == 40
     assert np.allclose(np.diff(out_t), 0.01)
     assert np.allclose(out_f, 0.01 * np.arange(40))
+
+
+def test_a_tpdos_counts_become_the_same_newtons_as_an_array_of_them_bit_for_bit():
+    """`to_newton` takes a frame's few counts (a list) in floats: numpy's numbers exactly."""
+    rng = np.random.default_rng(7)
+    for zero, per_count in [(0, 98067.0 / 4095 / 1e3), (95, 0.0239), (2048.5, 1e-3 / 3)]:
+        objects = SampleObjects((), per_count, zero)
+        counts = [int(c) for c in rng.integers(0, 65536, 64)] + [-3, 0, 4095]
+        listed = objects.to_newton(counts)
+        assert listed.dtype == np.float64
+        assert listed.tobytes() == objects.to_newton(np.array(counts)).tobytes()
+
+
+def test_sample_times_are_numpys_tick_over_rate_plus_shift_bit_for_bit():
+    """The stream times a packet's samples in floats; the same bits as numpy's arrays."""
+    frames = SkinFrames(SampleObjects.of_skin(SkinCalibration(12, 98067.0, 0), 3), 400.0)
+    stream = frames.stream
+    got = []
+    for n in range(3000):  # 22.5 s, a clock 533 ppm slow: drift corrections on
+        t_s, _ = frames.feed(1000 + n * 7504 + (n % 7) * 40, {**_counts(3), SEQUENCE_KEY: n % 256})
+        got.append(t_s)
+    # the last packet's times as numpy makes them, from the stream's grid and shift now
+    n = stream._released
+    ticks = stream._tick0 + n * 3 + np.arange(3)
+    assert got[-1].tobytes() == (ticks / stream.rate_hz + stream._shift_s).tobytes()
+    assert stream._shift_s != 0.0
+
+
+def _counts(per: int) -> dict:
+    return {(SLOT, k + 1): 1000 + k for k in range(per)}

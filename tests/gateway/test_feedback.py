@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Iterable
@@ -436,6 +437,17 @@ def test_cleaning_a_percept_makes_unusable_numbers_unknown():
     p = Percept(0, math.nan, True, math.inf, math.nan).clean()
     assert (p.grip_force_n, p.slip_speed_mm_s, p.confidence) == (None, None, 0.0)
     assert Percept(0, 1.0, False, None, 7.0).clean().confidence == 1.0
+
+
+def test_a_cleaned_percept_is_cleaned_once():
+    """The gateway cleans a decoder update once; the controllers' clean() gives it back
+    as it is. A percept made from a clean one (replace) is cleaned again."""
+    dirty = Percept(0, math.nan, True, 12.0, 1.5, None, None, 1, math.inf)
+    clean = dirty.clean()
+    assert clean.clean() is clean and dirty.clean() is not dirty
+    assert clean == Percept(0, None, True, 12.0, 1.0)
+    again = dataclasses.replace(clean, confidence=math.nan)
+    assert again.clean() is not again and again.clean().confidence == 0.0
 
 
 def test_the_default_occurrence_speed_is_none_of_the_slip_speed_levels():
