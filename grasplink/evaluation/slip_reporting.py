@@ -821,7 +821,8 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
             if not hasattr(probing, key):
                 raise ValueError(f"build_decoder: no PulseProbeSettings field {key!r}")
             kind = type(getattr(probing, key))
-            probing = replace(probing, **{key: tuple(value) if kind is tuple else kind(value)})
+            field_value: Any = tuple(value) if kind is tuple else kind(value)
+            probing = replace(probing, **{key: field_value})
         floor = NoiseSettings()
         for key, value in (noise or {}).items():
             if not hasattr(floor, key):
