@@ -40,11 +40,23 @@ def job(case: sr.Case, configs: dict[str, dict]) -> dict[str, sr.CaseScore]:
 def config(tuning: dict) -> dict:
     """A `slip_reporting.build_decoder` config from a parsed setting: tracker constants as
     the tuning, `watch.NAME` as the detector's `WatchSettings` field NAME, `tails.NAME` as
-    its kink bank's `TailKinkSettings` field NAME (`detector.tail_kinks`)."""
+    its kink bank's `TailKinkSettings` field NAME (`detector.tail_kinks`), `pulses.NAME` as
+    its pulse probe's `PulseProbeSettings` field NAME (`detector.pulse_probe`),
+    `hinges.threshold` as its kink bank's threshold (noise units), `noise.NAME` as its
+    noise floor's `NoiseSettings` field NAME (`detector.noise_floor`)."""
     watch = {k.removeprefix("watch."): v for k, v in tuning.items() if k.startswith("watch.")}
     tails = {k.removeprefix("tails."): v for k, v in tuning.items() if k.startswith("tails.")}
-    tracker = {k: v for k, v in tuning.items() if not k.startswith(("watch.", "tails."))}
+    pulses = {k.removeprefix("pulses."): v for k, v in tuning.items() if k.startswith("pulses.")}
+    noise = {k.removeprefix("noise."): v for k, v in tuning.items() if k.startswith("noise.")}
+    parts = ("watch.", "tails.", "pulses.", "hinges.", "noise.")
+    tracker = {k: v for k, v in tuning.items() if not k.startswith(parts)}
     out: dict = {"tuning": tracker}
+    if "hinges.threshold" in tuning:
+        out["detector_threshold"] = tuning["hinges.threshold"]
+    if pulses:
+        out["pulses"] = pulses
+    if noise:
+        out["noise"] = noise
     if watch:
         out["watch"] = watch
     if tails:

@@ -41,6 +41,8 @@ from grasplink.decoding.contacts import (
     ContactDetector,
     DetectorSettings,
     HingeSettings,
+    NoiseSettings,
+    PulseProbeSettings,
     WatchSettings,
 )
 from grasplink.decoding.registry import DEFAULT_DECODER
@@ -800,7 +802,9 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
     threshold = settings.pop("detector_threshold", None)
     watch = settings.pop("watch", None)  # WatchSettings fields by name (a trial's)
     tails = settings.pop("tails", None)  # TailKinkSettings fields by name (a trial's)
-    if threshold is not None or watch or tails:
+    pulses = settings.pop("pulses", None)  # PulseProbeSettings fields by name (a trial's)
+    noise = settings.pop("noise", None)  # NoiseSettings fields by name (a trial's)
+    if threshold is not None or watch or tails or pulses or noise:
         hinges = HingeSettings() if threshold is None else HingeSettings(threshold=threshold)
         for key, value in (tails or {}).items():
             if not hasattr(hinges.tails, key):
@@ -812,7 +816,19 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
             if not hasattr(watching, key):
                 raise ValueError(f"build_decoder: no WatchSettings field {key!r}")
             watching = replace(watching, **{key: type(getattr(watching, key))(value)})
-        detector = DetectorSettings(hinges=hinges, watch=watching)
+        probing = PulseProbeSettings()
+        for key, value in (pulses or {}).items():
+            if not hasattr(probing, key):
+                raise ValueError(f"build_decoder: no PulseProbeSettings field {key!r}")
+            kind = type(getattr(probing, key))
+            field_value: Any = tuple(value) if kind is tuple else kind(value)
+            probing = replace(probing, **{key: field_value})
+        floor = NoiseSettings()
+        for key, value in (noise or {}).items():
+            if not hasattr(floor, key):
+                raise ValueError(f"build_decoder: no NoiseSettings field {key!r}")
+            floor = replace(floor, **{key: type(getattr(floor, key))(value)})
+        detector = DetectorSettings(hinges=hinges, watch=watching, pulses=probing, noise=floor)
         settings["detector"] = ContactDetector(fs_hz, detector)
     return make_decoder(name, layout_mm, fs_hz, **settings)
 

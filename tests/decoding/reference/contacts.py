@@ -3,7 +3,8 @@ per-block numeric path was compiled (`kernels.detector`), with later behaviour c
 ported (35f4b94: a chunk longer than a block is fed a block at a time; a80cd9a: the first
 verdicts on a slip's rising level; issue 22: a block a ridge contact touched tells no
 coloured noise, `_mark_busy`; issue 22: a kink with no rise after it on a pulse's falling
-tail, `tail_kinks`, its pure test shared). The compiled
+tail, `tail_kinks`, its pure test shared; issue 22: the coarse scales' noise at
+`weak_slip_share` while weak pulses are told, `_noise`). The compiled
 detector is checked against it in the same process (tests/decoding/test_detector_kernels.py).
 
 Streaming ridge-contact detector: finds the ONSET of every ridge pulse in the FSR signal.
@@ -253,6 +254,8 @@ class ContactDetector:
         block_s: float = 0.125,
         noise_blocks: int = 8,
         history_s: float = 10.0,
+        weak_slip_share: float = 0.9,
+        weak_slip_s: float = 1.0,
         rise_fraction: float = 0.1,
         coarse_rise_fraction: float = 0.3,
         drop_fraction: float = 0.3,
@@ -276,10 +279,12 @@ class ContactDetector:
         widths = sorted({max(1, round(s * self.fs_hz)) for s in scales_s})
         self.noise_blocks = int(noise_blocks)
         self.history_blocks = max(self.noise_blocks, round(history_s / block_s))
+        self.weak_slip_share = float(weak_slip_share)
         self.threshold = float(threshold)
         self.refine_z = float(refine_z)
         self.merge_widths = float(merge_widths)
         self.block = max(16, round(block_s * self.fs_hz))
+        self.weak_slip_blocks = max(1, round(weak_slip_s * self.fs_hz / self.block))
         self.channels = [
             _Channel(w, SosFilter.fir(_slope_taps(w)), block_abs=np.empty(self.block))
             for w in widths
@@ -653,6 +658,11 @@ class ContactDetector:
             )
             if own:
                 noise = max(noise, own[(len(own) - 1) // 2])
+            # weak pulses told within weak_slip_s: a slip in heavy noise, a lower threshold
+            weak = self._busy_wide
+            reach = range(block - self.weak_slip_blocks, block + 1)
+            if self.weak_slip_share < 1.0 and any(weak.get(b, told) < told for b in reach):
+                noise *= self.weak_slip_share
         # few blocks yet: the estimate is itself noisy, be more careful
         noise *= 1.0 + STARTUP_MARGIN * max(0, self.noise_blocks - known) / self.noise_blocks
         ch.noise_by_block[block] = noise
