@@ -19,7 +19,9 @@ was instead:
   where the mass was - *no slip* (every contact clutter), tracks *not evident* (two or
   more contacts but no pulse verdict among them, or too few: `EVIDENT_CONTACTS`),
   *one contact* (a slip just started or reversed), or *restart held* (a restart whose
-  contact was told a step).
+  contact was told a step); *last ridge undecided* when the truth's last ridge contact
+  is more recent than the detector's longest delay (`_silence_latency`): no decoder
+  could have linked it yet.
 
 Each dropped update also notes whether the sensor sat on its rail (saturation) since the
 chosen track's contact. Then per kind, and (`--stops`) the same state read at the update
@@ -52,7 +54,7 @@ from grasplink.evaluation import slip_reporting as sr
 MOVING_KINDS = tuple(k for k in sr.KINDS if k in sr.MOVING)
 RIDGE_MATCH_S = stop_causes.RIDGE_MATCH_S
 SHAPES = {step_shape.STOP_LIKE: "stop-like", step_shape.RIDGE_LIKE: "ridge-like",
-          step_shape.UNTOLD: "untold"}  # fmt: skip
+          step_shape.UNTOLD: "untold", step_shape.AMBIGUOUS: "ambiguous"}  # fmt: skip
 
 
 class _State(stop_causes._Watch):
@@ -141,7 +143,11 @@ def classify(dec: _State, k: int, t_upd: float, truth, contacts: np.ndarray) -> 
         del mass["slip"]
         where = max(mass, key=lambda key: mass[key])
         where = where if not where.startswith("stopped") else "stopped, below no slip"
-        return ("no hypothesis", where + rail)
+        # the truth's last ridge contact not yet decidable (the detector's delay): no
+        # tracker can link it yet
+        before = contacts[contacts <= t_upd]
+        fresh = len(before) and t_upd - float(before[-1]) <= dec._silence_latency
+        return ("no hypothesis", where + rail + (", last ridge undecided" if fresh else ""))
     how, t_last, ridge, dirn, last_id = chosen  # (a step's: its step contact)
     on_ridge = len(contacts) and float(np.min(np.abs(contacts - t_last))) <= RIDGE_MATCH_S
     last = "last on a ridge" if on_ridge else "last no ridge"
