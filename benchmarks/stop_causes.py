@@ -310,7 +310,7 @@ CUES = {
 
 
 _SHAPE_VERDICTS = {step_shape.STOP_LIKE: "stop-like", step_shape.RIDGE_LIKE: "ridge-like",
-                   step_shape.UNTOLD: "untold"}  # fmt: skip
+                   step_shape.UNTOLD: "untold", step_shape.AMBIGUOUS: "ambiguous"}  # fmt: skip
 
 
 def _shape(row: dict) -> step_shape.StepShape | None:

@@ -317,16 +317,25 @@ class TrackerDecoder(Decoder):
     LOG_STOP_AT_RIDGE = math.log(0.05)  # a slip stops just as it reaches a ridge
     # a step not sure by its shape (`step_shape.classify`, from its samples up to the
     # verdict): a fast monotone rise is a stop's - taken as a ridge the slip went on from
-    # with this prior -, a slow one (or a peak over its held level) a ridge pulse the FSR's
-    # hysteresis held up - taken as a stop (there or at the ridge) with this one; 0: off.
-    # Measured (stop_causes.py --shapes, full plan): 89 % of the stops' plain steps fast,
-    # 94 % of the ridges' slow (the loop's 96 %). Full plan, 2 seeds, one run
-    # (tune_tracker_kinds.py), against both off: the stop side alone clears stops in time
-    # 87.0 -> 89.9 % (speed after a stop's report due 1.1 -> 1.0 %) at no cost; both sides
-    # lower slip dropped 18.0 -> 15.8 % and moving missing 29.7 -> 27.3 % but clear 86.6 %
-    # (the ridge side alone 83.8: ridge-like stop steps held as ridges): the ridge side off
+    # with this prior -, a slow one (or none above its base) a ridge pulse the FSR's
+    # hysteresis held up, or the grip rising under a sliding object - taken as a stop
+    # (there or at the ridge) with this one; a fast rise to a peak, or off a falling tail,
+    # is either (AMBIGUOUS: neither prior, unless SHAPE_AMBIGUOUS_RIDGE). Measured
+    # (stop_causes.py --shapes, full plan): 89 % of the stops' plain steps fast, 94 % of the
+    # ridges' slow (the loop's 96 %). Full plan, 2 seeds, one run (tune_tracker_kinds.py):
+    # the stop side alone clears stops in time 87.0 -> 89.9 % at no cost. The ridge side
+    # (dropped_causes.py: a slow step read as a stop holds 14 % of the updates the slip flag
+    # drops while sliding) at log 0.1, against it off: slip dropped 18.1 -> 16.0 %
+    # (saturation 28.5 -> 15.5, reversal 36.0 -> 31.0, stick-slip 8.9 -> 6.4, loop 41.8 ->
+    # 38.8), moving missing 29.8 -> 27.5 %; cost: stops cleared in time 89.9 -> 88.8 %
+    # (87.7 with AMBIGUOUS ridge-like, 86.6 before the falling-tail jump), speed after a
+    # stop's report due 1.0 -> 1.1 %, wrong direction 3.0 -> 3.2 %, snr10 flagged at rest
+    # 40.9 -> 46.3 %; held objects 0.0 %. It also fails three decoding tests (a stop past
+    # the last ridge at 10 dB cleared in 0.42 s, > 0.3; a stop on a ridge placed 0.067 mm
+    # past the bound; the rail before the object arrives): off (0) until those hold
     LOG_SHAPE_STOP_RIDGE = math.log(0.1)
     LOG_SHAPE_RIDGE_STOP = 0.0
+    SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a track whose last contact came from a probe waits this share of the probes' latency
     # for its next (`_latency_floor`; 0: the kink bank's latency for every track)
     PROBE_WAIT = 1.0
@@ -788,7 +797,9 @@ class TrackerDecoder(Decoder):
             floats[ridge, F_SCORE] += (
                 self.LOG_SURE_STEP_RIDGE if sure else self.LOG_SHAPE_STOP_RIDGE
             )
-        elif shape == step_shape.RIDGE_LIKE:  # a ridge pulse held up: seldom a stop (here)
+        elif shape == step_shape.RIDGE_LIKE or (
+            shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
+        ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
 

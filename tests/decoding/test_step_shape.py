@@ -62,13 +62,31 @@ def test_a_ridge_pulse_held_up_on_a_rising_level_is_no_stop(fs_hz, rise_s, noise
         assert verdict(held, fs_hz) == ss.RIDGE_LIKE, (fs_hz, seed)
 
 
-def test_a_peak_well_over_the_level_held_is_a_pulse_however_fast_it_rose():
-    """0.4 N in 5 ms falling back to 0.2 N (its fall held halfway): a pulse."""
+def test_a_fast_peak_well_over_the_level_held_is_peaked_not_a_plain_stop():
+    """0.4 N in 5 ms falling back to 0.2 N (its fall held halfway): a pulse held up, or a
+    stop landing on a ridge's pulse - AMBIGUOUS, neither a stop's plain step nor a slow rise;
+    the same rise falling back a tenth is a stop's step."""
     fs_hz = 400.0
     t, x = level(fs_hz, 0.005, 1)
     rise = np.clip((t - ONSET_S) / 0.005, 0.0, 1.0)
     fall = np.clip((t - ONSET_S - 0.005) / 0.02, 0.0, 1.0)
-    assert verdict(x + 0.4 * rise * (1.0 - 0.5 * fall), fs_hz) == ss.RIDGE_LIKE
+    assert verdict(x + 0.4 * rise * (1.0 - 0.5 * fall), fs_hz) == ss.AMBIGUOUS
+    assert verdict(x + 0.4 * rise * (1.0 - 0.1 * fall), fs_hz) == ss.STOP_LIKE
+
+
+def test_a_jump_off_a_falling_tail_to_a_level_under_it_is_peaked():
+    """A stop on a ridge pulse's falling tail (stop kind, 12 mm/s): the level jumps 0.27 N
+    within a sample and relaxes while the tail under it falls on, to a level held below
+    the median of the 60 ms before - no rise above that base, but a jump off the tail's
+    base carried to the onset: AMBIGUOUS (a stop on a pulse, or a pulse), not a slow ridge
+    rise. The same tail with no jump is no stop."""
+    fs_hz = 400.0
+    t, x = level(fs_hz, 0.005, 1)
+    tail = 0.3 * np.exp(-(t - ONSET_S + 0.2) / 0.08) * (t > ONSET_S - 0.2)
+    after = np.clip(t - ONSET_S, 0.0, None)
+    jump = 0.27 * (t > ONSET_S) * np.exp(-after / 0.03)
+    assert verdict(x + tail + jump, fs_hz) == ss.AMBIGUOUS
+    assert verdict(x + tail, fs_hz) == ss.RIDGE_LIKE
 
 
 def test_a_level_no_higher_than_before_is_no_stop():

@@ -40,6 +40,10 @@ class StepShape(NamedTuple):
     post_slope_n_s: float  # ... over POST_S before the verdict
     post_rough_snr: float  # the residual of that fit (rms) in noise units
     noise_n: float  # white noise before the onset (first differences, robust)
+    # the smoothed peak above the level before, its trend carried to the onset (on a
+    # pulse's falling tail the median before lies above it), and how soon 90 % of it came
+    jump_n: float = 0.0
+    jump_s: float = float("nan")
 
 
 def _fit(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
@@ -86,6 +90,11 @@ def measure(x: np.ndarray, onset: int, verdict: int, fs_hz: float) -> StepShape 
     near = max(0.1 * height, RISE_NOISE * noise / math.sqrt(width))
     reached = np.flatnonzero(smooth - base >= height - near) if height > 0 else np.zeros(0)
     rise = (float(reached[0]) + (width - 1) / 2.0) / fs_hz if len(reached) else float("nan")
+    # the base carried to the onset along the level's trend before it (the fit's line)
+    base0 = float(np.mean(before)) + pre_slope * (pre / 2.0 + 0.5) / fs_hz
+    jump = peak - base0
+    jumped = np.flatnonzero(smooth - base0 >= 0.9 * jump) if jump > 0 else np.zeros(0)
+    jump_s = (float(jumped[0]) + (width - 1) / 2.0) / fs_hz if len(jumped) else float("nan")
     return StepShape(
         height_n=height,
         overshoot_n=peak - held,
@@ -94,11 +103,17 @@ def measure(x: np.ndarray, onset: int, verdict: int, fs_hz: float) -> StepShape 
         post_slope_n_s=post_slope,
         post_rough_snr=rough / noise,
         noise_n=noise,
+        jump_n=jump,
+        jump_s=jump_s,
     )
 
 
-# the verdicts of `classify`
-RIDGE_LIKE, UNTOLD, STOP_LIKE = -1, 0, 1
+# the verdicts of `classify`; AMBIGUOUS: a fast rise past the level held, or off a falling
+# tail to a level under it - a ridge pulse held up, or a stop landing on a
+# ridge's pulse (the edge pushed the ridge over, then stuck): the stop kinds' steps not
+# told sure, full plan, 1 seed (stop_causes.py --shapes): of 106 stops' 7 rose fast to a
+# peak, 5 slowly; of 294 ridges' and others' 22 and 234
+RIDGE_LIKE, UNTOLD, STOP_LIKE, AMBIGUOUS = -1, 0, 1, 2
 # a stop's level change is over within the braking (the object sticks): told fast when it
 # reached 90 % of its height this soon after the onset (or within this many samples of a
 # slow input); a ridge pulse rises over the ~1.25 mm the edge needs to push a ridge over,
@@ -113,18 +128,27 @@ PULSE_OVERSHOOT_SNR = 3.0
 
 
 def classify(shape: StepShape | None, fs_hz: float) -> int:
-    """STOP_LIKE (a fast, monotone level change), RIDGE_LIKE (a slow rise, no rise at all,
-    or a peak well above the level held: a ridge pulse held up), or UNTOLD (no shape)."""
+    """STOP_LIKE (a fast, monotone level change), RIDGE_LIKE (a slow rise, or no rise at
+    all: a ridge pulse held up), AMBIGUOUS (a fast rise to a peak well above the level
+    held, or off a falling tail to a level under it: a ridge pulse held up, or a stop on
+    one), or UNTOLD (no shape)."""
     if shape is None:
         return UNTOLD
+    fast_s = max(FAST_RISE_S, FAST_RISE_SAMPLES / fs_hz)
     if not shape.height_n > 0 or not math.isfinite(shape.rise_s):
-        return RIDGE_LIKE  # the level held is no higher than before: no stop's step
-    fast = shape.rise_s <= max(FAST_RISE_S, FAST_RISE_SAMPLES / fs_hz)
+        # the level held is no higher than before: no stop's step - unless it jumped at
+        # once from a falling tail (a stop on a ridge's pulse: the tail goes on falling
+        # under the level it holds) to a peak well above the noise
+        jumped = shape.jump_s <= fast_s and shape.jump_n > PULSE_OVERSHOOT_SNR * shape.noise_n
+        return AMBIGUOUS if jumped and shape.pre_slope_n_s < 0 else RIDGE_LIKE
+    fast = shape.rise_s <= fast_s
     peaked = (
         shape.overshoot_n > PULSE_OVERSHOOT * shape.height_n
         and shape.overshoot_n > PULSE_OVERSHOOT_SNR * shape.noise_n
     )
-    return STOP_LIKE if fast and not peaked else RIDGE_LIKE
+    if not fast:
+        return RIDGE_LIKE
+    return AMBIGUOUS if peaked else STOP_LIKE
 
 
 # a verdict told late (a revision, a probe's contact) is read on the rise it told of: the
