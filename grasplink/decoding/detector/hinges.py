@@ -488,7 +488,7 @@ class HingeBank:
         rise = float(mean(x[i + 1 : i + w + 1]) - x[i])
         return fall > 5.0 * math.sqrt(2.0) * white[0] and fall > 2.0 * max(rise, 0.0)
 
-    def _refine(self, ci: int, n: int) -> tuple[int, float, int]:
+    def _refine(self, ci: int, n: int) -> tuple[int, float, float]:
         """Coarse to fine: move the onset to the peak of each finer scale that sees it.
 
         Returns (sample, fraction of a sample, width of the scale that placed it).

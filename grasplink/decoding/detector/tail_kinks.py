@@ -14,9 +14,10 @@ end of a grip release or ramp, the slow bend at the end of a pulse's decay. This
 tells a tail kink from those by the tail's own decay model: a candidate the rise check
 dropped is a contact when
 
-* it lies on the falling tail of a pulse: the level peaked within `look_s` before it, at
-  least `tall` white-noise units above the level at the kink, after rising to that peak
-  by at least as much (a pulse, not the start of a ramp down);
+* it lies on the falling tail of a pulse: the level peaked within `look_s` (or, where
+  that finds none, `slow_look_s`) before it, at least `tall` white-noise units above the
+  level at the kink, after rising to that peak by at least as much (a pulse, not the
+  start of a ramp down);
 * the tail from the peak to the kink is a ridge pulse's decay (u e^(1 - u); where on it
   the highest sample sits and the rise from a grid, base and height least squares) that
   fits it within `fit_rms` noise units RMS (a tail, not a corner of two ramps);

@@ -28,7 +28,7 @@ LATE_SHARE = 0.4  # a tail kink's time lies this share of its finding scale late
 SPREAD_SHARE = 0.4  # ... with this spread (one sigma), a share of that scale
 
 
-def tail_placed(n_at: int, delta: float, placed: int, width: int) -> tuple[int, float, float]:
+def tail_placed(n_at: int, delta: float, placed: float, width: int) -> tuple[int, float, float]:
     """A tail kink's onset as the kink bank's candidates carry it: (sample, fraction of a
     sample, the width whose quarter plus 0.3 samples is its one-sigma, `HingeBank.merge`),
     from the kink bank's own (`HingeBank._refine`) and the scale that found it (width, in
