@@ -96,13 +96,13 @@ class _Watch(TrackerDecoder):
 
 
 def _decoder(rec: ns.Recorded, tuning: dict) -> _Watch:
-    """The watching decoder with a tuning (`tune_tracker.config`: `watch.NAME` the
-    detector's), as `slip_reporting.build_decoder` builds the default one."""
+    """The watching decoder with a tuning (`tune_tracker.config`: `watch.NAME` and
+    `tails.NAME` the detector's), as `slip_reporting.build_decoder` builds the default one."""
     config = tune_tracker.config(tuning)
     probe = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, config)
     return _Watch(
         rec.truth.layout_mm, rec.fs_hz, tuning=config["tuning"],
-        detector=probe.detector if "watch" in config else None,
+        detector=probe.detector if "watch" in config or "tails" in config else None,
     )  # fmt: skip
 
 

@@ -108,7 +108,11 @@ class ContactDetector:
         self.block = self.noise.block
         # samples (and level) held: what the widest channel, the level and its trend read
         self._keep = self.block + 4 * max(widths) + level_span(fs, settings.watch) + 8
-        self.samples = Samples(4 * self._keep)
+        # ... and the samples a tail kink's look back reads (`tail_kinks`: its peak)
+        tails = settings.hinges.tails
+        look = round(max(tails.look_s, tails.slow_look_s) * fs) if tails.residual_z > 0 else 0
+        self._keep_x = max(self._keep, self.block + 4 * max(widths) + look + 8)
+        self.samples = Samples(4 * self._keep_x)
         self.ledger = Ledger()
         shared = (self.noise, self.samples, self.ledger)
         self.hinges = HingeBank(fs, settings.hinges, *shared)
@@ -209,7 +213,7 @@ class ContactDetector:
 
     def _trim(self) -> None:
         keep = self._keep
-        self.samples.trim(keep)
+        self.samples.trim(self._keep_x)
         self.watcher.trim(keep, [w for w, _, _ in self.steps.probes + self.pulses.watches])
         self.steps.trim(keep)
         self.hinges.trim(keep)

@@ -277,10 +277,11 @@ class TrackerDecoder(Decoder):
     # model constants (see module doc); all times in s, distances in mm
     # chance a ridge contact is detected, by the spacing crossed before it (its pulse is
     # 1 - exp(-spacing / 10 mm) high and starts on the previous one's decay): measured by
-    # benchmarks/detector_contacts.py --spacings (ba7160a: 3 mm 22 %, 4 mm 91 %, 5 mm 99 %,
-    # 6-34 mm 100 % of 3964 contacts, 8-120 mm/s); interpolated between, flat beyond
+    # benchmarks/detector_contacts.py --spacings (with the tail kinks, `detector.tail_kinks`:
+    # 3 mm 46 %, 4 mm 92 %, 5 mm 99 %, 6-34 mm 100 % of 3964 contacts, 8-120 mm/s; 22, 91,
+    # 99 % without them); interpolated between, flat beyond
     DETECT_SPACINGS_MM = (3.0, 4.0, 5.0)
-    DETECT_P = (0.22, 0.9, 0.99)
+    DETECT_P = (0.46, 0.92, 0.99)
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
     LOG_NEW_TRACK = math.log(0.01)  # slips starting per s
     LOG_REVERSE = math.log(0.2)  # a contact while slipping is the first after a reversal

@@ -59,7 +59,9 @@ def test_the_detector_buffers_stay_bounded_over_a_long_stream():
     assert held[-1] == held[2]  # after the first cycles, no buffer grows any more
     keep = detector._keep
     level = detector.watcher._level
-    assert len(detector.samples.t) <= 2 * keep and len(level) <= 2 * keep + detector.watcher.watch
+    # (the samples also hold a tail kink's look back, `tail_kinks.slow_look_s`: `_keep_x`)
+    assert len(detector.samples.t) <= 2 * detector._keep_x
+    assert len(level) <= 2 * keep + detector.watcher.watch
     for ch in detector.channels:
         assert ch.rows.size <= 2 * keep
     for sc in detector.steps.scales:

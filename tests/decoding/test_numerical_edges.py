@@ -200,14 +200,7 @@ def test_a_stop_exactly_on_a_ridge_clears_the_flag_and_reports_no_speed_after(na
         assert not still, (ridge, reverse, after[cleared[0]].t_s - stop_s, still[:3])
 
 
-STOP_HELD_TOO_FAR = (
-    "a stop exactly on ridge 4 of alpha0.1 (47 mm/s) is held at rest at 84 mm forward (the "
-    "object is at 44 mm) and at 19 mm in reverse (at 36 mm): past the next ridge, which the "
-    "edge never reached"
-)
-
-
-@pytest.mark.parametrize("name", decoders(**known_defect(STOP_HELD_TOO_FAR)))
+@pytest.mark.parametrize("name", decoders())
 def test_a_stop_exactly_on_a_ridge_is_placed_no_further_than_the_next_ridge(name):
     """The contact at the stop places the edge on that ridge; at the very worst a decoder
     that missed it may hold the edge up to the next ridge, which it never reached."""

@@ -21,7 +21,7 @@ from grasplink.simulators import synth
 
 FS_HZ = 400.0
 WHITE_N = 0.02  # thesis-like
-SETTINGS = TailKinkSettings(residual_z=ON_RESIDUAL_Z)  # (shipped off for now: its doc)
+SETTINGS = TailKinkSettings(residual_z=ON_RESIDUAL_Z)  # (as shipped)
 ON = DetectorSettings(hinges=HingeSettings(tails=SETTINGS))
 OFF = DetectorSettings(hinges=HingeSettings(tails=replace(SETTINGS, residual_z=0.0)))
 

@@ -37,6 +37,7 @@ from grasplink.decoding.detector.series import (
     mean,
 )
 from grasplink.decoding.detector.tail_kinks import TailKinkSettings, tail_kink
+from grasplink.decoding.detector.tail_onsets import tail_placed
 from grasplink.decoding.filters import SosFilter, lattice_median
 from grasplink.decoding.kernels.detector import (
     BLOCK_DONE,
@@ -448,9 +449,12 @@ class HingeBank:
         w = ch.width
         for i in found.tolist():
             n = ch.z_start + i
-            if ch.za[i] < ch.rise * ch.zh[i] and not self._on_tail(n, w):
+            tail = ch.za[i] < ch.rise * ch.zh[i]
+            if tail and not self._on_tail(n, w):
                 continue
             n_at, delta, placed = self._refine(ci, n)
+            if tail:  # (timed late by the tail's bend: `tail_onsets`)
+                n_at, delta, placed = tail_placed(n_at, delta, placed, w)
             if self._after_drop(n_at, w):
                 continue
             # decided once z is known over +-w (late where the noise had to be waited for)
@@ -484,7 +488,7 @@ class HingeBank:
         rise = float(mean(x[i + 1 : i + w + 1]) - x[i])
         return fall > 5.0 * math.sqrt(2.0) * white[0] and fall > 2.0 * max(rise, 0.0)
 
-    def _refine(self, ci: int, n: int) -> tuple[int, float, int]:
+    def _refine(self, ci: int, n: int) -> tuple[int, float, float]:
         """Coarse to fine: move the onset to the peak of each finer scale that sees it.
 
         Returns (sample, fraction of a sample, width of the scale that placed it).

@@ -3,8 +3,8 @@ per-block numeric path was compiled (`kernels.detector`), with later behaviour c
 ported (35f4b94: a chunk longer than a block is fed a block at a time; a80cd9a: the first
 verdicts on a slip's rising level; issue 22: a block a ridge contact touched tells no
 coloured noise, `_mark_busy`; issue 22: a kink with no rise after it on a pulse's falling
-tail, `tail_kinks`, its pure test shared; issue 22: the coarse scales' noise at
-`weak_slip_share` while weak pulses are told, `_noise`). The compiled
+tail, `tail_kinks`, its pure test shared, timed back as `tail_onsets` times it; issue 22:
+the coarse scales' noise at `weak_slip_share` while weak pulses are told, `_noise`). The compiled
 detector is checked against it in the same process (tests/decoding/test_detector_kernels.py).
 
 Streaming ridge-contact detector: finds the ONSET of every ridge pulse in the FSR signal.
@@ -69,6 +69,7 @@ import numpy as np
 
 from grasplink.decoding.contacts import sharp_flat_step
 from grasplink.decoding.detector.tail_kinks import TailKinkSettings, tail_kink
+from grasplink.decoding.detector.tail_onsets import tail_placed
 from grasplink.decoding.filters import RAIL_SHARE, lattice_median, on_rail, resolution
 from grasplink.decoding.kernels.layout import ROW_AFTER, ROW_HINGE, ROW_READY, ROW_Z
 from tests.decoding.reference.filters import SosFilter
@@ -77,7 +78,7 @@ DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
 BUSY_MAX_S = 0.06  # ... in the hinge scales under this (s); wider ones count every block
 BUSY_SNR = 3.0  # a pulse this many white-noise units high marks its blocks busy (`_noise`)
 CLEAR_SNR = 10.0  # ... in the widest scale only while under this (a clear pulse's bends)
-TAILS = TailKinkSettings()  # the kink bank's tail kinks (issue 22), as shipped (off)
+TAILS = TailKinkSettings()  # the kink bank's tail kinks (issue 22), as shipped
 NOISE_FLOOR_N = 1e-3  # smallest white-noise level assumed, N per sample (an ideal, quiet FSR)
 MEDIAN_TO_STD = 1.0 / 0.6745
 STARTUP_MARGIN = 0.3  # noise inflation while the estimate rests on a single block
@@ -694,9 +695,12 @@ class ContactDetector:
             needed = self.rise_fraction if w / self.fs_hz < 0.03 else self.coarse_rise_fraction
             # ... unless a ridge's kink on a pulse's falling tail (issue 22, `tail_kinks`)
             floor = TAILS.floor * jump
-            if rising < needed * jump and (rising < floor or not self._on_tail(n, w)):
+            tail = rising < needed * jump
+            if tail and (rising < floor or not self._on_tail(n, w)):
                 continue
             n_at, delta, placed = self._refine(ci, n)
+            if tail:  # timed late by the tail's bend (`tail_onsets`)
+                n_at, delta, placed = tail_placed(n_at, delta, placed, w)
             if self._after_drop(n_at, w):
                 continue
             # decided once z is known over +-w (late where the noise had to be waited for)
