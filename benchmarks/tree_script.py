@@ -17,15 +17,21 @@ from pathlib import Path
 from typing import Any
 
 
+def _command(tree: Path, script: str, folder: str, args: tuple[str, ...]) -> list[str]:
+    """The child's command line: `script` saved in `folder`, run with `tree` first on the
+    path and `args` as its `sys.argv[1:]`."""
+    path = Path(folder) / "script.py"
+    path.write_text(script)
+    prelude = f"import sys; sys.path.insert(0, {str(tree)!r}); "
+    return [sys.executable, "-c", prelude + f"exec(open({str(path)!r}).read())", *args]
+
+
 def run_in_tree(tree: Path, script: str, *args: str, what: str) -> str:
     """`script`'s stdout, run with `tree`'s grasplink; exits naming `what` if it fails."""
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "script.py"
-        path.write_text(script)
-        prelude = f"import sys; sys.path.insert(0, {str(tree)!r}); "
         out = subprocess.run(
-            [sys.executable, "-c", prelude + f"exec(open({str(path)!r}).read())", *args],
-            check=False, cwd=tmp, capture_output=True, text=True,
+            _command(tree, script, tmp, args), check=False, cwd=tmp, capture_output=True,
+            text=True,
         )  # fmt: skip
     if out.returncode:
         raise SystemExit(f"{what} failed in {tree}:\n{out.stderr}")
@@ -38,12 +44,9 @@ def served_in_tree(tree: Path, script: str, *args: str) -> Iterator[subprocess.P
     stdout are pipes, text lines): a timing asks it round after round, so each round
     costs neither an interpreter's start nor its imports and compiled kernels."""
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "script.py"
-        path.write_text(script)
-        prelude = f"import sys; sys.path.insert(0, {str(tree)!r}); "
         child = subprocess.Popen(
-            [sys.executable, "-c", prelude + f"exec(open({str(path)!r}).read())", *args],
-            cwd=tmp, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+            _command(tree, script, tmp, args), cwd=tmp, stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
         try:
             yield child
