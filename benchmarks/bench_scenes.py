@@ -474,10 +474,15 @@ What is left is per frame and per chunk, not per sample. In a closed loop a part
 physics still steps every 10 ms through a ramp of its own commands (the gateway
 ramps grip and belt commands chunk by chunk), where each of its effects pays
 numpy's per-call cost on 4-15 samples (the hand's part: 212 blocks in 6 s). The
-gateway alone (its skin decoding a quarter to half of it; the detector's per-block
-glue was cut by 10-20 %, outputs bit-identical) bounds the scene below the 20×
-target whatever the rest costs (the line under the loop_headline table). In a
-skin-only slip the skin
+gateway is the largest part (its skin decoding about half of it; the detector's
+per-block glue was cut by 10-20 %, and in s22 a decoder update became one clean
+percept, not three, TPDOs decode in one look-up and skin packets in floats: the
+gateway alone on its replayed calls 1.07× as fast, 8.9 % fewer Python calls, all
+byte-identical); its profile is flat past the decoder. The tail kinks the decoder
+finds since s22 cost it 3.5 % more per sample, so the loop moved ~1.05× against
+c22be85. Measured on a quiet host the loop is at 15× (the line under the
+loop_headline table bounds what the gateway alone allows): 20× needs every part
+about a quarter cheaper. In a skin-only slip the skin
 node streams its packets in spans (above), which took it past 200×. A node accepts
 only the heartbeats its consumer (1016h) watches, so another node's beat no longer
 ends a skin span: headline_slip's spans went from 298 asks and 578 ticks told (317
