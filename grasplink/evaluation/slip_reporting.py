@@ -796,6 +796,17 @@ def sweep_configs(plan: Plan) -> dict[str, dict]:
     return configs
 
 
+def _with_fields(base: Any, fields: dict | None) -> Any:
+    """The settings dataclass `base` with a trial's fields (by name) replaced, each value
+    converted to the field's own type; ValueError naming an unknown field."""
+    for key, value in (fields or {}).items():
+        if not hasattr(base, key):
+            raise ValueError(f"build_decoder: no {type(base).__name__} field {key!r}")
+        kind = type(getattr(base, key))
+        base = replace(base, **{key: tuple(value) if kind is tuple else kind(value)})
+    return base
+
+
 def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings: dict) -> Decoder:
     """`make_decoder` with a sweep's settings (`detector_threshold`: a detector of its own)."""
     settings = dict(settings)
@@ -806,29 +817,13 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
     noise = settings.pop("noise", None)  # NoiseSettings fields by name (a trial's)
     if threshold is not None or watch or tails or pulses or noise:
         hinges = HingeSettings() if threshold is None else HingeSettings(threshold=threshold)
-        for key, value in (tails or {}).items():
-            if not hasattr(hinges.tails, key):
-                raise ValueError(f"build_decoder: no TailKinkSettings field {key!r}")
-            kind = type(getattr(hinges.tails, key))
-            hinges = replace(hinges, tails=replace(hinges.tails, **{key: kind(value)}))
-        watching = WatchSettings()
-        for key, value in (watch or {}).items():
-            if not hasattr(watching, key):
-                raise ValueError(f"build_decoder: no WatchSettings field {key!r}")
-            watching = replace(watching, **{key: type(getattr(watching, key))(value)})
-        probing = PulseProbeSettings()
-        for key, value in (pulses or {}).items():
-            if not hasattr(probing, key):
-                raise ValueError(f"build_decoder: no PulseProbeSettings field {key!r}")
-            kind = type(getattr(probing, key))
-            field_value: Any = tuple(value) if kind is tuple else kind(value)
-            probing = replace(probing, **{key: field_value})
-        floor = NoiseSettings()
-        for key, value in (noise or {}).items():
-            if not hasattr(floor, key):
-                raise ValueError(f"build_decoder: no NoiseSettings field {key!r}")
-            floor = replace(floor, **{key: type(getattr(floor, key))(value)})
-        detector = DetectorSettings(hinges=hinges, watch=watching, pulses=probing, noise=floor)
+        hinges = replace(hinges, tails=_with_fields(hinges.tails, tails))
+        detector = DetectorSettings(
+            hinges=hinges,
+            watch=_with_fields(WatchSettings(), watch),
+            pulses=_with_fields(PulseProbeSettings(), pulses),
+            noise=_with_fields(NoiseSettings(), noise),
+        )
         settings["detector"] = ContactDetector(fs_hz, detector)
     return make_decoder(name, layout_mm, fs_hz, **settings)
 
