@@ -10,7 +10,7 @@ clutter: a likelihood the tracker does not use yet.
 
 For slip_reporting's cases (`--kinds`, `--seeds N`: the full plan's first N), every
 contact the shipped detector tells (3 samples at a time) is matched to the truth's ridge
-crossings (within `contact_truth.MATCH_S`); the table gives, per kind, the travel
+crossings (`contact_truth.near_truth`); the table gives, per kind, the travel
 (scale_s x the truth's |speed| at the contact) of true contacts and of false ones while
 the object moves, as quantiles, and the false contacts told at rest.
 
@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 
 from grasplink.evaluation import slip_reporting as sr
-from grasplink.evaluation.contact_truth import MATCH_S, detect
+from grasplink.evaluation.contact_truth import detect, near_truth
 
 MOVING_MM_S = 3.0  # slower than this the edge is at rest (or braking to it at a run's end)
 QUANTILES = (0.1, 0.5, 0.9)
@@ -38,12 +38,11 @@ def job(case: sr.Case) -> tuple[str, list[tuple[bool, float, float, float]]]:
     rec = case.make()
     truth = rec.truth
     told = detect(rec.t_s, rec.force_n, rec.fs_hz)
-    crossings = np.sort(np.asarray(truth.contact_times_s, dtype=float))
+    near = near_truth(np.array([e.t_s for e in told.contacts]), truth.contact_times_s)
     out = []
-    for event in told.contacts:
-        near = bool(len(crossings)) and np.min(np.abs(crossings - event.t_s)) <= MATCH_S
+    for event, is_near in zip(told.contacts, near.tolist(), strict=True):
         speed = abs(float(np.interp(event.t_s, truth.t_s, truth.speed_mm_s)))
-        out.append((near, event.scale_s, speed, event.scale_s * speed))
+        out.append((is_near, event.scale_s, speed, event.scale_s * speed))
     return case.kind, out
 
 

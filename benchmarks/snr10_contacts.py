@@ -20,29 +20,18 @@ from dataclasses import replace
 
 import numpy as np
 
-from grasplink.decoding.contacts import ContactDetector, ContactEvent, DetectorSettings
+from grasplink.decoding.contacts import DetectorSettings
 from grasplink.decoding.detector.noise_floor import NoiseSettings
 from grasplink.evaluation import contact_truth as ct
-from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 
 PROBE_ID = 10**9  # the probes' contact ids start here (`detector.events.Ledger`)
 
 
-def detect(rec: ns.Recorded, settings: DetectorSettings) -> ct.Told:
-    """`contact_truth.detect` with a detector of `settings`."""
-    detector = ContactDetector(rec.fs_hz, settings)
-    contacts: list[ContactEvent] = []
-    for i in range(0, len(rec.t_s), ct.CHUNK):
-        events, _ = detector.feed(rec.t_s[i : i + ct.CHUNK], rec.force_n[i : i + ct.CHUNK])
-        contacts += events
-    return ct.Told(contacts, {}, 0.0)
-
-
 def job(case: sr.Case, settings: DetectorSettings) -> dict:
     """One case's counts: true, found, false while sliding / at rest, by source."""
     rec = case.make()
-    told = detect(rec, settings)
+    told = ct.detect(rec.t_s, rec.force_n, rec.fs_hz, settings=settings)
     truth = rec.truth
     crossings = np.asarray(truth.contact_times_s, dtype=float)
     times = np.array([e.t_s for e in told.contacts])
@@ -57,11 +46,7 @@ def job(case: sr.Case, settings: DetectorSettings) -> dict:
     out["true"] = len(crossings)
     out["slide_s"] = max(0.0, slip_to - slip_from) if len(sliding) else 0.0
     out["rest_s"] = float(t_truth[-1] - t_truth[0]) - out["slide_s"]
-    near = (
-        np.array([np.any(np.abs(crossings - t) <= ct.MATCH_S) for t in times], dtype=bool)
-        if len(crossings)
-        else np.zeros(len(times), bool)
-    )
+    near = ct.near_truth(times, crossings)
     for c in crossings:
         if not len(times):
             break

@@ -128,10 +128,18 @@ class Told:
     seconds: float = 0.0  # wall time of the feeding (for a cost figure only)
 
 
-def detect(t_s: np.ndarray, force_n: np.ndarray, fs_hz: float, chunk: int = CHUNK) -> Told:
+def detect(
+    t_s: np.ndarray,
+    force_n: np.ndarray,
+    fs_hz: float,
+    chunk: int = CHUNK,
+    settings: DetectorSettings | None = None,
+) -> Told:
+    """What a detector (`settings`; None: the shipped one) tells over a signal fed `chunk`
+    samples at a time."""
     import time
 
-    detector = ContactDetector(fs_hz)
+    detector = ContactDetector(fs_hz, settings)
     contacts: list[ContactEvent] = []
     first: dict[int, PulseCheck] = {}
     start = time.perf_counter()
@@ -155,6 +163,14 @@ class Matched:
     step_first: int  # ... a step (pulse=False)
 
 
+def near_truth(times_s: np.ndarray, truth_s: np.ndarray) -> np.ndarray:
+    """Per contact time: within `MATCH_S` of a true ridge crossing?"""
+    times, truth = np.asarray(times_s, dtype=float), np.asarray(truth_s, dtype=float)
+    if not len(truth):
+        return np.zeros(len(times), bool)
+    return np.abs(times[:, None] - truth[None, :]).min(axis=1) <= MATCH_S
+
+
 def match(truth_s: np.ndarray, told: Told) -> Matched:
     times = np.array([e.t_s for e in told.contacts])
     ids = [e.id for e in told.contacts]
@@ -170,11 +186,8 @@ def match(truth_s: np.ndarray, told: Told) -> Matched:
             verdict = told.first_verdict.get(ids[j])
             pulse_first += verdict is not None and verdict.pulse is True
             step_first += verdict is not None and verdict.pulse is False
-    false = sum(
-        1
-        for j, t in enumerate(times)
-        if j not in used and not np.any(np.abs(truth_s - t) <= MATCH_S)
-    )
+    near = near_truth(times, truth_s)
+    false = sum(1 for j in range(len(times)) if j not in used and not near[j])
     return Matched(len(truth_s), len(errors), false, np.array(errors), pulse_first, step_first)
 
 
