@@ -90,14 +90,12 @@ def decompose(dec: _State, g: float) -> dict:
         j = int(np.sum(due[i] <= seen)) - 1
         adj = adj_t[i, j]
         running = bool(np.isnan(B.stop[i]))
-        braked = False
-        if running and B.run[i] >= 2:
-            P22 = float(B.P[i, 2, 2])
-            a_hi = pk.acceleration(B.X[i, 2] + K[pk.BRAKE_Z] * math.sqrt(max(P22, 0.0)),
-                                   P22, int(B.ridge[i]), R, K)  # fmt: skip
-            if a_hi < 0:
-                rest = max(K[pk.V_MIN], K[pk.REST_SHARE] * B.X[i, 1])
-                braked = B.t[i] + (rest - B.X[i, 1]) / a_hi <= g
+        braked = (
+            running
+            and B.run[i] >= 2
+            and _braked(dec, float(B.X[i, 1]), float(B.X[i, 2]), float(B.P[i, 2, 2]),
+                        int(B.ridge[i]), float(B.t[i]), g)
+        )  # fmt: skip
         waiting = running and B.run[i] == 1
         if waiting and live:
             elapsed = g - B.t[i] - (blind[i] if blind is not None else 0.0)
@@ -164,6 +162,18 @@ def classify(dec: _State, k: int, t_upd: float, truth, contacts: np.ndarray) -> 
     return (f"stopped: {how}", last + rail)
 
 
+def _braked(dec: _State, v: float, a: float, p22: float, ridge: int, t: float, g: float) -> bool:
+    """Has a running track braked to rest by g: even braking BRAKE_Z sigma gentler, its own
+    motion since its contact at t brought it below the slowest slip (as
+    `kernels.posterior.posterior` reads it)."""
+    K = dec._K
+    a_hi = pk.acceleration(a + K[pk.BRAKE_Z] * math.sqrt(max(p22, 0.0)), p22, ridge, dec.count, K)
+    if a_hi >= 0:
+        return False
+    rest = max(K[pk.V_MIN], K[pk.REST_SHARE] * v)
+    return t + (rest - v) / a_hi <= g
+
+
 def _next_ridge_x(dec: _State, ridge: int, dirn: int) -> float:
     """Skin position of the ridge after travel-order ridge `ridge` going `dirn`."""
     di = (1 - dirn) // 2
@@ -182,11 +192,7 @@ def _chosen(dec: _State, g: float):
     if not math.isnan(h.stop):  # at a step: its step contact (its last is the ridge before)
         step_id = next((c.id for c, _ in dec.contacts if c.t_s == h.stop), -1)
         return ("step", h.stop, h.ridge, h.dirn, step_id)
-    K = dec._K
-    a_hi = pk.acceleration(h.a + K[pk.BRAKE_Z] * math.sqrt(max(h.p22, 0.0)), h.p22, h.ridge,
-                           dec.count, K)  # fmt: skip
-    rest = max(K[pk.V_MIN], K[pk.REST_SHARE] * h.v)
-    braked = h.run >= 2 and a_hi < 0 and h.t + (rest - h.v) / a_hi <= g
+    braked = h.run >= 2 and _braked(dec, h.v, h.a, h.p22, h.ridge, h.t, g)
     last_id = next((c.id for c, _ in dec.contacts if c.t_s == h.t), -1)
     return ("braked" if braked else "silence", h.t, h.ridge, h.dirn, last_id)
 
