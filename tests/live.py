@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import queue
 import time
 from collections.abc import Callable
 from typing import Any
@@ -19,6 +20,21 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 15.0, what: str 
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out waiting for {what or predicate}")
         time.sleep(0.02)
+
+
+def first_from(items: queue.Queue, timeout_s: float, wanted: Callable[[Any], Any]) -> Any:
+    """What `wanted` makes of the first item a reader thread queues within timeout_s for
+    which it is truthy (None if none came); the items before it are taken off the queue."""
+    deadline = time.monotonic() + timeout_s
+    while (left_s := deadline - time.monotonic()) > 0:
+        try:
+            item = items.get(timeout=left_s)
+        except queue.Empty:
+            return None
+        found = wanted(item)
+        if found:
+            return found
+    return None
 
 
 def operational(gateway) -> bool:

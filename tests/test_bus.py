@@ -45,6 +45,7 @@ from grasplink.bus.url import (
 )
 from grasplink.core.frames import Frame
 from grasplink.errors import BusError
+from tests.live import first_from
 
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 5.0
@@ -497,15 +498,11 @@ def test_run_hub_process_serves_and_stops_on_sigterm(closing, tmp_path: Path) ->
 
 
 def hub_url_from(lines: queue.Queue[str], timeout: float) -> str:
-    deadline = time.monotonic() + timeout
-    while (left := deadline - time.monotonic()) > 0:
-        try:
-            line = lines.get(timeout=left)
-        except queue.Empty:
-            break
-        found = re.search(r"remote:ws://127\.0\.0\.1:\d+/", line)
-        if found:
-            return found.group(0)
+    found = first_from(
+        lines, timeout, lambda line: re.search(r"remote:ws://127\.0\.0\.1:\d+/", line)
+    )
+    if found:
+        return found.group(0)
     pytest.fail("hub process printed no URL")
 
 

@@ -21,6 +21,7 @@ import pytest
 from grasplink.decoding import registry
 from grasplink.errors import ConfigError
 from grasplink.gateway.config import load_config
+from tests.live import first_from
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -180,15 +181,13 @@ def _lines_of(stream, sink) -> threading.Thread:  # type: ignore[no-untyped-def]
 
 
 def _wait_line(lines: queue.Queue[str], pattern: str, timeout_s: float, seen: list[str]) -> str:
-    deadline = time.monotonic() + timeout_s
-    while (left := deadline - time.monotonic()) > 0:
-        try:
-            line = lines.get(timeout=left)
-        except queue.Empty:
-            break
+    def matching(line: str) -> str | None:
         seen.append(line)
-        if re.search(pattern, line):
-            return line
+        return line if re.search(pattern, line) else None
+
+    line = first_from(lines, timeout_s, matching)
+    if line is not None:
+        return line
     pytest.fail(f"no line matching {pattern!r} within {timeout_s} s; got {seen!r}")
 
 

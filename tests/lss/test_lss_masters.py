@@ -4,7 +4,6 @@ python-canopen's LssMaster used directly, and the gateway's `assign_node_ids` on
 from __future__ import annotations
 
 import queue
-import time
 import uuid
 from collections.abc import Callable, Iterator
 
@@ -20,6 +19,7 @@ from grasplink.gateway.lss import LssAddress, assign_node_ids, check_assignments
 from grasplink.profiles import eds_path
 from grasplink.profiles import objects as obj
 from grasplink.profiles.edsgen import REVISION, VENDOR_ID
+from tests.live import first_from
 
 UNCONFIGURED = 0xFF
 SKIN_PRODUCT, HAND_PRODUCT = 1, 4
@@ -82,14 +82,8 @@ def first_frame(frames: queue.Queue[bytes]) -> bytes:
 def boot_up_after_power_cycle(frames: queue.Queue[bytes]) -> bytes:
     """The boot-up of the cycled node, past the heartbeats the node sent before it was cut
     off: subscribing before the cycle races with the last of them (seen at load 15)."""
-    deadline = time.monotonic() + BOOT_WAIT_S
-    while (left_s := deadline - time.monotonic()) > 0:
-        try:
-            data = frames.get(timeout=left_s)
-        except queue.Empty:
-            break
-        if data == b"\x00":
-            return data
+    if first_from(frames, BOOT_WAIT_S, lambda data: data == b"\x00"):
+        return b"\x00"
     raise AssertionError(f"no boot-up within {BOOT_WAIT_S} s of the power cycle")
 
 
