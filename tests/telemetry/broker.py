@@ -14,6 +14,7 @@ import socket
 import subprocess
 import threading
 import time
+import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -187,6 +188,10 @@ class Received:
     t_wall_ms: float
 
 
+#: Where a recorder sends itself the marker that `Recorder.flush` waits for.
+FLUSH_ROOT = "grasplink-test/flush"
+
+
 class Recorder:
     """An MQTT client recording what it receives (paho in its own thread)."""
 
@@ -203,6 +208,8 @@ class Recorder:
         self.lock = threading.Lock()
         self.subscribed = threading.Event()
         self.topics = topics
+        self.flush_topic = f"{FLUSH_ROOT}/{uuid.uuid4().hex}"
+        self.flushed = threading.Event()
         self.client = paho.Client(
             CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=not persistent
         )
@@ -219,9 +226,12 @@ class Recorder:
         assert self.subscribed.wait(5), "subscription not acknowledged"
 
     def _on_connect(self, client, userdata, flags, reason, properties) -> None:
-        client.subscribe([(topic, 1) for topic in self.topics])
+        client.subscribe([(topic, 1) for topic in [*self.topics, self.flush_topic]])
 
     def _on_message(self, client, userdata, message) -> None:
+        if message.topic == self.flush_topic:
+            self.flushed.set()
+            return
         with self.lock:
             self.messages.append(
                 Received(
@@ -248,6 +258,15 @@ class Recorder:
                 return found
             time.sleep(0.02)
         return []
+
+    def flush(self, timeout_s: float = 15.0) -> None:
+        """Wait until every message the broker accepted before this call has reached this
+        recorder: mosquitto queues a session's messages in the order it accepts them, so our
+        own marker coming back means all before it came (a fixed sleep is timing luck).
+        Only where anonymous clients may publish (not on the secured broker)."""
+        self.flushed.clear()
+        self.publish(self.flush_topic, b"")
+        assert self.flushed.wait(timeout_s), f"the flush marker took over {timeout_s} s"
 
     def close(self) -> None:
         self.client.disconnect()

@@ -142,7 +142,8 @@ def test_a_sparkplug_host_reads_births_and_data_in_order(broker: Mosquitto, fake
         set_value(rebirth.metrics.add(name="Node Control/Rebirth"), BOOLEAN, True)
         recorder.publish("spBv1.0/grasplink/NCMD/gw", rebirth.SerializeToString())
         time.sleep(0.4)
-    time.sleep(0.2)
+    recorder.wait_for(lambda m: "/NDEATH/" in m.topic)
+    recorder.flush()
     for message in recorder.taken():
         host.feed(message.topic, message.payload)
     recorder.close()
@@ -173,7 +174,8 @@ def test_every_message_is_delivered_in_order_and_counted(broker: Mosquitto, fake
         time.sleep(1.0)
         links = {link.protocol.name: link for link in pub.links}
         assert links["json"].sent > 20 and links["sparkplug"].sent > 20
-    time.sleep(0.2)
+    recorder.wait_for(lambda m: "/NDEATH/" in m.topic)
+    recorder.flush()
     recorder.close()
     forces = []
     for message in recorder.taken():
@@ -212,6 +214,7 @@ def test_commands_are_answered_accepted_or_rejected_with_the_reason(
         replies = recorder.wait_for(lambda m: "/reply/" in m.topic and json_of(m)["id"] is None)
         assert replies
         time.sleep(0.5)
+    recorder.flush()
     answers = {json_of(m)["id"]: json_of(m) for m in recorder.taken() if "/reply/" in m.topic}
     assert answers[1]["accepted"] is True and answers[1]["detail"] == "feedback mode slip_speed"
     assert answers[2]["accepted"] is False and "expected one of off" in answers[2]["detail"]
@@ -261,7 +264,7 @@ def test_commands_are_answered_while_publishing_and_the_window_stays_bounded(
             waiting.append(json_link.in_flight)
             time.sleep(0.01)
         assert json_link.sent > sent and max(waiting) <= writer.WINDOW
-    time.sleep(0.2)
+    recorder.flush()  # every value was acknowledged before the clean stop returned
     recorder.close()
     forces = [
         json_of(m)["grip_force_n"] for m in recorder.taken() if m.topic.endswith("skin/values")
@@ -318,7 +321,7 @@ def test_a_broker_restarted_mid_run_loses_nothing_within_the_buffer_bound(
             lambda m: "/values" in m.topic and json.loads(m.payload)["grip_force_n"] == made[-1],
             timeout_s=10,
         )
-        time.sleep(0.3)
+        recorder.flush()
     finally:
         recorder.close()
         server.stop()
@@ -456,7 +459,7 @@ def test_births_wait_for_the_primary_host_and_its_return_brings_a_new_bdseq(
         assert recorder.wait_for(lambda m: m.topic.endswith("NBIRTH/gw") and m.t_mono > 0, 5)
         time.sleep(0.5)
         assert pub.stats()["links"]["sparkplug"]["connections"] == 2
-    time.sleep(0.2)
+    recorder.flush()
     for message in recorder.taken():
         host.feed(message.topic, message.payload)
     scada.close()
@@ -485,7 +488,7 @@ def test_bdseq_goes_on_across_two_runs_of_the_gateway(broker: Mosquitto, tmp_pat
             cwd=ROOT,
             timeout=60,
         )
-    time.sleep(0.3)
+    recorder.flush()
     host = SparkplugHost("grasplink", "twice")
     for message in recorder.taken():
         host.feed(message.topic, message.payload)
@@ -516,7 +519,7 @@ def test_several_buses_publish_a_topic_tree_and_an_edge_node_each(
         cwd=ROOT,
         timeout=60,
     )
-    time.sleep(0.3)
+    recorder.flush()
     taken = recorder.taken()
     recorder.close()
     assert run.returncode == 0, run.stdout + run.stderr

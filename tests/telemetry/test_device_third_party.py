@@ -66,6 +66,7 @@ def test_a_device_node_is_read_by_mqtt_clients_and_a_third_party_sparkplug_host(
     assert data and all(m["resolved"] == len(m["metrics"]) for m in data)
     assert messages[-1]["type"] == "NDEATH"
     # the JSON subtree, as any MQTT client reads it
+    recorder.flush()
     received = {m.topic: m for m in recorder.taken()}
     recorder.close()
     base = "grasplink/devs/node/fsr"
