@@ -43,9 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-from grasplink.core.frames import HEARTBEAT_BASE
+from grasplink.core.frames import HEARTBEAT_BASE, SDO_RX_BASE
 from grasplink.core.log_formats import LOG_FORMATS
-from grasplink.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
+from grasplink.decoding.base import MIN_USABLE_SHARE, Decoder, check_sample_rate, skin_limits
 from grasplink.decoding.skin_frames import SampleObjects, SkinCalibration, SkinFrames
 from grasplink.errors import ConfigError, PdoError, RecordingError
 from grasplink.profiles import objects as obj
@@ -477,7 +477,6 @@ def read_can_log(
 
 # -- the hand's grip commands in a CAN log (the efference copy) --------------------------------
 DEFAULT_HAND_NODE_ID = 0x40
-SDO_RX_BASE = 0x600  # client -> server SDO requests (a download writes an object)
 
 
 @dataclass(frozen=True)
@@ -490,6 +489,22 @@ class GripCommandLog:
     force_n: np.ndarray
     rate_n_s: float | None
     frames: int  # RPDO frames carrying the grip target
+
+    def feed(self, decoder: Decoder) -> None:
+        """Tell `decoder` the commands (all before its samples: only those at or before a
+        contact's onset weigh it) and the hand's grip rate when the log holds it."""
+        if self.rate_n_s is not None:
+            decoder.set_hand_follow(self.rate_n_s)
+        for t_s, force_n in zip(self.t_s.tolist(), self.force_n.tolist(), strict=True):
+            decoder.note_grip_command(t_s, force_n)
+
+    def summary(self, source: str) -> str:
+        """The line `grasplink decode` prints."""
+        rate = "the hand EDS's default" if self.rate_n_s is None else f"{self.rate_n_s:g} N/s"
+        return (
+            f"{source}: hand grip RPDO: {self.frames} frames, {len(self.t_s)} grip commands "
+            f"fed to the decoder (grip rate {rate})"
+        )
 
 
 def read_grip_commands(path: str | Path, *, node_id: int = DEFAULT_HAND_NODE_ID) -> GripCommandLog:

@@ -45,6 +45,7 @@ from grasplink.decoding.contacts import (
     PulseProbeSettings,
     WatchSettings,
 )
+from grasplink.decoding.io import read_grip_commands
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import LOOP_OBJECT_MM, loop_recording
@@ -635,13 +636,18 @@ def headline_figures(estimates: Sequence[SlipEstimate], truth: SkinRecording) ->
 
 def headline_check(scene: Path, controllers_for: Callable, decoder: str = DEFAULT_DECODER) -> dict:
     """Run the loop scene as `grasplink run` does (gateway in the loop), read its can.asc as
-    `grasplink decode R/can.asc` does, decode it 3 samples at a time, and judge it."""
+    `grasplink decode R/can.asc` does (the skin's samples and the hand's grip commands: the
+    efference copy the gateway fed its decoder live), decode it 3 samples at a time, and
+    judge it."""
     from grasplink.evaluation import scenes as sc
 
     with tempfile.TemporaryDirectory(prefix="grasplink-slip-reporting-") as folder:
         signals = sc.record_scene(scene, controllers_for, folder)
+        grip = read_grip_commands(Path(folder) / "can.asc")
     rec = signals.can
-    estimates, _ = ns.feed(make_decoder(decoder, rec.layout_mm, rec.fs_hz), rec.t_s, rec.force_n, 3)
+    decoding = make_decoder(decoder, rec.layout_mm, rec.fs_hz)
+    grip.feed(decoding)
+    estimates, _ = ns.feed(decoding, rec.t_s, rec.force_n, 3)
     figures = headline_figures(estimates, rec)
     figures["scene"] = scene.name
     figures["layout"] = list(rec.layout_mm)
