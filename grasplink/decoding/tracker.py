@@ -30,6 +30,9 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   with its speed unknown. A contact may also start a new track at any
   ridge, either way (a slip starting, or reversing: after a reversal the
   other edge leads, at a place no contact tells).
+* A contact whose onset falls in a commanded grip change's window (the efference copy,
+  `Decoder.note_grip_command`: `efference.py`) may be the grip's: every child taking it
+  for no ridge, and "no slip", explain it at their rate plus the grip's.
 * A contact judged a step branches a slipping track into "stopped there"
   (position held, speed 0) and "a grip change, slipping on"; the next
   contact (or its absence) decides. A stopped track restarts with a contact

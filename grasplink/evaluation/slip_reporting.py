@@ -1297,8 +1297,9 @@ def render_headline(hl: dict) -> list[str]:
         "## The headline loop",
         "",
         f"`scenes/{hl['scene']}` run as `grasplink run` runs it (the gateway's decoder in the",
-        "loop), its `can.asc` read as `grasplink decode R/can.asc` reads it and decoded 3 samples",
-        "at a time.",
+        "loop), its `can.asc` read as `grasplink decode R/can.asc` reads it - the skin's samples",
+        "and the hand's grip commands, the efference copy the gateway gave its decoder live -",
+        "and decoded 3 samples at a time.",
         f"Ridge contacts from the truth's leading edge crossing the ridges: {contacts or 'none'} s",
         f"(onset {_fmt(hl['onset_s'], 3)} s, stop {_fmt(hl['stop_s'], 3)} s, the stop "
         f"observable at {_fmt(hl['observable_s'], 3)} s).",
