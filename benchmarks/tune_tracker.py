@@ -43,14 +43,17 @@ def config(tuning: dict) -> dict:
     its kink bank's `TailKinkSettings` field NAME (`detector.tail_kinks`), `pulses.NAME` as
     its pulse probe's `PulseProbeSettings` field NAME (`detector.pulse_probe`),
     `hinges.threshold` as its kink bank's threshold (noise units), `noise.NAME` as its
-    noise floor's `NoiseSettings` field NAME (`detector.noise_floor`)."""
+    noise floor's `NoiseSettings` field NAME (`detector.noise_floor`), `grip_commands` 0 the
+    loop cases without the grip commands their gateway would have sent."""
     watch = {k.removeprefix("watch."): v for k, v in tuning.items() if k.startswith("watch.")}
     tails = {k.removeprefix("tails."): v for k, v in tuning.items() if k.startswith("tails.")}
     pulses = {k.removeprefix("pulses."): v for k, v in tuning.items() if k.startswith("pulses.")}
     noise = {k.removeprefix("noise."): v for k, v in tuning.items() if k.startswith("noise.")}
     parts = ("watch.", "tails.", "pulses.", "hinges.", "noise.")
-    tracker = {k: v for k, v in tuning.items() if not k.startswith(parts)}
+    tracker = {k: v for k, v in tuning.items() if not k.startswith(parts) and k != "grip_commands"}
     out: dict = {"tuning": tracker}
+    if "grip_commands" in tuning:  # 0: the loop cases decoded without their grip commands
+        out["grip_commands"] = bool(tuning["grip_commands"])
     if "hinges.threshold" in tuning:
         out["detector_threshold"] = tuning["hinges.threshold"]
     if pulses:

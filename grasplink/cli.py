@@ -314,6 +314,18 @@ def build_parser() -> argparse.ArgumentParser:
     decode.add_argument(
         "--node-id", type=node_id_arg, default=0x10, help="skin node-ID in a CAN log (default 0x10)"
     )
+    decode.add_argument(
+        "--hand-node-id",
+        type=node_id_arg,
+        default=0x40,
+        help="hand node-ID in a CAN log (default 0x40): its grip commands (RPDO, 0x2400) are "
+        "fed to the decoder as the gateway fed them live (the efference copy)",
+    )
+    decode.add_argument(
+        "--no-grip-commands",
+        action="store_true",
+        help="decode a CAN log's skin samples alone, without the hand's grip commands",
+    )
 
     bench = sub.add_parser("bench", help="benchmarks that write their figures into docs/")
     bench_sub = bench.add_subparsers(dest="bench_command", required=True, metavar="BENCHMARK")
@@ -961,6 +973,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     name = args.decoder or registry.DEFAULT_DECODER
     registry.decoder_class(name)  # an unknown or missing decoder fails before reading
     source = str(args.file)
+    grip = None  # a CAN log's grip commands
     if args.file.is_dir():
         run = io.read_run_folder(args.file)
         t, force, source = run.t_s, run.force_n, str(run.source)
@@ -977,12 +990,17 @@ def cmd_decode(args: argparse.Namespace) -> int:
         print(f"grasplink: {stats.summary(source)}", file=sys.stderr, flush=True)
         stats.check_usable(source)
         fs = stats.rate_hz
+        if not args.no_grip_commands:
+            grip = io.read_grip_commands(args.file, node_id=args.hand_node_id)
+            print(f"grasplink: {grip.summary(source)}", file=sys.stderr, flush=True)
     else:
         t, force = io.read_recording(args.file)
         fs = fs if fs is not None else io.infer_rate(t, source)
     fs = check_sample_rate(fs)
     # the evaluation layer supplies the reference slips mmse and dtw match against
     decoder = make_decoder(name, layout, fs)
+    if grip is not None:
+        grip.feed(decoder)
     out = sys.stdout
     try:
         for start in range(0, len(t), DECODE_CHUNK):

@@ -45,7 +45,7 @@ from grasplink.core.frames import (
     SYNC_COB_ID_DEFAULT,
     TPDO_BASES,
 )
-from grasplink.decoding.io import read_can_log
+from grasplink.decoding.io import read_can_log, read_grip_commands
 from grasplink.errors import ConfigError, RecordingError
 from grasplink.gateway.live import LiveGateway
 from grasplink.gateway.service import Gateway
@@ -481,11 +481,13 @@ def test_a_recording_thread_stops_on_request(tmp_path):
 def test_offline_decoding_of_the_log_gives_the_live_gateways_estimates(loop_run):
     """One front end (decoding.skin_frames) for the live gateway and `grasplink decode`:
     the run's can.asc read offline and fed to a decoder configured as the gateway's, in
-    the packets' 3-sample chunks, gives every update the gateway made live, bit for bit."""
+    the packets' 3-sample chunks, gives every update the gateway made live, bit for bit -
+    told the hand's grip commands from the log, as the gateway told its decoder live."""
     log, scene, live = loop_run
     t_s, force_n, stats = read_can_log(log)
     assert stats.malformed == stats.stray == 0
     decoder = build_controllers(scene)[0].decoder  # a fresh one, configured as live
+    read_grip_commands(log).feed(decoder)
     offline = []
     for start in range(0, len(t_s), 3):
         offline += decoder.feed(t_s[start : start + 3], force_n[start : start + 3])

@@ -23,6 +23,16 @@ counts it in `decoder.stats`:
 Layout and sample rate are bounded by what the skin node can hold (its EDS:
 spacings 0x2140, rate 0x2120), so an absurd value is a `ConfigError` naming
 the bound rather than a numpy error deep inside a decoder.
+
+The second input is the efference copy (`Decoder.note_grip_command`): the grip the
+loop commanded the hand, at the time its command went on the bus (the samples' clock),
+so a decoder can tell the level bending under a commanded grip change from a ridge
+contact (`efference.py`). It has its own guard (NaN/Inf, a force outside the hand's
+target range 0x2400, time before the previous command: counted in
+`decoder.grip_commands.stats`, named in `input_report`; a value that is no number is a
+ValueError). The tracker weighs it; decoders that cannot use it (ratio, mmse, dtw, fft)
+take it and ignore it. With no command noted every output is what it was without this
+input, bit for bit.
 """
 
 from __future__ import annotations
@@ -39,6 +49,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from grasplink.decoding.efference import GripCommands, HandFollow
 from grasplink.errors import ConfigError, RecordingError
 
 DEFAULT_UPDATE_S = 0.01
@@ -289,7 +300,8 @@ def _read_only_arrays(root: object) -> list[np.ndarray]:
 
 
 # attributes of the base class itself, which a reset keeps
-_BASE_STATE = frozenset({"stats", "_last_t", "_next_update", "_pristine"})
+# (the grip commands noted too: a gap in the samples does not undo a command)
+_BASE_STATE = frozenset({"stats", "_last_t", "_next_update", "_pristine", "grip_commands"})
 
 
 class Decoder:
@@ -315,6 +327,7 @@ class Decoder:
         self._last_t: float | None = None
         self._next_update: int | None = None  # index of the next update on the grid
         self._pristine: dict | None = None  # state before the first sample (for reset)
+        self.grip_commands = GripCommands()  # the efference copy (`note_grip_command`)
 
     def warm_up(self) -> None:
         """Load, or on a machine's first run compile, whatever this decoder compiles
@@ -356,11 +369,26 @@ class Decoder:
         out += self.process(t[start:], x[start:])
         return out
 
+    def note_grip_command(self, t_s: float, force_n: float) -> bool:
+        """The loop commanded the hand's grip to `force_n` (N) at `t_s` (when the command
+        went on the bus, on the samples' clock): whether the guard kept it. Note commands
+        in time order, each no later than the samples after it are fed (live: as they are
+        sent; offline: all before the samples will do - only commands at or before a
+        contact's onset weigh it). A decoder that cannot use them ignores them."""
+        return self.grip_commands.note(t_s, force_n, self.max_time_s)
+
+    def set_hand_follow(self, rate_n_s: float, lag_s: float | None = None) -> None:
+        """How the commanded hand follows a command: its grip rate (0x2404, N/s) and its
+        actuator's lag (s; default `efference.HAND_LAG_S`). ConfigError when out of range."""
+        follow = HandFollow(rate_n_s) if lag_s is None else HandFollow(rate_n_s, lag_s)
+        self.grip_commands.follow = follow
+
     def input_report(self) -> str | None:
         """One line on what the guard kept out and the gaps it saw; None if nothing."""
         s = self.stats
+        commands = self.grip_commands.stats.report()
         if not (s.rejected or s.gaps):
-            return None
+            return None if commands is None else f"decoder input: {commands}"
         parts = [f"{s.received} samples, {s.accepted} decoded"]
         reasons = [
             (s.rejected_nonfinite, "NaN/Inf"),
@@ -384,6 +412,8 @@ class Decoder:
                 f"{s.gaps} gap(s) over {GAP_PERIODS:g} sample periods ({self.gap_s * 1e3:g} ms; "
                 f"longest {s.longest_gap_s:.6g} s) reset the decoder, no updates inside"
             )
+        if commands is not None:
+            parts.append(commands)
         return "decoder input: " + "; ".join(parts)
 
     def check_usable(self, source: str) -> None:

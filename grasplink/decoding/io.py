@@ -43,9 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-from grasplink.core.frames import HEARTBEAT_BASE
+from grasplink.core.frames import HEARTBEAT_BASE, SDO_RX_BASE
 from grasplink.core.log_formats import LOG_FORMATS
-from grasplink.decoding.base import MIN_USABLE_SHARE, check_sample_rate, skin_limits
+from grasplink.decoding.base import MIN_USABLE_SHARE, Decoder, check_sample_rate, skin_limits
 from grasplink.decoding.skin_frames import SampleObjects, SkinCalibration, SkinFrames
 from grasplink.errors import ConfigError, PdoError, RecordingError
 from grasplink.profiles import objects as obj
@@ -473,3 +473,99 @@ def read_can_log(
         raise RecordingError(f"{p}: no usable skin samples: {stats.reasons()}")
     t = np.concatenate(times)
     return t, np.concatenate(forces), stats
+
+
+# -- the hand's grip commands in a CAN log (the efference copy) --------------------------------
+DEFAULT_HAND_NODE_ID = 0x40
+
+
+@dataclass(frozen=True)
+class GripCommandLog:
+    """The grip commands a CAN log holds: each change of the hand's grip target (0x2400 in
+    its RPDO) and when it went on the bus, and the grip rate the gateway wrote (0x2404 by
+    SDO; None when the log holds no such write: the hand EDS's default applies)."""
+
+    t_s: np.ndarray
+    force_n: np.ndarray
+    rate_n_s: float | None
+    frames: int  # RPDO frames carrying the grip target
+
+    def feed(self, decoder: Decoder) -> None:
+        """Tell `decoder` the commands (all before its samples: only those at or before a
+        contact's onset weigh it) and the hand's grip rate when the log holds it."""
+        if self.rate_n_s is not None:
+            decoder.set_hand_follow(self.rate_n_s)
+        for t_s, force_n in zip(self.t_s.tolist(), self.force_n.tolist(), strict=True):
+            decoder.note_grip_command(t_s, force_n)
+
+    def summary(self, source: str) -> str:
+        """The line `grasplink decode` prints."""
+        rate = "the hand EDS's default" if self.rate_n_s is None else f"{self.rate_n_s:g} N/s"
+        return (
+            f"{source}: hand grip RPDO: {self.frames} frames, {len(self.t_s)} grip commands "
+            f"fed to the decoder (grip rate {rate})"
+        )
+
+
+def read_grip_commands(path: str | Path, *, node_id: int = DEFAULT_HAND_NODE_ID) -> GripCommandLog:
+    """The hand's grip commands from a python-can log (`GripCommandLog`), unpacked by the
+    hand EDS's own RPDO mapping (`PdoCodec`), as the node takes them: only changes are
+    kept (the gateway refreshes its command), in log order. A log without a hand gives
+    none. RecordingError naming the file for a log python-can cannot read."""
+    import can
+
+    from grasplink.profiles.pdo_codec import PdoCodec
+
+    p = Path(path)
+    if not p.is_file():
+        raise RecordingError(f"{p}: no such file")
+    codec = PdoCodec("hand", node_id)
+    target = (obj.HAND_TARGET_GRIP_MN, 0)
+    number = next(
+        (n for n in codec.rpdo_numbers() if any(o.key == target for o in codec.rpdo_objects(n))),
+        None,
+    )
+    if number is None:
+        raise ConfigError(f"hand EDS: no RPDO maps the grip target (0x{target[0]:04X})")
+    cob_id = codec.rpdo(number).cob_id
+    sdo_id = SDO_RX_BASE + node_id
+    times: list[float] = []
+    forces: list[float] = []
+    rate: float | None = None
+    frames = 0
+    try:
+        for msg in can.LogReader(str(p)):
+            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+                continue
+            data = bytes(msg.data)
+            if msg.arbitration_id == sdo_id:
+                written = _expedited_write(data, obj.HAND_GRIP_RATE_MN_S)
+                if written is not None:
+                    rate = written / 1000.0
+                continue
+            if msg.arbitration_id != cob_id:
+                continue
+            try:
+                values = codec.decode_rpdo(number, data)
+            except PdoError:  # a length its mapping does not have: not a command
+                continue
+            frames += 1
+            force = float(values[target]) / 1000.0
+            if not forces or force != forces[-1]:
+                times.append(float(msg.timestamp))
+                forces.append(force)
+    except Exception as exc:  # python-can raises assorted errors on a corrupt log
+        raise RecordingError(
+            f"{p}: cannot read as a CAN log ({type(exc).__name__}: {exc})"
+        ) from None
+    return GripCommandLog(np.array(times), np.array(forces), rate, frames)
+
+
+def _expedited_write(data: bytes, index: int, subindex: int = 0) -> int | None:
+    """The value of an expedited SDO download of (index, subindex) in this request, or None."""
+    if len(data) != 8 or data[0] & 0xE3 != 0x23:  # initiate download, expedited, size given
+        return None
+    if int.from_bytes(data[1:3], "little") != index or data[3] != subindex:
+        return None
+    unused = (data[0] >> 2) & 0x3
+    return int.from_bytes(data[4 : 8 - unused], "little")

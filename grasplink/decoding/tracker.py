@@ -30,6 +30,9 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   with its speed unknown. A contact may also start a new track at any
   ridge, either way (a slip starting, or reversing: after a reversal the
   other edge leads, at a place no contact tells).
+* A contact whose onset falls in a commanded grip change's window (the efference copy,
+  `Decoder.note_grip_command`: `efference.py`) may be the grip's: every child taking it
+  for no ridge, and "no slip", explain it at their rate plus the grip's.
 * A contact judged a step branches a slipping track into "stopped there"
   (position held, speed 0) and "a grip change, slipping on"; the next
   contact (or its absence) decides. A stopped track restarts with a contact
@@ -82,6 +85,7 @@ from grasplink.decoding.contacts import (
     PulseCheck,
 )
 from grasplink.decoding.detector import step_shape
+from grasplink.decoding.efference import LEVEL_BEFORE_S, charge_grip
 from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.decoding.kernels.branch import Model, branch, pack_constants
 from grasplink.decoding.kernels.common import ring_slot
@@ -565,6 +569,7 @@ class TrackerDecoder(Decoder):
         self._force: float | None = None
         self._cache: tuple | None = None
         self._told_way = 0  # the direction the last update told (0: none)
+        self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         # what every contact's one-contact tracks share: a bank that `_births` copies and
         # fills in (the contact's id, time, sigma and the score)
         dirn = np.repeat(np.array([1, -1]), R)
@@ -789,7 +794,15 @@ class TrackerDecoder(Decoder):
         tracks = (self._tracks._f, self._tracks._i)
         log_stop = math.log(stop_rate)
         contact = (ev.t_s, ev.id, ev.sigma_s, sigma_s, log_strength, log_stop, step, probe)
-        floats, ints, self._null = branch(tracks, contact, self._null, self._branch_model)
+        null = self._null
+        floats, ints, self._null = branch(tracks, contact, null, self._branch_model)
+        grip_per_s = self._grip_rate(ev)
+        if grip_per_s > 0:  # the commanded grip may have made it (`efference.py`)
+            base = math.log(self.GRIP_STEP_PER_S) if step else self.LOG_CLUTTER_IDLE
+            kept = ~(ev.t_s - self._tracks.t > self._stale_s)  # the kernel's `_kept`
+            self._null = charge_grip(
+                floats[:, F_SCORE], self._tracks.score[kept], null, base, math.log(grip_per_s)
+            )
         shape = self._shapes.get(ev.id, step_shape.UNTOLD) if step else step_shape.UNTOLD
         if ev.id in self._sure or shape == step_shape.STOP_LIKE:
             # a step beyond doubt (or shaped as a stop's): seldom a ridge the slip went on from
@@ -803,6 +816,22 @@ class TrackerDecoder(Decoder):
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
+
+    def _grip_rate(self, ev: ContactEvent) -> float:
+        """Contacts per s like ev the commanded grip makes at its onset (0: none noted, or
+        none under way); decided once per contact, so a replay weighs it alike."""
+        commands = self.grip_commands
+        if not len(commands):
+            return 0.0
+        known = self._grip_rates.get(ev.id)
+        if known is None:
+            n = max(1, round(LEVEL_BEFORE_S * self.fs_hz))
+            level = self._recent.mean(ev.index - n, ev.index)
+            known = commands.contact_rate_per_s(ev.t_s, ev.jump_n_s, level)
+            self._grip_rates[ev.id] = known
+            while len(self._grip_rates) > 64:
+                del self._grip_rates[next(iter(self._grip_rates))]
+        return known
 
     def _branch_constant_values(self) -> dict[str, float]:
         """The constants `kernels.branch` reads, by its names (`branch.CONSTANTS`)."""

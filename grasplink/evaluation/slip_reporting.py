@@ -45,6 +45,7 @@ from grasplink.decoding.contacts import (
     PulseProbeSettings,
     WatchSettings,
 )
+from grasplink.decoding.io import read_grip_commands
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation.contact_truth import LOOP_OBJECT_MM, loop_recording
@@ -74,6 +75,7 @@ LOOP_FS_HZ = 400  # the skin node's default rate
 LOOP_LEAD_MM = 8.0  # loop_headline.toml: the edge starts this far before the first ridge
 LOOP_GRIP_N = (5.0, 8.8)  # held, then raised (the wearer or the reflex) as the slip stops
 LOOP_GRIP_RISE_S = 0.6
+LOOP_COMMAND_S = 0.01  # the gateway's command interval: its slew-limited ramp steps this often
 STOP_REST_S = 1.0  # at rest after a stop mid-skin, beyond the time the next contact is due
 HELD_S = 5.0
 HELD = ("held-grip", "held-noise")
@@ -166,6 +168,31 @@ def _loop_signal(case: Case) -> ns.Recorded:
     0.05 N drift; half the seeds stop with the edge at 40-95 % of the skin while the grip
     rises 5 -> 8.8 N, the others slide off the skin's far end (`contact_truth.loop_recording`)."""
     layout = tuple(LAYOUTS_MM[case.layout])
+    profile, grip, start_mm, duration_s = _loop_script(case)
+    rec = loop_recording(layout, profile, start_mm, grip, case.seed, duration_s, LOOP_FS_HZ)
+    return ns.Recorded(rec, rec.t_s, rec.force_n, rec.fs_hz)
+
+
+def loop_grip_commands(case: Case) -> list[tuple[float, float]]:
+    """The grip commands (t_s, N) the loop's gateway would have sent in a `loop` case - its
+    efference copy: the case's grip profile as the gateway's slew-limited ramp commands
+    it, a step every command interval (`LOOP_COMMAND_S`), from the grip held at start.
+    The case's grip follows them exactly (an actuator without lag), so the decoder's window
+    (its hand lag included) is wider than the grip's move, never narrower."""
+    _, grip, _, _ = _loop_script(case)
+    times = [t for t, _ in grip]
+    values = [f for _, f in grip]
+    out = [(0.0, values[0])]
+    if len(grip) > 1:
+        steps = np.arange(times[1], times[-1] + LOOP_COMMAND_S / 2, LOOP_COMMAND_S)
+        for t in steps.tolist()[1:]:
+            out.append((float(t), float(np.interp(t, times, values))))
+    return out
+
+
+def _loop_script(case: Case) -> tuple[list[list[float]], list[list[float]], float, float]:
+    """A `loop` case's signed speed points, grip points, start (mm) and duration (s)."""
+    layout = tuple(LAYOUTS_MM[case.layout])
     skin_mm = float(sum(layout))
     rng = np.random.default_rng(case.seed)
     (speed,) = case.numbers
@@ -185,8 +212,7 @@ def _loop_signal(case: Case) -> ns.Recorded:
     if stops:
         grip += [[stop_s - LOOP_GRIP_RISE_S, LOOP_GRIP_N[0]], [stop_s, LOOP_GRIP_N[1]]]
     start_mm = skin_mm + LOOP_LEAD_MM if case.reverse else -LOOP_LEAD_MM
-    rec = loop_recording(layout, profile, start_mm, grip, case.seed, duration_s, LOOP_FS_HZ)
-    return ns.Recorded(rec, rec.t_s, rec.force_n, rec.fs_hz)
+    return profile, grip, start_mm, duration_s
 
 
 def _held_noise(case: Case) -> ns.Recorded:
@@ -635,13 +661,18 @@ def headline_figures(estimates: Sequence[SlipEstimate], truth: SkinRecording) ->
 
 def headline_check(scene: Path, controllers_for: Callable, decoder: str = DEFAULT_DECODER) -> dict:
     """Run the loop scene as `grasplink run` does (gateway in the loop), read its can.asc as
-    `grasplink decode R/can.asc` does, decode it 3 samples at a time, and judge it."""
+    `grasplink decode R/can.asc` does (the skin's samples and the hand's grip commands: the
+    efference copy the gateway fed its decoder live), decode it 3 samples at a time, and
+    judge it."""
     from grasplink.evaluation import scenes as sc
 
     with tempfile.TemporaryDirectory(prefix="grasplink-slip-reporting-") as folder:
         signals = sc.record_scene(scene, controllers_for, folder)
+        grip = read_grip_commands(Path(folder) / "can.asc")
     rec = signals.can
-    estimates, _ = ns.feed(make_decoder(decoder, rec.layout_mm, rec.fs_hz), rec.t_s, rec.force_n, 3)
+    decoding = make_decoder(decoder, rec.layout_mm, rec.fs_hz)
+    grip.feed(decoding)
+    estimates, _ = ns.feed(decoding, rec.t_s, rec.force_n, 3)
     figures = headline_figures(estimates, rec)
     figures["scene"] = scene.name
     figures["layout"] = list(rec.layout_mm)
@@ -837,7 +868,14 @@ def case_job(case: Case, decoder: str, configs: dict[str, dict], baseline: bool)
     rec = case.make()
     scores: dict[str, CaseScore] = {}
     for key, settings in configs.items():
+        settings = dict(settings)
+        # a loop case stands for a loop's recording: decoded with the grip commands its
+        # gateway would have sent (`loop_grip_commands`; a trial's grip_commands=0: without)
+        told = settings.pop("grip_commands", True)
         decoding = build_decoder(decoder, rec.truth.layout_mm, rec.fs_hz, settings)
+        if told and case.kind == "loop":
+            for t_s, force_n in loop_grip_commands(case):
+                decoding.note_grip_command(t_s, force_n)
         estimates, cpu = ns.feed(decoding, rec.t_s, rec.force_n, CHUNK)
         result = score(estimates, rec.truth)
         result.kind, result.layout, result.variant = case.kind, case.layout, case.variant
@@ -1259,8 +1297,9 @@ def render_headline(hl: dict) -> list[str]:
         "## The headline loop",
         "",
         f"`scenes/{hl['scene']}` run as `grasplink run` runs it (the gateway's decoder in the",
-        "loop), its `can.asc` read as `grasplink decode R/can.asc` reads it and decoded 3 samples",
-        "at a time.",
+        "loop), its `can.asc` read as `grasplink decode R/can.asc` reads it - the skin's samples",
+        "and the hand's grip commands, the efference copy the gateway gave its decoder live -",
+        "and decoded 3 samples at a time.",
         f"Ridge contacts from the truth's leading edge crossing the ridges: {contacts or 'none'} s",
         f"(onset {_fmt(hl['onset_s'], 3)} s, stop {_fmt(hl['stop_s'], 3)} s, the stop "
         f"observable at {_fmt(hl['observable_s'], 3)} s).",

@@ -327,6 +327,7 @@ class Gateway(NmtMaster):
         self.skin_frames: SkinFrames | None = None
         self.decoder = None
         self.skin_binding: roles.SkinBinding | None = None  # its objects, what it can read
+        self._noted_grip_mn: int | None = None  # the last grip command the decoder was told
         # a vendor's samples on SYNC are numbered by the SYNC they answer (roles.py)
         self._skin_sync_numbers: SyncNumbers | None = None
         if link is None:
@@ -348,6 +349,10 @@ class Gateway(NmtMaster):
             settle_us=LIVE_SETTLE_US,
         )
         self.decoder = make_decoder(skin.decoder, skin.layout_mm, skin.sample_rate_hz)
+        hand = self.by_kind.get("hand")
+        if hand is not None and isinstance(hand.config, HandConfig):
+            # the efference copy (`_commands`): how fast the hand follows a grip command
+            self.decoder.set_hand_follow(hand.config.grip_rate_n_s)
         if binding.sync_every:
             self._skin_sync_numbers = SyncNumbers(binding.sync_every)
 
@@ -1145,7 +1150,13 @@ class Gateway(NmtMaster):
                     grip_mn = round(at)
                 else:
                     grip_mn = round(self.grip_ramp.output(grip_mn, t_us))
-                frames += self._rpdo(hand, grip_mn, refresh)
+                sent = self._rpdo(hand, grip_mn, refresh)
+                if sent and grip_mn != self._noted_grip_mn and self.decoder is not None:
+                    # the efference copy: the decoder is told the grip it goes on the bus
+                    # with, so it can tell the level bending under it from a ridge contact
+                    self._noted_grip_mn = grip_mn
+                    self.decoder.note_grip_command(t_us / 1e6, grip_mn / MN_PER_N)
+                frames += sent
         return frames
 
     def _next_ramp_us(self) -> int | None:

@@ -164,6 +164,15 @@ class PdoCodec:
             for v in self.rpdo(number).map
         ]
 
+    def decode_rpdo(self, number: int, data: bytes) -> dict[Key, int | float]:
+        """The mapped values of an RPDO frame the node received (a CAN log read offline);
+        PdoError for a frame that does not fit its map."""
+        pdo = self.rpdo(number)
+        expected = (pdo.length + 7) // 8  # (canopen gives the mapping's length in bits)
+        if len(data) != expected:
+            raise PdoError(f"{pdo.name}: {len(data)} bytes, its mapping needs {expected}")
+        return self._decode_by_map(pdo, data)
+
     def encode(self, number: int, values: Mapping[Key, int | float]) -> tuple[int, bytes]:
         """(CAN-ID, payload) of RPDO `number` carrying `values`; every mapped object is required.
 

@@ -157,8 +157,10 @@ def test_the_hand_and_the_belt_parts_run_ahead_each_as_its_commands_hold(monkeyp
         monkeypatch.setattr(cls, "step", counted)
     sim.run()
     assert sim.rollbacks > 0
-    # (the hand's commands follow the decoded slip: 34 before the tail kinks, s22)
-    assert steps == {"hand.actuator": 33, "belt.motor": 59}
+    # (the hand's commands follow the decoded slip: 34 before the tail kinks, s22; the
+    # belt's too: 59 before the gateway told its decoder its grip commands, s23 - the
+    # speed a braking track showed at rest from 1.91 s drove the belt)
+    assert steps == {"hand.actuator": 33, "belt.motor": 61}
 
 
 def test_effects_sharing_no_signal_split_into_parts_with_their_commands():

@@ -187,6 +187,12 @@ class Recent:
         self._x[self.size : self.size + len(x)] = x
         self.size += len(x)
 
+    def mean(self, start: int, stop: int) -> float | None:
+        """The mean of the samples at global indices start..stop-1; None unless all held."""
+        if start < self.start or stop > self.start + self.size or stop <= start:
+            return None
+        return float(np.mean(self._x[start - self.start : stop - self.start]))
+
     def verdict(self, onset: int, told: int) -> int:
         """`classify` of the step whose onset and verdict are global sample indices."""
         told = min(told, onset + round(HELD_S * self.fs_hz))

@@ -1,0 +1,235 @@
+"""The efference copy: the grip the loop commanded, as the decoder is told it (issue 22).
+
+In the closed loop the gateway commands the hand's grip (the reflex, the wearer's EMG).
+A commanded change moves the skin's level while the hand follows it, and the contact
+detector reads that bend in the level as a ridge contact: in the headline loop the
+reflex's grip rise made a contact 14 noise units high at 1.826 s, and a braking track
+through it reported 24 -> 8 mm/s for 17 updates while the object had been at rest since
+1.768 s. The gateway knows when it changed the grip; `Decoder.note_grip_command` tells
+the decoder, and this module says how likely a contact is the grip's.
+
+How fast the grip follows a command (`HandFollow`): the hand node slews its setpoint at
+its grip rate (0x2404, the hand EDS's default 50 N/s, written by the gateway from
+`[controller.nodes.hand] grip_rate_n_s`), and the actuator follows the setpoint with a
+first-order lag (the `hand.actuator` effect's `time_constant_s`, default 0.1 s: a test
+ties `HAND_LAG_S` to it). A change of dF commanded at t moves the grip from t until
+t + |dF| / rate + `SETTLE_LAGS` lags (95 % settled): its *window*. Commands whose windows
+overlap are one change (a slew-limited ramp is a command every 10 ms).
+
+The odds (`GripCommands.contact_rate_per_s`): the hand's grip bends the level where its
+rate changes - where the change starts and where it ends (`KINKS_PER_CHANGE`) - so a
+change under way makes contacts at KINKS / window per second. It cannot make a bend
+steeper than the level's share of the grip (the level over the grip held before the
+change: at rest the sensor reads the grip times the object's share over it) times the
+rate the grip moves at; a contact's slope jump beyond that is charged as a Gaussian in
+log ratio (`FIT_LOG_SIGMA`). Ridge pulses bend the level far more sharply than a grip
+ramp does, so real ridge contacts during a grip change keep most of their weight.
+
+Only commands at or before a contact's onset count: a contact is decided after its
+onset (the detector's delay), by which time every command before it has been noted -
+live and offline alike, whichever way the input is chunked.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+#: the hand actuator's first-order lag (simulators' `hand.actuator` time_constant_s default)
+HAND_LAG_S = 0.1
+#: lags after the hand's slew before the grip has settled (3: 95 %)
+SETTLE_LAGS = 3.0
+#: bends of the level a grip change makes: where the grip starts moving and where it stops
+KINKS_PER_CHANGE = 2.0
+#: a contact's slope jump beyond what the grip can make: charged as a Gaussian in log ratio
+#: of this sigma - the jump is measured to about 1/z (under 25 % at the detector's z >= 4),
+#: the level's share of the grip read within about a third: a factor of ~1.4 together
+FIT_LOG_SIGMA = math.log(2.0) / 2
+#: the level a contact rose from: the mean of the samples this long before its onset
+LEVEL_BEFORE_S = 0.02
+#: commands older than this before the newest are forgotten (a contact is decided within
+#: a fraction of a second; replays go back a few contacts)
+KEEP_S = 30.0
+
+
+@cache
+def hand_limits() -> tuple[tuple[float, float], tuple[float, float], float]:
+    """((lowest, highest) grip target N (0x2400), (lowest, highest) grip rate N/s (0x2404),
+    the default grip rate N/s), read once from the shipped hand EDS."""
+    from grasplink.profiles import load_profile, object_limits, od_default
+    from grasplink.profiles.objects import HAND_GRIP_RATE_MN_S, HAND_TARGET_GRIP_MN
+
+    low, high = object_limits("hand", HAND_TARGET_GRIP_MN)
+    rate_low, rate_high = object_limits("hand", HAND_GRIP_RATE_MN_S)
+    default = od_default(load_profile("hand", 0x40), HAND_GRIP_RATE_MN_S)
+    return (low / 1000, high / 1000), (rate_low / 1000, rate_high / 1000), default / 1000
+
+
+@dataclass(frozen=True)
+class HandFollow:
+    """How the hand's grip follows a command: its slew rate (N/s) and actuator lag (s)."""
+
+    rate_n_s: float
+    lag_s: float = HAND_LAG_S
+
+    @classmethod
+    def default(cls) -> HandFollow:
+        return cls(hand_limits()[2])
+
+    def __post_init__(self) -> None:
+        from grasplink.errors import ConfigError
+
+        low, high = hand_limits()[1]
+        if not (math.isfinite(self.rate_n_s) and low <= self.rate_n_s <= high):
+            raise ConfigError(
+                f"hand grip rate {self.rate_n_s!r} N/s is outside {low:g}-{high:g} N/s, "
+                "what the hand node's 0x2404 holds"
+            )
+        if not (math.isfinite(self.lag_s) and 0.0 <= self.lag_s <= 10.0):
+            raise ConfigError(f"hand actuator lag {self.lag_s!r} s must be 0-10 s")
+
+    def window_s(self, change_n: float) -> float:
+        """How long the grip moves after a command changing it by change_n."""
+        return abs(change_n) / self.rate_n_s + SETTLE_LAGS * self.lag_s
+
+
+@dataclass
+class CommandStats:
+    """Grip commands noted and those the guard kept out, and why."""
+
+    accepted: int = 0
+    rejected_nonfinite: int = 0  # NaN or Inf time or force
+    rejected_range: int = 0  # force outside the hand's target range, or time out of range
+    rejected_time: int = 0  # before the previous accepted command
+
+    @property
+    def rejected(self) -> int:
+        return self.rejected_nonfinite + self.rejected_range + self.rejected_time
+
+    def report(self) -> str | None:
+        """One line on what was kept out; None if nothing."""
+        if not self.rejected:
+            return None
+        low, high = hand_limits()[0]
+        reasons = [
+            (self.rejected_nonfinite, "NaN/Inf"),
+            (self.rejected_range, f"out of range (force outside {low:g}-{high:g} N, 0x2400)"),
+            (self.rejected_time, "earlier than the previous command"),
+        ]
+        why = ", ".join(f"{n} {text}" for n, text in reasons if n)
+        return f"grip commands: {self.accepted + self.rejected} noted, rejected {why}"
+
+
+@dataclass(frozen=True)
+class Change:
+    """A commanded grip change under way: when it started, how long the grip moves, by how
+    much (N), from which grip (N), and the rate it moves at (N/s)."""
+
+    start_s: float
+    window_s: float
+    change_n: float
+    from_n: float
+    rate_n_s: float
+
+
+class GripCommands:
+    """The grip commands noted so far (time order) and the odds they give a contact."""
+
+    def __init__(self, follow: HandFollow | None = None):
+        self.follow = follow or HandFollow.default()
+        self.stats = CommandStats()
+        self._t: list[float] = []
+        self._f: list[float] = []
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    def note(self, t_s: object, force_n: object, max_time_s: float) -> bool:
+        """Keep a command if usable (counted in `stats` either way); whether it was kept.
+        A value that is no number at all is a ValueError naming it."""
+        t, f = _number(t_s, "time"), _number(force_n, "force")
+        low, high = hand_limits()[0]
+        if not (math.isfinite(t) and math.isfinite(f)):
+            self.stats.rejected_nonfinite += 1
+            return False
+        if not (low <= f <= high and abs(t) <= max_time_s):
+            self.stats.rejected_range += 1
+            return False
+        if self._t and t < self._t[-1]:
+            self.stats.rejected_time += 1
+            return False
+        self.stats.accepted += 1
+        if self._f and f == self._f[-1]:
+            return True  # the same grip again (a refresh): nothing changes
+        self._t.append(t)
+        self._f.append(f)
+        if t - self._t[0] > 2 * KEEP_S:
+            cut = bisect.bisect_left(self._t, t - KEEP_S) - 1  # keep the grip held before
+            if cut > 0:
+                del self._t[:cut], self._f[:cut]
+        return True
+
+    def change_at(self, t_s: float) -> Change | None:
+        """The commanded change whose window holds t_s, from the commands at or before it
+        (None: the grip is still). The first command only tells the grip held."""
+        k = bisect.bisect_right(self._t, t_s) - 1
+        if k < 1:
+            return None
+        follow = self.follow
+        end = -math.inf
+        start = k + 1
+        for j in range(k, 0, -1):  # back through the commands whose windows run into t_s
+            until = self._t[j] + follow.window_s(self._f[j] - self._f[j - 1])
+            if until < t_s and (start > k or until < self._t[start]):
+                break  # neither under way at t_s nor overlapping the change after it
+            start = j
+            end = max(end, until)
+        if start > k:
+            return None
+        change = self._f[k] - self._f[start - 1]
+        span = self._t[k] - self._t[start]
+        rate = follow.rate_n_s if span <= 0 else min(follow.rate_n_s, abs(change) / span)
+        return Change(self._t[start], end - self._t[start], change, self._f[start - 1], rate)
+
+    def contact_rate_per_s(self, t_s: float, jump_n_s: float, level_n: float | None) -> float:
+        """Contacts per s the commanded grip makes like this one (onset t_s, slope jump
+        jump_n_s, the level it rose from level_n): 0 outside every change's window."""
+        change = self.change_at(t_s)
+        if change is None or change.change_n == 0 or change.window_s <= 0:
+            return 0.0
+        share = 1.0  # the level's share of the grip: at most all of it
+        if level_n is not None and change.from_n > 0:
+            share = min(1.0, max(0.0, level_n / change.from_n))
+        bend_n_s = share * change.rate_n_s  # the steepest bend the grip can make
+        if bend_n_s <= 0:
+            return 0.0
+        excess = max(0.0, math.log(abs(jump_n_s) / bend_n_s)) if jump_n_s else 0.0
+        fit = math.exp(-0.5 * (excess / FIT_LOG_SIGMA) ** 2)
+        return KINKS_PER_CHANGE / change.window_s * fit
+
+
+def _number(value: object, what: str) -> float:
+    if isinstance(value, bool):
+        raise ValueError(f"grip command {what} must be a number, got {value!r}")
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValueError(f"grip command {what} must be a number, got {value!r}") from None
+
+
+def charge_grip(
+    children: np.ndarray, scores: np.ndarray, null: float, log_base: float, log_grip: float
+) -> float:
+    """Weigh a contact the commanded grip may have made, in the scores of the tracker's
+    children of it (`children`: a view; `kernels.branch` puts first, in order, the
+    len(scores) children taking it for no ridge, at their clutter or grip-step rate;
+    `scores`: those tracks' scores before it): each such
+    child, and "no slip" (`null`, before the contact; `log_base` its rate then), explains
+    it at its own rate plus the grip's (`log_grip`, per s). In place; the new null."""
+    n = len(scores)
+    children[:n] = np.logaddexp(children[:n], scores + log_grip)
+    return null + float(np.logaddexp(log_base, log_grip))
