@@ -91,6 +91,7 @@ from grasplink.decoding.kernels.layout import (
     F_S,
     F_SCORE,
     F_STOP,
+    F_V,
     F_WIDTH,
     I_COLS,
     I_LAST,
@@ -335,6 +336,10 @@ class TrackerDecoder(Decoder):
     # the last ridge at 10 dB cleared in 0.42 s, > 0.3; a stop on a ridge placed 0.067 mm
     # past the bound; the rail before the object arrives): off (0) until those hold
     LOG_SHAPE_STOP_RIDGE = math.log(0.1)
+    # a contact's scale x the track's speed (edge travel over its rise) past this, per
+    # octave: benchmarks/contact_scales.py (true 0.18 / 0.48 / 1.18 mm at 10/50/90 %)
+    TRAVEL_MAX_MM = 2.0
+    LOG_TRAVEL_PER_OCTAVE = 0.0
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a track whose last contact came from a probe waits this share of the probes' latency
@@ -802,6 +807,13 @@ class TrackerDecoder(Decoder):
             shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
+        if self.LOG_TRAVEL_PER_OCTAVE and not probe and len(floats):
+            # a ridge's rise spans ~1 mm of the edge's travel whatever the speed: a contact
+            # found at a scale the track's speed makes much longer is seldom its ridge
+            ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_N] >= 2) & np.isnan(floats[:, F_STOP])
+            travel_mm = ev.scale_s * np.abs(floats[ridge, F_V])
+            octaves = np.log2(np.maximum(travel_mm, 1e-9) / self.TRAVEL_MAX_MM)
+            floats[ridge, F_SCORE] += self.LOG_TRAVEL_PER_OCTAVE * np.maximum(octaves, 0.0)
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
 
     def _branch_constant_values(self) -> dict[str, float]:
