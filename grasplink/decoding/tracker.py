@@ -74,6 +74,7 @@ from typing import Any
 
 import numpy as np
 
+from grasplink.decoding import rise_travel
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -96,8 +97,10 @@ from grasplink.decoding.kernels.layout import (
     I_COLS,
     I_LAST,
     I_N,
+    I_RUN,
     I_WIDTH,
     IDS,
+    P11,
 )
 from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.errors import ConfigError
@@ -336,10 +339,11 @@ class TrackerDecoder(Decoder):
     # the last ridge at 10 dB cleared in 0.42 s, > 0.3; a stop on a ridge placed 0.067 mm
     # past the bound; the rail before the object arrives): off (0) until those hold
     LOG_SHAPE_STOP_RIDGE = math.log(0.1)
-    # a contact's scale x the track's speed (edge travel over its rise) past this, per
-    # octave: benchmarks/contact_scales.py (true 0.18 / 0.48 / 1.18 mm at 10/50/90 %)
-    TRAVEL_MAX_MM = 2.0
-    LOG_TRAVEL_PER_OCTAVE = 0.0
+    # weight of a contact's scale against the track's speed (`rise_travel.log_ratio`, the
+    # measured ridge / clutter likelihood ratio) on a child taking it for its ridge: 0 off;
+    # RISE_TRAVEL_GAIN 0 keeps only its losses (a scale fitting the speed gains nothing)
+    RISE_TRAVEL = 0.0
+    RISE_TRAVEL_GAIN = 1.0
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a track whose last contact came from a probe waits this share of the probes' latency
@@ -807,13 +811,16 @@ class TrackerDecoder(Decoder):
             shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
-        if self.LOG_TRAVEL_PER_OCTAVE and not probe and len(floats):
-            # a ridge's rise spans ~1 mm of the edge's travel whatever the speed: a contact
-            # found at a scale the track's speed makes much longer is seldom its ridge
-            ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_N] >= 2) & np.isnan(floats[:, F_STOP])
-            travel_mm = ev.scale_s * np.abs(floats[ridge, F_V])
-            octaves = np.log2(np.maximum(travel_mm, 1e-9) / self.TRAVEL_MAX_MM)
-            floats[ridge, F_SCORE] += self.LOG_TRAVEL_PER_OCTAVE * np.maximum(octaves, 0.0)
+        if self.RISE_TRAVEL and not probe and len(floats):
+            # a ridge's rise spans ~1 mm of the edge's travel whatever the speed: the
+            # track's speed (and its uncertainty) predicts the scale its ridge is found at
+            ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_RUN] >= 2) & np.isnan(floats[:, F_STOP])
+            ratio = rise_travel.log_ratio(
+                ev.scale_s, floats[ridge, F_V], floats[ridge, P11], self.fs_hz
+            )
+            if not self.RISE_TRAVEL_GAIN:
+                ratio = np.minimum(ratio, 0.0)
+            floats[ridge, F_SCORE] += self.RISE_TRAVEL * ratio
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
 
     def _branch_constant_values(self) -> dict[str, float]:
