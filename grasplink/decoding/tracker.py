@@ -289,6 +289,11 @@ class TrackerDecoder(Decoder):
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
     LOG_NEW_TRACK = math.log(0.01)  # slips starting per s
     LOG_REVERSE = math.log(0.2)  # a contact while slipping is the first after a reversal
+    # ... or the first after the slip stopped unseen and went on its way from a ridge its
+    # tracks do not place (a clutter contact took the restart's ridge): without it a
+    # reversal starts anywhere while going on must restart at the next ridge, and a
+    # stick-slip's restart reads as a reversal (rates-drops 130101). -inf: off
+    LOG_REBIRTH = -math.inf
     CLUTTER_PER_S = 0.05  # spurious contacts per s (detector false alarms, grip changes)
     P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge) ...
     TIP_MM = 10.0  # ... within this travel after it, into a spacing of at least TIP_GAP_MM
@@ -840,6 +845,7 @@ class TrackerDecoder(Decoder):
             "log_new_track": self.LOG_NEW_TRACK,
             "log_reverse": self.LOG_REVERSE,
             "log_2": math.log(2.0),
+            "log_rebirth": self.LOG_REBIRTH,
             "dip_recovery_s": self.DIP_RECOVERY_S,
             "log_restart": self.LOG_RESTART,
             "log_restart_rate": math.log(self.RESTART_PER_S),
