@@ -77,6 +77,7 @@ from typing import Any
 
 import numpy as np
 
+from grasplink.decoding import rise_travel
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -95,12 +96,15 @@ from grasplink.decoding.kernels.layout import (
     F_S,
     F_SCORE,
     F_STOP,
+    F_V,
     F_WIDTH,
     I_COLS,
     I_LAST,
     I_N,
+    I_RUN,
     I_WIDTH,
     IDS,
+    P11,
 )
 from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.errors import ConfigError
@@ -289,6 +293,11 @@ class TrackerDecoder(Decoder):
     LOG_CLUTTER_IDLE = math.log(0.01)  # spurious contacts per s without slip
     LOG_NEW_TRACK = math.log(0.01)  # slips starting per s
     LOG_REVERSE = math.log(0.2)  # a contact while slipping is the first after a reversal
+    # ... or the first after the slip stopped unseen and went on its way from a ridge its
+    # tracks do not place (a clutter contact took the restart's ridge): without it a
+    # reversal starts anywhere while going on must restart at the next ridge, and a
+    # stick-slip's restart reads as a reversal (rates-drops 130101). -inf: off
+    LOG_REBIRTH = -math.inf
     CLUTTER_PER_S = 0.05  # spurious contacts per s (detector false alarms, grip changes)
     P_TIP = 0.3  # extra contacts per ridge contact while slipping (tipping front edge) ...
     TIP_MM = 10.0  # ... within this travel after it, into a spacing of at least TIP_GAP_MM
@@ -339,6 +348,11 @@ class TrackerDecoder(Decoder):
     # the last ridge at 10 dB cleared in 0.42 s, > 0.3; a stop on a ridge placed 0.067 mm
     # past the bound; the rail before the object arrives): off (0) until those hold
     LOG_SHAPE_STOP_RIDGE = math.log(0.1)
+    # weight of a contact's scale against the track's speed (`rise_travel.log_ratio`, the
+    # measured ridge / clutter likelihood ratio) on a child taking it for its ridge: 0 off;
+    # RISE_TRAVEL_GAIN 0 keeps only its losses (a scale fitting the speed gains nothing)
+    RISE_TRAVEL = 0.0
+    RISE_TRAVEL_GAIN = 1.0
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a track whose last contact came from a probe waits this share of the probes' latency
@@ -815,6 +829,16 @@ class TrackerDecoder(Decoder):
             shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
+        if self.RISE_TRAVEL and not probe and len(floats):
+            # a ridge's rise spans ~1 mm of the edge's travel whatever the speed: the
+            # track's speed (and its uncertainty) predicts the scale its ridge is found at
+            ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_RUN] >= 2) & np.isnan(floats[:, F_STOP])
+            ratio = rise_travel.log_ratio(
+                ev.scale_s, floats[ridge, F_V], floats[ridge, P11], self.fs_hz
+            )
+            if not self.RISE_TRAVEL_GAIN:
+                ratio = np.minimum(ratio, 0.0)
+            floats[ridge, F_SCORE] += self.RISE_TRAVEL * ratio
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
 
     def _grip_rate(self, ev: ContactEvent) -> float:
@@ -850,6 +874,7 @@ class TrackerDecoder(Decoder):
             "log_new_track": self.LOG_NEW_TRACK,
             "log_reverse": self.LOG_REVERSE,
             "log_2": math.log(2.0),
+            "log_rebirth": self.LOG_REBIRTH,
             "dip_recovery_s": self.DIP_RECOVERY_S,
             "log_restart": self.LOG_RESTART,
             "log_restart_rate": math.log(self.RESTART_PER_S),

@@ -11,6 +11,7 @@ and edge cases built from one of them."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from functools import cache
 
@@ -226,3 +227,35 @@ def test_compiled_branch_constants_are_packed_by_name():
     assert packed[kernel.STALE_S] == dec._stale_s
     with pytest.raises(ValueError, match="stale_s"):
         kernel.pack_constants({k: v for k, v in values.items() if k != "stale_s"})
+
+
+class _Rebirth(TrackerDecoder):
+    LOG_REBIRTH = math.log(0.2)
+
+
+@cache
+def rebirth_decoder(layout: str, fs: int) -> TrackerDecoder:
+    return _Rebirth(LAYOUTS_MM[layout], fs)
+
+
+def test_compiled_branch_matches_numpy_with_births_the_slips_way(monkeypatch):
+    """`LOG_REBIRTH` on (a slip going on its way from a ridge its tracks do not place):
+    the compiled births match the numpy code's, and they are other births than with it
+    off (the best slipping track's score lifts those of its own way)."""
+
+    def slips(c: Call) -> bool:
+        return bool((np.isnan(c.floats[:, kernel.F_STOP]) & (c.ints[:, kernel.I_N] >= 2)).any())
+
+    slipping = [c for c in calls() if c.ev.id < STEP_IDS and slips(c)][:40]
+    assert len(slipping) >= 20
+    off = [decoder(c.layout, c.fs) for c in slipping]
+    monkeypatch.setitem(globals(), "decoder", rebirth_decoder)
+    lifted = 0
+    for k, (call, plain) in enumerate(zip(slipping, off, strict=True)):
+        got, _ = check(call, 2000 + k)
+        plain._tracks, plain._null = _Bank(call.floats.copy(), call.ints.copy()), call.null
+        plain._steps = {} if call.step is None else {call.ev.id: call.step[0]}
+        lifted += int(
+            (got._f[:, kernel.F_SCORE] > plain._branch(call.ev)._f[:, kernel.F_SCORE]).any()
+        )
+    assert lifted >= len(slipping) // 4, lifted

@@ -73,7 +73,7 @@ CONSTANTS = (
     "v_max_mm_s", "max_speed_jump", "pos_var_mm2", "speed_init_rel", "dip_var_mm2",
     "dip_var_changing_mm2", "acc_per_s", "log_changing", "log_steady", "speed_prior_mm_s",
     "speed_prior_log_sigma", "log_speed_norm", "speed_walk2", "speed_walk_mm", "jerk_per_s2",
-    "robust_floor", "dip_max_mm",
+    "robust_floor", "dip_max_mm", "log_rebirth",
 )  # fmt: skip
 (
     STALE_S, CLUTTER_PER_S, P_TIP, TIP_MM, TIP_GAP_MM, TIP_S, TIP_SLOW_PER_S,
@@ -82,7 +82,7 @@ CONSTANTS = (
     V_MAX_MM_S, MAX_SPEED_JUMP, POS_VAR_MM2, SPEED_INIT_REL, DIP_VAR_MM2,
     DIP_VAR_CHANGING_MM2, ACC_PER_S, LOG_CHANGING, LOG_STEADY, SPEED_PRIOR_MM_S,
     SPEED_PRIOR_LOG_SIGMA, LOG_SPEED_NORM, SPEED_WALK2, SPEED_WALK_MM, JERK_PER_S2,
-    ROBUST_FLOOR, DIP_MAX_MM,
+    ROBUST_FLOOR, DIP_MAX_MM, LOG_REBIRTH,
 ) = range(len(CONSTANTS))  # fmt: skip
 
 
@@ -584,6 +584,14 @@ def _births(
         if way.any():
             reverse = _nan_max(f[:, F_SCORE], np.nonzero(way)[0]) + c[LOG_REVERSE] + c[LOG_2]
             base = reverse if reverse > base else base
+        if c[LOG_REBIRTH] > -np.inf:  # going on its way from a ridge its tracks do not place
+            same = np.zeros(len(f), np.bool_)
+            for r in range(len(f)):
+                slipping = f[r, F_STOP] != f[r, F_STOP] and i[r, I_N] >= 2
+                same[r] = slipping and i[r, I_DIRN] == 1 - 2 * di
+            if same.any():
+                again = _nan_max(f[:, F_SCORE], np.nonzero(same)[0]) + c[LOG_REBIRTH] + c[LOG_2]
+                base = again if again > base else base
         base += log_strength
         for ridge in range(R):
             q = di * R + ridge

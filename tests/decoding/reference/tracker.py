@@ -321,6 +321,10 @@ class NumpyTracker:
                 if way.any():
                     reverse = float(B.score[way].max()) + self.LOG_REVERSE + math.log(2.0)
                     base[di] = max(base[di], reverse)
+                same = slipping & (B.dirn == d)  # going on its way from an unplaced ridge
+                if same.any() and math.isfinite(self.LOG_REBIRTH):
+                    again = float(B.score[same].max()) + self.LOG_REBIRTH + math.log(2.0)
+                    base[di] = max(base[di], again)
         children.append(self._births(ev, base + self._log_strength(ev.z)))
         return _concat(children)
 
