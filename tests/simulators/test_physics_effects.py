@@ -675,3 +675,34 @@ def test_wearer_script_holds_each_level_until_the_next_point():
 def test_bad_parameters_raise_scene_errors_naming_the_key(cls, params, key):
     with pytest.raises(SceneError, match=rf"test: effect\.{key}"):
         make(cls, ctx(), **params)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 100])
+def test_ridge_dips_short_path_gives_the_crossing_loops_bits(monkeypatch, chunk):
+    """A chunk with no dip in force and no ridge in reach skips the crossing loop: the same
+    bits as the loop gives (moving between ridges, resting with the offset the dips left,
+    moving back across them), and the short path is taken most of the time."""
+    profile = {
+        "speed_mm_s": [[0, 40], [0.4, 40], [0.5, 0], [3.0, 0], [3.1, -30]],
+        "interpolation": "step",
+        "start_mm": -5,
+    }
+    times = sample_times_us(1000, 4.5)
+    source = make(ScriptedObject, ctx(), **profile)
+    dips = make(RidgeDips, ctx())
+    short = dips._crosses_nothing
+    taken = []
+
+    def counted(p0):
+        taken.append(short(p0))
+        return taken[-1]
+
+    monkeypatch.setattr(dips, "_crosses_nothing", counted)
+    out = run([source, dips], times, chunk=chunk)
+    loop_only = make(RidgeDips, ctx())
+    monkeypatch.setattr(loop_only, "_crosses_nothing", lambda p0: False)
+    expected = run([make(ScriptedObject, ctx(), **profile), loop_only], times, chunk=chunk)
+    for name, values in expected.items():
+        assert np.array_equal(out[name], values), name
+    assert dips.offset_mm == loop_only.offset_mm != 0.0  # the dips moved the edge back
+    assert sum(taken) > 0.6 * len(taken)

@@ -180,6 +180,29 @@ def test_contacts_come_when_the_edge_reaches_each_ridge_with_sub_sample_timing()
     assert np.allclose([c.time_s for c in contacts], (ridges + 1.234) / 33.0, atol=1e-9)
 
 
+@pytest.mark.parametrize("chunk", [1, 2, None])
+@pytest.mark.parametrize("speed_mm_s", [25.0, -25.0])
+def test_a_sample_landing_on_a_ridge_makes_its_contact_in_that_chunk(chunk, speed_mm_s):
+    """A point is crossed when the edge reaches it (x0 < x <= x1 forward, x1 < x <= x0 in
+    reverse): a sample exactly on a ridge makes the contact with that sample, however the
+    samples are chunked, also when a chunk's whole travel ends or starts on the ridge
+    (the chunk that travels to a ridge crosses it, the next one from it does not)."""
+    ridges = skin.ridge_positions_mm(ALPHA_01)
+    times = harness.sample_times_us(SKIN_HZ, 0.1)  # 2.5 mm: no other ridge
+    step_mm = abs(speed_mm_s) / SKIN_HZ  # 1/16 mm: ridges, steps and positions exact
+    ridge = ridges[2] if speed_mm_s > 0 else ridges[5]
+    start_mm = ridge - np.sign(speed_mm_s) * 13 * step_mm
+    inputs = slide(times, speed_mm_s, start_mm)
+    inputs["object.position_mm"] = start_mm + np.sign(speed_mm_s) * step_mm * np.arange(len(times))
+    assert ridge in inputs["object.position_mm"]
+    _, contacts = contacts_for(times, inputs, ALPHA_01, **FIXED)
+    if chunk is not None:
+        _, effect = run_one(skin.RidgeContacts, skin_ctx(), times, inputs, chunk, **FIXED)
+        assert list(effect.contacts) == contacts
+    assert [c.ridge for c in contacts] == [2 if speed_mm_s > 0 else 5]
+    assert contacts[0].time_s == times[13] / 1e6
+
+
 def test_reverse_contacts_meet_the_ridges_from_the_last_one():
     times = harness.sample_times_us(SKIN_HZ, 3.0)
     inputs = slide(times, -40.0, 90.0)

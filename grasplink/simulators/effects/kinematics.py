@@ -431,6 +431,18 @@ class RidgeDips(Effect):
             self.dip_start_us = [self.dip_start_us[j] for j in keep]
             self.dip_depth = [self.dip_depth[j] for j in keep]
 
+    def _crosses_nothing(self, p0: np.ndarray) -> bool:
+        """Whether the edge, `p0` less the offset (no dip adds to it), stays within the
+        ridges around it: finite positions, and the count at or behind it the same."""
+        low, high = float(p0.min()), float(p0.max())
+        if not (math.isfinite(low) and math.isfinite(high)):
+            return False
+        edges = self.ridges_mm
+        behind = self.behind
+        return (behind == 0 or edges[behind - 1] <= low - self.offset_mm) and (
+            behind == len(edges) or high - self.offset_mm < edges[behind]
+        )
+
     def step(self, io: Io) -> None:
         times = io.times_us
         n = len(times)
@@ -443,6 +455,16 @@ class RidgeDips(Effect):
             self.last_us, self.last_p0_mm = int(times[0]), float(p0[0])
             self.last_v0_mm_s = float(v0[0])
             self.behind = int(np.searchsorted(self.ridges_mm, p0[0], side="right"))
+        self._forget(self.last_us)
+        if not self.dip_start_us and self._crosses_nothing(p0):
+            # No dip in force and no ridge in reach (an object at rest or between ridges,
+            # its dips decayed): what the loop below would give, without its windows.
+            position = p0 - self.offset_mm
+            speed = np.sign(v0) * np.maximum(np.abs(v0) - np.zeros(n), 0.0)
+            self.last_us, self.last_p0_mm = int(times[-1]), float(p0[-1])
+            self.last_v0_mm_s = float(v0[-1])
+            put_object(io, position, speed)
+            return
         previous_us = np.concatenate(([self.last_us], times[:-1]))
         moved = np.diff(p0, prepend=self.last_p0_mm)
         moved_abs, moved_sign = np.abs(moved), np.sign(moved)

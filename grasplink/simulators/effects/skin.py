@@ -35,6 +35,7 @@ Models (thesis ch. 4.3, 5.3.1, 5.4.2, 3.4):
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from typing import ClassVar, NamedTuple
@@ -241,6 +242,11 @@ class RidgeContacts(Effect):
         self._rng = ctx.rng(self.kind) if random else None
         self._forward_points = self._points(layout, +1)
         self._reverse_points = self._points(layout, -1)
+        # Every point either direction crosses, sorted: a chunk whose travel spans none of
+        # them crosses nothing (`_crossings`), as the object rests or slides between ridges.
+        self._all_points_mm = sorted(
+            [*self._forward_points.x_mm.tolist(), *self._reverse_points.x_mm.tolist()]
+        )
         # Carried state: the previous sample and the segment in force.
         self._last_sample: tuple[float, float, float] | None = None  # (t_s, x_mm, v_mm_s)
         self._segment: tuple[float, float, float, float] | None = None  # t, alpha, rise, start
@@ -292,6 +298,13 @@ class RidgeContacts(Effect):
         opposite directions, at least one is non-zero, and the step is not a
         jump of the reported edge (a reversal switches the leading edge).
         """
+        # Either direction crosses a point only within the travel's span (low, high]: with
+        # none there (most chunks), none is crossed, and nothing below would change.
+        low, high = float(x.min()), float(x.max())
+        if math.isfinite(low) and math.isfinite(high):
+            every = self._all_points_mm
+            if bisect.bisect_right(every, high) == bisect.bisect_right(every, low):
+                return None
         t0, t1, x0, x1, v0, v1 = t[:-1], t[1:], x[:-1], x[1:], v[:-1], v[1:]
         direction = np.where(v0 != 0, np.sign(v0), np.sign(v1))
         with np.errstate(invalid="ignore"):
