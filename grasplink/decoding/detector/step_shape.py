@@ -189,9 +189,12 @@ class Recent:
 
     def verdict(self, onset: int, told: int) -> int:
         """`classify` of the step whose onset and verdict are global sample indices."""
-        told = min(told, onset + round(HELD_S * self.fs_hz))
-        x = self._x[: self.size]
+        held = min(told, onset + round(HELD_S * self.fs_hz))
+        return classify(self.shape(onset, held), self.fs_hz)
+
+    def shape(self, onset: int, told: int) -> StepShape | None:
+        """`measure` of the samples from before `onset` to `told` (global sample indices):
+        None when they are no longer (or not yet) held."""
         if onset - self.start < 0:
-            return UNTOLD
-        shape = measure(x, onset - self.start, told - self.start, self.fs_hz)
-        return classify(shape, self.fs_hz)
+            return None
+        return measure(self._x[: self.size], onset - self.start, told - self.start, self.fs_hz)

@@ -1,0 +1,82 @@
+"""A contact told a pulse that jumped like a stop's step: a ridge only at a speed this fast.
+
+Physics (thesis ch. 4.3): when a slipping object sticks the FSR's level moves from the
+sliding level (1 - k mu) W + k P to the resting W within the braking - a jump over
+6-10 ms whatever the speed was. A ridge contact's pulse rises while the edge pushes the
+ridge over, about a millimetre of travel: its jump lasts ~1 mm / v. A stop often lands
+on the falling tail of the last ridge's pulse (the ridge goes on relaxing when the object
+stops); the tail then falls on under the jump and the watcher tells it a pulse, and the
+tracker took it for the ridge then due: at that time, in the spacings' ratios, with a
+pulse's evidence for a slip (`benchmarks/stop_causes.py`, full plan, 1 seed: 11 of 16
+stops cleared late had their own contact told a pulse).
+
+So a contact told a pulse whose jump is as fast as a stop's (`fast_jump_s`) is branched
+like a step (`TrackerDecoder._branch`: "stopped there" and "a grip change, slipping on"
+children besides the ridge ones), and each slipping track is weighed by its own speed v
+(`weigh`): a ridge of a track at v rises over v x jump of travel - under
+`RIDGE_TRAVEL_MIN_MM` that track's ridge child is unlikely (a stop's jump, not its
+ridge), over it its stop child is (a fast ridge at that speed: the pulse fell back).
+Measured (truth speed, full plan, 1 seed, 10 kinds; the jump to 90 % of the smoothed
+peak over the level before, its trend carried to the onset, `step_shape.measure`): the
+stops' own contacts jump in 6.2-10 ms (10-90 %) at every speed; the ridge contacts told
+a pulse travel 0.83-1.36 mm over their jump at 30-60 mm/s, 0.90 mm and more at 60-100
+mm/s (10 %), while the stops' contacts told a pulse at 47-50 mm/s (stick-slip, rates and
+drops) travel 0.33-0.50 mm. Above ~80 mm/s a stop's jump spans a ridge's travel: no
+shape tells them apart there, and `weigh` leaves such tracks' ridge children alone.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grasplink.decoding.detector import step_shape
+from grasplink.decoding.kernels.layout import F_SCORE, F_STOP, F_V, I_LAST, I_N, I_RUN
+
+# the window a pulse's jump is read in: its onset to this long after (its verdict no later)
+WINDOW_S = 0.06
+# a stop's jump is over within `step_shape.FAST_RISE_S` (or its samples at a slow rate)
+# and stands at least this many white-noise units over the level before (its trend
+# carried): smaller jumps' timing is the noise's
+JUMP_SNR_MIN = 4.0
+
+
+def fast_jump_s(recent: step_shape.Recent, onset: int, told: int) -> float | None:
+    """The jump time (s) of the contact with this onset, told a pulse at sample `told`
+    (global indices, `step_shape.Recent`), when it jumped as fast as a stop's step and
+    stood clear of the noise; None otherwise (or when its samples are not held)."""
+    fs_hz = recent.fs_hz
+    end = min(told, onset + round(WINDOW_S * fs_hz))
+    shape = recent.shape(onset, end)
+    if shape is None or not math.isfinite(shape.jump_s):
+        return None
+    fast_s = max(step_shape.FAST_RISE_S, step_shape.FAST_RISE_SAMPLES / fs_hz)
+    tall = shape.jump_n >= JUMP_SNR_MIN * shape.noise_n
+    return shape.jump_s if shape.jump_s <= fast_s and tall else None
+
+
+def weigh(
+    floats: np.ndarray,
+    ints: np.ndarray,
+    contact_id: int,
+    t_s: float,
+    jump_s: float,
+    travel_min_mm: float,
+    log_ridge: float,
+    log_stop: float,
+) -> None:
+    """Weigh the children of a fast-jumping contact (in place, the bank's matrices): a
+    slipping track with a measured speed taking it for a ridge at a speed whose ridge
+    would travel under `travel_min_mm` over the jump gets `log_ridge`; a track stopped at
+    it whose speed before made such a jump a ridge's travel gets `log_stop`."""
+    if not (jump_s > 0 and travel_min_mm > 0):
+        raise ValueError(f"stop jumps: jump {jump_s!r} s, travel {travel_min_mm!r} mm")
+    travel_mm = np.abs(floats[:, F_V]) * jump_s
+    slipping = np.isnan(floats[:, F_STOP])
+    # (a restart's speed is not known yet: run 1)
+    ridge = (ints[:, I_LAST] == contact_id) & (ints[:, I_N] >= 2) & (ints[:, I_RUN] >= 2)
+    ridge &= slipping
+    floats[ridge & (travel_mm < travel_min_mm), F_SCORE] += log_ridge
+    stop = floats[:, F_STOP] == t_s
+    floats[stop & (travel_mm >= travel_min_mm), F_SCORE] += log_stop
