@@ -32,7 +32,10 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   other edge leads, at a place no contact tells).
 * A contact judged a step branches a slipping track into "stopped there"
   (position held, speed 0) and "a grip change, slipping on"; the next
-  contact (or its absence) decides. A stopped track restarts with a contact
+  contact (or its absence) decides. A contact told a pulse whose jump was as
+  fast as a stop's (on the falling tail of the last ridge's pulse) is branched
+  so too, each track weighed by its speed (`stop_jumps`: a ridge's rise spans
+  about a millimetre of travel). A stopped track restarts with a contact
   at its next ridge, speed unknown until the one after.
 * Silence is evidence too: a track that expected a ridge well before now
   and saw none either missed it or has stopped, whichever is likelier.

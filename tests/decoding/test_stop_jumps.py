@@ -28,8 +28,8 @@ FS_HZ = 1000.0
 ONSET_S = 0.5
 
 
-def recent(x: np.ndarray) -> step_shape.Recent:
-    held = step_shape.Recent(FS_HZ)
+def recent(x: np.ndarray, fs_hz: float = FS_HZ) -> step_shape.Recent:
+    held = step_shape.Recent(fs_hz)
     held.append(x)
     return held
 
@@ -52,6 +52,20 @@ def test_a_stop_jump_on_a_falling_tail_is_fast_a_ridge_rise_is_not(seed):
     jump = stop_jumps.fast_jump_s(recent(stop), onset, onset + 80)
     assert jump is not None and jump <= step_shape.FAST_RISE_S
     assert stop_jumps.fast_jump_s(recent(ridge), onset, onset + 80) is None
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_one_sample_spike_on_a_slow_ridge_rise_is_not_fast(seed):
+    """A ridge at 10 mm/s rising 0.1 N over 100 ms at 400 Hz, 20 mN of noise and a 0.3 N
+    spike on its third sample (thesis-like noise had one): the 10 ms mean alone read a
+    jump in 4 ms."""
+    fs_hz = 400.0
+    t = np.arange(0.0, 1.0, 1.0 / fs_hz)
+    x = 2.0 + 0.02 * np.random.default_rng(seed).standard_normal(len(t))
+    x += 0.1 * np.clip((t - ONSET_S) / 0.1, 0.0, 1.0)
+    onset = round(ONSET_S * fs_hz)
+    x[onset + 2] += 0.3
+    assert stop_jumps.fast_jump_s(recent(x, fs_hz), onset, onset + 32) is None
 
 
 def test_a_jump_in_the_noise_is_not_fast():
