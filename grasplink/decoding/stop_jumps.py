@@ -14,15 +14,17 @@ So a contact told a pulse whose jump is as fast as a stop's (`fast_jump_s`) is b
 like a step (`TrackerDecoder._branch`: "stopped there" and "a grip change, slipping on"
 children besides the ridge ones), and each slipping track is weighed by its own speed v
 (`weigh`): a ridge of a track at v rises over v x jump of travel - under
-`RIDGE_TRAVEL_MIN_MM` that track's ridge child is unlikely (a stop's jump, not its
+`TrackerDecoder.FAST_JUMP_TRAVEL_MM` (0.8 mm) that track's ridge child is unlikely (a stop's jump, not its
 ridge), over it its stop child is (a fast ridge at that speed: the pulse fell back).
-Measured (truth speed, full plan, 1 seed, 10 kinds; the jump to 90 % of the smoothed
-peak over the level before, its trend carried to the onset, `step_shape.measure`): the
-stops' own contacts jump in 6.2-10 ms (10-90 %) at every speed; the ridge contacts told
-a pulse travel 0.83-1.36 mm over their jump at 30-60 mm/s, 0.90 mm and more at 60-100
-mm/s (10 %), while the stops' contacts told a pulse at 47-50 mm/s (stick-slip, rates and
-drops) travel 0.33-0.50 mm. Above ~80 mm/s a stop's jump spans a ridge's travel: no
-shape tells them apart there, and `weigh` leaves such tracks' ridge children alone.
+Measured (`benchmarks/contact_jumps.py`, full plan, 1 seed, 9 kinds, at the truth's
+speed; the jump to 90 % of the smoothed peak over the level before, its trend carried
+to the onset, `step_shape.measure`, on `despiked` samples): the stops' own contacts jump
+in 6.2-10 ms (10-90 %) at every speed, 0.26-0.50 mm of travel at 30-60 mm/s (those told
+a pulse 0.34-0.50 mm); the ridge contacts told a pulse travel 0.77-1.26 mm over their
+jump at 30-60 mm/s, 0.90 mm and more above (10 %). Above ~80 mm/s a stop's jump spans
+a ridge's travel: no shape tells them apart there, and `weigh` leaves such tracks'
+ridge children alone. A ridge at 30-60 mm/s jumps in 16 ms or more (10 %): over
+`FAST_RISE_S`, never weighed.
 """
 
 from __future__ import annotations
