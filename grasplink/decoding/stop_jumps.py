@@ -14,8 +14,9 @@ So a contact told a pulse whose jump is as fast as a stop's (`fast_jump_s`) is b
 like a step (`TrackerDecoder._branch`: "stopped there" and "a grip change, slipping on"
 children besides the ridge ones), and each slipping track is weighed by its own speed v
 (`weigh`): a ridge of a track at v rises over v x jump of travel - under
-`TrackerDecoder.FAST_JUMP_TRAVEL_MM` (0.8 mm) that track's ridge child is unlikely (a stop's jump, not its
-ridge), over it its stop child is (a fast ridge at that speed: the pulse fell back).
+`TrackerDecoder.FAST_JUMP_TRAVEL_MM` (0.8 mm) that track's ridge child is unlikely (a
+stop's jump, not its ridge), over it its stop child is (a fast ridge at that speed: the
+pulse fell back).
 Measured (`benchmarks/contact_jumps.py`, full plan, 1 seed, 9 kinds, at the truth's
 speed; the jump to 90 % of the smoothed peak over the level before, its trend carried
 to the onset, `step_shape.measure`, on `despiked` samples): the stops' own contacts jump
