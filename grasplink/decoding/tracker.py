@@ -35,7 +35,10 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   for no ridge, and "no slip", explain it at their rate plus the grip's.
 * A contact judged a step branches a slipping track into "stopped there"
   (position held, speed 0) and "a grip change, slipping on"; the next
-  contact (or its absence) decides. A stopped track restarts with a contact
+  contact (or its absence) decides. A contact told a pulse whose jump was as
+  fast as a stop's (on the falling tail of the last ridge's pulse) is branched
+  so too, each track weighed by its speed (`stop_jumps`: a ridge's rise spans
+  about a millimetre of travel). A stopped track restarts with a contact
   at its next ridge, speed unknown until the one after.
 * Silence is evidence too: a track that expected a ridge well before now
   and saw none either missed it or has stopped, whichever is likelier.
@@ -77,7 +80,7 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.decoding import rise_travel
+from grasplink.decoding import rise_travel, stop_jumps
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -355,6 +358,13 @@ class TrackerDecoder(Decoder):
     RISE_TRAVEL_GAIN = 1.0
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
+    # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
+    # like a step, its ridge children whose speed makes that jump under this travel get
+    # LOG_FAST_JUMP_RIDGE, its stop children whose speed makes it more LOG_FAST_JUMP_STOP
+    # (0: off, the contact a pulse only)
+    FAST_JUMP_TRAVEL_MM = 0.8
+    LOG_FAST_JUMP_RIDGE = math.log(0.1)
+    LOG_FAST_JUMP_STOP = math.log(0.05)
     # a track whose last contact came from a probe waits this share of the probes' latency
     # for its next (`_latency_floor`; 0: the kink bank's latency for every track)
     PROBE_WAIT = 1.0
@@ -576,6 +586,7 @@ class TrackerDecoder(Decoder):
         self._steps: dict[int, bool | None] = {}
         self._sure: set[int] = set()  # ... of which told at the sure hold (`PulseCheck.sure`)
         self._shapes: dict[int, int] = {}  # ... their shapes' verdicts (`step_shape.classify`)
+        self._fast: dict[int, float] = {}  # contacts told pulses that jumped like a stop's
         self._recent = step_shape.Recent(fs_hz)  # the samples their shapes are read from
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
@@ -711,6 +722,8 @@ class TrackerDecoder(Decoder):
                 if c.id == check.id:
                     self._replay(at, [])
                     break
+        if verdict == PULSE and self.LOG_FAST_JUMP_RIDGE and check.id not in self._fast:
+            self._fast_jump(check)
         if check.pulse is False:
             self._steps[check.id] = check.trend_on
             if check.sure:
@@ -726,6 +739,20 @@ class TrackerDecoder(Decoder):
                 if c.id == check.id:
                     self._replay(at, [])
                     break
+
+    def _fast_jump(self, check: PulseCheck) -> None:
+        """A contact told a pulse that jumped like a stop's step (`stop_jumps`): noted, and
+        replayed from (branched as a step, weighed by each track's speed)."""
+        at = next((k for k, c in enumerate(self._contacts) if c.id == check.id), None)
+        if at is None:
+            return
+        jump = stop_jumps.fast_jump_s(self._recent, self._contacts[at].index, check.emit_index)
+        if jump is None:
+            return
+        self._fast[check.id] = jump
+        while len(self._fast) > 64:
+            del self._fast[next(iter(self._fast))]
+        self._replay(at, [])
 
     def _step_shape(self, check: PulseCheck) -> int:
         """The shape verdict of a contact told a step (`step_shape.classify`), read from the
@@ -773,7 +800,7 @@ class TrackerDecoder(Decoder):
         and only the pruning can differ (a replay holds one contact fewer)."""
         key = (
             ev, self._null, ev.id in self._steps, self._steps.get(ev.id), ev.id in self._sure,
-            self._shapes.get(ev.id),
+            self._shapes.get(ev.id), self._fast.get(ev.id),
         )  # fmt: skip
         known = self._memo.get(key)
         if known is not None and known[0] is self._tracks:
@@ -807,11 +834,17 @@ class TrackerDecoder(Decoder):
         # the tracks and the contact: a `kernels.branch.Bank` and `Contact`, as plain tuples
         tracks = (self._tracks._f, self._tracks._i)
         log_stop = math.log(stop_rate)
-        contact = (ev.t_s, ev.id, ev.sigma_s, sigma_s, log_strength, log_stop, step, probe)
+        # a pulse that jumped like a stop's step: branched as a step (`stop_jumps`)
+        fast = None if step else self._fast.get(ev.id)
+        as_step = step or fast is not None
+        contact = (ev.t_s, ev.id, ev.sigma_s, sigma_s, log_strength, log_stop, as_step, probe)
         null = self._null
         floats, ints, self._null = branch(tracks, contact, null, self._branch_model)
+        if fast is not None:
+            self._weigh_fast(floats, ints, ev, fast)
         grip_per_s = self._grip_rate(ev)
         if grip_per_s > 0:  # the commanded grip may have made it (`efference.py`)
+            # (a fast pulse's no-ridge children are back at clutter's odds: `_weigh_fast`)
             base = math.log(self.GRIP_STEP_PER_S) if step else self.LOG_CLUTTER_IDLE
             kept = ~(ev.t_s - self._tracks.t > self._stale_s)  # the kernel's `_kept`
             self._null = charge_grip(
@@ -856,6 +889,19 @@ class TrackerDecoder(Decoder):
             while len(self._grip_rates) > 64:
                 del self._grip_rates[next(iter(self._grip_rates))]
         return known
+
+    def _weigh_fast(self, floats: np.ndarray, ints: np.ndarray, ev: ContactEvent, jump_s: float):
+        """The children of a pulse branched as a step: "no slip" and the tracks that take
+        it for none of theirs keep clutter's odds (it fell back: no grip change), and each
+        track's ridge or stop child is weighed by its speed (`stop_jumps.weigh`)."""
+        log_grip = math.log(self.GRIP_STEP_PER_S)
+        self._null += self.LOG_CLUTTER_IDLE - log_grip
+        ignored = (ints[:, I_LAST] != ev.id) & (floats[:, F_STOP] != ev.t_s)
+        floats[ignored, F_SCORE] += math.log(self.CLUTTER_PER_S) - log_grip
+        stop_jumps.weigh(
+            floats, ints, ev.id, ev.t_s, jump_s, self.FAST_JUMP_TRAVEL_MM,
+            self.LOG_FAST_JUMP_RIDGE, self.LOG_FAST_JUMP_STOP,
+        )  # fmt: skip
 
     def _branch_constant_values(self) -> dict[str, float]:
         """The constants `kernels.branch` reads, by its names (`branch.CONSTANTS`)."""

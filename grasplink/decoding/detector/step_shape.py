@@ -195,9 +195,18 @@ class Recent:
 
     def verdict(self, onset: int, told: int) -> int:
         """`classify` of the step whose onset and verdict are global sample indices."""
-        told = min(told, onset + round(HELD_S * self.fs_hz))
-        x = self._x[: self.size]
+        held = min(told, onset + round(HELD_S * self.fs_hz))
+        return classify(self.shape(onset, held), self.fs_hz)
+
+    def held(self, start: int, end: int) -> np.ndarray | None:
+        """A copy of the samples start..end-1 (global indices): None when not all held."""
+        if start - self.start < 0 or end - self.start > self.size or end < start:
+            return None
+        return self._x[start - self.start : end - self.start].copy()
+
+    def shape(self, onset: int, told: int) -> StepShape | None:
+        """`measure` of the samples from before `onset` to `told` (global sample indices):
+        None when they are no longer (or not yet) held."""
         if onset - self.start < 0:
-            return UNTOLD
-        shape = measure(x, onset - self.start, told - self.start, self.fs_hz)
-        return classify(shape, self.fs_hz)
+            return None
+        return measure(self._x[: self.size], onset - self.start, told - self.start, self.fs_hz)
