@@ -480,9 +480,15 @@ percept, not three, TPDOs decode in one look-up and skin packets in floats: the
 gateway alone on its replayed calls 1.07× as fast, 8.9 % fewer Python calls, all
 byte-identical); its profile is flat past the decoder. The tail kinks the decoder
 finds since s22 cost it 3.5 % more per sample, so the loop moved ~1.05× against
-c22be85. Measured on a quiet host the loop is at 15× (the line under the
-loop_headline table bounds what the gateway alone allows): 20× needs every part
-about a quarter cheaper. In a skin-only slip the skin
+c22be85. In s23 a physics chunk whose travel spans no ridge skips the skin's
+contact and the object's dip loops (ridge_contacts 1.7×, ridge_dips 2.0× as fast,
+byte-identical): the loop 1.07× against 3c9cd53 in this page's run, whose host ran
+slower than s22's (the same base tree read 16× then, 11× here; the decoder's cost
+against the base in one run: 1.01×, `benchmarks/decoder_cost_trees.py`). The line
+under the loop_headline table bounds what the gateway alone allows: 20× needs every
+part about a quarter cheaper, and what is left of the physics is numpy's per-call
+cost on ~10-sample blocks (the hand's part: 182 of 206 blocks one chunk long, as
+its grip command changes every chunk). In a skin-only slip the skin
 node streams its packets in spans (above), which took it past 200×. A node accepts
 only the heartbeats its consumer (1016h) watches, so another node's beat no longer
 ends a skin span: headline_slip's spans went from 298 asks and 578 ticks told (317
