@@ -45,6 +45,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import stop_causes
+from stop_causes import pct
 
 from grasplink.decoding.detector import step_shape
 from grasplink.decoding.kernels import posterior as pk
@@ -257,10 +258,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")
     scored = sum(r[3] for r in results)
     drops = [(case.kind, c) for case, out, _, _ in results for c in out]
-    print(f"\nslip dropped: {len(drops)} of {scored} updates ({_pct(len(drops), scored)})")
+    print(f"\nslip dropped: {len(drops)} of {scored} updates ({pct(len(drops), scored)})")
     causes = Counter(c for _, c in drops)
     for (cause, detail), count in causes.most_common():
-        print(f"  {cause:18s} {detail:48s} {count:6d} {_pct(count, len(drops)):>7s}")
+        print(f"  {cause:18s} {detail:48s} {count:6d} {pct(count, len(drops)):>7s}")
     per_kind: dict[str, Counter] = defaultdict(Counter)
     n_kind: Counter = Counter()
     for case, _, _, n in results:
@@ -275,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     for kind in kinds:
         row = per_kind[kind]
         total = sum(row[h] for h in heads)
-        cells = " ".join(f"{_pct(row[h], total):>16s}" for h in heads)
+        cells = " ".join(f"{pct(row[h], total):>16s}" for h in heads)
         print(f"  {kind:12s} {100.0 * total / max(n_kind[kind], 1):6.1f} {cells}")
         if args.detail:
             for key, count in row.most_common():
@@ -286,10 +287,6 @@ def main(argv: list[str] | None = None) -> int:
     for (cause, detail), count in Counter((s[1], s[2]) for _, s in late).most_common():
         print(f"  {cause:30s} {detail:30s} {count:5d}")
     return 0
-
-
-def _pct(part: float, whole: float) -> str:
-    return f"{100.0 * part / max(whole, 1):.1f} %"
 
 
 if __name__ == "__main__":

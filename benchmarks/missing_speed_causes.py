@@ -32,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import tune_tracker
+from stop_causes import pct
 
 from grasplink.decoding.base import SlipEstimate
 from grasplink.decoding.tracker import TrackerDecoder
@@ -119,13 +120,13 @@ def main(argv: list[str] | None = None) -> int:
                     causes[(cause, detail)] += 1
                     layouts[case.layout][cause] += 1
         missing = sum(causes.values())
-        print(f"\n{title}: {total} updates, speed missing in {missing} ({_pct(missing, total)})")
+        print(f"\n{title}: {total} updates, speed missing in {missing} ({pct(missing, total)})")
         for (cause, detail), count in causes.most_common():
-            print(f"  {cause:15s} {detail:40s} {count:7d} {_pct(count, total):>7s}")
+            print(f"  {cause:15s} {detail:40s} {count:7d} {pct(count, total):>7s}")
         for layout, row in sorted(layouts.items()):
             n = row.pop("updates")
-            parts = ", ".join(f"{k} {_pct(c, n)}" for k, c in row.most_common())
-            print(f"  {layout:10s} of {n:6d}: {_pct(sum(row.values()), n):>7s} ({parts})")
+            parts = ", ".join(f"{k} {pct(c, n)}" for k, c in row.most_common())
+            print(f"  {layout:10s} of {n:6d}: {pct(sum(row.values()), n):>7s} ({parts})")
     worst = []
     for case, out in results:
         mine = [cause for from3, cause, _ in out if from3]
@@ -138,10 +139,6 @@ def main(argv: list[str] | None = None) -> int:
         way = "r" if case.reverse else "f"
         print(f"  {case.layout:10s} {case.variant:14s} {way} {case.seed} {missed:5d}/{n:5d} {top}")
     return 0
-
-
-def _pct(part: int, whole: int) -> str:
-    return f"{100.0 * part / max(whole, 1):.1f} %"
 
 
 if __name__ == "__main__":

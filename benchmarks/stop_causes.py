@@ -201,10 +201,10 @@ def main(argv: list[str] | None = None) -> int:
     stops = [(case, s) for case, out in results for s in out]
     late = [(case, s) for case, s in stops if s[1]]
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")
-    print(f"{len(stops)} judged stops, {len(late)} cleared late ({_pct(len(late), len(stops))})")
+    print(f"{len(stops)} judged stops, {len(late)} cleared late ({pct(len(late), len(stops))})")
     causes = Counter((s[1], s[2]) for _, s in late)
     for (cause, detail), count in causes.most_common():
-        print(f"  {cause:30s} {detail:22s} {count:5d} {_pct(count, len(late)):>7s}")
+        print(f"  {cause:30s} {detail:22s} {count:5d} {pct(count, len(late)):>7s}")
     print("\nthe stop's own step, in the late stops")
     for what, count in Counter(_bucket(s[3]) for _, s in late).most_common():
         print(f"  {what:40s} {count:5d}")
@@ -365,7 +365,8 @@ def _bucket(step: str) -> str:
     return step.split(" at +")[0]
 
 
-def _pct(part: int, whole: int) -> str:
+def pct(part: float, whole: float) -> str:
+    """part of whole as "12.3 %" ("-" for a part that is no number): the causes scripts' cells."""
     return f"{100.0 * part / max(whole, 1):.1f} %" if math.isfinite(part) else "-"
 
 
