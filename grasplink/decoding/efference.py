@@ -39,6 +39,8 @@ from functools import cache
 
 import numpy as np
 
+from grasplink.errors import ConfigError
+
 #: the hand actuator's first-order lag (simulators' `hand.actuator` time_constant_s default)
 HAND_LAG_S = 0.1
 #: lags after the hand's slew before the grip has settled (3: 95 %)
@@ -81,8 +83,6 @@ class HandFollow:
         return cls(hand_limits()[2])
 
     def __post_init__(self) -> None:
-        from grasplink.errors import ConfigError
-
         low, high = hand_limits()[1]
         if not (math.isfinite(self.rate_n_s) and low <= self.rate_n_s <= high):
             raise ConfigError(

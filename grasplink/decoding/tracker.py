@@ -146,6 +146,13 @@ def _fill(floats: np.ndarray, ints: np.ndarray, fields: dict) -> None:
             ints[:, _I_COLS[key]] = value
 
 
+def _put_bounded(table: dict, key: Any, value: Any, keep: int) -> None:
+    """table[key] = value, then its oldest entries (insertion order) dropped past `keep`."""
+    table[key] = value
+    while len(table) > keep:
+        del table[next(iter(table))]
+
+
 def _tracks(B: _Bank) -> tuple:
     """A bank's fields as the posterior's kernels take them (a plain tuple)."""
     return tuple(
@@ -479,6 +486,7 @@ class TrackerDecoder(Decoder):
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
     MEMO = 8  # contacts whose branches are kept for a replay on the same inputs (`_step`)
+    VERDICTS_KEPT = 64  # contacts whose step / fast-jump / grip verdicts are remembered
     # a track silent this long has stopped or left the skin (None: the slowest slip's time
     # to cross the skin and the coast past it, (length + coast) / V_MIN_MM_S)
     STALE_S: float | None = None
@@ -729,7 +737,7 @@ class TrackerDecoder(Decoder):
             if check.sure:
                 self._sure.add(check.id)
             self._shapes[check.id] = self._step_shape(check)
-            while len(self._steps) > 64:
+            while len(self._steps) > self.VERDICTS_KEPT:
                 oldest = next(iter(self._steps))
                 del self._steps[oldest]
                 self._sure.discard(oldest)
@@ -749,9 +757,7 @@ class TrackerDecoder(Decoder):
         jump = stop_jumps.fast_jump_s(self._recent, self._contacts[at].index, check.emit_index)
         if jump is None:
             return
-        self._fast[check.id] = jump
-        while len(self._fast) > 64:
-            del self._fast[next(iter(self._fast))]
+        _put_bounded(self._fast, check.id, jump, self.VERDICTS_KEPT)
         self._replay(at, [])
 
     def _step_shape(self, check: PulseCheck) -> int:
@@ -808,9 +814,7 @@ class TrackerDecoder(Decoder):
         else:
             before = self._tracks
             pool = self._branch(ev)
-            self._memo[key] = (before, self._null, pool)
-            while len(self._memo) > self.MEMO:
-                del self._memo[next(iter(self._memo))]
+            _put_bounded(self._memo, key, (before, self._null, pool), self.MEMO)
         recent_ids = np.array([c.id for c in self._contacts[-self.START_CONTACTS :]], np.int64)
         held_ids = np.array([c.id for c in self._contacts], np.int64)
         self._tracks = self._prune(pool, recent_ids, held_ids)
@@ -885,9 +889,7 @@ class TrackerDecoder(Decoder):
             n = max(1, round(LEVEL_BEFORE_S * self.fs_hz))
             level = self._recent.mean(ev.index - n, ev.index)
             known = commands.contact_rate_per_s(ev.t_s, ev.jump_n_s, level)
-            self._grip_rates[ev.id] = known
-            while len(self._grip_rates) > 64:
-                del self._grip_rates[next(iter(self._grip_rates))]
+            _put_bounded(self._grip_rates, ev.id, known, self.VERDICTS_KEPT)
         return known
 
     def _weigh_fast(self, floats: np.ndarray, ints: np.ndarray, ev: ContactEvent, jump_s: float):
@@ -984,9 +986,7 @@ class TrackerDecoder(Decoder):
         if known is not None and known[0] is B and np.array_equal(known[1], chosen):
             return known[2]
         out = B.take(chosen)
-        self._pruned[id(B)] = (B, chosen, out)
-        while len(self._pruned) > self.MEMO:
-            del self._pruned[next(iter(self._pruned))]
+        _put_bounded(self._pruned, id(B), (B, chosen, out), self.MEMO)
         return out
 
     # ------------------------------------------------------------------ motion

@@ -187,11 +187,16 @@ class Recent:
         self._x[self.size : self.size + len(x)] = x
         self.size += len(x)
 
+    def _view(self, start: int, end: int) -> np.ndarray | None:
+        """The samples start..end-1 (global indices), not copied: None when not all held."""
+        if start < self.start or end > self.start + self.size or end < start:
+            return None
+        return self._x[start - self.start : end - self.start]
+
     def mean(self, start: int, stop: int) -> float | None:
         """The mean of the samples at global indices start..stop-1; None unless all held."""
-        if start < self.start or stop > self.start + self.size or stop <= start:
-            return None
-        return float(np.mean(self._x[start - self.start : stop - self.start]))
+        x = self._view(start, stop)
+        return float(np.mean(x)) if x is not None and len(x) else None
 
     def verdict(self, onset: int, told: int) -> int:
         """`classify` of the step whose onset and verdict are global sample indices."""
@@ -200,9 +205,8 @@ class Recent:
 
     def held(self, start: int, end: int) -> np.ndarray | None:
         """A copy of the samples start..end-1 (global indices): None when not all held."""
-        if start - self.start < 0 or end - self.start > self.size or end < start:
-            return None
-        return self._x[start - self.start : end - self.start].copy()
+        x = self._view(start, end)
+        return None if x is None else x.copy()
 
     def shape(self, onset: int, told: int) -> StepShape | None:
         """`measure` of the samples from before `onset` to `told` (global sample indices):
