@@ -5,7 +5,7 @@
 Runs `scenes/loop_headline.toml` as `grasplink run` does, decodes its can.asc 3 samples at
 a time without and with the hand's grip commands (`io.read_grip_commands`), and prints
 the speed updates 0.15 s or more into the rest and the last speed; `--kinks` repeats it
-with `efference.KINKS_PER_CHANGE` at each value (the rate's sensitivity). `--cost
+with `efference.KINKS_PER_RISE` at each value (the rate's sensitivity). `--cost
 ROUNDS`: the tracker's CPU per sample on 8 loop cases of slip_reporting's full plan
 without and with their gateway's commands (`loop_grip_commands`), alternating, the least
 of ROUNDS runs each, and their ratio.
@@ -66,7 +66,9 @@ def cost(rounds: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kinks", default="", help="comma-separated KINKS_PER_CHANGE values")
+    parser.add_argument(
+        "--kinks", default="", help="comma-separated KINKS_PER_RISE values (contacts per rise)"
+    )
     parser.add_argument("--cost", type=int, default=0, metavar="ROUNDS")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="grasplink-efference-") as folder:
@@ -75,11 +77,11 @@ def main(argv: list[str] | None = None) -> int:
         layout = signals.layout_mm
         print(f"without commands:   {headline(log, layout, False)}")
         print(f"with commands:      {headline(log, layout, True)}")
-        shipped = efference.KINKS_PER_CHANGE
+        shipped = efference.KINKS_PER_RISE
         for value in [float(v) for v in args.kinks.split(",") if v]:
-            efference.KINKS_PER_CHANGE = value
-            print(f"KINKS_PER_CHANGE {value:g}: {headline(log, layout, True)}")
-        efference.KINKS_PER_CHANGE = shipped
+            efference.KINKS_PER_RISE = value
+            print(f"KINKS_PER_RISE {value:g}: {headline(log, layout, True)}")
+        efference.KINKS_PER_RISE = shipped
     if args.cost:
         cost(args.cost)
     return 0

@@ -16,13 +16,17 @@ ties `HAND_LAG_S` to it). A change of dF commanded at t moves the grip from t un
 t + |dF| / rate + `SETTLE_LAGS` lags (95 % settled): its *window*. Commands whose windows
 overlap are one change (a slew-limited ramp is a command every 10 ms).
 
-The odds (`GripCommands.contact_rate_per_s`): the hand's grip bends the level where its
-rate changes - where the change starts and where it ends (`KINKS_PER_CHANGE`) - so a
-change under way makes contacts at KINKS / window per second. It cannot make a bend
+The odds (`GripCommands.contact_rate_per_s`): a grip *rise* bends the level up where the
+grip starts to move - one onset of a rise per change, whatever its size or ramp, within
+one lag of its first command (plus the detector's timing); a *fall* turns the level
+down and makes none (`benchmarks/grip_ramp_contacts.py`: a held object, the hand's slew
+and lag, the loop scenes' skin chain: `KINKS_PER_RISE`, `ONSET_TIMING_S`). So a rise
+makes contacts at KINKS_PER_RISE / (lag + ONSET_TIMING_S) per second over that onset,
+none after it. A rise cannot make a bend
 steeper than the level's share of the grip (the level over the grip held before the
 change: at rest the sensor reads the grip times the object's share over it) times the
 rate the grip moves at; a contact's slope jump beyond that is charged as a Gaussian in
-log ratio (`FIT_LOG_SIGMA`). Ridge pulses bend the level far more sharply than a grip
+log ratio (`FIT_LOG_SIGMA`). Ridge pulses bend the level far more steeply than a grip
 ramp does, so real ridge contacts during a grip change keep most of their weight.
 
 Only commands at or before a contact's onset count: a contact is decided after its
@@ -45,8 +49,16 @@ from grasplink.errors import ConfigError
 HAND_LAG_S = 0.1
 #: lags after the hand's slew before the grip has settled (3: 95 %)
 SETTLE_LAGS = 3.0
-#: bends of the level a grip change makes: where the grip starts moving and where it stops
-KINKS_PER_CHANGE = 2.0
+#: contacts the detector tells per commanded grip rise, where the grip starts to move
+#: (`benchmarks/grip_ramp_contacts.py --seeds 8 [--ramp 6.33]`: a held object over all or
+#: half of alpha0.1, hand slew 50 N/s and lag 0.1 s, gateway ramps of 50 and 6.33 N/s,
+#: rises of 0.5-6.5 N: 150 contacts in 160 rises, 0.4-1.4 by size; falls of 0.5-3.8 N:
+#: none in 128)
+KINKS_PER_RISE = 0.94
+#: those contacts' onsets come within a lag of the rise's first command plus this (the
+#: detector times a slow bend late: 149 of the 150 onsets 0-0.127 s after it, the lag
+#: being 0.1 s; the other at 0.98 s, as often as clutter)
+ONSET_TIMING_S = 0.05
 #: a contact's slope jump beyond what the grip can make: charged as a Gaussian in log ratio
 #: of this sigma - the jump is measured to about 1/z (under 25 % at the detector's z >= 4),
 #: the level's share of the grip read within about a third: a factor of ~1.4 together
@@ -195,21 +207,56 @@ class GripCommands:
         rate = follow.rate_n_s if span <= 0 else min(follow.rate_n_s, abs(change) / span)
         return Change(self._t[start], end - self._t[start], change, self._f[start - 1], rate)
 
+    def rise_at(self, t_s: float) -> Change | None:
+        """The commanded rise whose onset holds t_s (None: none): a run of commands each
+        raising the grip within a lag of the one before, started no more than
+        `onset_s` before t_s; its window is that onset, its change the run's rise."""
+        k = bisect.bisect_right(self._t, t_s) - 1
+        if k < 1:
+            return None
+        follow, onset = self.follow, self.onset_s
+        first = max(1, bisect.bisect_left(self._t, t_s - onset))
+        for j in range(k, first - 1, -1):  # the newest rise's start first
+            if not (self._f[j] > self._f[j - 1] and self._starts_rise(j)):
+                continue
+            end = j
+            while end < k and self._rising(end + 1):
+                end += 1
+            change = self._f[end] - self._f[j - 1]
+            span = self._t[end] - self._t[j]
+            rate = follow.rate_n_s if span <= 0 else min(follow.rate_n_s, change / span)
+            return Change(self._t[j], onset, change, self._f[j - 1], rate)
+        return None
+
+    @property
+    def onset_s(self) -> float:
+        """How long after a rise's first command its contacts come."""
+        return self.follow.lag_s + ONSET_TIMING_S
+
+    def _rising(self, j: int) -> bool:
+        """Command j raises the grip on from a rise under way (within a lag of the last)."""
+        return self._f[j] > self._f[j - 1] and self._t[j] - self._t[j - 1] <= self.follow.lag_s
+
+    def _starts_rise(self, j: int) -> bool:
+        """Command j (raising the grip) starts a rise: the one before held or lowered it,
+        or came more than a lag earlier (the grip all but still by then)."""
+        return j < 2 or not (self._f[j - 1] > self._f[j - 2] and self._rising(j))
+
     def contact_rate_per_s(self, t_s: float, jump_n_s: float, level_n: float | None) -> float:
         """Contacts per s the commanded grip makes like this one (onset t_s, slope jump
-        jump_n_s, the level it rose from level_n): 0 outside every change's window."""
-        change = self.change_at(t_s)
-        if change is None or change.change_n == 0 or change.window_s <= 0:
+        jump_n_s, the level it rose from level_n): 0 outside every rise's onset."""
+        rise = self.rise_at(t_s)
+        if rise is None or rise.change_n <= 0 or rise.window_s <= 0:
             return 0.0
         share = 1.0  # the level's share of the grip: at most all of it
-        if level_n is not None and change.from_n > 0:
-            share = min(1.0, max(0.0, level_n / change.from_n))
-        bend_n_s = share * change.rate_n_s  # the steepest bend the grip can make
+        if level_n is not None and rise.from_n > 0:
+            share = min(1.0, max(0.0, level_n / rise.from_n))
+        bend_n_s = share * rise.rate_n_s  # the steepest bend the grip can make
         if bend_n_s <= 0:
             return 0.0
         excess = max(0.0, math.log(abs(jump_n_s) / bend_n_s)) if jump_n_s else 0.0
         fit = math.exp(-0.5 * (excess / FIT_LOG_SIGMA) ** 2)
-        return KINKS_PER_CHANGE / change.window_s * fit
+        return KINKS_PER_RISE / rise.window_s * fit
 
 
 def _number(value: object, what: str) -> float:
