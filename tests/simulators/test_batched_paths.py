@@ -117,8 +117,8 @@ def _loop_scene(duration_s: float, name: str = "loop_headline"):
 
 
 @pytest.mark.parametrize(
-    ("name", "duration_s"), [("loop_headline", 2.5), ("headline_slip", 1.5)]
-)  # 10 and 50 ms chunks
+    ("name", "duration_s"), [("loop_headline", 2.5), ("loop_headline", 6.0), ("headline_slip", 1.5)]
+)  # 10 and 50 ms chunks; loop_headline whole: the grip ramps -15, -15, -30 mN from 4 s
 def test_closed_loop_physics_running_ahead_records_what_chunk_by_chunk_records(
     tmp_path, name, duration_s
 ):
