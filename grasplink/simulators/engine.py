@@ -12,18 +12,20 @@ on a python-can bus beside other participants (an external master), and
 steps the same per-chunk physics from its own clock as each chunk begins.
 
 In virtual time a closed loop's physics runs ahead: while the nodes' commands have
-not changed for a while, it steps many chunks at once with the commands held,
-then hands them to the network chunk by chunk; a command that changes at a chunk
-end rolls the physics back to that chunk end (effect snapshots). Every chunk
-still gets the commands of its start, so results are the same as chunk by chunk.
+gone as guessed for a while (held, or a ramp's repeating steps continued: `trends`),
+it steps many chunks at once with the guessed commands, then hands them to the network
+chunk by chunk; a command that differs from its guess at a chunk end rolls the physics
+back to that chunk end (effect snapshots). Every chunk still gets the commands of its
+start, so results are the same as chunk by chunk.
 Effects that share no signal (the hand's grip and skin, the belt's wearer and EMG)
-form independent parts: each runs ahead as far as its own commands have held and is
-rolled back only by a change of its own commands.
+form independent parts: each runs ahead as far as its own commands have gone as guessed
+and is rolled back only by a wrong guess of its own commands.
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
@@ -41,13 +43,14 @@ from grasplink.simulators.core import DOMAINS, PHYSICS, Effect, Endpoint, Io, in
 from grasplink.simulators.live import LiveBus, LiveNetwork
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import Scene
+from grasplink.simulators.trends import HISTORY, continue_steps
 
 # A scene whose physics hears nothing from the nodes steps in chunks this long at least:
 # every effect gives the same samples however time is chunked, and the bus runs exactly
 # to any chunk end, so only the per-chunk overhead changes (docs/scenes.md, Chunks).
 UNCOUPLED_STEP_US = 500_000
 # A coupled scene's physics runs ahead at most this far, and only as far as its
-# commands have stayed the same (a rollback throws away what was run past a change).
+# commands have gone as guessed (a rollback throws away what was run past a wrong guess).
 RUN_AHEAD_US = 320_000
 
 
@@ -74,8 +77,12 @@ class Part:
     command_nodes: list[str]
     domains: dict[str, DomainState]
     horizon_us: int = 0  # computed up to here (the last block's end)
-    quiet_us: int = 0  # how long its commands have held, up to now
-    held: list[float] = field(default_factory=list)  # the commands its last block ran with
+    quiet_us: int = 0  # how long its commands have gone as guessed, up to now
+    start_us: int = 0  # the last block's start
+    # The commands of each chunk of the last block, and the guess for the chunk after it.
+    schedule: list[list[float]] = field(default_factory=list)
+    # The commands it was given, a chunk's each, newest last (what the guesses continue).
+    history: deque[list[float]] = field(default_factory=lambda: deque(maxlen=HISTORY))
     snapshot: list[Callable[[], None]] | None = None  # back to the last block's start
 
 
@@ -259,11 +266,12 @@ class Simulation:
 
     def _chunks_ahead(self, duration_us: int) -> Iterator[int]:
         """Chunk by chunk to the end, each part's physics running ahead while its commands
-        hold; yields each chunk's end once the network has run to it.
+        go as guessed; yields each chunk's end once the network has run to it.
 
-        A part runs ahead as far as its commands have held so far (up to `run_ahead_us`):
-        a ramp of its commands runs chunk by chunk, a quiet stretch in ever longer steps,
-        and a rollback throws away at most what the quiet before it bought.
+        A part runs ahead as far as its commands have gone as guessed so far (up to
+        `run_ahead_us`): a change nothing foretold runs chunk by chunk, a quiet stretch or
+        a ramp of repeating steps in ever longer blocks, and a rollback throws away at
+        most what the guesses before it bought.
         """
         chunk_us = self.scene.chunk_us
         while self.t_us < duration_us:
@@ -277,27 +285,40 @@ class Simulation:
             self._network_to(t_end)
             yield t_end
             for part in self.parts:
-                if self._commands(part) == part.held:
+                commands = self._commands(part)
+                part.history.append(commands)
+                done = (t_end - part.start_us) // chunk_us  # chunks of the block run so far
+                if commands == part.schedule[done]:
                     part.quiet_us += chunk_us
                     continue
                 part.quiet_us = 0
                 if t_end < part.horizon_us:
-                    # what ran past t_end held the old commands: back to t0, then to t_end
+                    # what ran past t_end had a wrong guess: back to the block's start, then
+                    # to t_end with the commands its chunks had
                     assert part.snapshot is not None
                     self.rollbacks += 1
                     for restore in part.snapshot:
                         restore()
-                    self._compute(part, t_end, part.held)
+                    self._compute(part, part.start_us, t_end, part.schedule[:done])
 
     def _run_ahead(self, part: Part, t0_us: int, duration_us: int) -> None:
-        """Compute `part` from t0 as far ahead as its commands have held (whole chunks: the
-        chunk ends stay on the scene's grid), keeping how to come back to t0."""
+        """Compute `part` from t0 as far ahead as its commands have gone as guessed (whole
+        chunks: the chunk ends stay on the scene's grid), keeping how to come back to t0."""
         chunk_us = self.scene.chunk_us
         ahead_us = max(chunk_us, min(part.quiet_us, self.run_ahead_us) // chunk_us * chunk_us)
         horizon = min(t0_us + ahead_us, duration_us)
         part.snapshot = self._snapshot(part) if horizon > t0_us + chunk_us else None
-        part.held = self._commands(part)
-        self._compute(part, horizon, part.held)
+        now = self._commands(part)
+        if not part.history or part.history[-1] != now:  # (the first block; a NaN)
+            part.history.append(now)
+        chunks = -(-(horizon - t0_us) // chunk_us)
+        history = list(part.history)
+        guesses = [continue_steps([c[i] for c in history], chunks) for i in range(len(now))]
+        part.start_us = t0_us
+        part.schedule = (
+            [now, *map(list, zip(*guesses, strict=True))] if now else [now] * (chunks + 1)
+        )
+        self._compute(part, t0_us, horizon, part.schedule[:chunks])
 
     def _commands(self, part: Part) -> list[float]:
         return [self.bindings[node].command_value() for node in part.command_nodes]
@@ -362,27 +383,31 @@ class Simulation:
         """Step every domain of one chunk, up to t_end_us, and tell the nodes the actual
         values at its end: the one per-chunk physics step, in virtual and in real time."""
         for part in self.parts:
-            self._compute(part, t_end_us, self._commands(part))
+            self._compute(part, self.t_us, t_end_us, [self._commands(part)])
         self._publish_until(t_end_us)
         self._read_actuators()
 
-    def _compute(self, part: Part, t_end_us: int, commands: list[float]) -> None:
-        """Step a part's effects, domain by domain, up to t_end_us with these commands of
-        its nodes (nothing reaches the nodes yet)."""
-        held = dict(zip(part.command_nodes, commands, strict=True))
+    def _compute(self, part: Part, t0_us: int, t_end_us: int, schedule: list[list[float]]) -> None:
+        """Step a part's effects, domain by domain, from t0_us up to t_end_us, each chunk
+        with its commands of `schedule` (nothing reaches the nodes yet)."""
         for domain in DOMAINS:
             state = part.domains.get(domain)
             if state is not None:
                 # Physics includes the sample at t_end so sensors can interpolate up to it.
                 t_last_us = t_end_us if domain == PHYSICS else t_end_us - 1
-                self._step_domain(part, state, t_last_us, held)
+                self._step_domain(part, state, t_last_us, t0_us, schedule)
         part.horizon_us = t_end_us
 
     def _charge(self, what: str, since: float) -> None:
         self.cost_s[what] = self.cost_s.get(what, 0.0) + time.process_time() - since
 
     def _step_domain(
-        self, part: Part, state: DomainState, t_last_us: int, commands: dict[str, float]
+        self,
+        part: Part,
+        state: DomainState,
+        t_last_us: int,
+        t0_us: int,
+        schedule: list[list[float]],
     ) -> None:
         clock = state.clock
         end = clock.due_until(t_last_us)
@@ -396,7 +421,7 @@ class Simulation:
         state.values = {}
         for endpoint in part.endpoints[state.name]:
             for name in endpoint.writes:
-                state.values[name] = np.full(len(times), commands[endpoint.node])
+                state.values[name] = self._held(part, state, times, t0_us, schedule, endpoint.node)
 
         # An earlier domain's signal at this chunk's sample times is interpolated once
         # however many effects read it; read-only, as every signal an effect is handed.
@@ -425,6 +450,26 @@ class Simulation:
                     self._charge(effect.kind, t0)
                 else:
                     effect.step(io)
+
+    def _held(
+        self,
+        part: Part,
+        state: DomainState,
+        times: np.ndarray,
+        t0_us: int,
+        schedule: list[list[float]],
+        node: str,
+    ) -> np.ndarray:
+        """A node's command at each sample: its chunk's, zero-order held (a chunk's samples
+        are those chunk by chunk computes with it: physics up to and including its end,
+        the sensors to its end - 1)."""
+        i = part.command_nodes.index(node)
+        values = [commands[i] for commands in schedule]
+        if values.count(values[0]) == len(values):
+            return np.full(len(times), values[0])
+        ends = t0_us + self.scene.chunk_us * np.arange(1, len(values), dtype=np.int64)
+        side: Literal["left", "right"] = "left" if state.name == PHYSICS else "right"
+        return np.asarray(values)[ends.searchsorted(times, side)]
 
     def _publish(self, state: DomainState) -> None:
         """A domain's chunk reaches the sensor nodes and the recorder."""

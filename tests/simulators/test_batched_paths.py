@@ -117,8 +117,8 @@ def _loop_scene(duration_s: float, name: str = "loop_headline"):
 
 
 @pytest.mark.parametrize(
-    ("name", "duration_s"), [("loop_headline", 2.5), ("headline_slip", 1.5)]
-)  # 10 and 50 ms chunks
+    ("name", "duration_s"), [("loop_headline", 2.5), ("loop_headline", 6.0), ("headline_slip", 1.5)]
+)  # 10 and 50 ms chunks; loop_headline whole: the grip ramps -15, -15, -30 mN from 4 s
 def test_closed_loop_physics_running_ahead_records_what_chunk_by_chunk_records(
     tmp_path, name, duration_s
 ):
@@ -159,8 +159,9 @@ def test_the_hand_and_the_belt_parts_run_ahead_each_as_its_commands_hold(monkeyp
     assert sim.rollbacks > 0
     # (the hand's commands follow the decoded slip: 34 before the tail kinks, s22; the
     # belt's too: 59 before the gateway told its decoder its grip commands, s23 - the
-    # speed a braking track showed at rest from 1.91 s drove the belt)
-    assert steps == {"hand.actuator": 33, "belt.motor": 61}
+    # speed a braking track showed at rest from 1.91 s drove the belt; 33 and 61 before
+    # their ramps' steps were continued, s24 `trends`: the ramps run ahead too)
+    assert steps == {"hand.actuator": 28, "belt.motor": 50}
 
 
 def test_effects_sharing_no_signal_split_into_parts_with_their_commands():
