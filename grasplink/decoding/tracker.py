@@ -319,6 +319,13 @@ class TrackerDecoder(Decoder):
     LOG_STOP_REPORT: float | None = None
     LOG_RESTART = math.log(0.05)  # a slip stopped unseen and restarted before this contact
     RESTART_PER_S = 1.0  # a stopped slip restarts (per s)
+    # a slip that stopped unseen and went on reaches the next ridge later than one that
+    # did not, never sooner: its restart child is weighed by P(speed >= distance / time
+    # since the last contact) under the speed prior, to this power (`kernels.branch.
+    # _log_reach`; 0: off) - a contact 0.18 s after one at 15 mm/s was the restart at the
+    # ridge 33 mm on (185 mm/s), and such waiting tracks held the slip off for 2 s
+    RESTART_REACH = 1.0
+    STOPPED_REACH = 1.0  # ... and a stopped track's restart, from where and when it stopped
     # a restarted track (speed unknown until its next contact) is no slip yet while its
     # restart contact is told a step (1), or also unclear (2), or also not yet told (3);
     # 0: a slip at once. After a stop the level steps (static friction), and that step
@@ -944,6 +951,9 @@ class TrackerDecoder(Decoder):
             "jerk_per_s2": self.JERK_PER_S2,
             "robust_floor": self.ROBUST_FLOOR,
             "dip_max_mm": self.DIP_MAX_MM,
+            "restart_reach": self.RESTART_REACH,
+            "stopped_reach": self.STOPPED_REACH,
+            "erf_scale": self._erf_scale,
         }
 
     def _log_strength(self, z: float) -> float:
