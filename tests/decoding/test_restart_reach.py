@@ -6,8 +6,11 @@ a restart had one prior whatever the time since: a contact 0.18 s after a ridge 
 15 mm/s became the restart at the ridge 33 mm on (185 mm/s), and those tracks, waiting
 for a second contact, held the slip off for seconds while the object slid on
 (`benchmarks/missing_speed_causes.py`: alpha0.1 15 mm/s, seed 50210). Now the restart is
-weighed by P(speed >= distance / time) under the speed prior (`RESTART_REACH`,
-`STOPPED_REACH`, `kernels.branch._log_reach`)."""
+weighed by P(speed >= distance / time) under the speed prior (`kernels.branch._log_reach`):
+a slipping track's (`RESTART_REACH`, on) and a stopped track's (`STOPPED_REACH`, off by
+default: see its comment in the tracker). In the traced case the restart was a stopped
+track's - stopped at the probe's step at 4.15 s, restarted two ridges on, past the 3 mm
+ridge it took as missed - so its tests set STOPPED_REACH."""
 
 from __future__ import annotations
 
@@ -61,10 +64,22 @@ def _restarts_far_ahead(tuning: dict) -> float:
 
 
 def test_a_restart_cannot_outrun_the_slip():
-    assert _restarts_far_ahead({}) < math.log(0.1)
+    assert _restarts_far_ahead({"STOPPED_REACH": 1.0}) < math.log(0.1)
 
 
 def test_without_the_reach_that_restart_is_nearly_the_best():
-    """RESTART_REACH 0 is the tracker before: the case still shows the restart (so the test
-    above checks the rule, not a changed signal)."""
-    assert _restarts_far_ahead({"RESTART_REACH": 0.0, "STOPPED_REACH": 0.0}) > math.log(0.5)
+    """STOPPED_REACH 0 (the default) leaves that restart as the tracker before had it: the
+    case still shows it (so the test above checks the rule, not a changed signal)."""
+    assert _restarts_far_ahead({"STOPPED_REACH": 0.0}) > math.log(0.5)
+
+
+def test_a_stopped_tracks_reach_clears_a_stop_whose_step_reads_as_its_restart():
+    """STOPPED_REACH (off by default: see its comment in the tracker) weighs a stopped
+    track's restart too: the stick-slip stop whose own friction step, just after it, read as
+    the restart at the next ridge (test_restart_confirm's case) is then cleared in time with
+    neither the restart rule nor the step's shape; without it, not."""
+    from tests.decoding.test_restart_confirm import SHAPE_OFF, STICK_SLIP, stop_delays
+
+    bare = {"RESTART_CONFIRM": 0.0, **SHAPE_OFF}
+    assert max(stop_delays(STICK_SLIP, {**bare, "STOPPED_REACH": 1.0})) <= sr.CLEAR_WITHIN_S
+    assert max(stop_delays(STICK_SLIP, bare)) > sr.CLEAR_WITHIN_S
