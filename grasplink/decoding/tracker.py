@@ -329,10 +329,11 @@ class TrackerDecoder(Decoder):
     # clears a stick-slip stop whose own friction step read as the restart
     # (test_restart_confirm's case); a noise contact 0.18 s after a stop at 15 mm/s is no
     # longer the restart two ridges (33 mm) on, which kept the slip reported stopped 0.6 s
-    # longer, to the next ridge (test_restart_reach); full plan, against RESTART_REACH alone: moving missing 26.2 ->
-    # 26.0 % (saturation 45.3 -> 44.1), stops cleared 93.1 -> 93.3 %. But on the ADC-
-    # quantised rail case with dips (test_quantised_input, 40 mm/s) it gives 45 more speeds
-    # at a median error of 5.8 % (> 5): off until that is understood
+    # longer, to the next ridge (test_restart_reach); full plan, against RESTART_REACH
+    # alone: moving missing 26.2 -> 26.0 % (saturation 45.3 -> 44.1), stops cleared 93.1
+    # -> 93.3 %. But on the ADC-quantised rail case with dips (test_quantised_input,
+    # 40 mm/s) it gives 45 more speeds at a median error of 5.8 % (> 5): off until that
+    # is understood
     STOPPED_REACH = 0.0
     # a restarted track (speed unknown until its next contact) is no slip yet while its
     # restart contact is told a step (1), or also unclear (2), or also not yet told (3);
