@@ -17,6 +17,7 @@ tables), each a plain tuple named again on entry, as `kernels.posterior`'s.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -73,7 +74,7 @@ CONSTANTS = (
     "v_max_mm_s", "max_speed_jump", "pos_var_mm2", "speed_init_rel", "dip_var_mm2",
     "dip_var_changing_mm2", "acc_per_s", "log_changing", "log_steady", "speed_prior_mm_s",
     "speed_prior_log_sigma", "log_speed_norm", "speed_walk2", "speed_walk_mm", "jerk_per_s2",
-    "robust_floor", "dip_max_mm", "log_rebirth",
+    "robust_floor", "dip_max_mm", "log_rebirth", "restart_reach", "stopped_reach", "erf_scale",
 )  # fmt: skip
 (
     STALE_S, CLUTTER_PER_S, P_TIP, TIP_MM, TIP_GAP_MM, TIP_S, TIP_SLOW_PER_S,
@@ -82,7 +83,7 @@ CONSTANTS = (
     V_MAX_MM_S, MAX_SPEED_JUMP, POS_VAR_MM2, SPEED_INIT_REL, DIP_VAR_MM2,
     DIP_VAR_CHANGING_MM2, ACC_PER_S, LOG_CHANGING, LOG_STEADY, SPEED_PRIOR_MM_S,
     SPEED_PRIOR_LOG_SIGMA, LOG_SPEED_NORM, SPEED_WALK2, SPEED_WALK_MM, JERK_PER_S2,
-    ROBUST_FLOOR, DIP_MAX_MM, LOG_REBIRTH,
+    ROBUST_FLOOR, DIP_MAX_MM, LOG_REBIRTH, RESTART_REACH, STOPPED_REACH, ERF_SCALE,
 ) = range(len(CONSTANTS))  # fmt: skip
 
 
@@ -230,6 +231,18 @@ def _restart(
     out_f[j, F_STOP] = np.nan
     out_f[j, F_T] = tc
     _with_contact(i, r, out_i, j, ev_id, k, 1)
+
+
+@jit()
+def _log_reach(dist_mm: float, dt_s: float, weight: float, c: np.ndarray) -> float:
+    """weight x log P(a restarted slip covers dist_mm within dt_s): its speed, unknown,
+    drawn from the speed prior (log-normal) must be at least dist_mm / dt_s - a slip that
+    stopped and went on reaches the next ridge later than one that did not, never sooner
+    (`TrackerDecoder.RESTART_REACH`); 0 when weight is 0 or nothing is left to cover."""
+    if not weight > 0.0 or not dist_mm > 0.0:
+        return 0.0
+    z = math.log(dist_mm / (_maximum(dt_s, 1e-9) * c[SPEED_PRIOR_MM_S])) * c[ERF_SCALE]
+    return weight * math.log(_maximum(0.5 * (1.0 - math.erf(z)), 1e-12))
 
 
 @jit()
@@ -542,15 +555,23 @@ def _assign(
         if not slipping[q] or skips[q] != 0:
             continue
         r = track[q]
-        _restart(
-            f, i, r, out_f, out_i, j, i[r, I_RIDGE] + 1, prior[q] + c[LOG_RESTART], contact, pos
+        k = i[r, I_RIDGE] + 1
+        di = (1 - i[r, I_DIRN]) // 2
+        reach = _log_reach(
+            pos[di, k] - pos[di, i[r, I_RIDGE]], contact[0] - f[r, F_T], c[RESTART_REACH], c
         )
+        _restart(f, i, r, out_f, out_i, j, k, prior[q] + c[LOG_RESTART] + reach, contact, pos)
         j += 1
     for q in range(len(track)):  # a stopped track restarting here
         r = track[q]
         if f[r, F_STOP] == f[r, F_STOP]:
             k = i[r, I_RIDGE] + 1 + skips[q]
-            _restart(f, i, r, out_f, out_i, j, k, prior[q] + c[LOG_RESTART_RATE], contact, pos)
+            di = (1 - i[r, I_DIRN]) // 2
+            reach = _log_reach(
+                pos[di, k] - f[r, F_S], contact[0] - f[r, F_STOP], c[STOPPED_REACH], c
+            )
+            log_prior = prior[q] + c[LOG_RESTART_RATE] + reach
+            _restart(f, i, r, out_f, out_i, j, k, log_prior, contact, pos)
             j += 1
     return j
 

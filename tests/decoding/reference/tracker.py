@@ -421,14 +421,33 @@ class NumpyTracker:
             first = sel[skip_arr[sel] == 0]
             if len(first):
                 at = B.take(row[first])
-                out.append(self._restart(at, ev, at.ridge + 1, prior[first] + self.LOG_RESTART))
+                di_at = (1 - at.dirn) // 2
+                dist = self._pos[di_at, at.ridge + 1] - self._pos[di_at, at.ridge]
+                reach = self._log_reach(dist, ev.t_s - at.t, self.RESTART_REACH)
+                out.append(
+                    self._restart(at, ev, at.ridge + 1, prior[first] + self.LOG_RESTART + reach)
+                )
         # a stopped track restarting here
         sel = _nz(~mov)
         if len(sel):
             at = B.take(row[sel])
             log_rate = math.log(self.RESTART_PER_S)
-            out.append(self._restart(at, ev, at.ridge + 1 + skip_arr[sel], prior[sel] + log_rate))
+            k = at.ridge + 1 + skip_arr[sel]
+            dist = self._pos[(1 - at.dirn) // 2, k] - at.X[:, 0]
+            reach = self._log_reach(dist, ev.t_s - at.stop, self.STOPPED_REACH)
+            out.append(self._restart(at, ev, k, prior[sel] + log_rate + reach))
         return out
+
+    def _log_reach(self, dist: np.ndarray, dt: np.ndarray, weight: float) -> np.ndarray:
+        """weight x log P(speed >= dist / dt) under the speed prior, 0 where nothing is left
+        to cover (`kernels.branch._log_reach`)."""
+        if not weight > 0.0:
+            return np.zeros(len(dist))
+        far = dist > 0.0
+        safe = np.where(far, dist, 1.0)
+        z = ops.log(safe / (np.maximum(dt, 1e-9) * self.SPEED_PRIOR_MM_S)) * self._erf_scale
+        reach = weight * ops.log(np.maximum(0.5 * (1.0 - ops.erf(z)), 1e-12))
+        return np.where(far, reach, 0.0)
 
     def _restart(self, B: _Bank, ev: ContactEvent, k: np.ndarray, log_prior: np.ndarray) -> _Bank:
         """B restarted (speed unknown) with ev at ridge k."""
