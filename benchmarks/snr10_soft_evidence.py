@@ -77,7 +77,9 @@ def job(case: sr.Case) -> dict:
     slip_to = float(t_truth[np.flatnonzero(sliding)[-1]])
     before = x[t < slip_from - 0.05]
     sigma = float(np.median(np.abs(np.diff(before)))) / 0.6745 / math.sqrt(2.0)
-    widths = {w: rise_z(x, w, sigma) for w in sorted({max(2, round(s * fs)) for s in PULSE_SCALES_S})}
+    widths = {
+        w: rise_z(x, w, sigma) for w in sorted({max(2, round(s * fs)) for s in PULSE_SCALES_S})
+    }
     told = ct.detect(t, x, rec.fs_hz)
     times = np.array([e.t_s for e in told.contacts])
     crossings = np.asarray(truth.contact_times_s, float)
@@ -144,8 +146,10 @@ def report(title: str, rows: list[dict]) -> None:
     found0 = np.array(pooled[("found", 0.5, False)])
     median_h = float(np.median(found0)) if len(found0) else 5.0
     print(f"\n### {title}: {len(rows)} cases; found crossings' median z {median_h:.2f}")
-    print("| set | offset (rise times) | timing | n | z q25 / median / q75 | mean log LR |"
-          " a > c median | AUC a vs c |")
+    print(
+        "| set | offset (rise times) | timing | n | z q25 / median / q75 | mean log LR |"
+        " a > c median | AUC a vs c |"
+    )
     print("|---|---:|---|---:|---|---:|---:|---:|")
     for off in OFFSETS:
         for jit in JITTERS_S:
@@ -158,8 +162,9 @@ def report(title: str, rows: list[dict]) -> None:
                 lr = float(np.mean(log_lr(z, median_h)))
                 above = f"{100 * np.mean(z > np.median(null)):.0f} %" if len(null) else "-"
                 area = f"{auc(z, null):.2f}" if name != "slide" else "-"
+                timing = f"+-{1000 * jit:g} ms" if jit else "exact"
                 print(
-                    f"| {name} | {off:g} | {f'+-{1000 * jit:g} ms' if jit else 'exact'} | {len(z)} | "
+                    f"| {name} | {off:g} | {timing} | {len(z)} | "
                     f"{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} | {lr:+.2f} | {above} | {area} |"
                 )
 

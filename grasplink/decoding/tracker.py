@@ -80,7 +80,7 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.decoding import rise_travel, stop_jumps
+from grasplink.decoding import rise_evidence, rise_travel, stop_jumps
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -89,6 +89,7 @@ from grasplink.decoding.contacts import (
     PulseCheck,
 )
 from grasplink.decoding.detector import step_shape
+from grasplink.decoding.detector.noise_floor import NOISE_FLOOR_N
 from grasplink.decoding.efference import LEVEL_BEFORE_S, charge_grip
 from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.decoding.kernels.branch import Model, branch, pack_constants
@@ -363,6 +364,13 @@ class TrackerDecoder(Decoder):
     # RISE_TRAVEL_GAIN 0 keeps only its losses (a scale fitting the speed gains nothing)
     RISE_TRAVEL = 0.0
     RISE_TRAVEL_GAIN = 1.0
+    # weight of the soft evidence of skipped ridges (`rise_evidence`: the signal's rise
+    # where a child that skipped ridges puts them, scored in place of log(1 - DETECT_P),
+    # never below it); 0: off (the fixed penalty alone)
+    RISE_EVIDENCE = 0.0
+    # ... while the pulses told stand under this many white-noise units at their median
+    # (`PulseCheck.height_snr`; the pulse probe's gate: heavy noise)
+    RISE_EVIDENCE_GATE = 10.0
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
@@ -596,6 +604,10 @@ class TrackerDecoder(Decoder):
         self._shapes: dict[int, int] = {}  # ... their shapes' verdicts (`step_shape.classify`)
         self._fast: dict[int, float] = {}  # contacts told pulses that jumped like a stop's
         self._recent = step_shape.Recent(fs_hz)  # the samples their shapes are read from
+        noise = self.detector.noise  # skipped ridges' rises read from them (`rise_evidence`)
+        self._rise = rise_evidence.RiseEvidence(
+            fs_hz, self._recent, noise.white, noise.block, NOISE_FLOOR_N
+        )
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
@@ -721,6 +733,7 @@ class TrackerDecoder(Decoder):
         if verdict == PULSE and weak:
             verdict = NOISE  # noise falls back like this too
         self._ring[slot] = verdict
+        self._rise.note_height(check.id, snr)
         self._cache = None
         if check.pulse is True and check.id in self._steps:  # a step revised: a slow pulse
             del self._steps[check.id]
@@ -876,7 +889,20 @@ class TrackerDecoder(Decoder):
             if not self.RISE_TRAVEL_GAIN:
                 ratio = np.minimum(ratio, 0.0)
             floats[ridge, F_SCORE] += self.RISE_TRAVEL * ratio
+        if self.RISE_EVIDENCE and len(floats):
+            self._weigh_skips(floats, ints, ev)
         return _Bank(floats, ints) if len(floats) else _Bank.empty()
+
+    def _weigh_skips(self, floats: np.ndarray, ints: np.ndarray, ev: ContactEvent) -> None:
+        """Children that skipped ridges: each skipped ridge scored by the signal's rise where
+        the child puts it (`rise_evidence.skip_adjustment`), read from samples before ev's
+        decision (the same on a replay)."""
+        earlier = {c.id: (c.t_s, c.index) for c in self._contacts}
+        rows, gain = rise_evidence.skip_adjustment(
+            floats, ints, (ev.id, ev.t_s, ev.index, ev.emit_index), earlier, self._pos,
+            self._log_miss, self.MAX_SKIP, self._rise, self.RISE_EVIDENCE_GATE,
+        )  # fmt: skip
+        floats[rows, F_SCORE] += self.RISE_EVIDENCE * gain
 
     def _grip_rate(self, ev: ContactEvent) -> float:
         """Contacts per s like ev the commanded grip makes at its onset (0: none noted, or
