@@ -47,26 +47,30 @@ H_DEFAULT = 5.0  # the median before any contact is told (a 10 dB pulse's)
 _GRID = 32  # points of the size prior
 
 
-def log_ratio(z: np.ndarray, median_h: float) -> np.ndarray:
+def log_ratio(z: np.ndarray, median_h: float, h_low: float = H_LOW) -> np.ndarray:
     """log p(z | a pulse of unknown size) / p(z | none), per z (unclipped): the size
-    log-uniform over `H_LOW`..`H_HIGH` x median_h, z ~ N(h, 1) against N(0, 1). NaN
+    log-uniform over h_low..`H_HIGH` x median_h, z ~ N(h, 1) against N(0, 1). NaN
     where z is NaN; ValueError for a median that is not a positive number."""
     if not (math.isfinite(median_h) and median_h > 0.0):
         raise ValueError(f"rise evidence: the told pulses' median z {median_h!r} is not > 0")
     z = np.asarray(z, dtype=float)
-    h = np.exp(np.linspace(math.log(H_LOW * median_h), math.log(H_HIGH * median_h), _GRID))
+    if not 0.0 < h_low < H_HIGH:
+        raise ValueError(f"rise evidence: the size prior's low end {h_low!r} is not in (0, 2)")
+    h = np.exp(np.linspace(math.log(h_low * median_h), math.log(H_HIGH * median_h), _GRID))
     terms = z[..., None] * h - 0.5 * h * h
     top = np.max(terms, axis=-1, keepdims=True)
     return top[..., 0] + np.log(np.mean(np.exp(terms - top), axis=-1))
 
 
-def skip_score(z: np.ndarray, median_h: float, log_miss: np.ndarray) -> np.ndarray:
+def skip_score(
+    z: np.ndarray, median_h: float, log_miss: np.ndarray, h_low: float = H_LOW
+) -> np.ndarray:
     """A skipped ridge's log score from its z: the ratio `log_ratio`, no less than the
     detector-based `log_miss` (log(1 - DETECT_P)), no more than `CLIP`; `log_miss` where
     z is unknown (NaN: the samples were not held) or `TOLD_Z` or more (the detector
     would have told such a rise: it is another contact's)."""
     log_miss = np.asarray(log_miss, dtype=float)
-    ratio = log_ratio(z, median_h)
+    ratio = log_ratio(z, median_h, h_low)
     score = np.minimum(CLIP, np.maximum(ratio, log_miss))
     return np.where(np.isfinite(ratio) & (np.nan_to_num(z) < TOLD_Z), score, log_miss)
 
@@ -93,6 +97,7 @@ class RiseEvidence:
         self.floor_n = float(floor_n)
         self.widths = np.array(sorted({max(2, round(s * fs_hz)) for s in PULSE_SCALES_S}))
         self._told: dict[int, np.ndarray] = {}  # contact id -> its z per window (bounded)
+        self.h_low = H_LOW  # the size prior's low end (x the median)
         self._heights: dict[int, float] = {}  # contact id -> told pulse height (noise units)
 
     def width_for(self, speed_mm_s: np.ndarray) -> np.ndarray:
@@ -211,13 +216,15 @@ def skip_adjustment(
         & (ints[:, I_RUN] >= 2)
         & np.isnan(floats[:, F_STOP])
     )
-    prev = [earlier.get(int(k)) for k in ints[rows, I_LAST - 1]]
-    known = np.array([p is not None and p[0] < t_s for p in prev], bool)
+    nowhere = (math.inf, -1)
+    prev = [earlier.get(int(k), nowhere) for k in ints[rows, I_LAST - 1]]
+    t_all = np.array([p[0] for p in prev], float)
+    known = t_all < t_s
     rows = rows[known]
     if not len(rows):
         return rows, np.zeros(0)
-    t_prev = np.array([p[0] for p, k in zip(prev, known, strict=True) if k])
-    i_prev = np.array([p[1] for p, k in zip(prev, known, strict=True) if k], float)
+    t_prev = t_all[known]
+    i_prev = np.array([p[1] for p in prev], float)[known]
     way = (1 - ints[rows, I_DIRN]) // 2
     k_new = ints[rows, I_RIDGE]
     dt = t_s - t_prev
@@ -253,5 +260,83 @@ def skip_adjustment(
     gain = np.zeros(len(k))
     for w in np.unique(width).tolist():
         on = width == w
-        gain[on] = skip_score(z[on], evidence.median_h(w), lm[on]) - lm[on]
+        gain[on] = skip_score(z[on], evidence.median_h(w), lm[on], evidence.h_low) - lm[on]
     return rows, np.bincount(child, weights=gain, minlength=len(rows))
+
+
+def silence(
+    open_sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tables: dict[str, np.ndarray],
+    bank: dict[str, np.ndarray],
+    last: np.ndarray,
+    held: int,
+    g: float,
+    log_miss: np.ndarray,
+    log_stop: float,
+    weight: float,
+    scored: dict[tuple[int, int], float],
+    evidence: RiseEvidence,
+    ahead: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The silence schedule (due, adj, stopped, limit: `kernels.posterior.schedule`'s) with
+    each due ridge of a slipping track scored by the signal's rise where the track puts it
+    (`skip_score`, weighted by `weight` against log(1 - DETECT_P)) instead of its miss
+    alone: a track whose due ridge shows a sub-threshold rise goes on, one whose due ridge
+    lies on flat signal stops as before.
+
+    `open_sched`: the schedule with no miss counted (`done` only at the coast end: every
+    ridge ahead gets its time due); `tables`: the silence tables (rows by direction and
+    ridge: `target`, `coast`); `bank`: the tracks' X, t, stop, run, dirn, ridge; `last`:
+    the global sample index of each track's last contact (-1: not held, then the plain
+    miss); `held`: samples held up to this global index; `scored`: (track, ridge ahead)
+    -> its score once read (the bank's: a ridge is read once, the same at every later
+    update). A ridge's time due waits for the samples its rise is read from."""
+    due0, _, stopped0, limit0 = open_sched
+    due, adj = due0.copy(), np.zeros(due0.shape)
+    stopped, limit = stopped0.copy(), limit0.copy()
+    X, t, stop, run = bank["X"], bank["t"], bank["stop"], bank["run"]
+    dirn, ridge = bank["dirn"], bank["ridge"]
+    R = log_miss.shape[1] - 1
+    S = due0.shape[1] - 1
+    fs = evidence.fs_hz
+    active = np.flatnonzero(np.isnan(stop) & (run >= 2))
+    if not len(active):
+        return due, adj, stopped, limit
+    di = (1 - dirn[active]) // 2
+    row = di * (R + 1) + np.minimum(ridge[active], R)
+    k = np.minimum(ridge[active][:, None] + 1 + np.arange(S), R)
+    coast = tables["coast"][row]
+    v = np.maximum(X[active, 1], 1.0)
+    tau = (tables["target"][row] - X[active, 0][:, None]) / v[:, None]
+    width = evidence.width_for(v)
+    onset = last[active][:, None] + tau * fs
+    ready_s = t[active][:, None] + (tau * fs + (OFFSET + 3.0) * width[:, None] + 1) / fs
+    when = np.where(last[active][:, None] >= 0, ready_s, -np.inf)
+    due[active, 1:] = np.maximum.accumulate(np.maximum(due0[active, 1:], when), axis=1)
+    lm = log_miss[di[:, None], k]
+    soft = lm.copy()
+    for a, n in enumerate(active.tolist()):
+        if last[n] < 0:
+            continue
+        for j in range(min(S, ahead)):
+            if coast[a, j] or due[n, j + 1] > g:
+                break
+            got = scored.get((n, j))
+            if got is None:
+                z = evidence.z_at(onset[a, j : j + 1], width[a : a + 1], held)
+                w = int(width[a])
+                h = evidence.median_h(w)
+                got = float(skip_score(z, h, lm[a, j : j + 1], evidence.h_low)[0])
+                if np.isfinite(z[0]):  # (else read again at the next update)
+                    scored[(n, j)] = got
+            soft[a, j] = lm[a, j] + weight * (got - lm[a, j])
+    miss = np.cumsum(soft, axis=1)
+    go_on = miss >= log_stop
+    ended = np.logical_or.accumulate(~go_on | coast, axis=1)
+    done = np.zeros(ended.shape, bool)
+    done[:, 1:] = ended[:, :-1]
+    adj[active, 1:] = np.where(done, 0.0, np.where(go_on, miss, log_stop))
+    stopped[active, 1:] = ~(go_on | done)
+    limit[active, 1:] = np.where(done, 0, k + go_on)
+    due[active, 1:] = np.where(done, np.inf, due[active, 1:])
+    return due, adj, stopped, limit

@@ -371,6 +371,8 @@ class TrackerDecoder(Decoder):
     # ... while the pulses told stand under this many white-noise units at their median
     # (`PulseCheck.height_snr`; the pulse probe's gate: heavy noise)
     RISE_EVIDENCE_GATE = 10.0
+    RISE_H_LOW = rise_evidence.H_LOW  # ... the pulse size's prior from this x the told median
+    RISE_SILENCE_AHEAD = 3  # ... and the silence of this many ridges due so read (0: none)
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
@@ -604,10 +606,13 @@ class TrackerDecoder(Decoder):
         self._shapes: dict[int, int] = {}  # ... their shapes' verdicts (`step_shape.classify`)
         self._fast: dict[int, float] = {}  # contacts told pulses that jumped like a stop's
         self._recent = step_shape.Recent(fs_hz)  # the samples their shapes are read from
+        # the banks' open schedules and the due ridges read (`_soft_schedule`)
+        self._soft_banks: dict[int, tuple[_Bank, tuple, dict]] = {}
         noise = self.detector.noise  # skipped ridges' rises read from them (`rise_evidence`)
         self._rise = rise_evidence.RiseEvidence(
             fs_hz, self._recent, noise.white, noise.block, NOISE_FLOOR_N
         )
+        self._rise.h_low = self.RISE_H_LOW
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
@@ -1018,6 +1023,18 @@ class TrackerDecoder(Decoder):
     # ------------------------------------------------------------------ motion
     @cached_property
     def _silence_tables(self) -> dict[str, np.ndarray]:
+        """The silence tables (`_tables_for` the ridges' misses)."""
+        return self._tables_for(self._log_miss)
+
+    @cached_property
+    def _silence_open(self) -> tuple:
+        """The silence tables with no ridge's miss counted (only the coast end stops a
+        track), as the schedule kernel takes them: every ridge ahead gets its time due, and
+        `rise_evidence.silence` scores them."""
+        open_miss = np.where(np.isfinite(self._log_miss), 0.0, self._log_miss)
+        return tuple(posterior_kernels.Silence(**self._tables_for(open_miss)))
+
+    def _tables_for(self, log_miss: np.ndarray) -> dict[str, np.ndarray]:
         """What a track's schedule (`_schedule`) takes from its direction and ridge alone,
         per row di * (count + 1) + ridge (a ridge past the last one schedules as the
         coast end does), for idle tracks (stopped, or no speed yet: rows from 0) and
@@ -1030,7 +1047,7 @@ class TrackerDecoder(Decoder):
         ridge = np.tile(np.arange(R + 1), 2)
         k = ridge[:, None] + 1 + np.arange(S)
         kk = np.minimum(k, R)
-        miss = np.cumsum(self._log_miss[di[:, None], kk], axis=1)
+        miss = np.cumsum(log_miss[di[:, None], kk], axis=1)
         go_on = miss >= self.LOG_STOP
         # reported as still slipping (`LOG_STOP_REPORT`): the score keeps LOG_STOP
         told = miss >= (self.LOG_STOP if self.LOG_STOP_REPORT is None else self.LOG_STOP_REPORT)
@@ -1068,6 +1085,26 @@ class TrackerDecoder(Decoder):
                 _tracks(B), self._silence, self._skin, self._latency_floor(B)
             )
         return B._sched
+
+    def _soft_schedule(self, B: _Bank, g: float):
+        """The schedule with each due ridge scored by the signal's rise where the track puts
+        it (`rise_evidence.silence`; heavy noise, `RISE_EVIDENCE`): the open schedule and
+        the ridges read so far cached on the bank."""
+        known = self._soft_banks.get(id(B))
+        if known is None or known[0] is not B:
+            open_sched = posterior_kernels.schedule(
+                _tracks(B), self._silence_open, self._skin, self._latency_floor(B)
+            )
+            known = (B, open_sched, {})
+            _put_bounded(self._soft_banks, id(B), known, 2)
+        _, open_sched, scored = known
+        index = {c.id: c.index for c in self._contacts}
+        last = np.fromiter((index.get(int(k), -1) for k in B._i[:, I_LAST]), np.int64, len(B))
+        fields = {key: getattr(B, key) for key in ("X", "t", "stop", "run", "dirn", "ridge")}
+        return rise_evidence.silence(
+            open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
+            self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
+        )  # fmt: skip
 
     def _latency_floor(self, B: _Bank) -> np.ndarray:
         """How late each track's next contact may still be told, at least: the probes'
@@ -1218,7 +1255,8 @@ class TrackerDecoder(Decoder):
         moving the other way.
         """
         B = self._tracks
-        sched = self._schedule(B)
+        soft = self.RISE_EVIDENCE and self._rise.blind(self.RISE_EVIDENCE_GATE)
+        sched = self._soft_schedule(B, g) if soft else self._schedule(B)
         blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
         verdicts = tuple(
             posterior_kernels.Verdicts(self._ring, self._ring_id, *self._evidence_tables)
