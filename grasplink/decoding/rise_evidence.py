@@ -1,0 +1,344 @@
+"""Soft evidence of the ridges a track skips: the signal's rise where it predicts them.
+
+A ridge the detector did not tell is not "no information" (issue 22, 10 dB SNR: the
+detector finds 46 % of the crossings, and a missed one still shows as a sub-threshold
+rise). Where a track that skipped ridges put them, the pulse probe's rise statistic z
+(`detector.pulse_probe`: mean after less mean before over w, half the same difference
+2 w either side taken out - a ramp is no rise -, in white-noise units) is an observation:
+about N(h, 1) under "a ridge pulse here", h the pulse's size, N(0, 1) under "none". The
+size is not known (the thesis's signal model draws each ridge's height at random and
+starts each pulse on the previous one's tail: no height law is assumed here), so h is
+taken log-uniform from `H_LOW` to `H_HIGH` times the median z of the contacts told
+lately (`TOLD_KEPT`), and the log likelihood ratio is clipped to `CLIP` nats.
+
+The tracker's fixed penalty for a skipped ridge is log(1 - DETECT_P(spacing)); this
+module gives the score to use instead, never below it (`skip_score`): in a clean signal
+a told pulse is 20-60 units of z and a flat place reads about 0, whose ratio lies far
+below log(1 - 0.99), so nothing changes there, while at 10 dB a true track's missed
+ridges (z 2.5 at their median) gain and an alias's (z 0) do not.
+Measured by `benchmarks/snr10_soft_evidence.py` (full plan, 2 seeds: snr10 missed
+crossings z 2.5 at their median against 0.0 at an alias's times, AUC 0.87).
+
+z is read only from samples before the contact's decision (`ContactEvent.emit_index`),
+so a contact weighs the same however the input was chunked and whenever it is replayed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from grasplink.decoding.detector.pulse_probe import PULSE_RAMP, PULSE_SCALES_S
+from grasplink.decoding.detector.step_shape import Recent
+from grasplink.decoding.kernels.layout import F_STOP, F_V, I_DIRN, I_LAST, I_N, I_RIDGE, I_RUN
+from grasplink.decoding.ridge_pulses import RISE_MM
+
+OFFSET = 0.5  # the rise's centre after the onset, in rise times (the best measured)
+# the pulse size's prior, times the told pulses' median z: from 0.3 (snr10 speed missing
+# 54.2 % from 0.1, 53.3 % from 0.3, 54.7 % from 0.5: full plan, 2 seeds, one run) to 2
+H_LOW, H_HIGH = 0.3, 2.0
+CLIP = 3.0  # nats a skipped ridge may gain at most
+# a rise this high (the pulse probe's threshold, white-noise units) would have been told:
+# untold, it is some told contact's pulse or a bend of one - no evidence either way
+TOLD_Z = 4.5
+NEAR_TOLD = 2.0  # ... and so is one this many windows (at least 20 ms) from a told onset
+TOLD_KEPT = 16  # told contacts whose z the median reads
+H_DEFAULT = 5.0  # the median before any contact is told (a 10 dB pulse's)
+_GRID = 32  # points of the size prior
+
+
+def log_ratio(z: np.ndarray, median_h: float, h_low: float = H_LOW) -> np.ndarray:
+    """log p(z | a pulse of unknown size) / p(z | none), per z (unclipped): the size
+    log-uniform over h_low..`H_HIGH` x median_h, z ~ N(h, 1) against N(0, 1). NaN
+    where z is NaN; ValueError for a median that is not a positive number."""
+    if not (math.isfinite(median_h) and median_h > 0.0):
+        raise ValueError(f"rise evidence: the told pulses' median z {median_h!r} is not > 0")
+    z = np.asarray(z, dtype=float)
+    if not 0.0 < h_low < H_HIGH:
+        raise ValueError(f"rise evidence: the size prior's low end {h_low!r} is not in (0, 2)")
+    h = np.exp(np.linspace(math.log(h_low * median_h), math.log(H_HIGH * median_h), _GRID))
+    terms = z[..., None] * h - 0.5 * h * h
+    top = np.max(terms, axis=-1, keepdims=True)
+    return top[..., 0] + np.log(np.mean(np.exp(terms - top), axis=-1))
+
+
+def skip_score(
+    z: np.ndarray, median_h: float, log_miss: np.ndarray, h_low: float = H_LOW
+) -> np.ndarray:
+    """A skipped ridge's log score from its z: the ratio `log_ratio`, no less than the
+    detector-based `log_miss` (log(1 - DETECT_P)), no more than `CLIP`; `log_miss` where
+    z is unknown (NaN: the samples were not held) or `TOLD_Z` or more (the detector
+    would have told such a rise: it is another contact's)."""
+    log_miss = np.asarray(log_miss, dtype=float)
+    ratio = log_ratio(z, median_h, h_low)
+    score = np.minimum(CLIP, np.maximum(ratio, log_miss))
+    return np.where(np.isfinite(ratio) & (np.nan_to_num(z) < TOLD_Z), score, log_miss)
+
+
+class RiseEvidence:
+    """z at predicted onsets from the tracker's recent samples (`step_shape.Recent`) and the
+    detector's white noise (`white(block)` -> (N per sample, blocks) or None, blocks of
+    `block` samples), and the median z of the contacts told lately."""
+
+    def __init__(
+        self,
+        fs_hz: float,
+        recent: Recent,
+        white: Callable[[int], tuple[float, int] | None],
+        block: int,
+        floor_n: float,
+    ):
+        if not fs_hz > 0:
+            raise ValueError(f"rise evidence: sample rate {fs_hz!r} Hz is not positive")
+        self.fs_hz = float(fs_hz)
+        self.recent = recent
+        self.white = white
+        self.block = int(block)
+        self.floor_n = float(floor_n)
+        self.widths = np.array(sorted({max(2, round(s * fs_hz)) for s in PULSE_SCALES_S}))
+        self._told: dict[int, np.ndarray] = {}  # contact id -> its z per window (bounded)
+        self.h_low = H_LOW  # the size prior's low end (x the median)
+        self._heights: dict[int, float] = {}  # contact id -> told pulse height (noise units)
+
+    def width_for(self, speed_mm_s: np.ndarray) -> np.ndarray:
+        """The probe window (samples) nearest each speed's rise time (`RISE_MM` of travel)."""
+        rise = RISE_MM / np.maximum(np.asarray(speed_mm_s, dtype=float), 1.0) * self.fs_hz
+        k = np.argmin(np.abs(np.log(self.widths[None, :] / rise[:, None])), axis=1)
+        return self.widths[k]
+
+    def z_at(self, onset: np.ndarray, width: np.ndarray, before: int) -> np.ndarray:
+        """z for pulses with onsets at (fractional) global sample indices `onset`, read on
+        windows `width` centred `OFFSET` of a window after them, from samples before the
+        global index `before` only: NaN where they are not all held, or the noise is not
+        known, or an input is not finite."""
+        onset = np.asarray(onset, dtype=float)
+        width = np.asarray(width, dtype=np.int64)
+        out = np.full(onset.shape, np.nan)
+        ok = np.isfinite(onset)
+        if not ok.any():
+            return out
+        centre = np.zeros(onset.shape, np.int64)
+        centre[ok] = np.rint(onset[ok] + OFFSET * width[ok]).astype(np.int64)
+        lo, hi = centre - 3 * width, centre + 3 * width  # samples lo .. hi - 1 read
+        ok &= hi <= before
+        if not ok.any():
+            return out
+        start, end = int(lo[ok].min()), int(hi[ok].max())
+        x = self.recent.held(start, end)
+        if x is None:
+            first = self.recent.start
+            ok &= lo >= first
+            if not ok.any():
+                return out
+            start = int(lo[ok].min())
+            x = self.recent.held(start, end)
+            if x is None:
+                return out
+        if not np.all(np.isfinite(x)):
+            ok &= False  # a NaN sample: no evidence rather than a false one
+            return out
+        sums = np.concatenate([[0.0], np.cumsum(x)])
+        for k in np.flatnonzero(ok):
+            w, c = int(width[k]), int(centre[k]) - start
+            white = self.white(int(centre[k]) // self.block)
+            if white is None:
+                continue
+            d = [(sums[m + w] - 2.0 * sums[m] + sums[m - w]) / w for m in (c - 2 * w, c, c + 2 * w)]
+            adj = d[1] - PULSE_RAMP * (d[0] + d[2])
+            sigma = max(float(white[0]), self.floor_n)
+            out[k] = adj / (sigma * math.sqrt(2.0 / w * (1.0 + 2.0 * PULSE_RAMP**2)))
+        return out
+
+    def tell(self, contact_id: int, onset: float, before: int) -> None:
+        """Note a told contact's z on every window, for the size prior's median."""
+        if contact_id in self._told:
+            return
+        z = self.z_at(np.full(len(self.widths), float(onset)), self.widths, before)
+        if np.any(np.isfinite(z)):
+            _put(self._told, contact_id, z)
+
+    def note_height(self, contact_id: int, height_snr: float | None) -> None:
+        """Note a told pulse's height above its base (white-noise units: `PulseCheck`)."""
+        if height_snr is not None and math.isfinite(height_snr):
+            _put(self._heights, contact_id, float(height_snr))
+
+    def blind(self, gate: float) -> bool:
+        """The told pulses stand under `gate` noise units at their median: heavy noise, where
+        the detector misses ridges a track can still read (none told: False)."""
+        if not self._heights:
+            return False
+        return float(np.median(np.fromiter(self._heights.values(), float))) < gate
+
+    def median_h(self, width: int) -> float:
+        """The median z on `width` of the contacts told lately (`H_DEFAULT` before any; at
+        least 1: a told pulse is a rise)."""
+        k = int(np.flatnonzero(self.widths == width)[0])
+        told = [z[k] for z in self._told.values() if np.isfinite(z[k])]
+        return max(1.0, float(np.median(told))) if told else H_DEFAULT
+
+
+def _put(table: dict, key: int, value) -> None:
+    table[key] = value
+    while len(table) > TOLD_KEPT:
+        del table[next(iter(table))]
+
+
+def skip_adjustment(
+    floats: np.ndarray,
+    ints: np.ndarray,
+    contact: tuple[int, float, int, int],
+    earlier: dict[int, tuple[float, int]],
+    pos_mm: np.ndarray,
+    log_miss: np.ndarray,
+    max_skip: int,
+    evidence: RiseEvidence,
+    gate: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of a contact's children that took it for a ridge after skipping some, and
+    what each gains (log) when its skipped ridges are scored by `skip_score` in place of
+    `log_miss` (direction x ridge, travel order). `contact`: (id, time s, onset index,
+    decision index); `earlier`: the held contacts' (time s, onset index) by id; `pos_mm`:
+    the ridges' positions (direction x ridge, travel order). None unless the told pulses
+    stand under `gate` noise units at their median (`RiseEvidence.blind`: in a clean
+    signal the detector sees the ridges, and a slow pulse's rise reads as a ramp).
+
+    A child's skipped ridges are not stored: the ridge it came from is the one (of the
+    `max_skip` + 1 before its new one) whose distance to it best matches its speed times
+    the time since its previous contact; the skipped ones are placed between the two
+    contacts at a constant speed (times and sample indices interpolated)."""
+    ev_id, t_s, index, emit = contact
+    evidence.tell(ev_id, float(index), emit)
+    if not evidence.blind(gate):
+        return np.zeros(0, np.int64), np.zeros(0)
+    rows = np.flatnonzero(
+        (ints[:, I_LAST] == ev_id)
+        & (ints[:, I_N] >= 2)
+        & (ints[:, I_RUN] >= 2)
+        & np.isnan(floats[:, F_STOP])
+    )
+    nowhere = (math.inf, -1)
+    prev = [earlier.get(int(k), nowhere) for k in ints[rows, I_LAST - 1]]
+    t_all = np.array([p[0] for p in prev], float)
+    known = t_all < t_s
+    rows = rows[known]
+    if not len(rows):
+        return rows, np.zeros(0)
+    t_prev = t_all[known]
+    i_prev = np.array([p[1] for p in prev], float)[known]
+    way = (1 - ints[rows, I_DIRN]) // 2
+    k_new = ints[rows, I_RIDGE]
+    dt = t_s - t_prev
+    travel = np.abs(floats[rows, F_V]) * dt
+    skips = np.arange(max_skip + 1)
+    k_par = k_new[:, None] - 1 - skips[None, :]
+    valid = k_par >= 0
+    gap = pos_mm[way[:, None], k_new[:, None]] - pos_mm[way[:, None], np.maximum(k_par, 0)]
+    miss = np.where(valid, np.abs(gap - travel[:, None]), np.inf)
+    skip = np.argmin(miss, axis=1)
+    has = skip >= 1
+    rows, way, k_new, skip = rows[has], way[has], k_new[has], skip[has]
+    t_prev, i_prev, dt = t_prev[has], i_prev[has], dt[has]
+    if not len(rows):
+        return rows, np.zeros(0)
+    # one entry per (child, skipped ridge)
+    child = np.repeat(np.arange(len(rows)), skip)
+    back = np.concatenate([np.arange(1, s + 1) for s in skip.tolist()])  # ridges before new
+    k = k_new[child] - back
+    w_ = way[child]
+    p_par = pos_mm[w_, k_new[child] - 1 - skip[child]]
+    p_new = pos_mm[w_, k_new[child]]
+    share = (pos_mm[w_, k] - p_par) / (p_new - p_par)
+    onset = i_prev[child] + share * (index - i_prev[child])
+    speed = (p_new - p_par) / dt[child]
+    width = evidence.width_for(speed)
+    z = evidence.z_at(onset, width, emit)
+    told = np.array([i for _, i in earlier.values()] + [index], float)
+    reach = np.maximum(NEAR_TOLD * width, 0.02 * evidence.fs_hz)
+    near = np.min(np.abs(onset[:, None] - told[None, :]), axis=1) <= reach
+    z[near] = np.nan  # (a told contact's own rise)
+    lm = log_miss[w_, k]
+    gain = np.zeros(len(k))
+    for w in np.unique(width).tolist():
+        on = width == w
+        gain[on] = skip_score(z[on], evidence.median_h(w), lm[on], evidence.h_low) - lm[on]
+    return rows, np.bincount(child, weights=gain, minlength=len(rows))
+
+
+def silence(
+    open_sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tables: dict[str, np.ndarray],
+    bank: dict[str, np.ndarray],
+    last: np.ndarray,
+    held: int,
+    g: float,
+    log_miss: np.ndarray,
+    log_stop: float,
+    weight: float,
+    scored: dict[tuple[int, int], float],
+    evidence: RiseEvidence,
+    ahead: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The silence schedule (due, adj, stopped, limit: `kernels.posterior.schedule`'s) with
+    each due ridge of a slipping track scored by the signal's rise where the track puts it
+    (`skip_score`, weighted by `weight` against log(1 - DETECT_P)) instead of its miss
+    alone: a track whose due ridge shows a sub-threshold rise goes on, one whose due ridge
+    lies on flat signal stops as before.
+
+    `open_sched`: the schedule with no miss counted (`done` only at the coast end: every
+    ridge ahead gets its time due); `tables`: the silence tables (rows by direction and
+    ridge: `target`, `coast`); `bank`: the tracks' X, t, stop, run, dirn, ridge; `last`:
+    the global sample index of each track's last contact (-1: not held, then the plain
+    miss); `held`: samples held up to this global index; `scored`: (track, ridge ahead)
+    -> its score once read (the bank's: a ridge is read once, the same at every later
+    update). A ridge's time due waits for the samples its rise is read from."""
+    due0, _, stopped0, limit0 = open_sched
+    due, adj = due0.copy(), np.zeros(due0.shape)
+    stopped, limit = stopped0.copy(), limit0.copy()
+    X, t, stop, run = bank["X"], bank["t"], bank["stop"], bank["run"]
+    dirn, ridge = bank["dirn"], bank["ridge"]
+    R = log_miss.shape[1] - 1
+    S = due0.shape[1] - 1
+    fs = evidence.fs_hz
+    active = np.flatnonzero(np.isnan(stop) & (run >= 2))
+    if not len(active):
+        return due, adj, stopped, limit
+    di = (1 - dirn[active]) // 2
+    row = di * (R + 1) + np.minimum(ridge[active], R)
+    k = np.minimum(ridge[active][:, None] + 1 + np.arange(S), R)
+    coast = tables["coast"][row]
+    v = np.maximum(X[active, 1], 1.0)
+    tau = (tables["target"][row] - X[active, 0][:, None]) / v[:, None]
+    width = evidence.width_for(v)
+    onset = last[active][:, None] + tau * fs
+    ready_s = t[active][:, None] + (tau * fs + (OFFSET + 3.0) * width[:, None] + 1) / fs
+    when = np.where(last[active][:, None] >= 0, ready_s, -np.inf)
+    due[active, 1:] = np.maximum.accumulate(np.maximum(due0[active, 1:], when), axis=1)
+    lm = log_miss[di[:, None], k]
+    soft = lm.copy()
+    for a, n in enumerate(active.tolist()):
+        if last[n] < 0:
+            continue
+        for j in range(min(S, ahead)):
+            if coast[a, j] or due[n, j + 1] > g:
+                break
+            got = scored.get((n, j))
+            if got is None:
+                z = evidence.z_at(onset[a, j : j + 1], width[a : a + 1], held)
+                w = int(width[a])
+                h = evidence.median_h(w)
+                got = float(skip_score(z, h, lm[a, j : j + 1], evidence.h_low)[0])
+                if np.isfinite(z[0]):  # (else read again at the next update)
+                    scored[(n, j)] = got
+            soft[a, j] = lm[a, j] + weight * (got - lm[a, j])
+    miss = np.cumsum(soft, axis=1)
+    go_on = miss >= log_stop
+    ended = np.logical_or.accumulate(~go_on | coast, axis=1)
+    done = np.zeros(ended.shape, bool)
+    done[:, 1:] = ended[:, :-1]
+    adj[active, 1:] = np.where(done, 0.0, np.where(go_on, miss, log_stop))
+    stopped[active, 1:] = ~(go_on | done)
+    limit[active, 1:] = np.where(done, 0, k + go_on)
+    due[active, 1:] = np.where(done, np.inf, due[active, 1:])
+    return due, adj, stopped, limit
