@@ -165,3 +165,42 @@ def test_nmt_stop_and_start_sync_and_a_config_change_mid_span_act_as_per_tick():
     ]
     seen = same_both_ways(at)
     assert any(can_id == TPDO1 and t > 2_300_000 for t, can_id, _, _ in seen)
+
+
+def test_runs_too_short_for_a_span_tick_one_by_one_without_asking(monkeypatch):
+    """A closed loop runs the bus in 10 ms chunks, fewer packets than a span holds: the
+    bus asks the node how far a span must reach (`stream_until_us`) and, that being past
+    the run's end, ticks it without asking for a span (which would tell nothing)."""
+    asked: list[int] = []
+    original = DeviceNode.stream_ahead
+
+    def counting(self: DeviceNode, t_us: int, until_us: int) -> list:
+        asked.append(t_us)
+        return original(self, t_us, until_us)
+
+    monkeypatch.setattr(DeviceNode, "stream_ahead", counting)
+    ticked, ticked_store, _ = run(False, [], chunks_us=10_000, end_us=1_000_000)
+    streamed, streamed_store, _ = run(True, [], chunks_us=10_000, end_us=1_000_000)
+    assert streamed == ticked and streamed_store == ticked_store
+    assert sum(can_id == TPDO1 for _, can_id, _, _ in streamed) > 100
+    assert asked == []  # (before: asked once per run, 100 asks, each telling nothing)
+
+
+def test_how_far_a_span_must_reach_is_exactly_where_the_node_tells_one():
+    """`stream_until_us` is the least `until_us` at which `stream_ahead` tells anything
+    (one microsecond less: nothing), at many points of a stream."""
+    _, _, node = run(True, [], chunks_us=7_000, end_us=300_000)
+    checked = 0
+    for _ in range(40):
+        t_us = node.next_deadline_us()
+        assert t_us is not None
+        reach_us = node.stream_until_us(t_us)
+        assert reach_us is not None and reach_us > t_us
+        assert node.stream_ahead(t_us, reach_us - 1) == []
+        ticks = node.stream_ahead(t_us, reach_us)
+        node.commit_stream(0)
+        if ticks:  # (none where a saturation EMCY comes or goes: it ticks as usual)
+            checked += 1
+            assert ticks[-1][0] <= reach_us
+        node.advance(t_us)
+    assert checked > 30

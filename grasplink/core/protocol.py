@@ -69,6 +69,13 @@ class StreamingDevice(FilteringDevice, Protocol):
         a bus treats it as any other device); constant for the device's life."""
         ...
 
+    def stream_until_us(self, t_us: int) -> int | None:
+        """How far a span from `t_us` must reach before `stream_ahead` can tell anything:
+        for any `until_us` before this (and always when None) it tells nothing. A cheap
+        necessary condition, so a bus whose run ends sooner ticks the device one by one
+        without asking (a closed loop's 10 ms chunks hold fewer packets than a span)."""
+        ...
+
     def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
         """What `advance` would return at each of the device's deadlines from `t_us` (its
         deadline now) up to `until_us`, if nothing reached it meanwhile: (time, frames)

@@ -113,6 +113,11 @@ class DeviceApp:
     def next_deadline_us(self) -> int | None:
         return None
 
+    def stream_until_us(self, t_us: int) -> int | None:
+        """How far `stream_ahead(t_us, until_us)` must reach to tell anything (None: it
+        tells nothing now); see `core.protocol.StreamingDevice.stream_until_us`."""
+        return None
+
     def stream_ahead(self, t_us: int, until_us: int) -> StreamSpan | None:
         """Its ticks from its deadline (not before `t_us`) up to `until_us` told ahead, when
         nothing else reaches it meanwhile (`core.protocol.StreamingDevice`): what `advance`

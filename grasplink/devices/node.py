@@ -265,6 +265,13 @@ class DeviceNode:
             frames.append(Frame(HEARTBEAT_BASE + self.node_id, bytes([self.state])))
         return frames
 
+    def stream_until_us(self, t_us: int) -> int | None:
+        """`StreamingDevice`: how far a span must reach before the application tells
+        anything (None while the node cannot stream: off, not OPERATIONAL)."""
+        if not self.streaming or not self.powered or self.state != NmtState.OPERATIONAL:
+            return None
+        return self.app.stream_until_us(t_us)
+
     def stream_ahead(self, t_us: int, until_us: int) -> list[tuple[int, list[Frame]]]:
         """`StreamingDevice`: the application's next ticks told ahead, with the event-timer
         TPDOs and heartbeats due among them, while OPERATIONAL and up to any other timer

@@ -210,6 +210,14 @@ class SkinApp(DeviceApp):
         self._set_static_force()
         return frames
 
+    def stream_until_us(self, t_us: int) -> int | None:
+        """When the last sample of the `MIN_PACKETS_PER_SPAN`-th packet not yet sent is
+        due: a span told ahead holds at least that many packets (None: nothing is told)."""
+        clock = self.clock
+        if clock is None or self._final is None:
+            return None
+        return clock.time_of(clock.next_index + MIN_PACKETS_PER_SPAN * self.samples_per_pdo - 1)
+
     def stream_ahead(self, t_us: int, until_us: int) -> StreamSpan | None:
         """The packets due up to `until_us`, each TPDO1 at its time, told ahead
         (`core.protocol.StreamingDevice`) up to the last final sample and to the first
