@@ -12,7 +12,7 @@ previous contact and the verdict told by the report's due time. `--headline` doe
 for the headline loop's contacts after its onset (`scenes/loop_headline.toml`, with
 `RISE_TRAVEL=1` by default: the loop that slips on to 2.08 s).
 
-Run: `.venv/bin/python benchmarks/stop_trends.py --seeds 2`.
+Run: `.venv/bin/python benchmarks/stop_trends.py --seeds 2` (`--cases SEED,...`: only those).
 """
 
 from __future__ import annotations
@@ -45,10 +45,12 @@ def _noting_start(self, cid, index, emit=None):  # type: ignore[no-untyped-def]
     own = 0.0 if base is None or earlier is None else max(0.0, (base - earlier) / self.trend_n)
     past = trend_past_pulse(list(self._trends)[:-1], index, emit, before - self.trend_n, own)
     prior = [n for n, e, _ in list(self._bases)[:-1] if e <= emit and n <= index - 2]
+    fs = self.fs_hz
     SEEN[index] = {
-        "t_s": index / self.fs_hz, "own": own * self.fs_hz, "past": past * self.fs_hz, "used": w.trend * self.fs_hz,
-        "long": w.long * self.fs_hz, "noise": w.noise, "window_ms": 1e3 * self.trend_n / self.fs_hz,
-        "gap_ms": 1e3 * (index - prior[-1]) / self.fs_hz if prior else float("nan"),
+        "t_s": index / fs, "own": own * fs, "past": past * fs, "used": w.trend * fs,
+        "long": w.long * fs, "noise": w.noise, "window_ms": 1e3 * self.trend_n / fs,
+        "gap_ms": 1e3 * (index - prior[-1]) / fs if prior else float("nan"),
+        "slope": w.slope * fs, "watch": w,
     }  # fmt: skip
     return w
 
@@ -84,11 +86,14 @@ def _line(decoder, contact, due: float) -> str:  # type: ignore[no-untyped-def]
     s = SEEN.get(contact.index)
     if s is None:
         return f"contact {contact.t_s:.3f} told {verdict} (no kink watch)"
+    plain = s["watch"].plain / s["noise"]  # level - base by the hold, noise units
+    top, end = (float(plain.max()), float(plain[-1])) if len(plain) else (0.0, 0.0)
     return (
         f"contact {contact.t_s:.3f} told {verdict:7s} trend N/s own {s['own']:6.2f} "
         f"past pulse {s['past']:6.2f} used {s['used']:6.2f} long {s['long']:6.2f}; "
         f"previous contact {s['gap_ms']:5.0f} ms before (window {s['window_ms']:.0f} ms); "
-        f"noise {s['noise']:.4f} N"
+        f"slope before {s['slope']:6.2f} N/s; level by the hold top {top:5.1f} end {end:5.1f} "
+        "noise units"
     )
 
 
@@ -114,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--kinds", default=",".join(stop_causes.STOP_KINDS))
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--try", dest="tuning", default={}, type=stop_causes.tune_tracker.parse)
+    parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
     parser.add_argument("--headline", type=float, default=None, metavar="RISE_TRAVEL")
     args = parser.parse_args(argv)
     if args.headline is not None:
@@ -124,13 +130,15 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sr.KINDS)}")
     todo = [c for c in sr.cases(replace(sr.FULL, seeds=args.seeds)) if c.kind in kinds]
+    if args.cases:
+        todo = [c for c in todo if str(c.seed) in args.cases.split(",")]
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")
     for case, lines in results:
         for line in lines:
             way = "r" if case.reverse else "f"
-            print(f"{case.kind:11s} {case.layout:9s} {case.variant:26s} {way} {case.seed:6d} {line}")
+            print(f"{case.kind:11s} {case.layout:9s} {case.variant:26s} {way} {case.seed:6d}", line)
     return 0
 
 
