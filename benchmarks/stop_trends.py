@@ -105,7 +105,9 @@ def headline(rise_travel: float) -> None:
     tracker.TrackerDecoder.RISE_TRAVEL = rise_travel  # type: ignore[attr-defined]
     SEEN.clear()
     found = sr.headline_check(Path("scenes/loop_headline.toml"), build_controllers)
-    print(f"headline (RISE_TRAVEL={rise_travel:g}): stop {found['stop_s']}")
+    keys = ("stop_s", "first_speed_s", "first_speed", "first_speed_truth", "last_speed_s",
+            "speed_at_rest_updates", "speed_after_observable_updates")  # fmt: skip
+    print(f"headline (RISE_TRAVEL={rise_travel:g}):", {k: found.get(k) for k in keys})
     for _, s in sorted(SEEN.items()):
         print(
             f"  contact {s['t_s']:.3f} trend N/s own {s['own']:6.2f} past pulse "
