@@ -59,6 +59,8 @@ class WatchSettings:
     # the trend before an onset with an earlier pulse in its window out (`prior_trend`);
     # False: the window's own change
     trend_past_pulse: bool = False
+    # ... and the base-to-base trend too (its base sits on that pulse as well); False: off
+    long_past_pulse: bool = False
 
 
 def step_hold_samples(fs_hz: float, settings: WatchSettings) -> int:
@@ -177,6 +179,7 @@ class PulseWatcher:
         self._bases: deque[tuple[int, int, float]] = deque(maxlen=32)
         # ... and the trend its watch measured before it: (index, emit, trend), `prior_trend`
         self._trends: deque[tuple[int, int, float]] = deque(maxlen=32)
+        self._longs: deque[tuple[int, int, float]] = deque(maxlen=32)  # ... its long trend
         self.fall_n = max(2, round(0.02 * fs_hz))  # an earlier pulse's tail: its slope ...
         self.fall_credit = max(1, round(0.03 * fs_hz))  # ... followed this long at most
         half = max(0, round(settings.level_s * fs_hz / 2.0))
@@ -256,6 +259,9 @@ class PulseWatcher:
         long = None
         if emit is not None and base is not None:
             long = self._long_trend(index, emit, base)
+        long_measured = math.nan if long is None else long  # (none: min keeps the own)
+        if long is not None and emit is not None and self.settings.long_past_pulse:
+            long = trend_past_pulse(self._longs, index, emit, before - self.trend_n, long)
         recent = self.level_at(before - self.fall_n)
         floor = self._level_floor(before)
         if base is not None and recent is not None and floor is not None:
@@ -289,6 +295,7 @@ class PulseWatcher:
             watch.long = 0.0 if long is None else long
             self._bases.append((index, emit, base))
             self._trends.append((index, emit, measured))
+            self._longs.append((index, emit, long_measured))
         return watch
 
     def _level_slope(self, before: int) -> float:
