@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -58,6 +60,7 @@ def test_step_after_pulse_takes_out_the_rise_not_the_pulse() -> None:
         ([(950, 1001, 0.001)], 0.004),  # not decided by this onset's decision: not seen
         ([(999, 960, 0.001)], 0.004),  # the same onset (within 2 samples): not earlier
         ([(890, 900, 0.0), (950, 960, 0.002)], 0.002),  # the latest earlier one
+        ([(950, 960, math.nan)], 0.004),  # none measured there (no long trend): its own
         ([], 0.004),
     ],
 )
