@@ -21,6 +21,7 @@ import numpy as np
 
 from grasplink.decoding.detector.events import ContactEvent, Ledger, PulseCheck
 from grasplink.decoding.detector.noise_floor import NOISE_FLOOR_N, NoiseFloor, hinge_gain
+from grasplink.decoding.detector.prior_trend import trend_past_pulse
 from grasplink.decoding.detector.series import Samples, Series, mean
 from grasplink.decoding.filters import SosFilter
 from grasplink.decoding.kernels.detector import (
@@ -55,6 +56,11 @@ class WatchSettings:
     # a tail step's size and sharpness from the trough the tail fell to under its rise, not
     # from the level before the onset (`PulseWatcher._tail_step`); False: from that level
     tail_trough: bool = False
+    # the trend before an onset with an earlier pulse in its window out (`prior_trend`);
+    # False: the window's own change
+    trend_past_pulse: bool = False
+    # ... and the base-to-base trend too (its base sits on that pulse as well); False: off
+    long_past_pulse: bool = False
 
 
 def step_hold_samples(fs_hz: float, settings: WatchSettings) -> int:
@@ -171,6 +177,9 @@ class PulseWatcher:
         self.sure_drop = float(settings.sure_drop)
         # the level before each contact's onset: (index, emit, level), see _tail_room
         self._bases: deque[tuple[int, int, float]] = deque(maxlen=32)
+        # ... and the trend its watch measured before it: (index, emit, trend), `prior_trend`
+        self._trends: deque[tuple[int, int, float]] = deque(maxlen=32)
+        self._longs: deque[tuple[int, int, float]] = deque(maxlen=32)  # ... its long trend
         self.fall_n = max(2, round(0.02 * fs_hz))  # an earlier pulse's tail: its slope ...
         self.fall_credit = max(1, round(0.03 * fs_hz))  # ... followed this long at most
         half = max(0, round(settings.level_s * fs_hz / 2.0))
@@ -244,9 +253,15 @@ class PulseWatcher:
         trend = fall = 0.0
         if base is not None and earlier is not None:  # rising trend before the onset
             trend = max(0.0, (base - earlier) / self.trend_n)
+        measured = trend
+        if emit is not None and self.settings.trend_past_pulse:
+            trend = trend_past_pulse(self._trends, index, emit, before - self.trend_n, trend)
         long = None
         if emit is not None and base is not None:
             long = self._long_trend(index, emit, base)
+        long_measured = math.nan if long is None else long  # (none: min keeps the own)
+        if long is not None and emit is not None and self.settings.long_past_pulse:
+            long = trend_past_pulse(self._longs, index, emit, before - self.trend_n, long)
         recent = self.level_at(before - self.fall_n)
         floor = self._level_floor(before)
         if base is not None and recent is not None and floor is not None:
@@ -279,6 +294,8 @@ class PulseWatcher:
             watch.room = self._tail_room(index, emit, base)
             watch.long = 0.0 if long is None else long
             self._bases.append((index, emit, base))
+            self._trends.append((index, emit, measured))
+            self._longs.append((index, emit, long_measured))
         return watch
 
     def _level_slope(self, before: int) -> float:
