@@ -59,6 +59,14 @@ KINKS_PER_RISE = 0.94
 #: detector times a slow bend late: 149 of the 150 onsets 0-0.127 s after it, the lag
 #: being 0.1 s; the other at 0.98 s, as often as clutter)
 ONSET_TIMING_S = 0.05
+#: contacts a long rising change makes over its whole window (|dF| / rate + 3 lags), where
+#: that beats the onset's rate: a wearer's contraction stepping the grip up 2.5 N every
+#: 50 ms for 0.5 s bent the level three times (the loop benchmark's 20 mm/s seed-8 trial:
+#: contacts 0.0-0.13 s into each run of steps, taken for ridges at rest, fired the reflex
+#: onto a 20 N grip and crushed the object). `grip_ramp_contacts.py` measured rises of
+#: 0.5-6.5 N only; 2 is the count per change this module used before it (s23), kept for
+#: the longer rises until they are measured.
+KINKS_PER_LONG_RISE = 2.0
 #: a contact's slope jump beyond what the grip can make: charged as a Gaussian in log ratio
 #: of this sigma - the jump is measured to about 1/z (under 25 % at the detector's z >= 4),
 #: the level's share of the grip read within about a third: a factor of ~1.4 together
@@ -244,19 +252,32 @@ class GripCommands:
 
     def contact_rate_per_s(self, t_s: float, jump_n_s: float, level_n: float | None) -> float:
         """Contacts per s the commanded grip makes like this one (onset t_s, slope jump
-        jump_n_s, the level it rose from level_n): 0 outside every rise's onset."""
+        jump_n_s, the level it rose from level_n): a rise's onset rate, or over a rising
+        change's whole window `KINKS_PER_LONG_RISE` spread out, whichever is higher; 0
+        outside both."""
+        rate = 0.0
         rise = self.rise_at(t_s)
-        if rise is None or rise.change_n <= 0 or rise.window_s <= 0:
-            return 0.0
-        share = 1.0  # the level's share of the grip: at most all of it
-        if level_n is not None and rise.from_n > 0:
-            share = min(1.0, max(0.0, level_n / rise.from_n))
-        bend_n_s = share * rise.rate_n_s  # the steepest bend the grip can make
-        if bend_n_s <= 0:
-            return 0.0
-        excess = max(0.0, math.log(abs(jump_n_s) / bend_n_s)) if jump_n_s else 0.0
-        fit = math.exp(-0.5 * (excess / FIT_LOG_SIGMA) ** 2)
-        return KINKS_PER_RISE / rise.window_s * fit
+        if rise is not None and rise.change_n > 0 and rise.window_s > 0:
+            rate = KINKS_PER_RISE / rise.window_s * _fit(rise, jump_n_s, level_n)
+        change = self.change_at(t_s)
+        if change is not None and change.change_n > 0 and change.window_s > 0:
+            spread = KINKS_PER_LONG_RISE / change.window_s * _fit(change, jump_n_s, level_n)
+            rate = max(rate, spread)
+        return rate
+
+
+def _fit(change: Change, jump_n_s: float, level_n: float | None) -> float:
+    """How well a contact's slope jump fits a bend the change can make: 1 up to the level's
+    share of the grip (the level over the grip held before; at most all) times the rate the
+    grip moves at, a Gaussian in log ratio (`FIT_LOG_SIGMA`) beyond; 0 if it cannot bend."""
+    share = 1.0
+    if level_n is not None and change.from_n > 0:
+        share = min(1.0, max(0.0, level_n / change.from_n))
+    bend_n_s = share * change.rate_n_s  # the steepest bend the grip can make
+    if bend_n_s <= 0:
+        return 0.0
+    excess = max(0.0, math.log(abs(jump_n_s) / bend_n_s)) if jump_n_s else 0.0
+    return math.exp(-0.5 * (excess / FIT_LOG_SIGMA) ** 2)
 
 
 def _number(value: object, what: str) -> float:

@@ -17,6 +17,7 @@ import pytest
 from grasplink.decoding import io
 from grasplink.decoding.efference import (
     HAND_LAG_S,
+    KINKS_PER_LONG_RISE,
     KINKS_PER_RISE,
     ONSET_TIMING_S,
     GripCommands,
@@ -147,9 +148,33 @@ def test_a_change_is_the_commands_whose_windows_run_into_a_time():
     gentle = commands.contact_rate_per_s(1.826, 6.0, 2.0)
     steep = commands.contact_rate_per_s(1.826, 60.0, 2.0)
     assert gentle == pytest.approx(KINKS_PER_RISE / rise.window_s) and steep < 0.05 * gentle
-    # past the onset the grip still moves but bends the level up no more
+    # past the onset the grip still moves: a rise's contacts spread over its window (the
+    # long rises' count), below the onset's rate
     assert commands.change_at(1.90) is not None and commands.rise_at(1.90) is None
-    assert commands.contact_rate_per_s(1.90, 6.0, 2.0) == 0.0
+    after = commands.contact_rate_per_s(1.90, 6.0, 2.0)
+    assert after == pytest.approx(KINKS_PER_LONG_RISE / change.window_s) and after < gentle
+
+
+def test_a_wearers_stepped_contraction_is_charged_past_each_runs_onset():
+    """The loop benchmark's crush (20 mm/s, seed 8): the wearer's contraction steps the grip
+    up 2.5 N every 50 ms, 0.5 -> 20.5 N with a pause; its contacts 0.13-0.25 s into a run,
+    past the onset, were taken for ridges at rest and fired the reflex onto a 20 N grip."""
+    commands = GripCommands(HandFollow(50.0, 0.1))
+    commands.note(4.47, 0.5, 1e9)
+    for t_s, force_n in [
+        (4.52, 3.0),
+        (4.57, 5.5),
+        (4.62, 8.0),
+        (4.67, 10.5),
+        (4.91, 13.0),
+        (4.99, 15.5),
+        (5.04, 18.0),
+        (5.143, 20.5),
+    ]:
+        commands.note(t_s, force_n, 1e9)
+    assert commands.rise_at(4.85) is None  # past the first run's onset, before the next
+    assert commands.contact_rate_per_s(4.85, 8.0, 8.0) > 1.0  # still the grip's, likely
+    assert commands.contact_rate_per_s(4.45, 8.0, 8.0) == 0.0  # before the contraction
 
 
 def test_a_grip_fall_makes_no_contact_and_a_new_rise_a_new_onset():
