@@ -24,6 +24,7 @@ from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
 
 # constant 15 mm/s over alpha0.1: ridges at 48 (3.90 s) and 51 mm (4.11 s, told by the
 # step probe at 4.15 s), a noise contact at 4.328 s, the next ridge at 84 mm (6.31 s)
@@ -78,8 +79,37 @@ def test_a_stopped_tracks_reach_clears_a_stop_whose_step_reads_as_its_restart():
     track's restart too: the stick-slip stop whose own friction step, just after it, read as
     the restart at the next ridge (test_restart_confirm's case) is then cleared in time with
     neither the restart rule nor the step's shape; without it, not."""
-    from tests.decoding.test_restart_confirm import SHAPE_OFF, STICK_SLIP, stop_delays
+    from tests.decoding.test_restart_confirm import BARE, STICK_SLIP, stop_delays
 
-    bare = {"RESTART_CONFIRM": 0.0, **SHAPE_OFF}
-    assert max(stop_delays(STICK_SLIP, {**bare, "STOPPED_REACH": 1.0})) <= sr.CLEAR_WITHIN_S
-    assert max(stop_delays(STICK_SLIP, bare)) > sr.CLEAR_WITHIN_S
+    assert max(stop_delays(STICK_SLIP, {**BARE, "STOPPED_REACH": 1.0})) <= sr.CLEAR_WITHIN_S
+    assert max(stop_delays(STICK_SLIP, BARE)) > sr.CLEAR_WITHIN_S
+
+
+def _gap_reports(tuning: dict) -> list:
+    """test_quantised_input's rail case with speed dips (alpha0.1, 40 mm/s, seed 1, ADC
+    counts): the estimates while the edge crosses the last gap, 51 -> 84 mm (2.55-3.30 s)."""
+    from tests.decoding.test_quantised_input import adc
+
+    rec = synth.slip_recording(
+        LAYOUTS_MM["alpha0.1"], 40.0, reverse=False, dips=True, onset_s=1.0, seed=1
+    )
+    x = rec.force_n.copy()
+    before = rec.t_s < 0.9
+    x[before] = np.maximum(0.0, np.random.default_rng(1).normal(-0.01, 0.02, before.sum()))
+    dec = TrackerDecoder(rec.layout_mm, rec.fs_hz, tuning=tuning)
+    estimates, _ = ns.feed(dec, rec.t_s, adc(x), 3)
+    return [e for e in estimates if 2.95 <= e.t_s <= 3.30]
+
+
+def test_a_restart_past_the_last_ridge_no_longer_holds_a_gap_stopped():
+    """The probe's step at 2.52 s (the ridge at 51 mm) branches the tracks stopped at the
+    step at 2.415 s (48 mm) into a restart at the last ridge, 84 mm: 36 mm in 0.107 s,
+    335 mm/s. No ridge follows it, so no silence refutes it, and its restart on a step is
+    no slip yet (RESTART_CONFIRM): it kept the slip reported stopped through the 33 mm gap
+    (0.83 s at 40 mm/s). Weighed by its reach it goes, and the slip is reported going on at
+    its speed - 37.0 mm/s, the dips' bias every speed of this case has (`test_quantised_
+    input`'s median)."""
+    on = _gap_reports({"STOPPED_REACH": 1.0})
+    assert on and all(e.slip and 0.9 * 40.0 <= e.speed_mm_s <= 40.0 for e in on)
+    off = _gap_reports({"STOPPED_REACH": 0.0})
+    assert off and not any(e.slip for e in off)
