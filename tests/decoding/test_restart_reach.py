@@ -7,10 +7,10 @@ a restart had one prior whatever the time since: a contact 0.18 s after a ridge 
 for a second contact, held the slip off for seconds while the object slid on
 (`benchmarks/missing_speed_causes.py`: alpha0.1 15 mm/s, seed 50210). Now the restart is
 weighed by P(speed >= distance / time) under the speed prior (`kernels.branch._log_reach`):
-a slipping track's (`RESTART_REACH`, on) and a stopped track's (`STOPPED_REACH`, off by
-default: see its comment in the tracker). In the traced case the restart was a stopped
-track's - stopped at the probe's step at 4.15 s, restarted two ridges on, past the 3 mm
-ridge it took as missed - so its tests set STOPPED_REACH."""
+a slipping track's (`RESTART_REACH`) and a stopped track's (`STOPPED_REACH`), both on by
+default. In the traced case the restart was a stopped track's - stopped at the probe's
+step at 4.15 s, restarted two ridges on, past the 3 mm ridge it took as missed - so its
+tests set STOPPED_REACH."""
 
 from __future__ import annotations
 
@@ -69,16 +69,16 @@ def test_a_restart_cannot_outrun_the_slip():
 
 
 def test_without_the_reach_that_restart_is_nearly_the_best():
-    """STOPPED_REACH 0 (the default) leaves that restart as the tracker before had it: the
+    """STOPPED_REACH 0 (off) leaves that restart as the tracker before had it: the
     case still shows it (so the test above checks the rule, not a changed signal)."""
     assert _restarts_far_ahead({"STOPPED_REACH": 0.0}) > math.log(0.5)
 
 
 def test_a_stopped_tracks_reach_clears_a_stop_whose_step_reads_as_its_restart():
-    """STOPPED_REACH (off by default: see its comment in the tracker) weighs a stopped
-    track's restart too: the stick-slip stop whose own friction step, just after it, read as
-    the restart at the next ridge (test_restart_confirm's case) is then cleared in time with
-    neither the restart rule nor the step's shape; without it, not."""
+    """STOPPED_REACH weighs a stopped track's restart too: the stick-slip stop whose own
+    friction step, just after it, read as the restart at the next ridge
+    (test_restart_confirm's case) is cleared in time with neither the restart rule nor the
+    step's shape; without it, not."""
     from tests.decoding.test_restart_confirm import BARE, STICK_SLIP, stop_delays
 
     assert max(stop_delays(STICK_SLIP, {**BARE, "STOPPED_REACH": 1.0})) <= sr.CLEAR_WITHIN_S
