@@ -111,34 +111,66 @@ def test_adc_noise_alone_is_no_slip():
         assert len(events) <= 2  # a false contact every 10 s at most
 
 
+RAIL_CASES = [(40.0, False, 1), (25.0, True, 2), (40.0, False, 3)]
+
+
+def rail_start(speed: float, reverse: bool, seed: int) -> tuple[synth.SkinRecording, np.ndarray]:
+    """The headline scene's start: the FSR reads 0 N (noise clipped) until the object lands,
+    0.1 s before it slips, with speed dips at every ridge."""
+    rec = synth.slip_recording(
+        LAYOUTS_MM["alpha0.1"], speed, reverse=reverse, dips=True, onset_s=1.0, seed=seed
+    )
+    x = rec.force_n.copy()
+    before = rec.t_s < 0.9
+    x[before] = np.maximum(0.0, np.random.default_rng(seed).normal(-0.01, 0.02, before.sum()))
+    return rec, x
+
+
+@pytest.mark.parametrize("speed,reverse,seed", RAIL_CASES)
+def test_sensor_on_its_rail_before_the_object_arrives(speed, reverse, seed):
+    """The clipped stretch shows no noise, so it says nothing about it; before the fix its
+    near-zero noise estimate turned every poke above the rail into a contact (speeds up to
+    ~380 mm/s, mostly the wrong way, and slips flagged on a resting object)."""
+    rec, x = rail_start(speed, reverse, seed)
+    for signal in (x, adc(x)):
+        estimates = decode(rec.layout_mm, rec.t_s, signal)
+        given, wrong, _, false = signs_and_errors(rec, estimates)
+        assert given >= 100 and wrong == 0 and false == 0
+        fastest = max(e.speed_mm_s or 0.0 for e in estimates)
+        assert fastest <= 1.25 * speed, f"{fastest:.0f} mm/s"
+
+
 DIPS_DEFECT = (
     "speed median 5.6-7.9 % > 5 % with speed dips at every ridge: the tracker that replaced "
     "the constant-speed one (issue 9) has a narrow dip prior (0.1 mm); no wrong sign, no false slip"
     " (the dip prior's curve: docs/benchmarks/slip_reporting.md, DIP_PRIOR_MM)"
 )
+# seed 1's ADC stream reads the last gap (51 -> 84 mm, 0.83 s) as the slip going on at its
+# dip-biased speed (37.0 for 40 mm/s, 7.4 %): 155 speeds at a median 5.8 %. The float
+# stream's coin (P(slip) ~0.45 there) falls to a stop, whose speed 0 the median does not
+# count: 111 speeds at 3.5 % (test_restart_reach: the restart past the last ridge that held
+# the stop, refuted by the stopped tracks' reach)
+GAP_READ_AS_SLIP = DIPS_DEFECT + "; seed 1 over ADC counts: its last gap is read as slipping"
+
+
+def _xfail(reason: str) -> pytest.MarkDecorator:
+    return pytest.mark.xfail(strict=True, reason=reason)
 
 
 @pytest.mark.parametrize(
-    "speed,reverse,seed",
+    "speed,reverse,seed,quantised",
     [
-        (40.0, False, 1),  # within 5 % since the detection model follows the detector
-        pytest.param(25.0, True, 2, marks=pytest.mark.xfail(strict=True, reason=DIPS_DEFECT)),
-        pytest.param(40.0, False, 3, marks=pytest.mark.xfail(strict=True, reason=DIPS_DEFECT)),
+        (40.0, False, 1, False),  # within 5 % since the detection model follows the detector
+        pytest.param(40.0, False, 1, True, marks=_xfail(GAP_READ_AS_SLIP)),
+        pytest.param(25.0, True, 2, False, marks=_xfail(DIPS_DEFECT)),
+        pytest.param(40.0, False, 3, False, marks=_xfail(DIPS_DEFECT)),
     ],
 )
-def test_sensor_on_its_rail_before_the_object_arrives(speed, reverse, seed):
-    """The headline scene's start: the FSR reads 0 N (noise clipped) until the object lands.
-
-    The clipped stretch shows no noise, so it says nothing about it; before the fix its
-    near-zero noise estimate turned every poke above the rail into a contact (speeds up to
-    ~380 mm/s, mostly the wrong way, and slips flagged on a resting object)."""
-    rec = synth.slip_recording(
-        LAYOUTS_MM["alpha0.1"], speed, reverse=reverse, dips=True, onset_s=1.0, seed=seed
+def test_speed_after_the_rail_with_dips(speed, reverse, seed, quantised):
+    """The median speed error over the speeds given while slipping (a stop reported during
+    the slip gives none, and is not counted)."""
+    rec, x = rail_start(speed, reverse, seed)
+    _, _, error, _ = signs_and_errors(
+        rec, decode(rec.layout_mm, rec.t_s, adc(x) if quantised else x)
     )
-    x = rec.force_n.copy()
-    before = rec.t_s < 0.9  # the object lands 0.1 s before it slips
-    x[before] = np.maximum(0.0, np.random.default_rng(seed).normal(-0.01, 0.02, before.sum()))
-    for signal in (x, adc(x)):
-        given, wrong, error, false = signs_and_errors(rec, decode(rec.layout_mm, rec.t_s, signal))
-        assert given >= 100 and wrong == 0 and false == 0
-        assert error <= 0.05
+    assert error <= 0.05

@@ -35,11 +35,24 @@ def test_a_stop_whose_step_reads_as_a_restart_is_cleared_in_time():
 SHAPE_OFF = {"LOG_SHAPE_STOP_RIDGE": 0.0, "LOG_SHAPE_RIDGE_STOP": 0.0}
 
 
+# a stopped track's restart weighed by its reach from where and when it stopped clears it
+# on its own too (test_restart_reach.test_a_stopped_tracks_reach_clears_a_stop_whose_...)
+BARE = {"RESTART_CONFIRM": 0.0, "STOPPED_REACH": 0.0, **SHAPE_OFF}
+
+
 def test_the_restart_rule_off_leaves_that_stop_uncleared():
     """RESTART_CONFIRM = 0 is the tracker before the rule: the case still shows the miss
     (so the test above checks the rule, not a changed signal) - with the step's shape
-    unweighed, which clears it on its own (test_a_stop_shaped_step_clears_it_on_its_own)."""
-    assert max(stop_delays(STICK_SLIP, {"RESTART_CONFIRM": 0.0, **SHAPE_OFF})) > sr.CLEAR_WITHIN_S
+    unweighed and the stopped tracks' restart reach off, each of which clears it on its
+    own (test_a_stop_shaped_step_clears_it_on_its_own; test_restart_reach)."""
+    assert max(stop_delays(STICK_SLIP, BARE)) > sr.CLEAR_WITHIN_S
+
+
+def test_the_restart_rule_alone_clears_that_stop():
+    """The rule clears the stop with neither of the others: each of the three does the job
+    on its own (the control above leaves all three off)."""
+    delays = stop_delays(STICK_SLIP, {**BARE, "RESTART_CONFIRM": 1.0})
+    assert delays and all(d <= sr.CLEAR_WITHIN_S for d in delays), delays
 
 
 def test_a_stop_shaped_step_clears_it_on_its_own():

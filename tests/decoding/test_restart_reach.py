@@ -7,10 +7,10 @@ a restart had one prior whatever the time since: a contact 0.18 s after a ridge 
 for a second contact, held the slip off for seconds while the object slid on
 (`benchmarks/missing_speed_causes.py`: alpha0.1 15 mm/s, seed 50210). Now the restart is
 weighed by P(speed >= distance / time) under the speed prior (`kernels.branch._log_reach`):
-a slipping track's (`RESTART_REACH`, on) and a stopped track's (`STOPPED_REACH`, off by
-default: see its comment in the tracker). In the traced case the restart was a stopped
-track's - stopped at the probe's step at 4.15 s, restarted two ridges on, past the 3 mm
-ridge it took as missed - so its tests set STOPPED_REACH."""
+a slipping track's (`RESTART_REACH`) and a stopped track's (`STOPPED_REACH`), both on by
+default. In the traced case the restart was a stopped track's - stopped at the probe's
+step at 4.15 s, restarted two ridges on, past the 3 mm ridge it took as missed - so its
+tests set STOPPED_REACH."""
 
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators import synth
 
 # constant 15 mm/s over alpha0.1: ridges at 48 (3.90 s) and 51 mm (4.11 s, told by the
 # step probe at 4.15 s), a noise contact at 4.328 s, the next ridge at 84 mm (6.31 s)
@@ -68,18 +69,47 @@ def test_a_restart_cannot_outrun_the_slip():
 
 
 def test_without_the_reach_that_restart_is_nearly_the_best():
-    """STOPPED_REACH 0 (the default) leaves that restart as the tracker before had it: the
+    """STOPPED_REACH 0 (off) leaves that restart as the tracker before had it: the
     case still shows it (so the test above checks the rule, not a changed signal)."""
     assert _restarts_far_ahead({"STOPPED_REACH": 0.0}) > math.log(0.5)
 
 
 def test_a_stopped_tracks_reach_clears_a_stop_whose_step_reads_as_its_restart():
-    """STOPPED_REACH (off by default: see its comment in the tracker) weighs a stopped
-    track's restart too: the stick-slip stop whose own friction step, just after it, read as
-    the restart at the next ridge (test_restart_confirm's case) is then cleared in time with
-    neither the restart rule nor the step's shape; without it, not."""
-    from tests.decoding.test_restart_confirm import SHAPE_OFF, STICK_SLIP, stop_delays
+    """STOPPED_REACH weighs a stopped track's restart too: the stick-slip stop whose own
+    friction step, just after it, read as the restart at the next ridge
+    (test_restart_confirm's case) is cleared in time with neither the restart rule nor the
+    step's shape; without it, not."""
+    from tests.decoding.test_restart_confirm import BARE, STICK_SLIP, stop_delays
 
-    bare = {"RESTART_CONFIRM": 0.0, **SHAPE_OFF}
-    assert max(stop_delays(STICK_SLIP, {**bare, "STOPPED_REACH": 1.0})) <= sr.CLEAR_WITHIN_S
-    assert max(stop_delays(STICK_SLIP, bare)) > sr.CLEAR_WITHIN_S
+    assert max(stop_delays(STICK_SLIP, {**BARE, "STOPPED_REACH": 1.0})) <= sr.CLEAR_WITHIN_S
+    assert max(stop_delays(STICK_SLIP, BARE)) > sr.CLEAR_WITHIN_S
+
+
+def _gap_reports(tuning: dict) -> list:
+    """test_quantised_input's rail case with speed dips (alpha0.1, 40 mm/s, seed 1, ADC
+    counts): the estimates while the edge crosses the last gap, 51 -> 84 mm (2.55-3.30 s)."""
+    from tests.decoding.test_quantised_input import adc
+
+    rec = synth.slip_recording(
+        LAYOUTS_MM["alpha0.1"], 40.0, reverse=False, dips=True, onset_s=1.0, seed=1
+    )
+    x = rec.force_n.copy()
+    before = rec.t_s < 0.9
+    x[before] = np.maximum(0.0, np.random.default_rng(1).normal(-0.01, 0.02, before.sum()))
+    dec = TrackerDecoder(rec.layout_mm, rec.fs_hz, tuning=tuning)
+    estimates, _ = ns.feed(dec, rec.t_s, adc(x), 3)
+    return [e for e in estimates if 2.95 <= e.t_s <= 3.30]
+
+
+def test_a_restart_past_the_last_ridge_no_longer_holds_a_gap_stopped():
+    """The probe's step at 2.52 s (the ridge at 51 mm) branches the tracks stopped at the
+    step at 2.415 s (48 mm) into a restart at the last ridge, 84 mm: 36 mm in 0.107 s,
+    335 mm/s. No ridge follows it, so no silence refutes it, and its restart on a step is
+    no slip yet (RESTART_CONFIRM): it kept the slip reported stopped through the 33 mm gap
+    (0.83 s at 40 mm/s). Weighed by its reach it goes, and the slip is reported going on at
+    its speed - 37.0 mm/s, the dips' bias every speed of this case has (`test_quantised_
+    input`'s median)."""
+    on = _gap_reports({"STOPPED_REACH": 1.0})
+    assert on and all(e.slip and 0.9 * 40.0 <= e.speed_mm_s <= 40.0 for e in on)
+    off = _gap_reports({"STOPPED_REACH": 0.0})
+    assert off and not any(e.slip for e in off)
