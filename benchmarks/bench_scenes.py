@@ -486,9 +486,16 @@ byte-identical): the loop 1.07× against 3c9cd53 in this page's run, whose host 
 slower than s22's (the same base tree read 16× then, 11× here; the decoder's cost
 against the base in one run: 1.01×, `benchmarks/decoder_cost_trees.py`). The line
 under the loop_headline table bounds what the gateway alone allows: 20× needs every
-part about a quarter cheaper, and what is left of the physics is numpy's per-call
-cost on ~10-sample blocks (the hand's part: 182 of 206 blocks one chunk long, as
-its grip command changes every chunk). In a skin-only slip the skin
+part about a quarter cheaper. In s24 the physics stopped running the gateway's grip
+ramps one chunk at a time (the hand's part had 182 of 206 blocks one chunk long, its
+command changing every chunk): a part's repeating command steps are continued as a
+guess and rolled back when wrong (`simulators/trends.py`; effect steps 2347 -> 841,
+22 one-chunk hand blocks, `benchmarks/bench_guessed_commands.py`), and the bus asks
+the skin node for a span only when one fits the run (684 futile asks -> 0): the loop
+1.11× against a5cc9bb in this page's run, byte-identical. What is left is flat: the
+decoder costs ~1.5× inside the loop what it costs replayed alone, from cold caches
+(`benchmarks/decoder_in_loop.py`: the same 795 feeds and 600 estimates; a 1 MiB
+sweep between calls gives 1.44×). In a skin-only slip the skin
 node streams its packets in spans (above), which took it past 200×. A node accepts
 only the heartbeats its consumer (1016h) watches, so another node's beat no longer
 ends a skin span: headline_slip's spans went from 298 asks and 578 ticks told (317
