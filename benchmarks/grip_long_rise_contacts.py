@@ -18,7 +18,8 @@ command .. last command + its step's `HandFollow.window_s`), split into those th
 efference copy's onset already charges (`GripCommands.rise_at` not None: within
 lag + ONSET_TIMING_S of a run of rising commands) and those past it, which only the
 long-rise spread (`KINKS_PER_LONG_RISE` over the change's window) charges; where the
-past-onset ones fall (s after the first command, commanded grip N at the onset); and
+past-onset ones fall (s after the rise's first command and after their run's first
+command, commanded grip N at the onset); and
 the same signal's contacts per s outside every window (clutter).
 """
 
@@ -90,6 +91,11 @@ RISES = (
     Rise("5->20 2.5N/200ms", 5.0, 20.0, 2.5, 0.20),
     Rise("5->20 1N/50ms", 5.0, 20.0, 1.0, 0.05),
     Rise("0.5->20.5 2.5N/200ms", 0.5, 20.5, 2.5, 0.20),
+    # the gateway's own ramp (0.5 N every 10 ms, its 50 N/s slew), as in the crush trial's
+    # CAN log: from a released grip, 0 -> 11 N, 0.2 s held, on to 20 N
+    Rise("0->20 0.5N/10ms crush", 0.0, 20.0, 0.5, 0.01, pause_at_n=11.0, pause_s=0.19),
+    Rise("5->20 0.5N/10ms", 5.0, 20.0, 0.5, 0.01),
+    Rise("5->28 0.5N/10ms", 5.0, 28.0, 0.5, 0.01),
 )
 
 
@@ -119,12 +125,23 @@ def run(seeds: int, layouts: list[str], rises: tuple[Rise, ...]) -> None:
     commands, spans = schedule(rises)
     end_s = commands[-1][0] + HOLD_S
     grip = hand_grip(commands, follow.rate_n_s, end_s)
-    efference = GripCommands(follow)
-    for t, f in commands:
-        efference.note(t, f, 1e9)
+    told = {}  # per rise: the efference copy of the commands up to its window's end
+    for rise, (own, until) in zip(rises, spans, strict=True):
+        copy = GripCommands(follow)  # its own: a copy keeps KEEP_S of commands
+        for t, f in commands:
+            if own[0][0] - 5.0 <= t <= until or (t < own[0][0] and not len(copy)):
+                copy.note(t, f, 1e9)
+        told[rise.name] = copy
     onset_n: dict[str, list[int]] = defaultdict(list)
     past_n: dict[str, list[int]] = defaultdict(list)
-    past_at: dict[str, list[tuple[float, float]]] = defaultdict(list)
+    past_at: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
+    onset_at: dict[str, list[float]] = defaultdict(list)
+
+    def run_starts(rise: Rise, own: list[tuple[float, float]]) -> list[float]:
+        """Where the rise's runs of rising commands start (`GripCommands.rise_at`)."""
+        found = (told[rise.name].rise_at(t + 1e-9) for t, _ in own)
+        return sorted({r.start_s for r in found if r is not None})
+
     per_layout: dict[tuple[str, str], list[int]] = defaultdict(list)
     clutter = [0, 0.0]
     for layout_name in layouts:
@@ -143,6 +160,7 @@ def run(seeds: int, layouts: list[str], rises: tuple[Rise, ...]) -> None:
                     window = (onsets >= start) & (onsets <= until)
                     inside |= window
                     clear &= ~((rec.t_s >= start) & (rec.t_s <= until))
+                    efference = told[rise.name]
                     at_onset = [efference.rise_at(float(x)) is not None for x in onsets[window]]
                     onset_n[rise.name].append(sum(at_onset))
                     past_n[rise.name].append(len(at_onset) - sum(at_onset))
@@ -150,7 +168,10 @@ def run(seeds: int, layouts: list[str], rises: tuple[Rise, ...]) -> None:
                     for x, charged in zip(onsets[window].tolist(), at_onset, strict=True):
                         if not charged:
                             commanded = max(f for t, f in own if t <= x)
-                            past_at[rise.name].append((x - start, commanded))
+                            run_start = max(t for t in run_starts(rise, own) if t <= x)
+                            past_at[rise.name].append((x - start, x - run_start, commanded))
+                        else:
+                            onset_at[rise.name].append(x - efference.rise_at(x).start_s)
                 # falls (commands back down) are clear of rises but are grip moves: skip them
                 for k in range(1, len(commands)):
                     if commands[k][1] < commands[k - 1][1]:
@@ -168,21 +189,31 @@ def run(seeds: int, layouts: list[str], rises: tuple[Rise, ...]) -> None:
     )
     print(
         f"{'rise':24} {'window s':>8} {'runs':>4} {'per rise':>8} {'onset':>6} {'past':>6} "
-        f"{'past/N':>7} {'past/s':>7}  past-onset contacts: s after the first command @ N"
+        f"{'past/N':>7} {'past/s':>7}  past the onset: s after the first command / its "
+        "run's first @ N commanded"
     )
     for rise, (own, until) in zip(rises, spans, strict=True):
         window_s = until - own[0][0]
         onset_c, past_c = np.mean(onset_n[rise.name]), np.mean(past_n[rise.name])
         where = sorted(past_at[rise.name])
-        runs = [efference.rise_at(t + 1e-6) for t, _ in own]
-        starts = {r.start_s for r in runs if r is not None}  # runs of rising commands
+        starts = run_starts(rise, own)
         print(
             f"{rise.name:24} {window_s:8.2f} {len(starts):4d} {onset_c + past_c:8.2f} "
             f"{onset_c:6.2f} "
             f"{past_c:6.2f} {past_c / rise.rise_n:7.3f} {past_c / window_s:7.2f}  "
-            + " ".join(f"{x:.2f}@{f:g}" for x, f in where[:24])
-            + (" ..." if len(where) > 24 else "")
+            + " ".join(f"{x:.2f}/{r:.3f}@{f:g}" for x, r, f in where[:12])
+            + (" ..." if len(where) > 12 else "")
         )
+    late = sorted(r for where in past_at.values() for _, r, _ in where)
+    early = np.array(sorted(x for xs in onset_at.values() for x in xs))
+    print(
+        f"onsets within a run's onset window: {len(early)}, s after the run's first command: "
+        f"median {np.median(early):.3f}, p90 {np.quantile(early, 0.9):.3f}, max {early.max():.3f}"
+    )
+    print(
+        f"past it: {len(late)}, s after their run's first command: "
+        + " ".join(f"{r:.3f}" for r in late)
+    )
     print("contacts per rise by layout (whole and half cover, every seed):")
     print(f"{'rise':24} " + " ".join(f"{name:>9}" for name in layouts))
     for rise in rises:
