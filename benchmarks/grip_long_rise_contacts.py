@@ -2,9 +2,10 @@
 
     .venv/bin/python benchmarks/grip_long_rise_contacts.py [--seeds N] [--layouts a,b]
 
-Why: `efference.KINKS_PER_LONG_RISE` (contacts a rising change makes over its whole
-window) was set to 2 without a measurement; `grip_ramp_contacts.py` covers rises of
-0.5-6.5 N only. The loop's virtual wearer steps the grip 2.5 N every 50 ms up to
+Why: until s25 the efference copy charged 2 contacts over a rising change's whole
+window (`KINKS_PER_LONG_RISE`) without a measurement; `grip_ramp_contacts.py` covers
+rises of 0.5-6.5 N only. This measured `efference.KINKS_LATE_IN_RISE` and
+`LATE_ONSET_S` that replace it. The loop's virtual wearer steps the grip 2.5 N every 50 ms up to
 20-28 N (the loop benchmark's 20 mm/s seed-8 crush). Here the object is held (no slip)
 over the whole skin or half of it, on every layout; the grip is commanded in steps
 (`RISES`: from, to, step N, step interval s, optional pause), the hand node slews its
@@ -15,10 +16,10 @@ again, so every rise starts from a settled level.
 
 Per rise profile: the detector's contacts whose onset falls in the rise's window (first
 command .. last command + its step's `HandFollow.window_s`), split into those the
-efference copy's onset already charges (`GripCommands.rise_at` not None: within
-lag + ONSET_TIMING_S of a run of rising commands) and those past it, which only the
-long-rise spread (`KINKS_PER_LONG_RISE` over the change's window) charges; where the
-past-onset ones fall (s after the rise's first command and after their run's first
+efference copy's onset charges (`GripCommands.rise_at` not None: within
+lag + ONSET_TIMING_S of a run of rising commands) and those past it (charged only
+within `GripCommands.late_s` of a run's first command, `KINKS_LATE_IN_RISE`); where
+the past-onset ones fall (s after the rise's first command and after their run's first
 command, commanded grip N at the onset); and
 the same signal's contacts per s outside every window (clutter).
 """
@@ -34,7 +35,8 @@ from grip_ramp_contacts import hand_grip
 
 from grasplink.decoding.efference import (
     HAND_LAG_S,
-    KINKS_PER_LONG_RISE,
+    KINKS_LATE_IN_RISE,
+    LATE_ONSET_S,
     GripCommands,
     HandFollow,
 )
@@ -223,7 +225,8 @@ def run(seeds: int, layouts: list[str], rises: tuple[Rise, ...]) -> None:
         )
     print(
         f"outside the windows: {clutter[0] / max(clutter[1], 1e-9):.3f} contacts/s over "
-        f"{clutter[1]:.0f} s; the shipped KINKS_PER_LONG_RISE is {KINKS_PER_LONG_RISE:g}"
+        f"{clutter[1]:.0f} s; shipped: KINKS_LATE_IN_RISE {KINKS_LATE_IN_RISE:g} per run "
+        f"within {follow.lag_s + LATE_ONSET_S:.2f} s of its first command"
     )
 
 
