@@ -21,8 +21,11 @@ grip starts to move - one onset of a rise per change, whatever its size or ramp,
 one lag of its first command (plus the detector's timing); a *fall* turns the level
 down and makes none (`benchmarks/grip_ramp_contacts.py`: a held object, the hand's slew
 and lag, the loop scenes' skin chain: `KINKS_PER_RISE`, `ONSET_TIMING_S`). So a rise
-makes contacts at KINKS_PER_RISE / (lag + ONSET_TIMING_S) per second over that onset,
-none after it. A rise cannot make a bend
+makes contacts at KINKS_PER_RISE / (lag + ONSET_TIMING_S) per second over that onset.
+A long run of rising commands (10-28 N, the wearer's contraction) now and then bends the
+level again just past its onset, up to a lag plus `LATE_ONSET_S` after its first command
+(`KINKS_LATE_IN_RISE` per run; `benchmarks/grip_long_rise_contacts.py`); none later in the
+rise, however long the grip still moves. A rise cannot make a bend
 steeper than the level's share of the grip (the level over the grip held before the
 change: at rest the sensor reads the grip times the object's share over it) times the
 rate the grip moves at; a contact's slope jump beyond that is charged as a Gaussian in
@@ -59,14 +62,19 @@ KINKS_PER_RISE = 0.94
 #: detector times a slow bend late: 149 of the 150 onsets 0-0.127 s after it, the lag
 #: being 0.1 s; the other at 0.98 s, as often as clutter)
 ONSET_TIMING_S = 0.05
-#: contacts a long rising change makes over its whole window (|dF| / rate + 3 lags), where
-#: that beats the onset's rate: a wearer's contraction stepping the grip up 2.5 N every
-#: 50 ms for 0.5 s bent the level three times (the loop benchmark's 20 mm/s seed-8 trial:
-#: contacts 0.0-0.13 s into each run of steps, taken for ridges at rest, fired the reflex
-#: onto a 20 N grip and crushed the object). `grip_ramp_contacts.py` measured rises of
-#: 0.5-6.5 N only; 2 is the count per change this module used before it (s23), kept for
-#: the longer rises until they are measured.
-KINKS_PER_LONG_RISE = 2.0
+#: contacts a run of rising commands makes just past its onset window (up to a lag plus
+#: LATE_ONSET_S after its first command), spread over that span; none later in the rise
+#: (`benchmarks/grip_long_rise_contacts.py --seeds 16 --layouts alpha0.1`, a held object
+#: over all or half of the skin; every layout tells the same contacts: `--seeds 4`): the
+#: wearer's 2.5 N / 50 ms and the gateway's 0.5 N / 10 ms steps up to 10-28 N, slower
+#: stairs, the crush trial's two runs - 1076 contacts in onset windows, 49 past them: 46
+#: at 0.15-0.22 s after their run's first command, 3 at 0.29-0.30 s, none later; 47 of
+#: them in the 384 runs of 10 N or more (0.12 each), 2 in the 192 stair steps of 2.5 N.
+#: The crush trial's bends (loop benchmark, 20 mm/s seed 8) came 0.201 and 0.157 s into
+#: their runs. Until s25 a rising change's whole window was charged 2 contacts (unmeasured).
+KINKS_LATE_IN_RISE = 0.12
+#: the late contacts come within a lag plus this of their run's first command (46 of 49)
+LATE_ONSET_S = 0.13
 #: a contact's slope jump beyond what the grip can make: charged as a Gaussian in log ratio
 #: of this sigma - the jump is measured to about 1/z (under 25 % at the detector's z >= 4),
 #: the level's share of the grip read within about a third: a factor of ~1.4 together
@@ -215,14 +223,16 @@ class GripCommands:
         rate = follow.rate_n_s if span <= 0 else min(follow.rate_n_s, abs(change) / span)
         return Change(self._t[start], end - self._t[start], change, self._f[start - 1], rate)
 
-    def rise_at(self, t_s: float) -> Change | None:
+    def rise_at(self, t_s: float, within_s: float | None = None) -> Change | None:
         """The commanded rise whose onset holds t_s (None: none): a run of commands each
         raising the grip within a lag of the one before, started no more than
-        `onset_s` before t_s; its window is that onset, its change the run's rise."""
+        `onset_s` (or `within_s`) before t_s; its window is that span, its change the run's
+        rise."""
         k = bisect.bisect_right(self._t, t_s) - 1
         if k < 1:
             return None
-        follow, onset = self.follow, self.onset_s
+        follow = self.follow
+        onset = self.onset_s if within_s is None else within_s
         first = max(1, bisect.bisect_left(self._t, t_s - onset))
         for j in range(k, first - 1, -1):  # the newest rise's start first
             if not (self._f[j] > self._f[j - 1] and self._starts_rise(j)):
@@ -241,6 +251,11 @@ class GripCommands:
         """How long after a rise's first command its contacts come."""
         return self.follow.lag_s + ONSET_TIMING_S
 
+    @property
+    def late_s(self) -> float:
+        """How long after a run's first command its late bends still come."""
+        return self.follow.lag_s + LATE_ONSET_S
+
     def _rising(self, j: int) -> bool:
         """Command j raises the grip on from a rise under way (within a lag of the last)."""
         return self._f[j] > self._f[j - 1] and self._t[j] - self._t[j - 1] <= self.follow.lag_s
@@ -252,18 +267,17 @@ class GripCommands:
 
     def contact_rate_per_s(self, t_s: float, jump_n_s: float, level_n: float | None) -> float:
         """Contacts per s the commanded grip makes like this one (onset t_s, slope jump
-        jump_n_s, the level it rose from level_n): a rise's onset rate, or over a rising
-        change's whole window `KINKS_PER_LONG_RISE` spread out, whichever is higher; 0
-        outside both."""
-        rate = 0.0
+        jump_n_s, the level it rose from level_n): a rise's onset rate; past the onset, up
+        to `late_s` after a run's first command, its late bends' (`KINKS_LATE_IN_RISE`);
+        0 after both."""
         rise = self.rise_at(t_s)
         if rise is not None and rise.change_n > 0 and rise.window_s > 0:
-            rate = KINKS_PER_RISE / rise.window_s * _fit(rise, jump_n_s, level_n)
-        change = self.change_at(t_s)
-        if change is not None and change.change_n > 0 and change.window_s > 0:
-            spread = KINKS_PER_LONG_RISE / change.window_s * _fit(change, jump_n_s, level_n)
-            rate = max(rate, spread)
-        return rate
+            return KINKS_PER_RISE / rise.window_s * _fit(rise, jump_n_s, level_n)
+        late = self.rise_at(t_s, self.late_s)
+        span = self.late_s - self.onset_s
+        if late is None or late.change_n <= 0 or span <= 0:
+            return 0.0
+        return KINKS_LATE_IN_RISE / span * _fit(late, jump_n_s, level_n)
 
 
 def _fit(change: Change, jump_n_s: float, level_n: float | None) -> float:

@@ -788,6 +788,16 @@ CONSTANT_FIGURES = {
 }
 
 
+#: Under the targets when a no-regression row is "no": that flag compares with the run the
+#: page replaces, so a step traded on purpose shows until the next run; where it is told.
+REGRESSION_NOTE = (
+    "A **no** in the no-regression rows compares with the previous run only: "
+    'docs/decoding.md, "No-regression flags of the constant-speed set", names each commit '
+    "that moved that set and what it traded; `benchmarks/constant_target_table.py TREE` "
+    "measures the set alone for any checkout (`--bisect` finds the commit)."
+)
+
+
 def target_rows(results: dict, default: str, before: dict | None, now: dict | None) -> list:
     """(label, figure, bound text, met) for the default decoder; None = not measured."""
     rows: list[tuple[str, Any, str, bool | None]] = []
@@ -976,10 +986,14 @@ def render(results: dict, default: str, before: dict | None, now: dict | None) -
         "| target | figure | bound | met |",
         "|---|---:|---|---|",
     ]
+    regressed = False
     for label, value, bound, met in target_rows(results, default, before, now):
         mark = "-" if met is None else ("yes" if met else "**no**")
         digits = 2 if label.startswith("no regression") else 1  # as its bound
         lines.append(f"| {label} | {_fmt(value, digits)} | {bound} | {mark} |")
+        regressed |= label.startswith("no regression") and met is False
+    if regressed:  # a step against the last run only: say where its cause is told
+        lines += ["", REGRESSION_NOTE]
     lines += [
         "",
         f"![Non-stationary slips: accuracy against cost per decoder, and `{default}` per "

@@ -268,6 +268,15 @@ def test_the_report_has_the_targets_and_a_table_per_category():
     )
     assert regression + " **no** |" in text
     assert "µs/sample 3 / 256" in text and "| tracker |" in text
+    assert ns.REGRESSION_NOTE in text  # a flagged step says where its cause is told
+
+
+def test_no_regression_note_only_under_a_flagged_step():
+    results = _results()
+    same = {k: 1.0 for k in ns.CONSTANT_FIGURES}
+    text = "\n".join(ns.render(results, "tracker", same, dict(same)))
+    assert "≤ 1.00 (last run) | yes |" in text
+    assert ns.REGRESSION_NOTE not in text
 
 
 def test_the_constant_speed_baseline_is_the_last_run_of_the_same_grid(tmp_path):
