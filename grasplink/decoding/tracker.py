@@ -80,7 +80,7 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.decoding import rise_evidence, rise_travel, stop_jumps
+from grasplink.decoding import arrival, rise_evidence, rise_travel, stop_jumps
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -103,8 +103,11 @@ from grasplink.decoding.kernels.layout import (
     F_V,
     F_WIDTH,
     I_COLS,
+    I_DIRN,
+    I_FIRST,
     I_LAST,
     I_N,
+    I_RIDGE,
     I_RUN,
     I_WIDTH,
     IDS,
@@ -378,6 +381,11 @@ class TrackerDecoder(Decoder):
     # measured ridge / clutter likelihood ratio) on a child taking it for its ridge: 0 off;
     # RISE_TRAVEL_GAIN 0 keeps only its losses (a scale fitting the speed gains nothing)
     RISE_TRAVEL = 0.0
+    # a contact onto an unloaded sensor (its level under this, N: `arrival`) is the edge
+    # sliding onto the skin: tracks born there at a later ridge of their way had every
+    # ridge before it missed (0: off, the start prior alone). Full plan, one run
+    # (tune_tracker_kinds.py): see docs/decoding.md, "Arrival"
+    ARRIVAL_EMPTY_N = arrival.EMPTY_N
     RISE_TRAVEL_GAIN = 1.0
     # weight of the soft evidence of skipped and due ridges (`rise_evidence`: the signal's
     # rise where a track puts a ridge no contact told, scored in place of log(1 - DETECT_P),
@@ -639,6 +647,8 @@ class TrackerDecoder(Decoder):
         self._cache: tuple | None = None
         self._told_way = 0  # the direction the last update told (0: none)
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
+        self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
+        self._entry = arrival.entry_adjustment(self._log_prior, self._log_miss[:, :R])
         # what every contact's one-contact tracks share: a bank that `_births` copies and
         # fills in (the contact's id, time, sigma and the score)
         dirn = np.repeat(np.array([1, -1]), R)
@@ -883,6 +893,10 @@ class TrackerDecoder(Decoder):
         floats, ints, self._null = branch(tracks, contact, null, self._branch_model)
         if fast is not None:
             self._weigh_fast(floats, ints, ev, fast)
+        if self.ARRIVAL_EMPTY_N > 0 and len(floats) and self._onto_empty_skin(ev):
+            born = ints[:, I_FIRST] == ev.id  # the slip enters at an end (`arrival`)
+            way = (1 - ints[born, I_DIRN]) // 2
+            floats[born, F_SCORE] += self._entry[way, ints[born, I_RIDGE]]
         grip_per_s = self._grip_rate(ev)
         if grip_per_s > 0:  # the commanded grip may have made it (`efference.py`)
             # (a fast pulse's no-ridge children are back at clutter's odds: `_weigh_fast`)
@@ -927,6 +941,20 @@ class TrackerDecoder(Decoder):
             self._log_miss, self.MAX_SKIP, self._rise, self.RISE_EVIDENCE_GATE,
         )  # fmt: skip
         floats[rows, F_SCORE] += self.RISE_EVIDENCE * gain
+
+    def _onto_empty_skin(self, ev: ContactEvent) -> bool:
+        """Whether the sensor read unloaded just before ev's onset (`arrival.unloaded`):
+        decided once per contact, so a replay weighs it alike."""
+        known = self._unloaded.get(ev.id)
+        if known is None:
+            n = max(1, round(arrival.LEVEL_S * self.fs_hz))
+            level = self._recent.mean(ev.index - n, ev.index)
+            noise = self.detector.noise
+            white = noise.white(max(0, ev.index - n) // noise.block)
+            sigma = None if white is None else max(float(white[0]), NOISE_FLOOR_N)
+            known = arrival.unloaded(level, sigma, n, self.ARRIVAL_EMPTY_N)
+            _put_bounded(self._unloaded, ev.id, known, self.VERDICTS_KEPT)
+        return known
 
     def _grip_rate(self, ev: ContactEvent) -> float:
         """Contacts per s like ev the commanded grip makes at its onset (0: none noted, or

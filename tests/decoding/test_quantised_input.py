@@ -141,7 +141,7 @@ def test_sensor_on_its_rail_before_the_object_arrives(speed, reverse, seed):
 
 
 DIPS_DEFECT = (
-    "speed median 5.6-7.9 % > 5 % with speed dips at every ridge: the tracker that replaced "
+    "speed median 5.1-7.3 % > 5 % with speed dips at every ridge: the tracker that replaced "
     "the constant-speed one (issue 9) has a narrow dip prior (0.1 mm); no wrong sign, no false slip"
     " (the dip prior's curve: docs/benchmarks/slip_reporting.md, DIP_PRIOR_MM)"
 )
@@ -163,7 +163,9 @@ def _xfail(reason: str) -> pytest.MarkDecorator:
         (40.0, False, 1, False),  # within 5 % since the detection model follows the detector
         pytest.param(40.0, False, 1, True, marks=_xfail(GAP_READ_AS_SLIP)),
         pytest.param(25.0, True, 2, False, marks=_xfail(DIPS_DEFECT)),
-        pytest.param(40.0, False, 3, False, marks=_xfail(DIPS_DEFECT)),
+        # within 5 % since a slip onto the empty skin enters at an end (`decoding.arrival`:
+        # 4.7 %; 5.5 % with ARRIVAL_EMPTY_N 0, the start prior alone)
+        (40.0, False, 3, False),
     ],
 )
 def test_speed_after_the_rail_with_dips(speed, reverse, seed, quantised):
