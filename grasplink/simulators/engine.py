@@ -95,6 +95,9 @@ class Simulation:
 
     With `live`, the participants run on that bus in real time (`simulators/live.py`);
     with no controllers there, the loop is closed by whatever master is on the bus.
+
+    A scene already given to a Simulation is parsed again (`Scene.fresh`): `self.scene` is
+    the one this run steps, so a parsed scene can be run any number of times.
     """
 
     def __init__(
@@ -106,6 +109,9 @@ class Simulation:
         measure: bool = False,
         live: LiveBus | None = None,
     ):
+        if scene.claimed:  # run before: its effects hold where that run ended
+            scene = scene.fresh()
+        scene.claimed = True
         self.scene = scene
         self.recorder = recorder
         self.measure = measure

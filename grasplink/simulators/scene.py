@@ -6,6 +6,7 @@ and what was expected. See docs/scenes.md for the format.
 
 from __future__ import annotations
 
+import copy
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -92,6 +93,15 @@ class Scene:
     endpoints: list[Endpoint]  # what the nodes read and write
     ordered: list[Effect]  # effects in the order they step
     domain_of: dict[str, str]  # signal -> domain
+    data: dict | None = field(default=None, repr=False, compare=False)  # parsed from this
+    claimed: bool = field(default=False, repr=False, compare=False)  # a Simulation ran it
+
+    def fresh(self) -> Scene:
+        """The scene parsed again from what it was parsed from: its effects carry a run's
+        state (object, grip, filters, generators), so each run needs its own."""
+        if self.data is None:
+            raise ConfigError(f"{self.path}: this scene was not parsed from data; load it again")
+        return parse_scene(self.data, self.path)
 
     @property
     def duration_us(self) -> int:
@@ -141,6 +151,7 @@ def load_scene(path: str | Path) -> Scene:
 
 
 def parse_scene(data: dict, source: str) -> Scene:
+    data = copy.deepcopy(data)  # kept for `Scene.fresh`; the caller's dict may change later
     top = Params(data, source)
     head = top.table_of("scene")
     name = head.string("name", Path(source).stem)
@@ -196,6 +207,7 @@ def parse_scene(data: dict, source: str) -> Scene:
         endpoints,
         ordered,
         domain_of,
+        copy.deepcopy(data),
     )
 
 
