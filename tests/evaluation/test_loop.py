@@ -201,8 +201,10 @@ def test_fast_slip_in_every_mode_drops_without_the_reflex_and_is_stopped_with_it
         assert with_reflex.belt_latency_s is None
     elif mode == "grip_force":
         assert with_reflex.slip_belt_latency_s is None
-    else:  # the slip belt runs before the reflex acts (the speed needs one contact more)
-        assert 0 < with_reflex.slip_belt_latency_s < with_reflex.reflex_latency_s
+    else:  # the slip belt runs no later than the reflex, which needs the speed as well
+        # (one contact more until s25: a slip onto the empty skin now enters at an end,
+        # `decoding/arrival.py`, and its speed may come with the flag)
+        assert 0 < with_reflex.slip_belt_latency_s <= with_reflex.reflex_latency_s
 
 
 def test_trial_is_the_same_for_the_same_seed():
