@@ -80,7 +80,7 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.decoding import rise_evidence, rise_travel, stop_jumps
+from grasplink.decoding import coast_bound, rise_evidence, rise_travel, stop_jumps
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -513,6 +513,10 @@ class TrackerDecoder(Decoder):
     BOUND_SHARE = 0.01
     SCHEDULE = 3  # ridges ahead whose silence is scored
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
+    # ... and stopped (no speed shown) this many intervals (the spacing into the last ridge
+    # at the speed there) after the last ridge's contact: past it no contact can come, so
+    # the speed is unobserved (`coast_bound`); 0: shown until a step or staleness ends it
+    COAST_INTERVALS = 0.0
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
     MEMO = 8  # contacts whose branches are kept for a replay on the same inputs (`_step`)
     VERDICTS_KEPT = 64  # contacts whose step / fast-jump / grip verdicts are remembered
@@ -1103,10 +1107,29 @@ class TrackerDecoder(Decoder):
         computed for the active tracks only (kernels.posterior.schedule). Cached on the
         bank (banks are immutable)."""
         if B._sched is None:
-            B._sched = posterior_kernels.schedule(
-                _tracks(B), self._silence, self._skin, self._latency_floor(B)
+            B._sched = self._coast_bound(
+                B,
+                posterior_kernels.schedule(
+                    _tracks(B), self._silence, self._skin, self._latency_floor(B)
+                ),
             )
         return B._sched
+
+    def _coast_bound(self, B: _Bank, sched: tuple) -> tuple:
+        """`sched` (fresh arrays) with the coasts past the last ridge bounded
+        (`coast_bound`, COAST_INTERVALS; 0: as it is)."""
+        if not self.COAST_INTERVALS or not len(B):
+            return sched
+        fields = {"s": B.X[:, 0], "t": B.t, "v": B.X[:, 1], "stop": B.stop, "run": B.run}
+        fields |= {"dirn": B.dirn, "ridge": B.ridge}
+        return coast_bound.bound(
+            sched, fields, self._pos, self._last_gaps, self.count, self.COAST_INTERVALS
+        )
+
+    @cached_property
+    def _last_gaps(self) -> np.ndarray:
+        """Per direction, the spacing into the last ridge (`coast_bound.last_gaps`)."""
+        return coast_bound.last_gaps(self._pos, self.count)
 
     def _soft_schedule(self, B: _Bank, g: float):
         """The schedule with each due ridge scored by the signal's rise where the track puts
@@ -1123,10 +1146,10 @@ class TrackerDecoder(Decoder):
         index = {c.id: c.index for c in self._contacts}
         last = np.fromiter((index.get(int(k), -1) for k in B._i[:, I_LAST]), np.int64, len(B))
         fields = {key: getattr(B, key) for key in ("X", "t", "stop", "run", "dirn", "ridge")}
-        return rise_evidence.silence(
+        return self._coast_bound(B, rise_evidence.silence(
             open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
             self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
-        )  # fmt: skip
+        ))  # fmt: skip
 
     def _latency_floor(self, B: _Bank) -> np.ndarray:
         """How late each track's next contact may still be told, at least: the probes'
