@@ -517,6 +517,7 @@ class TrackerDecoder(Decoder):
     # at the speed there) after the last ridge's contact: past it no contact can come, so
     # the speed is unobserved (`coast_bound`); 0: shown until a step or staleness ends it
     COAST_INTERVALS = 0.0
+    COAST_GAP = 0.0  # ... the interval's spacing: 0 the one into the last ridge, 1 the largest
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
     MEMO = 8  # contacts whose branches are kept for a replay on the same inputs (`_step`)
     VERDICTS_KEPT = 64  # contacts whose step / fast-jump / grip verdicts are remembered
@@ -630,7 +631,7 @@ class TrackerDecoder(Decoder):
         self._fast: dict[int, float] = {}  # contacts told pulses that jumped like a stop's
         self._recent = step_shape.Recent(fs_hz)  # the samples their shapes are read from
         # the banks' open schedules and the due ridges read (`_soft_schedule`)
-        self._soft_banks: dict[int, tuple[_Bank, tuple, dict]] = {}
+        self._soft_banks: dict[int, tuple[_Bank, tuple, dict, dict]] = {}
         noise = self.detector.noise  # skipped ridges' rises read from them (`rise_evidence`)
         self._rise = rise_evidence.RiseEvidence(
             fs_hz, self._recent, noise.white, noise.block, NOISE_FLOOR_N
@@ -1129,6 +1130,8 @@ class TrackerDecoder(Decoder):
     @cached_property
     def _last_gaps(self) -> np.ndarray:
         """Per direction, the spacing into the last ridge (`coast_bound.last_gaps`)."""
+        if self.COAST_GAP:  # the layout's largest spacing (`_coast`) either way
+            return np.full(2, self._coast)
         return coast_bound.last_gaps(self._pos, self.count)
 
     def _soft_schedule(self, B: _Bank, g: float):
@@ -1140,15 +1143,16 @@ class TrackerDecoder(Decoder):
             open_sched = posterior_kernels.schedule(
                 _tracks(B), self._silence_open, self._skin, self._latency_floor(B)
             )
-            known = (B, open_sched, {})
+            known = (B, open_sched, {}, {})
             _put_bounded(self._soft_banks, id(B), known, 2)
-        _, open_sched, scored = known
+        _, open_sched, scored, memo = known
         index = {c.id: c.index for c in self._contacts}
         last = np.fromiter((index.get(int(k), -1) for k in B._i[:, I_LAST]), np.int64, len(B))
         fields = {key: getattr(B, key) for key in ("X", "t", "stop", "run", "dirn", "ridge")}
         return self._coast_bound(B, rise_evidence.silence(
             open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
             self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
+            memo,
         ))  # fmt: skip
 
     def _latency_floor(self, B: _Bank) -> np.ndarray:
