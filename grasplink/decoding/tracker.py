@@ -384,7 +384,10 @@ class TrackerDecoder(Decoder):
     # never below it); 0: off (the fixed penalty alone). At 1, full plan, 2 seeds, one run:
     # snr10 speed missing 60.5 -> 54.7 %, wrong direction 10.4 -> 3.6 %, no other target
     # moved; cost: snr10 speed at rest 13.8 -> 24.4 %, flagged at rest 40.3 -> 46.4 %, p90
-    # 75 -> 84 %, loop missing 63.2 -> 64.7 % (docs/decoding.md): off
+    # 75 -> 84 %, loop missing 63.2 -> 64.7 % (docs/decoding.md): off. With the coast
+    # bounded (COAST_INTERVALS 1, full plan, 2 seeds, one run): snr10 missing 60.3 -> 54.6 %,
+    # speed / flagged at rest 14.0 / 39.2 -> 13.2 / 34.0 %; but slip dropped 17.2 -> 18.8 %
+    # and the bound fails the clean decoding targets (test_tracker): still off
     RISE_EVIDENCE = 0.0
     # ... while the pulses told stand under this many white-noise units at their median
     # (`PulseCheck.height_snr`: heavy noise). 6, not the pulse probe's 10: at 10 the loop's
@@ -515,7 +518,10 @@ class TrackerDecoder(Decoder):
     COAST_S = 0.5  # a slip past the last ridge: stopped by silence no sooner (see _coast_end)
     # ... and stopped (no speed shown) this many intervals (the spacing into the last ridge
     # at the speed there) after the last ridge's contact: past it no contact can come, so
-    # the speed is unobserved (`coast_bound`); 0: shown until a step or staleness ends it
+    # the speed is unobserved (`coast_bound`); 0: shown until a step or the coast end.
+    # snr10 at-rest updates with a speed 1944 -> 1052 (rest_speed_causes.py, evidence on);
+    # off: the decoding benchmark scores the speed past the last ridge (test_tracker's
+    # speed p90 at 90-120 mm/s 1.0 > 0.1, fibonacci 0.24), docs/decoding.md
     COAST_INTERVALS = 0.0
     COAST_GAP = 0.0  # ... the interval's spacing: 0 the one into the last ridge, 1 the largest
     TURN_PER_S = 0.3  # a slip stops or reverses unseen between contacts (rate, per s)
