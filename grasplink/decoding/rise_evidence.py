@@ -25,6 +25,7 @@ so a contact weighs the same however the input was chunked and whenever it is re
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
@@ -49,23 +50,36 @@ H_DEFAULT = 5.0  # the median before any contact is told (a 10 dB pulse's)
 _GRID = 32  # points of the size prior
 
 
-def log_ratio(z: np.ndarray, median_h: float, h_low: float = H_LOW) -> np.ndarray:
+def log_ratio(z: np.ndarray, median_h: float | np.ndarray, h_low: float = H_LOW) -> np.ndarray:
     """log p(z | a pulse of unknown size) / p(z | none), per z (unclipped): the size
-    log-uniform over h_low..`H_HIGH` x median_h, z ~ N(h, 1) against N(0, 1). NaN
-    where z is NaN; ValueError for a median that is not a positive number."""
-    if not (math.isfinite(median_h) and median_h > 0.0):
-        raise ValueError(f"rise evidence: the told pulses' median z {median_h!r} is not > 0")
+    log-uniform over h_low..`H_HIGH` x median_h (one median, or one per z), z ~ N(h, 1)
+    against N(0, 1). NaN where z is NaN; ValueError for a median that is not a positive
+    number."""
     z = np.asarray(z, dtype=float)
     if not 0.0 < h_low < H_HIGH:
         raise ValueError(f"rise evidence: the size prior's low end {h_low!r} is not in (0, 2)")
-    h = np.exp(np.linspace(math.log(h_low * median_h), math.log(H_HIGH * median_h), _GRID))
+    if np.ndim(median_h) == 0:
+        h = _sizes(float(median_h), h_low)
+    else:  # a grid per z (the same numbers as one call per median)
+        medians = np.asarray(median_h, dtype=float).tolist()
+        h = np.stack([_sizes(m, h_low) for m in medians]) if medians else np.zeros((0, _GRID))
     terms = z[..., None] * h - 0.5 * h * h
     top = np.max(terms, axis=-1, keepdims=True)
     return top[..., 0] + np.log(np.mean(np.exp(terms - top), axis=-1))
 
 
+@functools.lru_cache(maxsize=256)
+def _sizes(median_h: float, h_low: float) -> np.ndarray:
+    """The size prior's grid for a median (read-only: shared by every call)."""
+    if not (math.isfinite(median_h) and median_h > 0.0):
+        raise ValueError(f"rise evidence: the told pulses' median z {median_h!r} is not > 0")
+    h = np.exp(np.linspace(math.log(h_low * median_h), math.log(H_HIGH * median_h), _GRID))
+    h.flags.writeable = False
+    return h
+
+
 def skip_score(
-    z: np.ndarray, median_h: float, log_miss: np.ndarray, h_low: float = H_LOW
+    z: np.ndarray, median_h: float | np.ndarray, log_miss: np.ndarray, h_low: float = H_LOW
 ) -> np.ndarray:
     """A skipped ridge's log score from its z: the ratio `log_ratio`, no less than the
     detector-based `log_miss` (log(1 - DETECT_P)), no more than `CLIP`; `log_miss` where
@@ -101,6 +115,9 @@ class RiseEvidence:
         self._told: dict[int, np.ndarray] = {}  # contact id -> its z per window (bounded)
         self.h_low = H_LOW  # the size prior's low end (x the median)
         self._heights: dict[int, float] = {}  # contact id -> told pulse height (noise units)
+        # the medians read many times between contacts: kept until a contact changes them
+        self._medians: dict[int, float] = {}
+        self._height_median: float | None = None
 
     def width_for(self, speed_mm_s: np.ndarray) -> np.ndarray:
         """The probe window (samples) nearest each speed's rise time (`RISE_MM` of travel)."""
@@ -151,6 +168,41 @@ class RiseEvidence:
             out[k] = adj / (sigma * math.sqrt(2.0 / w * (1.0 + 2.0 * PULSE_RAMP**2)))
         return out
 
+    def z_each(self, onset: np.ndarray, width: np.ndarray, before: int) -> np.ndarray:
+        """`z_at` of each onset on its own (its sums anchored at its own first sample, as
+        a call with that onset alone reads it: the same z to the bit whatever else is
+        read with it), vectorised per window width."""
+        onset = np.asarray(onset, dtype=float)
+        width = np.asarray(width, dtype=np.int64)
+        out = np.full(onset.shape, np.nan)
+        ok = np.isfinite(onset)
+        centre = np.zeros(onset.shape, np.int64)
+        centre[ok] = np.rint(onset[ok] + OFFSET * width[ok]).astype(np.int64)
+        lo, hi = centre - 3 * width, centre + 3 * width  # samples lo .. hi - 1 read
+        ok &= (hi <= before) & (lo >= self.recent.start)
+        if not ok.any():
+            return out
+        start, end = int(lo[ok].min()), int(hi[ok].max())
+        x = self.recent.held(start, end)
+        if x is None:  # (not all held: none of these is)
+            return out
+        noise = {}  # the white noise per block: one lookup each
+        for b in np.unique(centre[ok] // self.block).tolist():
+            white = self.white(b)
+            noise[b] = math.nan if white is None else max(float(white[0]), self.floor_n)
+        for w in np.unique(width[ok]).tolist():
+            k = np.flatnonzero(ok & (width == w))
+            rows = x[(lo[k] - start)[:, None] + np.arange(6 * w)]
+            sums = np.concatenate([np.zeros((len(k), 1)), np.cumsum(rows, axis=1)], axis=1)
+            d0, d1, d2 = (
+                (sums[:, m + w] - 2.0 * sums[:, m] + sums[:, m - w]) / w for m in (w, 3 * w, 5 * w)
+            )
+            adj = d1 - PULSE_RAMP * (d0 + d2)
+            sigma = np.array([noise[b] for b in (centre[k] // self.block).tolist()], float)
+            z = adj / (sigma * math.sqrt(2.0 / w * (1.0 + 2.0 * PULSE_RAMP**2)))
+            out[k] = np.where(np.all(np.isfinite(rows), axis=1), z, np.nan)
+        return out
+
     def tell(self, contact_id: int, onset: float, before: int) -> None:
         """Note a told contact's z on every window, for the size prior's median."""
         if contact_id in self._told:
@@ -158,25 +210,34 @@ class RiseEvidence:
         z = self.z_at(np.full(len(self.widths), float(onset)), self.widths, before)
         if np.any(np.isfinite(z)):
             _put(self._told, contact_id, z)
+            self._medians.clear()
 
     def note_height(self, contact_id: int, height_snr: float | None) -> None:
         """Note a told pulse's height above its base (white-noise units: `PulseCheck`)."""
         if height_snr is not None and math.isfinite(height_snr):
             _put(self._heights, contact_id, float(height_snr))
+            self._height_median = None
 
     def blind(self, gate: float) -> bool:
         """The told pulses stand under `gate` noise units at their median: heavy noise, where
         the detector misses ridges a track can still read (none told: False)."""
         if not self._heights:
             return False
-        return float(np.median(np.fromiter(self._heights.values(), float))) < gate
+        if self._height_median is None:
+            self._height_median = float(np.median(np.fromiter(self._heights.values(), float)))
+        return self._height_median < gate
 
     def median_h(self, width: int) -> float:
         """The median z on `width` of the contacts told lately (`H_DEFAULT` before any; at
         least 1: a told pulse is a rise)."""
+        known = self._medians.get(width)
+        if known is not None:
+            return known
         k = int(np.flatnonzero(self.widths == width)[0])
         told = [z[k] for z in self._told.values() if np.isfinite(z[k])]
-        return max(1.0, float(np.median(told))) if told else H_DEFAULT
+        out = max(1.0, float(np.median(told))) if told else H_DEFAULT
+        self._medians[width] = out
+        return out
 
 
 def _put(table: dict, key: int, value) -> None:
@@ -279,6 +340,7 @@ def silence(
     scored: dict[tuple[int, int], float],
     evidence: RiseEvidence,
     ahead: int,
+    memo: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The silence schedule (due, adj, stopped, limit: `kernels.posterior.schedule`'s) with
     each due ridge of a slipping track scored by the signal's rise where the track puts it
@@ -292,46 +354,51 @@ def silence(
     the global sample index of each track's last contact (-1: not held, then the plain
     miss); `held`: samples held up to this global index; `scored`: (track, ridge ahead)
     -> its score once read (the bank's: a ridge is read once, the same at every later
-    update). A ridge's time due waits for the samples its rise is read from."""
+    update). A ridge's time due waits for the samples its rise is read from. `memo`: the
+    bank's own dict, where what does not change with g is kept between calls (`_plan`)."""
     due0, _, stopped0, limit0 = open_sched
+    plan = None if memo is None else memo.get("plan")
+    if plan is None or not np.array_equal(plan[0], last):
+        plan = (last.copy(), *_plan(open_sched, tables, bank, last, log_miss, evidence))
+        if memo is not None:
+            memo["plan"] = plan
+    _, active, due_a, k, coast, width, onset, lm = plan
     due, adj = due0.copy(), np.zeros(due0.shape)
     stopped, limit = stopped0.copy(), limit0.copy()
-    X, t, stop, run = bank["X"], bank["t"], bank["stop"], bank["run"]
-    dirn, ridge = bank["dirn"], bank["ridge"]
-    R = log_miss.shape[1] - 1
-    S = due0.shape[1] - 1
-    fs = evidence.fs_hz
-    active = np.flatnonzero(np.isnan(stop) & (run >= 2))
     if not len(active):
         return due, adj, stopped, limit
-    di = (1 - dirn[active]) // 2
-    row = di * (R + 1) + np.minimum(ridge[active], R)
-    k = np.minimum(ridge[active][:, None] + 1 + np.arange(S), R)
-    coast = tables["coast"][row]
-    v = np.maximum(X[active, 1], 1.0)
-    tau = (tables["target"][row] - X[active, 0][:, None]) / v[:, None]
-    width = evidence.width_for(v)
-    onset = last[active][:, None] + tau * fs
-    ready_s = t[active][:, None] + (tau * fs + (OFFSET + 3.0) * width[:, None] + 1) / fs
-    when = np.where(last[active][:, None] >= 0, ready_s, -np.inf)
-    due[active, 1:] = np.maximum.accumulate(np.maximum(due0[active, 1:], when), axis=1)
-    lm = log_miss[di[:, None], k]
+    S = due0.shape[1] - 1
+    due[active, 1:] = due_a
     soft = lm.copy()
-    for a, n in enumerate(active.tolist()):
-        if last[n] < 0:
-            continue
-        for j in range(min(S, ahead)):
-            if coast[a, j] or due[n, j + 1] > g:
-                break
-            got = scored.get((n, j))
-            if got is None:
-                z = evidence.z_at(onset[a, j : j + 1], width[a : a + 1], held)
-                w = int(width[a])
-                h = evidence.median_h(w)
-                got = float(skip_score(z, h, lm[a, j : j + 1], evidence.h_low)[0])
-                if np.isfinite(z[0]):  # (else read again at the next update)
-                    scored[(n, j)] = got
-            soft[a, j] = lm[a, j] + weight * (got - lm[a, j])
+    # the due ridges read: per track, those ahead up to the coast end or one not yet due
+    read = np.zeros(lm.shape, bool)
+    span = min(S, ahead)
+    if span > 0:
+        open_ = ~coast[:, :span] & (due[active, 1 : span + 1] <= g)
+        read[:, :span] = np.logical_and.accumulate(open_, axis=1) & (last[active] >= 0)[:, None]
+    a_read, j_read = np.nonzero(read)
+    if len(a_read):
+        got = np.array(
+            [
+                scored.get((n, j), math.nan)
+                for n, j in zip(active[a_read].tolist(), j_read.tolist(), strict=True)
+            ]
+        )
+        new = np.flatnonzero(np.isnan(got))
+        if len(new):  # read once: one z_at call for every ridge not read before
+            a_new, j_new = a_read[new], j_read[new]
+            z = evidence.z_each(onset[a_new, j_new], width[a_new], held)
+            medians = {w: evidence.median_h(w) for w in np.unique(width[a_new]).tolist()}
+            h = np.array([medians[w] for w in width[a_new].tolist()], float)
+            fresh = skip_score(z, h, lm[a_new, j_new], evidence.h_low)
+            got[new] = fresh
+            for n, j, value, zk in zip(
+                active[a_new].tolist(), j_new.tolist(), fresh.tolist(), z.tolist(), strict=True
+            ):
+                if math.isfinite(zk):  # (else read again at the next update)
+                    scored[(n, j)] = value
+        lm_read = lm[a_read, j_read]
+        soft[a_read, j_read] = lm_read + weight * (got - lm_read)
     miss = np.cumsum(soft, axis=1)
     go_on = miss >= log_stop
     ended = np.logical_or.accumulate(~go_on | coast, axis=1)
@@ -342,3 +409,37 @@ def silence(
     limit[active, 1:] = np.where(done, 0, k + go_on)
     due[active, 1:] = np.where(done, np.inf, due[active, 1:])
     return due, adj, stopped, limit
+
+
+def _plan(
+    open_sched: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    tables: dict[str, np.ndarray],
+    bank: dict[str, np.ndarray],
+    last: np.ndarray,
+    log_miss: np.ndarray,
+    evidence: RiseEvidence,
+) -> tuple[np.ndarray, ...]:
+    """What `silence` reads of a bank whatever the time: the slipping tracks with a
+    speed, their due times (waiting for the samples each ridge's rise is read from), the
+    ridges ahead, whether each is the coast end, the probe width, the predicted onsets
+    (global sample index) and the misses' log(1 - DETECT_P)."""
+    due0 = open_sched[0]
+    X, t, stop, run = bank["X"], bank["t"], bank["stop"], bank["run"]
+    dirn, ridge = bank["dirn"], bank["ridge"]
+    R = log_miss.shape[1] - 1
+    S = due0.shape[1] - 1
+    fs = evidence.fs_hz
+    active = np.flatnonzero(np.isnan(stop) & (run >= 2))
+    di = (1 - dirn[active]) // 2
+    row = di * (R + 1) + np.minimum(ridge[active], R)
+    k = np.minimum(ridge[active][:, None] + 1 + np.arange(S), R)
+    coast = tables["coast"][row]
+    v = np.maximum(X[active, 1], 1.0)
+    tau = (tables["target"][row] - X[active, 0][:, None]) / v[:, None]
+    width = evidence.width_for(v)
+    onset = last[active][:, None] + tau * fs
+    ready_s = t[active][:, None] + (tau * fs + (OFFSET + 3.0) * width[:, None] + 1) / fs
+    when = np.where(last[active][:, None] >= 0, ready_s, -np.inf)
+    due_a = np.maximum.accumulate(np.maximum(due0[active, 1:], when), axis=1)
+    lm = log_miss[di[:, None], k]
+    return active, due_a, k, coast, width, onset, lm

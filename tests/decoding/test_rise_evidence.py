@@ -126,3 +126,27 @@ def test_bad_input_gives_no_evidence_or_a_clear_error():
         rev.log_ratio(np.array([1.0]), 5.0, h_low=3.0)
     with pytest.raises(ValueError, match="sample rate"):
         rev.RiseEvidence(0.0, clean.recent, lambda block: None, 50, 1e-3)
+
+
+def test_each_onset_reads_the_same_z_to_the_bit_read_together_or_alone():
+    # `silence` reads every due ridge in one call (`z_each`): each z must be the one a
+    # call with that onset alone gives, whatever else is read with it (replays, chunking)
+    rng = np.random.default_rng(11)
+    x = 1e3 + rng.standard_normal(800) + _pulse(800, 300, 2.5)  # a level: rounding shows
+    x[700] = np.nan
+    ev = _evidence(x)
+    widths = ev.width_for(np.array([10.0, 57.0, 118.0, 57.0, 22.0, 57.0, 57.0, 57.0]))
+    onsets = np.array([120.0, 300.0, 310.5, -900.0, 450.0, math.nan, 690.0, 785.0])
+    together = ev.z_each(onsets, widths, 790)
+    alone = np.array(
+        [ev.z_at(onsets[k : k + 1], widths[k : k + 1], 790)[0] for k in range(len(onsets))]
+    )
+    assert np.array_equal(together, alone, equal_nan=True)
+    assert np.isfinite(together[[0, 1, 2, 4]]).all()  # read
+    assert np.isnan(together[[3, 5, 6, 7]]).all()  # not held, not finite, a NaN sample read
+    # one median per z: the numbers of one call per median
+    z, medians = np.array([0.5, 2.5, 3.0, -1.0]), np.array([5.0, 5.0, 2.0, 8.0])
+    each = [rev.log_ratio(z[k : k + 1], float(medians[k]))[0] for k in range(len(z))]
+    assert np.array_equal(rev.log_ratio(z, medians), np.array(each))
+    with pytest.raises(ValueError, match="median z"):
+        rev.log_ratio(z, np.array([5.0, 0.0, 2.0, 8.0]))
