@@ -212,6 +212,43 @@ def test_mapping_procedure_remaps_a_tpdo():
     assert all(len(f.data) == 4 for _, f in rec.of(0x1A0))
 
 
+def _pdo_cache(engine) -> list:
+    """What the PDO engine derived from the store: per PDO and across them."""
+    per_pdo = [
+        (p.params, p.inhibit_us, p.timer_us, p.mapping, p.packer and p.packer.format, p.packed)
+        for p in engine.tpdos + engine.rpdos
+    ]
+    watchers = {k: [p.number for p in v] for k, v in engine._watchers.items()}
+    by_can_id = {k: (p.number, p.transmit) for k, p in engine._by_can_id.items()}
+    events = [p.number for p in engine._event_tpdos]
+    return [per_pdo, watchers, by_can_id, events, engine.can_ids(), set(engine._interest)]
+
+
+def test_a_pdo_parameter_write_re_reads_that_pdo_alone():
+    """A master configures a node one object at a time (~40 writes at boot): each write
+    re-reads the PDO it belongs to, not every PDO, and what the engine derives across
+    the PDOs (CAN-IDs, watched objects, event TPDOs) ends as a full reload leaves it."""
+    net, _ = network("belt")
+    engine = node(net, BELT).pdo
+    read = []
+    engine_read = engine._read
+    engine._read = lambda pdo: (read.append(pdo.number), engine_read(pdo))
+    _remap(
+        net,
+        BELT,
+        obj.TPDO_COMM + 1,
+        obj.TPDO_MAP + 1,
+        [(obj.BELT_VELOCITY_ACTUAL_MRAD_S << 16) | 32],
+    )
+    write_uint(net, BELT, obj.TPDO_COMM, 2, 254, 1)  # TPDO1 stays event-driven
+    write_uint(net, BELT, obj.TPDO_COMM + 1, 5, 30, 2)
+    assert read == [2] * 5 + [1, 2]  # the remap's five writes, then one write to each
+    remapped = _pdo_cache(engine)
+    engine.reload()
+    assert remapped == _pdo_cache(engine)
+    assert 2 in [p.number for p in engine._event_tpdos]
+
+
 @pytest.mark.parametrize(
     ("sub", "value", "code"),
     [

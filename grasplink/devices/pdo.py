@@ -83,13 +83,13 @@ class _Pdo:
     owed: deque[Frame] = field(default_factory=lambda: deque(maxlen=MAX_OWED_PACKETS))
     last_rx_us: int | None = None  # RPDO deadline monitoring
     mapping: list[MapEntry] = field(default_factory=list)
-    # Communication parameters as the store holds them, cached by `reload()` (which
-    # runs on every change of a PDO parameter): the hot path reads these, not the store.
+    # Communication parameters as the store holds them, cached by `_read()` (which runs
+    # on every change of this PDO's parameters): the hot path reads these, not the store.
     params: dict[int, int] = field(default_factory=dict)
     timer_us: int = 0  # event timer (sub-index 5), from `params`
     inhibit_us: int = 0  # inhibit time (sub-index 3), from `params`
     # struct packer for the mapped values (None if a mapped type has no fixed size),
-    # and the store's entries it packs, in mapping order (kept by `reload()`).
+    # and the store's entries it packs, in mapping order (kept by `_read()`).
     packer: struct.Struct | None = None
     packed: list[Entry] = field(default_factory=list)
 
@@ -171,7 +171,34 @@ class PdoEngine:
         return pdo.timer_us
 
     def reload(self) -> None:
-        """Re-read every mapping (after a reset or a parameter change)."""
+        """Re-read every mapping (after a reset or a change of the packets switch)."""
+        for pdo in self._by_comm.values():
+            self._read(pdo)
+        self._index()
+
+    def _read(self, pdo: _Pdo) -> None:
+        """Cache one PDO's parameters and mapping as the store holds them. Only its own
+        objects go into them, so a change of one PDO's parameters re-reads that PDO
+        alone (a master configuring a node writes ~40 of them, one by one)."""
+        pdo.params = {
+            sub: int(self.store.get(pdo.comm_index, sub))
+            for sub in range(1, 7)
+            if self.store.has(pdo.comm_index, sub)
+        }
+        pdo.inhibit_us = self._param(pdo, 3) * 100
+        pdo.timer_us = self._param(pdo, 5) * 1000
+        pdo.mapping = self._mapping(pdo)
+        if pdo.transmit:
+            pdo.packer = self._packer(pdo)
+            pdo.packed = (
+                [self.store.entry(e.index, e.subindex) for e in pdo.mapping]
+                if pdo.packer is not None
+                else []
+            )
+
+    def _index(self) -> None:
+        """What the PDOs read last give together: each valid CAN-ID's PDO (the first),
+        the objects watched, the event-driven TPDOs and the store indices of interest."""
         self._packings.clear()
         self._watchers.clear()
         self._event_tpdos = []
@@ -180,27 +207,13 @@ class PdoEngine:
         if self._packets_on_sync is not None:
             interest.add(self._packets_on_sync[0])
         for pdo in self._by_comm.values():
-            pdo.params = {
-                sub: int(self.store.get(pdo.comm_index, sub))
-                for sub in range(1, 7)
-                if self.store.has(pdo.comm_index, sub)
-            }
-            pdo.inhibit_us = self._param(pdo, 3) * 100
-            pdo.timer_us = self._param(pdo, 5) * 1000
             if self.is_valid(pdo):
                 self._by_can_id.setdefault(self.cob_id(pdo) & CAN_ID_MASK, pdo)
-            pdo.mapping = self._mapping(pdo)
             if pdo.transmit:
                 for entry in pdo.mapping:
                     self._watchers.setdefault((entry.index, entry.subindex), []).append(pdo)
                 if self.transmission_type(pdo) in (0, TYPE_EVENT_PROFILE):
                     interest.update(entry.index for entry in pdo.mapping)
-                pdo.packer = self._packer(pdo)
-                pdo.packed = (
-                    [self.store.entry(e.index, e.subindex) for e in pdo.mapping]
-                    if pdo.packer is not None
-                    else []
-                )
                 if self._sendable(pdo) and self.transmission_type(pdo) >= TYPE_EVENT_MANUFACTURER:
                     self._event_tpdos.append(pdo)
         self._can_ids = frozenset(self._by_can_id)
@@ -606,7 +619,8 @@ class PdoEngine:
 
     def _on_parameter_change(self, index: int, subindex: int) -> None:
         pdo = self._by_comm.get(index) or self._by_map[index]
-        self.reload()
+        self._read(pdo)
+        self._index()
         if index == pdo.comm_index:
             pdo.pending = False
             pdo.timer_due = False

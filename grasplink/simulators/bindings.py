@@ -111,7 +111,14 @@ class SceneSource:
         # (held). Further ahead would be an engine bug.
         if times[-1] >= self.times_us[-1] + self.period_us:
             raise RuntimeError("a node sampled ahead of the simulation")
-        return np.interp(times, self.times_us, self.values)
+        # np.interp reads, for each time, the held samples at or before and after it (or an
+        # end), but converts all it is handed to float first: the whole ring (2 s, 3000 EMG
+        # samples) for a tick's 3-20. It gets the samples from the last at or before the
+        # first time to the first after the last one, the same ones it reads: same bits.
+        held = self.times_us
+        a = max(0, int(held.searchsorted(times[0], "right")) - 1)
+        b = int(held.searchsorted(times[-1], "right")) + 1
+        return np.interp(times, held[a:b], self.values[a:b])
 
     def final_until_us(self) -> int | None:
         """Up to the last scene sample: later times would be held, not interpolated."""

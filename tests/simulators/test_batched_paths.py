@@ -260,3 +260,41 @@ def test_scene_source_holds_the_last_capacity_samples_as_concatenating_would():
         assert np.array_equal(source.times_us, all_times)
         assert np.array_equal(source.values, all_values)
         assert source.final_until_us() == (int(all_times[-1]) if len(all_times) else -1)
+
+
+@pytest.mark.parametrize("rate_hz", [400, 1500])
+def test_scene_source_samples_are_np_interp_over_the_whole_ring_bit_for_bit(rate_hz):
+    """A node's samples, interpolated over the held samples about them only, are those
+    interpolating over the whole ring gives: on the scene's grid and off it (a node reset
+    mid-scene), before the ring's first sample, held past its last, at exact sample times,
+    next to NaN and infinite samples and signed zeros."""
+    source = SceneSource(rate_hz)
+    rng = np.random.default_rng(5)
+    count = 3 * source.capacity
+    times = np.arange(count, dtype=np.int64) * 1_000_000 // rate_hz
+    values = rng.normal(size=count)
+    values[rng.integers(0, count, 40)] = np.nan
+    values[rng.integers(0, count, 20)] = np.inf
+    values[rng.integers(0, count, 20)] = -0.0
+    checked = 0
+    for end in range(10, count, 7):
+        source.append(times[end - 7 : end], values[end - 7 : end])
+        held_t, held_v = source.times_us, source.values
+        for t0_us, first, n in (
+            (0, end - 12, 12),  # on the grid: exact sample times
+            (0, end - 1, 1),
+            (137, end - 20, 9),  # off it, between held samples
+            (137, end - 9, 9),  # the last one held past the ring's end
+            (0, max(0, end - source.capacity - 4), 6),  # starting before the ring
+        ):
+            if first < 0:
+                continue
+            index = np.arange(first, first + n, dtype=np.int64)
+            at = t0_us + index * 1_000_000 // rate_hz
+            if at[-1] >= held_t[-1] + source.period_us:
+                continue
+            got = source.samples(t0_us, first, n, rate_hz)
+            want = np.interp(at, held_t, held_v)
+            assert got.tobytes() == want.tobytes(), (end, t0_us, first)
+            checked += 1
+    assert checked > 1000
