@@ -38,9 +38,11 @@ RISE_MIN_S = 0.005
 RISE_MAX_S = 0.2
 RISE_STEPS = 24
 MIN_FIT_SAMPLES = 3  # level samples between the two onsets the fit needs at the least
-# an earlier onset at most this long before (a pulse's width: the full plan's stops told
-# pulses on one came 35-70 ms after it, benchmarks/stop_pulse_under.py)
-MAX_GAP_S = 0.1
+# an earlier onset at most this long before: the full plan's stops told pulses on one came
+# 35-70 ms after it (benchmarks/stop_pulse_under.py); a ridge train at ~41 mm/s on 4 mm
+# spacings (98 ms) read a step at 95 ms, the earlier pulse's fall held up by the FSR's
+# hysteresis and its fitted course falling under it (reversal kind, uniform4)
+MAX_GAP_S = 0.075
 
 
 class Course(NamedTuple):

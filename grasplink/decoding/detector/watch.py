@@ -104,6 +104,7 @@ class Watch:
     rise: int = 0  # a probe: the rise of its scale (samples)
     long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
     under: bool = False  # fell back on an earlier pulse's course: judged at the hold (pulse_under)
+    course: tuple[float, ...] | None = None  # ... that course (`PulseWatcher._under_course`)
     # what `watch_scan` reads of it that stays (a `kernels.detector.Watched` as a plain
     # tuple, built once by `PulseWatcher.start`: the fields it holds are never reassigned)
     scanned: tuple = ()
@@ -503,27 +504,54 @@ class PulseWatcher:
             detrended, watch.noise, self.sure_rise, self.sure_snr, self.sure_drop
         )
 
-    def _under_residual(self, watch: Watch, upto: int) -> np.ndarray | None:
-        """The level after the onset to sample `upto` with the course of the pulse of the
-        latest earlier kink contact (decided by this one's decision, onset within
-        `pulse_under.MAX_GAP_S`) out, as `plain` from the onset (`pulse_under.residual`);
-        None: no such contact, or no level or fit."""
+    def _under_course(self, watch: Watch) -> tuple[float, ...]:
+        """The course of the pulse of the latest earlier kink contact (decided by this
+        one's decision, onset within `pulse_under.MAX_GAP_S`) fitted over the level from
+        its onset to this one's base (`pulse_under.fit`), once per watch: (its onset,
+        height, rise, the course's value at this base); () when there is none (no such
+        contact, level or fit)."""
+        if watch.course is not None:
+            return watch.course
+        watch.course = ()
         own = [e for n, e, _ in self._bases if n == watch.index]
-        if not own:
-            return None
-        earlier = [(n, b) for n, e, b in self._bases if n < watch.index - 2 and e <= own[-1]]
+        earlier = [
+            (n, b) for n, e, b in self._bases if n < watch.index - 2 and own and e <= own[-1]
+        ]
         if not earlier or watch.index - earlier[-1][0] > self.under_gap:
-            return None
+            return watch.course
         n, base = earlier[-1]
         h = self.level_half
-        first = n - h
-        i0 = first + h - self._level_start
-        i1 = upto + h - self._level_start + 1
-        if i0 < 0 or i1 > len(self._level):
-            return None
         before = watch.index - 2 * h - 1
-        out = pulse_under.residual(self._level[i0:i1], first, before, n, base, h, self.fs_hz)
-        return None if out is None else out[watch.index - before :]
+        i0, i1 = n - h + h - self._level_start, before + h - self._level_start + 1
+        if i0 < 0 or i1 > len(self._level):
+            return watch.course
+        centres = np.arange(n - h, before + 1)
+        course = pulse_under.fit(self._level[i0:i1] - base, centres - n, h, self.fs_hz)
+        if course is not None:
+            at = course.height * float(
+                pulse_under.smoothed(np.array([before - n]), course.rise, h)[0]
+            )
+            watch.course = (float(n), course.height, course.rise, at)
+        return watch.course
+
+    def _under_residual(
+        self, watch: Watch, upto: int, since: int | None = None
+    ) -> np.ndarray | None:
+        """The level from `since` (default: the onset) to sample `upto` less the base and
+        the earlier pulse's course carried on from it (`_under_course`), as `plain`; None:
+        no course, or no level."""
+        course = self._under_course(watch)
+        if not course:
+            return None
+        n, height, rise, at = course
+        h = self.level_half
+        since = watch.index if since is None else since
+        i0, i1 = since + h - self._level_start, upto + h - self._level_start + 1
+        if i0 < 0 or i1 > len(self._level) or i1 <= i0:
+            return None
+        k = np.arange(since, upto + 1)
+        model = height * pulse_under.smoothed(k - n, rise, h) - at
+        return self._level[i0:i1] - watch.base - model
 
     def _under_pulse(self, watch: Watch, upto: int) -> bool:
         """Fallen back like a pulse by `upto` (before the hold), but not with the earlier
