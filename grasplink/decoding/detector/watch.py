@@ -472,7 +472,7 @@ class PulseWatcher:
                 fell = watch.fell or (not small and self._fell_on_slip_trend(watch))
                 under = watch.under or (fell and self.settings.pulse_under_step and not small)
                 if under and self._under_step(watch):
-                    return PulseCheck(watch.id, hold + h, False, None)
+                    return PulseCheck(watch.id, hold + h, False, None, under=True)
                 if fell or watch.under:
                     return PulseCheck(watch.id, hold + h, True)
             if hit >= 0 and not (watch.under and end < hold):
