@@ -64,7 +64,7 @@ class WatchSettings:
     long_past_pulse: bool = False
     # a contact that falls back before the hold within `pulse_under.MAX_GAP_S` of an earlier
     # one: judged at the hold with that pulse's course out (`pulse_under`); False: off
-    pulse_under_step: bool = False
+    pulse_under_step: bool = True
 
 
 def step_hold_samples(fs_hz: float, settings: WatchSettings) -> int:
