@@ -63,7 +63,8 @@ class WatchSettings:
     # ... and the base-to-base trend too (its base sits on that pulse as well); False: off
     long_past_pulse: bool = False
     # a contact that falls back before the hold within `pulse_under.MAX_GAP_S` of an earlier
-    # one: judged at the hold with that pulse's course out (`pulse_under`); False: off
+    # one: judged at the hold with that pulse's course out (`pulse_under`); False: off (the
+    # outputs before it, bit for bit)
     pulse_under_step: bool = True
 
 
