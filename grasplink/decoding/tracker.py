@@ -825,6 +825,8 @@ class TrackerDecoder(Decoder):
         onset = next((c.index for c in self._contacts if c.id == check.id), None)
         if onset is None or check.sure:
             return step_shape.UNTOLD
+        if check.under:  # flat with the earlier pulse's course out (`detector.pulse_under`)
+            return step_shape.STOP_LIKE
         return self._recent.verdict(onset, check.emit_index)
 
     # ------------------------------------------------------------------ hypotheses

@@ -117,7 +117,9 @@ def test_a_stop_told_a_pulse_on_a_falling_tail_is_cleared_within_0_15_s(
 ):
     label, numbers = sr.VARIANTS[kind][variant]
     rec = sr.Case(kind, label, numbers, layout, reverse, seed).make()
-    tuning = {} if on else {"tuning": {"LOG_FAST_JUMP_RIDGE": 0.0}}
+    # (off: the earlier pulse's course out too - `detector.pulse_under` clears this one too)
+    off = {"tuning": {"LOG_FAST_JUMP_RIDGE": 0.0}, "watch": {"pulse_under_step": False}}
+    tuning = {} if on else off
     decoder = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, tuning)
     assert isinstance(decoder, TrackerDecoder)
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)

@@ -35,6 +35,9 @@ class PulseCheck(NamedTuple):
     # a step told at the sure hold (`WatchSettings.sure_hold_s`): sharp, tall and flat
     # (`watch.sharp_flat_step`), which ridge pulses seldom are
     sure: bool = False
+    # a step told with an earlier pulse's course out (`detector.pulse_under`): the level on
+    # its own rises and falls back with that pulse, the step itself is flat - a stop's shape
+    under: bool = False
 
 
 class Ledger:

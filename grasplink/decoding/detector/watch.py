@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from grasplink.decoding.detector import pulse_under
 from grasplink.decoding.detector.events import ContactEvent, Ledger, PulseCheck
 from grasplink.decoding.detector.noise_floor import NOISE_FLOOR_N, NoiseFloor, hinge_gain
 from grasplink.decoding.detector.prior_trend import trend_past_pulse
@@ -61,6 +62,10 @@ class WatchSettings:
     trend_past_pulse: bool = False
     # ... and the base-to-base trend too (its base sits on that pulse as well); False: off
     long_past_pulse: bool = False
+    # a contact that falls back before the hold within `pulse_under.MAX_GAP_S` of an earlier
+    # one: judged at the hold with that pulse's course out (`pulse_under`); False: off (the
+    # outputs before it, bit for bit)
+    pulse_under_step: bool = True
 
 
 def step_hold_samples(fs_hz: float, settings: WatchSettings) -> int:
@@ -99,6 +104,8 @@ class Watch:
     room: float = 0.0  # how far a falling tail under the onset can still fall (N; 0: none)
     rise: int = 0  # a probe: the rise of its scale (samples)
     long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
+    under: bool = False  # fell back on an earlier pulse's course: judged at the hold (pulse_under)
+    course: tuple[float, ...] | None = None  # ... that course (`PulseWatcher._under_course`)
     # what `watch_scan` reads of it that stays (a `kernels.detector.Watched` as a plain
     # tuple, built once by `PulseWatcher.start`: the fields it holds are never reassigned)
     scanned: tuple = ()
@@ -197,6 +204,7 @@ class PulseWatcher:
         self.trend_n = max(1, round(settings.trend_s * fs_hz))
         self.long_trend_n = max(self.trend_n + 1, round(settings.long_trend_s * fs_hz))
         self.slip_fall = 6.0  # noise units (`_fell_in_slip`)
+        self.under_gap = round(pulse_under.MAX_GAP_S * fs_hz)  # (`_under_residual`)
         self._scan_settings = tuple(
             ScanSettings(
                 fall_credit=self.fall_credit, width=2 * half + 1, min_rise=self.min_rise,
@@ -453,13 +461,22 @@ class PulseWatcher:
                 # (no trend_on: half the sure hold is too short to tell it)
                 return PulseCheck(watch.id, sure + h, False, None, sure=True)
             if hit >= 0 and watch.next_k + hit < hold:
-                return PulseCheck(watch.id, watch.next_k + hit + h, True)
+                if not (small or not self.settings.pulse_under_step) and (
+                    watch.under or self._under_pulse(watch, watch.next_k + hit)
+                ):
+                    watch.under = True  # (judged at the hold)
+                else:
+                    return PulseCheck(watch.id, watch.next_k + hit + h, True)
             if watch.next_k <= hold <= end and not self.samples.clipped(watch.index, hold):
                 if self._is_small_step(watch) if small else self._is_step(watch):
                     return PulseCheck(watch.id, hold + h, False, self._trend_on(watch))
-                if watch.fell or (not small and self._fell_on_slip_trend(watch)):
+                fell = watch.fell or (not small and self._fell_on_slip_trend(watch))
+                under = watch.under or (fell and self.settings.pulse_under_step and not small)
+                if under and self._under_step(watch):
+                    return PulseCheck(watch.id, hold + h, False, None, under=True)
+                if fell or watch.under:
                     return PulseCheck(watch.id, hold + h, True)
-            if hit >= 0:
+            if hit >= 0 and not (watch.under and end < hold):
                 return PulseCheck(watch.id, watch.next_k + hit + h, True)
             early = min(len(level), watch.index + self.watch // 4 - watch.next_k + 1)
             if early > 0:
@@ -487,6 +504,80 @@ class PulseWatcher:
         return sharp_flat_step(
             detrended, watch.noise, self.sure_rise, self.sure_snr, self.sure_drop
         )
+
+    def _under_course(self, watch: Watch) -> tuple[float, ...]:
+        """The course of the pulse of the latest earlier kink contact (decided by this
+        one's decision, onset within `pulse_under.MAX_GAP_S`) fitted over the level from
+        its onset to this one's base (`pulse_under.fit`), once per watch: (its onset,
+        height, rise, the course's value at this base); () when there is none (no such
+        contact, level or fit)."""
+        if watch.course is not None:
+            return watch.course
+        watch.course = ()
+        own = [e for n, e, _ in self._bases if n == watch.index]
+        earlier = [
+            (n, b) for n, e, b in self._bases if n < watch.index - 2 and own and e <= own[-1]
+        ]
+        if not earlier or watch.index - earlier[-1][0] > self.under_gap:
+            return watch.course
+        n, base = earlier[-1]
+        h = self.level_half
+        before = watch.index - 2 * h - 1
+        i0, i1 = n - h + h - self._level_start, before + h - self._level_start + 1
+        if i0 < 0 or i1 > len(self._level):
+            return watch.course
+        centres = np.arange(n - h, before + 1)
+        course = pulse_under.fit(self._level[i0:i1] - base, centres - n, h, self.fs_hz)
+        if course is not None:
+            at = course.height * float(
+                pulse_under.smoothed(np.array([before - n]), course.rise, h)[0]
+            )
+            watch.course = (float(n), course.height, course.rise, at)
+        return watch.course
+
+    def _under_residual(
+        self, watch: Watch, upto: int, since: int | None = None
+    ) -> np.ndarray | None:
+        """The level from `since` (default: the onset) to sample `upto` less the base and
+        the earlier pulse's course carried on from it (`_under_course`), as `plain`; None:
+        no course, or no level."""
+        course = self._under_course(watch)
+        if not course:
+            return None
+        n, height, rise, at = course
+        h = self.level_half
+        since = watch.index if since is None else since
+        i0, i1 = since + h - self._level_start, upto + h - self._level_start + 1
+        if i0 < 0 or i1 > len(self._level) or i1 <= i0:
+            return None
+        k = np.arange(since, upto + 1)
+        model = height * pulse_under.smoothed(k - n, rise, h) - at
+        return self._level[i0:i1] - watch.base - model
+
+    def _under_pulse(self, watch: Watch, upto: int) -> bool:
+        """Fallen back like a pulse by `upto` (before the hold), but not with the earlier
+        pulse's course out (`pulse_under`): a step on that pulse's rise may be - judged at
+        the hold."""
+        res = self._under_residual(watch, upto)
+        if res is None or not len(res):
+            return False
+        top = float(res.max())
+        return top >= 6.0 * watch.noise and float(res[-1]) > (1.0 - self.drop_fraction) * top
+
+    def _under_step(self, watch: Watch) -> bool:
+        """At the hold: with the earlier pulse's course out, a sharp rise that stays
+        (`_is_step`'s test on the level) and no pulse train after it."""
+        if self._train_follows(watch):
+            return False
+        res = self._under_residual(watch, watch.index + self.step_hold)
+        if res is None or not len(res):
+            return False
+        top = float(res.max())
+        if top < 6.0 * watch.noise:
+            return False
+        rise = int(np.argmax(res >= 0.8 * top))
+        keep = (1.0 - self.drop_fraction) * top
+        return rise <= self.step_rise and float(res[rise:].min()) >= keep
 
     def _level_floor(self, before: int) -> float | None:
         """The lowest level over the trend window up to `before` (under an earlier pulse)."""
