@@ -38,12 +38,12 @@ import math
 import sys
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plan_cases
 import stop_causes
 from stop_causes import pct
 
@@ -248,11 +248,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--try", dest="tuning", default={}, type=stop_causes.tune_tracker.parse)
     parser.add_argument("--detail", action="store_true", help="per kind, each cause's details")
     args = parser.parse_args(argv)
-    kinds = args.kinds.split(",")
-    unknown = set(kinds) - set(sr.KINDS)
-    if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sr.KINDS)}")
-    todo = [c for c in sr.cases(replace(sr.FULL, seeds=args.seeds)) if c.kind in kinds]
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")
@@ -273,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     heads = sorted({c for _, (c, _) in drops})
     print("\nper kind: dropped % of its scored updates, then each cause's share of them")
     print(f"  {'kind':12s} {'drop%':>6s} " + " ".join(f"{h[:16]:>16s}" for h in heads))
-    for kind in kinds:
+    for kind in args.kinds.split(","):
         row = per_kind[kind]
         total = sum(row[h] for h in heads)
         cells = " ".join(f"{pct(row[h], total):>16s}" for h in heads)

@@ -28,12 +28,12 @@ import argparse
 import sys
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plan_cases
 import tune_tracker
 from stop_causes import pct
 
@@ -110,11 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--try", dest="tuning", default={}, type=tune_tracker.parse)
     parser.add_argument("--baseline", action="store_true", help="the shipped settings too")
     args = parser.parse_args(argv)
-    kinds = args.kinds.split(",")
-    unknown = set(kinds) - set(sr.KINDS)
-    if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sr.KINDS)}")
-    todo = [c for c in sr.cases(replace(sr.FULL, seeds=args.seeds)) if c.kind in kinds]
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
     tunings = ([{}] if args.baseline else []) + [args.tuning]
     for tuning in tunings:
         with ProcessPoolExecutor(2) as pool:

@@ -32,12 +32,12 @@ import math
 import sys
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plan_cases
 import tune_tracker
 
 from grasplink.decoding.contacts import STEP_IDS, ContactEvent, PulseCheck
@@ -183,11 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.shapes and args.kinds == ",".join(STOP_KINDS):
         args.kinds = ",".join(SHAPE_KINDS)
-    kinds = args.kinds.split(",")
-    unknown = set(kinds) - set(sr.KINDS)
-    if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sr.KINDS)}")
-    todo = [c for c in sr.cases(replace(sr.FULL, seeds=args.seeds)) if c.kind in kinds]
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
     if args.trace is not None:
         chosen = [c for c in todo if c.seed == args.trace]
         if not chosen:

@@ -20,12 +20,12 @@ from __future__ import annotations
 import argparse
 import sys
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plan_cases
 import stop_causes
 import stop_trends  # (its watcher patch notes each watch's noise: SEEN)
 
@@ -120,22 +120,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
     parser.add_argument("--all", action="store_true", help="every late stop, any verdict")
     args = parser.parse_args(argv)
-    kinds = args.kinds.split(",")
-    unknown = set(kinds) - set(sr.KINDS)
-    if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sr.KINDS)}")
-    todo = [c for c in sr.cases(replace(sr.FULL, seeds=args.seeds)) if c.kind in kinds]
-    if args.cases:
-        todo = [c for c in todo if str(c.seed) in args.cases.split(",")]
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, args.cases)
     n = len(todo)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * n, [args.all] * n, chunksize=2))
     print(f"{n} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")
     print(f"level - base in noise units at {SHOW_MS} ms after the onset")
-    for case, lines in results:
-        for line in lines:
-            way = "r" if case.reverse else "f"
-            print(f"{case.kind:11s} {case.layout:9s} {case.variant:26s} {way} {case.seed:6d}", line)
+    plan_cases.print_case_lines(results)
     return 0
 
 

@@ -20,10 +20,10 @@ from __future__ import annotations
 import argparse
 import sys
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plan_cases
 import stop_causes
 
 from grasplink.decoding.detector import watch as watch_mod
@@ -127,20 +127,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.headline is not None:
         headline(args.headline)
         return 0
-    kinds = args.kinds.split(",")
-    unknown = set(kinds) - set(sr.KINDS)
-    if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sr.KINDS)}")
-    todo = [c for c in sr.cases(replace(sr.FULL, seeds=args.seeds)) if c.kind in kinds]
-    if args.cases:
-        todo = [c for c in todo if str(c.seed) in args.cases.split(",")]
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, args.cases)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")
-    for case, lines in results:
-        for line in lines:
-            way = "r" if case.reverse else "f"
-            print(f"{case.kind:11s} {case.layout:9s} {case.variant:26s} {way} {case.seed:6d}", line)
+    plan_cases.print_case_lines(results)
     return 0
 
 
