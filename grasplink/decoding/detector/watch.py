@@ -66,10 +66,6 @@ class WatchSettings:
     # one: judged at the hold with that pulse's course out (`pulse_under`); False: off (the
     # outputs before it, bit for bit)
     pulse_under_step: bool = True
-    # a step told with that course out (`PulseCheck.under`) watched for a fall (`_revise`)
-    # on the level with the course out too, not the raw level that falls with the earlier
-    # pulse; False: the raw level
-    revise_under: bool = False
 
 
 def step_hold_samples(fs_hz: float, settings: WatchSettings) -> int:
@@ -110,7 +106,6 @@ class Watch:
     long: float = 0.0  # the slip's rising trend from the base of an earlier contact (N/sample)
     under: bool = False  # fell back on an earlier pulse's course: judged at the hold (pulse_under)
     course: tuple[float, ...] | None = None  # ... that course (`PulseWatcher._under_course`)
-    told_under: bool = False  # told a step with that course out: revised on it too
     # what `watch_scan` reads of it that stays (a `kernels.detector.Watched` as a plain
     # tuple, built once by `PulseWatcher.start`: the fields it holds are never reassigned)
     scanned: tuple = ()
@@ -382,8 +377,6 @@ class PulseWatcher:
                 checks.append(done)
                 if done.pulse is False and done.emit_index < watch.index + self.revise:
                     watch.top = float(watch.detrended.max()) if len(watch.detrended) else 0.0
-                    if done.under and self.settings.revise_under:
-                        watch.told_under = self._revise_on_course(watch, done.emit_index)
                     watch.next_k = max(watch.next_k, done.emit_index - self.level_half + 1)
                     self._stepped.append(watch)
         self._watches = still
@@ -413,8 +406,6 @@ class PulseWatcher:
                 k = np.arange(watch.next_k, end + 1)
                 credit = self._tail_credit(watch, k)
                 d = level - watch.base + credit - watch.trend * (k - watch.index + 2 * h + 1)
-                if watch.told_under:
-                    d = self._course_out(watch, end, d)
                 watch.next_k = end + 1
                 fell = (watch.top - d >= self.drop_fraction * watch.top).nonzero()[0]
                 if len(fell):
@@ -425,24 +416,6 @@ class PulseWatcher:
                 watch.next_k = limit + self.lag + 1  # done
                 return PulseCheck(watch.id, max(watch.fell_at + h, min(later)), True)
         return None
-
-    def _revise_on_course(self, watch: Watch, emit_index: int) -> bool:
-        """A step told with the earlier pulse's course out (`PulseCheck.under`): the level
-        it stepped to (`Watch.top`) on the level with that course out, to the decision.
-        The raw level falls with that pulse's decay while the stop's step stays (thesis
-        ch. 5.3.1: the pulse runs its course), so a fall read on it is the earlier pulse's,
-        not this contact's. False (top as it was): no course."""
-        res = self._under_residual(watch, emit_index - self.level_half)
-        if res is None or not len(res):
-            return False
-        watch.top = float(res.max())
-        return True
-
-    def _course_out(self, watch: Watch, end: int, raw: np.ndarray) -> np.ndarray:
-        """The level `_revise` reads (next_k .. end), with the earlier pulse's course out
-        instead of the trend and tail (`_under_residual`); `raw` when it has none."""
-        res = self._under_residual(watch, end, since=watch.next_k)
-        return raw if res is None or len(res) != len(raw) else res
 
     def _revising(self, watch: Watch) -> bool:
         """Still watched: the fall not yet looked for to the end, or a contact within the
