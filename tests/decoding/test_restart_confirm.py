@@ -60,3 +60,26 @@ def test_a_stop_shaped_step_clears_it_on_its_own():
     went on from, the stop is cleared in time without the restart rule."""
     delays = stop_delays(STICK_SLIP, {"RESTART_CONFIRM": 0.0})
     assert delays and all(d <= sr.CLEAR_WITHIN_S for d in delays), delays
+
+
+# the full plan's rates-drops case (200 Hz, stick-slip 47 mm/s) whose second stop (1.995 -
+# 2.315 s) was cleared at 2.10 s and raised again at 2.19 s: a contact at rest 186 ms after
+# the stop's step (z 4.7, told a pulse only at 2.51 s) restarted the stopped track there
+AT_REST = sr.Case(
+    "rates-drops", "200 Hz, stick-slip 47 mm/s", (200, "stick-slip"), "uniform4", True, 136501
+)
+
+
+def test_a_contact_at_rest_not_yet_told_does_not_restart_a_stop():
+    """RESTART_CONFIRM 3: a restart on a contact not yet told is no slip yet. A stopped
+    object makes no ridge contacts (thesis ch. 5.3.1: a pulse needs a ridge's collision);
+    what the sensor sees at rest - a held object's kinks, the friction step's tail - is
+    not told a pulse by the time the flag is due, while a real restart's contact is."""
+    delays = stop_delays(AT_REST, {})
+    assert delays and all(d <= sr.CLEAR_WITHIN_S for d in delays), delays
+
+
+def test_restarting_on_a_contact_not_yet_told_leaves_it_late():
+    """The control: with a restart on a contact not yet told a slip (RESTART_CONFIRM 2),
+    the same stop is not cleared for good."""
+    assert max(stop_delays(AT_REST, {"RESTART_CONFIRM": 2.0})) > sr.CLEAR_WITHIN_S
