@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from grasplink.decoding.detector.arrival_tail import on_first_load
 from grasplink.decoding.detector.events import ContactEvent, Ledger
 from grasplink.decoding.detector.noise_floor import MEDIAN_TO_STD, NOISE_FLOOR_N, NoiseFloor
 from grasplink.decoding.detector.series import (
@@ -453,8 +454,11 @@ class HingeBank:
             if tail and not self._on_tail(n, w):
                 continue
             n_at, delta, placed = self._refine(ci, n)
-            if tail:  # (timed late by the tail's bend: `tail_onsets`)
-                n_at, delta, placed = tail_placed(n_at, delta, placed, w)
+            if tail:  # (timed late by the tail's bend: `tail_onsets`; not on the first
+                # load's pulse: `arrival_tail`)
+                n_at, delta, placed = tail_placed(
+                    n_at, delta, placed, w, keep_time=self._on_first_load(n_at)
+                )
             if self._after_drop(n_at, w):
                 continue
             # decided once z is known over +-w (late where the noise had to be waited for)
@@ -470,6 +474,21 @@ class HingeBank:
         sigma = max(white[0], NOISE_FLOOR_N)
         x = self.samples.x
         return tail_kink(x, n - self.samples.start, w, sigma, self.fs_hz, self.tails)
+
+    def _on_first_load(self, n: int) -> bool:
+        """Does the tail kink at sample n sit on the first load's pulse (`arrival_tail`)?"""
+        empty_n = self.tails.arrival_empty_n
+        if not empty_n > 0:
+            return False
+
+        def white(index: int) -> float | None:
+            told = self.noise.white(max(0, index) // self.block)
+            return None if told is None else max(float(told[0]), NOISE_FLOOR_N)
+
+        x = self.samples.x
+        return on_first_load(
+            x, self.samples.start, self.ledger.onsets, n, self.fs_hz, white, empty_n
+        )
 
     def _after_drop(self, n: int, w: int) -> bool:
         """Is the kink at sample n the bottom of a sharp fall (the level stepping down: a

@@ -46,6 +46,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from grasplink.decoding import arrival
+
 
 @dataclass(frozen=True)
 class TailKinkSettings:
@@ -66,6 +68,9 @@ class TailKinkSettings:
     fit_rms: float = 1.6  # the decay fits the tail within this (white-noise units, RMS)
     spread_chi2: float = 6.0  # decays fitting within this (noise variances) of the best
     min_fit: int = 6  # samples of tail to fit, at least
+    # a tail kink on the first load's pulse keeps the kink bank's time (`arrival_tail`):
+    # the sensor's unloaded level (N); 0: every tail kink moved back (shipped on, s25)
+    arrival_empty_n: float = arrival.EMPTY_N
 
 
 ON_RESIDUAL_Z = 4.0  # the shipped setting (`benchmarks/tail_kinks.py`, tune_tracker_kinds)

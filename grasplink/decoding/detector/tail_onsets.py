@@ -28,12 +28,15 @@ LATE_SHARE = 0.4  # a tail kink's time lies this share of its finding scale late
 SPREAD_SHARE = 0.4  # ... with this spread (one sigma), a share of that scale
 
 
-def tail_placed(n_at: int, delta: float, placed: float, width: int) -> tuple[int, float, float]:
+def tail_placed(
+    n_at: int, delta: float, placed: float, width: int, keep_time: bool = False
+) -> tuple[int, float, float]:
     """A tail kink's onset as the kink bank's candidates carry it: (sample, fraction of a
     sample, the width whose quarter plus 0.3 samples is its one-sigma, `HingeBank.merge`),
     from the kink bank's own (`HingeBank._refine`) and the scale that found it (width, in
-    samples): moved back and widened (module doc)."""
-    onset = n_at + delta - LATE_SHARE * width
+    samples): moved back and widened (module doc); `keep_time`: widened only (a tail of
+    the first load's pulse, `arrival_tail`)."""
+    onset = n_at + delta - (0.0 if keep_time else LATE_SHARE) * width
     n = round(onset)
     sigma = max(0.25 * placed + 0.3, SPREAD_SHARE * width)
     return n, onset - n, (sigma - 0.3) / 0.25

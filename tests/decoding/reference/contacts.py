@@ -68,6 +68,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from grasplink.decoding.contacts import sharp_flat_step
+from grasplink.decoding.detector.arrival_tail import on_first_load
 from grasplink.decoding.detector.tail_kinks import TailKinkSettings, tail_kink
 from grasplink.decoding.detector.tail_onsets import tail_placed
 from grasplink.decoding.filters import RAIL_SHARE, lattice_median, on_rail, resolution
@@ -699,13 +700,27 @@ class ContactDetector:
             if tail and (rising < floor or not self._on_tail(n, w)):
                 continue
             n_at, delta, placed = self._refine(ci, n)
-            if tail:  # timed late by the tail's bend (`tail_onsets`)
-                n_at, delta, placed = tail_placed(n_at, delta, placed, w)
+            if tail:  # timed late by the tail's bend (`tail_onsets`), not on the first
+                # load's pulse (`arrival_tail`)
+                n_at, delta, placed = tail_placed(
+                    n_at, delta, placed, w, keep_time=self._on_first_load(n_at)
+                )
             if self._after_drop(n_at, w):
                 continue
             # decided once z is known over +-w (late where the noise had to be waited for)
             emit = max(n + 2 * w, int(ch.zready[i - w : i + w + 1].max()))
             candidates.append((emit, w, n_at, delta, float(z[i]), float(jump), placed))
+
+    def _on_first_load(self, n: int) -> bool:
+        """A tail kink on the first load's pulse (`arrival_tail`)?"""
+
+        def white(index: int) -> float | None:
+            told = self._white(max(0, index) // self.block)
+            return None if told is None else max(told[0], NOISE_FLOOR_N)
+
+        return on_first_load(
+            self._x, self._t_start, self._onsets, n, self.fs_hz, white, TAILS.arrival_empty_n
+        )
 
     def _on_tail(self, n: int, w: int) -> bool:
         """A kink with no rise after it on a pulse's falling tail (`tail_kinks`)."""
