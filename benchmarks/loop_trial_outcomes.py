@@ -1,7 +1,10 @@
 """Chosen closed-loop trials of the loop benchmark, one line each (crush, stop, grip).
 
     .venv/bin/python benchmarks/loop_trial_outcomes.py --speeds 20 --seeds 8 [--modes a,b]
-        [--reflex on|off|both] [--workers 2]
+        [--reflex on|off|both] [--workers 2] [--try NAME=VALUE[,...]]
+
+`--try` sets TrackerDecoder constants (the gateway's skin decoder) in the workers, e.g.
+`--try ARRIVAL_EMPTY_N=0` for the loop without the arrival rule.
 
 Why: a decoder change that weighs grip commands (the efference copy) can make the reflex
 fire at rest and crush the object; `bench_loop.py` finds that in 990 trials but takes an
@@ -16,6 +19,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 
 from grasplink.controllers import build_controllers
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import loop
 
 
@@ -26,6 +30,26 @@ def _numbers(text: str, what: str, kind: type) -> list:
         raise SystemExit(
             f"loop_trial_outcomes: --{what}: comma-separated numbers, got {text!r}"
         ) from None
+
+
+def _tracker_tuning(text: str) -> dict[str, float]:
+    out = {}
+    for item in (x for x in text.split(",") if x):
+        name, _, value = item.partition("=")
+        if not hasattr(TrackerDecoder, name) or name.startswith("_"):
+            raise SystemExit(f"loop_trial_outcomes: --try: TrackerDecoder has no constant {name!r}")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            what = f"loop_trial_outcomes: --try {name}: a number, got {value!r}"
+            raise SystemExit(what) from None
+    return out
+
+
+def _tune(tuning: dict[str, float]) -> None:
+    """In each worker: the gateway's decoders are built from these class constants."""
+    for name, value in tuning.items():
+        setattr(TrackerDecoder, name, value)
 
 
 def outcome(trial: loop.Trial) -> tuple[loop.Trial, loop.Outcome]:
@@ -39,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--modes", default=",".join(loop.MODES), help="comma-separated")
     parser.add_argument("--reflex", choices=("on", "off", "both"), default="on")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--try", dest="tuning", default="", help="TrackerDecoder NAME=VALUE,...")
     args = parser.parse_args(argv)
     modes = [m for m in args.modes.split(",") if m]
     unknown = sorted(set(modes) - set(loop.MODES))
@@ -54,17 +79,19 @@ def main(argv: list[str] | None = None) -> int:
         for speed in _numbers(args.speeds, "speeds", float)
         for seed in _numbers(args.seeds, "seeds", int)
     ]
+    tuning = _tracker_tuning(args.tuning)
     crushed = 0
-    with ProcessPoolExecutor(args.workers) as pool:
+    with ProcessPoolExecutor(args.workers, initializer=_tune, initargs=(tuning,)) as pool:
         for trial, out in pool.map(outcome, trials):
             crushed += out.crushed
             grip = "-" if out.grip_mean_n is None else f"{out.grip_mean_n:.1f}"
             reflex_s = "-" if out.reflex_latency_s is None else f"{out.reflex_latency_s:.2f}"
+            belt_s = "-" if out.slip_belt_latency_s is None else f"{out.slip_belt_latency_s:.3f}"
             print(
                 f"{trial.mode:16} reflex {'on ' if trial.reflex else 'off'} "
                 f"{trial.speed_mm_s:5g} mm/s seed {trial.seed:2d}: crushed {out.crushed!s:5} "
                 f"stopped {out.stopped!s:5} dropped {out.dropped!s:5} grip mean {grip} N "
-                f"reflex after {reflex_s} s"
+                f"reflex after {reflex_s} s slip belt after {belt_s} s"
             )
     print(f"{len(trials)} trials, {crushed} crushed")
     return 0
