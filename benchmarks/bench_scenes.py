@@ -501,6 +501,16 @@ only the heartbeats its consumer (1016h) watches, so another node's beat no long
 ends a skin span: headline_slip's spans went from 298 asks and 578 ticks told (317
 happened) to 174 asks and 456 told, all of which happened (13.8 % fewer Python calls
 in that scene, 0-0.5 % in the others; outputs byte-identical).
+
+Session 25 (this page's before/after is against its base, 0d333e4): a PDO parameter
+write re-reads that PDO alone, not all of the node's (the gateway's 168 such writes at
+boot made 1,124 re-reads): the network's boot 1.67× as fast (`benchmarks/bench_boot.py`,
+17.6 -> 10.5 ms), ~1.5 % of a loop run; a node's scene samples interpolated over the
+held samples about them, not the 2 s ring (bit for bit). The loop's 10 ms chunk already
+runs every stage once per event or block; the quiet phase before any slip costs 54-67 ms
+per simulated s against the 50 the 20× target allows, a quarter of it the skin decoder's
+~145 µs per update (ten detector stages in Python). 20× needs that pipeline compiled or
+a coarser loop; neither is done.
 """
 
 
