@@ -147,6 +147,26 @@ def _stop_step(decoder: _Watch, start_s: float, due_s: float) -> str:
     return f"stop contact told {verdict} at +{g - start_s:.2f} s"
 
 
+def late_stops(decoder: _Watch, scored: sr.CaseScore):  # type: ignore[no-untyped-def]
+    """Each judged stop cleared late: (stop, the time its report was due, the decoder's
+    contact nearest its start within NEAR_STOP_S or None, that contact's verdict by then:
+    "pulse", "step", "unclear" or "-" when not told)."""
+    for stop in scored.stops:
+        if not stop.judged or stop.observable_s is None or stop.delay_s <= sr.CLEAR_WITHIN_S:
+            continue
+        due = stop.observable_s + sr.CLEAR_WITHIN_S
+        near = [c for c, _ in decoder.contacts if abs(c.t_s - stop.start_s) <= NEAR_STOP_S]
+        if not near:
+            yield stop, due, None, "-"
+            continue
+        c = min(near, key=lambda c: abs(c.t_s - stop.start_s))
+        told = [ck for ck, g in decoder.checks if ck.id == c.id and g <= due]
+        yield stop, due, c, VERDICT[told[-1].pulse] if told else "-"
+
+
+VERDICT = {True: "pulse", False: "step", None: "unclear"}
+
+
 def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple]]:
     """(case, per judged stop: (delay s, cause, detail, step) with cause "" if in time)."""
     rec = case.make()

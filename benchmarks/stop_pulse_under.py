@@ -62,16 +62,9 @@ def job(case: sr.Case, tuning: dict, every: bool) -> tuple[sr.Case, list[str]]:
     x = np.asarray(rec.force_n, dtype=float)
     level = np.convolve(x, np.full(2 * half + 1, 1.0 / (2 * half + 1)), mode="same")
     lines = []
-    for stop in scored.stops:
-        if not stop.judged or stop.observable_s is None or stop.delay_s <= sr.CLEAR_WITHIN_S:
+    for stop, _, c, verdict in stop_causes.late_stops(decoder, scored):
+        if c is None:
             continue
-        due = stop.observable_s + sr.CLEAR_WITHIN_S
-        near = [c for c, _ in decoder.contacts if abs(c.t_s - stop.start_s) <= 0.1]
-        if not near:
-            continue
-        c = min(near, key=lambda c: abs(c.t_s - stop.start_s))
-        told = [ck for ck, g in decoder.checks if ck.id == c.id and g <= due]
-        verdict = {True: "pulse", False: "step", None: "unclear"}[told[-1].pulse] if told else "-"
         if verdict != "pulse" and not every:
             continue
         seen = stop_trends.SEEN.get(c.index)

@@ -67,22 +67,15 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[str]]:
     estimates, _ = stop_causes.ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     scored = sr.score(estimates, rec.truth)
     lines = []
-    for stop in scored.stops:
-        if not stop.judged or stop.observable_s is None or stop.delay_s <= sr.CLEAR_WITHIN_S:
-            continue
-        due = stop.observable_s + sr.CLEAR_WITHIN_S
-        near = [c for c, _ in decoder.contacts if abs(c.t_s - stop.start_s) <= 0.1]
-        if not near:
+    for stop, _, c, verdict in stop_causes.late_stops(decoder, scored):
+        if c is None:
             lines.append(f"stop {stop.start_s:.3f}: no contact at the stop")
             continue
-        c = min(near, key=lambda c: abs(c.t_s - stop.start_s))
-        lines.append(f"stop {stop.start_s:.3f} delay {stop.delay_s:.2f}: " + _line(decoder, c, due))
+        lines.append(f"stop {stop.start_s:.3f} delay {stop.delay_s:.2f}: " + _line(c, verdict))
     return case, lines
 
 
-def _line(decoder, contact, due: float) -> str:  # type: ignore[no-untyped-def]
-    told = [ck for ck, g in decoder.checks if ck.id == contact.id and g <= due]
-    verdict = {True: "pulse", False: "step", None: "unclear"}[told[-1].pulse] if told else "-"
+def _line(contact, verdict: str) -> str:  # type: ignore[no-untyped-def]
     s = SEEN.get(contact.index)
     if s is None:
         return f"contact {contact.t_s:.3f} told {verdict} (no kink watch)"
