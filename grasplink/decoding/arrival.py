@@ -29,6 +29,7 @@ heavy noise (10 dB) no contact is told unloaded and nothing changes.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -48,6 +49,22 @@ def unloaded(level_n: float | None, white_n: float | None, samples: int, empty_n
     if level_n is None or white_n is None or samples < 1 or not empty_n > 0:
         return False
     return level_n + EMPTY_Z * white_n / math.sqrt(samples) < empty_n
+
+
+def unloaded_before(
+    onset: int,
+    fs_hz: float,
+    mean: Callable[[int, int], float | None],
+    white: Callable[[int], float | None],
+    empty_n: float,
+) -> bool:
+    """`unloaded` over the `LEVEL_S` before the sample `onset`: `mean(start, stop)` the mean
+    of the samples start..stop-1 (None: not held), `white(index)` the white noise at a
+    sample (None: not yet measured). One reading for the tracker's new tracks and the kink
+    bank's tail kinks (`detector.arrival_tail`)."""
+    samples = max(1, round(LEVEL_S * fs_hz))
+    start = onset - samples
+    return unloaded(mean(start, onset), white(start), samples, empty_n)
 
 
 def entry_adjustment(log_prior: np.ndarray, log_miss: np.ndarray) -> np.ndarray:

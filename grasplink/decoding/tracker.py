@@ -964,12 +964,15 @@ class TrackerDecoder(Decoder):
         decided once per contact, so a replay weighs it alike."""
         known = self._unloaded.get(ev.id)
         if known is None:
-            n = max(1, round(arrival.LEVEL_S * self.fs_hz))
-            level = self._recent.mean(ev.index - n, ev.index)
             noise = self.detector.noise
-            white = noise.white(max(0, ev.index - n) // noise.block)
-            sigma = None if white is None else max(float(white[0]), NOISE_FLOOR_N)
-            known = arrival.unloaded(level, sigma, n, self.ARRIVAL_EMPTY_N)
+
+            def white(index: int) -> float | None:
+                told = noise.white(max(0, index) // noise.block)
+                return None if told is None else max(float(told[0]), NOISE_FLOOR_N)
+
+            known = arrival.unloaded_before(
+                ev.index, self.fs_hz, self._recent.mean, white, self.ARRIVAL_EMPTY_N
+            )
             _put_bounded(self._unloaded, ev.id, known, self.VERDICTS_KEPT)
         return known
 

@@ -151,7 +151,7 @@ def load_scene(path: str | Path) -> Scene:
 
 
 def parse_scene(data: dict, source: str) -> Scene:
-    data = copy.deepcopy(data)  # kept for `Scene.fresh`; the caller's dict may change later
+    kept = copy.deepcopy(data)  # for `Scene.fresh`: neither the caller nor an effect changes it
     top = Params(data, source)
     head = top.table_of("scene")
     name = head.string("name", Path(source).stem)
@@ -207,7 +207,7 @@ def parse_scene(data: dict, source: str) -> Scene:
         endpoints,
         ordered,
         domain_of,
-        copy.deepcopy(data),
+        kept,
     )
 
 

@@ -22,7 +22,6 @@ more speeds are given (docs/decoding.md, "Tail kinks").
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable
 
 import numpy as np
@@ -41,22 +40,19 @@ def on_first_load(
 ) -> bool:
     """Whether the tail kink at global sample `n` sits on the first load's pulse: the
     last contact told before it (`onsets`: (onset index, emit index) of the contacts told,
-    `Ledger.onsets`) came onto an unloaded sensor. `x` holds the samples from global index
-    `x_start`; `white(index)` is the white noise (N per sample) at a sample, None while
-    unknown. `empty_n` 0 turns the rule off."""
+    `Ledger.onsets`) came onto an unloaded sensor (`arrival.unloaded_before`). `x` holds
+    the samples from global index `x_start`; `white(index)` is the white noise (N per
+    sample) at a sample, None while unknown. `empty_n` 0 turns the rule off."""
     if not empty_n > 0:
         return False
     before = [m for m, _ in onsets if m < n]
     if not before:
         return False
-    m = max(before)
-    samples = max(1, round(arrival.LEVEL_S * fs_hz))
-    i1 = m - x_start
-    i0 = i1 - samples
-    if i0 < 0 or i1 > len(x):
-        return False  # (not held: not told)
-    sigma = white(m - samples)
-    if sigma is None or not math.isfinite(sigma):
-        return False
-    level = float(np.add.reduce(x[i0:i1]) / samples)
-    return arrival.unloaded(level, sigma, samples, empty_n)
+
+    def mean(start: int, stop: int) -> float | None:
+        i0, i1 = start - x_start, stop - x_start
+        if i0 < 0 or i1 > len(x):
+            return None  # (not held: not told)
+        return float(np.add.reduce(x[i0:i1]) / (i1 - i0))
+
+    return arrival.unloaded_before(max(before), fs_hz, mean, white, empty_n)
