@@ -284,7 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
         "file",
         type=Path,
         help="CSV (header t_s,force_n or t_s,skin.force_n), NPZ (t_s, force_n), a CAN log "
-        "of the skin node (.asc, .blf, .log, .trc) or a folder written by `grasplink run`",
+        "of the skin node (.asc, .blf, .log, .trc) or a folder written by `grasplink run` "
+        "(its skin.csv: the simulated force before the node's ADC; give FOLDER/can.asc "
+        "to decode what a gateway received, with its grip commands)",
     )
     decode.add_argument(
         "--skin",

@@ -3,8 +3,8 @@
 A recording of a scene with the gateway in the loop holds the truth
 (truth.csv) and every frame on the bus (can.asc). The gateway's decoded
 slip speed is what its decoder makes of the skin's TPDOs, so it is decoded
-again here from can.asc with the same decoder and layout (a replayed log
-decodes exactly as live traffic); belt and hand commands are the RPDOs,
+again here from can.asc with the same decoder, layout and grip commands (a
+replayed log decodes exactly as live traffic); belt and hand commands are the RPDOs,
 unpacked through the nodes' EDS mappings.
 """
 
@@ -18,6 +18,7 @@ import numpy as np
 
 from grasplink.core.frames import RPDO_BASES, Frame, node_cob_ids
 from grasplink.decoding.base import SlipEstimate
+from grasplink.decoding.io import read_grip_commands
 from grasplink.errors import RecordingError
 from grasplink.gateway.config import parse_config
 from grasplink.gateway.service import Gateway
@@ -56,7 +57,7 @@ def read_loop(folder: Path) -> LoopTrace:
     if "skin" not in nodes or layout is None:
         raise RecordingError(f"{folder}: no skin node in this recording: nothing was decoded")
     layout_text = layout if isinstance(layout, str) else ",".join(f"{x:g}" for x in layout)
-    estimates = replay_skin(folder / "can.asc", nodes["skin"], layout_text)
+    estimates = replay_skin(folder / "can.asc", nodes["skin"], layout_text, nodes.get("hand"))
     decoded_t = np.array([e.t_s for e in estimates])
     # A speed counts only while the decoder says the object slips (what the gateway acts on).
     speed = np.array(
@@ -75,13 +76,19 @@ def read_loop(folder: Path) -> LoopTrace:
     return LoopTrace(truth, decoded_t, speed, slip, belt_t, belt_v, hand_t, hand_n, low)
 
 
-def replay_skin(path: Path, skin: dict, layout: str) -> list[SlipEstimate]:
+def replay_skin(
+    path: Path, skin: dict, layout: str, hand: dict | None = None
+) -> list[SlipEstimate]:
     """The gateway's skin decoder updates, replayed from a CAN log through a `Gateway`.
 
     Frames reach the gateway at their logged times, as they reached it live, so its
     sample timing and its decoder give the same updates it acted on. Only the skin
     node's own frames: this gateway listens to a recording, it masters nothing, and the
-    recorded master's NMT commands and heartbeat would be a second master to it.
+    recorded master's NMT commands and heartbeat would be a second master to it. The
+    live decoder was also told every grip command the gateway sent the `hand` (its
+    efference copy): those are read back from the hand's RPDOs in the log and told
+    first, as `grasplink decode` does - only commands at or before a contact's onset
+    weigh it, so the updates are the live ones.
     """
     settings = {"node_id": skin["node_id"], "layout": layout}
     if "sample_rate_hz" in skin:
@@ -90,6 +97,8 @@ def replay_skin(path: Path, skin: dict, layout: str) -> list[SlipEstimate]:
     others = {k: {"enabled": False} for k in KINDS if k != "skin"}
     data = {"nodes": {"skin": settings} | others}
     gateway = Gateway(parse_config(data, str(path)))
+    if hand is not None and gateway.decoder is not None:
+        read_grip_commands(path, node_id=hand["node_id"]).feed(gateway.decoder)
     estimates: list[SlipEstimate] = []
     gateway.estimate_listeners.append(lambda t_us, estimate: estimates.append(estimate))
     skin_cob_ids = frozenset(node_cob_ids(skin["node_id"]))
