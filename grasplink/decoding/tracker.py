@@ -964,14 +964,12 @@ class TrackerDecoder(Decoder):
         decided once per contact, so a replay weighs it alike."""
         known = self._unloaded.get(ev.id)
         if known is None:
-            noise = self.detector.noise
-
-            def white(index: int) -> float | None:
-                told = noise.white(max(0, index) // noise.block)
-                return None if told is None else max(float(told[0]), NOISE_FLOOR_N)
-
             known = arrival.unloaded_before(
-                ev.index, self.fs_hz, self._recent.mean, white, self.ARRIVAL_EMPTY_N
+                ev.index,
+                self.fs_hz,
+                self._recent.mean,
+                self.detector.noise.white_at_sample,
+                self.ARRIVAL_EMPTY_N,
             )
             _put_bounded(self._unloaded, ev.id, known, self.VERDICTS_KEPT)
         return known

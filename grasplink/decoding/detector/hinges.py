@@ -481,11 +481,7 @@ class HingeBank:
         if not empty_n > 0:
             return False
 
-        def white(index: int) -> float | None:
-            told = self.noise.white(max(0, index) // self.block)
-            return None if told is None else max(float(told[0]), NOISE_FLOOR_N)
-
-        x = self.samples.x
+        x, white = self.samples.x, self.noise.white_at_sample
         return on_first_load(
             x, self.samples.start, self.ledger.onsets, n, self.fs_hz, white, empty_n
         )

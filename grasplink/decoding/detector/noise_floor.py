@@ -192,6 +192,12 @@ class NoiseFloor:
                 return later, 1
         return None
 
+    def white_at_sample(self, index: int) -> float | None:
+        """`white` for the block of sample `index` (negative: the first), never under
+        `NOISE_FLOOR_N`: the sigma a level test divides by. None while none is told."""
+        told = self.white(max(0, index) // self.block)
+        return None if told is None else max(float(told[0]), NOISE_FLOOR_N)
+
     def mark_busy(self, index: int, emit: int, height: float) -> None:
         """A contact at `index` told a pulse at `emit`, `height` N above its base
         (`PulseWatcher.told_height`): when the pulse stands out of the white noise
