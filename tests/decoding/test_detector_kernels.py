@@ -337,6 +337,38 @@ def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
     np.testing.assert_array_equal(bank.after, after)
 
 
+def test_the_kernel_takes_the_centres_of_channels_waiting_for_a_noise() -> None:
+    """On a rail no block shows its noise and every channel's centres wait for one: the
+    kernel appends them to those waiting (hinge, slope after and |hinge| as the Python
+    path's `channel_hinge`), rather than leaving each channel to Python every block."""
+    from grasplink.decoding.kernels.detector import TAKEN, channel_hinge, channels_fast
+    from grasplink.decoding.kernels.layout import CH_ABS_N, CH_HELD, CH_WAIT_N
+
+    detector = ContactDetector(FS_HZ)
+    x = np.zeros(60)  # the lower rail: blocks wait for a noise (the first one too)
+    detector.feed(np.arange(len(x)) / FS_HZ, x)
+    bank = detector.hinges.bank
+    waiting = bank.ints[:, CH_WAIT_N].copy()
+    assert (waiting > 0).all()
+    new = np.array([0.0, 0.3, 0.1])
+    expected = []
+    for c, w in enumerate(ch.width for ch in detector.channels):
+        state, after = bank.state[c, :w].copy(), bank.after[c, :w].copy()
+        held = int(bank.ints[c, CH_HELD])
+        expected.append(channel_hinge(new, bank.taps[c, : w + 1], state, after, held))
+    abs_n = bank.ints[:, CH_ABS_N].copy()
+    channels_fast(new, bank.numbers, bank.rows, detector.hinges.constants, bank.told)
+    assert (bank.status == TAKEN).all() and (bank.taken == len(new)).all()
+    np.testing.assert_array_equal(bank.ints[:, CH_WAIT_N], waiting + len(new))
+    for c, (hinge, slope_after) in enumerate(expected):
+        told = slice(waiting[c], waiting[c] + len(new))
+        np.testing.assert_array_equal(bank.wait[c, 0, told], hinge)
+        np.testing.assert_array_equal(bank.wait[c, 1, told], slope_after)
+        np.testing.assert_array_equal(
+            bank.block_abs[c, abs_n[c] : abs_n[c] + len(new)], np.abs(hinge)
+        )
+
+
 def test_step_scales_the_kernel_has_no_room_for_are_left_as_they_were() -> None:
     """A scale whose store is full is the Python path's (it grows the store there): the
     kernel changes nothing of it, and says so (-1)."""
