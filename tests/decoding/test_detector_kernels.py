@@ -270,6 +270,47 @@ def test_compiled_lattice_median_leaves_a_nan_to_numpy() -> None:
     assert np.isnan(lattice_median_of(np.array([0.1, np.nan, 0.2]), 0.0))
 
 
+def _raw_blocks() -> list[np.ndarray]:
+    """Blocks of 50 as the noise floor reads them: free noise, ADC steps, either rail
+    (with noise off it, ties at both ends), constant, tiny values, a lone step."""
+    rng = np.random.default_rng(5)
+    lsb = 0.0244
+    noise = rng.normal(2.0, 0.02, 50)
+    stepped = np.round(rng.normal(2.0, 0.05, 50) / lsb) * lsb
+    low = np.maximum(np.round(rng.normal(0.0, 0.03, 50) / lsb) * lsb, 0.0)
+    high = np.minimum(stepped, float(np.median(stepped)))
+    both = np.concatenate([np.zeros(12), np.full(12, 3.0), rng.normal(1.5, 0.1, 26)])
+    lone = np.full(50, 1.0)
+    lone[20:] = 1.5
+    return [
+        noise, stepped, low, high, both, np.full(50, 0.7), rng.normal(0.0, 1e-13, 50), lone,
+        np.concatenate([np.zeros(9), rng.normal(1.0, 0.1, 41)]),  # under the share
+        np.array([1.0]), np.zeros(0), np.array([-0.0, 0.0, 1.0, 1.0]),
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize("index", range(len(_raw_blocks())))
+def test_compiled_rail_and_step_match_the_numpy_ones(index: int) -> None:
+    """A raw block's rail and smallest step (`NoiseFloor.raw_stats`) as `filters.on_rail`
+    and `filters.resolution` tell them, to the bit."""
+    from grasplink.decoding.filters import RAIL_SHARE, on_rail, resolution
+    from grasplink.decoding.kernels.detector import rail_and_step
+
+    block = _raw_blocks()[index]
+    rail, step = rail_and_step(block, RAIL_SHARE)
+    assert (rail, np.float64(step).tobytes()) == (
+        int(on_rail(block)),
+        np.float64(resolution(block)).tobytes(),
+    )
+
+
+def test_compiled_rail_and_step_leave_a_nan_to_numpy() -> None:
+    from grasplink.decoding.kernels.detector import rail_and_step
+
+    rail, step = rail_and_step(np.array([1.0, np.nan, 1.0]), 0.2)
+    assert rail == -1 and np.isnan(step)
+
+
 def test_compiled_step_scale_with_nothing_to_test_only_filters() -> None:
     taps = np.array([0.5, 0.5, -0.5, -0.5])
     state = signal.lfilter_zi(taps, [1.0, 0.0]) * 2.0

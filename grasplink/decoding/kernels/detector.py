@@ -155,6 +155,59 @@ def lattice_median_of(values: np.ndarray, floor: float) -> float:
 
 
 @jit()
+def rail_and_step(x: np.ndarray, share: float) -> tuple[int, float]:
+    """`filters.on_rail(x)` (with RAIL_SHARE = `share`) and `filters.resolution(x)` of a
+    raw block in one crossing (`NoiseFloor.raw_stats`, a block of 50 samples at 400 Hz:
+    a sort, run counts, a diff and masks of numpy calls, each costing more than its
+    arithmetic): (1 on a rail else 0, the smallest step). The same comparisons and
+    subtractions: the same answer and bits. (-1, NaN) for a NaN among them (the caller's
+    numpy path then)."""
+    n = len(x)
+    for i in range(n):
+        if x[i] != x[i]:
+            return -1, np.nan
+    # resolution: the smallest |x[i + 1] - x[i]| above 1e-12 of the largest |x| (or of 1)
+    top = 0.0
+    for i in range(n):
+        if abs(x[i]) > top:
+            top = abs(x[i])
+    tol = 1e-12 * (top if top > 1.0 else 1.0)
+    step, stepped = 0.0, False
+    for i in range(n - 1):
+        d = abs(x[i + 1] - x[i])
+        if d > tol and (not stepped or d < step):
+            step, stepped = d, True
+    if n < 2:
+        return 0, step
+    # on a rail: the run of the smallest (or largest) value at least `share` of them (and
+    # 2) and twice any other value's run
+    v = np.sort(x)
+    runs = np.empty(n, np.int64)
+    k, runs[0] = 0, 1
+    for i in range(1, n):
+        if v[i] != v[i - 1]:
+            k += 1
+            runs[k] = 0
+        runs[k] += 1
+    if k == 0:
+        return 1, step  # constant: nothing of the noise shows
+    need = share * n
+    if need < 2.0:
+        need = 2.0
+    low, high = runs[0], runs[k]
+    most_above, most_below = 0, 0  # the longest run but the first, but the last
+    for j in range(1, k + 1):
+        if runs[j] > most_above:
+            most_above = runs[j]
+    for j in range(k):
+        if runs[j] > most_below:
+            most_below = runs[j]
+    if (low >= need and low >= 2 * most_above) or (high >= need and high >= 2 * most_below):
+        return 1, step
+    return 0, step
+
+
+@jit()
 def _slopes(
     x: np.ndarray, taps: np.ndarray, state: np.ndarray, after: np.ndarray, held: int
 ) -> np.ndarray:
