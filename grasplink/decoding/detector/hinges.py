@@ -262,6 +262,12 @@ class HingeBank:
             taps, state = ch.slope.fir_state(first)
             ch.taps[:], ch.state[:] = taps, state  # (the bank's rows: run in place from now)
 
+    def room(self, keep: int) -> int:
+        """Samples to come before `trim(keep)` would cut: a channel gains at most a centre
+        per sample, as a row or waiting for a noise (rows once `_release`d)."""
+        held = self.bank.ints[:, CH_SIZE] + self.bank.ints[:, CH_WAIT_N]
+        return 2 * keep - max(held.tolist(), default=0)
+
     def trim(self, keep: int) -> None:
         """Keep the last `keep` rows of each channel once twice that many are held."""
         if max(self.bank.ints[:, CH_SIZE].tolist(), default=0) <= 2 * keep:
