@@ -410,6 +410,20 @@ def test_the_kernel_takes_the_centres_of_channels_waiting_for_a_noise() -> None:
         )
 
 
+@pytest.mark.parametrize("chunk", [3, 7])
+def test_a_long_rail_tells_what_the_numpy_detector_tells(chunk: int) -> None:
+    """10 s on the lower rail (an idle skin), then a slip, twice: the centres that waited
+    for a noise longer than `noise_blocks` are dropped undetected and the bank's `wait`
+    rows never overflow; the contacts are the numpy detector's, to the bit."""
+    slip = SIGNALS["slip"][:900]
+    x = np.concatenate([np.zeros(4000), slip, np.zeros(4000), slip])
+    compiled, numpy_detector = ContactDetector(FS_HZ), NumpyDetector(FS_HZ)
+    got, expected = told(compiled, x, chunk), told(numpy_detector, x, chunk)
+    assert len(got[0]) > 4
+    np.testing.assert_array_equal(got[0], expected[0])
+    np.testing.assert_array_equal(got[1], expected[1])
+
+
 def test_step_scales_the_kernel_has_no_room_for_are_left_as_they_were() -> None:
     """A scale whose store is full is the Python path's (it grows the store there): the
     kernel changes nothing of it, and says so (-1)."""
