@@ -113,6 +113,7 @@ class ContactDetector:
         look = round(max(tails.look_s, tails.slow_look_s) * fs) if tails.residual_z > 0 else 0
         self._keep_x = max(self._keep, self.block + 4 * max(widths) + look + 8)
         self.samples = Samples(4 * self._keep_x)
+        self._trim_at = 0  # samples received when the buffers are next trimmed (`_trim`)
         self.ledger = Ledger()
         shared = (self.noise, self.samples, self.ledger)
         self.hinges = HingeBank(fs, settings.hinges, *shared)
@@ -212,8 +213,21 @@ class ContactDetector:
         return self.hinges.merge(candidates)
 
     def _trim(self) -> None:
+        """Each part's buffers cut back once twice what it keeps is held. None gains more
+        than an entry per sample, so until the fewest samples any part has `room` for have
+        come (`_trim_at`) none would cut: the trims are not asked (a feed's look at four
+        parts' sizes, most feeds) - the same cuts at the same samples."""
+        if self.samples.n < self._trim_at:
+            return
         keep = self._keep
         self.samples.trim(self._keep_x)
         self.watcher.trim(keep, [w for w, _, _ in self.steps.probes + self.pulses.watches])
         self.steps.trim(keep)
         self.hinges.trim(keep)
+        room = min(
+            self.samples.room(self._keep_x),
+            self.watcher.room(keep),
+            self.steps.room(keep),
+            self.hinges.room(keep),
+        )
+        self._trim_at = self.samples.n + room

@@ -270,6 +270,47 @@ def test_compiled_lattice_median_leaves_a_nan_to_numpy() -> None:
     assert np.isnan(lattice_median_of(np.array([0.1, np.nan, 0.2]), 0.0))
 
 
+def _raw_blocks() -> list[np.ndarray]:
+    """Blocks of 50 as the noise floor reads them: free noise, ADC steps, either rail
+    (with noise off it, ties at both ends), constant, tiny values, a lone step."""
+    rng = np.random.default_rng(5)
+    lsb = 0.0244
+    noise = rng.normal(2.0, 0.02, 50)
+    stepped = np.round(rng.normal(2.0, 0.05, 50) / lsb) * lsb
+    low = np.maximum(np.round(rng.normal(0.0, 0.03, 50) / lsb) * lsb, 0.0)
+    high = np.minimum(stepped, float(np.median(stepped)))
+    both = np.concatenate([np.zeros(12), np.full(12, 3.0), rng.normal(1.5, 0.1, 26)])
+    lone = np.full(50, 1.0)
+    lone[20:] = 1.5
+    return [
+        noise, stepped, low, high, both, np.full(50, 0.7), rng.normal(0.0, 1e-13, 50), lone,
+        np.concatenate([np.zeros(9), rng.normal(1.0, 0.1, 41)]),  # under the share
+        np.array([1.0]), np.zeros(0), np.array([-0.0, 0.0, 1.0, 1.0]),
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize("index", range(len(_raw_blocks())))
+def test_compiled_rail_and_step_match_the_numpy_ones(index: int) -> None:
+    """A raw block's rail and smallest step (`NoiseFloor.raw_stats`) as `filters.on_rail`
+    and `filters.resolution` tell them, to the bit."""
+    from grasplink.decoding.filters import RAIL_SHARE, on_rail, resolution
+    from grasplink.decoding.kernels.detector import rail_and_step
+
+    block = _raw_blocks()[index]
+    rail, step = rail_and_step(block, RAIL_SHARE)
+    assert (rail, np.float64(step).tobytes()) == (
+        int(on_rail(block)),
+        np.float64(resolution(block)).tobytes(),
+    )
+
+
+def test_compiled_rail_and_step_leave_a_nan_to_numpy() -> None:
+    from grasplink.decoding.kernels.detector import rail_and_step
+
+    rail, step = rail_and_step(np.array([1.0, np.nan, 1.0]), 0.2)
+    assert rail == -1 and np.isnan(step)
+
+
 def test_compiled_step_scale_with_nothing_to_test_only_filters() -> None:
     taps = np.array([0.5, 0.5, -0.5, -0.5])
     state = signal.lfilter_zi(taps, [1.0, 0.0]) * 2.0
@@ -335,6 +376,52 @@ def test_channels_the_kernel_does_not_take_are_left_as_they_were() -> None:
     np.testing.assert_array_equal(bank.ints, ints)
     np.testing.assert_array_equal(bank.state, state)
     np.testing.assert_array_equal(bank.after, after)
+
+
+def test_the_kernel_takes_the_centres_of_channels_waiting_for_a_noise() -> None:
+    """On a rail no block shows its noise and every channel's centres wait for one: the
+    kernel appends them to those waiting (hinge, slope after and |hinge| as the Python
+    path's `channel_hinge`), rather than leaving each channel to Python every block."""
+    from grasplink.decoding.kernels.detector import TAKEN, channel_hinge, channels_fast
+    from grasplink.decoding.kernels.layout import CH_ABS_N, CH_HELD, CH_WAIT_N
+
+    detector = ContactDetector(FS_HZ)
+    x = np.zeros(60)  # the lower rail: blocks wait for a noise (the first one too)
+    detector.feed(np.arange(len(x)) / FS_HZ, x)
+    bank = detector.hinges.bank
+    waiting = bank.ints[:, CH_WAIT_N].copy()
+    assert (waiting > 0).all()
+    new = np.array([0.0, 0.3, 0.1])
+    expected = []
+    for c, w in enumerate(ch.width for ch in detector.channels):
+        state, after = bank.state[c, :w].copy(), bank.after[c, :w].copy()
+        held = int(bank.ints[c, CH_HELD])
+        expected.append(channel_hinge(new, bank.taps[c, : w + 1], state, after, held))
+    abs_n = bank.ints[:, CH_ABS_N].copy()
+    channels_fast(new, bank.numbers, bank.rows, detector.hinges.constants, bank.told)
+    assert (bank.status == TAKEN).all() and (bank.taken == len(new)).all()
+    np.testing.assert_array_equal(bank.ints[:, CH_WAIT_N], waiting + len(new))
+    for c, (hinge, slope_after) in enumerate(expected):
+        told = slice(waiting[c], waiting[c] + len(new))
+        np.testing.assert_array_equal(bank.wait[c, 0, told], hinge)
+        np.testing.assert_array_equal(bank.wait[c, 1, told], slope_after)
+        np.testing.assert_array_equal(
+            bank.block_abs[c, abs_n[c] : abs_n[c] + len(new)], np.abs(hinge)
+        )
+
+
+@pytest.mark.parametrize("chunk", [3, 7])
+def test_a_long_rail_tells_what_the_numpy_detector_tells(chunk: int) -> None:
+    """10 s on the lower rail (an idle skin), then a slip, twice: the centres that waited
+    for a noise longer than `noise_blocks` are dropped undetected and the bank's `wait`
+    rows never overflow; the contacts are the numpy detector's, to the bit."""
+    slip = SIGNALS["slip"][:900]
+    x = np.concatenate([np.zeros(4000), slip, np.zeros(4000), slip])
+    compiled, numpy_detector = ContactDetector(FS_HZ), NumpyDetector(FS_HZ)
+    got, expected = told(compiled, x, chunk), told(numpy_detector, x, chunk)
+    assert len(got[0]) > 4
+    np.testing.assert_array_equal(got[0], expected[0])
+    np.testing.assert_array_equal(got[1], expected[1])
 
 
 def test_step_scales_the_kernel_has_no_room_for_are_left_as_they_were() -> None:

@@ -92,3 +92,39 @@ def test_a_non_finite_sample_is_refused_by_name_and_nothing_of_its_chunk_is_kept
         refused.feed(t[half : half + 3], broken)
     told.append(refused.feed(t[half:], x[half:]))
     assert told == told_clean
+
+
+class _AlwaysTrims(ContactDetector):
+    """Asks every part's trim on every feed (as before `_trim_at`)."""
+
+    def _trim(self) -> None:
+        self._trim_at = 0
+        super()._trim()
+
+
+def _cuts(detector: ContactDetector) -> tuple[int, ...]:
+    """Where each buffer the trims cut now starts."""
+    return (
+        detector.samples.start,
+        detector.watcher._level_start,
+        *(ch.z_start for ch in detector.channels),
+        *(sc.start for sc in detector.steps.scales),
+    )
+
+
+@pytest.mark.parametrize("chunk", [1, 3, 7, 50])
+def test_the_trims_not_asked_would_have_cut_nothing(chunk):
+    """`_trim` skips the parts' trims until one could cut: every buffer is cut at the same
+    sample as when they are asked on every feed, through a rail start (centres waiting
+    for a noise), contacts and rest."""
+    x = np.concatenate([np.zeros(150), *[_cycle()] * 3])
+    t = np.arange(len(x)) / FS_HZ
+    skipping, asking = ContactDetector(FS_HZ), _AlwaysTrims(FS_HZ)
+    cuts, told = set(), 0
+    for i in range(0, len(x), chunk):
+        got = skipping.feed(t[i : i + chunk], x[i : i + chunk])
+        assert got == asking.feed(t[i : i + chunk], x[i : i + chunk])
+        told += len(got[0])
+        assert _cuts(skipping) == _cuts(asking), i
+        cuts.add(_cuts(skipping))
+    assert told and len(cuts) > 10  # contacts told, and buffers cut many times

@@ -61,6 +61,7 @@ from grasplink.decoding.kernels.layout import (
     CH_NOISE_BLOCK,
     CH_SIZE,
     CH_W,
+    CH_WAIT_N,
     CH_Z_START,
     CHANNEL_COLUMNS,
     CHANNEL_ROWS,
@@ -68,6 +69,9 @@ from grasplink.decoding.kernels.layout import (
     ROW_HINGE,
     ROW_READY,
     ROW_Z,
+    WAIT_AFTER,
+    WAIT_HINGE,
+    WAIT_ROWS,
 )
 
 DEFAULT_SCALES_S = (0.005, 0.01, 0.02, 0.04, 0.08)
@@ -106,12 +110,13 @@ class _ChannelBank:
     """The hinge channels' numbers side by side (a row per channel), so that one kernel
     crossing steps them all (`kernels.detector.channels_fast`): their int state
     (`CHANNEL_COLUMNS`), the noise of the block they are in, the slope filters' taps and
-    carried state, the slopes held, the block's |hinge|, and the kernel's outputs; the
-    kernel takes them in two bundles built here once (`numbers`, `told`). A `_Channel`
-    reads and writes its own row through properties (no views are kept: a deep copy of
-    the detector stays one piece)."""
+    carried state, the slopes held, the block's |hinge|, the centres waiting for a noise
+    (`wait`: room for `waits` of them), and the kernel's outputs; the kernel takes them
+    in two bundles built here once (`numbers`, `told`). A `_Channel` reads and writes its
+    own row through properties (no views are kept: a deep copy of the detector stays one
+    piece)."""
 
-    def __init__(self, widths: list[int], needed: list[float], block: int):
+    def __init__(self, widths: list[int], needed: list[float], block: int, waits: int):
         C, wide = len(widths), max(widths)
         self.ints = np.zeros((C, len(CHANNEL_COLUMNS)), np.int64)
         self.ints[:, CH_W] = widths
@@ -122,6 +127,7 @@ class _ChannelBank:
         self.state = np.zeros((C, wide))
         self.after = np.zeros((C, wide))
         self.block_abs = np.zeros((C, block))
+        self.wait = np.zeros((C, len(WAIT_ROWS), waits))
         self.found = np.zeros((C, 2 * block), np.int64)
         self.counts = np.zeros(C, np.int64)
         self.status = np.zeros(C, np.int64)
@@ -131,7 +137,7 @@ class _ChannelBank:
         self.numbers = tuple(
             Channels(
                 ints=self.ints, noise=self.noise, needed=self.needed, taps=self.taps,
-                state=self.state, after=self.after, block_abs=self.block_abs,
+                state=self.state, after=self.after, block_abs=self.block_abs, wait=self.wait,
             )
         )  # fmt: skip
         self.told = tuple(
@@ -147,7 +153,6 @@ class _Channel:
     rise: float  # ... that the rise check asks (`needed` lower: tail kinks, `_candidates`)
     bank: _ChannelBank  # where its numbers live: row `index`
     index: int
-    waiting: list = field(default_factory=list)  # (block, hinge, after) awaiting a noise
     # rows z, hinge (N/sample), slope after, sample that told the noise (known at), by centre
     # from z_start; z, zh, za, zready are views of their whole storage (refreshed when it
     # grows): the first rows.size entries are held
@@ -162,6 +167,9 @@ class _Channel:
     abs_n = BankInt(CH_ABS_N)  # |h| of the block being filled (`block_abs`), so far
     next_test = BankInt(CH_NEXT_TEST)  # next centre to test for a local maximum
     z_start = BankInt(CH_Z_START)  # global centre index of z[0]
+    # centres awaiting their block's noise: `waiting` of them after the last row, their
+    # hinge and slope after in `wait` (once some wait, every later one does: `_release`)
+    waiting = BankInt(CH_WAIT_N)
 
     def __post_init__(self) -> None:
         self.rows = BankRows(self.bank.ints, self.index, CH_SIZE, 256, rows=len(CHANNEL_ROWS))
@@ -183,6 +191,11 @@ class _Channel:
     @property
     def block_abs(self) -> np.ndarray:
         return self.bank.block_abs[self.index]
+
+    @property
+    def wait(self) -> np.ndarray:
+        """The waiting centres' rows (`WAIT_ROWS`; the first `waiting` entries held)."""
+        return self.bank.wait[self.index]
 
     def refresh_views(self) -> None:
         """z, zh, za, zready as views of the rows' storage, after an append that grew it
@@ -228,7 +241,10 @@ class HingeBank:
         self.tails = settings.tails
         floor = self.tails.floor if self.tails.residual_z > 0.0 else math.inf
         needed = [min(r, floor) for r in rise]
-        self.bank = _ChannelBank(widths, needed, self.block)
+        # centres wait for a noise at most noise_blocks blocks past their own (`_release`):
+        # room for those, the block being filled and one more
+        waits = (noise.noise_blocks + 3) * self.block
+        self.bank = _ChannelBank(widths, needed, self.block, waits)
         self.constants = tuple(ChannelSettings(block=self.block, threshold=self.threshold))
         self.channels = [
             _Channel(w, SosFilter.fir(slope_taps(w)), needed[ci], rise[ci], self.bank, ci)
@@ -245,6 +261,12 @@ class HingeBank:
         for ch in self.channels:
             taps, state = ch.slope.fir_state(first)
             ch.taps[:], ch.state[:] = taps, state  # (the bank's rows: run in place from now)
+
+    def room(self, keep: int) -> int:
+        """Samples to come before `trim(keep)` would cut: a channel gains at most a centre
+        per sample, as a row or waiting for a noise (rows once `_release`d)."""
+        held = self.bank.ints[:, CH_SIZE] + self.bank.ints[:, CH_WAIT_N]
+        return 2 * keep - max(held.tolist(), default=0)
 
     def trim(self, keep: int) -> None:
         """Keep the last `keep` rows of each channel once twice that many are held."""
@@ -276,9 +298,14 @@ class HingeBank:
             else:
                 if said[ci] == BLOCK_DONE:
                     n = ch.next_n
+                    waited = ch.waiting
                     self._block_done(ch, (n - 1) // self.block, n)
                     if taken[ci] < len(x):  # the next block's first centres
                         self._run_channel(ci, ch, x[taken[ci] :], candidates)
+                    elif waited:  # centres it released: tested now, as `_run_channel` would
+                        found = self._maxima(ch)
+                        if len(found):
+                            self._candidates(ci, ch, found, candidates)
                 if told:  # (after the rows of the rest: a candidate's timing reads them)
                     self._candidates(ci, ch, bank.found[ci, :told], candidates)
             self._arm(ci, ch)
@@ -403,7 +430,7 @@ class HingeBank:
             ch.abs_n = abs_n
             noise = None if ch.waiting else self.noise.of(ch.index, block)
             if noise is None:
-                ch.waiting.append((block, seg_h, seg_a))
+                self._wait(ch, seg_h, seg_a)
             else:
                 self._append_z(ch, seg_h, seg_a, noise, n + ch.width)
             n += end - pos
@@ -422,18 +449,37 @@ class HingeBank:
         self.noise.tell(ch.index, block, median * MEDIAN_TO_STD)
         self._release(ch, n - 1 + ch.width)
 
+    @staticmethod
+    def _wait(ch: _Channel, seg_h: np.ndarray, seg_a: np.ndarray) -> None:
+        """Centres (their hinge, slope after) after those waiting, to wait for a noise too
+        (the kernel appends as `channel_wait`)."""
+        at, wait = ch.waiting, ch.wait
+        if at + len(seg_h) > wait.shape[1]:
+            raise RuntimeError(
+                f"hinge channel {ch.index}: {at + len(seg_h)} centres waiting for a noise, "
+                f"room for {wait.shape[1]} (`_release` drops them sooner)"
+            )
+        wait[WAIT_HINGE, at : at + len(seg_h)] = seg_h
+        wait[WAIT_AFTER, at : at + len(seg_a)] = seg_a
+        ch.waiting = at + len(seg_h)
+
     def _release(self, ch: _Channel, ready: int) -> None:
         """z for the waiting blocks whose noise is now known (sample `ready` told it)."""
+        B = self.block
         while ch.waiting:
-            block = ch.waiting[0][0]
+            count = ch.waiting
+            first = ch.z_start + ch.rows.size  # the first waiting centre: after every row
+            block = first // B
             noise = self.noise.of(ch.index, block)
             if noise is None:
                 if self.noise.done[ch.index] - block <= self.noise.noise_blocks:
                     return
                 noise = math.inf  # waited too long: nothing detected there
-            while ch.waiting and ch.waiting[0][0] == block:
-                _, seg_h, seg_a = ch.waiting.pop(0)
-                self._append_z(ch, seg_h, seg_a, noise, ready)
+            wait = ch.wait
+            k = min(count, (block + 1) * B - first)  # the block's centres
+            self._append_z(ch, wait[WAIT_HINGE, :k], wait[WAIT_AFTER, :k], noise, ready)
+            wait[:, : count - k] = wait[:, k:count]  # (overlapping: numpy copies safely)
+            ch.waiting = count - k
 
     @staticmethod
     def _append_z(

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from grasplink.decoding.detector.series import Samples
-from grasplink.decoding.filters import on_rail, resolution
+from grasplink.decoding.filters import RAIL_SHARE, on_rail, resolution
+from grasplink.decoding.kernels.detector import rail_and_step
 from grasplink.errors import ConfigError
 
 BUSY_MAX_S = 0.06  # ... in the hinge scales under this (s); wider ones count every block
@@ -115,8 +116,11 @@ class NoiseFloor:
         for k in range(full):
             block = raw[k * B : (k + 1) * B]
             b = self._raw_blocks + k
-            self._censored[b] = on_rail(block)
-            self._floor[b] = resolution(block) / math.sqrt(12.0)
+            rail, step = rail_and_step(block, RAIL_SHARE)  # (compiled; NaN: numpy's rules)
+            if rail < 0:
+                rail, step = on_rail(block), resolution(block)
+            self._censored[b] = bool(rail)
+            self._floor[b] = step / math.sqrt(12.0)
             top = float(block.max())
             if self._censored[b] and top > 0.0 and np.count_nonzero(block == top) >= 0.5 * B:
                 # saturated: no contact can show; times of the block's first and last sample

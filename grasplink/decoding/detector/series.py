@@ -130,6 +130,10 @@ class Samples:
         x = self.x[i0:i1]
         return bool(on_rail(x)) and bool(np.count_nonzero(x == x.max()) >= RAIL_SHARE * len(x))
 
+    def room(self, keep: int) -> int:
+        """Samples to come before `trim(keep)` would cut (one entry each)."""
+        return 2 * keep - len(self.t)
+
     def trim(self, keep: int) -> None:
         """Keep the last `keep` samples once twice that many are held."""
         if len(self.t) > 2 * keep:

@@ -139,6 +139,10 @@ class StepProbe:
             taps, state = sc.fir.fir_state(first)
             sc.taps[:], sc.state[:] = taps, state  # (the bank's rows: run in place from now)
 
+    def room(self, keep: int) -> int:
+        """Samples to come before `trim(keep)` would cut (a difference each per scale)."""
+        return 2 * keep - max(self.bank.ints[:, S_SIZE].tolist(), default=0)
+
     def trim(self, keep: int) -> None:
         """Keep the last `keep` differences of each scale once twice that many are held."""
         if max(self.bank.ints[:, S_SIZE].tolist(), default=0) <= 2 * keep:

@@ -218,6 +218,11 @@ class PulseWatcher:
         if self._level_filter.is_fir:  # (one tap, under 100 Hz: a plain gain, run as is)
             self._level_fir = self._level_filter.fir_state(first)
 
+    def room(self, keep: int) -> int:
+        """Samples to come before `trim(keep, ...)` would look at the level (an entry each;
+        under 1 while a watch holds it longer)."""
+        return 2 * keep - len(self._level)
+
     def trim(self, keep: int, others: Iterable[Watch]) -> None:
         """Keep the level back to `keep` samples, or to the oldest sample a watch (this
         watcher's, or `others`: the probes' candidates) still examines."""

@@ -34,6 +34,7 @@ from grasplink.decoding.kernels.layout import (
     CH_NOISE_BLOCK,
     CH_SIZE,
     CH_W,
+    CH_WAIT_N,
     CH_Z_START,
     HELD_DETRENDED,
     HELD_LEVELS,
@@ -46,6 +47,8 @@ from grasplink.decoding.kernels.layout import (
     S_SIZE,
     S_START,
     S_W,
+    WAIT_AFTER,
+    WAIT_HINGE,
 )
 
 __all__ = [
@@ -149,6 +152,59 @@ def lattice_median_of(values: np.ndarray, floor: float) -> float:
     if floor > cell_lo:
         cell_lo = floor
     return cell_lo + (0.5 * n - lo) / ties * (cell_hi - cell_lo)
+
+
+@jit()
+def rail_and_step(x: np.ndarray, share: float) -> tuple[int, float]:
+    """`filters.on_rail(x)` (with RAIL_SHARE = `share`) and `filters.resolution(x)` of a
+    raw block in one crossing (`NoiseFloor.raw_stats`, a block of 50 samples at 400 Hz:
+    a sort, run counts, a diff and masks of numpy calls, each costing more than its
+    arithmetic): (1 on a rail else 0, the smallest step). The same comparisons and
+    subtractions: the same answer and bits. (-1, NaN) for a NaN among them (the caller's
+    numpy path then)."""
+    n = len(x)
+    for i in range(n):
+        if x[i] != x[i]:
+            return -1, np.nan
+    # resolution: the smallest |x[i + 1] - x[i]| above 1e-12 of the largest |x| (or of 1)
+    top = 0.0
+    for i in range(n):
+        if abs(x[i]) > top:
+            top = abs(x[i])
+    tol = 1e-12 * (top if top > 1.0 else 1.0)
+    step, stepped = 0.0, False
+    for i in range(n - 1):
+        d = abs(x[i + 1] - x[i])
+        if d > tol and (not stepped or d < step):
+            step, stepped = d, True
+    if n < 2:
+        return 0, step
+    # on a rail: the run of the smallest (or largest) value at least `share` of them (and
+    # 2) and twice any other value's run
+    v = np.sort(x)
+    runs = np.empty(n, np.int64)
+    k, runs[0] = 0, 1
+    for i in range(1, n):
+        if v[i] != v[i - 1]:
+            k += 1
+            runs[k] = 0
+        runs[k] += 1
+    if k == 0:
+        return 1, step  # constant: nothing of the noise shows
+    need = share * n
+    if need < 2.0:
+        need = 2.0
+    low, high = runs[0], runs[k]
+    most_above, most_below = 0, 0  # the longest run but the first, but the last
+    for j in range(1, k + 1):
+        if runs[j] > most_above:
+            most_above = runs[j]
+    for j in range(k):
+        if runs[j] > most_below:
+            most_below = runs[j]
+    if (low >= need and low >= 2 * most_above) or (high >= need and high >= 2 * most_below):
+        return 1, step
+    return 0, step
 
 
 @jit()
@@ -260,6 +316,30 @@ def channel_fast(
     return hinge_maxima(rows, lo, at + count - 1 - w, w, threshold, needed, found)
 
 
+@jit()
+def channel_wait(
+    x: np.ndarray,
+    taps: np.ndarray,
+    state: np.ndarray,
+    after: np.ndarray,
+    held: int,
+    wait: np.ndarray,
+    at: int,
+    block_abs: np.ndarray,
+    abs_n: int,
+) -> int:
+    """A hinge channel's step while its centres wait for a noise (no block before them has
+    shown one yet: a signal on a rail, the first blocks): `channel_hinge` on x, the new
+    centres' hinge and slope after appended to wait[:, at:] (`WAIT_ROWS`) and their
+    |hinge| to block_abs[abs_n:], as `HingeBank._normalise` does; returns how many."""
+    hinge, slope_after = channel_hinge(x, taps, state, after, held)
+    for i in range(len(hinge)):
+        wait[WAIT_HINGE, at + i] = hinge[i]
+        wait[WAIT_AFTER, at + i] = slope_after[i]
+        block_abs[abs_n + i] = abs(hinge[i])
+    return len(hinge)
+
+
 # what `channels_fast` says of each channel
 TAKEN, NOT_TAKEN, BLOCK_DONE = 0, 1, 2
 
@@ -268,7 +348,8 @@ class Channels(NamedTuple):
     """The hinge channels' numbers, a row each (`detector.hinges._ChannelBank`): int state
     (`CHANNEL_COLUMNS`), the noise of the block each is in, the rise needed after a
     candidate, the slope filters' taps and carried state (a channel's first `width` + 1,
-    `width` entries), the slopes held (`width`) and the block's |hinge|."""
+    `width` entries), the slopes held (`width`), the block's |hinge| and the centres
+    waiting for a noise (`wait[c, :, :wait_n]`, `WAIT_ROWS`)."""
 
     ints: np.ndarray
     noise: np.ndarray
@@ -277,6 +358,7 @@ class Channels(NamedTuple):
     state: np.ndarray
     after: np.ndarray
     block_abs: np.ndarray
+    wait: np.ndarray
 
 
 class ChannelSettings(NamedTuple):
@@ -300,16 +382,18 @@ class ChannelsTold(NamedTuple):
 def channels_fast(x: np.ndarray, bank: tuple, rows: tuple, settings: tuple, out: tuple) -> bool:
     """Every hinge channel's usual step (`channel_fast`) in one crossing: the new centres
     in the block of the channel's known noise, with room in its rows and for its
-    candidates. Per channel: status TAKEN (counts[c] candidates in found[c]), BLOCK_DONE
-    (taken, and its block complete: the caller takes its noise; centres past the block's
-    end are left to it: only x[:taken[c]] was taken) or NOT_TAKEN (nothing changed: the
-    caller's Python path does it); the int state updated in `bank.ints`. `bank`,
-    `settings`, `out`: a `Channels`, `ChannelSettings` and `ChannelsTold` as plain tuples
-    (built once by the caller); `rows`: the channels' rows storage. Returns whether any
-    channel needs the caller (not taken, a block done, a candidate): usually none does."""
+    candidates - or, while its centres wait for a noise, appended to those waiting
+    (`channel_wait`: no candidates then). Per channel: status TAKEN (counts[c] candidates
+    in found[c]), BLOCK_DONE (taken, and its block complete: the caller takes its noise;
+    centres past the block's end are left to it: only x[:taken[c]] was taken) or
+    NOT_TAKEN (nothing changed: the caller's Python path does it); the int state updated
+    in `bank.ints`. `bank`, `settings`, `out`: a `Channels`, `ChannelSettings` and
+    `ChannelsTold` as plain tuples (built once by the caller); `rows`: the channels' rows
+    storage. Returns whether any channel needs the caller (not taken, a block done, a
+    candidate): usually none does."""
     bank, settings, out = Channels(*bank), ChannelSettings(*settings), ChannelsTold(*out)
     ints, noise, needed, taps = bank.ints, bank.noise, bank.needed, bank.taps
-    state, after, block_abs = bank.state, bank.after, bank.block_abs
+    state, after, block_abs, wait = bank.state, bank.after, bank.block_abs, bank.wait
     block, threshold = settings.block, settings.threshold
     found, counts, status, taken = out.found, out.counts, out.status, out.taken
     attention = False
@@ -325,6 +409,24 @@ def channels_fast(x: np.ndarray, bank: tuple, rows: tuple, settings: tuple, out:
         data = rows[c]
         counts[c] = 0
         taken[c] = 0
+        waiting = ints[c, CH_WAIT_N]
+        if waiting > 0:  # its centres wait for a noise: appended to those waiting
+            if count <= 0 or (start + count - 1) // block != b or waiting + count > wait.shape[2]:
+                status[c] = NOT_TAKEN
+                attention = True
+                continue
+            channel_wait(
+                x[:m], taps[c, : w + 1], state[c, :w], after[c, :w], held, wait[c], waiting,
+                block_abs[c], ints[c, CH_ABS_N],
+            )  # fmt: skip
+            ints[c, CH_HELD] = min(w, held + m)
+            ints[c, CH_ABS_N] += count
+            ints[c, CH_NEXT_N] = start + count
+            ints[c, CH_WAIT_N] = waiting + count
+            taken[c] = m
+            status[c] = BLOCK_DONE if (start + count) % block == 0 else TAKEN
+            attention = attention or status[c] == BLOCK_DONE
+            continue
         lo = max(ints[c, CH_NEXT_TEST], z_start + w)
         hi = z_start + size + count - 1 - w
         if (

@@ -79,14 +79,20 @@ P21, P22, P31, P33 = p_at(2, 1), p_at(2, 2), p_at(3, 1), p_at(3, 3)
 # ------------------------------------------------------------------ the contact detector
 # a hinge channel's int state (`detector.hinges`, a row per channel): width, slopes held,
 # next centre, |hinge| entries of the block, next centre to test, centre of row 0, rows
-# held, and the block whose noise is `noise[channel]` (-1: none known, or blocks waiting
-# for one: the Python path)
+# held, centres waiting for their block's noise (those after the last row, in the
+# bank's `wait`), and the block whose noise is `noise[channel]` (-1: none known, or
+# blocks waiting for one)
 CHANNEL_COLUMNS = (
-    "width", "held", "next_n", "abs_n", "next_test", "z_start", "size", "noise_block",
+    "width", "held", "next_n", "abs_n", "next_test", "z_start", "size", "wait_n",
+    "noise_block",
 )  # fmt: skip
-CH_W, CH_HELD, CH_NEXT_N, CH_ABS_N, CH_NEXT_TEST, CH_Z_START, CH_SIZE, CH_NOISE_BLOCK = range(
-    len(CHANNEL_COLUMNS)
-)
+(
+    CH_W, CH_HELD, CH_NEXT_N, CH_ABS_N, CH_NEXT_TEST, CH_Z_START, CH_SIZE, CH_WAIT_N,
+    CH_NOISE_BLOCK,
+) = range(len(CHANNEL_COLUMNS))  # fmt: skip
+# a waiting centre's rows (`wait[channel]`): its hinge (N/sample) and the slope after it
+WAIT_ROWS = ("hinge", "after")
+WAIT_HINGE, WAIT_AFTER = range(len(WAIT_ROWS))
 # a hinge channel's rows by centre: z (hinge in noise units), hinge (N/sample), the slope
 # after it, and the sample that told the noise
 CHANNEL_ROWS = ("z", "hinge", "after", "ready")
