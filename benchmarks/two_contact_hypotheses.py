@@ -79,7 +79,8 @@ class _Probe(TrackerDecoder):
         """(dirn, ridge, n, |v|, share of the slipping mass) of each slipping track with a
         measured speed."""
         B = self._tracks
-        if not len(B) or self.RISE_EVIDENCE:
+        # the soft silence (heavy noise: `rise_evidence`) is not rebuilt per track here
+        if not len(B) or (self.RISE_EVIDENCE and self._rise.blind(self.RISE_EVIDENCE_GATE)):
             return []
         verdicts = tuple(
             posterior_kernels.Verdicts(self._ring, self._ring_id, *self._evidence_tables)

@@ -4,7 +4,10 @@ Definitions (the benchmark states them too):
 
 - An update is *scored* when the truth is slipping and the leading edge has
   passed the third ridge contact after onset (before that no layout can tell
-  position, the *physical limit*).
+  position, the *physical limit*), until the edge lies one spacing (the one
+  into the last ridge) past the last ridge ahead: past it no contact can come,
+  nothing observes the slip, and the tracker shows no speed there
+  (`decoding.coast_bound`; as slip_reporting, which stops at the last ridge).
 - Speed error: |v_est - v_true| / |v_true| (a wrong direction counts in
   full; a speed told without a direction is compared as a magnitude);
   position error: |x_est - x_true| in mm. A scored update without a speed
@@ -100,6 +103,7 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
     contacts = rec.contact_times_s[rec.contact_times_s >= (onset or 0.0)]
     third = contacts[2] if len(contacts) >= 3 else None
     scored_mask = slipping & (t_upd >= third) if third is not None else np.zeros_like(slipping)
+    scored_mask &= observed(rec, x_true, v_true)
     v_est, _ = along_truth(estimates, v_true)
     x_est = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
     flags = np.array([e.slip for e in estimates])
@@ -135,6 +139,14 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
         cpu_us_per_sample=cpu_us,
         samples=len(rec.t_s),
     )
+
+
+def observed(rec: SkinRecording, x_true: np.ndarray, v_true: np.ndarray) -> np.ndarray:
+    """Updates whose edge (at x_true, moving at v_true) lies no more than one spacing, the
+    one into the last ridge ahead, past that ridge: where a speed is observable."""
+    spacing = np.asarray(rec.layout_mm, dtype=float)
+    ahead = np.where(v_true >= 0, x_true - float(spacing.sum()), -x_true)
+    return ahead <= np.where(v_true >= 0, spacing[-1], spacing[0])
 
 
 def along_truth(

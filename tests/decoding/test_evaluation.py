@@ -144,6 +144,42 @@ def test_a_speed_without_a_direction_is_scored_as_a_speed_and_never_a_wrong_sign
     assert told.wrong_sign == (len(told.speed_rel_err) if reverse else 0)
 
 
+class CoastBounded(ConstantSpeed):
+    """The true |speed| until the edge lies `past_mm` past the last ridge ahead, then a stop."""
+
+    def __init__(self, rec: synth.SkinRecording, past_mm: float):
+        super().__init__(rec.layout_mm, rec.fs_hz, 40.0)
+        self.rec, self.past_mm = rec, past_mm
+
+    def process(self, t, x):
+        out = []
+        length = float(sum(self.rec.layout_mm))
+        for _, g in self.update_points(t):
+            edge = float(np.interp(g, self.rec.t_s, self.rec.position_mm))
+            beyond = edge - length if self.rec.position_mm[-1] > 0 else -edge
+            speed = self.speed_mm_s if beyond <= self.past_mm else 0.0
+            out.append(SlipEstimate(g, speed > 0, speed, 0.0, 0.0, 1.0))
+        return out
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_no_speed_is_owed_past_one_spacing_beyond_the_last_ridge(reverse):
+    """Past the last ridge no contact can come: a speed is scored until the edge lies one
+    spacing (the one into the last ridge) past it (`decoding.coast_bound`), not after."""
+    layout = LAYOUTS_MM["alpha0.1"]
+    rec = synth.slip_recording(layout, 40.0, reverse=reverse, seed=3)
+    gap = layout[0] if reverse else layout[-1]
+    bounded = scoring.score(lambda: CoastBounded(rec, gap), rec)
+    assert bounded.scored > 0 and bounded.missing == 0
+    assert float(np.max(bounded.speed_rel_err)) < 1e-9  # the stops lie outside the window
+    early = scoring.score(lambda: CoastBounded(rec, 0.5 * gap), rec)
+    assert float(np.max(early.speed_rel_err)) == 1.0  # stopped inside it: scored
+    length = float(sum(layout))
+    x = np.array([-layout[0] - 0.1, -layout[0] + 0.1, length + layout[-1] + 0.1, length])
+    v = np.array([-40.0, -40.0, 40.0, 40.0])
+    assert scoring.observed(rec, x, v).tolist() == [False, True, False, True]
+
+
 # -- where the benchmark writes ------------------------------------------------------------
 def write_pyproject(folder: Path, name: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)

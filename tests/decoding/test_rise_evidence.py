@@ -82,7 +82,7 @@ def test_clean_slip_decodes_bit_for_bit_with_the_evidence_on():
             out += decoder.feed(rec.t_s[i : i + 3], rec.force_n[i : i + 3])
         return [(e.t_s, e.slip, e.speed_mm_s, e.position_mm, e.confidence) for e in out]
 
-    plain = decode({})
+    plain = decode({"RISE_EVIDENCE": 0.0})
     assert any(s for _, s, *_ in plain)  # a slip decoded
     assert decode({"RISE_EVIDENCE": 1.0, "RISE_H_LOW": 0.3}) == plain
 

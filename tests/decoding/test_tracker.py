@@ -2,8 +2,12 @@
 
 Signals come from `simulators.synth` with ground truth. Accuracy is judged as
 the targets state it: over the updates where the object slips, after its
-third ridge contact, aggregated over the recordings of a group. The full
-grid (all layouts, more speeds) is the decoding benchmark's job.
+third ridge contact, aggregated over the recordings of a group - until the edge
+lies one spacing (the one into the last ridge) past the last ridge ahead: past it
+no contact can come, so no speed is observed there, and the tracker shows none
+(`decoding.coast_bound`; benchmarks/coast_scored_window.py: on this grid the
+bound moves no figure inside that window). The full grid (all layouts, more
+speeds) is the decoding benchmark's job.
 """
 
 from __future__ import annotations
@@ -56,6 +60,16 @@ def assert_clean(estimates: list[SlipEstimate]) -> None:
         assert 0.0 <= e.confidence <= 1.0, e
 
 
+def observed(rec: synth.SkinRecording, t: np.ndarray) -> np.ndarray:
+    """Updates at t whose edge lies no more than one spacing (the one into the last ridge)
+    past the last ridge ahead (one-way slips): where a speed is owed."""
+    spacing = np.asarray(rec.layout_mm, dtype=float)
+    edge = np.interp(t, rec.t_s, rec.position_mm)
+    if rec.position_mm[-1] > rec.position_mm[0]:
+        return edge <= spacing.sum() + spacing[-1]
+    return edge >= -spacing[0]
+
+
 class Score:
     """Errors of one recording over the scored updates, plus the timing figures."""
 
@@ -67,7 +81,7 @@ class Score:
         v = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
         x = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
         contacts = rec.contact_times_s
-        mask = slipping & (t >= contacts[2])
+        mask = slipping & (t >= contacts[2]) & observed(rec, t)
         # errors of the answers given: |speed| whether or not the direction is told yet,
         # the position where given (it needs the direction); an update without a speed is
         # *missing*, counted apart (the benchmark's definition) and bounded by the targets

@@ -6,7 +6,8 @@ at 0858d90, before each became a compiled kernel (`kernels.branch`, `kernels.pru
 The methods are those of `TrackerDecoder` at 0858d90, unchanged but for three things:
 `NumpyTracker` reads the decoder it wraps (its constants, tables, tracks, null score,
 detector) and never writes it (`_branch` keeps its own null score); `_prune` returns the rows
-it keeps (the kernel's answer) instead of the bank; `_schedule` caches nothing on the bank.
+it keeps (the kernel's answer) instead of the bank; `_schedule` caches nothing on the bank
+(and ends with the runtime's coast bound past the last ridge, `_coast_bounded`).
 
 Every elementary operation whose bits may differ between numpy and the compiled kernels, or
 between two CPUs, goes through `ops` (`Ops`): exp, log and erf (numpy's SIMD loops on one
@@ -27,6 +28,7 @@ from contextlib import contextmanager
 import numpy as np
 from scipy.special import erf
 
+from grasplink.decoding import coast_bound
 from grasplink.decoding.contacts import STEP_IDS, ContactEvent
 from grasplink.decoding.kernels.layout import (
     CHANGING,
@@ -773,7 +775,19 @@ class NumpyTracker:
             latency = np.maximum(latency, self._latency_floor(B)[act, None])
             t_due = B.t[act, None] + tau + 3.0 * span + self.LATE_REL * tau + latency
             due[act, 1:] = np.where(T["done"][ra], np.inf, t_due)
-        return due, adj, stopped, limit
+        return self._coast_bounded(B, (due, adj, stopped, limit))
+
+    def _coast_bounded(self, B: _Bank, sched: tuple) -> tuple:
+        """The schedule with each slipping track stopped COAST_INTERVALS intervals past the
+        last ridge (added after 0858d90: `decoding.coast_bound`, numpy in the runtime too,
+        applied after the schedule kernel there; 0: as it is)."""
+        if not self.COAST_INTERVALS or not len(B):
+            return sched
+        tracks = {"s": B.X[:, 0], "t": B.t, "v": B.X[:, 1], "stop": B.stop, "run": B.run}
+        tracks |= {"dirn": B.dirn, "ridge": B.ridge}
+        return coast_bound.bound(
+            sched, tracks, self._pos, self._last_gaps, self.count, self.COAST_INTERVALS
+        )
 
     def _coast_end(self, di, v):
         """How far a slip at speed v goes past the last ridge before silence alone says it
