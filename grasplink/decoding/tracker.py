@@ -80,7 +80,14 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.decoding import arrival, coast_bound, rise_evidence, rise_travel, stop_jumps
+from grasplink.decoding import (
+    arrival,
+    arrival_flag,
+    coast_bound,
+    rise_evidence,
+    rise_travel,
+    stop_jumps,
+)
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -390,6 +397,10 @@ class TrackerDecoder(Decoder):
     # ridge before it missed (0: off, the start prior alone). Full plan, one run
     # (tune_tracker_kinds.py): see docs/decoding.md, "Arrival"
     ARRIVAL_EMPTY_N = arrival.EMPTY_N
+    # ... and it is a slip from then: flagged (no speed, no direction) while the posterior
+    # flags none, until P(its next ridge not yet told) falls below this (`arrival_flag`;
+    # 0: off). Figures: docs/decoding.md, "Arrival"
+    ARRIVAL_FLAG_P = arrival_flag.HOLD_P
     RISE_TRAVEL_GAIN = 1.0
     # weight of the soft evidence of skipped and due ridges (`rise_evidence`: the signal's
     # rise where a track puts a ridge no contact told, scored in place of log(1 - DETECT_P),
@@ -663,6 +674,7 @@ class TrackerDecoder(Decoder):
         self._told_way = 0  # the direction the last update told (0: none)
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
+        self._arrival_flag = arrival_flag.ArrivalFlag()  # whether the posterior took over
         self._entry = arrival.entry_adjustment(self._log_prior, self._log_miss[:, :R])
         # what every contact's one-contact tracks share: a bank that `_births` copies and
         # fills in (the contact's id, time, sigma and the score)
@@ -1212,6 +1224,32 @@ class TrackerDecoder(Decoder):
 
     # ------------------------------------------------------------------ reporting
     def _report(self, g: float) -> SlipEstimate:
+        out = self._report_posterior(g)
+        if self.ARRIVAL_FLAG_P > 0 and self.ARRIVAL_EMPTY_N > 0:
+            return self._report_arrival(g, out)
+        return out
+
+    def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
+        """`out`, or the slip flagged from its arrival onto an unloaded sensor while the
+        posterior flags none (`arrival_flag`: no speed, no direction)."""
+        arrival_id = -1
+        for c in reversed(self._contacts):
+            if self._unloaded.get(c.id):
+                arrival_id, arrived_s = c.id, c.t_s
+                break
+        if not self._arrival_flag.note(arrival_id, out.slip) or out.slip:
+            return out
+        if arrival_flag.verdict(arrival_id, self._ring, self._ring_id) in (STEP, NOISE):
+            return out  # the contact a grip's press or noise's pulse
+        blind = self._blind(np.array([arrived_s]), g)
+        elapsed = g - arrived_s - (0.0 if blind is None else float(blind[0]))
+        rows = (0, self.count)  # its first ridge, either way
+        p = arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
+        if p < self.ARRIVAL_FLAG_P:
+            return out
+        return SlipEstimate(g, True, None, None, out.force_n, min(1.0, p))
+
+    def _report_posterior(self, g: float) -> SlipEstimate:
         force = self._force
         if not len(self._tracks):
             self._told_way = 0

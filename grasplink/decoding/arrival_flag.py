@@ -1,0 +1,80 @@
+"""A slip shown from its arrival: the flag raised on a first contact onto an unloaded sensor.
+
+Physics (`arrival`): the one FSR sees load only through the skin the object covers, so a
+contact told while the sensor read unloaded is the object's edge sliding onto the skin at
+one of its ends - it is moving. A held object never reads unloaded before a contact (the
+grip presses it onto the skin first). The tracker's posterior flags a slip only once a
+track has two contacts (`TrackerDecoder.EVIDENT_CONTACTS`, a pulse among them): on the
+closed loop (object 8 mm off the skin) the slip belt waited for the second ridge, 19 mm
+on (40 mm/s seed 1: arrival 1.200 s, flag 1.71 s).
+
+The rule: after such a contact, while the posterior flags nothing, the slip is flagged
+(no speed, no direction: one contact tells neither, and either end may be the one it
+came in at) for as long as the next ridge of an entering slip may still be unseen -
+P(no ridge contact told yet | a slip entering at either end, the tracker's speed prior and
+detection model) at least `HOLD_P` (`TrackerDecoder.ARRIVAL_FLAG_P`). Silence ends it: an
+object that slid onto the skin and stopped before its next ridge is no longer flagged
+once that ridge is overdue for all but the slowest slips. It also ends for good once the
+posterior has flagged the slip (the normal path has taken over: a later "no slip" there
+is the posterior's stop or doubt, not the arrival's) and when the arrival contact is told
+a step or noise's pulse (a grip press or noise, not an edge crossing a ridge).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from grasplink.decoding.kernels import posterior as posterior_kernels
+from grasplink.decoding.kernels.common import ring_slot
+
+#: the flag is held while P(the entering slip's next ridge not yet told) is at least this
+HOLD_P = 0.2
+
+
+def waiting_p(
+    elapsed_s: float, rows: Sequence[int], waiting: tuple, K: np.ndarray, latency_s: float
+) -> float:
+    """P(no ridge contact told yet) `elapsed_s` after a slip's first contact, averaged
+    over the tracks' rows `rows` (direction x ridge: each way it may have entered), from
+    the tracker's waiting tables (`TrackerDecoder._waiting_tables`: speed prior, spacing
+    and detection model) less the detector's latency `latency_s`."""
+    if not rows:
+        raise ValueError("arrival_flag: no rows to wait on (a skin has two ends)")
+    log, finite, before = waiting
+    total = 0.0
+    for row in rows:
+        total += math.exp(
+            posterior_kernels._log_waiting(elapsed_s - latency_s, row, log, finite, before, K)
+        )
+    return total / len(rows)
+
+
+class ArrivalFlag:
+    """Which arrival the flag is held for, and whether the posterior has taken over.
+
+    `note(arrival_id, slipping)` at each report: the arrival contact in the tracker's
+    history (its id, or -1 for none) and whether the posterior flags a slip. The flag may
+    show only for an arrival the posterior has not yet flagged since it came."""
+
+    __slots__ = ("_id", "_taken_over")
+
+    def __init__(self) -> None:
+        self._id = -1
+        self._taken_over = False
+
+    def note(self, arrival_id: int, slipping: bool) -> bool:
+        """Whether the arrival flag may still show for `arrival_id`."""
+        if arrival_id != self._id:
+            self._id, self._taken_over = arrival_id, False
+        if slipping and arrival_id >= 0:
+            self._taken_over = True
+        return arrival_id >= 0 and not self._taken_over
+
+
+def verdict(contact_id: int, ring: np.ndarray, ring_id: np.ndarray) -> int:
+    """A contact's pulse verdict in the tracker's ring (0: not told, or no longer held)."""
+    slot = ring_slot(contact_id, len(ring))
+    return int(ring[slot]) if ring_id[slot] == contact_id else 0
