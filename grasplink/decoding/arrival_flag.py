@@ -57,21 +57,27 @@ class ArrivalFlag:
 
     `note(arrival_id, slipping)` at each report: the arrival contact in the tracker's
     history (its id, or -1 for none) and whether the posterior flags a slip. The flag may
-    show only for an arrival the posterior has not yet flagged since it came."""
+    show only for an arrival the posterior has not yet flagged since it came, nor its
+    silence ended (`expire`: the waiting probability only falls as the silence lasts, so
+    it is not computed again for every update at rest)."""
 
-    __slots__ = ("_id", "_taken_over")
+    __slots__ = ("_done", "_id")
 
     def __init__(self) -> None:
         self._id = -1
-        self._taken_over = False
+        self._done = False
 
     def note(self, arrival_id: int, slipping: bool) -> bool:
         """Whether the arrival flag may still show for `arrival_id`."""
         if arrival_id != self._id:
-            self._id, self._taken_over = arrival_id, False
+            self._id, self._done = arrival_id, False
         if slipping and arrival_id >= 0:
-            self._taken_over = True
-        return arrival_id >= 0 and not self._taken_over
+            self._done = True
+        return arrival_id >= 0 and not self._done
+
+    def expire(self) -> None:
+        """The current arrival's silence has ended its flag."""
+        self._done = True
 
 
 def verdict(contact_id: int, ring: np.ndarray, ring_id: np.ndarray) -> int:

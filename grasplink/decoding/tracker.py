@@ -1246,6 +1246,7 @@ class TrackerDecoder(Decoder):
         rows = (0, self.count)  # its first ridge, either way
         p = arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
         if p < self.ARRIVAL_FLAG_P:
+            self._arrival_flag.expire()
             return out
         return SlipEstimate(g, True, None, None, out.force_n, min(1.0, p))
 
