@@ -401,6 +401,10 @@ class TrackerDecoder(Decoder):
     # flags none, until P(its next ridge not yet told) falls below this (`arrival_flag`;
     # 0: off). Figures: docs/decoding.md, "Arrival"
     ARRIVAL_FLAG_P = arrival_flag.HOLD_P
+    # ... over a stop the posterior reports before it ever flagged the slip (1; 0: the
+    # stop reported): such a stop rests on a track pairing the arrival with a contact no
+    # ridge made (the loop's 40 mm/s seed 1: stopped at 1.42 s, its ridge 1 at 1.68 s)
+    ARRIVAL_FLAG_OVER_STOP = 1.0
     RISE_TRAVEL_GAIN = 1.0
     # weight of the soft evidence of skipped and due ridges (`rise_evidence`: the signal's
     # rise where a track puts a ridge no contact told, scored in place of log(1 - DETECT_P),
@@ -976,17 +980,21 @@ class TrackerDecoder(Decoder):
         decided once per contact, so a replay weighs it alike."""
         known = self._unloaded.get(ev.id)
         if known is None:
-            noise = self.detector.noise
-
-            def white(index: int) -> float | None:
-                told = noise.white(max(0, index) // noise.block)
-                return None if told is None else max(float(told[0]), NOISE_FLOOR_N)
-
-            known = arrival.unloaded_before(
-                ev.index, self.fs_hz, self._recent.mean, white, self.ARRIVAL_EMPTY_N
-            )
+            known = self._reads_unloaded(ev.index)
             _put_bounded(self._unloaded, ev.id, known, self.VERDICTS_KEPT)
         return known
+
+    def _reads_unloaded(self, index: int) -> bool:
+        """Whether the sensor read unloaded over `arrival.LEVEL_S` before sample `index`."""
+        noise = self.detector.noise
+
+        def white(at: int) -> float | None:
+            told = noise.white(max(0, at) // noise.block)
+            return None if told is None else max(float(told[0]), NOISE_FLOOR_N)
+
+        return arrival.unloaded_before(
+            index, self.fs_hz, self._recent.mean, white, self.ARRIVAL_EMPTY_N
+        )
 
     def _grip_rate(self, ev: ContactEvent) -> float:
         """Contacts per s like ev the commanded grip makes at its onset (0: none noted, or
@@ -1239,8 +1247,12 @@ class TrackerDecoder(Decoder):
                 break
         if not self._arrival_flag.note(arrival_id, out.slip) or out.slip:
             return out
+        if out.speed_mm_s is not None and not self.ARRIVAL_FLAG_OVER_STOP:
+            return out  # the posterior's stop
         if arrival_flag.verdict(arrival_id, self._ring, self._ring_id) in (STEP, NOISE):
             return out  # the contact a grip's press or noise's pulse
+        if self._reads_unloaded(self._n_in):
+            return out  # nothing lies on the skin now: the contact was no edge sliding on
         blind = self._blind(np.array([arrived_s]), g)
         elapsed = g - arrived_s - (0.0 if blind is None else float(blind[0]))
         rows = (0, self.count)  # its first ridge, either way
