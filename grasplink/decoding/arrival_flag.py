@@ -14,7 +14,10 @@ came in at) for as long as the next ridge of an entering slip may still be unsee
 P(no ridge contact told yet | a slip entering at either end, the tracker's speed prior and
 detection model) at least `HOLD_P` (`TrackerDecoder.ARRIVAL_FLAG_P`). Silence ends it: an
 object that slid onto the skin and stopped before its next ridge is no longer flagged
-once that ridge is overdue for all but the slowest slips. It also ends for good once the
+once that ridge is overdue for all but the slowest slips (1.9 s after a 20 mm/s arrival
+on alpha0.1). Sooner, a stall ends it (`STALL_N`): an edge sliding on covers more skin,
+so the level rises; once it lies flat for 0.2 s the object has stopped (that case: 0.4 s
+after the stop, before its next ridge was due). It also ends for good once the
 posterior has flagged the slip (the normal path has taken over: a later "no slip" there
 is the posterior's stop or doubt, not the arrival's) and when the arrival contact is told
 a step or noise's pulse (a grip press or noise, not an edge crossing a ridge), and while
@@ -26,7 +29,7 @@ seed 162201 at 0.58 s, 0.4 s before the slip began).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -35,6 +38,13 @@ from grasplink.decoding.kernels.common import ring_slot
 
 #: the flag is held while P(the entering slip's next ridge not yet told) is at least this
 HOLD_P = 0.2
+#: a stall: the level's means over `STALL_WINDOWS` windows of `STALL_S` since the arrival
+#: lie within this (N) of each other - an edge sliding on covers more skin, so the level
+#: rises (stick-slip 118 mm/s alpha0.1: 0.2 N per 40 ms), and at rest it is flat (within
+#: 0.01 N); the arrival pulse's fall is no stall. 0: off (silence alone ends the flag)
+STALL_N = 0.02
+STALL_S = 0.04
+STALL_WINDOWS = 5
 
 
 def waiting_p(
@@ -87,3 +97,20 @@ def verdict(contact_id: int, ring: np.ndarray, ring_id: np.ndarray) -> int:
     """A contact's pulse verdict in the tracker's ring (0: not told, or no longer held)."""
     slot = ring_slot(contact_id, len(ring))
     return int(ring[slot]) if ring_id[slot] == contact_id else 0
+
+
+def stalled(
+    mean: Callable[[int, int], float | None], end: int, since: int, fs_hz: float, flat_n: float
+) -> bool:
+    """Whether the level lay flat (`STALL_N`: its window means within `flat_n`) over the
+    last `STALL_WINDOWS` windows of `STALL_S` before sample `end`, all after sample `since`
+    (the arrival's onset); `mean(start, stop)` the mean of samples start..stop-1 (None: not
+    held)."""
+    samples = max(1, round(STALL_S * fs_hz))
+    start = end - STALL_WINDOWS * samples
+    if not flat_n > 0 or start < since:
+        return False
+    levels = [mean(start + k * samples, start + (k + 1) * samples) for k in range(STALL_WINDOWS)]
+    if any(level is None for level in levels):
+        return False
+    return max(levels) - min(levels) < flat_n  # type: ignore[type-var]

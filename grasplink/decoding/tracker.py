@@ -405,6 +405,8 @@ class TrackerDecoder(Decoder):
     # stop reported): such a stop rests on a track pairing the arrival with a contact no
     # ridge made (the loop's 40 mm/s seed 1: stopped at 1.42 s, its ridge 1 at 1.68 s)
     ARRIVAL_FLAG_OVER_STOP = 1.0
+    # ... and ended by the level lying flat since (`arrival_flag.STALL_N`, N; 0: off)
+    ARRIVAL_STALL_N = arrival_flag.STALL_N
     RISE_TRAVEL_GAIN = 1.0
     # weight of the soft evidence of skipped and due ridges (`rise_evidence`: the signal's
     # rise where a track puts a ridge no contact told, scored in place of log(1 - DETECT_P),
@@ -1243,7 +1245,7 @@ class TrackerDecoder(Decoder):
         arrival_id = -1
         for c in reversed(self._contacts):
             if self._unloaded.get(c.id):
-                arrival_id, arrived_s = c.id, c.t_s
+                arrival_id, arrived_s, onset = c.id, c.t_s, c.index
                 break
         if not self._arrival_flag.note(arrival_id, out.slip) or out.slip:
             return out
@@ -1253,6 +1255,11 @@ class TrackerDecoder(Decoder):
             return out  # the contact a grip's press or noise's pulse
         if self._reads_unloaded(self._n_in):
             return out  # nothing lies on the skin now: the contact was no edge sliding on
+        if arrival_flag.stalled(
+            self._recent.mean, self._n_in, onset, self.fs_hz, self.ARRIVAL_STALL_N
+        ):
+            self._arrival_flag.expire()  # no more skin covered: it stopped
+            return out
         blind = self._blind(np.array([arrived_s]), g)
         elapsed = g - arrived_s - (0.0 if blind is None else float(blind[0]))
         rows = (0, self.count)  # its first ridge, either way

@@ -77,7 +77,7 @@ def test_a_slip_onto_the_skin_is_flagged_at_its_first_contact(flag_p):
 
 @pytest.mark.parametrize("flag_p", [arrival_flag.HOLD_P, 1e-9], ids=["flag", "no-silence"])
 def test_a_slip_that_arrives_and_stops_is_cleared_by_its_silence(flag_p):
-    estimates, rec = _slide_on(12.0, {"ARRIVAL_FLAG_P": flag_p})
+    estimates, rec = _slide_on(12.0, {"ARRIVAL_FLAG_P": flag_p, "ARRIVAL_STALL_N": 0.0})
     first = float(np.sort(rec.contact_times_s)[0])
     assert len(rec.contact_times_s) == 1
     late = [e.t_s for e in estimates if e.slip and e.t_s > first + 2.0]
@@ -87,3 +87,26 @@ def test_a_slip_that_arrives_and_stops_is_cleared_by_its_silence(flag_p):
     # its second ridge overdue for all but the slowest slips (1.9 s measured)
     assert not late, late[:3]
     assert not [e for e in estimates if e.speed_mm_s not in (None, 0.0)]
+
+
+@pytest.mark.parametrize("stall_n", [arrival_flag.STALL_N, 0.0], ids=["stall", "off"])
+def test_a_slip_that_arrives_and_stops_is_cleared_by_its_flat_level(stall_n):
+    """The object stops at 1.62 s, 4 mm onto the skin: the level no longer rises (no more
+    skin covered). Its next ridge would have been due at 2.36 s (the stop's observable
+    moment), the clearing allowed until 2.51 s; silence alone clears it at 3.31 s."""
+    estimates, rec = _slide_on(12.0, {"ARRIVAL_STALL_N": stall_n})
+    stop = sr.score(estimates, rec).stops[0]
+    assert stop.judged
+    if not stall_n:
+        assert stop.delay_s > sr.CLEAR_WITHIN_S
+        return
+    assert stop.delay_s <= 0.0, stop.delay_s  # cleared before it was observable (2.02 s)
+
+
+def test_a_slow_slip_onto_the_skin_is_no_stall():
+    """20 mm/s through: the level rises as the object covers the skin (and dips after the
+    arrival pulse), never flat for 0.2 s: the flag holds from the arrival on."""
+    estimates, rec = _slide_on(60.0, {})
+    first, second = np.sort(rec.contact_times_s)[:2]
+    shown = [e for e in estimates if first + 0.1 <= e.t_s < second + 0.1]
+    assert all(e.slip for e in shown)
