@@ -110,7 +110,10 @@ def stalled(
     start = end - STALL_WINDOWS * samples
     if not flat_n > 0 or start < since:
         return False
-    levels = [mean(start + k * samples, start + (k + 1) * samples) for k in range(STALL_WINDOWS)]
-    if any(level is None for level in levels):
-        return False
-    return max(levels) - min(levels) < flat_n  # type: ignore[type-var]
+    levels: list[float] = []
+    for k in range(STALL_WINDOWS):
+        level = mean(start + k * samples, start + (k + 1) * samples)
+        if level is None:
+            return False
+        levels.append(level)
+    return max(levels) - min(levels) < flat_n

@@ -47,7 +47,10 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
 * Output: posterior over hypotheses (plus "no slip": every contact is
   clutter). Slip is flagged when slipping tracks with two or more contacts
   (one of which fell back like a pulse, or `EVIDENT_CONTACTS` with no step and no
-  pulse as low as noise among them) hold half the mass. The speed needs no
+  pulse as low as noise among them) hold half the mass - or, before that, from a first
+  contact onto an unloaded sensor (the object has just slid onto the skin:
+  `arrival_flag`, no speed, until silence, a flat level or the posterior ends it). The
+  speed needs no
   direction (the belt and the reflex act on it): it is given when the slipping
   tracks agree on it whichever way they go, else the range of speeds they allow
   (`_report`: SPEED_* constants).
