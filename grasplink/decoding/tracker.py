@@ -750,6 +750,9 @@ class TrackerDecoder(Decoder):
         throwaway = TrackerDecoder(self.geometry.spacings_mm.tolist(), self.fs_hz)
         for i in range(0, len(t), 3):  # as a skin TPDO brings them
             throwaway.feed(t[i : i + 3], x[i : i + 3])
+        # a held level has no arrival: its flag's waiting kernel is called from here
+        rows = (0, throwaway.count)
+        arrival_flag.waiting_p(1.0, rows, throwaway._waiting, throwaway._K, 0.1)
         _WARM = True
 
     def _detect_probability(self, spacing_before: float) -> float:
