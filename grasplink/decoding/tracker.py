@@ -47,7 +47,10 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
 * Output: posterior over hypotheses (plus "no slip": every contact is
   clutter). Slip is flagged when slipping tracks with two or more contacts
   (one of which fell back like a pulse, or `EVIDENT_CONTACTS` with no step and no
-  pulse as low as noise among them) hold half the mass. The speed needs no
+  pulse as low as noise among them) hold half the mass - or, before that, from a first
+  contact onto an unloaded sensor (the object has just slid onto the skin:
+  `arrival_flag`, no speed, until silence, a flat level or the posterior ends it). The
+  speed needs no
   direction (the belt and the reflex act on it): it is given when the slipping
   tracks agree on it whichever way they go, else the range of speeds they allow
   (`_report`: SPEED_* constants).
@@ -80,7 +83,14 @@ from typing import Any
 
 import numpy as np
 
-from grasplink.decoding import arrival, coast_bound, rise_evidence, rise_travel, stop_jumps
+from grasplink.decoding import (
+    arrival,
+    arrival_flag,
+    coast_bound,
+    rise_evidence,
+    rise_travel,
+    stop_jumps,
+)
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
 from grasplink.decoding.contacts import (
     STEP_IDS,
@@ -390,6 +400,16 @@ class TrackerDecoder(Decoder):
     # ridge before it missed (0: off, the start prior alone). Full plan, one run
     # (tune_tracker_kinds.py): see docs/decoding.md, "Arrival"
     ARRIVAL_EMPTY_N = arrival.EMPTY_N
+    # ... and it is a slip from then: flagged (no speed, no direction) while the posterior
+    # flags none, until P(its next ridge not yet told) falls below this (`arrival_flag`;
+    # 0: off). Figures: docs/decoding.md, "Arrival"
+    ARRIVAL_FLAG_P = arrival_flag.HOLD_P
+    # ... over a stop the posterior reports before it ever flagged the slip (1; 0: the
+    # stop reported): such a stop rests on a track pairing the arrival with a contact no
+    # ridge made (the loop's 40 mm/s seed 1: stopped at 1.42 s, its ridge 1 at 1.68 s)
+    ARRIVAL_FLAG_OVER_STOP = 1.0
+    # ... and ended by the level lying flat since (`arrival_flag.STALL_N`, N; 0: off)
+    ARRIVAL_STALL_N = arrival_flag.STALL_N
     RISE_TRAVEL_GAIN = 1.0
     # weight of the soft evidence of skipped and due ridges (`rise_evidence`: the signal's
     # rise where a track puts a ridge no contact told, scored in place of log(1 - DETECT_P),
@@ -662,6 +682,7 @@ class TrackerDecoder(Decoder):
         self._told_way = 0  # the direction the last update told (0: none)
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
+        self._arrival_flag = arrival_flag.ArrivalFlag()  # whether the posterior took over
         self._entry = arrival.entry_adjustment(self._log_prior, self._log_miss[:, :R])
         # what every contact's one-contact tracks share: a bank that `_births` copies and
         # fills in (the contact's id, time, sigma and the score)
@@ -728,6 +749,9 @@ class TrackerDecoder(Decoder):
         throwaway = TrackerDecoder(self.geometry.spacings_mm.tolist(), self.fs_hz)
         for i in range(0, len(t), 3):  # as a skin TPDO brings them
             throwaway.feed(t[i : i + 3], x[i : i + 3])
+        # a held level has no arrival: its flag's waiting kernel is called from here
+        rows = (0, throwaway.count)
+        arrival_flag.waiting_p(1.0, rows, throwaway._waiting, throwaway._K, 0.1)
         _WARM = True
 
     def _detect_probability(self, spacing_before: float) -> float:
@@ -963,15 +987,19 @@ class TrackerDecoder(Decoder):
         decided once per contact, so a replay weighs it alike."""
         known = self._unloaded.get(ev.id)
         if known is None:
-            known = arrival.unloaded_before(
-                ev.index,
-                self.fs_hz,
-                self._recent.mean,
-                self.detector.noise.white_at_sample,
-                self.ARRIVAL_EMPTY_N,
-            )
+            known = self._reads_unloaded(ev.index)
             _put_bounded(self._unloaded, ev.id, known, self.VERDICTS_KEPT)
         return known
+
+    def _reads_unloaded(self, index: int) -> bool:
+        """Whether the sensor read unloaded over `arrival.LEVEL_S` before sample `index`."""
+        return arrival.unloaded_before(
+            index,
+            self.fs_hz,
+            self._recent.mean,
+            self.detector.noise.white_at_sample,
+            self.ARRIVAL_EMPTY_N,
+        )
 
     def _grip_rate(self, ev: ContactEvent) -> float:
         """Contacts per s like ev the commanded grip makes at its onset (0: none noted, or
@@ -1209,6 +1237,42 @@ class TrackerDecoder(Decoder):
 
     # ------------------------------------------------------------------ reporting
     def _report(self, g: float) -> SlipEstimate:
+        out = self._report_posterior(g)
+        if self.ARRIVAL_FLAG_P > 0 and self.ARRIVAL_EMPTY_N > 0:
+            return self._report_arrival(g, out)
+        return out
+
+    def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
+        """`out`, or the slip flagged from its arrival onto an unloaded sensor while the
+        posterior flags none (`arrival_flag`: no speed, no direction)."""
+        arrival_id = -1
+        for c in reversed(self._contacts):
+            if self._unloaded.get(c.id):
+                arrival_id, arrived_s, onset = c.id, c.t_s, c.index
+                break
+        if not self._arrival_flag.note(arrival_id, out.slip) or out.slip:
+            return out
+        if out.speed_mm_s is not None and not self.ARRIVAL_FLAG_OVER_STOP:
+            return out  # the posterior's stop
+        if arrival_flag.verdict(arrival_id, self._ring, self._ring_id) in (STEP, NOISE):
+            return out  # the contact a grip's press or noise's pulse
+        if self._reads_unloaded(self._n_in):
+            return out  # nothing lies on the skin now: the contact was no edge sliding on
+        if arrival_flag.stalled(
+            self._recent.mean, self._n_in, onset, self.fs_hz, self.ARRIVAL_STALL_N
+        ):
+            self._arrival_flag.expire()  # no more skin covered: it stopped
+            return out
+        blind = self._blind(np.array([arrived_s]), g)
+        elapsed = g - arrived_s - (0.0 if blind is None else float(blind[0]))
+        rows = (0, self.count)  # its first ridge, either way
+        p = arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
+        if p < self.ARRIVAL_FLAG_P:
+            self._arrival_flag.expire()
+            return out
+        return SlipEstimate(g, True, None, None, out.force_n, min(1.0, p))
+
+    def _report_posterior(self, g: float) -> SlipEstimate:
         force = self._force
         if not len(self._tracks):
             self._told_way = 0

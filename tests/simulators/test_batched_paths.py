@@ -161,8 +161,10 @@ def test_the_hand_and_the_belt_parts_run_ahead_each_as_its_commands_hold(monkeyp
     # belt's too: 59 before the gateway told its decoder its grip commands, s23 - the
     # speed a braking track showed at rest from 1.91 s drove the belt; 33 and 61 before
     # their ramps' steps were continued, s24 `trends`: the ramps run ahead too; the belt's
-    # 50 before a slip onto the empty skin entered at an end, s25 `arrival`)
-    assert steps == {"hand.actuator": 28, "belt.motor": 42}
+    # 50 before a slip onto the empty skin entered at an end, s25 `arrival`; 42 before the
+    # slip was flagged from its arrival onto the unloaded sensor, s26 `arrival_flag`: the
+    # belt runs from 1.2 s, not 1.7)
+    assert steps == {"hand.actuator": 28, "belt.motor": 67}
 
 
 def test_effects_sharing_no_signal_split_into_parts_with_their_commands():
