@@ -19,11 +19,12 @@ wider evidence rule (`widened`): by `level`,
 3. also a track of one contact not (yet) told a step or a noise pulse.
 
 A restart held by its contact's verdict (`RESTART_CONFIRM`: a contact at rest restarting a
-stopped track) stays no slip at every level, and tracks stopped (silence, a step, braked)
-count against the flag as before: the stop figures are what a looser flag costs. The
-flag is only *kept*, never raised, by this rule: a held object's flag never went up
-(false slip on held objects stays the evident rule's). A kept flag carries no speed (the
-speed stays the evident tracks'; `TrackerDecoder._report`).
+stopped track) stays no slip at every level (`unheld`: while the flag is up, only a
+verdict of step or noise pulse holds it - `TrackerDecoder.KEEP_FLAG_UNHOLD`), and tracks
+stopped (silence, a step, braked) count against the flag as before: the stop figures are
+what a looser flag costs. The flag is only *kept*, never raised, by this rule: a held
+object's flag never went up (false slip on held objects stays the evident rule's). A
+kept flag carries no speed (the speed stays the evident tracks'; `TrackerDecoder._report`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,16 @@ import numpy as np
 
 # the levels (`TrackerDecoder.KEEP_FLAG`); 0: off
 OFF, PULSE_ONE, UNTOLD_MANY, UNTOLD_ONE = 0, 1, 2, 3
+
+
+def unheld(hold: np.ndarray, verdicts: tuple[int, ...]) -> np.ndarray:
+    """The restart hold (`TrackerDecoder._evidence_tables`: per verdict, does a restart
+    on a contact with it wait) lifted for `verdicts`: while the flag is up the slip was
+    never reported stopped, so a restart on a contact not yet told (or unclear) is the slip
+    going on, not a contact at rest; a step or a noise pulse still holds it."""
+    out = hold.copy()
+    out[list(verdicts)] = False
+    return out
 
 
 def widened(

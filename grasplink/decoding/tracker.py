@@ -497,11 +497,18 @@ class TrackerDecoder(Decoder):
     EVIDENT_CONTACTS = 4
     # a flag up is kept while moving tracks hold KEEP_FLAG_SHARE of the mass under a wider
     # evidence rule (`flag_keep`: 1 a pulse-told first contact, 2 also untold contacts, 3
-    # also an untold first contact; 0: off, the evident rule alone)
+    # also an untold first contact; 0: off, the evident rule alone). Quick plan, one run
+    # (tune_tracker_kinds.py): slip dropped 12.9 -> 12.8 % at every level, the cost: the
+    # stop kind's flagged at rest 0.0 -> 8.7 % (the flag held into the stop): off
     KEEP_FLAG = 0
     KEEP_FLAG_SHARE = 0.5
     KEEP_FLAG_WITHIN_S = 0.0  # ... also re-raised this long after it went down (0: kept only)
-    KEEP_FLAG_UNHOLD = 0.0  # 1: ... and a restart is not held by its verdict (RESTART_CONFIRM)
+    # 1: while the flag is up a restart is not held by its contact's verdict not yet told
+    # (or unclear): RESTART_CONFIRM 3 is for a contact at rest restarting a slip already
+    # reported stopped, with the flag down; a restart told a step or a noise pulse is still
+    # held (the stop's own friction step: test_restart_confirm). Figures: docs/decoding.md,
+    # "slip dropped" (issue 22)
+    KEEP_FLAG_UNHOLD = 1.0
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -1256,7 +1263,9 @@ class TrackerDecoder(Decoder):
         packed = np.arange(evident.shape[1])
         pulses, steps, noise = packed & 7, (packed >> 3) & 7, packed >> 6
         wide = flag_keep.widened(evident, pulses, steps, noise, int(self.KEEP_FLAG))
-        return weight, bonus, wide, hold & (not self.KEEP_FLAG_UNHOLD)
+        if self.KEEP_FLAG_UNHOLD:  # a told step or noise pulse still holds (`flag_keep`)
+            hold = flag_keep.unheld(hold, (UNKNOWN, UNCLEAR))
+        return weight, bonus, wide, hold
 
     def _report_evident(self, g: float) -> SlipEstimate:
         force = self._force

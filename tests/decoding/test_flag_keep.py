@@ -2,7 +2,8 @@
 
 A slip told is not reported dropped because the posterior's mass moved onto tracks
 whose evidence is not yet in: a restart waiting for its contact's pulse verdict
-(`RESTART_CONFIRM`) while the slip was never reported stopped (`KEEP_FLAG_UNHOLD`), or
+(`RESTART_CONFIRM`: not yet told or unclear) while the slip was never reported stopped
+(`KEEP_FLAG_UNHOLD`), or
 (`KEEP_FLAG` levels) a track whose first contact was told a pulse or whose contacts are
 not yet told."""
 
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 
 from grasplink.decoding import flag_keep
-from grasplink.decoding.tracker import TrackerDecoder
+from grasplink.decoding.tracker import NOISE, STEP, UNCLEAR, UNKNOWN, TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 
@@ -35,7 +36,7 @@ def column(pulses: int = 0, steps: int = 0, noise: int = 0) -> int:
 
 
 def test_level_one_makes_a_pulse_told_first_contact_evident_and_nothing_else():
-    _, _, evident, hold, _, _, wide, keep_hold = tables(KEEP_FLAG=1)
+    _, _, evident, hold, _, _, wide, keep_hold = tables(KEEP_FLAG=1, KEEP_FLAG_UNHOLD=0)
     assert not evident[1, column(pulses=1)] and wide[1, column(pulses=1)]
     assert not wide[1, column()] and not wide[2, column()]  # untold contacts: not yet
     assert not wide[1 + 5, column(pulses=1)]  # a held restart stays no slip
@@ -51,9 +52,12 @@ def test_level_two_and_three_take_untold_contacts_but_never_a_step_or_noise():
         assert not wide[2, column(steps=1)] and not wide[3, column(noise=1)]
 
 
-def test_unhold_drops_the_restart_hold_only():
+def test_unhold_lifts_the_hold_of_untold_contacts_only():
+    """While the flag is up a restart on a contact not yet told (or unclear) is no longer
+    held; one told a step or a noise pulse still is (a stop's own friction step)."""
     _, _, evident, hold, _, _, wide, keep_hold = tables(KEEP_FLAG_UNHOLD=1)
-    assert hold.any() and not keep_hold.any()
+    assert hold[[UNKNOWN, UNCLEAR, STEP, NOISE]].all()
+    assert not keep_hold[[UNKNOWN, UNCLEAR]].any() and keep_hold[[STEP, NOISE]].all()
     assert np.array_equal(evident, wide)
 
 
