@@ -425,6 +425,9 @@ class TrackerDecoder(Decoder):
     # but the loop's held ridges the step probe finds lose their wait (loop missing 51.2 ->
     # 51.7 %, slip dropped 18.2 -> 18.3 %): docs/decoding.md, *Gaps*
     STEP_PROBE_WAIT = 1.0
+    # ... and with it (1) a step probe's contact waits only when one of the this many
+    # contacts before it came late too (`_step_probe_regime`; 0: always)
+    STEP_PROBE_REGIME = 0.0
     PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
     LOG_PROBE_RIDGE = math.log(0.3)  # ... and a ridge contact (merged pulses) sometimes
     PROBE_SIGMA_S = 0.02  # its timing (mid-rise of an unresolved pulse train)
@@ -1213,10 +1216,27 @@ class TrackerDecoder(Decoder):
         late = {c.id for c in self._contacts if c.emit_index - c.index > self.detector.lag}
         if not self.STEP_PROBE_WAIT:  # a step probe's contact taken for a stop's step
             late = {k for k in late if k < STEP_IDS}
+        elif self.STEP_PROBE_REGIME > 0:  # ... unless contacts just before it came late too
+            late = self._step_probe_regime(late)
         if not late or not len(B):
             return np.zeros(len(B))
         slow = np.fromiter((int(k) in late for k in B._i[:, I_LAST]), bool, len(B))
         return np.where(slow, self.PROBE_WAIT * self._probe_latency, 0.0)
+
+    def _step_probe_regime(self, late: set[int]) -> set[int]:
+        """`late` without the step probe's contacts that follow `STEP_PROBE_REGIME` contacts
+        all told in time: the FSR's hysteresis holds ridge pulses run after run (the loop's
+        probes find 21 % of its ridges), so a held ridge found late follows other late
+        ones; a late step after contacts told in time is a stop's (issue 22, 136321)."""
+        n = int(self.STEP_PROBE_REGIME)
+        order = sorted(self._contacts, key=lambda c: c.t_s)
+        keep = set(late)
+        for at, c in enumerate(order):
+            if c.id in late and c.id >= STEP_IDS:
+                before = order[max(0, at - n) : at]
+                if not any(b.id in late for b in before):
+                    keep.discard(c.id)
+        return keep
 
     # ------------------------------------------------------------------ reporting
     def _report(self, g: float) -> SlipEstimate:
