@@ -426,10 +426,11 @@ class TrackerDecoder(Decoder):
     # 51.7 %, slip dropped 18.2 -> 18.3 %): docs/decoding.md, *Gaps*
     STEP_PROBE_WAIT = 1.0
     # ... and with it (1) a step probe's contact waits only when one of the this many
-    # contacts before it came late too (`_step_probe_regime`; 0: always). Full plan, 3
-    # seeds: stops cleared 95.7 -> 96.0 %, after due 92 -> 76 updates, loop missing 51.2
-    # -> 51.3 %, slip dropped 18.2 % both (docs/decoding.md, *Gaps*)
-    STEP_PROBE_REGIME = 3.0
+    # contacts before it came late too (`_step_probe_regime`; 0: always). Off: at 3, full
+    # plan, 3 seeds, stops cleared 95.7 -> 96.0 %, loop missing 51.2 -> 51.3 %, but the
+    # first held ridge of a run loses its wait (tests/decoding/test_tracker_probe_wait.py:
+    # the flag drops 2.57-2.65 s; docs/decoding.md, *Gaps*)
+    STEP_PROBE_REGIME = 0.0
     PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
     LOG_PROBE_RIDGE = math.log(0.3)  # ... and a ridge contact (merged pulses) sometimes
     PROBE_SIGMA_S = 0.02  # its timing (mid-rise of an unresolved pulse train)
@@ -1230,12 +1231,13 @@ class TrackerDecoder(Decoder):
         all told in time: the FSR's hysteresis holds ridge pulses run after run (the loop's
         probes find 21 % of its ridges), so a held ridge found late follows other late
         ones; a late step after contacts told in time is a stop's (issue 22, 136321)."""
+        if all(k < STEP_IDS for k in late):
+            return late
         n = int(self.STEP_PROBE_REGIME)
-        order = sorted(self._contacts, key=lambda c: c.t_s)
         keep = set(late)
-        for at, c in enumerate(order):
+        for at, c in enumerate(self._contacts):  # (in time order: `_add_contact`)
             if c.id in late and c.id >= STEP_IDS:
-                before = order[max(0, at - n) : at]
+                before = self._contacts[max(0, at - n) : at]
                 if not any(b.id in late for b in before):
                     keep.discard(c.id)
         return keep

@@ -42,15 +42,15 @@ def test_without_the_step_probes_wait_the_late_step_gives_no_speed_after_due():
 
 
 def test_after_contacts_told_in_time_the_late_step_gives_no_speed_after_due():
-    """The shipped tracker (`STEP_PROBE_REGIME` 3): the contacts before the step were told
-    in time, so it waits for no probe."""
-    assert TrackerDecoder.STEP_PROBE_REGIME == 3.0
-    assert after_due_speeds(LATE_STEP, {}) == 0
+    """`STEP_PROBE_REGIME` 3 (off by default: the first held ridge of a loop's run loses
+    its wait too, test_tracker_probe_wait): the contacts before the step were told in
+    time, so it waits for no probe."""
+    assert after_due_speeds(LATE_STEP, {"STEP_PROBE_REGIME": 3.0}) == 0
 
 
 def test_with_the_step_probes_wait_the_speed_after_due_stays():
-    """The control, the tracker before either rule (`STEP_PROBE_REGIME` 0 and
-    `STEP_PROBE_WAIT` 1): the wait for that contact gives the
+    """The control, the shipped tracker (`STEP_PROBE_REGIME` 0, `STEP_PROBE_WAIT` 1): the
+    wait for that contact gives the
     speed after due (so the tests above check the rules, not a changed signal)."""
     assert after_due_speeds(LATE_STEP, {"STEP_PROBE_WAIT": 1.0, "STEP_PROBE_REGIME": 0.0}) > 0
 
