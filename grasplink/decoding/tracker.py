@@ -439,6 +439,18 @@ class TrackerDecoder(Decoder):
     # a track whose last contact came from a probe waits this share of the probes' latency
     # for its next (`_latency_floor`; 0: the kink bank's latency for every track)
     PROBE_WAIT = 1.0
+    # ... also when that contact came from the step probe (`STEP_IDS`: a small step, found
+    # at its hold); 0: only the kink bank's late contacts and the pulse probe's wait. Off
+    # (1): full plan, 3 seeds, stops cleared 95.7 -> 96.0 % and after due 92 -> 76 updates,
+    # but the loop's held ridges the step probe finds lose their wait (loop missing 51.2 ->
+    # 51.7 %, slip dropped 18.2 -> 18.3 %): docs/decoding.md, *Gaps*
+    STEP_PROBE_WAIT = 1.0
+    # ... and with it (1) a step probe's contact waits only when one of the this many
+    # contacts before it came late too (`_step_probe_regime`; 0: always). Off: at 3, full
+    # plan, 3 seeds, stops cleared 95.7 -> 96.0 %, loop missing 51.2 -> 51.3 %, but the
+    # first held ridge of a run loses its wait (tests/decoding/test_tracker_probe_wait.py:
+    # the flag drops 2.57-2.65 s; docs/decoding.md, *Gaps*)
+    STEP_PROBE_REGIME = 0.0
     PROBE_STOP = 0.4  # a small step (step probe) is a stop less often than a clear one
     LOG_PROBE_RIDGE = math.log(0.3)  # ... and a ridge contact (merged pulses) sometimes
     PROBE_SIGMA_S = 0.02  # its timing (mid-rise of an unresolved pulse train)
@@ -1248,10 +1260,30 @@ class TrackerDecoder(Decoder):
         loop scenes) the kink bank misses many ridges and the probes find them ~0.2 s
         late; a track waits for them as long before its silence is taken for a stop."""
         late = {c.id for c in self._contacts if c.emit_index - c.index > self.detector.lag}
+        if not self.STEP_PROBE_WAIT:  # a step probe's contact taken for a stop's step
+            late = {k for k in late if k < STEP_IDS}
+        elif self.STEP_PROBE_REGIME > 0:  # ... unless contacts just before it came late too
+            late = self._step_probe_regime(late)
         if not late or not len(B):
             return np.zeros(len(B))
         slow = np.fromiter((int(k) in late for k in B._i[:, I_LAST]), bool, len(B))
         return np.where(slow, self.PROBE_WAIT * self._probe_latency, 0.0)
+
+    def _step_probe_regime(self, late: set[int]) -> set[int]:
+        """`late` without the step probe's contacts that follow `STEP_PROBE_REGIME` contacts
+        all told in time: the FSR's hysteresis holds ridge pulses run after run (the loop's
+        probes find 21 % of its ridges), so a held ridge found late follows other late
+        ones; a late step after contacts told in time is a stop's (issue 22, 136321)."""
+        if all(k < STEP_IDS for k in late):
+            return late
+        n = int(self.STEP_PROBE_REGIME)
+        keep = set(late)
+        for at, c in enumerate(self._contacts):  # (in time order: `_add_contact`)
+            if c.id in late and c.id >= STEP_IDS:
+                before = self._contacts[max(0, at - n) : at]
+                if not any(b.id in late for b in before):
+                    keep.discard(c.id)
+        return keep
 
     # ------------------------------------------------------------------ reporting
     def _report(self, g: float) -> SlipEstimate:
