@@ -85,16 +85,22 @@ def replayed(path: Path, calls: list[Call], between: Callable[[], object] | None
     return answers, cpu_ns / 1e9
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scene", default="loop_headline", help="a scene with a gateway")
-    parser.add_argument("--rounds", type=int, default=3, help="runs per way (best of)")
-    args = parser.parse_args(argv)
+def checked_scene(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Path:
+    """The shipped scene `args.scene` names; a parser error for it or for `--rounds` < 1."""
     if args.rounds < 1:
         parser.error(f"--rounds must be at least 1, not {args.rounds}")
     path = ROOT / "scenes" / f"{args.scene}.toml"
     if not path.is_file():
         parser.error(f"no scene {path}")
+    return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="loop_headline", help="a scene with a gateway")
+    parser.add_argument("--rounds", type=int, default=3, help="runs per way (best of)")
+    args = parser.parse_args(argv)
+    path = checked_scene(parser, args)
     simulation(load_scene(path)).run()  # warm: imports, compiled kernels
 
     sweep_1 = np.ones(1 << 17)  # 1 MiB of float64

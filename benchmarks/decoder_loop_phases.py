@@ -29,7 +29,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from decoder_in_loop import recorded_loop
+from decoder_in_loop import checked_scene, recorded_loop
 from tree_script import ask, served_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,11 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=5, help="replays per tree (least)")
     parser.add_argument("--split", type=float, default=1.0, help="phase boundary (s)")
     args = parser.parse_args(argv)
-    if args.rounds < 1:
-        parser.error(f"--rounds must be at least 1, not {args.rounds}")
-    path = ROOT / "scenes" / f"{args.scene}.toml"
-    if not path.is_file():
-        parser.error(f"no scene {path}")
+    path = checked_scene(parser, args)
     if not (args.base / "grasplink").is_dir():
         parser.error(f"{args.base} is no checkout (no grasplink/ in it)")
     _, calls, answers, _, duration_s = recorded_loop(path)
