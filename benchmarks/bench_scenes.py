@@ -511,6 +511,15 @@ runs every stage once per event or block; the quiet phase before any slip costs 
 per simulated s against the 50 the 20× target allows, a quarter of it the skin decoder's
 ~145 µs per update (ten detector stages in Python). 20× needs that pipeline compiled or
 a coarser loop; neither is done.
+
+Session 26 (this page's before/after is against its base, 335369a): the detector's hinge
+channels that wait for a first noise level (the loop's first 0.6 s on the rail) stay in
+the compiled kernel, a raw block's rail and smallest step are one kernel, and the
+buffer trims are asked only once a part could cut: the decoder on loop_headline's own
+feed 1.12× as fast, its first simulated second 1.65× (`benchmarks/decoder_loop_phases.py`),
+outputs bit for bit; the loop ~1.02-1.03×, within the noise, since the decoder is about a
+fifth of the loop's CPU (even a free decoder leaves it near 16-17× on a loaded host).
+This page's run had a quieter host than session 25's (the base read 19×, not 13×).
 """
 
 
