@@ -776,7 +776,7 @@ class TrackerDecoder(Decoder):
         if _WARM:
             return
         t, x = warm_up_signal(self.geometry.ridges_mm, self.fs_hz)
-        throwaway = TrackerDecoder(self.geometry.spacings_mm.tolist(), self.fs_hz)
+        throwaway: TrackerDecoder = TrackerDecoder(self.geometry.spacings_mm.tolist(), self.fs_hz)
         for i in range(0, len(t), 3):  # as a skin TPDO brings them
             throwaway.feed(t[i : i + 3], x[i : i + 3])
         # a held level has no arrival: its flag's waiting kernel is called from here
