@@ -183,7 +183,9 @@ def test_live_gateway_on_another_handle_masters_the_scene_nodes_and_a_stop_keeps
 ):
     """One process: the scene's nodes on a live runner, a `LiveGateway` on its own handle
     of the same python-can virtual channel. The run is stopped (as Ctrl-C does) once the
-    gateway has started every node: the recording up to then is whole, both sides in it."""
+    gateway has started every node and its heartbeat (every 100 ms) is in the recording: the
+    recording up to then is whole, both sides in it. (A fast boot starts every node within
+    one heartbeat period of the run's start: stopping then left no master's beat to find.)"""
     text = (ROOT / "scenes" / "boot.toml").read_text()
     scene_path = tmp_path / "boot.toml"
     scene_path.write_text(re.sub(r"(?m)^duration_s = .*$", "duration_s = 600.0", text))
@@ -196,11 +198,20 @@ def test_live_gateway_on_another_handle_masters_the_scene_nodes_and_a_stop_keeps
         bus = open_bus(url)
         try:
             sim = Simulation(scene, Recorder(out), live=LiveBus(bus, url))
+            beats: list[int] = []  # the master's heartbeats, each after the recorder's tap
+
+            def heard(t_us: int, frame: Frame, _: object) -> None:
+                if frame.can_id == HEARTBEAT_BASE + GATEWAY_ID:
+                    beats.append(t_us)
+
+            sim.network.taps.append(heard)
             deadline = time.monotonic() + READY_S
 
             def started() -> bool:
                 assert time.monotonic() < deadline, f"nodes not started within {READY_S} s"
-                return all(n.state.name == "OPERATIONAL" for n in sim.nodes.values())
+                return bool(beats) and all(
+                    n.state.name == "OPERATIONAL" for n in sim.nodes.values()
+                )
 
             summary = sim.run(should_stop=started)
         finally:
