@@ -243,9 +243,7 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple[str, str]], li
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kinds", default=",".join(MOVING_KINDS), help="comma-separated")
-    parser.add_argument("--seeds", type=int, default=2)
-    parser.add_argument("--try", dest="tuning", default={}, type=stop_causes.tune_tracker.parse)
+    plan_cases.add_plan_arguments(parser, ",".join(MOVING_KINDS), 2)
     parser.add_argument("--detail", action="store_true", help="per kind, each cause's details")
     args = parser.parse_args(argv)
     todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)

@@ -25,13 +25,12 @@ import argparse
 import sys
 from collections import Counter, defaultdict
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import tune_tracker
+import plan_cases
 from stop_causes import pct
 
 from grasplink.decoding.base import SlipEstimate
@@ -96,13 +95,10 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple[bool, str, str
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kinds", default="constant", help="comma-separated kinds")
-    parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--try", dest="tuning", default={}, type=tune_tracker.parse)
+    plan_cases.add_plan_arguments(parser, "constant", 3)
     parser.add_argument("--worst", type=int, default=15, help="cases listed")
     args = parser.parse_args(argv)
-    kinds = args.kinds.split(",")
-    todo = [c for c in sr.cases(replace(sr.FULL, seeds=args.seeds)) if c.kind in kinds]
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")

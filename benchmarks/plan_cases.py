@@ -7,7 +7,22 @@ import argparse
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
 
+import tune_tracker
+
 from grasplink.evaluation import slip_reporting as sr
+
+
+def add_plan_arguments(
+    parser: argparse.ArgumentParser, kinds: str, seeds: int, cases: bool = False
+) -> None:
+    """`--kinds` (default `kinds`), `--seeds` (default `seeds`), `--try` (a tuning, as in
+    `tune_tracker_kinds.py`: `args.tuning`) and, with `cases`, `--cases`: the options every
+    per-case diagnostic takes, read back by `full_plan_cases`."""
+    parser.add_argument("--kinds", default=kinds, help="comma-separated kinds")
+    parser.add_argument("--seeds", type=int, default=seeds, help="the full plan's first N")
+    parser.add_argument("--try", dest="tuning", default={}, type=tune_tracker.parse)
+    if cases:
+        parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
 
 
 def kinds_of(parser: argparse.ArgumentParser, kinds_text: str) -> list[str]:

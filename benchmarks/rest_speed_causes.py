@@ -34,7 +34,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import plan_cases
-import tune_tracker
 from stop_causes import pct
 
 from grasplink.decoding.base import SlipEstimate
@@ -105,9 +104,7 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple[str, str, str]
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kinds", default="snr10", help="comma-separated kinds")
-    parser.add_argument("--seeds", type=int, default=2)
-    parser.add_argument("--try", dest="tuning", default={}, type=tune_tracker.parse)
+    plan_cases.add_plan_arguments(parser, "snr10", 2)
     parser.add_argument("--baseline", action="store_true", help="the shipped settings too")
     args = parser.parse_args(argv)
     todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)

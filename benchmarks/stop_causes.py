@@ -190,9 +190,7 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple]]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kinds", default=",".join(STOP_KINDS), help="comma-separated kinds")
-    parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--try", dest="tuning", default={}, type=tune_tracker.parse)
+    plan_cases.add_plan_arguments(parser, ",".join(STOP_KINDS), 3)
     parser.add_argument("--worst", type=int, default=30, help="late stops listed")
     parser.add_argument("--trace", type=int, default=None, help="one case's seed: its timeline")
     parser.add_argument(

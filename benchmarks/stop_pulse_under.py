@@ -107,10 +107,7 @@ def job(case: sr.Case, tuning: dict, every: bool) -> tuple[sr.Case, list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kinds", default=",".join(stop_causes.STOP_KINDS))
-    parser.add_argument("--seeds", type=int, default=2)
-    parser.add_argument("--try", dest="tuning", default={}, type=stop_causes.tune_tracker.parse)
-    parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
+    plan_cases.add_plan_arguments(parser, ",".join(stop_causes.STOP_KINDS), 2, cases=True)
     parser.add_argument("--all", action="store_true", help="every late stop, any verdict")
     args = parser.parse_args(argv)
     todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, args.cases)

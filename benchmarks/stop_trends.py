@@ -111,10 +111,7 @@ def headline(rise_travel: float) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--kinds", default=",".join(stop_causes.STOP_KINDS))
-    parser.add_argument("--seeds", type=int, default=2)
-    parser.add_argument("--try", dest="tuning", default={}, type=stop_causes.tune_tracker.parse)
-    parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
+    plan_cases.add_plan_arguments(parser, ",".join(stop_causes.STOP_KINDS), 2, cases=True)
     parser.add_argument("--headline", type=float, default=None, metavar="RISE_TRAVEL")
     args = parser.parse_args(argv)
     if args.headline is not None:
