@@ -72,7 +72,8 @@ def bound(
     if not len(rows):
         return sched
     col = ahead[rows] + 1
-    rows, col = rows[np.isfinite(due[rows, col])], col[np.isfinite(due[rows, col])]
+    known = np.isfinite(due[rows, col])
+    rows, col = rows[known], col[known]
     if not len(rows):
         return sched
     way = (1 - tracks["dirn"][rows]) // 2
