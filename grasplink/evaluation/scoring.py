@@ -103,7 +103,7 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
     contacts = rec.contact_times_s[rec.contact_times_s >= (onset or 0.0)]
     third = contacts[2] if len(contacts) >= 3 else None
     scored_mask = slipping & (t_upd >= third) if third is not None else np.zeros_like(slipping)
-    scored_mask &= observed(rec, x_true, v_true)
+    scored_mask &= observed(rec.layout_mm, x_true, v_true)
     v_est, _ = along_truth(estimates, v_true)
     x_est = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
     flags = np.array([e.slip for e in estimates])
@@ -141,10 +141,10 @@ def score(make: Callable[[], Decoder], rec: SkinRecording) -> RecordingScore:
     )
 
 
-def observed(rec: SkinRecording, x_true: np.ndarray, v_true: np.ndarray) -> np.ndarray:
+def observed(layout_mm: Sequence[float], x_true: np.ndarray, v_true: np.ndarray) -> np.ndarray:
     """Updates whose edge (at x_true, moving at v_true) lies no more than one spacing, the
     one into the last ridge ahead, past that ridge: where a speed is observable."""
-    spacing = np.asarray(rec.layout_mm, dtype=float)
+    spacing = np.asarray(layout_mm, dtype=float)
     ahead = np.where(v_true >= 0, x_true - float(spacing.sum()), -x_true)
     return ahead <= np.where(v_true >= 0, spacing[-1], spacing[0])
 

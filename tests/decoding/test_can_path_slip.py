@@ -22,7 +22,7 @@ import pytest
 from grasplink.cli import main
 from grasplink.decoding.io import read_can_log, read_csv
 from grasplink.decoding.tracker import TrackerDecoder
-from grasplink.evaluation.scoring import along_truth
+from grasplink.evaluation.scoring import along_truth, observed
 from grasplink.profiles.layouts import LAYOUTS_MM
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
@@ -48,7 +48,7 @@ def decode(layout, t: np.ndarray, x: np.ndarray, chunk: int = 3):
 
 def owed(t: np.ndarray, true: dict[str, np.ndarray], layout_mm) -> np.ndarray:
     """Updates at t owed a speed: slipping, from the edge's 3rd ridge crossing until it lies
-    one spacing (the one into the last ridge) past the last ridge ahead (one-way slips)."""
+    one spacing (the one into the last ridge) past the last ridge ahead (`observed`)."""
     spacing = np.asarray(layout_mm, dtype=float)
     ridges = np.concatenate([[0.0], np.cumsum(spacing)])
     pos = true["position_mm"]
@@ -56,9 +56,9 @@ def owed(t: np.ndarray, true: dict[str, np.ndarray], layout_mm) -> np.ndarray:
     third = ridges[2] if forward else ridges[-3]
     crossed = (pos >= third) if forward else (pos <= third)
     edge = np.interp(t, true["t_s"], pos)
-    inside = edge <= ridges[-1] + spacing[-1] if forward else edge >= -spacing[0]
     slipping = np.interp(t, true["t_s"], true["slipping"]) > 0.5
     v_true = np.interp(t, true["t_s"], true["speed_mm_s"])
+    inside = observed(layout_mm, edge, v_true)
     return slipping & (np.abs(v_true) > 1.0) & (t >= true["t_s"][np.argmax(crossed)]) & inside
 
 

@@ -21,6 +21,7 @@ import pytest
 from grasplink.decoding.base import SlipEstimate
 from grasplink.decoding.contacts import ContactDetector
 from grasplink.decoding.tracker import TrackerDecoder
+from grasplink.evaluation.scoring import observed
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
 
@@ -60,16 +61,6 @@ def assert_clean(estimates: list[SlipEstimate]) -> None:
         assert 0.0 <= e.confidence <= 1.0, e
 
 
-def observed(rec: synth.SkinRecording, t: np.ndarray) -> np.ndarray:
-    """Updates at t whose edge lies no more than one spacing (the one into the last ridge)
-    past the last ridge ahead (one-way slips): where a speed is owed."""
-    spacing = np.asarray(rec.layout_mm, dtype=float)
-    edge = np.interp(t, rec.t_s, rec.position_mm)
-    if rec.position_mm[-1] > rec.position_mm[0]:
-        return edge <= spacing.sum() + spacing[-1]
-    return edge >= -spacing[0]
-
-
 class Score:
     """Errors of one recording over the scored updates, plus the timing figures."""
 
@@ -81,7 +72,7 @@ class Score:
         v = np.array([np.nan if e.speed_mm_s is None else e.speed_mm_s for e in estimates])
         x = np.array([np.nan if e.position_mm is None else e.position_mm for e in estimates])
         contacts = rec.contact_times_s
-        mask = slipping & (t >= contacts[2]) & observed(rec, t)
+        mask = slipping & (t >= contacts[2]) & observed(rec.layout_mm, x_true, v_true)
         # errors of the answers given: |speed| whether or not the direction is told yet,
         # the position where given (it needs the direction); an update without a speed is
         # *missing*, counted apart (the benchmark's definition) and bounded by the targets

@@ -136,6 +136,25 @@ def test_first_belt_command_ignores_refreshes_of_what_was_shown_before_onset():
     assert out.slip_belt_latency_s == pytest.approx(0.4)
 
 
+def test_first_belt_display_is_where_the_slewed_ramp_settles_not_its_first_step():
+    # The gateway slews the belt 400 mrad/s per 10 ms command interval, refreshing
+    # every 5 ms: the occurrence display (-4500) goes out as a ramp, held once reached.
+    truth = physics(profile((1.0, 0.0), (1.0, 20.0), (2.0, 0.0)))
+    ramp = np.repeat(np.maximum(-400.0 * np.arange(1, 13), -4500.0), 2)
+    belt_v = np.concatenate(([0.0], ramp, np.full(20, -4500.0), np.full(5, -7000.0)))
+    belt_t = 1.2 + 0.005 * np.arange(len(belt_v))
+    out = judged(truth, belt=(belt_t, belt_v))
+    assert out.belt_latency_s == pytest.approx(0.205)
+    assert out.belt_first_mrad_s == -4500.0
+
+
+def test_first_belt_display_still_ramping_at_the_end_is_its_last_command():
+    truth = physics(profile((1.0, 0.0), (1.0, 20.0), (2.0, 0.0)))
+    belt_t = np.array([0.5, 1.2, 1.21, 1.22])
+    belt_v = np.array([0.0, -400.0, -800.0, -1200.0])
+    assert judged(truth, belt=(belt_t, belt_v)).belt_first_mrad_s == -1200.0
+
+
 def test_force_belt_change_is_the_first_belt_command_and_the_slip_belt_comes_later():
     truth = physics(profile((1.0, 0.0), (1.0, 20.0), (2.0, 0.0)))
     belt_t = np.array([0.5, 1.2, 1.5])
