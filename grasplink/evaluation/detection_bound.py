@@ -68,9 +68,9 @@ def template(train: PulseTrain, i: int, fs_hz: float) -> Template:
         tau = t - t0
         d = np.zeros(len(offsets))
         on = tau >= 0
-        d[on] = skin.pulse(
-            tau[on], train.alpha_n[i], rise, train.start_n[i]
-        ) - _continued(train, i, t[on])
+        d[on] = skin.pulse(tau[on], train.alpha_n[i], rise, train.start_n[i]) - _continued(
+            train, i, t[on]
+        )
         basis = np.vander(offsets / span, 2)
         coef, *_ = np.linalg.lstsq(basis, d, rcond=None)
         perp = d - basis @ coef
