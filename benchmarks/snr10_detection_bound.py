@@ -145,7 +145,24 @@ def snr10_job(case: sr.Case, decoder: bool) -> dict:
                 f"{case}: decoder's updates {score.moving_from3} scored, not {int(scored.sum())}"
             )
         out["decoder_missing"] = score.missing_from3
+        t_est = np.array([e.t_s for e in estimates])
+        if len(t_est) != len(t_upd) or not np.allclose(t_est, t_upd):
+            raise AssertionError(f"{case}: the decoder's updates are not every {UPDATE_S} s")
+        out["decoder_state"] = np.array([_state(e) for e in estimates])[scored]
     return out
+
+
+STATES = ("speed", "range", "flag only", "no slip")
+
+
+def _state(e: SlipEstimate) -> int:
+    """An update's answer (`STATES`): a speed, a range of speeds with the flag up, the
+    flag alone, or no slip."""
+    if e.speed_mm_s is not None and e.speed_mm_s > 0:
+        return 0
+    if e.slip and e.speed_low_mm_s is not None:
+        return 1
+    return 2 if e.slip else 3
 
 
 def _update_runs(truth, t_upd: np.ndarray) -> np.ndarray:
@@ -205,6 +222,11 @@ def told_mask(row: dict, level: float, gate_level: float | None, key: str) -> np
 
 def missing(row: dict, told: np.ndarray, last: int | None) -> int:
     """Scored updates of one case with no speed possible."""
+    return int((~_possible(row, told, last)).sum())
+
+
+def _possible(row: dict, told: np.ndarray, last: int | None) -> np.ndarray:
+    """Per scored update of one case: a speed possible from the told contacts."""
     possible = np.zeros(len(row["t_upd"]), bool)
     for r in np.unique(row["upd_run"]):
         upd = row["upd_run"] == r
@@ -212,7 +234,7 @@ def missing(row: dict, told: np.ndarray, last: int | None) -> int:
         possible[upd] = db.speed_possible(
             row["t_upd"][upd], row["times"][mine], told[mine], row["decided"][mine], last
         )
-    return int((~possible).sum())
+    return possible
 
 
 def level_for(held: list[dict], rate_per_min: float) -> float:
@@ -373,14 +395,31 @@ def report(rows: list[dict], every_held: list[dict], args) -> None:
         if args.decoder:
             cells.append(f"{sum(r['decoder_missing'] for r in rs) / scored:.1%}")
         print("| " + " | ".join(cells) + " |")
-    print("Missing (last 3, clean, no gate) by level, all cases:")
-    line = []
-    for lv in LEVELS:
-        if not 3.0 <= lv <= 6.0:
-            continue
-        m = sum(missing(r, told_mask(r, float(lv), None, "clean"), 3) for r in rows)
-        line.append(f"{lv:g}: {m / sum(len(r['t_upd']) for r in rows):.1%}")
-    print("  " + ", ".join(line))
+    if args.decoder:
+        print(
+            "The decoder's answers where a tracker knowing the ridges would give a speed from"
+            " today's found contacts (any 2) and where it could not (share of the scored"
+            " updates; " + " / ".join(STATES) + "):"
+        )
+        for key in order:
+            rs = groups[key]
+            scored = sum(len(r["t_upd"]) for r in rs)
+            cells = [key]
+            for able in (True, False):
+                counts = np.zeros(len(STATES))
+                for r in rs:
+                    ok = _possible(r, r["found"], None) == able
+                    counts += np.bincount(r["decoder_state"][ok], minlength=len(STATES))
+                cells.append(" / ".join(f"{c / scored:.1%}" for c in counts))
+            print("| " + " | ".join(cells) + " |")
+    total = sum(len(r["t_upd"]) for r in rows)
+    for label, last in (("any 2", None), ("last 3", 3)):
+        cells = []
+        for lv in LEVELS:
+            if 3.0 <= lv <= 6.0:
+                miss = sum(missing(r, told_mask(r, float(lv), None, "clean"), last) for r in rows)
+                cells.append(f"{lv:g}: {miss / total:.1%}")
+        print(f"Missing ({label}, clean, no gate) by level, all cases: " + ", ".join(cells))
 
 
 if __name__ == "__main__":
