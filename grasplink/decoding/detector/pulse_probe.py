@@ -2,7 +2,7 @@
 
 Where the kink bank is blind - heavy noise, the pulses told so far under `snr`
 white-noise units high at their median - the probe measures the SIZE of each rise
-(after-minus-before means over 10-50 ms, ramps out): at 10 dB SNR a ridge pulse is 5-7
+(after-minus-before means over 10-40 ms, ramps out): at 10 dB SNR a ridge pulse is 5-7
 noise units of that and 2 of its kink. Its candidates the pulse watcher tells pulses are
 ridge contacts (onset half the placing window before the rise's middle), unless the kink
 bank or the step probe has them. Before any pulse is told it takes `prior_n` for their
@@ -23,13 +23,7 @@ from grasplink.decoding.detector.series import Samples
 from grasplink.decoding.detector.step_probe import StepProbe
 from grasplink.decoding.detector.watch import PulseWatcher, Watch
 
-PULSE_SCALES_S = (0.01, 0.02, 0.04)  # the pulse probe's windows (the rise evidence's too)
-# ... and one nearer a slow slip's rise: at 22 mm/s a pulse rises over 57 ms (1.25 mm), of
-# which 40 ms reads a part - the matched filter's bound tells 91 % of those contacts at
-# 10 dB, the detector found 56 % (`benchmarks/snr10_detection_bound.py`). Full plan, 3
-# seeds, one run: snr10 speed missing 52.9 -> 49.7 % (60 ms: 50.6; 80 ms: 52.0, and held
-# objects at 10 dB flagged 1.0 %), no met target moved (docs/decoding.md)
-SLOW_SCALE_S = 0.05
+PULSE_SCALES_S = (0.01, 0.02, 0.04)  # the pulse probe's windows
 PULSE_RAMP = 0.5  # the pulse probe takes out this share of the differences 2 w either side
 # the pulse probe's gate before any pulse is told (`PulseProbe._gate`): a ridge pulse's
 # height on the thesis skin (alpha 0.8-1.2 N times 1 - e^(-D / 10 mm): 0.8 N for D = 16 mm)
@@ -40,7 +34,7 @@ PULSE_PRIOR_N = 0.8
 class PulseProbeSettings:
     """The pulse probe's windows (s; none: off), thresholds (white-noise units) and gate."""
 
-    scales_s: tuple[float, ...] = (*PULSE_SCALES_S, SLOW_SCALE_S)
+    scales_s: tuple[float, ...] = PULSE_SCALES_S
     threshold: float = 4.5
     snr: float = 10.0  # open while the pulses told are under this high at their median
     prior_n: float = PULSE_PRIOR_N  # their height before any is told (N)
