@@ -9,7 +9,10 @@ from __future__ import annotations
 from functools import cache
 from pathlib import Path
 
+import pytest
+
 from grasplink.controllers import build_controllers
+from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation.slip_reporting import headline_check
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "loop_headline.toml"
@@ -45,3 +48,37 @@ def test_the_headline_speed_at_rest_ends_within_a_second_of_the_stop_showing():
     f = figures()
     assert f["observable_s"] is not None and f["last_speed_s"] is not None, f
     assert f["last_speed_s"] - f["observable_s"] <= 1.0, f
+
+
+def _first_speed_told_right(f: dict) -> bool:
+    """The first speed shown while the object slides lies within 10 % of the truth then;
+    none shown before the stop passes (alpha0.1 is not unique from the 2nd contact, and the
+    reflex stops the object after two: the truth cannot be told from the contacts)."""
+    first, stop = f["first_speed_s"], f["stop_s"]
+    if first is None or stop is None or first >= stop:
+        return True
+    return abs(f["first_speed"] - f["first_speed_truth"]) <= 0.1 * f["first_speed_truth"]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 22: the first speed, 65 mm/s at 1.70 s (truth 33.4), rests on a bend at "
+    "1.496 s taken for ridge 1 (TOLD_RISE_LOG, off: docs/decoding.md, Gaps)",
+)
+def test_the_headline_first_speed_is_the_slips_or_none_before_it_can_be_told():
+    f = figures()
+    assert _first_speed_told_right(f), f
+
+
+def test_the_headline_bend_read_as_no_ridge_leaves_no_speed_before_the_stop(monkeypatch):
+    """With `told_rise` (the bend at 1.496 s reads z -1.1: no pulse rose) and a flat step
+    not charged to the grip (`GRIP_FLAT_STEP`: the stop's step at 1.768 s), live and
+    offline: a range of 39.7-69 mm/s from 1.70 s (the reflex acts on its floor as before),
+    no speed before the stop, none once the stop's report was due. Not shipped: 3 updates
+    0.15 s into the rest show 39.7 mm/s (1.92-1.94 s) until the step's verdict is told."""
+    monkeypatch.setattr(TrackerDecoder, "TOLD_RISE_LOG", -4.0)
+    monkeypatch.setattr(TrackerDecoder, "GRIP_FLAT_STEP", 1.0)
+    f = headline_check(SCENE, build_controllers)
+    assert _first_speed_told_right(f), f
+    assert f["first_speed_s"] is None or f["first_speed_s"] >= f["stop_s"], f
+    assert f["last_ok"] and f["rest_ok"], f
