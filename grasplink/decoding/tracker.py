@@ -422,12 +422,6 @@ class TrackerDecoder(Decoder):
     # a step after which the level lay flat (its trend ended) is not charged to a commanded
     # grip rise (1; 0: it is): the grip's bend starts the level rising with it
     GRIP_FLAT_STEP = 0.0
-    # a contact taken for a ridge whose onset shows no pulse's rise on the track's rise
-    # time (`told_rise`: the probe's z under TOLD_RISE_Z, read only where its window is
-    # held by the contact's decision) loses this (0: off) - a bend of the level (hysteresis
-    # letting go onto the coverage ramp: the headline loop's 1.496 s), not its ridge
-    TOLD_RISE_LOG = 0.0
-    TOLD_RISE_Z = told_rise.Z_MAX
     # weight of the soft evidence of skipped and due ridges (`rise_evidence`: the signal's
     # rise where a track puts a ridge no contact told, scored in place of log(1 - DETECT_P),
     # never below it); 0: off (the fixed penalty alone). Alone it nearly doubled the snr10
@@ -1015,12 +1009,6 @@ class TrackerDecoder(Decoder):
             if not self.RISE_TRAVEL_GAIN:
                 ratio = np.minimum(ratio, 0.0)
             floats[ridge, F_SCORE] += self.RISE_TRAVEL * ratio
-        if self.TOLD_RISE_LOG and not probe and len(floats):
-            # no pulse rose at the onset on the track's rise time: a bend, not its ridge
-            told_rise.ridge_loss(
-                floats, ints, ev, self._rise, self.detector.blind,
-                self.TOLD_RISE_Z, self.TOLD_RISE_LOG,
-            )  # fmt: skip
         if self.TOLD_RISE_LOG and not probe and len(floats):
             # no pulse rose at the onset on the track's rise time: a bend, not its ridge
             told_rise.ridge_loss(
