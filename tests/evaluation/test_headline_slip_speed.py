@@ -23,9 +23,14 @@ def figures() -> dict:
     return headline_check(SCENE, build_controllers)
 
 
-def test_the_headline_slip_gets_a_speed_before_the_object_stops():
+def test_the_headline_slip_gets_a_speed_before_the_object_stops_where_one_is_owed():
+    """A speed is owed once the contact the layout needs came before the stop; the reflex
+    stops the object after two on alpha0.1 (not unique from the 2nd), so none is owed."""
     f = figures()
-    assert f["first_speed_s"] is not None and f["stop_s"] is not None, f
+    assert f["stop_s"] is not None, f
+    if f["first_speed_s"] is None:
+        assert f["contact_needed_s"] is None, f
+        return
     assert f["onset_s"] <= f["first_speed_s"] <= f["stop_s"], f
     if f["first_ok"] is not None:  # the contact the layout needs came before the stop
         assert f["first_ok"], f
@@ -37,7 +42,7 @@ def test_the_headline_slip_speed_ends_with_the_slip_and_never_shows_at_rest():
     last speed: 3.77 s on 1521ca0, 2.79 s with the due-time cap, 2.13 s now that a braking
     hypothesis whose own motion has come to rest is reported stopped (`BRAKE_Z`)."""
     f = figures()
-    assert f["last_ok"] and f["rest_ok"], f
+    assert f["last_ok"] is not False and f["rest_ok"], f  # (None: no speed shown nor owed)
 
 
 def test_the_headline_speed_at_rest_ends_within_a_second_of_the_stop_showing():
@@ -46,8 +51,9 @@ def test_the_headline_speed_at_rest_ends_within_a_second_of_the_stop_showing():
     speed at rest ended 1.78 s after the stop became observable on 1521ca0; 0.80 s with
     the cap alone, 0.14 s now."""
     f = figures()
-    assert f["observable_s"] is not None and f["last_speed_s"] is not None, f
-    assert f["last_speed_s"] - f["observable_s"] <= 1.0, f
+    assert f["observable_s"] is not None, f
+    if f["last_speed_s"] is not None:
+        assert f["last_speed_s"] - f["observable_s"] <= 1.0, f
 
 
 def _first_speed_told_right(f: dict) -> bool:
@@ -74,11 +80,10 @@ def test_the_headline_bend_read_as_no_ridge_leaves_no_speed_before_the_stop(monk
     """With `told_rise` (the bend at 1.496 s reads z -1.1: no pulse rose) and a flat step
     not charged to the grip (`GRIP_FLAT_STEP`: the stop's step at 1.768 s), live and
     offline: a range of 39.7-69 mm/s from 1.70 s (the reflex acts on its floor as before),
-    no speed before the stop, none once the stop's report was due. Not shipped: 3 updates
-    0.15 s into the rest show 39.7 mm/s (1.92-1.94 s) until the step's verdict is told."""
+    no speed at all, the stop told at 1.95 s (observable 1.99 s)."""
     monkeypatch.setattr(TrackerDecoder, "TOLD_RISE_LOG", -4.0)
     monkeypatch.setattr(TrackerDecoder, "GRIP_FLAT_STEP", 1.0)
     f = headline_check(SCENE, build_controllers)
     assert _first_speed_told_right(f), f
     assert f["first_speed_s"] is None or f["first_speed_s"] >= f["stop_s"], f
-    assert f["last_ok"] and f["rest_ok"], f
+    assert f["last_ok"] is not False and f["rest_ok"] and f["speed_at_rest_updates"] == 0, f
