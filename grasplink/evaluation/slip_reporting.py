@@ -596,8 +596,9 @@ def ridge_crossings_s(truth: SkinRecording) -> np.ndarray:
 def headline_figures(estimates: Sequence[SlipEstimate], truth: SkinRecording) -> dict:
     """The issue's "Done when" on one slip: first speed against the 3rd ridge contact after
     onset (the 2nd where `unique_from_second`), last speed against the stop (at most one
-    contact interval after it), and no speed at rest once the stop's report was due (its
-    observable moment + CLEAR_WITHIN_S).
+    contact interval after it; not judged when no speed was shown and none was owed: the
+    contact needed never came before the stop), and no speed at rest once the stop's
+    report was due (its observable moment + CLEAR_WITHIN_S).
     Contacts are the truth's ridge crossings (`ridge_crossings_s`); onset is the first
     truth speed >= 1 mm/s, the stop the first standstill of >= 0.15 s after it."""
     t_upd = np.array([e.t_s for e in estimates])
@@ -650,8 +651,10 @@ def headline_figures(estimates: Sequence[SlipEstimate], truth: SkinRecording) ->
         if due is None
         else (first is not None and first - due <= DETECT_ALLOWANCE_S and first >= onset)
     )
-    figures["last_ok"] = (
-        None if not stops or interval is None else (last is not None and last - stop_s <= interval)
+    figures["last_ok"] = (  # no speed shown and none owed (the contact needed never came): -
+        None
+        if not stops or interval is None or (last is None and due is None)
+        else (last is not None and last - stop_s <= interval)
     )
     figures["rest_ok"] = (
         None if observable is None else figures["speed_after_observable_updates"] == 0

@@ -74,7 +74,9 @@ def _speeds_between_third_and_fourth(tuning: dict) -> tuple[np.ndarray, np.ndarr
 
 @pytest.mark.parametrize("empty_n", [arrival.EMPTY_N, 0.0], ids=["arrival", "off"])
 def test_two_contacts_onto_an_empty_skin_give_the_speed(empty_n: float):
-    given, true = _speeds_between_third_and_fourth({"ARRIVAL_EMPTY_N": empty_n})
+    # (the defect pinned with `told_rise` off too: it gives some of those speeds back)
+    off = {} if empty_n else {"TOLD_RISE_LOG": 0.0}
+    given, true = _speeds_between_third_and_fourth({"ARRIVAL_EMPTY_N": empty_n, **off})
     assert len(given) > 500
     right = np.abs(given - true) <= 0.15 * true
     if empty_n == 0.0:  # the defect, pinned: the aliases held the speed back throughout

@@ -236,7 +236,7 @@ def test_the_headline_keeps_its_speed_while_it_slides(headline):
     told = [e for e in decode(log, commands=True) if e.t_s < 1.70]
     assert [e.as_dict() for e in told] == [e.as_dict() for e in plain]
     figures = headline_figures(decode(log, commands=True), headline["rec"])
-    assert figures["last_ok"] and figures["rest_ok"], figures
+    assert figures["last_ok"] is not False and figures["rest_ok"], figures
 
 
 # -- the gateway and the CAN log ------------------------------------------------------------

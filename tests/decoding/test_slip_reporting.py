@@ -210,6 +210,20 @@ def test_headline_figures_from_the_truth_ridge_crossings():
     assert late["first_ok"] is False  # 0.3 s after the 3rd contact: beyond the detector's delay
 
 
+def test_headline_figures_owe_no_last_speed_where_the_contact_needed_never_came():
+    """Stopped after two contacts on a layout needing three: no speed shown is right (the
+    slip flagged, the speed not told), not a last speed missing; with the third contact
+    before the stop, a slip shown without a speed still misses it."""
+    layout = (10.0, 10.0, 10.0, 25.0)  # first and last spacings differ: 3 contacts needed
+    flag_only = stream(lambda t: (1.0 <= t < 2.6, None, None))
+    early = sr.headline_figures(flag_only, truth(layout=layout, stop_s=2.5))
+    assert early["contact_needed_s"] is None and early["first_speed_s"] is None
+    assert early["last_ok"] is None and early["rest_ok"] is True
+    owed = sr.headline_figures(flag_only, truth(layout=layout))
+    assert owed["contact_needed_s"] == pytest.approx(3.0, abs=1e-3)
+    assert owed["last_ok"] is False and owed["first_ok"] is False
+
+
 def test_sweep_settings_reach_the_tracker():
     odds = sr.build_decoder("tracker", LAYOUT, FS, sr.settings_for("LOG_REPORT_ODDS", 3.0))
     assert math.isclose(odds.LOG_REPORT_ODDS, math.log(3.0))
