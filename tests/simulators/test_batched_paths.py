@@ -267,9 +267,10 @@ def test_scene_source_holds_the_last_capacity_samples_as_concatenating_would():
 @pytest.mark.parametrize("rate_hz", [400, 1500])
 def test_scene_source_samples_are_np_interp_over_the_whole_ring_bit_for_bit(rate_hz):
     """A node's samples, interpolated over the held samples about them only, are those
-    interpolating over the whole ring gives: on the scene's grid and off it (a node reset
-    mid-scene), before the ring's first sample, held past its last, at exact sample times,
-    next to NaN and infinite samples and signed zeros."""
+    interpolating over the whole ring gives: on the scene's grid (read as the held samples
+    themselves, `SceneSource._held`) and off it (a node reset mid-scene), before the
+    ring's first sample, held past its last, at exact sample times, next to NaN and
+    infinite samples and signed zeros."""
     source = SceneSource(rate_hz)
     rng = np.random.default_rng(5)
     count = 3 * source.capacity
