@@ -280,7 +280,10 @@ class SurfaceEmg(Effect):
 
     def sigma_uv(self, level: np.ndarray) -> np.ndarray:
         """Gaussian amplitude whose rectified mean is the level's target."""
-        target = np.interp(np.nan_to_num(level, nan=0.0), np.arange(TOP_LEVEL + 1), self.targets_uv)
+        # NaN reads level 0; infinities stay (np.interp holds the end levels for them, as
+        # for nan_to_num's largest floats): nan_to_num without its Python wrapper
+        level = np.where(np.isnan(level), 0.0, level)
+        target = np.interp(level, np.arange(TOP_LEVEL + 1), self.targets_uv)
         return target * RECTIFIED_MEAN_TO_SIGMA
 
     def step(self, io: Io) -> None:
