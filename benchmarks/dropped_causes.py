@@ -101,8 +101,7 @@ def decompose(dec: _State, g: float) -> dict:
         if waiting and live:
             elapsed = g - B.t[i] - (blind[i] if blind is not None else 0.0)
             row = (1 - B.dirn[i]) // 2 * R + min(int(B.ridge[i]), R - 1)
-            w = dec._waiting
-            adj = pk._log_waiting(elapsed - K[pk.MAX_LATENCY], row, w[0], w[1], w[2], K)
+            adj = pk.log_waiting(elapsed - K[pk.MAX_LATENCY], row, dec._waiting, K)
         total = B.score[i] + adj + bonus[i] if live else -math.inf
         if not running:
             how = "step"

@@ -56,12 +56,9 @@ def waiting_p(
     and detection model) less the detector's latency `latency_s`."""
     if not rows:
         raise ValueError("arrival_flag: no rows to wait on (a skin has two ends)")
-    log, finite, before = waiting
     total = 0.0
     for row in rows:
-        total += math.exp(
-            posterior_kernels._log_waiting(elapsed_s - latency_s, row, log, finite, before, K)
-        )
+        total += math.exp(posterior_kernels.log_waiting(elapsed_s - latency_s, row, waiting, K))
     return total / len(rows)
 
 

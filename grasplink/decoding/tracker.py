@@ -728,6 +728,11 @@ class TrackerDecoder(Decoder):
         self._kept: tuple | None = None  # (the posterior it was read with, P(moving))
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
+        # the last contact held that came onto an unloaded sensor, (id, t_s, index) or None
+        # (`_arrival_contact`), looked up again only once stale: the contacts held changed
+        # (`_add_contact`; a replay re-adds the same ones) or a load verdict came or went
+        self._arrival_at: tuple[int, float, int] | None = None
+        self._arrival_stale = True
         self._arrival_flag = arrival_flag.ArrivalFlag()  # whether the posterior took over
         self._entry = arrival.entry_adjustment(self._log_prior, self._log_miss[:, :R])
         # what every contact's one-contact tracks share: a bank that `_births` copies and
@@ -918,6 +923,7 @@ class TrackerDecoder(Decoder):
         while len(self._contacts) > self._history:
             self._contacts.pop(0)
             self._snapshots.pop(0)
+        self._arrival_stale = True
 
     def _replay(self, at: int, extra: list[ContactEvent]) -> None:
         self._null, self._tracks = self._snapshots[at]
@@ -1043,6 +1049,7 @@ class TrackerDecoder(Decoder):
         if known is None:
             known = self._reads_unloaded(ev.index)
             _put_bounded(self._unloaded, ev.id, known, self.VERDICTS_KEPT)
+            self._arrival_stale = True
         return known
 
     def _reads_unloaded(self, index: int) -> bool:
@@ -1319,13 +1326,12 @@ class TrackerDecoder(Decoder):
     def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged from its arrival onto an unloaded sensor while the
         posterior flags none (`arrival_flag`: no speed, no direction)."""
-        arrival_id = -1
-        for c in reversed(self._contacts):
-            if self._unloaded.get(c.id):
-                arrival_id, arrived_s, onset = c.id, c.t_s, c.index
-                break
+        arrival = self._arrival_contact()
+        arrival_id = -1 if arrival is None else arrival[0]
         if not self._arrival_flag.note(arrival_id, out.slip) or out.slip:
             return out
+        assert arrival is not None  # `note` is False without an arrival
+        _, arrived_s, onset = arrival
         if out.speed_mm_s is not None and not self.ARRIVAL_FLAG_OVER_STOP:
             return out  # the posterior's stop
         if arrival_flag.verdict(arrival_id, self._ring, self._ring_id) in (STEP, NOISE):
@@ -1345,6 +1351,19 @@ class TrackerDecoder(Decoder):
             self._arrival_flag.expire()
             return out
         return SlipEstimate(g, True, None, None, out.force_n, min(1.0, p))
+
+    def _arrival_contact(self) -> tuple[int, float, int] | None:
+        """The last contact held that came onto an unloaded sensor (`_onto_empty_skin`):
+        (id, t_s, onset index), or None. Looked up again only after the contacts held or
+        their verdicts changed (`_arrival_stale`), not at every update."""
+        if self._arrival_stale:
+            self._arrival_stale = False
+            self._arrival_at = None
+            for c in reversed(self._contacts):
+                if self._unloaded.get(c.id):
+                    self._arrival_at = (c.id, c.t_s, c.index)
+                    break
+        return self._arrival_at
 
     def _report_kept(self, g: float) -> SlipEstimate:
         """The posterior's report, its flag kept while moving tracks hold half the mass

@@ -169,7 +169,9 @@ class SkinApp(DeviceApp):
         zero, full, mn_per_count = self.calibration()
         force_n = np.where(np.isnan(force_n), 0.0, force_n)
         counts = np.rint(zero + force_n * (MN_PER_N / mn_per_count))
-        return np.clip(counts, 0, full).astype(np.int64)
+        # np.clip's bounds, without its Python wrapper (a fifth of this call on a tick's
+        # 4-6 samples)
+        return np.minimum(np.maximum(counts, 0), full).astype(np.int64)
 
     def to_force_mn(self, counts: np.ndarray | float) -> np.ndarray:
         zero, _, mn_per_count = self.calibration()

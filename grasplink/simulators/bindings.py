@@ -77,6 +77,7 @@ class SceneSource:
     """
 
     def __init__(self, rate_hz: int):
+        self.rate_hz = rate_hz  # the domain's: its samples fall at k * 1e6 // rate_hz
         self.period_us = -(-1_000_000 // rate_hz)
         self.capacity = max(16, int(rate_hz * RING_SECONDS))
         self._times_us = np.zeros(2 * self.capacity, dtype=np.int64)
@@ -102,6 +103,10 @@ class SceneSource:
         self.values = self._values[start:end]
 
     def samples(self, t0_us: int, start_index: int, count: int, rate_hz: int) -> np.ndarray:
+        if t0_us == 0 and rate_hz == self.rate_hz and count > 0 and len(self.times_us):
+            held = self._held(start_index, count)
+            if held is not None:
+                return held
         index = np.arange(start_index, start_index + count, dtype=np.int64)
         times = t0_us + index * 1_000_000 // rate_hz
         if not len(self.times_us):
@@ -119,6 +124,24 @@ class SceneSource:
         a = max(0, int(held.searchsorted(times[0], "right")) - 1)
         b = int(held.searchsorted(times[-1], "right")) + 1
         return np.interp(times, held[a:b], self.values[a:b])
+
+    def _held(self, start_index: int, count: int) -> np.ndarray | None:
+        """A node sampling on the domain's own grid (its rate, from 0: every scene node
+        until a reset) reads held samples themselves: the ring's slice from its first
+        time, a copy - what np.interp gives for times equal to held ones (their values as
+        they are), without the times' and the interpolation's arrays (EMG and skin, once
+        per tick). None when the ring does not hold all of them; the caller interpolates
+        (and tells a node sampling ahead)."""
+        first_us = start_index * 1_000_000 // self.rate_hz
+        last_us = (start_index + count - 1) * 1_000_000 // self.rate_hz
+        held = self.times_us
+        a = int(held.searchsorted(first_us))
+        b = a + count
+        # a sorted ring of grid times holding the first and the last with count - 1
+        # between them holds every one between
+        if b > len(held) or held[a] != first_us or held[b - 1] != last_us:
+            return None
+        return self.values[a:b].copy()
 
     def final_until_us(self) -> int | None:
         """Up to the last scene sample: later times would be held, not interpolated."""

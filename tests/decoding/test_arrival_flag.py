@@ -110,3 +110,41 @@ def test_a_slow_slip_onto_the_skin_is_no_stall():
     first, second = np.sort(rec.contact_times_s)[:2]
     shown = [e for e in estimates if first + 0.1 <= e.t_s < second + 0.1]
     assert all(e.slip for e in shown)
+
+
+@pytest.mark.parametrize("history", [8, 2])
+def test_the_arrival_contact_kept_between_updates_is_the_one_a_scan_finds(history):
+    """The tracker keeps its arrival contact between updates (`_arrival_contact`, looked up
+    again only once contacts or their load verdicts changed): after every packet it is
+    the last contact held whose verdict reads an unloaded sensor, as a scan of the history
+    finds it - through the slip's contacts coming, replayed and, with a short history,
+    dropped."""
+    moved_s = 60.0 / SPEED_MM_S
+    profile = [[0.0, 0.0], [1.0, 0.0], [1.02, SPEED_MM_S], [1.0 + moved_s, SPEED_MM_S]]
+    profile += [[1.02 + moved_s, 0.0], [6.0, 0.0]]
+    rec = synth.scripted_recording(LAYOUT, profile, start_mm=-8.0, duration_s=6.0, seed=7)
+    dec = TrackerDecoder(LAYOUT, rec.fs_hz, history=history)
+    seen: set[int] = set()
+    for start in range(0, len(rec.t_s), sr.CHUNK):
+        chunk = slice(start, start + sr.CHUNK)
+        dec.feed(rec.t_s[chunk], rec.force_n[chunk])
+        scanned = next(
+            ((c.id, c.t_s, c.index) for c in reversed(dec._contacts) if dec._unloaded.get(c.id)),
+            None,
+        )
+        assert dec._arrival_contact() == scanned, rec.t_s[start]
+        seen.add(-1 if scanned is None else scanned[0])
+    assert len(seen) >= 2  # an arrival came (and, with a short history, went)
+
+
+def test_the_waiting_probability_is_the_posterior_kernels_own():
+    """`kernels.posterior.log_waiting`, the public face of the posterior's waiting tables,
+    gives the kernel's own numbers bit for bit."""
+    from grasplink.decoding.kernels import posterior as pk
+
+    dec = TrackerDecoder(LAYOUT, 400.0)
+    log, finite, before = dec._waiting
+    for row in (0, dec.count - 1, dec.count, 2 * dec.count - 1):
+        for elapsed in (-1.0, 0.0, 0.05, 0.7, 3.0):
+            kernel = pk._log_waiting(elapsed, row, log, finite, before, dec._K)
+            assert pk.log_waiting(elapsed, row, dec._waiting, dec._K) == kernel

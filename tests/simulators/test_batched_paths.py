@@ -25,7 +25,7 @@ from grasplink.simulators.effects.actuators import (
     FirstOrderLag,
     HandActuator,
 )
-from grasplink.simulators.effects.emg import sosfilt_floats
+from grasplink.simulators.effects.emg import sosfilt_compiled, sosfilt_floats
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.recording import Recorder
 from grasplink.simulators.scene import load_scene, parse_scene
@@ -247,6 +247,31 @@ def test_one_section_filter_in_floats_gives_sosfilts_bits():
             assert got.tobytes() == want.tobytes() and got_z.tobytes() == want_z.tobytes()
 
 
+def test_compiled_sections_give_sosfilts_bits_and_leave_the_state_given():
+    """The EMG's long chunks and noise blocks: the onset filter's one section and a
+    band-pass of several, on strided columns, through signed zeros, NaN, infinities and
+    huge values; sosfilt's output and final state bit for bit, the state given unchanged."""
+    a = 1.0 - np.exp(-1.0 / (1500 * 0.05))
+    one = np.array([[a, 0.0, 0.0, 1.0, a - 1.0, 0.0]])
+    band = signal.butter(4, [20.0, 450.0], btype="bandpass", fs=1500.0, output="sos")
+    rng = np.random.default_rng(11)
+    draws = rng.standard_normal((500, 3))
+    draws[[7, 90], 1] = -0.0
+    draws[200, 2] = 1e300
+    draws[300, 2] = np.inf
+    draws[400, 0] = np.nan
+    for sos in (one, band):
+        for zi in (np.zeros((len(sos), 2)), rng.normal(size=(len(sos), 2))):
+            for column, stop in itertools.product(range(3), (1, 65, 500)):
+                x = draws[:stop, column]  # a strided view, as the noise bank's columns
+                given = zi.copy()
+                want, want_z = signal.sosfilt(sos, x, zi=zi)
+                got, got_z = sosfilt_compiled(sos, x, zi)
+                assert got.tobytes() == want.tobytes(), (len(sos), column, stop)
+                assert got_z.tobytes() == want_z.tobytes(), (len(sos), column, stop)
+                assert zi.tobytes() == given.tobytes()
+
+
 def test_scene_source_holds_the_last_capacity_samples_as_concatenating_would():
     """Chunks of 0 to more than the ring's capacity, through many wraps of its buffers."""
     source = SceneSource(100)  # capacity 200
@@ -267,9 +292,10 @@ def test_scene_source_holds_the_last_capacity_samples_as_concatenating_would():
 @pytest.mark.parametrize("rate_hz", [400, 1500])
 def test_scene_source_samples_are_np_interp_over_the_whole_ring_bit_for_bit(rate_hz):
     """A node's samples, interpolated over the held samples about them only, are those
-    interpolating over the whole ring gives: on the scene's grid and off it (a node reset
-    mid-scene), before the ring's first sample, held past its last, at exact sample times,
-    next to NaN and infinite samples and signed zeros."""
+    interpolating over the whole ring gives: on the scene's grid (read as the held samples
+    themselves, `SceneSource._held`) and off it (a node reset mid-scene), before the
+    ring's first sample, held past its last, at exact sample times, next to NaN and
+    infinite samples and signed zeros."""
     source = SceneSource(rate_hz)
     rng = np.random.default_rng(5)
     count = 3 * source.capacity

@@ -610,6 +610,18 @@ def test_emg_fractional_levels_interpolate():
     assert np.allclose(effect.targets_uv, [10, 106.25, 218.75, 331.25, 443.75, 625])
 
 
+def test_emg_amplitude_reads_nan_as_rest_and_infinities_as_the_end_levels():
+    """A level the wearer model cannot tell (NaN) is rest; beyond the levels (however far,
+    infinities too) the end levels hold: `sigma_uv` as np.interp of nan_to_num's levels."""
+    _, effect = emg_run(0, duration_s=0.01)
+    level = np.array([np.nan, np.inf, -np.inf, 1e308, -1e308, -0.0, 2.5, 7.0])
+    got = effect.sigma_uv(level)
+    ends = np.interp(np.nan_to_num(level, nan=0.0), np.arange(6), effect.targets_uv)
+    assert got.tobytes() == (ends * math.sqrt(math.pi / 2)).tobytes()
+    assert got[0] == got[5] == effect.targets_uv[0] * math.sqrt(math.pi / 2)
+    assert got[1] == got[3] == got[7] == effect.targets_uv[-1] * math.sqrt(math.pi / 2)
+
+
 def test_unregulated_emg_is_a_stationary_gaussian_with_the_target_mean():
     raw, _ = emg_run(3, duration_s=30.0, regulate_s=0.0)
     sigma = 331.25 * math.sqrt(math.pi / 2)

@@ -406,6 +406,18 @@ def _log_waiting(
     return math.log(np.maximum(pairwise_sum(step), 1e-12))
 
 
+def log_waiting(elapsed_s: float, row: int, waiting: tuple, K: np.ndarray) -> float:
+    """Log P(no ridge contact told yet) for a track of row `row` (direction x ridge) whose
+    speed is unknown, `elapsed_s` after its contact less the detector's latency, from the
+    waiting tables `waiting` (a `Waiting`: the tracker's `_waiting`) and constants `K`.
+
+    The posterior weighs its waiting tracks with this (`_log_waiting`, inside the kernel);
+    a rule that asks the same question outside it (`decoding.arrival_flag`) calls this
+    rather than the kernel's private helper, so both read one definition, bit for bit."""
+    log, finite, before = waiting
+    return float(_log_waiting(elapsed_s, row, log, finite, before, K))
+
+
 @jit()
 def _evidence(
     ids: np.ndarray,

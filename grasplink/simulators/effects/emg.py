@@ -87,6 +87,27 @@ def sosfilt_floats(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> tuple[np.n
     return np.array(out), np.array([[z0, z1]])
 
 
+def sosfilt_compiled(
+    sos: np.ndarray, x: np.ndarray, zi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """`scipy.signal.sosfilt(sos, x, zi=zi)` for float64 sections and samples, through the
+    decoder's compiled section loop (`decoding.kernels.detector.sos_run`: sosfilt's sample
+    loop operation for operation, the same bits). sosfilt's checks cost ~80-100 µs a call
+    (scipy 1.17), most of a physics block of a few hundred samples: a loop scene's EMG
+    (its smoothing and noise blocks) spent ~3 % of its run in them."""
+    from grasplink.decoding.kernels.detector import sos_run  # numba: only when used
+
+    state = np.array(zi, dtype=np.float64)  # sosfilt returns a new final state
+    out = np.empty(len(x))
+    sos_run(
+        np.ascontiguousarray(sos, dtype=np.float64),
+        state,
+        np.ascontiguousarray(x, dtype=np.float64),
+        out,
+    )
+    return out, state
+
+
 def level_targets_uv(rest_uv: float, e_min_uv: float, e_max_uv: float) -> np.ndarray:
     """Target rectified mean for levels 0..5 (the centre of each level's band)."""
     width = (e_max_uv - e_min_uv) / LEVELS
@@ -141,8 +162,8 @@ class NoiseBank:
         draws = self.rng.standard_normal((self.block, len(self.bands)))
         data = np.empty_like(draws)
         for column, sos in enumerate(self.bands):
-            data[:, column], self.states[column] = signal.sosfilt(
-                sos, draws[:, column], zi=self.states[column]
+            data[:, column], self.states[column] = sosfilt_compiled(
+                sos, draws[:, column], self.states[column]
             )
         if self.regulate:
             gains = math.sqrt(2.0 / math.pi) / np.mean(np.abs(data), axis=0)
@@ -259,7 +280,10 @@ class SurfaceEmg(Effect):
 
     def sigma_uv(self, level: np.ndarray) -> np.ndarray:
         """Gaussian amplitude whose rectified mean is the level's target."""
-        target = np.interp(np.nan_to_num(level, nan=0.0), np.arange(TOP_LEVEL + 1), self.targets_uv)
+        # NaN reads level 0; infinities stay (np.interp holds the end levels for them, as
+        # for nan_to_num's largest floats): nan_to_num without its Python wrapper
+        level = np.where(np.isnan(level), 0.0, level)
+        target = np.interp(level, np.arange(TOP_LEVEL + 1), self.targets_uv)
         return target * RECTIFIED_MEAN_TO_SIGMA
 
     def step(self, io: Io) -> None:
@@ -272,8 +296,8 @@ class SurfaceEmg(Effect):
         if self._smooth_sos is not None:
             if self._smooth_state is None:
                 self._smooth_state = signal.sosfilt_zi(self._smooth_sos) * sigma[0]
-            smooth = sosfilt_floats if n <= SHORT_CHUNK_SAMPLES else signal.sosfilt
-            sigma, self._smooth_state = smooth(self._smooth_sos, sigma, zi=self._smooth_state)
+            smooth = sosfilt_floats if n <= SHORT_CHUNK_SAMPLES else sosfilt_compiled
+            sigma, self._smooth_state = smooth(self._smooth_sos, sigma, self._smooth_state)
 
         bank = self._bank.take(n)
 

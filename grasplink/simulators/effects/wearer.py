@@ -326,8 +326,12 @@ class WearerVirtual(Effect):
         slip_position = np.interp(
             surface, self.slip_levels_mm_s, np.arange(len(self.slip_levels_mm_s))
         )
-        position = np.where(slip, slip_position, np.where(force, force_position, np.nan))
-        nearest = np.floor(np.nan_to_num(position) + 0.5).astype(np.int64)
+        position = np.where(slip, slip_position, force_position)
+        nothing = ~(slip | force)
+        # the nearest level, 0 where nothing shows (the key ignores it there): what
+        # nan_to_num gave with NaN there, without its Python wrapper (levels are finite)
+        nearest = np.floor(np.where(nothing, 0.0, position) + 0.5).astype(np.int64)
+        position[nothing] = np.nan  # no level shown
         key = np.where(
             slip, 1 + len(self.force_levels_rad_s) + nearest, np.where(force, 1 + nearest, 0)
         )
