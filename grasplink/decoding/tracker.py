@@ -88,6 +88,7 @@ from grasplink.decoding import (
     arrival_flag,
     coast_bound,
     flag_keep,
+    rail_hold,
     rise_evidence,
     rise_travel,
     stop_jumps,
@@ -534,6 +535,12 @@ class TrackerDecoder(Decoder):
     # held (the stop's own friction step: test_restart_confirm). Figures: docs/decoding.md,
     # "slip dropped" (issue 22)
     KEEP_FLAG_UNHOLD = 1.0
+    # a flag up within RAIL_HOLD_BEFORE_S of the rail the sensor sits on now is held (no
+    # speed) until RAIL_HOLD_AFTER_S past the rail's end (`rail_hold`: a saturated sensor
+    # shows no contact, the object does not stop for it); 0: off
+    RAIL_HOLD = 0.0
+    RAIL_HOLD_BEFORE_S = 0.3
+    RAIL_HOLD_AFTER_S = 0.0
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -1332,10 +1339,23 @@ class TrackerDecoder(Decoder):
             p_moving = self._keep_share(g)
             if p_moving >= self.KEEP_FLAG_SHARE:  # kept: the flag, no speed (`flag_keep`)
                 out = SlipEstimate(g, True, None, None, out.force_n, min(1.0, p_moving))
+        if not out.slip and self.RAIL_HOLD and self._rail_holds(g):
+            # the rail tells neither a stop nor a slip: the confidence of a coin's toss
+            out = SlipEstimate(g, True, None, None, out.force_n, 0.5)
         self._flagged = out.slip
         if out.slip:
             self._flag_t = g
         return out
+
+    def _rail_holds(self, g: float) -> bool:
+        """Is the flag held at g for the rail the sensor sits on (`rail_hold`)? The rail is
+        told per noise block, after the detector's block: that long late."""
+        noise = self.detector.noise
+        lag_s = (noise.block + self._block + 1) / self.fs_hz
+        return rail_hold.holds(
+            noise.blind, g, self._flag_t, lag_s, (noise.block + 1) / self.fs_hz,
+            self.RAIL_HOLD_BEFORE_S, self.RAIL_HOLD_AFTER_S,
+        )  # fmt: skip
 
     def _keep_share(self, g: float) -> float:
         """P(moving) at g under the widened evidence rule (`flag_keep.widened`): read once
