@@ -14,7 +14,10 @@ now (the squeeze's ramp and the detector's delay come first), the flag is held -
 no direction: nothing on the rail tells either - until `after_s` past the rail's end. A
 held object's flag never went up, so a held object is never flagged by it; a slip that
 stops while the sensor saturates stays flagged until the rail ends (the stop is not
-observable before then either: no contact, no step shows on the rail).
+observable before then either: no contact, no step shows on the rail). `before_s` 0.6 s:
+at 22 mm/s the squeeze's step was read as the stop up to 0.6 s before the sensor reached
+its rail (0.3 s held only part: the saturation kind's slip dropped 29.3 -> 20.0 %, 0.6 s
+-> 12.7 %, 1.0 s the same; `benchmarks/tune_tracker_kinds.py --full --seeds 2`).
 """
 
 from __future__ import annotations
