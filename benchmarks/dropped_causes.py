@@ -230,7 +230,13 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple[str, str]], li
         if len(mine) >= 2:
             from2 |= inside & (t >= mine[1])
     scored = from2 & (np.abs(v) >= sr.V_MOVING_MM_S) & ~beyond
-    dropped = [classify(dec, k, t[k], truth, contacts) for k in np.flatnonzero(scored & ~flags)]
+    # was the flag up earlier in the same motion run: "dropped after up", else "never up"
+    was_up = np.zeros(len(t), bool)
+    for start, end, _ in ns.motion(truth).runs:
+        inside = (t >= start) & (t < end)
+        was_up[inside] = np.maximum.accumulate(flags[inside]) if inside.any() else False
+    dropped = [(*classify(dec, k, t[k], truth, contacts), bool(was_up[k]))
+               for k in np.flatnonzero(scored & ~flags)]  # fmt: skip
     late = []
     for stop in sr.score(estimates, truth).stops:
         if not stop.judged or stop.observable_s is None or stop.delay_s <= sr.CLEAR_WITHIN_S:
@@ -250,11 +256,20 @@ def main(argv: list[str] | None = None) -> int:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")
     scored = sum(r[3] for r in results)
-    drops = [(case.kind, c) for case, out, _, _ in results for c in out]
+    drops = [(case.kind, c[:2]) for case, out, _, _ in results for c in out]
+    ups = [(case.kind, c[2]) for case, out, _, _ in results for c in out]
     print(f"\nslip dropped: {len(drops)} of {scored} updates ({pct(len(drops), scored)})")
     causes = Counter(c for _, c in drops)
     for (cause, detail), count in causes.most_common():
         print(f"  {cause:18s} {detail:48s} {count:6d} {pct(count, len(drops)):>7s}")
+    print("\nnever up (the flag not up yet in that motion run) / dropped after it was up")
+    split = Counter((c[0], c[2]) for _, out, _, _ in results for c in out)
+    for cause in sorted({c for c, _ in split}, key=lambda c: -split[c, False] - split[c, True]):
+        print(f"  {cause:18s} never up {pct(split[cause, False], scored):>7s} of scored, "
+              f"after up {pct(split[cause, True], scored):>7s}")  # fmt: skip
+    kind_split: dict[str, Counter] = defaultdict(Counter)
+    for kind, up in ups:
+        kind_split[kind][up] += 1
     per_kind: dict[str, Counter] = defaultdict(Counter)
     n_kind: Counter = Counter()
     for case, _, _, n in results:
@@ -265,12 +280,15 @@ def main(argv: list[str] | None = None) -> int:
             per_kind[kind][f"  {cause}: {detail}"] += 1
     heads = sorted({c for _, (c, _) in drops})
     print("\nper kind: dropped % of its scored updates, then each cause's share of them")
-    print(f"  {'kind':12s} {'drop%':>6s} " + " ".join(f"{h[:16]:>16s}" for h in heads))
+    print(f"  {'kind':12s} {'drop%':>6s} {'never':>6s} {'after':>6s} "
+          + " ".join(f"{h[:16]:>16s}" for h in heads))  # fmt: skip
     for kind in args.kinds.split(","):
         row = per_kind[kind]
         total = sum(row[h] for h in heads)
         cells = " ".join(f"{pct(row[h], total):>16s}" for h in heads)
-        print(f"  {kind:12s} {100.0 * total / max(n_kind[kind], 1):6.1f} {cells}")
+        n = max(n_kind[kind], 1)
+        never, after = (100.0 * kind_split[kind][up] / n for up in (False, True))
+        print(f"  {kind:12s} {100.0 * total / n:6.1f} {never:6.1f} {after:6.1f} {cells}")
         if args.detail:
             for key, count in row.most_common():
                 if key.startswith("  "):

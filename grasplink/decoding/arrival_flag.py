@@ -20,7 +20,11 @@ so the level rises; once it lies flat for 0.2 s the object has stopped (that cas
 after the stop, before its next ridge was due). It also ends for good once the
 posterior has flagged the slip (the normal path has taken over: a later "no slip" there
 is the posterior's stop or doubt, not the arrival's) and when the arrival contact is told
-a step or noise's pulse (a grip press or noise, not an edge crossing a ridge), and while
+noise's pulse (noise, not an edge crossing a ridge) - a step no longer ends it
+(`TrackerDecoder.ARRIVAL_STEP_KEEP`, s27): an edge sliding onto the skin leaves the object
+lying there, so the level rises and stays, and the reversal kind's 25 mm object was told a
+step in 7 of 9 arrivals, its flag down to the 2nd ridge; a grip pressing a placed object
+is told by the stall and the silence - and while
 the sensor reads unloaded again (`arrival.unloaded` over the last `arrival.LEVEL_S`:
 nothing lies on the skin - a noise kink on the empty sensor, the loop's 30 mm/s alpha0.5
 seed 162201 at 0.58 s, 0.4 s before the slip began).

@@ -88,6 +88,8 @@ from grasplink.decoding import (
     arrival_flag,
     coast_bound,
     flag_keep,
+    rail_hold,
+    reflag,
     rise_evidence,
     rise_travel,
     stop_jumps,
@@ -412,6 +414,14 @@ class TrackerDecoder(Decoder):
     ARRIVAL_FLAG_OVER_STOP = 1.0
     # ... and ended by the level lying flat since (`arrival_flag.STALL_N`, N; 0: off)
     ARRIVAL_STALL_N = arrival_flag.STALL_N
+    # ... not ended by its contact told a step (1; 0: ended, as until s27): an edge sliding
+    # onto the skin leaves the object lying there, so its level rises and stays - a step
+    # (the reversal kind's 25 mm object: 7 of 9 arrivals of seed 1 told steps 0.1 s on,
+    # the flag down to the 2nd ridge); a placed object is told by the stall and silence.
+    # Full plan, 2 seeds, one run (tune_tracker_kinds.py --try ARRIVAL_STEP_KEEP=1):
+    # slip dropped 13.6 -> 12.8 % (reversal 30.0 -> 23.1, loop 39.2 -> 37.3, rates-drops
+    # 8.7 -> 8.0), every other column of every kind unchanged (held 0.0 %)
+    ARRIVAL_STEP_KEEP = 1.0
     RISE_TRAVEL_GAIN = 1.0
     # a contact taken for a ridge whose onset shows no pulse's rise on the track's rise
     # time (`told_rise`: the probe's z under TOLD_RISE_Z, read only where its window is
@@ -550,6 +560,22 @@ class TrackerDecoder(Decoder):
     # held (the stop's own friction step: test_restart_confirm). Figures: docs/decoding.md,
     # "slip dropped" (issue 22)
     KEEP_FLAG_UNHOLD = 1.0
+    # a flag up within RAIL_HOLD_BEFORE_S of the rail the sensor sits on now is held (no
+    # speed) until RAIL_HOLD_AFTER_S past the rail's end (`rail_hold`: a saturated sensor
+    # shows no contact, the object does not stop for it); 0: off. Full plan, 2 seeds, one
+    # run (tune_tracker_kinds.py): saturation slip dropped 29.3 -> 12.7 % (0.3 s before:
+    # 20.0 - at 22 mm/s the squeeze's step is read as the stop up to 0.6 s before the
+    # rail), moving 14.7 -> 13.6 %, every other figure of every kind unchanged. 0.3 s
+    # after the rail: saturation flagged at rest 0.0 -> 10.5 % (the object stops soon
+    # after the squeeze ends at 118 mm/s): 0
+    RAIL_HOLD = 1.0
+    RAIL_HOLD_BEFORE_S = 0.6
+    RAIL_HOLD_AFTER_S = 0.0
+    # a contact told a pulse within REFLAG_WITHIN_S after the flag was last up raises it
+    # again (no speed) while P(its next ridge not yet told) is at least REFLAG_P
+    # (`reflag`: a ridge pulse is motion); 0: off
+    REFLAG_P = 0.0
+    REFLAG_WITHIN_S = 1.0
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -734,6 +760,8 @@ class TrackerDecoder(Decoder):
         self._arrival_at: tuple[int, float, int] | None = None
         self._arrival_stale = True
         self._arrival_flag = arrival_flag.ArrivalFlag()  # whether the posterior took over
+        self._reflag = reflag.Reflag()  # the pulse contact the flag is raised again for
+        self._up_t = -math.inf  # the last update flagged but by `reflag`
         self._entry = arrival.entry_adjustment(self._log_prior, self._log_miss[:, :R])
         # what every contact's one-contact tracks share: a bank that `_births` copies and
         # fills in (the contact's id, time, sigma and the score)
@@ -1320,8 +1348,34 @@ class TrackerDecoder(Decoder):
     def _report(self, g: float) -> SlipEstimate:
         out = self._report_kept(g)
         if self.ARRIVAL_FLAG_P > 0 and self.ARRIVAL_EMPTY_N > 0:
-            return self._report_arrival(g, out)
+            out = self._report_arrival(g, out)
+        if out.slip:
+            self._up_t = g  # up by the posterior, its keep, the rail or the arrival
+        elif self.REFLAG_P > 0:
+            out = self._report_reflag(g, out)
         return out
+
+    def _report_reflag(self, g: float, out: SlipEstimate) -> SlipEstimate:
+        """`out`, or the slip flagged again by a pulse contact soon after the flag was last
+        up (`reflag`: no speed, no direction)."""
+        if not math.isfinite(self._up_t):
+            return out  # never flagged (a held object): nothing to raise again
+        picked = self._reflag.candidate(
+            self._contacts,
+            lambda cid: arrival_flag.verdict(cid, self._ring, self._ring_id) == PULSE,
+            self._up_t,
+            self.REFLAG_WITHIN_S,
+        )
+        if picked is None:
+            return out
+        blind = self._blind(np.array([picked[1]]), g)
+        elapsed = g - picked[1] - (0.0 if blind is None else float(blind[0]))
+        rows = range(2 * self.count)  # its ridge unknown: every ridge, either way
+        p = arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
+        if p < self.REFLAG_P:
+            self._reflag.expire()
+            return out
+        return SlipEstimate(g, True, None, None, out.force_n, min(1.0, p))
 
     def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged from its arrival onto an unloaded sensor while the
@@ -1334,7 +1388,8 @@ class TrackerDecoder(Decoder):
         _, arrived_s, onset = arrival
         if out.speed_mm_s is not None and not self.ARRIVAL_FLAG_OVER_STOP:
             return out  # the posterior's stop
-        if arrival_flag.verdict(arrival_id, self._ring, self._ring_id) in (STEP, NOISE):
+        ends = (NOISE,) if self.ARRIVAL_STEP_KEEP else (STEP, NOISE)
+        if arrival_flag.verdict(arrival_id, self._ring, self._ring_id) in ends:
             return out  # the contact a grip's press or noise's pulse
         if self._reads_unloaded(self._n_in):
             return out  # nothing lies on the skin now: the contact was no edge sliding on
@@ -1375,10 +1430,23 @@ class TrackerDecoder(Decoder):
             p_moving = self._keep_share(g)
             if p_moving >= self.KEEP_FLAG_SHARE:  # kept: the flag, no speed (`flag_keep`)
                 out = SlipEstimate(g, True, None, None, out.force_n, min(1.0, p_moving))
+        if not out.slip and self.RAIL_HOLD and self._rail_holds(g):
+            # the rail tells neither a stop nor a slip: the confidence of a coin's toss
+            out = SlipEstimate(g, True, None, None, out.force_n, 0.5)
         self._flagged = out.slip
         if out.slip:
             self._flag_t = g
         return out
+
+    def _rail_holds(self, g: float) -> bool:
+        """Is the flag held at g for the rail the sensor sits on (`rail_hold`)? The rail is
+        told per noise block, after the detector's block: that long late."""
+        noise = self.detector.noise
+        lag_s = (noise.block + self._block + 1) / self.fs_hz
+        return rail_hold.holds(
+            noise.blind, g, self._flag_t, lag_s, (noise.block + 1) / self.fs_hz,
+            self.RAIL_HOLD_BEFORE_S, self.RAIL_HOLD_AFTER_S,
+        )  # fmt: skip
 
     def _keep_share(self, g: float) -> float:
         """P(moving) at g under the widened evidence rule (`flag_keep.widened`): read once

@@ -148,3 +148,21 @@ def test_the_waiting_probability_is_the_posterior_kernels_own():
         for elapsed in (-1.0, 0.0, 0.05, 0.7, 3.0):
             kernel = pk._log_waiting(elapsed, row, log, finite, before, dec._K)
             assert pk.log_waiting(elapsed, row, dec._waiting, dec._K) == kernel
+
+
+def _reversal_arrival(tuning: dict):
+    """(update times, flags) of the full plan's reversal at 41 -> 39 mm/s on alpha0.7 (seed
+    103000): the 25 mm object's edge onto the empty skin at 0.46 s (told a step 0.1 s
+    on: it lies on the skin after), its 2nd ridge at 0.63 s, then 64 mm to the next."""
+    case = next(c for c in sr.cases(sr.FULL) if c.kind == "reversal" and c.seed == 103000)
+    rec = case.make()
+    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
+    estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
+    return np.array([e.t_s for e in estimates]), np.array([e.slip for e in estimates])
+
+
+def test_an_arrival_told_a_step_keeps_its_flag():
+    t, flags = _reversal_arrival({})
+    assert flags[(t >= 0.5) & (t <= 1.2)].all()  # from the arrival to past the 2nd ridge
+    t, flags = _reversal_arrival({"ARRIVAL_STEP_KEEP": 0.0})  # before s27: ended at 0.57 s
+    assert not flags[(t >= 0.6) & (t <= 1.2)].any()
