@@ -31,6 +31,7 @@ ridge children alone. A ridge at 30-60 mm/s jumps in 16 ms or more (10 %): over
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -56,26 +57,69 @@ def despiked(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def fast_jump_s(recent: step_shape.Recent, onset: int, told: int) -> float | None:
-    """The longest the jump of the contact with this onset, told a pulse at sample `told`
-    (global indices, `step_shape.Recent`), can have lasted (s: its time to 90 % of the
-    peak, plus the sample it is resolved to), when it jumped as fast as a stop's step and
-    stood clear of the noise; None otherwise (or when its samples are not held). At 100 Hz
-    a 60 mm/s ridge rises within two samples: the sample its rise ended on only bounds it.
-    Read on the samples `despiked`: a one-sample spike on a slow ridge's rise (thesis-like
-    noise, 10 mm/s) jumped "in 4 ms" through the 10 ms mean."""
+class Jump(NamedTuple):
+    """How long a fast jump can have lasted, at most and at least (s): a track's ridge
+    child is weighed on the longest (only a jump surely faster than its ridge's rise is
+    no ridge of it), its stop child on the shortest (only a jump surely slower than a
+    stop's is no stop)."""
+
+    longest_s: float
+    shortest_s: float
+
+
+def fast_jump_s(recent: step_shape.Recent, onset: int, told: int, resolved: int = 0) -> Jump | None:
+    """How long the jump of the contact with this onset, told a pulse at sample `told`
+    (global indices, `step_shape.Recent`), can have lasted, when it jumped as fast as a
+    stop's step and stood clear of the noise; None otherwise (or when its samples are not
+    held). Both bounds are its time to 90 % of the peak plus the sample it is resolved to
+    (at 100 Hz a 60 mm/s ridge rises within two samples: the sample its rise ended on
+    only bounds it) - unless `resolved` and the samples are read unsmoothed
+    (`resolved_s`). Read on the samples `despiked`: a one-sample spike on a slow ridge's
+    rise (thesis-like noise, 10 mm/s) jumped "in 4 ms" through the 10 ms mean."""
     fs_hz = recent.fs_hz
     end = min(told, onset + round(WINDOW_S * fs_hz))
     start = onset - round(LEAD_S * fs_hz)
     x = recent.held(start, end + 2)
     if x is None:
         return None
-    shape = step_shape.measure(despiked(x), onset - start, end - start, fs_hz)
+    clean = despiked(x)
+    shape = step_shape.measure(clean, onset - start, end - start, fs_hz)
     if shape is None or not math.isfinite(shape.jump_s):
         return None
     fast_s = max(step_shape.FAST_RISE_S, step_shape.FAST_RISE_SAMPLES / fs_hz)
     tall = shape.jump_n >= JUMP_SNR_MIN * shape.noise_n
-    return shape.jump_s + 1.0 / fs_hz if shape.jump_s <= fast_s and tall else None
+    if not (shape.jump_s <= fast_s and tall):
+        return None
+    whole = shape.jump_s + 1.0 / fs_hz
+    if not resolved or round(step_shape.SMOOTH_S * fs_hz) > 1:
+        return Jump(whole, whole)
+    longest, shortest = resolved_s(clean[onset - start : end - start + 1], shape, fs_hz)
+    if resolved == 1:
+        return Jump(longest, longest)
+    if resolved == 2:
+        return Jump(longest, shortest)
+    if resolved == 3:
+        return Jump(whole, longest)
+    if resolved == 4:
+        return Jump(whole, shortest)
+    raise ValueError(f"stop jumps: resolved {resolved!r} is none of 0-4")
+
+
+def resolved_s(after: np.ndarray, shape: step_shape.StepShape, fs_hz: float) -> tuple[float, float]:
+    """How long a jump read on unsmoothed samples can have lasted from 10 to 90 % of its
+    height, at most and at least (s): its last sample at or under 10 % before the first
+    at 90 % (`after`: the samples from the onset on, the first at 90 % `shape.jump_s` in)
+    are k samples apart, so its crossings lie k - 2 to k samples apart. A stop's level
+    changes within one sample at 100 Hz (6-10 ms of braking) where a ridge at 47 mm/s
+    takes two (its ~1 mm of travel); `jump_s` + a sample bounded both by 20 ms or more,
+    over `FAST_JUMP_TRAVEL_MM` at 53 mm/s, so a stop told a pulse was weighed as a fast
+    ridge (its stop child charged). When the onset's own sample rose past 10 % already,
+    the jump may have begun a sample before it: a sample more, as at faster rates."""
+    top = round(shape.jump_s * fs_hz)
+    base0 = float(after.max()) - shape.jump_n  # (`measure`: the peak less the jump)
+    low = np.flatnonzero(after[:top] <= base0 + 0.1 * shape.jump_n)
+    k = top - (int(low[-1]) if len(low) else -1)
+    return k / fs_hz, max(0, k - 2) / fs_hz
 
 
 def weigh(
@@ -87,13 +131,18 @@ def weigh(
     travel_min_mm: float,
     log_ridge: float,
     log_stop: float,
+    stop_jump_s: float | None = None,
 ) -> None:
     """Weigh the children of a fast-jumping contact (in place, the bank's matrices): a
     slipping track with a measured speed taking it for a ridge at a speed whose ridge
-    would travel under `travel_min_mm` over the jump gets `log_ridge`; a track stopped at
-    it whose speed before made such a jump a ridge's travel gets `log_stop`."""
-    if not (jump_s > 0 and travel_min_mm > 0):
-        raise ValueError(f"stop jumps: jump {jump_s!r} s, travel {travel_min_mm!r} mm")
+    would travel under `travel_min_mm` over the jump (at most `jump_s`) gets `log_ridge`;
+    a track stopped at it whose speed before made such a jump (at least `stop_jump_s`;
+    None: `jump_s`) a ridge's travel gets `log_stop`."""
+    stop_s = jump_s if stop_jump_s is None else stop_jump_s
+    if not (jump_s > 0 and travel_min_mm > 0 and stop_s >= 0):
+        raise ValueError(
+            f"stop jumps: jump {jump_s!r} s (stop's {stop_s!r} s), travel {travel_min_mm!r} mm"
+        )
     travel_mm = np.abs(floats[:, F_V]) * jump_s
     slipping = np.isnan(floats[:, F_STOP])
     # (a restart's speed is not known yet: run 1)
@@ -101,4 +150,5 @@ def weigh(
     ridge &= slipping
     floats[ridge & (travel_mm < travel_min_mm), F_SCORE] += log_ridge
     stop = floats[:, F_STOP] == t_s
-    floats[stop & (travel_mm >= travel_min_mm), F_SCORE] += log_stop
+    stop_mm = np.abs(floats[:, F_V]) * stop_s
+    floats[stop & (stop_mm >= travel_min_mm), F_SCORE] += log_stop
