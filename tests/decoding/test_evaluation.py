@@ -177,7 +177,7 @@ def test_no_speed_is_owed_past_one_spacing_beyond_the_last_ridge(reverse):
     length = float(sum(layout))
     x = np.array([-layout[0] - 0.1, -layout[0] + 0.1, length + layout[-1] + 0.1, length])
     v = np.array([-40.0, -40.0, 40.0, 40.0])
-    assert scoring.observed(rec, x, v).tolist() == [False, True, False, True]
+    assert scoring.observed(rec.layout_mm, x, v).tolist() == [False, True, False, True]
 
 
 # -- where the benchmark writes ------------------------------------------------------------

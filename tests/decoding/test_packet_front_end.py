@@ -191,6 +191,11 @@ def decode_all(t: np.ndarray, x: np.ndarray) -> list:
     ]
 
 
+def shown_speed(estimate) -> float | None:
+    """The estimate's speed, else the floor of its range (what the belt shows)."""
+    return estimate.speed_low_mm_s if estimate.speed_mm_s is None else estimate.speed_mm_s
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_a_jittered_log_decodes_to_the_same_samples_and_slips(tmp_path, headline, seed):
     t0, x0, clean = io.read_can_log(write_log(tmp_path / "clean.asc", headline))
@@ -201,8 +206,9 @@ def test_a_jittered_log_decodes_to_the_same_samples_and_slips(tmp_path, headline
     np.testing.assert_array_equal(x, x0)
     estimates, reference = decode_all(t, x), decode_all(t0, x0)
     assert estimates == reference
-    # the reflex stops the headline slip after two ridge contacts: ~0.4 s with a speed
-    assert sum(e.slip and e.speed_mm_s is not None for e in estimates) >= 30
+    # the reflex stops the headline slip after two ridge contacts: ~0.4 s with a speed or,
+    # where two contacts leave it open on alpha0.1, the range's floor (what the belt shows)
+    assert sum(e.slip and shown_speed(e) is not None for e in estimates) >= 30
 
 
 def test_a_boot_up_in_the_log_starts_the_samples_anew(tmp_path):
@@ -282,5 +288,6 @@ def test_the_gateway_keeps_its_decoder_through_a_stall_and_a_burst(headline):
     assert gateway.decoder is not None and gateway.decoder.stats.gaps == 0
     assert gateway.skin_frames is not None and gateway.skin_frames.stats.resyncs == 0
     assert estimates == reference
-    # the reflex stops the headline slip after two ridge contacts: ~0.4 s with a speed
-    assert sum(e.slip and e.speed_mm_s is not None for e in estimates) >= 30
+    # the reflex stops the headline slip after two ridge contacts: ~0.4 s with a speed or,
+    # where two contacts leave it open on alpha0.1, the range's floor (what the belt shows)
+    assert sum(e.slip and shown_speed(e) is not None for e in estimates) >= 30

@@ -63,7 +63,7 @@ let history = {}; // gateway -> kind -> {t: [...s], fields: {name: [...]}}
 let historyS = 30;
 let chosen = new URLSearchParams(location.search).get("gateway");
 let drawQueued = false;
-let lastSlip = {}; // gateway -> the last skin values with a slip and its speed
+let lastSlip = {}; // gateway -> the last skin values with a slip and its speed (or floor)
 const plots = [];
 // what the page did, for the browser tests: frames taken, draws made (at most one per frame)
 window.viewStats = { frames: 0, draws: 0 };
@@ -78,8 +78,21 @@ function numeric(kind, field, value) {
   return value;
 }
 
+// The speed a slip is shown with: the decoded speed, else the floor of the range of speeds
+// still possible (what the belt shows and the reflex acts on until a speed is known).
+function shownSpeed(skin) {
+  return typeof skin.slip_speed_mm_s === "number" ? skin.slip_speed_mm_s : skin.slip_speed_low_mm_s;
+}
+
+function speedText(skin) {
+  if (typeof skin.slip_speed_mm_s === "number") return fixed(skin.slip_speed_mm_s, 1, " mm/s");
+  if (typeof skin.slip_speed_low_mm_s !== "number") return fixed(null, 1, " mm/s");
+  const high = typeof skin.slip_speed_high_mm_s === "number" ? `–${fixed(skin.slip_speed_high_mm_s, 1, "")}` : "+";
+  return `≥ ${fixed(skin.slip_speed_low_mm_s, 1, " mm/s")} (range ${fixed(skin.slip_speed_low_mm_s, 1, "")}${high})`;
+}
+
 function keep(gateway, kind, tsMs, values) {
-  if (kind === "skin" && values.slip && typeof values.slip_speed_mm_s === "number") {
+  if (kind === "skin" && values.slip && typeof shownSpeed(values) === "number") {
     lastSlip[gateway] = { tsMs, ...values }; // a slip lasts a second or two: keep it in view
   }
   const byKind = (history[gateway] ||= {});
@@ -227,23 +240,23 @@ function drawNow(g) {
   const skin = (g.nodes.skin || {}).values || {};
   const slip = $("slip");
   slip.dataset.slip = skin.slip === undefined || skin.slip === null ? "unknown" : String(skin.slip);
-  slip.dataset.speed = skin.slip_speed_mm_s ?? "";
+  slip.dataset.speed = shownSpeed(skin) ?? "";
   if (skin.slip) {
     const way = skin.slip_direction === null || skin.slip_direction === undefined ? "direction –"
       : `direction ${skin.slip_direction > 0 ? "+" : "−"} (confidence ${fixed(skin.slip_direction_confidence, 2, "")})`;
-    text(slip, `SLIP ${fixed(skin.slip_speed_mm_s, 1, " mm/s")} at ${fixed(skin.position_mm, 1, " mm")}` +
+    text(slip, `SLIP ${speedText(skin)} at ${fixed(skin.position_mm, 1, " mm")}` +
       `, ${way}; estimate confidence ${fixed(skin.confidence, 2, "")}`);
   } else {
     text(slip, skin.slip === false ? `no slip; grip ${fixed(skin.grip_force_n, 2, " N")}` : "slip: –");
   }
   const last = lastSlip[chosen];
   const shown = $("last-slip");
-  shown.dataset.speed = last ? last.slip_speed_mm_s : "";
+  shown.dataset.speed = last ? shownSpeed(last) : "";
   const when = last && (RECORDING ? `${(last.tsMs / 1000).toFixed(2)} s in the run`
     : new Date(last.tsMs).toLocaleTimeString());
   const truth = last && RECORDING ? trueSpeedAt(last.tsMs / 1000) : null;
   shown.dataset.truth = truth === null ? "" : String(truth);
-  text(shown, last ? `last slip with a speed: ${fixed(last.slip_speed_mm_s, 1, " mm/s")} at ` +
+  text(shown, last ? `last slip with a speed: ${speedText(last)} at ` +
     when + (truth === null ? "" : ` (true ${fixed(truth, 1, " mm/s")})`)
     : "last slip with a speed: –");
   const hand = (g.nodes.hand || {}).values || {};
