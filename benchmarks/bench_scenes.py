@@ -518,8 +518,19 @@ the compiled kernel, a raw block's rail and smallest step are one kernel, and th
 buffer trims are asked only once a part could cut: the decoder on loop_headline's own
 feed 1.12× as fast, its first simulated second 1.65× (`benchmarks/decoder_loop_phases.py`),
 outputs bit for bit; the loop ~1.02-1.03×, within the noise, since the decoder is about a
-fifth of the loop's CPU (even a free decoder leaves it near 16-17× on a loaded host).
-This page's run had a quieter host than session 25's (the base read 19×, not 13×).
+fifth of the loop's CPU (even a free decoder leaves it near 16-17× on a loaded host);
+its page's host was quieter than session 25's (the base read 19×, not 13×).
+
+Session 27 (this page's before/after is against its base, 866822a): the loop's profile
+by package is simulators ~26 %, decoding ~24 %, devices ~22 %, gateway ~16 %, no function
+above 3.5 %. A scene node on its domain's grid reads its held samples from the ring, not
+through `np.interp` (~3.5 %); the EMG effect's IIR sections run through the compiled
+section loop (scipy 1.17's `sosfilt` spends ~80 µs a call checking its arguments, ~3 %);
+numpy's Python wrappers are skipped on a tick's few samples (~2 %); outputs bit for bit.
+The loop 1.05-1.09× in interleaved runs at load (`benchmarks/scene_pairs.py`: median of
+40 pairs 1.09), 1.17× in this page's run. This page's host ran slower than session 26's
+(headline_slip 83× against 114×, the base's loop 16× against 19×), so the 20× target
+is not shown met here; a quieter host decides it.
 """
 
 
