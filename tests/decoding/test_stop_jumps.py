@@ -184,20 +184,27 @@ TAIL_STOPS = [("rates-drops", 1, "fibonacci", False, 135_100, 1.963)]
 ONE_SAMPLE_STOPS = [("rates-drops", 3, "fibonacci", False, 135_300, 2.25)]
 
 
+def decoded_stop(case: tuple, tuning: dict) -> tuple[list, sr.StopScore]:
+    """The tracker's estimates of a full-plan case (kind, variant, layout, reverse, seed,
+    the stop's start) with `tuning`, and the scored stop starting there."""
+    kind, variant, layout, reverse, seed, start_s = case
+    label, numbers = sr.VARIANTS[kind][variant]
+    rec = sr.Case(kind, label, numbers, layout, reverse, seed).make()
+    decoder = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, tuning)
+    assert isinstance(decoder, TrackerDecoder)
+    estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
+    stops = sr.score(estimates, rec.truth).stops
+    return estimates, next(s for s in stops if abs(s.start_s - start_s) < 0.01)
+
+
 @pytest.mark.parametrize("kind,variant,layout,reverse,seed,start_s", TAIL_STOPS)
 @pytest.mark.parametrize("on", [True, False])
 def test_a_stop_told_a_pulse_on_a_falling_tail_is_cleared_within_0_15_s(
     kind, variant, layout, reverse, seed, start_s, on
 ):
-    label, numbers = sr.VARIANTS[kind][variant]
-    rec = sr.Case(kind, label, numbers, layout, reverse, seed).make()
     # (off: the earlier pulse's course out too - `detector.pulse_under` clears this one too)
     off = {"tuning": {"LOG_FAST_JUMP_RIDGE": 0.0}, "watch": {"pulse_under_step": False}}
-    tuning = {} if on else off
-    decoder = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, tuning)
-    assert isinstance(decoder, TrackerDecoder)
-    estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
-    stop = next(s for s in sr.score(estimates, rec.truth).stops if abs(s.start_s - start_s) < 0.01)
+    _, stop = decoded_stop((kind, variant, layout, reverse, seed, start_s), {} if on else off)
     assert stop.judged
     assert (stop.delay_s <= sr.CLEAR_WITHIN_S) == on, stop.delay_s
 
@@ -207,12 +214,8 @@ def test_a_stop_told_a_pulse_on_a_falling_tail_is_cleared_within_0_15_s(
 def test_a_100_hz_stop_told_a_pulse_gives_no_speed_after_due(
     kind, variant, layout, reverse, seed, start_s, on
 ):
-    label, numbers = sr.VARIANTS[kind][variant]
-    rec = sr.Case(kind, label, numbers, layout, reverse, seed).make()
     tuning: dict = {"tuning": {} if on else {"RESOLVED_JUMP": 0.0}}
-    decoder = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, tuning)
-    estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
-    stop = next(s for s in sr.score(estimates, rec.truth).stops if abs(s.start_s - start_s) < 0.01)
+    estimates, stop = decoded_stop((kind, variant, layout, reverse, seed, start_s), tuning)
     assert stop.judged and stop.observable_s is not None
     due_s = stop.observable_s + sr.CLEAR_WITHIN_S
     late = [e.t_s for e in estimates if due_s < e.t_s < stop.end_s and (e.speed_mm_s or 0) > 0]
