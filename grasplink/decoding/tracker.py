@@ -305,6 +305,12 @@ class _One:
         )  # fmt: skip
 
 
+def _flag_only(out: SlipEstimate, p: float) -> SlipEstimate:
+    """`out` as a slip flagged with no speed, position or direction, confidence `p` (at
+    most 1): what the keep, rail, arrival and reflag rules report."""
+    return SlipEstimate(out.t_s, True, None, None, out.force_n, min(1.0, p))
+
+
 class TrackerDecoder(Decoder):
     """Contact tracker: hypotheses over (direction, ridge, motion); Kalman speed, acceleration."""
 
@@ -1381,14 +1387,11 @@ class TrackerDecoder(Decoder):
         )
         if picked is None:
             return out
-        blind = self._blind(np.array([picked[1]]), g)
-        elapsed = g - picked[1] - (0.0 if blind is None else float(blind[0]))
-        rows = range(2 * self.count)  # its ridge unknown: every ridge, either way
-        p = arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
+        p = self._waiting_p(g, picked[1], range(2 * self.count))  # its ridge unknown
         if p < self.REFLAG_P:
             self._reflag.expire()
             return out
-        return SlipEstimate(g, True, None, None, out.force_n, min(1.0, p))
+        return _flag_only(out, p)
 
     def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged from its arrival onto an unloaded sensor while the
@@ -1411,14 +1414,18 @@ class TrackerDecoder(Decoder):
         ):
             self._arrival_flag.expire()  # no more skin covered: it stopped
             return out
-        blind = self._blind(np.array([arrived_s]), g)
-        elapsed = g - arrived_s - (0.0 if blind is None else float(blind[0]))
-        rows = (0, self.count)  # its first ridge, either way
-        p = arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
+        p = self._waiting_p(g, arrived_s, (0, self.count))  # its first ridge, either way
         if p < self.ARRIVAL_FLAG_P:
             self._arrival_flag.expire()
             return out
-        return SlipEstimate(g, True, None, None, out.force_n, min(1.0, p))
+        return _flag_only(out, p)
+
+    def _waiting_p(self, g: float, contact_s: float, rows: Sequence[int]) -> float:
+        """P(the next ridge after a contact at `contact_s` on one of `rows` is not yet due
+        at g), the time on the rail since it not counted (`arrival_flag.waiting_p`)."""
+        blind = self._blind(np.array([contact_s]), g)
+        elapsed = g - contact_s - (0.0 if blind is None else float(blind[0]))
+        return arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
 
     def _arrival_contact(self) -> tuple[int, float, int] | None:
         """The last contact held that came onto an unloaded sensor (`_onto_empty_skin`):
@@ -1442,10 +1449,10 @@ class TrackerDecoder(Decoder):
         if not out.slip and keep and recent and len(self._tracks):
             p_moving = self._keep_share(g)
             if p_moving >= self.KEEP_FLAG_SHARE:  # kept: the flag, no speed (`flag_keep`)
-                out = SlipEstimate(g, True, None, None, out.force_n, min(1.0, p_moving))
+                out = _flag_only(out, p_moving)
         if not out.slip and self.RAIL_HOLD and self._rail_holds(g):
             # the rail tells neither a stop nor a slip: the confidence of a coin's toss
-            out = SlipEstimate(g, True, None, None, out.force_n, 0.5)
+            out = _flag_only(out, 0.5)
         self._flagged = out.slip
         if out.slip:
             self._flag_t = g
