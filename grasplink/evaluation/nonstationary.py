@@ -571,6 +571,13 @@ def signal_job(signal: Signal, decoders: dict[str, dict], chunks: Sequence[int])
     return {"signal": signal, "scores": scores}
 
 
+def warm_worker(signal: Signal, decoders: dict[str, dict]) -> None:
+    """Decode `signal` once, unscored, in a fresh worker: numba compiles (or loads from its
+    cache) each kernel at its first call, seconds that would land in the µs/sample of
+    whichever signal came first, and differ between a cold and a warm cache."""
+    signal_job(signal, decoders, CHUNKS[:1])
+
+
 def run(
     decoders: dict[str, dict],
     quick: bool,
@@ -581,7 +588,12 @@ def run(
     started = time.monotonic()
     todo = signals(quick)
     workers = max(1, min(workers, 2, os.cpu_count() or 1, len(todo)))
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(
+        workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=warm_worker,
+        initargs=(todo[0], decoders),
+    ) as pool:
         jobs = [
             pool.submit(signal_job, s, decoders, CHUNKS if measures_cost(s, quick) else CHUNKS[:1])
             for s in todo
@@ -628,7 +640,13 @@ def scene_path(
     if not paths:
         return {"scenes": []}
     workers = max(1, min(workers, 2, os.cpu_count() or 1, len(paths)))
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    warm = signals(quick=True)[0]
+    with ProcessPoolExecutor(
+        workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=warm_worker,
+        initargs=(warm, decoders),
+    ) as pool:
         jobs = [pool.submit(scene_job, str(p), controllers_for, decoders) for p in paths]
         done = [job.result() for job in jobs]
     return {
