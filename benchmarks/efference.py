@@ -1,10 +1,13 @@
-"""The efference copy on the headline loop, and what it costs (docs/decoding.md, Gaps).
+"""The efference copy on a loop scene, and what it costs (docs/decoding.md, Gaps).
 
-    .venv/bin/python benchmarks/efference.py [--kinks 1,2,4] [--cost ROUNDS]
+    .venv/bin/python benchmarks/efference.py [--scene loop_headline] [--kinks 1,2,4]
+        [--cost ROUNDS]
 
-Runs `scenes/loop_headline.toml` as `grasplink run` does, decodes its can.asc 3 samples at
-a time without and with the hand's grip commands (`io.read_grip_commands`), and prints
-the speed updates 0.15 s or more into the rest and the last speed; `--kinks` repeats it
+Runs the scene (default `scenes/loop_headline.toml`) as `grasplink run` does, decodes its
+can.asc 3 samples at a time without and with the hand's grip commands
+(`io.read_grip_commands`), and prints the speed updates 0.15 s or more into the rest (the
+object's first standstill of 1 s or more), the last speed, and the speeds more than 50 %
+off the truth or at rest; `--kinks` repeats it
 with `efference.KINKS_PER_RISE` at each value (the rate's sensitivity). `--cost
 ROUNDS`: the tracker's CPU per sample on 8 loop cases of slip_reporting's full plan
 without and with their gateway's commands (`loop_grip_commands`), alternating, the least
@@ -18,27 +21,40 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from grasplink.controllers import build_controllers
 from grasplink.decoding import efference, io
 from grasplink.decoding.registry import make_decoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import scenes as sc
 from grasplink.evaluation import slip_reporting as sr
+from grasplink.simulators.synth import SkinRecording
 
 ROOT = Path(__file__).resolve().parents[1]
-REST_FROM_S = 1.768 + sr.REST_SETTLED_S  # the headline's stop (truth) + 0.15 s
+FAR_OFF = 0.5  # a speed this far off the truth (relative) counts as wrong
 
 
-def headline(log: Path, layout: tuple[float, ...], commands: bool) -> str:
+def headline(log: Path, rec: SkinRecording, commands: bool) -> str:
     t, x, stats = io.read_can_log(log)
-    decoder = make_decoder("tracker", layout, stats.rate_hz)
+    decoder = make_decoder("tracker", rec.layout_mm, stats.rate_hz)
     if commands:
         io.read_grip_commands(log).feed(decoder)
     estimates, _ = ns.feed(decoder, t, x, 3)
     speeds = [(e.t_s, e.speed_mm_s) for e in estimates if e.speed_mm_s]
-    at_rest = [(t_s, v) for t_s, v in speeds if t_s >= REST_FROM_S]
+    rests = [s for s in ns.motion(rec).stops if s[1] - s[0] >= 1.0]
+    rest_from_s, rest_until_s = (rests[0][0] + sr.REST_SETTLED_S, rests[0][1]) if rests else (0, 0)
+    at_rest = [(t_s, v) for t_s, v in speeds if rest_from_s <= t_s < rest_until_s]
     span = f"{at_rest[0][0]:.2f}-{at_rest[-1][0]:.2f} s" if at_rest else "-"
-    return f"speed updates at rest {len(at_rest):3d} ({span}), last speed {speeds[-1][0]:.2f} s"
+    index = np.minimum(np.searchsorted(rec.t_s, [t_s for t_s, _ in speeds]), len(rec.t_s) - 1)
+    truth = np.abs(rec.speed_mm_s[index])
+    told = np.array([v for _, v in speeds])
+    off = int(np.sum((truth < 1.0) | (np.abs(told / np.maximum(truth, 1.0) - 1) > FAR_OFF)))
+    last = f"{speeds[-1][0]:.2f} s" if speeds else "-"
+    return (
+        f"speed updates at rest {len(at_rest):3d} ({span}), last speed {last}, "
+        f"{off} of {len(speeds)} speeds > {FAR_OFF:.0%} off the truth or at rest"
+    )
 
 
 def cost(rounds: int) -> None:
@@ -69,18 +85,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--kinks", default="", help="comma-separated KINKS_PER_RISE values (contacts per rise)"
     )
+    parser.add_argument("--scene", default="loop_headline", help="a scene in scenes/")
     parser.add_argument("--cost", type=int, default=0, metavar="ROUNDS")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="grasplink-efference-") as folder:
-        signals = sc.record_scene(ROOT / sr.HEADLINE_SCENE, build_controllers, folder)
+        scene = ROOT / "scenes" / f"{args.scene}.toml"
+        if not scene.is_file():
+            parser.error(f"--scene {args.scene}: no {scene}")
+        rec = sc.record_scene(scene, build_controllers, folder).can
         log = Path(folder) / "can.asc"
-        layout = signals.layout_mm
-        print(f"without commands:   {headline(log, layout, False)}")
-        print(f"with commands:      {headline(log, layout, True)}")
+        print(f"without commands:   {headline(log, rec, False)}")
+        print(f"with commands:      {headline(log, rec, True)}")
         shipped = efference.KINKS_PER_RISE
         for value in [float(v) for v in args.kinks.split(",") if v]:
             efference.KINKS_PER_RISE = value
-            print(f"KINKS_PER_RISE {value:g}: {headline(log, layout, True)}")
+            print(f"KINKS_PER_RISE {value:g}: {headline(log, rec, True)}")
         efference.KINKS_PER_RISE = shipped
     if args.cost:
         cost(args.cost)

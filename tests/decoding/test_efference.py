@@ -228,6 +228,35 @@ def test_the_headline_grip_rise_carries_no_speed_into_the_rest_told_or_not(headl
     assert not speed_at_rest(decode(log, commands=True))
 
 
+@pytest.fixture(scope="module")
+def least_force(tmp_path_factory) -> dict:
+    """loop_least_force run as `grasplink run` runs it: the wearer raises the grip twice
+    while the object slides (3.38 s, 4.59 s) and it stops at 4.805 s."""
+    from grasplink.controllers import build_controllers
+    from grasplink.evaluation import scenes as sc
+
+    folder = tmp_path_factory.mktemp("least_force")
+    signals = sc.record_scene(ROOT / "scenes" / "loop_least_force.toml", build_controllers, folder)
+    return {"log": folder / "can.asc", "rec": signals.can}
+
+
+def test_told_the_wearers_grip_rise_the_tracker_shows_no_speed_at_rest(least_force):
+    """Where the commands matter: the wearer's grip rise at 4.59-4.74 s bends the level at
+    4.62 s while the object slows to its stop (4.805 s). Untold, the tracker takes that bend
+    for a ridge and shows 33-36 mm/s until 5.18 s, the object at rest; told, it weighs the
+    bend as the grip's and shows no speed at rest."""
+    log, rec = least_force["log"], least_force["rec"]
+    stops = [s for s in ns.motion(rec).stops if s[1] - s[0] > 1.0]
+    assert stops, "the scene's object no longer comes to rest"
+    rest_from_s, rest_until_s = stops[0][0] + 0.15, stops[0][1]
+
+    def at_rest(estimates: list) -> list[float]:
+        return [e.t_s for e in estimates if e.speed_mm_s and rest_from_s <= e.t_s < rest_until_s]
+
+    assert len(at_rest(decode(log, commands=False))) > 10  # the contrast
+    assert not at_rest(decode(log, commands=True))
+
+
 def test_the_headline_keeps_its_speed_while_it_slides(headline):
     """The commands weigh only contacts in a commanded change's window: the speed before
     the reflex raised the grip (1.70 s) is what it was."""
