@@ -1,13 +1,16 @@
 """The default decoder's CPU per sample in this tree against a base tree, in one run.
 
     .venv/bin/python benchmarks/decoder_cost_trees.py BASE [--rounds N] [--repeats K]
+        [--base-try NAME=VALUE,...]
 
 Decodes slip_reporting's cost cases (the full plan's, as the page's "Cost beside the
 faithful thesis MMSE") and 8 forward loop cases 3 samples at a time, in a child process
 per tree (PYTHONPATH set to the tree), the trees asked in turn N times; each child
 reports the least of K passes. Prints each round's pair and the median ratio this/base:
 a page regenerated at another time (or beside another job) cannot say whether the decoder
-got dearer, a ratio measured in one run can.
+got dearer, a ratio measured in one run can. `--base-try` sets TrackerDecoder class
+attributes in the base's child only: with BASE `.` it prices one rule (e.g.
+`. --base-try TOLD_RISE_LOG=0`: this tree with the rule against the same tree without it).
 """
 
 from __future__ import annotations
@@ -24,6 +27,12 @@ ROOT = Path(__file__).resolve().parents[1]
 CHILD = """
 import sys, time
 from grasplink.decoding.registry import make_decoder
+from grasplink.decoding.tracker import TrackerDecoder
+for item in filter(None, sys.argv[2].split(",")):
+    name, value = item.split("=")
+    if not hasattr(TrackerDecoder, name):
+        sys.exit(f"--base-try {name}: TrackerDecoder has no such setting")
+    setattr(TrackerDecoder, name, float(value))
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 todo = sr.cases(sr.FULL)
@@ -42,16 +51,18 @@ print(best)
 """
 
 
-def cost_us(tree: Path, repeats: int) -> float:
+def cost_us(tree: Path, repeats: int, tries: str = "") -> float:
     env = {**os.environ, "PYTHONPATH": str(tree)}
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, str(repeats)],
+        [sys.executable, "-c", CHILD, str(repeats), tries],
         env=env,
         cwd=tree,
         capture_output=True,
         text=True,
-        check=True,
+        check=False,
     )
+    if out.returncode:
+        raise SystemExit(f"{tree}: the cost child failed: {out.stderr.strip()[-800:]}")
     return float(out.stdout.strip().splitlines()[-1])
 
 
@@ -60,12 +71,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("base", type=Path, help="a checkout of the base tree")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--base-try", default="", help="NAME=VALUE,... in the base's child")
     args = parser.parse_args(argv)
     if not (args.base / "grasplink" / "__init__.py").is_file():
         parser.error(f"{args.base} is not a grasplink checkout (no grasplink/__init__.py)")
     ratios = []
     for k in range(args.rounds):
-        base, this = cost_us(args.base, args.repeats), cost_us(ROOT, args.repeats)
+        base = cost_us(args.base.resolve(), args.repeats, args.base_try)
+        this = cost_us(ROOT, args.repeats)
         ratios.append(this / base)
         print(f"round {k + 1}: base {base:.2f} us/sample, this {this:.2f}, ratio {ratios[-1]:.3f}")
     print(f"median ratio this/base: {statistics.median(ratios):.3f}")
