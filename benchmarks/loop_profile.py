@@ -1,6 +1,7 @@
 """Where one closed-loop scene run spends its CPU: by package, and the gateway call by call.
 
     .venv/bin/python benchmarks/loop_profile.py [--scene loop_headline] [--top 25]
+        [--timed RUNS]
 
 One warmed run of the scene (imports and compiled kernels loaded first), then one run
 under cProfile in the same process. Printed, per simulated second:
@@ -16,6 +17,12 @@ under cProfile in the same process. Printed, per simulated second:
 4. the cyclic garbage collector's collections during the unprofiled run, and their
    CPU (`gc.callbacks`): a run allocates and frees in balance, so this is small.
 
+With `--timed RUNS`, instead: the stages of `TIMED` timed inclusively in RUNS unprofiled
+runs (each method wrapped, `time.thread_time_ns` around its calls; a wrapper adds ~1 us a
+call, and a stage inside another counts in both): ms per run, share of the runs' CPU,
+calls and us per call - what a stage costs inside the loop, where its caches are cold
+(a tick's numpy calls cost there several times what a warm timeit loop shows).
+
 cProfile (timed by CPU, not the wall clock) charges every Python call ~0.5-1 us more
 than it costs: call-heavy code (the bus's per-frame loop, the object store) reads larger
 than a sampling profiler shows it, and the run takes 5-8 times its CPU. Read the shares as
@@ -28,10 +35,13 @@ from __future__ import annotations
 import argparse
 import cProfile
 import gc
+import importlib
 import pstats
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from grasplink.controllers import simulation
 from grasplink.simulators.scene import load_scene
@@ -42,6 +52,27 @@ LIBRARIES = ("can", "canopen", "numpy", "scipy", "numba", "llvmlite")
 NOT_BEHAVIOUR = ("grasplink/gateway/feedback.py",)
 
 Func = tuple[str, int, str]
+# Stages timed inclusively with --timed: (module, class, method).
+TIMED = (
+    ("grasplink.decoding.base", "Decoder", "feed"),
+    ("grasplink.decoding.contacts", "ContactDetector", "_feed"),
+    ("grasplink.decoding.detector.hinges", "HingeBank", "run"),
+    ("grasplink.decoding.tracker", "TrackerDecoder", "_report"),
+    ("grasplink.decoding.skin_frames", "SkinFrames", "feed"),
+    ("grasplink.gateway.service", "Gateway", "_control"),
+    ("grasplink.gateway.service", "Gateway", "_commands"),
+    ("grasplink.gateway.service", "Gateway", "snapshot"),
+    ("grasplink.simulators.engine", "Simulation", "_run_ahead"),
+    ("grasplink.simulators.engine", "Simulation", "_snapshot"),
+    ("grasplink.simulators.engine", "Simulation", "_publish_until"),
+    ("grasplink.simulators.engine", "Simulation", "_read_actuators"),
+    ("grasplink.simulators.bindings", "SceneSource", "samples"),
+    ("grasplink.devices.skin", "SkinApp", "advance"),
+    ("grasplink.devices.skin", "SkinApp", "_counts"),
+    ("grasplink.devices.emg", "EmgApp", "advance"),
+    ("grasplink.devices.emg", "EmgApp", "_sample_until"),
+    ("grasplink.devices.emg", "EmgApp", "_publish_envelope"),
+)
 
 
 def package_of(file: str) -> str | None:
@@ -93,16 +124,67 @@ def gc_during(path: Path) -> tuple[float, Counter]:
     return spent[0], counts
 
 
+def timed_stages(path: Path, runs: int) -> None:
+    """Print each `TIMED` stage's inclusive CPU in `runs` runs (after a warm one)."""
+    spent: Counter = Counter()
+    calls: Counter = Counter()
+    originals = []
+    for module, cls_name, name in TIMED:
+        cls = getattr(importlib.import_module(module), cls_name)
+        original = cls.__dict__[name]
+        originals.append((cls, name, original))
+
+        def wrapped(
+            *args: Any,
+            _call: Callable[..., Any] = original,
+            _key: str = f"{cls_name}.{name}",
+            **kwargs: Any,
+        ) -> Any:
+            t0 = time.thread_time_ns()
+            try:
+                return _call(*args, **kwargs)
+            finally:
+                spent[_key] += time.thread_time_ns() - t0
+                calls[_key] += 1
+
+        setattr(cls, name, wrapped)
+    try:
+        simulation(load_scene(path)).run()  # warm
+        spent.clear()
+        calls.clear()
+        total_ns = 0
+        for _ in range(runs):
+            sim = simulation(load_scene(path))
+            t0 = time.thread_time_ns()
+            sim.run()
+            total_ns += time.thread_time_ns() - t0
+    finally:
+        for cls, name, original in originals:
+            setattr(cls, name, original)
+    print(f"{path.stem}: {total_ns / runs / 1e6:.0f} ms CPU a run ({runs} runs, wrapped)")
+    for key, ns in spent.most_common():
+        print(
+            f"  {key:34s} {ns / runs / 1e6:7.1f} ms/run {100 * ns / total_ns:5.1f} % "
+            f"{calls[key] / runs:7.0f} calls {ns / calls[key] / 1e3:7.1f} us/call"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="loop_headline")
     parser.add_argument("--top", type=int, default=25, help="rows of each function table")
+    parser.add_argument("--timed", type=int, metavar="RUNS", help="time TIMED's stages instead")
     args = parser.parse_args()
     path = ROOT / "scenes" / f"{args.scene}.toml"
     if not path.is_file():
         raise SystemExit(f"no scene {args.scene!r} in {path.parent}")
     if args.top < 1:
         raise SystemExit(f"--top {args.top}: at least one row")
+    if args.timed is not None:
+        if args.timed < 1:
+            raise SystemExit(f"--timed {args.timed}: at least one run")
+        timed_stages(path, args.timed)
+        return
     simulation(load_scene(path)).run()  # warm: imports, compiled kernels
     sim = simulation(load_scene(path))
     t0 = time.process_time()
