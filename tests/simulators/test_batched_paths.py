@@ -15,8 +15,9 @@ from grasplink.bus.lockstep import LockstepNetwork
 from grasplink.controllers import simulation
 from grasplink.core.frames import Frame
 from grasplink.devices.factory import build_node
-from grasplink.devices.skin import SkinApp
+from grasplink.devices.skin import CAL_FULL_SCALE_MN, CAL_ZERO, SCALAR_COUNTS_MAX, SkinApp
 from grasplink.devices.sources import FunctionSource
+from grasplink.profiles import objects as obj
 from grasplink.simulators.bindings import SceneSource
 from grasplink.simulators.core import SHORT_CHUNK_SAMPLES, independent_parts
 from grasplink.simulators.effects.actuators import (
@@ -327,3 +328,31 @@ def test_scene_source_samples_are_np_interp_over_the_whole_ring_bit_for_bit(rate
             assert got.tobytes() == want.tobytes(), (end, t0_us, first)
             checked += 1
     assert checked > 1000
+
+
+@pytest.mark.parametrize("calibration", [None, (12, 1000)])
+def test_skin_counts_of_a_few_samples_in_floats_are_to_counts_ints(calibration):
+    """`SkinApp.counts_list` (Python floats up to SCALAR_COUNTS_MAX samples, numpy past it)
+    gives `to_counts`' ints: NaN (0 N), +-inf, +-1e300, signed zeros, ties of round
+    half to even, both ends of the scale and every count between (fails with round half
+    up, or with the infinities left to `round`)."""
+    app = SkinApp()
+    build_node("skin", SKIN, None, app)
+    if calibration is not None:  # another zero and full-scale force: ties elsewhere
+        zero, scale_mn = calibration
+        app.store.set(obj.SKIN_FSR_CALIBRATION, CAL_ZERO, zero)
+        app.store.set(obj.SKIN_FSR_CALIBRATION, CAL_FULL_SCALE_MN, scale_mn)
+    zero, full, mn_per_count = app.calibration()
+    n_per_count = mn_per_count / 1000.0
+    ties = (np.arange(-3, full + 3) + 0.5 - zero) * n_per_count  # x.5 counts, about
+    special = [np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0, -0.0, 5e-324, -5e-324]
+    rng = np.random.default_rng(11)
+    forces = np.concatenate(
+        [special, ties, np.nextafter(ties, np.inf), np.nextafter(ties, -np.inf)]
+    )
+    forces = np.concatenate([forces, rng.uniform(-1, 1.2, 500) * full * n_per_count])
+    rng.shuffle(forces)
+    for size in (1, 4, 6, SCALAR_COUNTS_MAX, SCALAR_COUNTS_MAX + 1):
+        for i in range(0, len(forces), size):
+            chunk = forces[i : i + size]
+            assert app.counts_list(chunk) == app.to_counts(chunk).tolist(), chunk
