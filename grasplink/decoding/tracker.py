@@ -597,6 +597,11 @@ class TrackerDecoder(Decoder):
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
     STRONG_Z = 60.0  # ridge contacts: strengths spread log-uniformly up to about this
     STRENGTH_MIN, STRENGTH_MAX = math.log(0.1), math.log(3.0)
+    # while the slip is flagged the detector expects contacts from GATE_BACK_S before the
+    # samples taken to GATE_AHEAD_S after them (`ContactDetector.expect`: its gated pulse
+    # probe, `detector.pulse_gate`, reads a wider window there); 0: never told
+    GATE_BACK_S = 0.3
+    GATE_AHEAD_S = 0.3
     REFRESH_S = 0.5  # how often silence (and the agreement) is re-scored between contacts
     NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out
     MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts (far-off contact)
@@ -1372,6 +1377,12 @@ class TrackerDecoder(Decoder):
             self._up_t = g  # up by the posterior, its keep, the rail or the arrival
         elif self.REFLAG_P > 0:
             out = self._report_reflag(g, out)
+        if out.slip and self.GATE_AHEAD_S > 0:  # the next contacts expected (`pulse_gate`)
+            back, ahead = (
+                round(self.GATE_BACK_S * self.fs_hz),
+                round(self.GATE_AHEAD_S * self.fs_hz),
+            )
+            self.detector.expect(self._n_in - back, self._n_in + ahead)
         return out
 
     def _report_reflag(self, g: float, out: SlipEstimate) -> SlipEstimate:
