@@ -9,11 +9,13 @@ one, bit for bit, and the tracker tells them only while it flags a slip.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from grasplink.decoding import contact_gate
 from grasplink.decoding.contacts import ContactDetector, DetectorSettings
 from grasplink.decoding.detector.pulse_gate import ExpectedWindows
 from grasplink.decoding.tracker import TrackerDecoder
@@ -102,16 +104,36 @@ def test_the_gate_open_over_a_slow_slide_finds_more_of_its_ridges():
 
 
 def test_the_tracker_expects_contacts_only_while_it_flags_a_slip():
+    """Its windows come from the flagged tracks' next ridges (`contact_gate`): none on an
+    update without the flag, and none past the last ridge's due time."""
     rec = SLOW[0].make()
     det = ContactDetector(rec.fs_hz, _gated())
-    told: list[int] = []
+    told: list[tuple[int, int]] = []
     expect = det.expect
-    det.expect = lambda a, b: (told.append(a), expect(a, b))  # type: ignore[method-assign]
+    det.expect = lambda a, b: (told.append((a, b)), expect(a, b))  # type: ignore[method-assign]
     decoder = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, detector=det)
     flagged = 0
     for i in range(0, len(rec.t_s), 3):
-        for e in decoder.feed(rec.t_s[i : i + 3], rec.force_n[i : i + 3]):
-            before = len(told)
-            flagged += e.slip
-            assert len(told) == flagged, (e.t_s, e.slip, before)
-    assert flagged > 0
+        before = len(told)
+        estimates = decoder.feed(rec.t_s[i : i + 3], rec.force_n[i : i + 3])
+        up = any(e.slip for e in estimates)
+        flagged += up
+        assert up or len(told) == before, [e.t_s for e in estimates]
+    assert flagged > 0 and told
+
+
+def _track(s_mm: float, v_mm_s: float, t_s: float, ridge: int, p00: float, p11: float):
+    """A track's numbers as `tracker._One.numbers` holds them."""
+    return (s_mm, v_mm_s, 0.0, 0.0, 0.0, t_s, math.nan, p00, 0.0, p11, 0.0, 0.0, 0.0, 1, ridge)
+
+
+def test_due_windows_lie_around_the_next_ridges_and_never_past_the_last():
+    pos = np.array([0.0, 5.0, 10.0, 20.0, 26.0])  # + the coast end, as the tracker's
+    sure = contact_gate.due_windows(_track(5.0, 20.0, 1.0, 1, 0.0, 0.0), pos, 4, 3, 0.03, 3.0)
+    assert [round((a + b) / 2, 6) for a, b in sure] == [1.25, 1.75]  # ridges 2, 3: no 4
+    assert all(round(b - a, 6) == 0.06 for a, b in sure)
+    loose = contact_gate.due_windows(_track(5.0, 20.0, 1.0, 1, 1.0, 4.0), pos, 4, 1, 0.03, 3.0)
+    # 3 sigma of sqrt(1 + 0.25^2 4) mm at 20 mm/s, beyond the floor
+    assert round(loose[0][1] - 1.25, 6) == round(0.03 + 3.0 * math.sqrt(1.25) / 20.0, 6)
+    assert contact_gate.due_windows(_track(26.0, 20.0, 1.0, 3, 0.0, 0.0), pos, 4, 3, 0.03, 3) == []
+    assert contact_gate.due_windows(_track(5.0, 0.0, 1.0, 1, 0.0, 0.0), pos, 4, 3, 0.03, 3) == []
