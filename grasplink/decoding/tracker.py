@@ -1385,7 +1385,8 @@ class TrackerDecoder(Decoder):
             self._up_t = g  # up by the posterior, its keep, the rail or the arrival
         elif self.REFLAG_P > 0:
             out = self._report_reflag(g, out)
-        if out.slip and self.GATE_AHEAD_S > 0:  # the next contacts expected (`pulse_gate`)
+        if out.slip and self.GATE_AHEAD_S > 0 and self.detector.gated is not None:
+            # the next contacts expected: the detector's gated probe reads there (`pulse_gate`)
             self._expect_contacts()
         return out
 
