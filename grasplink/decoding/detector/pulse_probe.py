@@ -41,7 +41,9 @@ class PulseProbeSettings:
     prior_n: float = PULSE_PRIOR_N  # their height before any is told (N)
     first_threshold: float = 5.5  # the threshold until one is told
     # the gated probe's window (s; 0: none) and threshold (noise units): a second probe that
-    # tests only where the decoder expects a contact (`pulse_gate`, `ContactDetector.expect`)
+    # tests only where the decoder expects a contact (`pulse_gate`, `ContactDetector.expect`).
+    # Off: full plan, 2 seeds (tune_tracker_kinds.py, docs/decoding.md s28) 50 ms at 4.0
+    # gave snr10 missing 51.7 -> 51.0 %, 60 ms at 3.5 50.9 % but constant 4.4 -> 5.7 %
     gated_scale_s: float = 0.0
     gated_threshold: float = 4.5
 
