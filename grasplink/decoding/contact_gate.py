@@ -25,7 +25,7 @@ def due_windows(
     `numbers`: the track as `tracker._One.numbers` holds it (travel s at its contact
     time t, speed v, ..., P entries, direction, ridge of its last contact); `pos_mm`: the
     ridge positions along its direction (travel from the first ridge met), `count`
-    ridges. None for a track without a forward speed or past the last ridge."""
+    ridges. No window for a track without a forward speed, or past the last ridge."""
     s, v = float(numbers[0]), float(numbers[1])
     t = float(numbers[5])
     p00, p01, p11 = float(numbers[7]), float(numbers[8]), float(numbers[9])
