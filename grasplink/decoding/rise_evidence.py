@@ -48,6 +48,8 @@ NEAR_TOLD = 2.0  # ... and so is one this many windows (at least 20 ms) from a t
 TOLD_KEPT = 16  # told contacts whose z the median reads
 H_DEFAULT = 5.0  # the median before any contact is told (a 10 dB pulse's)
 _GRID = 32  # points of the size prior
+# (log_miss, told median z per ridge) -> a skipped ridge's least score (`detect_chance`)
+Floor = Callable[[np.ndarray, "float | np.ndarray"], np.ndarray]
 
 
 def log_ratio(z: np.ndarray, median_h: float | np.ndarray, h_low: float = H_LOW) -> np.ndarray:
@@ -66,6 +68,11 @@ def log_ratio(z: np.ndarray, median_h: float | np.ndarray, h_low: float = H_LOW)
     terms = z[..., None] * h - 0.5 * h * h
     top = np.max(terms, axis=-1, keepdims=True)
     return top[..., 0] + np.log(np.mean(np.exp(terms - top), axis=-1))
+
+
+def sizes(median_h: float, h_low: float = H_LOW) -> np.ndarray:
+    """The size prior's grid (z units) for a told median (read-only, shared)."""
+    return _sizes(median_h, h_low)
 
 
 @functools.lru_cache(maxsize=256)
@@ -256,6 +263,7 @@ def skip_adjustment(
     max_skip: int,
     evidence: RiseEvidence,
     gate: float,
+    floor: Floor | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The rows of a contact's children that took it for a ridge after skipping some, and
     what each gains (log) when its skipped ridges are scored by `skip_score` in place of
@@ -323,7 +331,9 @@ def skip_adjustment(
     gain = np.zeros(len(k))
     for w in np.unique(width).tolist():
         on = width == w
-        gain[on] = skip_score(z[on], evidence.median_h(w), lm[on], evidence.h_low) - lm[on]
+        med = evidence.median_h(w)
+        least = lm[on] if floor is None else floor(lm[on], med)
+        gain[on] = skip_score(z[on], med, least, evidence.h_low) - lm[on]
     return rows, np.bincount(child, weights=gain, minlength=len(rows))
 
 
@@ -341,6 +351,7 @@ def silence(
     evidence: RiseEvidence,
     ahead: int,
     memo: dict | None = None,
+    floor: Floor | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The silence schedule (due, adj, stopped, limit: `kernels.posterior.schedule`'s) with
     each due ridge of a slipping track scored by the signal's rise where the track puts it
@@ -355,7 +366,8 @@ def silence(
     miss); `held`: samples held up to this global index; `scored`: (track, ridge ahead)
     -> its score once read (the bank's: a ridge is read once, the same at every later
     update). A ridge's time due waits for the samples its rise is read from. `memo`: the
-    bank's own dict, where what does not change with g is kept between calls (`_plan`)."""
+    bank's own dict, where what does not change with g is kept between calls (`_plan`).
+    `floor`: as `skip_adjustment`'s, for the due ridges read (None: log_miss)."""
     due0, _, stopped0, limit0 = open_sched
     plan = None if memo is None else memo.get("plan")
     if plan is None or not np.array_equal(plan[0], last):
@@ -390,7 +402,8 @@ def silence(
             z = evidence.z_each(onset[a_new, j_new], width[a_new], held)
             medians = {w: evidence.median_h(w) for w in np.unique(width[a_new]).tolist()}
             h = np.array([medians[w] for w in width[a_new].tolist()], float)
-            fresh = skip_score(z, h, lm[a_new, j_new], evidence.h_low)
+            least = lm[a_new, j_new] if floor is None else floor(lm[a_new, j_new], h)
+            fresh = skip_score(z, h, least, evidence.h_low)
             got[new] = fresh
             for n, j, value, zk in zip(
                 active[a_new].tolist(), j_new.tolist(), fresh.tolist(), z.tolist(), strict=True

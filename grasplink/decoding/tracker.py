@@ -76,6 +76,7 @@ on how the input is chunked. Figures: docs/benchmarks/decoding.md, slip_reportin
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from functools import cached_property
@@ -87,6 +88,7 @@ from grasplink.decoding import (
     arrival,
     arrival_flag,
     coast_bound,
+    detect_chance,
     flag_keep,
     rail_hold,
     reflag,
@@ -459,6 +461,12 @@ class TrackerDecoder(Decoder):
     RISE_EVIDENCE_GATE = 6.0
     RISE_H_LOW = rise_evidence.H_LOW  # ... the pulse size's prior from this x the told median
     RISE_SILENCE_AHEAD = 3  # ... and the silence of this many ridges due so read (0: none)
+    # ... each such ridge scored no lower than log(1 - P(told)), P measured from the told
+    # pulses' rise against the probe's threshold (`detect_chance`): this share of the way
+    # (log) from the DETECT_P table's miss, for skipped ridges / due ridges; 0: the table's
+    DETECT_MEASURED_SKIP = 0.0
+    DETECT_MEASURED_SILENCE = 0.0
+    DETECT_THRESHOLD_Z = rise_evidence.TOLD_Z  # ... a rise told from this z (noise units)
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
@@ -1084,6 +1092,7 @@ class TrackerDecoder(Decoder):
         rows, gain = rise_evidence.skip_adjustment(
             floats, ints, (ev.id, ev.t_s, ev.index, ev.emit_index), earlier, self._pos,
             self._log_miss, self.MAX_SKIP, self._rise, self.RISE_EVIDENCE_GATE,
+            self._miss_floor(self.DETECT_MEASURED_SKIP),
         )  # fmt: skip
         floats[rows, F_SCORE] += self.RISE_EVIDENCE * gain
 
@@ -1328,8 +1337,18 @@ class TrackerDecoder(Decoder):
         return self._coast_bound(B, rise_evidence.silence(
             open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
             self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
-            memo,
+            memo, self._miss_floor(self.DETECT_MEASURED_SILENCE),
         ))  # fmt: skip
+
+    def _miss_floor(self, weight: float) -> rise_evidence.Floor | None:
+        """A missed ridge's least score with the detection chance measured
+        (`detect_chance.floor`, `weight` of the way from the table's); None at 0."""
+        if not weight:
+            return None
+        return functools.partial(
+            detect_chance.floor, h_low=self.RISE_H_LOW,
+            threshold_z=self.DETECT_THRESHOLD_Z, weight=float(weight),
+        )  # fmt: skip
 
     def _latency_floor(self, B: _Bank) -> np.ndarray:
         """How late each track's next contact may still be told, at least: the probes'
