@@ -827,7 +827,7 @@ class TrackerDecoder(Decoder):
         )
 
     @classmethod
-    def _tuning_value(cls, key: str, value: Any) -> float | tuple[float, ...]:
+    def _tuning_value(cls, key: str, value: Any) -> float | int | tuple[float, ...]:
         """A model constant's tuned value, checked: a number for a number, a table of
         numbers for a table (DETECT_P); ConfigError naming the key otherwise."""
         default = getattr(cls, key, None) if key.isupper() else None
@@ -839,7 +839,11 @@ class TrackerDecoder(Decoder):
             raise ConfigError(f"tracker tuning {key} = {value!r} is not a number") from None
         if not all(math.isfinite(x) for x in numbers):
             raise ConfigError(f"tracker tuning {key} = {value!r} is not finite")
-        return tuple(numbers) if isinstance(default, tuple) else numbers[0]
+        if isinstance(default, tuple):
+            return tuple(numbers)
+        if isinstance(default, int) and numbers[0].is_integer():
+            return int(numbers[0])  # a count (MAX_SKIP sizes arrays)
+        return numbers[0]
 
     def warm_up(self) -> None:
         """Load (or compile) the kernels: a throwaway decoder on this one's layout and rate
