@@ -632,6 +632,10 @@ class TrackerDecoder(Decoder):
     # 0.3 alone halves the missing speed at constant speed (8.9 -> 4.0 %) but gives guesses
     # from ranges like 7-94 mm/s (54 mm/s for 20: tests/decoding/test_can_path_slip.py)
     SPEED_AGREE_SHARE = 0.8
+    # ... in heavy noise (the rise evidence's gate open: `RiseEvidence.blind`), where half
+    # the ridges go untold and a true track's skips leave aliases a share of the mass;
+    # None: SPEED_AGREE_SHARE
+    SPEED_AGREE_SHARE_NOISY: float | None = None
     SPEED_NARROW_SHARE = 0.3
     SPEED_RATIO_SHARE = 0.5  # ... and with three contacts, at least this share
     # 5 gave a speed on two noise contacts of a held object; 2 (inclusive) one of a missed
@@ -831,7 +835,8 @@ class TrackerDecoder(Decoder):
         """A model constant's tuned value, checked: a number for a number, a table of
         numbers for a table (DETECT_P); ConfigError naming the key otherwise."""
         default = getattr(cls, key, None) if key.isupper() else None
-        if not (isinstance(default, float | int | tuple) or key in ("STALE_S", "LOG_STOP_REPORT")):
+        optional = ("STALE_S", "LOG_STOP_REPORT", "SPEED_AGREE_SHARE_NOISY")  # None by default
+        if not (isinstance(default, float | int | tuple) or key in optional):
             raise ConfigError(f"tracker tuning: no model constant {key!r}")
         try:
             numbers = [float(x) for x in value] if isinstance(default, tuple) else [float(value)]
@@ -1560,7 +1565,7 @@ class TrackerDecoder(Decoder):
         # none of the others is far off), or when the likeliest has an interval ratio to go
         # by (three contacts): then with the agreement as confidence
         narrow = share >= self.SPEED_NARROW_SHARE and high < self.SPEED_RANGE_MAX * low
-        agreed = share >= self.SPEED_AGREE_SHARE or narrow
+        agreed = share >= self._agree_share() or narrow
         ratio = fast is not None and fast.n >= self.DIRECTION_CONTACTS
         if fast is None or not (agreed or (ratio and share >= self.SPEED_RATIO_SHARE)):
             bound = self._speed_range(magnitude)
@@ -1571,6 +1576,14 @@ class TrackerDecoder(Decoder):
         return SlipEstimate(
             g, True, max(0.0, speed), held, force, min(1.0, max(0.0, conf)), None, None, *bound
         )
+
+    def _agree_share(self) -> float:
+        """The share of the slipping posterior that must agree on a speed: lower in heavy
+        noise (SPEED_AGREE_SHARE_NOISY, while the rise evidence's gate is open)."""
+        noisy = self.SPEED_AGREE_SHARE_NOISY
+        if noisy is None or not self._rise.blind(self.RISE_EVIDENCE_GATE):
+            return self.SPEED_AGREE_SHARE
+        return noisy
 
     def _maturity(self, n: int) -> float:
         """How far n contacts make an estimate (the confidence grows as 1 - exp(...))."""
