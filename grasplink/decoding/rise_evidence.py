@@ -86,16 +86,23 @@ def _sizes(median_h: float, h_low: float) -> np.ndarray:
 
 
 def skip_score(
-    z: np.ndarray, median_h: float | np.ndarray, log_miss: np.ndarray, h_low: float = H_LOW
+    z: np.ndarray,
+    median_h: float | np.ndarray,
+    log_miss: np.ndarray,
+    h_low: float = H_LOW,
+    unknown: np.ndarray | None = None,
 ) -> np.ndarray:
     """A skipped ridge's log score from its z: the ratio `log_ratio`, no less than the
     detector-based `log_miss` (log(1 - DETECT_P)), no more than `CLIP`; `log_miss` where
     z is unknown (NaN: the samples were not held) or `TOLD_Z` or more (the detector
-    would have told such a rise: it is another contact's)."""
+    would have told such a rise: it is another contact's) - or `unknown` there if given
+    (the miss with the detection chance measured, `detect_chance`: no z read, the miss
+    alone is the evidence)."""
     log_miss = np.asarray(log_miss, dtype=float)
     ratio = log_ratio(z, median_h, h_low)
     score = np.minimum(CLIP, np.maximum(ratio, log_miss))
-    return np.where(np.isfinite(ratio) & (np.nan_to_num(z) < TOLD_Z), score, log_miss)
+    other = log_miss if unknown is None else unknown
+    return np.where(np.isfinite(ratio) & (np.nan_to_num(z) < TOLD_Z), score, other)
 
 
 class RiseEvidence:
@@ -352,6 +359,7 @@ def silence(
     ahead: int,
     memo: dict | None = None,
     floor: Floor | None = None,
+    unknown: Floor | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The silence schedule (due, adj, stopped, limit: `kernels.posterior.schedule`'s) with
     each due ridge of a slipping track scored by the signal's rise where the track puts it
@@ -367,7 +375,8 @@ def silence(
     -> its score once read (the bank's: a ridge is read once, the same at every later
     update). A ridge's time due waits for the samples its rise is read from. `memo`: the
     bank's own dict, where what does not change with g is kept between calls (`_plan`).
-    `floor`: as `skip_adjustment`'s, for the due ridges read (None: log_miss)."""
+    `floor`: as `skip_adjustment`'s, for the due ridges read (None: log_miss); `unknown`:
+    the same map for those whose z is not read (no samples, or another contact's rise)."""
     due0, _, stopped0, limit0 = open_sched
     plan = None if memo is None else memo.get("plan")
     if plan is None or not np.array_equal(plan[0], last):
@@ -402,8 +411,10 @@ def silence(
             z = evidence.z_each(onset[a_new, j_new], width[a_new], held)
             medians = {w: evidence.median_h(w) for w in np.unique(width[a_new]).tolist()}
             h = np.array([medians[w] for w in width[a_new].tolist()], float)
-            least = lm[a_new, j_new] if floor is None else floor(lm[a_new, j_new], h)
-            fresh = skip_score(z, h, least, evidence.h_low)
+            lm_new = lm[a_new, j_new]
+            least = lm_new if floor is None else floor(lm_new, h)
+            unread = None if unknown is None else unknown(lm_new, h)
+            fresh = skip_score(z, h, least, evidence.h_low, unread)
             got[new] = fresh
             for n, j, value, zk in zip(
                 active[a_new].tolist(), j_new.tolist(), fresh.tolist(), z.tolist(), strict=True

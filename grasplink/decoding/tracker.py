@@ -466,6 +466,12 @@ class TrackerDecoder(Decoder):
     # (log) from the DETECT_P table's miss, for skipped ridges / due ridges; 0: the table's
     DETECT_MEASURED_SKIP = 0.0
     DETECT_MEASURED_SILENCE = 0.0
+    # ... or only for the due ridges whose rise is not read (no samples held yet, another
+    # contact's rise there): the z read stays the evidence (its ratio, no floor raised)
+    DETECT_MEASURED_UNREAD = 0.0
+    # ... the measured chance only while the told pulses stand under this many noise units
+    # at their median (`RiseEvidence.blind`; the rise evidence's own gate when larger)
+    DETECT_MEASURED_GATE = 6.0
     DETECT_THRESHOLD_Z = rise_evidence.TOLD_Z  # ... a rise told from this z (noise units)
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
@@ -1347,12 +1353,13 @@ class TrackerDecoder(Decoder):
             open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
             self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
             memo, self._miss_floor(self.DETECT_MEASURED_SILENCE),
+            self._miss_floor(self.DETECT_MEASURED_UNREAD),
         ))  # fmt: skip
 
     def _miss_floor(self, weight: float) -> rise_evidence.Floor | None:
         """A missed ridge's least score with the detection chance measured
         (`detect_chance.floor`, `weight` of the way from the table's); None at 0."""
-        if not weight:
+        if not weight or not self._rise.blind(self.DETECT_MEASURED_GATE):
             return None
         return functools.partial(
             detect_chance.floor, h_low=self.RISE_H_LOW,
