@@ -67,3 +67,15 @@ def test_tracker_count_constants_tune_as_counts():
     decoder = TrackerDecoder([5.0] * 8, 400.0, tuning={"MAX_SKIP": 3.0})
     assert decoder.MAX_SKIP == 3 and decoder._skip_prior.shape[2] == 4
     assert TrackerDecoder._tuning_value("DETECT_MEASURED_SILENCE", 0.5) == 0.5
+
+
+def test_unread_ridges_take_the_measured_miss_and_read_ones_keep_their_evidence():
+    z = np.array([math.nan, 6.0, 0.0, 2.5])  # not read, another contact's, flat, a rise
+    table = np.full(4, LOG_MISS)
+    unread = dc.floor(table, 5.0, h_low=H_LOW, threshold_z=rev.TOLD_Z, weight=1.0)
+    plain = rev.skip_score(z, 5.0, table, H_LOW)
+    got = rev.skip_score(z, 5.0, table, H_LOW, unread)
+    assert got[0] == unread[0] and got[1] == unread[1]  # the miss alone, measured
+    assert plain[0] == LOG_MISS and plain[1] == LOG_MISS  # (the table's without it)
+    assert np.array_equal(got[2:], plain[2:])  # a z read is the evidence either way
+    assert got[2] < unread[2]  # flat signal where a ridge was due: against going on
