@@ -79,3 +79,18 @@ def test_unread_ridges_take_the_measured_miss_and_read_ones_keep_their_evidence(
     assert plain[0] == LOG_MISS and plain[1] == LOG_MISS  # (the table's without it)
     assert np.array_equal(got[2:], plain[2:])  # a z read is the evidence either way
     assert got[2] < unread[2]  # flat signal where a ridge was due: against going on
+
+
+def test_speed_agreement_share_is_lower_only_while_the_told_pulses_are_weak():
+    decoder = TrackerDecoder([5.0] * 8, 400.0)
+    assert decoder._agree_share() == decoder.SPEED_AGREE_SHARE  # none told
+    for k, height in enumerate((30.0, 40.0, 35.0)):  # a clean slip's pulses
+        decoder._rise.note_height(k, height)
+    assert decoder._agree_share() == decoder.SPEED_AGREE_SHARE
+    for k, height in enumerate((4.0, 5.0, 6.0, 3.0, 4.5), start=3):  # 10 dB's
+        decoder._rise.note_height(k, height)
+    assert decoder._agree_share() == 0.7 < decoder.SPEED_AGREE_SHARE
+    off = TrackerDecoder([5.0] * 8, 400.0, tuning={"SPEED_AGREE_SHARE_NOISY": 0.8})
+    for k, height in enumerate((4.0, 5.0, 6.0), start=3):
+        off._rise.note_height(k, height)
+    assert off._agree_share() == 0.8
