@@ -76,6 +76,7 @@ on how the input is chunked. Figures: docs/benchmarks/decoding.md, slip_reportin
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from functools import cached_property
@@ -88,6 +89,7 @@ from grasplink.decoding import (
     arrival_flag,
     coast_bound,
     contact_gate,
+    detect_chance,
     flag_keep,
     rail_hold,
     reflag,
@@ -460,6 +462,18 @@ class TrackerDecoder(Decoder):
     RISE_EVIDENCE_GATE = 6.0
     RISE_H_LOW = rise_evidence.H_LOW  # ... the pulse size's prior from this x the told median
     RISE_SILENCE_AHEAD = 3  # ... and the silence of this many ridges due so read (0: none)
+    # ... each such ridge scored no lower than log(1 - P(told)), P measured from the told
+    # pulses' rise against the probe's threshold (`detect_chance`): this share of the way
+    # (log) from the DETECT_P table's miss, for skipped ridges / due ridges; 0: the table's
+    DETECT_MEASURED_SKIP = 0.0
+    DETECT_MEASURED_SILENCE = 0.0
+    # ... or only for the due ridges whose rise is not read (no samples held yet, another
+    # contact's rise there): the z read stays the evidence (its ratio, no floor raised)
+    DETECT_MEASURED_UNREAD = 0.0
+    # ... the measured chance only while the told pulses stand under this many noise units
+    # at their median (`RiseEvidence.blind`; the rise evidence's own gate when larger)
+    DETECT_MEASURED_GATE = 6.0
+    DETECT_THRESHOLD_Z = rise_evidence.TOLD_Z  # ... a rise told from this z (noise units)
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
@@ -637,6 +651,12 @@ class TrackerDecoder(Decoder):
     # 0.3 alone halves the missing speed at constant speed (8.9 -> 4.0 %) but gives guesses
     # from ranges like 7-94 mm/s (54 mm/s for 20: tests/decoding/test_can_path_slip.py)
     SPEED_AGREE_SHARE = 0.8
+    # ... in heavy noise (the rise evidence's gate open: `RiseEvidence.blind`), where half
+    # the ridges go untold and a true track's skips leave aliases a share of the mass;
+    # None: SPEED_AGREE_SHARE. 0.7: full plan, 2 seeds, one run (tune_tracker_kinds.py):
+    # snr10 speed missing 51.7 -> 49.4 %, its speed at rest 13.3 -> 14.9 %, p90 75.9 ->
+    # 78.2 %; every other kind's figures unchanged (docs/decoding.md, snr10 section)
+    SPEED_AGREE_SHARE_NOISY: float | None = 0.7
     SPEED_NARROW_SHARE = 0.3
     SPEED_RATIO_SHARE = 0.5  # ... and with three contacts, at least this share
     # 5 gave a speed on two noise contacts of a held object; 2 (inclusive) one of a missed
@@ -832,11 +852,12 @@ class TrackerDecoder(Decoder):
         )
 
     @classmethod
-    def _tuning_value(cls, key: str, value: Any) -> float | tuple[float, ...]:
+    def _tuning_value(cls, key: str, value: Any) -> float | int | tuple[float, ...]:
         """A model constant's tuned value, checked: a number for a number, a table of
         numbers for a table (DETECT_P); ConfigError naming the key otherwise."""
         default = getattr(cls, key, None) if key.isupper() else None
-        if not (isinstance(default, float | int | tuple) or key in ("STALE_S", "LOG_STOP_REPORT")):
+        optional = ("STALE_S", "LOG_STOP_REPORT", "SPEED_AGREE_SHARE_NOISY")  # None by default
+        if not (isinstance(default, float | int | tuple) or key in optional):
             raise ConfigError(f"tracker tuning: no model constant {key!r}")
         try:
             numbers = [float(x) for x in value] if isinstance(default, tuple) else [float(value)]
@@ -844,7 +865,11 @@ class TrackerDecoder(Decoder):
             raise ConfigError(f"tracker tuning {key} = {value!r} is not a number") from None
         if not all(math.isfinite(x) for x in numbers):
             raise ConfigError(f"tracker tuning {key} = {value!r} is not finite")
-        return tuple(numbers) if isinstance(default, tuple) else numbers[0]
+        if isinstance(default, tuple):
+            return tuple(numbers)
+        if isinstance(default, int) and numbers[0].is_integer():
+            return int(numbers[0])  # a count (MAX_SKIP sizes arrays)
+        return numbers[0]
 
     def warm_up(self) -> None:
         """Load (or compile) the kernels: a throwaway decoder on this one's layout and rate
@@ -1097,6 +1122,7 @@ class TrackerDecoder(Decoder):
         rows, gain = rise_evidence.skip_adjustment(
             floats, ints, (ev.id, ev.t_s, ev.index, ev.emit_index), earlier, self._pos,
             self._log_miss, self.MAX_SKIP, self._rise, self.RISE_EVIDENCE_GATE,
+            self._miss_floor(self.DETECT_MEASURED_SKIP),
         )  # fmt: skip
         floats[rows, F_SCORE] += self.RISE_EVIDENCE * gain
 
@@ -1341,8 +1367,19 @@ class TrackerDecoder(Decoder):
         return self._coast_bound(B, rise_evidence.silence(
             open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
             self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
-            memo,
+            memo, self._miss_floor(self.DETECT_MEASURED_SILENCE),
+            self._miss_floor(self.DETECT_MEASURED_UNREAD),
         ))  # fmt: skip
+
+    def _miss_floor(self, weight: float) -> rise_evidence.Floor | None:
+        """A missed ridge's least score with the detection chance measured
+        (`detect_chance.floor`, `weight` of the way from the table's); None at 0."""
+        if not weight or not self._rise.blind(self.DETECT_MEASURED_GATE):
+            return None
+        return functools.partial(
+            detect_chance.floor, h_low=self.RISE_H_LOW,
+            threshold_z=self.DETECT_THRESHOLD_Z, weight=float(weight),
+        )  # fmt: skip
 
     def _latency_floor(self, B: _Bank) -> np.ndarray:
         """How late each track's next contact may still be told, at least: the probes'
@@ -1583,7 +1620,7 @@ class TrackerDecoder(Decoder):
         # none of the others is far off), or when the likeliest has an interval ratio to go
         # by (three contacts): then with the agreement as confidence
         narrow = share >= self.SPEED_NARROW_SHARE and high < self.SPEED_RANGE_MAX * low
-        agreed = share >= self.SPEED_AGREE_SHARE or narrow
+        agreed = share >= self._agree_share() or narrow
         ratio = fast is not None and fast.n >= self.DIRECTION_CONTACTS
         if fast is None or not (agreed or (ratio and share >= self.SPEED_RATIO_SHARE)):
             bound = self._speed_range(magnitude)
@@ -1594,6 +1631,14 @@ class TrackerDecoder(Decoder):
         return SlipEstimate(
             g, True, max(0.0, speed), held, force, min(1.0, max(0.0, conf)), None, None, *bound
         )
+
+    def _agree_share(self) -> float:
+        """The share of the slipping posterior that must agree on a speed: lower in heavy
+        noise (SPEED_AGREE_SHARE_NOISY, while the rise evidence's gate is open)."""
+        noisy = self.SPEED_AGREE_SHARE_NOISY
+        if noisy is None or not self._rise.blind(self.RISE_EVIDENCE_GATE):
+            return self.SPEED_AGREE_SHARE
+        return noisy
 
     def _maturity(self, n: int) -> float:
         """How far n contacts make an estimate (the confidence grows as 1 - exp(...))."""
