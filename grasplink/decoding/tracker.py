@@ -655,8 +655,9 @@ class TrackerDecoder(Decoder):
     # the ridges go untold and a true track's skips leave aliases a share of the mass;
     # None: SPEED_AGREE_SHARE. 0.7: full plan, 2 seeds, one run (tune_tracker_kinds.py):
     # snr10 speed missing 51.7 -> 49.4 %, its speed at rest 13.3 -> 14.9 %, p90 75.9 ->
-    # 78.2 %; every other kind's figures unchanged (docs/decoding.md, snr10 section)
-    SPEED_AGREE_SHARE_NOISY: float | None = 0.7
+    # 78.2 %; every other kind's figures unchanged (docs/decoding.md, snr10 section).
+    # Off: it buys speeds with speeds at rest and wider errors, not with information
+    SPEED_AGREE_SHARE_NOISY: float | None = None
     SPEED_NARROW_SHARE = 0.3
     SPEED_RATIO_SHARE = 0.5  # ... and with three contacts, at least this share
     # 5 gave a speed on two noise contacts of a held object; 2 (inclusive) one of a missed
