@@ -88,6 +88,7 @@ from grasplink.decoding import (
     arrival_flag,
     coast_bound,
     flag_keep,
+    level_ramp,
     rail_hold,
     reflag,
     rise_evidence,
@@ -592,6 +593,17 @@ class TrackerDecoder(Decoder):
     # (`reflag`: a ridge pulse is motion); 0: off
     REFLAG_P = 0.0
     REFLAG_WITHIN_S = 1.0
+    # a flag up within RAMP_HOLD_WITHIN_S is held (no speed) while the level ramps: the
+    # medians of RAMP_STEPS + 1 windows of RAMP_WINDOW_S each step one way by at least
+    # RAMP_SLOPE_N_S x the window and RAMP_Z sigmas of the white noise's (`level_ramp`: an
+    # edge sliding onto or off the skin changes the covered length); 1: where the
+    # posterior reports no stop, 2: over its stop too; 0: off
+    RAMP_HOLD = 0.0
+    RAMP_HOLD_WITHIN_S = 3.0
+    RAMP_WINDOW_S = 0.05
+    RAMP_STEPS = 4
+    RAMP_SLOPE_N_S = 0.2
+    RAMP_Z = 1.5
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -1368,8 +1380,10 @@ class TrackerDecoder(Decoder):
         out = self._report_kept(g)
         if self.ARRIVAL_FLAG_P > 0 and self.ARRIVAL_EMPTY_N > 0:
             out = self._report_arrival(g, out)
+        if not out.slip and self.RAMP_HOLD:
+            out = self._report_ramp(g, out)
         if out.slip:
-            self._up_t = g  # up by the posterior, its keep, the rail or the arrival
+            self._up_t = g  # up by the posterior, its keep, the rail, the arrival or the ramp
         elif self.REFLAG_P > 0:
             out = self._report_reflag(g, out)
         return out
@@ -1392,6 +1406,32 @@ class TrackerDecoder(Decoder):
             self._reflag.expire()
             return out
         return _flag_only(out, p)
+
+    def _report_ramp(self, g: float, out: SlipEstimate) -> SlipEstimate:
+        """`out`, or the slip held while the level ramps, the flag up within
+        RAMP_HOLD_WITHIN_S (`level_ramp`: no speed, no direction)."""
+        if g - self._up_t > self.RAMP_HOLD_WITHIN_S:
+            return out  # never up (a held object), or too long ago
+        if out.speed_mm_s is not None and self.RAMP_HOLD < 2:
+            return out  # the posterior's stop
+        m = max(1, round(self.RAMP_WINDOW_S * self.fs_hz))
+        span = (int(self.RAMP_STEPS) + 1) * m
+        commands = self.grip_commands
+        if len(commands) and (
+            commands.change_at(g) is not None
+            or commands.change_at(g - span / self.fs_hz) is not None
+        ):
+            return out  # the commanded grip moves the level
+        white = self.detector.noise.white_at_sample(self._n_in - 1)
+        if white is None:
+            return out
+        step = level_ramp.step_min_n(
+            self.RAMP_WINDOW_S, self.fs_hz, self.RAMP_SLOPE_N_S, self.RAMP_Z, white
+        )
+        x = self._recent.held(self._n_in - span, self._n_in)
+        if not level_ramp.ramping(x, int(self.RAMP_STEPS), step):
+            return out
+        return _flag_only(out, 0.5)  # a ramp tells motion, not how fast
 
     def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged from its arrival onto an unloaded sensor while the
