@@ -18,8 +18,9 @@ object's never was), it is held - no speed, no direction: a ramp tells neither, 
 covered length grows whichever end the object enters - while the level ramps one way:
 the medians of the last `steps` + 1 windows of `window_s` each step the same way by at
 least `slope_n_s` x `window_s` and `z` standard deviations of a step of medians under the
-white noise (so heavy noise asks a steeper ramp). Medians, so that a ridge's pulse in a
-window moves it little. A commanded grip change under way (the efference copy) moves the
+white noise (so heavy noise asks a steeper ramp). Medians, so that a ridge's pulse on a
+flat level makes no ramp (on a shallow ramp it can still break one: the hold then waits
+for the windows to pass it). A commanded grip change under way (the efference copy) moves the
 level with no slip: no ramp counts then. The window's lag (about one window past a stop)
 is what it costs the stop figures.
 """
