@@ -604,6 +604,10 @@ class TrackerDecoder(Decoder):
     RAMP_STEPS = 4
     RAMP_SLOPE_N_S = 0.2
     RAMP_Z = 1.5
+    # ... and none within this after a commanded grip change's window (the FSR's level
+    # creeps back after a grip rise: the loop kind at 10 mm/s on uniform4 fell 0.25 N/s
+    # for 0.6 s at rest after its grip rose 5 -> 8.8 N)
+    RAMP_GRIP_SETTLE_S = 0.0
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -1416,12 +1420,8 @@ class TrackerDecoder(Decoder):
             return out  # the posterior's stop
         m = max(1, round(self.RAMP_WINDOW_S * self.fs_hz))
         span = (int(self.RAMP_STEPS) + 1) * m
-        commands = self.grip_commands
-        if len(commands) and (
-            commands.change_at(g) is not None
-            or commands.change_at(g - span / self.fs_hz) is not None
-        ):
-            return out  # the commanded grip moves the level
+        if self._grip_moves(g - span / self.fs_hz - self.RAMP_GRIP_SETTLE_S, g):
+            return out  # the commanded grip moves the level (or it settles)
         white = self.detector.noise.white_at_sample(self._n_in - 1)
         if white is None:
             return out
@@ -1432,6 +1432,21 @@ class TrackerDecoder(Decoder):
         if not level_ramp.ramping(x, int(self.RAMP_STEPS), step):
             return out
         return _flag_only(out, 0.5)  # a ramp tells motion, not how fast
+
+    def _grip_moves(self, start_s: float, end_s: float) -> bool:
+        """Whether a commanded grip change's window (`efference`: at least three hand lags
+        long, a slew's |dF| / rate more) overlaps [start_s, end_s]: read every lag (10 ms
+        at least)."""
+        commands = self.grip_commands
+        if not len(commands):
+            return False
+        every = max(commands.follow.lag_s, 0.01)
+        at = end_s
+        while at > start_s - every:
+            if commands.change_at(max(at, start_s)) is not None:
+                return True
+            at -= every
+        return False
 
     def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged from its arrival onto an unloaded sensor while the
