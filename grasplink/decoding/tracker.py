@@ -49,7 +49,9 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   (one of which fell back like a pulse, or `EVIDENT_CONTACTS` with no step and no
   pulse as low as noise among them) hold half the mass - or, before that, from a first
   contact onto an unloaded sensor (the object has just slid onto the skin:
-  `arrival_flag`, no speed, until silence, a flat level or the posterior ends it). The
+  `arrival_flag`, no speed, until silence, a flat level or the posterior ends it). Once
+  up, the flag is held (no speed) while the level ramps with no grip command moving it:
+  an edge sliding onto or off the skin changes the length it covers (`level_ramp`). The
   speed needs no
   direction (the belt and the reflex act on it): it is given when the slipping
   tracks agree on it whichever way they go, else the range of speeds they allow
@@ -598,7 +600,7 @@ class TrackerDecoder(Decoder):
     # RAMP_SLOPE_N_S x the window and RAMP_Z sigmas of the white noise's (`level_ramp`: an
     # edge sliding onto or off the skin changes the covered length); 1: where the
     # posterior reports no stop, 2: over its stop too; 0: off
-    RAMP_HOLD = 0.0
+    RAMP_HOLD = 1.0
     RAMP_HOLD_WITHIN_S = 3.0
     RAMP_WINDOW_S = 0.05
     RAMP_STEPS = 4
@@ -607,7 +609,7 @@ class TrackerDecoder(Decoder):
     # ... and none within this after a commanded grip change's window (the FSR's level
     # creeps back after a grip rise: the loop kind at 10 mm/s on uniform4 fell 0.25 N/s
     # for 0.6 s at rest after its grip rose 5 -> 8.8 N)
-    RAMP_GRIP_SETTLE_S = 0.0
+    RAMP_GRIP_SETTLE_S = 1.0
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
