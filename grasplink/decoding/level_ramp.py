@@ -59,5 +59,8 @@ def ramping(x: np.ndarray | None, steps: int, step_n: float) -> bool:
         raise ValueError(f"level_ramp: steps must be >= 1, got {steps!r}")
     if x is None or len(x) < steps + 1 or len(x) % (steps + 1):
         return False
-    d = np.diff(np.median(x.reshape(steps + 1, -1), axis=1))
+    # the median by one sort (np.median's wrapper costs 3x as much per update)
+    rows = np.sort(x.reshape(steps + 1, -1), axis=1)
+    m = rows.shape[1]
+    d = np.diff(0.5 * (rows[:, (m - 1) // 2] + rows[:, m // 2]))
     return bool(np.all(d >= step_n) or np.all(d <= -step_n))

@@ -1422,8 +1422,6 @@ class TrackerDecoder(Decoder):
             return out  # the posterior's stop
         m = max(1, round(self.RAMP_WINDOW_S * self.fs_hz))
         span = (int(self.RAMP_STEPS) + 1) * m
-        if self._grip_moves(g - span / self.fs_hz - self.RAMP_GRIP_SETTLE_S, g):
-            return out  # the commanded grip moves the level (or it settles)
         white = self.detector.noise.white_at_sample(self._n_in - 1)
         if white is None:
             return out
@@ -1433,6 +1431,9 @@ class TrackerDecoder(Decoder):
         x = self._recent.held(self._n_in - span, self._n_in)
         if not level_ramp.ramping(x, int(self.RAMP_STEPS), step):
             return out
+        # read last: the commands' windows are looked up every hand lag
+        if self._grip_moves(g - span / self.fs_hz - self.RAMP_GRIP_SETTLE_S, g):
+            return out  # the commanded grip moves the level (or it settles)
         return _flag_only(out, 0.5)  # a ramp tells motion, not how fast
 
     def _grip_moves(self, start_s: float, end_s: float) -> bool:
