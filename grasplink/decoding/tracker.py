@@ -49,7 +49,9 @@ Design (a multiple-hypothesis tracker, its hypotheses held as arrays):
   (one of which fell back like a pulse, or `EVIDENT_CONTACTS` with no step and no
   pulse as low as noise among them) hold half the mass - or, before that, from a first
   contact onto an unloaded sensor (the object has just slid onto the skin:
-  `arrival_flag`, no speed, until silence, a flat level or the posterior ends it). The
+  `arrival_flag`, no speed, until silence, a flat level or the posterior ends it). Once
+  up, the flag is held (no speed) while the level ramps with no grip command moving it:
+  an edge sliding onto or off the skin changes the length it covers (`level_ramp`). The
   speed needs no
   direction (the belt and the reflex act on it): it is given when the slipping
   tracks agree on it whichever way they go, else the range of speeds they allow
@@ -91,6 +93,7 @@ from grasplink.decoding import (
     contact_gate,
     detect_chance,
     flag_keep,
+    level_ramp,
     rail_hold,
     reflag,
     rise_evidence,
@@ -607,6 +610,21 @@ class TrackerDecoder(Decoder):
     # (`reflag`: a ridge pulse is motion); 0: off
     REFLAG_P = 0.0
     REFLAG_WITHIN_S = 1.0
+    # a flag up within RAMP_HOLD_WITHIN_S is held (no speed) while the level ramps: the
+    # medians of RAMP_STEPS + 1 windows of RAMP_WINDOW_S each step one way by at least
+    # RAMP_SLOPE_N_S x the window and RAMP_Z sigmas of the white noise's (`level_ramp`: an
+    # edge sliding onto or off the skin changes the covered length); 1: where the
+    # posterior reports no stop, 2: over its stop too; 0: off
+    RAMP_HOLD = 1.0
+    RAMP_HOLD_WITHIN_S = 3.0
+    RAMP_WINDOW_S = 0.05
+    RAMP_STEPS = 4
+    RAMP_SLOPE_N_S = 0.2
+    RAMP_Z = 1.5
+    # ... and none within this after a commanded grip change's window (the FSR's level
+    # creeps back after a grip rise: the loop kind at 10 mm/s on uniform4 fell 0.25 N/s
+    # for 0.6 s at rest after its grip rose 5 -> 8.8 N)
+    RAMP_GRIP_SETTLE_S = 1.0
     SPEED_PRIOR_MM_S = 35.0  # slips are mostly 10-120 mm/s: log-normal prior on the speed
     SPEED_PRIOR_LOG_SIGMA = 1.0
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
@@ -1419,8 +1437,10 @@ class TrackerDecoder(Decoder):
         out = self._report_kept(g)
         if self.ARRIVAL_FLAG_P > 0 and self.ARRIVAL_EMPTY_N > 0:
             out = self._report_arrival(g, out)
+        if not out.slip and self.RAMP_HOLD:
+            out = self._report_ramp(g, out)
         if out.slip:
-            self._up_t = g  # up by the posterior, its keep, the rail or the arrival
+            self._up_t = g  # up by the posterior, its keep, the rail, the arrival or the ramp
         elif self.REFLAG_P > 0:
             out = self._report_reflag(g, out)
         if out.slip and self.GATE_AHEAD_S > 0 and self.detector.gated is not None:
@@ -1476,6 +1496,44 @@ class TrackerDecoder(Decoder):
             self._reflag.expire()
             return out
         return _flag_only(out, p)
+
+    def _report_ramp(self, g: float, out: SlipEstimate) -> SlipEstimate:
+        """`out`, or the slip held while the level ramps, the flag up within
+        RAMP_HOLD_WITHIN_S (`level_ramp`: no speed, no direction)."""
+        if g - self._up_t > self.RAMP_HOLD_WITHIN_S:
+            return out  # never up (a held object), or too long ago
+        if out.speed_mm_s is not None and self.RAMP_HOLD < 2:
+            return out  # the posterior's stop
+        m = max(1, round(self.RAMP_WINDOW_S * self.fs_hz))
+        span = (int(self.RAMP_STEPS) + 1) * m
+        white = self.detector.noise.white_at_sample(self._n_in - 1)
+        if white is None:
+            return out
+        step = level_ramp.step_min_n(
+            self.RAMP_WINDOW_S, self.fs_hz, self.RAMP_SLOPE_N_S, self.RAMP_Z, white
+        )
+        x = self._recent.held(self._n_in - span, self._n_in)
+        if not level_ramp.ramping(x, int(self.RAMP_STEPS), step):
+            return out
+        # read last: the commands' windows are looked up every hand lag
+        if self._grip_moves(g - span / self.fs_hz - self.RAMP_GRIP_SETTLE_S, g):
+            return out  # the commanded grip moves the level (or it settles)
+        return _flag_only(out, 0.5)  # a ramp tells motion, not how fast
+
+    def _grip_moves(self, start_s: float, end_s: float) -> bool:
+        """Whether a commanded grip change's window (`efference`: at least three hand lags
+        long, a slew's |dF| / rate more) overlaps [start_s, end_s]: read every lag (10 ms
+        at least)."""
+        commands = self.grip_commands
+        if not len(commands):
+            return False
+        every = max(commands.follow.lag_s, 0.01)
+        at = end_s
+        while at > start_s - every:
+            if commands.change_at(max(at, start_s)) is not None:
+                return True
+            at -= every
+        return False
 
     def _report_arrival(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged from its arrival onto an unloaded sensor while the

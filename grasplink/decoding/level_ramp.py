@@ -1,0 +1,66 @@
+"""The slip flag held while the skin's level ramps (issue 22, "slip dropped").
+
+Physics: the one FSR under the skin reads the load through the skin the object covers
+(`arrival`), so while an edge slides onto the skin (or off it) the covered length - and
+with it the static level - changes at a rate set by the speed: the loop scenes' 90 mm
+object sliding onto an 84 mm skin raises the level about 0.47 N/s at 10 mm/s and 1.4 N/s
+at 30 mm/s, the stop kind's object 0.6 N/s at 12 mm/s. At rest the level is flat but for
+drift (the stop kind's: up to 0.14 N/s). The contacts alone leave long stretches with
+nothing to go by - ridges absorbed by the FSR's hysteresis after the arrival, a 48 mm
+spacing crossed at 30 mm/s (1.6 s without a contact) - and there the posterior's flag
+drops to "no slip" or to one-contact tracks, though the level still climbs
+(`benchmarks/dropped_causes.py --kinds loop,reversal --seeds 3`: the loop kind's flag
+down 37.6 % of its sliding updates, 68 % of them with no hypothesis chosen, nearly all
+after the flag had been up).
+
+The rule: once the flag was up (the posterior, its keep, the rail, the arrival: a held
+object's never was), it is held - no speed, no direction: a ramp tells neither, the
+covered length grows whichever end the object enters - while the level ramps one way:
+the medians of the last `steps` + 1 windows of `window_s` each step the same way by at
+least `slope_n_s` x `window_s` and `z` standard deviations of a step of medians under the
+white noise (so heavy noise asks a steeper ramp). Medians, so that a ridge's pulse on a
+flat level makes no ramp (on a shallow ramp it can still break one: the hold then waits
+for the windows to pass it). A commanded grip change under way (the efference copy) moves the
+level with no slip: no ramp counts then. The window's lag (about one window past a stop)
+is what it costs the stop figures.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: the median of m samples of white noise sigma s spreads about sqrt(pi / 2) s / sqrt(m)
+_MEDIAN_SPREAD = math.sqrt(math.pi / 2)
+
+
+def step_min_n(window_s: float, fs_hz: float, slope_n_s: float, z: float, white_n: float) -> float:
+    """The least step (N) between two windows' medians that counts as a ramp: `slope_n_s`
+    over a window, and `z` sigmas of the difference of two medians of a window's samples
+    under white noise `white_n` (N per sample)."""
+    if not (window_s > 0 and fs_hz > 0):
+        raise ValueError(f"level_ramp: window {window_s!r} s and rate {fs_hz!r} Hz must be > 0")
+    if slope_n_s < 0 or z < 0 or not white_n >= 0:
+        raise ValueError(
+            f"level_ramp: slope {slope_n_s!r} N/s, z {z!r} and white noise {white_n!r} N "
+            "must be >= 0"
+        )
+    m = max(1, round(window_s * fs_hz))
+    spread = math.sqrt(2.0) * _MEDIAN_SPREAD * white_n / math.sqrt(m)
+    return max(slope_n_s * window_s, z * spread)
+
+
+def ramping(x: np.ndarray | None, steps: int, step_n: float) -> bool:
+    """Whether the samples `x` (the last `steps` + 1 windows, oldest first, a whole number
+    of samples each) show the level ramping: every step between consecutive windows'
+    medians at least `step_n` the same way. None (the samples not held): no."""
+    if steps < 1:
+        raise ValueError(f"level_ramp: steps must be >= 1, got {steps!r}")
+    if x is None or len(x) < steps + 1 or len(x) % (steps + 1):
+        return False
+    # the median by one sort (np.median's wrapper costs 3x as much per update)
+    rows = np.sort(x.reshape(steps + 1, -1), axis=1)
+    m = rows.shape[1]
+    d = np.diff(0.5 * (rows[:, (m - 1) // 2] + rows[:, m // 2]))
+    return bool(np.all(d >= step_n) or np.all(d <= -step_n))

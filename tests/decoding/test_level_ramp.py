@@ -1,0 +1,95 @@
+"""The slip flag held while the skin's level ramps (`decoding.level_ramp`).
+
+The case: the full plan's loop kind at 30 mm/s on alpha0.3 (4, 3, 48, 29 mm), forward,
+seed 161200: the 90 mm object slides onto the skin from 8 mm before it (arrival 1.27 s),
+the FSR's hysteresis absorbs the 2nd and 3rd ridges, and the next is 48 mm on (3.16 s).
+Without the hold the flag drops from 1.71 s (the arrival flag's silence) to 3.82 s while
+the level climbs about 1.4 N/s (the object covering more skin)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from grasplink.decoding import level_ramp
+from grasplink.decoding.tracker import TrackerDecoder
+from grasplink.evaluation import nonstationary as ns
+from grasplink.evaluation import slip_reporting as sr
+
+FS_HZ = 400.0
+
+
+def _loop(tuning: dict):
+    """(update times, flags, speeds, truth) of the loop case, decoded with its grip
+    commands as `slip_reporting.case_job` does."""
+    case = next(
+        c
+        for c in sr.cases(sr.FULL)
+        if c.kind == "loop" and c.seed == 161200 and c.variant == "30 mm/s"
+    )
+    rec = case.make()
+    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
+    for t_s, force_n in sr.loop_grip_commands(case):
+        dec.note_grip_command(t_s, force_n)
+    estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
+    t = np.array([e.t_s for e in estimates])
+    flags = np.array([e.slip for e in estimates])
+    return t, flags, [e.speed_mm_s for e in estimates], rec.truth
+
+
+def test_the_flag_is_held_while_the_object_slides_on_between_ridges():
+    t, flags, speeds, truth = _loop({"RAMP_HOLD": 1.0})
+    gap = (t >= 2.2) & (t <= 3.1)  # between the arrival's flag and the 48 mm ridge
+    assert (np.interp(t[gap], truth.t_s, truth.speed_mm_s) > 20.0).all()
+    assert flags[gap].all()
+    assert all(speeds[k] is None for k in np.flatnonzero(gap))  # a ramp tells no speed
+
+
+def test_without_it_the_flag_drops_there():
+    t, flags, _, _ = _loop({"RAMP_HOLD": 0.0})
+    gap = (t >= 2.2) & (t <= 3.1)
+    assert not flags[gap].any()
+
+
+def test_the_hold_ends_at_rest():
+    t, flags, _, truth = _loop({"RAMP_HOLD": 1.0})
+    rest = np.interp(t, truth.t_s, truth.speed_mm_s) == 0.0
+    late = rest & (t > truth.t_s[np.flatnonzero(truth.speed_mm_s)[-1]] + 0.3)
+    assert late.any() and not flags[late].any()
+
+
+def _windows(level: np.ndarray, steps: int = 4, window_s: float = 0.05) -> np.ndarray:
+    return level[-(steps + 1) * round(window_s * FS_HZ) :]
+
+
+def test_a_ramp_a_flat_level_and_a_step():
+    rng = np.random.default_rng(0)
+    t = np.arange(400) / FS_HZ
+    noise = 0.02 * rng.standard_normal(len(t))
+    step = level_ramp.step_min_n(0.05, FS_HZ, 0.2, 1.5, 0.02)
+    assert step == pytest.approx(1.5 * np.sqrt(np.pi) * 0.02 / np.sqrt(20))  # noise's bound
+    assert level_ramp.ramping(_windows(0.5 * t + noise), 4, step)  # 10 mm/s sliding on
+    assert level_ramp.ramping(_windows(-0.5 * t + noise), 4, step)  # ... or off
+    assert not level_ramp.ramping(_windows(0.05 * t + noise), 4, step)  # drift
+    # a stop's step, then flat: one window's step, not a ramp
+    assert not level_ramp.ramping(_windows(np.where(t > 0.9, 0.3, 0.0) + noise), 4, step)
+    # a ridge's pulse (a few samples above half height) on a flat level makes no ramp
+    pulse = 0.8 * np.exp(-0.5 * ((t - 0.93) / 0.002) ** 2)
+    assert not level_ramp.ramping(_windows(noise + pulse), 4, step)
+    assert not level_ramp.ramping(None, 4, step)  # samples no longer held
+
+
+def test_heavy_noise_asks_a_steeper_ramp():
+    quiet = level_ramp.step_min_n(0.05, FS_HZ, 0.2, 1.5, 0.001)
+    loud = level_ramp.step_min_n(0.05, FS_HZ, 0.2, 1.5, 0.2)
+    assert quiet == pytest.approx(0.2 * 0.05)  # the slope's bound
+    assert loud > 5 * quiet
+
+
+def test_bad_input_is_named():
+    with pytest.raises(ValueError, match="window"):
+        level_ramp.step_min_n(0.0, FS_HZ, 0.2, 1.5, 0.02)
+    with pytest.raises(ValueError, match="must be >= 0"):
+        level_ramp.step_min_n(0.05, FS_HZ, -0.2, 1.5, 0.02)
+    with pytest.raises(ValueError, match="steps must be >= 1"):
+        level_ramp.ramping(np.zeros(10), 0, 0.01)
