@@ -88,6 +88,7 @@ from grasplink.decoding import (
     arrival_flag,
     coast_bound,
     flag_keep,
+    overdue_speed,
     rail_hold,
     reflag,
     rise_evidence,
@@ -286,11 +287,12 @@ class _One:
     """One track's numbers as plain floats (the chosen track, read at every update)."""
 
     __slots__ = (
-        "a", "d", "dirn", "m", "n", "numbers", "p00", "p01", "p02", "p11", "p12", "p22", "ridge",
-        "run", "s", "stop", "t", "v",
+        "a", "d", "dirn", "index", "m", "n", "numbers", "p00", "p01", "p02", "p11", "p12", "p22",
+        "ridge", "run", "s", "stop", "t", "v",
     )  # fmt: skip
 
     def __init__(self, B: _Bank, i: int):
+        self.index = i  # its row in the bank it was read from
         self.dirn, self.ridge = int(B.dirn[i]), int(B.ridge[i])
         self.n, self.run = int(B.n[i]), int(B.run[i])
         self.t, self.stop, self.m = float(B.t[i]), float(B.stop[i]), float(B.m[i])
@@ -525,6 +527,13 @@ class TrackerDecoder(Decoder):
     # at s27: stops cleared 96.0 -> 96.4 %, after due 0.13 -> 0.09 %, slip dropped 14.9 ->
     # 15.2 %; not shipped
     SPAN_MAX_REL = 0.5
+    # the speed shown (not the flag) is withheld once its own track's next ridge is overdue
+    # by the report's schedule: the timing sigma capped at OVERDUE_SPAN_REL of the interval,
+    # OVERDUE_LATE_REL of it late, the contact's latency (`overdue_speed`); 0: off
+    OVERDUE_SPEED = 0.0
+    OVERDUE_SPAN_REL = 0.5
+    OVERDUE_LATE_REL = 0.15
+    OVERDUE_PROBE_WAIT = 1.0  # ... the probes' latency floor (`_latency_floor`) this share
     # a braking track whose own motion, braking this many sigma gentler than its estimate,
     # has brought it below V_MIN_MM_S (or REST_SHARE) is reported stopped (a contact
     # revives it). 0: as estimated - the headline's speed at rest after the reflex stopped
@@ -768,6 +777,7 @@ class TrackerDecoder(Decoder):
         self._flagged = False  # the last update's slip flag (`flag_keep`)
         self._flag_t = -math.inf  # ... the last update that had it up
         self._kept: tuple | None = None  # (the posterior it was read with, P(moving))
+        self._due: tuple[_Bank, np.ndarray] | None = None  # (bank, `_overdue`'s times due)
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
         # the last contact held that came onto an unloaded sensor, (id, t_s, index) or None
@@ -1515,6 +1525,10 @@ class TrackerDecoder(Decoder):
         bar = self.LOG_KEEP_ODDS if h.dirn == self._told_way else self.LOG_REPORT_ODDS
         told = run > 1 and n >= self.DIRECTION_CONTACTS and odds >= bar
         self._told_way = h.dirn if told else 0
+        if told and self._overdue(h, g):  # its next ridge overdue: flagged, no speed
+            bound = self._speed_range(magnitude)
+            return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)), None,
+                                None, *bound)  # fmt: skip
         if told:
             s, speed, sigma = self._where(h, g, False, limit)
             p_way = 1.0 / (1.0 + math.exp(-odds))  # P(this way)
@@ -1539,15 +1553,43 @@ class TrackerDecoder(Decoder):
         narrow = share >= self.SPEED_NARROW_SHARE and high < self.SPEED_RANGE_MAX * low
         agreed = share >= self.SPEED_AGREE_SHARE or narrow
         ratio = fast is not None and fast.n >= self.DIRECTION_CONTACTS
-        if fast is None or not (agreed or (ratio and share >= self.SPEED_RATIO_SHARE)):
+        given = fast is not None and (agreed or (ratio and share >= self.SPEED_RATIO_SHARE))
+        if not given or self._overdue(fast, g):
             bound = self._speed_range(magnitude)
             return SlipEstimate(g, True, None, held, force, conf, None, None, *bound)
+        assert fast is not None
         _, speed, _ = self._where(fast, g, False, self.count)
         conf = share * self._maturity(fast.n) * math.exp(-max(0.0, g - fast.t) * self.TURN_PER_S)
         bound = self._speed_range(magnitude, speed)
         return SlipEstimate(
             g, True, max(0.0, speed), held, force, min(1.0, max(0.0, conf)), None, None, *bound
         )
+
+    def _overdue(self, h: _One, g: float) -> bool:
+        """Is the speed of track `h` (read from the bank now) withheld at g: its next ridge
+        overdue by the report's schedule (`overdue_speed`, OVERDUE_SPEED; the time its
+        contact spent on the rail not counted)? The times due are read once per bank."""
+        if not self.OVERDUE_SPEED:
+            return False
+        B = self._tracks
+        if self._due is None or self._due[0] is not B:
+            due = overdue_speed.next_due_s(
+                _tracks(B),
+                self._silence,
+                self._report_skin,
+                self.OVERDUE_PROBE_WAIT * self._latency_floor(B),
+            )
+            self._due = (B, due)
+        blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
+        return overdue_speed.overdue(
+            float(self._due[1][h.index]), g, 0.0 if blind is None else float(blind[0])
+        )
+
+    @cached_property
+    def _report_skin(self) -> tuple:
+        """The skin with the report's constants (`overdue_speed.report_constants`)."""
+        K = overdue_speed.report_constants(self._K, self.OVERDUE_SPAN_REL, self.OVERDUE_LATE_REL)
+        return tuple(posterior_kernels.Skin(pos=self._pos, K=K))
 
     def _maturity(self, n: int) -> float:
         """How far n contacts make an estimate (the confidence grows as 1 - exp(...))."""
