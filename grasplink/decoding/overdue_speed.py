@@ -45,15 +45,41 @@ def report_constants(K: np.ndarray, span_rel: float, late_rel: float) -> np.ndar
     return out
 
 
-def next_due_s(tracks: tuple, silence: tuple, skin: tuple, floor: np.ndarray) -> np.ndarray:
-    """Per track, when its next ridge is overdue (inf: none due - stopped, no speed yet,
-    or nothing ahead), by the schedule kernel on `skin` (its `K` from `report_constants`).
+def report_columns(log_miss: np.ndarray, ahead: int, log_p: float) -> np.ndarray:
+    """Per (direction, ridge) row (di * (R + 1) + ridge, as the silence tables), the ridge
+    ahead (0: the next, up to `ahead` - 1; `ahead`: none) whose silence withholds the speed:
+    the first by which every ridge so far would have been missed with P <= exp(`log_p`).
+    A ridge told 92 % of the time is missed often enough that its silence alone says
+    little (a 4 mm spacing: `TrackerDecoder.DETECT_P`); the one after it then decides.
+    `log_miss`: (2, R + 1) log P(a ridge missed), travel order, the coast end -inf."""
+    if not log_p <= 0:
+        raise ValueError(f"overdue speed: log P(missed) {log_p} must be <= 0")
+    R = log_miss.shape[1] - 1
+    di = np.repeat(np.arange(2), R + 1)
+    ridge = np.tile(np.arange(R + 1), 2)
+    kk = np.minimum(ridge[:, None] + 1 + np.arange(ahead), R)
+    missed = np.cumsum(log_miss[di[:, None], kk], axis=1)
+    hit = missed <= log_p
+    return np.where(hit.any(axis=1), hit.argmax(axis=1), ahead)
+
+
+def next_due_s(
+    tracks: tuple, silence: tuple, skin: tuple, floor: np.ndarray, columns: np.ndarray
+) -> np.ndarray:
+    """Per track, when the ridge whose silence withholds its speed (`report_columns`'s
+    `columns`, by row) is overdue (inf: none due - stopped, no speed yet, or nothing
+    ahead), by the schedule kernel on `skin` (its `K` from `report_constants`).
     `tracks`, `silence`, `skin`: plain tuples of a `Tracks`, `Silence` and `Skin`;
     `floor`: each track's least latency (`TrackerDecoder._latency_floor`)."""
     due = posterior_kernels.schedule(tracks, silence, skin, floor)[0]
-    if due.shape[1] < 2:
-        return np.full(len(due), np.inf)
-    return due[:, 1]
+    named = posterior_kernels.Tracks(*tracks)
+    R = posterior_kernels.Skin(*skin).pos.shape[1] - 1
+    rows = (1 - named.dirn) // 2 * (R + 1) + np.minimum(named.ridge, R)
+    col = columns[rows] + 1
+    out = np.full(len(due), np.inf)
+    ok = col < due.shape[1]
+    out[ok] = due[np.flatnonzero(ok), col[ok]]
+    return out
 
 
 def overdue(due_s: float, g_s: float, blind_s: float = 0.0) -> bool:

@@ -534,6 +534,9 @@ class TrackerDecoder(Decoder):
     OVERDUE_SPAN_REL = 0.5
     OVERDUE_LATE_REL = 0.15
     OVERDUE_PROBE_WAIT = 1.0  # ... the probes' latency floor (`_latency_floor`) this share
+    # ... read at the first ridge ahead by which all would be missed with P <= this
+    # (`overdue_speed.report_columns`)
+    OVERDUE_MISS_P = 0.2
     # a braking track whose own motion, braking this many sigma gentler than its estimate,
     # has brought it below V_MIN_MM_S (or REST_SHARE) is reported stopped (a contact
     # revives it). 0: as estimated - the headline's speed at rest after the reflex stopped
@@ -1578,12 +1581,19 @@ class TrackerDecoder(Decoder):
                 self._silence,
                 self._report_skin,
                 self.OVERDUE_PROBE_WAIT * self._latency_floor(B),
+                self._overdue_columns,
             )
             self._due = (B, due)
         blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
         return overdue_speed.overdue(
             float(self._due[1][h.index]), g, 0.0 if blind is None else float(blind[0])
         )
+
+    @cached_property
+    def _overdue_columns(self) -> np.ndarray:
+        """Per silence-table row, the ridge ahead whose silence withholds a speed."""
+        log_p = math.log(self.OVERDUE_MISS_P) if self.OVERDUE_MISS_P > 0 else -math.inf
+        return overdue_speed.report_columns(self._log_miss, self.SCHEDULE, log_p)
 
     @cached_property
     def _report_skin(self) -> tuple:
