@@ -116,15 +116,9 @@ def speeds_after_due(estimates: list, stops: list[sr.StopScore]) -> list[float]:
 #   stop ending 1.35 s (200 Hz);
 SPAN_CASES = [("rates-drops", 130_520, 14)]
 # - LATE_REL's 15 % of a long interval beyond the stop's 0.15 s: a 21 mm interval at
-#   35 mm/s (95120), a 4 mm one at 14 mm/s (86111), and a braking or speeding track's
-#   ridge due late at 118 mm/s (85200) and 100-1000 Hz (135320, 130111)
-LATE_CASES = [
-    ("stop", 95_120, 2),
-    ("stick-slip", 86_111, 4),
-    ("stick-slip", 85_200, 3),
-    ("rates-drops", 135_320, 2),
-    ("rates-drops", 130_111, 2),
-]
+#   35 mm/s (95120), and a speeding track's ridge due late at 118 mm/s (85200) and 100 Hz
+#   (135320)
+LATE_CASES = [("stop", 95_120, 2), ("stick-slip", 85_200, 3), ("rates-drops", 135_320, 2)]
 OFF = {"OVERDUE_SPEED": 0.0}
 
 
