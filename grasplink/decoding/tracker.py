@@ -541,6 +541,9 @@ class TrackerDecoder(Decoder):
     OVERDUE_LATE_REL = 0.0
     OVERDUE_PROBE_WAIT = 1.0
     OVERDUE_MISS_P = 0.05
+    # ... also under heavy noise (1; 0: not where the rise evidence reads the silence,
+    # RISE_EVIDENCE_GATE): at 10 dB a silent ridge says little (snr10 missing +5 points)
+    OVERDUE_NOISY = 0.0
     # a braking track whose own motion, braking this many sigma gentler than its estimate,
     # has brought it below V_MIN_MM_S (or REST_SHARE) is reported stopped (a contact
     # revives it). 0: as estimated - the headline's speed at rest after the reflex stopped
@@ -1577,6 +1580,12 @@ class TrackerDecoder(Decoder):
         overdue by the report's schedule (`overdue_speed`, OVERDUE_SPEED; the time its
         contact spent on the rail not counted)? The times due are read once per bank."""
         if not self.OVERDUE_SPEED:
+            return False
+        if (
+            self.OVERDUE_NOISY == 0
+            and self.RISE_EVIDENCE
+            and self._rise.blind(self.RISE_EVIDENCE_GATE)
+        ):  # heavy noise: ridges are missed far more often than DETECT_P says
             return False
         B = self._tracks
         if self._due is None or self._due[0] is not B:
