@@ -8,7 +8,10 @@ and under each `--try`, so a change aimed at those cases shows what it clears an
 brings, case by case, beside the pooled share.
 
 `--kinds` (default: every moving kind), `--seeds N` (the full plan's first N, default 3),
-`--try NAME=VALUE[,...]` (repeatable) as in `tune_tracker_kinds.py`.
+`--try NAME=VALUE[,...]` (repeatable) as in `tune_tracker_kinds.py`, `--cases SEED,...`
+only those cases (a setting that only withholds speeds, `TrackerDecoder.OVERDUE_SPEED`,
+brings none to a case the shipped settings keep clear, so the cases these list say all
+of it; the pooled share is then of those cases' updates).
 
 Run: `.venv/bin/python benchmarks/after_due_cases.py --seeds 3 --try NAME=VALUE`.
 """
@@ -32,8 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--kinds", default=",".join(sr.MOVING), help="comma-separated kinds")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--try", dest="tries", action="append", default=[], type=tune_tracker.parse)
+    parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
     args = parser.parse_args(argv)
-    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, args.cases)
     tunings = [{}, *args.tries]
     names = [",".join(f"{a}={b}" for a, b in t.items()) or "shipped" for t in tunings]
     configs = {str(k): tune_tracker.config(t) for k, t in enumerate(tunings)}

@@ -94,6 +94,7 @@ from grasplink.decoding import (
     detect_chance,
     flag_keep,
     level_ramp,
+    overdue_speed,
     rail_hold,
     reflag,
     rise_evidence,
@@ -292,11 +293,12 @@ class _One:
     """One track's numbers as plain floats (the chosen track, read at every update)."""
 
     __slots__ = (
-        "a", "d", "dirn", "m", "n", "numbers", "p00", "p01", "p02", "p11", "p12", "p22", "ridge",
-        "run", "s", "stop", "t", "v",
+        "a", "d", "dirn", "index", "m", "n", "numbers", "p00", "p01", "p02", "p11", "p12", "p22",
+        "ridge", "run", "s", "stop", "t", "v",
     )  # fmt: skip
 
     def __init__(self, B: _Bank, i: int):
+        self.index = i  # its row in the bank it was read from
         self.dirn, self.ridge = int(B.dirn[i]), int(B.ridge[i])
         self.n, self.run = int(B.n[i]), int(B.run[i])
         self.t, self.stop, self.m = float(B.t[i]), float(B.stop[i]), float(B.m[i])
@@ -543,6 +545,23 @@ class TrackerDecoder(Decoder):
     # at s27: stops cleared 96.0 -> 96.4 %, after due 0.13 -> 0.09 %, slip dropped 14.9 ->
     # 15.2 %; not shipped
     SPAN_MAX_REL = 0.5
+    # the speed shown (not the flag) is withheld once its own track's ridge ahead is overdue
+    # by the report's schedule (`overdue_speed`): the timing sigma capped at
+    # OVERDUE_SPAN_REL of the interval (3 sigma: half of it), OVERDUE_LATE_REL of it late,
+    # the contact's latency (OVERDUE_PROBE_WAIT of the probes' floor), at the first ridge
+    # by which all would be missed with P <= OVERDUE_MISS_P (a 4 mm ridge, told 92 %, leaves
+    # it to the one after). 0: off. Full plan, one run (tune_tracker_kinds.py,
+    # after_due_cases.py, docs/decoding.md): speed after due 58 -> 37 of 46021 updates, the
+    # flag, stops cleared and slip dropped unchanged; at P 1 (every next ridge) constant
+    # missing 4.6 -> 9.9 %, at 0.05 4.6 %
+    OVERDUE_SPEED = 1.0
+    OVERDUE_SPAN_REL = 1.0 / 6.0
+    OVERDUE_LATE_REL = 0.0
+    OVERDUE_PROBE_WAIT = 1.0
+    OVERDUE_MISS_P = 0.05
+    # ... also under heavy noise (1; 0: not where the rise evidence reads the silence,
+    # RISE_EVIDENCE_GATE): at 10 dB a silent ridge says little (snr10 missing +5 points)
+    OVERDUE_NOISY = 0.0
     # a braking track whose own motion, braking this many sigma gentler than its estimate,
     # has brought it below V_MIN_MM_S (or REST_SHARE) is reported stopped (a contact
     # revives it). 0: as estimated - the headline's speed at rest after the reflex stopped
@@ -820,6 +839,7 @@ class TrackerDecoder(Decoder):
         self._flagged = False  # the last update's slip flag (`flag_keep`)
         self._flag_t = -math.inf  # ... the last update that had it up
         self._kept: tuple | None = None  # (the posterior it was read with, P(moving))
+        self._due: tuple[_Bank, np.ndarray] | None = None  # (bank, `_overdue`'s times due)
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
         # the last contact held that came onto an unloaded sensor, (id, t_s, index) or None
@@ -1657,6 +1677,10 @@ class TrackerDecoder(Decoder):
         bar = self.LOG_KEEP_ODDS if h.dirn == self._told_way else self.LOG_REPORT_ODDS
         told = run > 1 and n >= self.DIRECTION_CONTACTS and odds >= bar
         self._told_way = h.dirn if told else 0
+        if told and self._overdue(h, g):  # its next ridge overdue: flagged, no speed
+            bound = self._speed_range(magnitude)
+            return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)), None,
+                                None, *bound)  # fmt: skip
         if told:
             s, speed, sigma = self._where(h, g, False, limit)
             p_way = 1.0 / (1.0 + math.exp(-odds))  # P(this way)
@@ -1681,9 +1705,11 @@ class TrackerDecoder(Decoder):
         narrow = share >= self.SPEED_NARROW_SHARE and high < self.SPEED_RANGE_MAX * low
         agreed = share >= self._agree_share() or narrow
         ratio = fast is not None and fast.n >= self.DIRECTION_CONTACTS
-        if fast is None or not (agreed or (ratio and share >= self.SPEED_RATIO_SHARE)):
+        given = fast is not None and (agreed or (ratio and share >= self.SPEED_RATIO_SHARE))
+        if not given or self._overdue(fast, g):
             bound = self._speed_range(magnitude)
             return SlipEstimate(g, True, None, held, force, conf, None, None, *bound)
+        assert fast is not None
         _, speed, _ = self._where(fast, g, False, self.count)
         conf = share * self._maturity(fast.n) * math.exp(-max(0.0, g - fast.t) * self.TURN_PER_S)
         bound = self._speed_range(magnitude, speed)
@@ -1698,6 +1724,45 @@ class TrackerDecoder(Decoder):
         if noisy is None or not self._rise.blind(self.RISE_EVIDENCE_GATE):
             return self.SPEED_AGREE_SHARE
         return noisy
+
+    def _overdue(self, h: _One, g: float) -> bool:
+        """Is the speed of track `h` (read from the bank now) withheld at g: its next ridge
+        overdue by the report's schedule (`overdue_speed`, OVERDUE_SPEED; the time its
+        contact spent on the rail not counted)? The times due are read once per bank."""
+        if not self.OVERDUE_SPEED:
+            return False
+        if (
+            self.OVERDUE_NOISY == 0
+            and self.RISE_EVIDENCE
+            and self._rise.blind(self.RISE_EVIDENCE_GATE)
+        ):  # heavy noise: ridges are missed far more often than DETECT_P says
+            return False
+        B = self._tracks
+        if self._due is None or self._due[0] is not B:
+            due = overdue_speed.next_due_s(
+                _tracks(B),
+                self._silence,
+                self._report_skin,
+                self.OVERDUE_PROBE_WAIT * self._latency_floor(B),
+                self._overdue_columns,
+            )
+            self._due = (B, due)
+        blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
+        return overdue_speed.overdue(
+            float(self._due[1][h.index]), g, 0.0 if blind is None else float(blind[0])
+        )
+
+    @cached_property
+    def _overdue_columns(self) -> np.ndarray:
+        """Per silence-table row, the ridge ahead whose silence withholds a speed."""
+        log_p = math.log(self.OVERDUE_MISS_P) if self.OVERDUE_MISS_P > 0 else -math.inf
+        return overdue_speed.report_columns(self._log_miss, self.SCHEDULE, log_p)
+
+    @cached_property
+    def _report_skin(self) -> tuple:
+        """The skin with the report's constants (`overdue_speed.report_constants`)."""
+        K = overdue_speed.report_constants(self._K, self.OVERDUE_SPAN_REL, self.OVERDUE_LATE_REL)
+        return tuple(posterior_kernels.Skin(pos=self._pos, K=K))
 
     def _maturity(self, n: int) -> float:
         """How far n contacts make an estimate (the confidence grows as 1 - exp(...))."""
