@@ -531,6 +531,19 @@ The loop 1.05-1.09× in interleaved runs at load (`benchmarks/scene_pairs.py`: m
 40 pairs 1.09), 1.17× in this page's run. This page's host ran slower than session 26's
 (headline_slip 83× against 114×, the base's loop 16× against 19×), so the 20× target
 is not shown met here; a quieter host decides it.
+
+Session 28 (this page's before/after is against its base, 4bd69df): with the machine
+idle (load 1) the loop read 15× (866822a 14×): a quieter host did not decide it. Where
+one run goes (`benchmarks/loop_profile.py`, one warmed run by package; `--timed` the
+stages inside the loop): devices 26 %, decoding 25 %, gateway 20 %, simulators 16 %, bus
+7 %, ~143 k Python calls per simulated second, no function above 2.4 %; the decoder's
+feed 25 %, physics run-ahead 14 %, the EMG node's tick 6 %, the skin node's 5.4 %. The
+skin node's counts of a tick's few samples in Python floats (same ints) cut ~2.5 %.
+20× needs a quarter of the run cut: every candidate left is under 1.5 % or changes what
+is simulated (the nodes' process data without CAN frames in virtual time ~10 %; a 20 ms
+chunk 15.5 → 16.6× in the chunk table above, 50 ms 17.7×; no 20 Hz snapshot ~2 %). Two
+checkouts of one commit ran 1.07× apart in `scene_pairs.py`, so a few percent in this
+page's before/after is the checkouts, not the code.
 """
 
 
