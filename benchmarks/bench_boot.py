@@ -19,6 +19,7 @@ import argparse
 import statistics
 from pathlib import Path
 
+from shipped_scenes import scene_path
 from tree_script import ask, served_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,9 +56,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--repeats", type=int, default=3, help="boots per answer (least)")
     args = parser.parse_args()
-    scene = ROOT / "scenes" / f"{args.scene}.toml"
-    if not scene.is_file():
-        raise SystemExit(f"no scene {args.scene!r} in {scene.parent}")
+    scene = scene_path(args.scene)
     trees = [ROOT, *args.against]
     times: dict[Path, list[float]] = {tree: [] for tree in trees}
     requests: dict[Path, str] = {}

@@ -27,11 +27,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from shipped_scenes import scene_paths
+
 from grasplink.controllers import simulation
 from grasplink.simulators import engine
 from grasplink.simulators.scene import load_scene
 
-ROOT = Path(__file__).resolve().parents[1]
 GUESSED: Callable[[list[float], int], list[float]] = engine.continue_steps
 
 
@@ -98,10 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error("--rounds must be at least 1")
-    paths = [ROOT / "scenes" / f"{name}.toml" for name in args.scenes]
-    missing = [p.stem for p in paths if not p.is_file()]
-    if missing:
-        parser.error(f"no scene {', '.join(missing)} in {ROOT / 'scenes'}")
+    paths = scene_paths(args.scenes)
     print(f"load average {os.getloadavg()[0]:.1f}; {args.rounds} rounds, interleaved")
     for path in paths:
         compare(path, args.rounds)

@@ -27,13 +27,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from shipped_scenes import scene_paths
 
 from grasplink.bus import lockstep
 from grasplink.core.frames import NMT_COB_ID, Frame
 from grasplink.devices.factory import build_node
 from grasplink.devices.sources import FunctionSource
 
-ROOT = Path(__file__).resolve().parents[1]
 SCENES = ("slip_alpha0.1_20mm_s_forward", "loop_headline", "headline_slip")
 STEPS_MS = (10, 15, 20, 30, 50, 100)
 SKIN_ALONE_S = 8.0
@@ -121,10 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.repeats < 1:
         parser.error("--repeats must be at least 1")
-    paths = [ROOT / "scenes" / f"{name}.toml" for name in args.scenes]
-    missing = [str(p) for p in paths if not p.is_file()]
-    if missing:
-        parser.error(f"no scene file {', '.join(missing)}")
+    paths = scene_paths(args.scenes)
     print(f"load average {os.getloadavg()[0]:.1f}; best of {args.repeats}, interleaved")
     print("| run | per-tick ms / simulated s | streamed | per-tick / streamed |")
     print("|---|---:|---:|---:|")

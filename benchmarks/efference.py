@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from shipped_scenes import scene_path
 
 from grasplink.controllers import build_controllers
 from grasplink.decoding import efference, io
@@ -31,7 +32,6 @@ from grasplink.evaluation import scenes as sc
 from grasplink.evaluation import slip_reporting as sr
 from grasplink.simulators.synth import SkinRecording
 
-ROOT = Path(__file__).resolve().parents[1]
 FAR_OFF = 0.5  # a speed this far off the truth (relative) counts as wrong
 
 
@@ -88,10 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scene", default="loop_headline", help="a scene in scenes/")
     parser.add_argument("--cost", type=int, default=0, metavar="ROUNDS")
     args = parser.parse_args(argv)
+    scene = scene_path(args.scene)
     with tempfile.TemporaryDirectory(prefix="grasplink-efference-") as folder:
-        scene = ROOT / "scenes" / f"{args.scene}.toml"
-        if not scene.is_file():
-            parser.error(f"--scene {args.scene}: no {scene}")
         rec = sc.record_scene(scene, build_controllers, folder).can
         log = Path(folder) / "can.asc"
         print(f"without commands:   {headline(log, rec, False)}")

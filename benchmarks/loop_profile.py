@@ -43,10 +43,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from shipped_scenes import scene_path
+
 from grasplink.controllers import simulation
 from grasplink.simulators.scene import load_scene
 
-ROOT = Path(__file__).resolve().parents[1]
 LIBRARIES = ("can", "canopen", "numpy", "scipy", "numba", "llvmlite")
 # gateway/ files whose time bench_scenes.py's stage split names apart from "behaviour"
 NOT_BEHAVIOUR = ("grasplink/gateway/feedback.py",)
@@ -175,9 +176,7 @@ def main() -> None:
     parser.add_argument("--top", type=int, default=25, help="rows of each function table")
     parser.add_argument("--timed", type=int, metavar="RUNS", help="time TIMED's stages instead")
     args = parser.parse_args()
-    path = ROOT / "scenes" / f"{args.scene}.toml"
-    if not path.is_file():
-        raise SystemExit(f"no scene {args.scene!r} in {path.parent}")
+    path = scene_path(args.scene)
     if args.top < 1:
         raise SystemExit(f"--top {args.top}: at least one row")
     if args.timed is not None:

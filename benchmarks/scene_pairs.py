@@ -18,6 +18,7 @@ import os
 import statistics
 from pathlib import Path
 
+from shipped_scenes import scene_path
 from tree_script import ask, served_in_tree
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,9 +45,7 @@ def main() -> None:
     parser.add_argument("--scene", default="loop_headline")
     parser.add_argument("--runs", type=int, default=30, help="runs per tree")
     args = parser.parse_args()
-    scene = ROOT / "scenes" / f"{args.scene}.toml"
-    if not scene.is_file():
-        raise SystemExit(f"no scene {args.scene!r} in {scene.parent}")
+    scene = scene_path(args.scene)
     if args.runs < 1:
         raise SystemExit(f"--runs {args.runs}: at least one run per tree")
     trees = (args.against, ROOT)

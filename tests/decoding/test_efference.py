@@ -243,7 +243,7 @@ def least_force(tmp_path_factory) -> dict:
 def test_told_the_wearers_grip_rise_the_tracker_shows_no_speed_at_rest(least_force):
     """Where the commands matter: the wearer's grip rise at 4.59-4.74 s bends the level at
     4.62 s while the object slows to its stop (4.805 s). Untold, the tracker takes that bend
-    for a ridge and shows 33-36 mm/s until 5.18 s, the object at rest; told, it weighs the
+    for a ridge and shows 38-39 mm/s until 5.13 s, the object at rest; told, it weighs the
     bend as the grip's and shows no speed at rest."""
     log, rec = least_force["log"], least_force["rec"]
     stops = [s for s in ns.motion(rec).stops if s[1] - s[0] > 1.0]
