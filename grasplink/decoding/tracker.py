@@ -1585,8 +1585,7 @@ class TrackerDecoder(Decoder):
     def _waiting_p(self, g: float, contact_s: float, rows: Sequence[int]) -> float:
         """P(the next ridge after a contact at `contact_s` on one of `rows` is not yet due
         at g), the time on the rail since it not counted (`arrival_flag.waiting_p`)."""
-        blind = self._blind(np.array([contact_s]), g)
-        elapsed = g - contact_s - (0.0 if blind is None else float(blind[0]))
+        elapsed = g - contact_s - self._rail_s(contact_s, g)
         return arrival_flag.waiting_p(elapsed, rows, self._waiting, self._K, self._max_latency)
 
     def _arrival_contact(self) -> tuple[int, float, int] | None:
@@ -1731,12 +1730,8 @@ class TrackerDecoder(Decoder):
         contact spent on the rail not counted)? The times due are read once per bank."""
         if not self.OVERDUE_SPEED:
             return False
-        if (
-            self.OVERDUE_NOISY == 0
-            and self.RISE_EVIDENCE
-            and self._rise.blind(self.RISE_EVIDENCE_GATE)
-        ):  # heavy noise: ridges are missed far more often than DETECT_P says
-            return False
+        if self.OVERDUE_NOISY == 0 and self._silence_read_soft():
+            return False  # heavy noise: ridges are missed far more often than DETECT_P says
         B = self._tracks
         if self._due is None or self._due[0] is not B:
             due = overdue_speed.next_due_s(
@@ -1747,10 +1742,7 @@ class TrackerDecoder(Decoder):
                 self._overdue_columns,
             )
             self._due = (B, due)
-        blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
-        return overdue_speed.overdue(
-            float(self._due[1][h.index]), g, 0.0 if blind is None else float(blind[0])
-        )
+        return overdue_speed.overdue(float(self._due[1][h.index]), g, self._rail_s(h.t, g))
 
     @cached_property
     def _overdue_columns(self) -> np.ndarray:
@@ -1800,8 +1792,7 @@ class TrackerDecoder(Decoder):
         reach, silent = math.inf, 0.0
         if self.SILENCE_REACH > 0 and not stopped and math.isnan(h.stop):
             reach = self.SILENCE_REACH * float(self._reach_mm[(1 - h.dirn) // 2, h.ridge])
-            blind = self._blind(np.array([h.t]), g) if self.detector.blind else None
-            silent = g - h.t - self._silence_latency - (0.0 if blind is None else float(blind[0]))
+            silent = g - h.t - self._silence_latency - self._rail_s(h.t, g)
         return posterior_kernels.where(h.numbers, g, stopped, limit, (reach, silent), self._skin)
 
     @cached_property
@@ -1850,14 +1841,25 @@ class TrackerDecoder(Decoder):
         """`kernels.posterior.posterior` at g on the bank now, with the evidence tables
         `tables` (`_evidence_tables`, or `_keep_tables`)."""
         B = self._tracks
-        soft = self.RISE_EVIDENCE and self._rise.blind(self.RISE_EVIDENCE_GATE)
-        sched = self._soft_schedule(B, g) if soft else self._schedule(B)
+        sched = self._soft_schedule(B, g) if self._silence_read_soft() else self._schedule(B)
         blind = self._blind(B.t, g)  # time on the rail since each track's contact: unseen
         verdicts = tuple(posterior_kernels.Verdicts(self._ring, self._ring_id, *tables))
         return posterior_kernels.posterior(
             g, self._null, _tracks(B), sched, _NO_BLIND if blind is None else blind,
             blind is not None, verdicts, self._waiting, self._skin,
         )  # fmt: skip
+
+    def _silence_read_soft(self) -> bool:
+        """Whether the due ridges' silence is scored by the rise read there (`rise_evidence`:
+        heavy noise, the told pulses under RISE_EVIDENCE_GATE) rather than by DETECT_P."""
+        return bool(self.RISE_EVIDENCE) and self._rise.blind(self.RISE_EVIDENCE_GATE)
+
+    def _rail_s(self, t_s: float, g: float) -> float:
+        """Seconds of [t_s, g] the sensor sat on its rail (`_blind` for one time; 0: none)."""
+        if not self.detector.blind:
+            return 0.0
+        blind = self._blind(np.array([t_s]), g)
+        return 0.0 if blind is None else float(blind[0])
 
     def _blind(self, t: np.ndarray, g: float) -> np.ndarray | None:
         """Seconds of [t, g] the sensor sat on its upper rail (no contact can show there);
