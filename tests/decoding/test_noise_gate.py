@@ -55,5 +55,5 @@ def test_the_silence_floor_opens_in_heavy_noise_not_on_weak_pulses_at_thesis_noi
     assert _held_in_noise(0.25, gated)._miss_floor(1.0) is not None
     assert _held_in_noise(0.02, gated)._miss_floor(1.0) is None
     # without the noise gate the weak pulses alone open it (session 28's stops cost)
-    plain = {"DETECT_MEASURED_SILENCE": 1.0}
+    plain = {"DETECT_MEASURED_SILENCE": 1.0, "NOISY_WHITE_N": 0.0}
     assert _held_in_noise(0.02, plain)._miss_floor(1.0) is not None
