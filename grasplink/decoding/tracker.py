@@ -472,7 +472,12 @@ class TrackerDecoder(Decoder):
     # pulses' rise against the probe's threshold (`detect_chance`): this share of the way
     # (log) from the DETECT_P table's miss, for skipped ridges / due ridges; 0: the table's
     DETECT_MEASURED_SKIP = 0.0
-    DETECT_MEASURED_SILENCE = 0.0
+    # The due ridges' floor is on, gated by the white noise too (NOISY_WHITE_N): full plan,
+    # 2 seeds, one run (tune_tracker_kinds.py --kinds snr10,held-noise,stick-slip,loop):
+    # snr10 speed missing 52.5 -> 50.3 %, slip dropped 35.4 -> 33.7 %, speed at rest 13.1
+    # -> 12.9 %; stick-slip, loop (stops 95.7 / 100 %) and held-noise (0) to the digit.
+    # Gated by the told pulses alone (s28) it cost stick-slip and loop stops
+    DETECT_MEASURED_SILENCE = 1.0
     # ... or only for the due ridges whose rise is not read (no samples held yet, another
     # contact's rise there): the z read stays the evidence (its ratio, no floor raised)
     DETECT_MEASURED_UNREAD = 0.0
