@@ -58,6 +58,36 @@ def test_the_hold_ends_at_rest():
     assert late.any() and not flags[late].any()
 
 
+def _stick(tuning: dict):
+    """(update times, flags, the stop's (start, end) s, when it became observable) of the
+    full plan's stick-slip at 14 mm/s on alpha0.1, reversed, seed 80121: the level ramps
+    up while the object slides, steps up as it sticks at 3.115 s (the last ridge 17 ms
+    before) and falls about 2 N/s through the stick to 3.485 s."""
+    case = next(
+        c
+        for c in sr.cases(sr.FULL)
+        if c.kind == "stick-slip" and c.seed == 80121 and c.variant == "14 mm/s"
+    )
+    rec = case.make()
+    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
+    estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
+    stop = next(s for s in sr.score(estimates, rec.truth).stops if 3.0 < s.start_s < 3.2)
+    t = np.array([e.t_s for e in estimates])
+    return t, np.array([e.slip for e in estimates]), (stop.start_s, stop.end_s), stop.observable_s
+
+
+def test_one_way_a_level_turning_in_a_stick_holds_no_flag():
+    t, flags, (_, end), observable = _stick({"RAMP_ONE_WAY": 2.0})
+    stick = (t > observable) & (t < end)
+    assert stick.sum() >= 15 and not flags[stick].any()
+
+
+def test_held_any_way_the_turn_raises_the_flag_in_the_stick():
+    t, flags, (_, end), observable = _stick({})  # shipped: RAMP_ONE_WAY 0
+    stick = (t > observable) & (t < end)
+    assert flags[stick].any()
+
+
 def _windows(level: np.ndarray, steps: int = 4, window_s: float = 0.05) -> np.ndarray:
     return level[-(steps + 1) * round(window_s * FS_HZ) :]
 
@@ -77,6 +107,17 @@ def test_a_ramp_a_flat_level_and_a_step():
     pulse = 0.8 * np.exp(-0.5 * ((t - 0.93) / 0.002) ** 2)
     assert not level_ramp.ramping(_windows(noise + pulse), 4, step)
     assert not level_ramp.ramping(None, 4, step)  # samples no longer held
+
+
+def test_a_ramp_tells_its_way():
+    rng = np.random.default_rng(1)
+    t = np.arange(400) / FS_HZ
+    noise = 0.02 * rng.standard_normal(len(t))
+    step = level_ramp.step_min_n(0.05, FS_HZ, 0.2, 1.5, 0.02)
+    assert level_ramp.ramp_way(_windows(0.5 * t + noise), 4, step) == 1  # covering more
+    assert level_ramp.ramp_way(_windows(-0.5 * t + noise), 4, step) == -1  # ... or less
+    assert level_ramp.ramp_way(_windows(noise), 4, step) == 0  # at rest
+    assert level_ramp.ramp_way(None, 4, step) == 0
 
 
 def test_heavy_noise_asks_a_steeper_ramp():
