@@ -1,0 +1,56 @@
+"""The slip flag held over a step shaped like a ridge's until its next ridge is due (issue 22).
+
+Physics: a slip that stops makes the level step (static friction takes the load: thesis
+ch. 4.3), and a stop's step is fast and monotone; a ridge pulse whose fall the FSR's
+hysteresis holds up, a reversal's turn through rest (the 25 mm object wholly on the
+skin), a grip rising under a sliding object all rise slowly (`step_shape.classify`:
+89 % of the stops' plain steps fast, 94 % of the ridges' slow). The posterior still takes
+such a step for the stop whenever "stopped there" explains the contacts as well as the
+slip going on - until the next ridge's contact tells them apart, the stop is likelier
+only by its prior (`benchmarks/dropped_causes.py --kinds reversal,loop,saturation
+--seeds 3`: 38 % of the updates the flag drops while the object slides are a track
+stopped at a step shaped like a ridge's, nearly all after the flag had been up).
+
+The rule: once the flag was up past the step, while the chosen hypothesis is a track
+stopped at a step told RIDGE_LIKE, the flag is held - no speed, no direction: the speed
+before the step may be gone - until the next ridge due after the step at the speed before
+it would have been decided (`kernels.posterior.stop_seen`: its time plus the detector's
+latency, times `wait`; the ridge after when the step lies on the next one), and no
+longer than `max_s` after the step: the chosen track's speed may be an alias's far below
+the slip's (the loop kind's 30 mm/s slip on alpha0.3, seed 161200: a track at 8 mm/s
+stopped at the last ridge's step, its next ridge 48 mm on, 6 s away). Its silence then
+tells the stop; a held object's flag never went up. A step shaped like a stop's (or
+not yet shaped) is told at once, as before: the stops figure is what a ridge-shaped stop
+step costs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grasplink.decoding.detector import step_shape
+from grasplink.decoding.kernels import posterior as posterior_kernels
+
+
+def hold_constants(K: np.ndarray, wait: float) -> np.ndarray:
+    """The posterior kernels' constants `K` with the step's wait set to `wait` (x the time
+    to the next ridge plus the latency: `kernels.posterior.stop_seen`)."""
+    if not wait > 0:
+        raise ValueError(f"step hold: wait must be > 0, got {wait!r}")
+    out = K.copy()
+    out[posterior_kernels.STEP_STOP_WAIT] = wait
+    return out
+
+
+def holds(
+    shape: int, up_s: float, step_s: float, now_s: float, seen_s: float, max_s: float
+) -> bool:
+    """Whether the flag is held at `now_s` over a stop at a step at `step_s` of shape
+    `shape` (`step_shape`): the flag last up at `up_s` (at or after the step), the step
+    shaped like a ridge's, its next ridge (`seen_s`, `stop_seen`) not yet decided and the
+    step no more than `max_s` ago."""
+    if not (math.isfinite(step_s) and up_s >= step_s):
+        return False  # not a step's stop, or the flag was not up past it
+    return shape == step_shape.RIDGE_LIKE and now_s < min(seen_s, step_s + max_s)
