@@ -166,27 +166,30 @@ def test_the_reports_ridge_is_never_past_the_one_the_posterior_stops_at():
 #   in time, revived the track with the probes' 0.21 s wait (100 Hz);
 # - OVERDUE_LATCH: withheld at 1.31 s, then a braking twin of the same contacts chosen,
 #   its ridge due 37 ms later.
+# (OVERDUE_LATCH ships off: it costs decelerating slips 4.6 points of missing speed.)
 WITHHELD_CASES = [
-    ("stick-slip", 86_111, 4, {"OVERDUE_STOP_RIDGE": 0.0}),
-    ("rates-drops", 130_111, 2, {"OVERDUE_STOP_RIDGE": 0.0}),
-    ("rates-drops", 136_321, 14, {"OVERDUE_PROBE_REGIME": 0.0}),
-    ("rates-drops", 130_101, 2, {"OVERDUE_LATCH": 0.0}),
+    ("stick-slip", 86_111, 4, {}, {"OVERDUE_STOP_RIDGE": 0.0}),
+    ("rates-drops", 130_111, 2, {}, {"OVERDUE_STOP_RIDGE": 0.0}),
+    ("rates-drops", 136_321, 14, {}, {"OVERDUE_PROBE_REGIME": 0.0}),
+    ("rates-drops", 130_101, 2, {"OVERDUE_LATCH": 1.0}, {}),
 ]
 
 
-@pytest.mark.parametrize("kind,seed,updates,off", WITHHELD_CASES)
-def test_no_speed_after_due_where_the_report_reads_the_posteriors_stop(kind, seed, updates, off):
-    estimates, stops = decoded(kind, seed, {})
+@pytest.mark.parametrize("kind,seed,updates,on,off", WITHHELD_CASES)
+def test_no_speed_after_due_where_the_report_reads_the_posteriors_stop(
+    kind, seed, updates, on, off
+):
+    estimates, stops = decoded(kind, seed, on)
     assert not speeds_after_due(estimates, stops)
 
 
-@pytest.mark.parametrize("kind,seed,updates,off", WITHHELD_CASES)
+@pytest.mark.parametrize("kind,seed,updates,on,off", WITHHELD_CASES)
 def test_with_its_rule_off_the_speed_after_due_stays_and_the_flag_is_the_same(
-    kind, seed, updates, off
+    kind, seed, updates, on, off
 ):
     """The control (the test above can fail): that rule off gives the speed after due it
     cleared; only speeds differ, every update's flag is as with it on."""
-    on, _ = decoded(kind, seed, {})
+    with_rule, _ = decoded(kind, seed, on)
     off_estimates, stops = decoded(kind, seed, off)
     assert len(speeds_after_due(off_estimates, stops)) == updates
-    assert [e.slip for e in on] == [e.slip for e in off_estimates]
+    assert [e.slip for e in with_rule] == [e.slip for e in off_estimates]
