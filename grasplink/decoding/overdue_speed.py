@@ -21,11 +21,18 @@ ending 1.35 s). The flag and the range of speeds stay as the posterior has them,
 neither the slip dropped nor the stops' flag moves with it; the cost is the speed
 missing while a missed ridge's next contact is awaited.
 
+The ridge whose silence decides is never past the one the posterior itself stops the
+track at (`report_log_p`: its LOG_STOP, P 0.2 - a 4 mm ridge, missed with P 0.08): the
+posterior schedules none past that one, so a wait for it was a wait for the posterior's
+own, later, due time (issue 22, session 29: stick-slip 86111, rates-drops 130111).
+
 Pure functions of the tracker's arrays: the tracker (`TrackerDecoder._overdue`) calls
 them once per bank and reads its chosen track's row.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -61,6 +68,19 @@ def report_columns(log_miss: np.ndarray, ahead: int, log_p: float) -> np.ndarray
     missed = np.cumsum(log_miss[di[:, None], kk], axis=1)
     hit = missed <= log_p
     return np.where(hit.any(axis=1), hit.argmax(axis=1), ahead)
+
+
+def report_log_p(miss_p: float, log_stop: float | None) -> float:
+    """log P(every ridge so far missed) at which the report's ridge ahead decides
+    (`report_columns`' `log_p`): `miss_p`'s, but never below `log_stop`, the posterior's
+    own (None: `miss_p` alone). The posterior reports a stop at the first ridge whose
+    silence leaves P(all missed) under exp(`log_stop`) and never schedules the ridges past
+    it (their time due is inf), so a report waiting for a later one would wait for the
+    posterior's own due time - later than the report's, its sigma and late allowance
+    wider - and show the speed until then (issue 22: a 4 mm ridge, told 92 %, stops the
+    track at P 0.08, under log_stop's 0.2, while `miss_p` 0.05 waited for the next)."""
+    log_p = math.log(miss_p) if miss_p > 0 else -math.inf
+    return log_p if log_stop is None else max(log_p, log_stop)
 
 
 def next_due_s(

@@ -93,6 +93,7 @@ from grasplink.decoding import (
     contact_gate,
     detect_chance,
     flag_keep,
+    flat_step_speed,
     level_ramp,
     noise_gate,
     overdue_speed,
@@ -571,6 +572,32 @@ class TrackerDecoder(Decoder):
     OVERDUE_LATE_REL = 0.0
     OVERDUE_PROBE_WAIT = 1.0
     OVERDUE_MISS_P = 0.05
+    # ... but never a ridge past the one whose silence the posterior itself reports as a
+    # stop (P(all missed) below LOG_STOP_REPORT, else LOG_STOP: `overdue_speed.
+    # report_log_p`; 0: OVERDUE_MISS_P alone). A 4 mm ridge (told 92 %) stops the track
+    # at its own silence; the report waited for the ridge after it, which the posterior
+    # never schedules (due: inf), so the speed went on until the posterior's later due
+    # time (stick-slip 86111, rates-drops 130101/130111: docs/decoding.md)
+    OVERDUE_STOP_RIDGE = 1.0
+    # ... and the report's latency floor reads the step probe's contacts as
+    # STEP_PROBE_REGIME would at this count (0: as the posterior, STEP_PROBE_REGIME): a
+    # late step after contacts told in time is a stop's, so the speed of the track it
+    # revived is not held the probes' latency; the flag still is (rates-drops 136321)
+    OVERDUE_PROBE_REGIME = 3.0
+    # ... and once withheld, withheld for every track whose last contact is that one's,
+    # until a contact comes (0: each track by its own schedule): silence since that
+    # contact already refuted the speed shown; a twin of it braking or a slower alias
+    # chosen next has no contact more behind it (rates-drops 130101). Off: it costs
+    # decelerating slips 4.6 points of missing speed (their braking twins' next ridge
+    # comes later than the report's capped schedule; full plan, 2 seeds, 17.0 -> 21.6 %)
+    OVERDUE_LATCH = 0.0
+    # 1: no speed either from a track whose last contact was told a step the level lay
+    # flat after (`flat_step_speed`: a stop's friction step). Only the speed: the flag and
+    # the range stay the posterior's. Clears stick-slip 81200 (7 updates after due), but
+    # ridge contacts read so too: the 40 mm/s rail start over ADC counts
+    # (test_quantised_input, seed 1) gives 106 speeds while slipping instead of 170, the
+    # last 0.64 s of its slip without one: off (docs/decoding.md)
+    FLAT_STEP_SPEED = 0.0
     # ... also under heavy noise (1; 0: not where the rise evidence reads the silence,
     # RISE_EVIDENCE_GATE): at 10 dB a silent ridge says little (snr10 missing +5 points)
     OVERDUE_NOISY = 0.0
@@ -866,6 +893,7 @@ class TrackerDecoder(Decoder):
         self._flag_t = -math.inf  # ... the last update that had it up
         self._kept: tuple | None = None  # (the posterior it was read with, P(moving))
         self._due: tuple[_Bank, np.ndarray] | None = None  # (bank, `_overdue`'s times due)
+        self._withheld = -1  # the last contact whose track's speed went overdue (OVERDUE_LATCH)
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
         # the last contact held that came onto an unloaded sensor, (id, t_s, index) or None
@@ -1457,30 +1485,32 @@ class TrackerDecoder(Decoder):
         white = self.detector.noise.white_at_sample(self._n_in - 1)
         return noise_gate.heavy(white, self.NOISY_WHITE_N)
 
-    def _latency_floor(self, B: _Bank) -> np.ndarray:
+    def _latency_floor(self, B: _Bank, regime: float | None = None) -> np.ndarray:
         """How late each track's next contact may still be told, at least: the probes'
         latency where its last contact came from a probe (told later than the kink bank
         tells any), else 0. Where the FSR's hysteresis holds the ridge pulses' fall (the
         loop scenes) the kink bank misses many ridges and the probes find them ~0.2 s
-        late; a track waits for them as long before its silence is taken for a stop."""
+        late; a track waits for them as long before its silence is taken for a stop.
+        `regime`: `STEP_PROBE_REGIME`'s count for this reading (None: that constant's)."""
+        regime = self.STEP_PROBE_REGIME if regime is None else regime
         late = {c.id for c in self._contacts if c.emit_index - c.index > self.detector.lag}
         if not self.STEP_PROBE_WAIT:  # a step probe's contact taken for a stop's step
             late = {k for k in late if k < STEP_IDS}
-        elif self.STEP_PROBE_REGIME > 0:  # ... unless contacts just before it came late too
-            late = self._step_probe_regime(late)
+        elif regime > 0:  # ... unless contacts just before it came late too
+            late = self._step_probe_regime(late, int(regime))
         if not late or not len(B):
             return np.zeros(len(B))
         slow = np.fromiter((int(k) in late for k in B._i[:, I_LAST]), bool, len(B))
         return np.where(slow, self.PROBE_WAIT * self._probe_latency, 0.0)
 
-    def _step_probe_regime(self, late: set[int]) -> set[int]:
-        """`late` without the step probe's contacts that follow `STEP_PROBE_REGIME` contacts
-        all told in time: the FSR's hysteresis holds ridge pulses run after run (the loop's
-        probes find 21 % of its ridges), so a held ridge found late follows other late
-        ones; a late step after contacts told in time is a stop's (issue 22, 136321)."""
+    def _step_probe_regime(self, late: set[int], n: int) -> set[int]:
+        """`late` without the step probe's contacts that follow `n` contacts all told in
+        time (`STEP_PROBE_REGIME`, `OVERDUE_PROBE_REGIME`): the FSR's hysteresis holds ridge
+        pulses run after run (the loop's probes find 21 % of its ridges), so a held ridge
+        found late follows other late ones; a late step after contacts told in time is a
+        stop's (issue 22, 136321)."""
         if all(k < STEP_IDS for k in late):
             return late
-        n = int(self.STEP_PROBE_REGIME)
         keep = set(late)
         for at, c in enumerate(self._contacts):  # (in time order: `_add_contact`)
             if c.id in late and c.id >= STEP_IDS:
@@ -1754,7 +1784,7 @@ class TrackerDecoder(Decoder):
         bar = self.LOG_KEEP_ODDS if h.dirn == self._told_way else self.LOG_REPORT_ODDS
         told = run > 1 and n >= self.DIRECTION_CONTACTS and odds >= bar
         self._told_way = h.dirn if told else 0
-        if told and self._overdue(h, g):  # its next ridge overdue: flagged, no speed
+        if told and self._withhold(h, g):  # its next ridge overdue: flagged, no speed
             bound = self._speed_range(magnitude)
             return SlipEstimate(g, True, None, None, force, min(1.0, max(0.0, p_slip)), None,
                                 None, *bound)  # fmt: skip
@@ -1783,7 +1813,7 @@ class TrackerDecoder(Decoder):
         agreed = share >= self._agree_share() or narrow
         ratio = fast is not None and fast.n >= self.DIRECTION_CONTACTS
         given = fast is not None and (agreed or (ratio and share >= self.SPEED_RATIO_SHARE))
-        if not given or self._overdue(fast, g):
+        if not given or self._withhold(fast, g):
             bound = self._speed_range(magnitude)
             return SlipEstimate(g, True, None, held, force, conf, None, None, *bound)
         assert fast is not None
@@ -1802,6 +1832,15 @@ class TrackerDecoder(Decoder):
             return self.SPEED_AGREE_SHARE
         return noisy
 
+    def _withhold(self, h: _One, g: float) -> bool:
+        """Is the speed of track `h` (read from the bank now) withheld at g: its last
+        contact a step the level lay flat after (`flat_step_speed`, FLAT_STEP_SPEED), or
+        its next ridge overdue (`_overdue`)?"""
+        last = int(self._tracks._i[h.index, I_LAST])
+        if self.FLAT_STEP_SPEED and flat_step_speed.withheld(last, self._steps):
+            return True
+        return self._overdue(h, g)
+
     def _overdue(self, h: _One, g: float) -> bool:
         """Is the speed of track `h` (read from the bank now) withheld at g: its next ridge
         overdue by the report's schedule (`overdue_speed`, OVERDUE_SPEED; the time its
@@ -1811,21 +1850,36 @@ class TrackerDecoder(Decoder):
         if self.OVERDUE_NOISY == 0 and self._silence_read_soft():
             return False  # heavy noise: ridges are missed far more often than DETECT_P says
         B = self._tracks
+        last = int(B._i[h.index, I_LAST])
+        if self.OVERDUE_LATCH and last == self._withheld:
+            return True  # no contact since a speed from it went overdue (`overdue_speed`)
         if self._due is None or self._due[0] is not B:
             due = overdue_speed.next_due_s(
                 _tracks(B),
                 self._silence,
                 self._report_skin,
-                self.OVERDUE_PROBE_WAIT * self._latency_floor(B),
+                self.OVERDUE_PROBE_WAIT * self._latency_floor(B, self._overdue_regime),
                 self._overdue_columns,
             )
             self._due = (B, due)
-        return overdue_speed.overdue(float(self._due[1][h.index]), g, self._rail_s(h.t, g))
+        late = overdue_speed.overdue(float(self._due[1][h.index]), g, self._rail_s(h.t, g))
+        if late:
+            self._withheld = last
+        return late
+
+    @property
+    def _overdue_regime(self) -> float | None:
+        """The step-probe regime the report's latency floor reads (`OVERDUE_PROBE_REGIME`;
+        None: the posterior's, `STEP_PROBE_REGIME`)."""
+        return self.OVERDUE_PROBE_REGIME if self.OVERDUE_PROBE_REGIME > 0 else None
 
     @cached_property
     def _overdue_columns(self) -> np.ndarray:
         """Per silence-table row, the ridge ahead whose silence withholds a speed."""
-        log_p = math.log(self.OVERDUE_MISS_P) if self.OVERDUE_MISS_P > 0 else -math.inf
+        log_stop = self.LOG_STOP if self.LOG_STOP_REPORT is None else self.LOG_STOP_REPORT
+        log_p = overdue_speed.report_log_p(
+            self.OVERDUE_MISS_P, log_stop if self.OVERDUE_STOP_RIDGE else None
+        )
         return overdue_speed.report_columns(self._log_miss, self.SCHEDULE, log_p)
 
     @cached_property

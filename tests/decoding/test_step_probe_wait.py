@@ -49,10 +49,12 @@ def test_after_contacts_told_in_time_the_late_step_gives_no_speed_after_due():
 
 
 def test_with_the_step_probes_wait_the_speed_after_due_stays():
-    """The control, the shipped tracker (`STEP_PROBE_REGIME` 0, `STEP_PROBE_WAIT` 1): the
-    wait for that contact gives the
-    speed after due (so the tests above check the rules, not a changed signal)."""
-    assert after_due_speeds(LATE_STEP, {"STEP_PROBE_WAIT": 1.0, "STEP_PROBE_REGIME": 0.0}) > 0
+    """The control, the shipped posterior (`STEP_PROBE_REGIME` 0, `STEP_PROBE_WAIT` 1) with
+    the report reading its wait too (`OVERDUE_PROBE_REGIME` 0; shipped 3 clears the case,
+    test_overdue_speed): the wait for that contact gives the speed after due (so the tests
+    above check the rules, not a changed signal)."""
+    tuning = {"STEP_PROBE_WAIT": 1.0, "STEP_PROBE_REGIME": 0.0, "OVERDUE_PROBE_REGIME": 0.0}
+    assert after_due_speeds(LATE_STEP, tuning) > 0
 
 
 def _contact(cid: int, t_s: float, late: bool, fs_hz: float) -> ContactEvent:
@@ -69,6 +71,6 @@ def test_a_late_step_after_late_contacts_keeps_its_wait():
     held = [_contact(0, 0.5, False, fs_hz), _contact(1, 0.6, True, fs_hz)]
     decoder._contacts = [*held, _contact(STEP_IDS, 0.7, True, fs_hz)]
     late = {1, STEP_IDS}
-    assert decoder._step_probe_regime(late) == {1, STEP_IDS}
+    assert decoder._step_probe_regime(late, 3) == {1, STEP_IDS}
     decoder._contacts = [_contact(0, 0.5, False, fs_hz), _contact(STEP_IDS, 0.7, True, fs_hz)]
-    assert decoder._step_probe_regime({STEP_IDS}) == set()
+    assert decoder._step_probe_regime({STEP_IDS}, 3) == set()
