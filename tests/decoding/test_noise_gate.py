@@ -9,12 +9,15 @@ is a clear error. The tracker with the gate off asks nothing of it.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from grasplink.decoding import noise_gate
 from grasplink.decoding.tracker import TrackerDecoder
+from grasplink.evaluation import nonstationary as ns
+from grasplink.evaluation import slip_reporting as sr
 
 
 def test_the_gate_opens_in_10_db_noise_and_stays_shut_at_thesis_noise():
@@ -57,3 +60,22 @@ def test_the_silence_floor_opens_in_heavy_noise_not_on_weak_pulses_at_thesis_noi
     # without the noise gate the weak pulses alone open it (session 28's stops cost)
     plain = {"DETECT_MEASURED_SILENCE": 1.0, "NOISY_WHITE_N": 0.0}
     assert _held_in_noise(0.02, plain)._miss_floor(1.0) is not None
+
+
+def test_the_reports_overdue_rules_rest_where_the_white_noise_reads_heavy():
+    """snr10, uniform4 (full plan, seed 116001): early in a 10 dB slip the rise evidence
+    does not yet read the silence soft, so the report's overdue rules withheld speeds no
+    stop had refuted (72 speed updates with them resting, 48 without); only speeds
+    differ, every update's flag is the same."""
+    case = next(
+        c for c in sr.cases(replace(sr.FULL, seeds=1)) if (c.kind, c.seed) == ("snr10", 116_001)
+    )
+    rec = case.make()
+    runs = {}
+    for resting in (0.0, 1.0):
+        tuning = {"tuning": {"OVERDUE_NOISY_WHITE": resting}}
+        decoder = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, tuning)
+        runs[resting], _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
+    speeds = {k: sum(1 for e in v if e.speed_mm_s) for k, v in runs.items()}
+    assert speeds[0.0] > speeds[1.0]
+    assert [e.slip for e in runs[0.0]] == [e.slip for e in runs[1.0]]
