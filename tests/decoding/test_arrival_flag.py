@@ -17,6 +17,7 @@ from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
+from tests.decoding.plan_cases import decode_case
 
 LAYOUT = LAYOUTS_MM["alpha0.1"]
 SPEED_MM_S = 20.0
@@ -154,10 +155,7 @@ def _reversal_arrival(tuning: dict):
     """(update times, flags) of the full plan's reversal at 41 -> 39 mm/s on alpha0.7 (seed
     103000): the 25 mm object's edge onto the empty skin at 0.46 s (told a step 0.1 s
     on: it lies on the skin after), its 2nd ridge at 0.63 s, then 64 mm to the next."""
-    case = next(c for c in sr.cases(sr.FULL) if c.kind == "reversal" and c.seed == 103000)
-    rec = case.make()
-    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
-    estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
+    _, _, estimates = decode_case("reversal", 103000, tuning)
     return np.array([e.t_s for e in estimates]), np.array([e.slip for e in estimates])
 
 

@@ -15,6 +15,7 @@ from grasplink.decoding import level_ramp
 from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
+from tests.decoding.plan_cases import decode_case
 
 FS_HZ = 400.0
 
@@ -63,14 +64,7 @@ def _stick(tuning: dict):
     full plan's stick-slip at 14 mm/s on alpha0.1, reversed, seed 80121: the level ramps
     up while the object slides, steps up as it sticks at 3.115 s (the last ridge 17 ms
     before) and falls about 2 N/s through the stick to 3.485 s."""
-    case = next(
-        c
-        for c in sr.cases(sr.FULL)
-        if c.kind == "stick-slip" and c.seed == 80121 and c.variant == "14 mm/s"
-    )
-    rec = case.make()
-    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
-    estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
+    rec, _, estimates = decode_case("stick-slip", 80121, tuning, "14 mm/s")
     stop = next(s for s in sr.score(estimates, rec.truth).stops if 3.0 < s.start_s < 3.2)
     t = np.array([e.t_s for e in estimates])
     return t, np.array([e.slip for e in estimates]), (stop.start_s, stop.end_s), stop.observable_s

@@ -9,15 +9,13 @@ is a clear error. The tracker with the gate off asks nothing of it.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from grasplink.decoding import noise_gate
 from grasplink.decoding.tracker import TrackerDecoder
-from grasplink.evaluation import nonstationary as ns
-from grasplink.evaluation import slip_reporting as sr
+from tests.decoding.plan_cases import decode_case
 
 
 def test_the_gate_opens_in_10_db_noise_and_stays_shut_at_thesis_noise():
@@ -67,15 +65,10 @@ def test_the_reports_overdue_rules_rest_where_the_white_noise_reads_heavy():
     does not yet read the silence soft, so the report's overdue rules withheld speeds no
     stop had refuted (72 speed updates with them resting, 48 without); only speeds
     differ, every update's flag is the same."""
-    case = next(
-        c for c in sr.cases(replace(sr.FULL, seeds=1)) if (c.kind, c.seed) == ("snr10", 116_001)
-    )
-    rec = case.make()
-    runs = {}
-    for resting in (0.0, 1.0):
-        tuning = {"tuning": {"OVERDUE_NOISY_WHITE": resting}}
-        decoder = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, tuning)
-        runs[resting], _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
+    runs = {
+        resting: decode_case("snr10", 116_001, {"OVERDUE_NOISY_WHITE": resting})[2]
+        for resting in (0.0, 1.0)
+    }
     speeds = {k: sum(1 for e in v if e.speed_mm_s) for k, v in runs.items()}
     assert speeds[0.0] > speeds[1.0]
     assert [e.slip for e in runs[0.0]] == [e.slip for e in runs[1.0]]

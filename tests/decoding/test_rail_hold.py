@@ -11,21 +11,12 @@ import numpy as np
 import pytest
 
 from grasplink.decoding import rail_hold
-from grasplink.decoding.tracker import TrackerDecoder
-from grasplink.evaluation import nonstationary as ns
-from grasplink.evaluation import slip_reporting as sr
+from tests.decoding.plan_cases import decode_case
 
 
 def _saturated(tuning: dict):
     """(update times, flags, the rail's stretches) of the saturation case."""
-    case = next(
-        c
-        for c in sr.cases(sr.FULL)
-        if c.kind == "saturation" and c.seed == 123100 and c.variant == "22 mm/s"
-    )
-    rec = case.make()
-    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
-    estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
+    rec, dec, estimates = decode_case("saturation", 123100, tuning, "22 mm/s")
     t = np.array([e.t_s for e in estimates])
     flags = np.array([e.slip for e in estimates])
     speeds = [e.speed_mm_s for e in estimates]

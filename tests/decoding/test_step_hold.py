@@ -17,21 +17,13 @@ import pytest
 from grasplink.decoding import step_hold
 from grasplink.decoding.detector import step_shape
 from grasplink.decoding.kernels import posterior as posterior_kernels
-from grasplink.decoding.tracker import TrackerDecoder
-from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
+from tests.decoding.plan_cases import decode_case
 
 
 def _reversal(tuning: dict):
     """(update times, flags, speeds, truth, estimates) of the reversal case."""
-    case = next(
-        c
-        for c in sr.cases(sr.FULL)
-        if c.kind == "reversal" and c.seed == 102110 and c.variant == "22->-58 mm/s"
-    )
-    rec = case.make()
-    dec = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
-    estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
+    rec, _, estimates = decode_case("reversal", 102110, tuning, "22->-58 mm/s")
     t = np.array([e.t_s for e in estimates])
     flags = np.array([e.slip for e in estimates])
     return t, flags, [e.speed_mm_s for e in estimates], rec.truth, estimates

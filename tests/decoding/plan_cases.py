@@ -1,0 +1,31 @@
+"""Full-plan cases of the slip-reporting benchmark, decoded as its page decodes them.
+
+The decoding tests pin each tracker rule on a case of `slip_reporting.FULL` named by kind,
+seed (and variant, where a seed names several); this finds it and feeds it to a tracker
+with a tuning, 3 samples at a time (`slip_reporting.CHUNK`), in one place.
+"""
+
+from __future__ import annotations
+
+from grasplink.decoding.tracker import TrackerDecoder
+from grasplink.evaluation import nonstationary as ns
+from grasplink.evaluation import slip_reporting as sr
+
+
+def plan_case(kind: str, seed: int, variant: str | None = None) -> sr.Case:
+    """The full plan's case of this kind and seed (and variant)."""
+    return next(
+        c
+        for c in sr.cases(sr.FULL)
+        if c.kind == kind and c.seed == seed and (variant is None or c.variant == variant)
+    )
+
+
+def decode_case(
+    kind: str, seed: int, tuning: dict, variant: str | None = None
+) -> tuple[ns.Recorded, TrackerDecoder, list]:
+    """(the recording, the tracker after it, its estimates) of that case under `tuning`."""
+    rec = plan_case(kind, seed, variant).make()
+    decoder = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
+    estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
+    return rec, decoder, estimates
