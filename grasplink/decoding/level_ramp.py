@@ -65,17 +65,12 @@ def step_min_n(window_s: float, fs_hz: float, slope_n_s: float, z: float, white_
     return max(slope_n_s * window_s, z * spread)
 
 
-def ramping(x: np.ndarray | None, steps: int, step_n: float) -> bool:
-    """Whether the samples `x` (the last `steps` + 1 windows, oldest first, a whole number
-    of samples each) show the level ramping: every step between consecutive windows'
-    medians at least `step_n` the same way. None (the samples not held): no."""
-    return ramp_way(x, steps, step_n) != 0
-
-
 def ramp_way(x: np.ndarray | None, steps: int, step_n: float) -> int:
-    """The way the samples `x` show the level ramping (`ramping`): +1 up, -1 down, 0 no
-    ramp. With `RAMP_ONE_WAY` the tracker holds only a ramp the way its last held one went
-    (the module doc)."""
+    """The way the samples `x` (the last `steps` + 1 windows, oldest first, a whole number
+    of samples each) show the level ramping: +1 up, -1 down when every step between
+    consecutive windows' medians is at least `step_n` that way, else 0 (and 0 for None:
+    the samples not held). With `RAMP_ONE_WAY` the tracker holds only a ramp the way its
+    last held one went (the module doc)."""
     if steps < 1:
         raise ValueError(f"level_ramp: steps must be >= 1, got {steps!r}")
     if x is None or len(x) < steps + 1 or len(x) % (steps + 1):

@@ -1854,7 +1854,7 @@ class TrackerDecoder(Decoder):
         if self.OVERDUE_NOISY == 0 and self._silence_read_soft():
             return False  # heavy noise: ridges are missed far more often than DETECT_P says
         if self.OVERDUE_NOISY_WHITE == 0 and self.NOISY_WHITE_N > 0 and self._noisy():
-            return False  # heavy noise: ridges are missed far more often than DETECT_P says
+            return False  # ... or the white noise reads heavy before any pulse is told
         B = self._tracks
         last = int(B._i[h.index, I_LAST])
         if self.OVERDUE_LATCH and last == self._withheld:

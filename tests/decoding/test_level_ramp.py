@@ -92,15 +92,15 @@ def test_a_ramp_a_flat_level_and_a_step():
     noise = 0.02 * rng.standard_normal(len(t))
     step = level_ramp.step_min_n(0.05, FS_HZ, 0.2, 1.5, 0.02)
     assert step == pytest.approx(1.5 * np.sqrt(np.pi) * 0.02 / np.sqrt(20))  # noise's bound
-    assert level_ramp.ramping(_windows(0.5 * t + noise), 4, step)  # 10 mm/s sliding on
-    assert level_ramp.ramping(_windows(-0.5 * t + noise), 4, step)  # ... or off
-    assert not level_ramp.ramping(_windows(0.05 * t + noise), 4, step)  # drift
+    assert level_ramp.ramp_way(_windows(0.5 * t + noise), 4, step) != 0  # 10 mm/s sliding on
+    assert level_ramp.ramp_way(_windows(-0.5 * t + noise), 4, step) != 0  # ... or off
+    assert level_ramp.ramp_way(_windows(0.05 * t + noise), 4, step) == 0  # drift
     # a stop's step, then flat: one window's step, not a ramp
-    assert not level_ramp.ramping(_windows(np.where(t > 0.9, 0.3, 0.0) + noise), 4, step)
+    assert level_ramp.ramp_way(_windows(np.where(t > 0.9, 0.3, 0.0) + noise), 4, step) == 0
     # a ridge's pulse (a few samples above half height) on a flat level makes no ramp
     pulse = 0.8 * np.exp(-0.5 * ((t - 0.93) / 0.002) ** 2)
-    assert not level_ramp.ramping(_windows(noise + pulse), 4, step)
-    assert not level_ramp.ramping(None, 4, step)  # samples no longer held
+    assert level_ramp.ramp_way(_windows(noise + pulse), 4, step) == 0
+    assert level_ramp.ramp_way(None, 4, step) == 0  # samples no longer held
 
 
 def test_a_ramp_tells_its_way():
@@ -127,4 +127,4 @@ def test_bad_input_is_named():
     with pytest.raises(ValueError, match="must be >= 0"):
         level_ramp.step_min_n(0.05, FS_HZ, -0.2, 1.5, 0.02)
     with pytest.raises(ValueError, match="steps must be >= 1"):
-        level_ramp.ramping(np.zeros(10), 0, 0.01)
+        level_ramp.ramp_way(np.zeros(10), 0, 0.01)
