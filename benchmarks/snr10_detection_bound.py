@@ -329,6 +329,10 @@ ALIAS_SETTINGS = {  # the allowances tabulated: name -> what a hypothesis must f
     "smooth": ab.AliasSettings(),  # every snr10 case's true assignment fits
     "25 %": ab.AliasSettings(rel=0.25, dv_dx_per_s=0.0),  # consecutive speeds +-25 %
     "smooth, 10 ms": ab.AliasSettings(tol_s=0.010),
+    # the most favourable: near-constant speed and the set's speeds (21-118 mm/s) known
+    "25 %, 15-150 mm/s": ab.AliasSettings(
+        rel=0.25, dv_dx_per_s=0.0, v_min_mm_s=15.0, v_max_mm_s=150.0
+    ),
 }
 
 
