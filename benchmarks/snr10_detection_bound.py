@@ -20,6 +20,8 @@ could give on slip_reporting's snr10 cases (`evaluation/detection_bound.py`).
    once two contacts of the run are told (a track predicts the rest). Beside it today's
    detector's found share (+-20 ms), the same bound on the contacts it finds (a perfect
    tracker behind today's detector), and, with `--decoder`, the default decoder's missing.
+4. With `--aliases`: the same bound without the ridge identities (`evaluation/alias_bound.py`)
+   on the clean told contacts at the level "today", per allowance of `ALIAS_SETTINGS`.
 
 Every snr10 case is sampled at 400 Hz (`nonstationary.make_signal`): no rate to split by.
 
