@@ -20,10 +20,12 @@ could give on slip_reporting's snr10 cases (`evaluation/detection_bound.py`).
    once two contacts of the run are told (a track predicts the rest). Beside it today's
    detector's found share (+-20 ms), the same bound on the contacts it finds (a perfect
    tracker behind today's detector), and, with `--decoder`, the default decoder's missing.
+4. With `--aliases`: the same bound without the ridge identities (`evaluation/alias_bound.py`)
+   on the clean told contacts at the level "today", per allowance of `ALIAS_SETTINGS`.
 
 Every snr10 case is sampled at 400 Hz (`nonstationary.make_signal`): no rate to split by.
 
-Run: `.venv/bin/python benchmarks/snr10_detection_bound.py [--seeds N] [--decoder]
+Run: `.venv/bin/python benchmarks/snr10_detection_bound.py [--seeds N] [--decoder] [--aliases]
 [--workers 2]`.
 """
 
@@ -38,6 +40,7 @@ import numpy as np
 
 from grasplink.decoding.base import SlipEstimate
 from grasplink.decoding.registry import DEFAULT_DECODER
+from grasplink.evaluation import alias_bound as ab
 from grasplink.evaluation import contact_truth as ct
 from grasplink.evaluation import detection_bound as db
 from grasplink.evaluation import nonstationary as ns
@@ -136,6 +139,8 @@ def snr10_job(case: sr.Case, decoder: bool) -> dict:
         "templates": tmpls,
         "t_upd": t_upd[scored],
         "upd_run": _update_runs(truth, t_upd[scored]),
+        "spacings": tuple(truth.layout_mm),
+        "reverse": bool(case.reverse),
     }
     if decoder:
         dec = sr.build_decoder(DEFAULT_DECODER, truth.layout_mm, fs, {})
@@ -278,6 +283,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--decoder", action="store_true", help="the default decoder beside it")
     parser.add_argument("--gates", type=int, default=400, help="gates per held case")
+    parser.add_argument(
+        "--aliases",
+        action="store_true",
+        help="the bound without the ridge identities (evaluation/alias_bound.py) beside it",
+    )
     args = parser.parse_args(argv)
     if not 1 <= args.seeds <= sr.FULL.seeds:
         parser.error(f"--seeds must be 1-{sr.FULL.seeds}, got {args.seeds}")
@@ -306,8 +316,132 @@ def main(argv: list[str] | None = None) -> int:
                 [args.gates] * len(held_cases),
             )
         )
+        if args.aliases:  # on the oracle's told contacts at the level "today"
+            level = _level_today(held)
+            per = list(pool.map(alias_job, rows, [level] * len(rows)))
+            for row, bounds in zip(rows, per, strict=True):
+                row["aliases"] = bounds
     report(rows, held, args)
+    if args.aliases:
+        alias_report(rows, args)
     return 0
+
+
+ALIAS_SETTINGS = {  # the allowances tabulated: name -> what a hypothesis must fit
+    "smooth": ab.AliasSettings(),  # every snr10 case's true assignment fits
+    "25 %": ab.AliasSettings(rel=0.25, dv_dx_per_s=0.0),  # consecutive speeds +-25 %
+    "smooth, 10 ms": ab.AliasSettings(tol_s=0.010),
+    # the most favourable: near-constant speed and the set's speeds (21-118 mm/s) known
+    "25 %, 15-150 mm/s": ab.AliasSettings(
+        rel=0.25, dv_dx_per_s=0.0, v_min_mm_s=15.0, v_max_mm_s=150.0
+    ),
+}
+
+
+def _level_today(every_held: list[dict]) -> float:
+    """The level "today" of `report`: the scan tells as many contacts per held minute (grip
+    steady) as today's detector."""
+    held = [h for h in every_held if h["steady"]]
+    minutes = sum(h["minutes"] for h in held)
+    return level_for(held, sum(h["today"] for h in held) / minutes)
+
+
+def alias_job(row: dict, level: float) -> dict:
+    """One snr10 case's alias bounds (`ab.run_bound`) per allowance of `ALIAS_SETTINGS`, on
+    the oracle's clean told contacts at `level`: summed over its scored updates."""
+    told = row["clean"] >= level
+    n = len(row["spacings"]) + 1
+    if len(row["times"]) != n or np.any(row["runs"] != 0):
+        raise AssertionError("an snr10 case is one run crossing every ridge once")
+    by_ridge = slice(None, None, -1) if row["reverse"] else slice(None)  # physical order
+    layout = ab.Layout(
+        row["spacings"],
+        ab.p_detect(row["snr"], level)[by_ridge],
+        (row["decided"] - row["times"])[by_ridge],
+    )
+    out: dict = {"level": level}
+    for name, settings in ALIAS_SETTINGS.items():
+        b = ab.run_bound(
+            layout,
+            -1 if row["reverse"] else 1,
+            row["times"],
+            told,
+            row["decided"],
+            row["t_upd"],
+            settings,
+        )
+        out[name] = {k: int(np.sum(getattr(b, k))) for k in ALIAS_COLUMNS} | {
+            "truth_fits": b.truth_fits
+        }
+    return out
+
+
+ALIAS_COLUMNS = (
+    "unanimous_held",
+    "likelihood_held",
+    "unanimous_fresh",
+    "likelihood_fresh",
+    "unanimous_alone",
+    "likelihood_alone",
+    "likelihood_now",
+    "wrong",
+)
+
+
+def alias_report(rows: list[dict], args) -> None:
+    """The alias bounds per layout and speed set beside the s27 bound (any 2 / last 3,
+    ridges known) and the decoder: speed missing = scored updates not determined."""
+    level = rows[0]["aliases"]["level"]
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        groups[r["layout"]].append(r)
+        groups[f"speed {r['variant']}"].append(r)
+        groups["all"].append(r)
+    order = sorted(groups, key=lambda k: (k == "all", k.startswith("speed"), k))
+    for name in ALIAS_SETTINGS:
+        s = ALIAS_SETTINGS[name]
+        excluded = sum(not r["aliases"][name]["truth_fits"] for r in rows)
+        print(
+            f"Aliases, allowance {name!r} (times +-{s.tol_s * 1e3:g} ms, consecutive speeds"
+            f" +-{s.rel:.0%} + {s.dv_dx_per_s:g} mm/s per mm, {s.v_min_mm_s:g}-"
+            f"{s.v_max_mm_s:g} mm/s; agree {s.agree:.0%}, mass {s.mass:.0%}), clean told at"
+            f" {level:.2f}; the true assignment excluded in {excluded} of {len(rows)} cases."
+            " Speed missing % (held: determined once in the run; fresh: now, the last two"
+            " told among the last 3 true; alone: from those alone):"
+        )
+        header = (
+            "| set | scored updates | s27 ridges known: any 2 / last 3 |"
+            " unanimous: held / fresh / alone | likelihood: held / fresh / alone |"
+            " likelihood on an alias (of scored) |" + (" decoder |" if args.decoder else "")
+        )
+        print(header)
+        print("|---" * (header.count("|") - 1) + "|")
+        for key in order:
+            rs = groups[key]
+            scored = sum(len(r["t_upd"]) for r in rs)
+            told = [r["clean"] >= level for r in rs]
+            any2 = sum(missing(r, m, None) for r, m in zip(rs, told, strict=True))
+            last3 = sum(missing(r, m, 3) for r, m in zip(rs, told, strict=True))
+
+            def pct(col: str, rs=rs, scored=scored, name=name) -> str:
+                got = sum(r["aliases"][name][col] for r in rs)
+                return f"{(scored - got) / scored:.1%}"
+
+            cells = [
+                key,
+                str(scored),
+                f"{any2 / scored:.1%} / {last3 / scored:.1%}",
+                " / ".join(
+                    pct(c) for c in ("unanimous_held", "unanimous_fresh", "unanimous_alone")
+                ),
+                " / ".join(
+                    pct(c) for c in ("likelihood_held", "likelihood_fresh", "likelihood_alone")
+                ),
+                f"{sum(r['aliases'][name]['wrong'] for r in rs) / scored:.1%}",
+            ]
+            if args.decoder:
+                cells.append(f"{sum(r['decoder_missing'] for r in rs) / scored:.1%}")
+            print("| " + " | ".join(cells) + " |")
 
 
 def report(rows: list[dict], every_held: list[dict], args) -> None:
