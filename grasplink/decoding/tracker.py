@@ -90,7 +90,6 @@ from grasplink.decoding import (
     arrival,
     arrival_flag,
     coast_bound,
-    contact_gate,
     detect_chance,
     flag_keep,
     flat_step_speed,
@@ -486,10 +485,10 @@ class TrackerDecoder(Decoder):
     # ... the measured chance only while the told pulses stand under this many noise units
     # at their median (`RiseEvidence.blind`; the rise evidence's own gate when larger)
     DETECT_MEASURED_GATE = 6.0
-    # ... and (with the gated probe's expectations, GATE_AHEAD_S) only while the white
-    # noise measured reaches this (N per sample; `noise_gate`): 10 dB SNR puts 0.1-0.3 N
-    # under the simulator's 0.3-1 N pulses, thesis-like noise is 0.02 N - the stick-slip
-    # and loop kinds' weak pulses open the told-height gate at that. 0: off (no such test)
+    # ... and only while the white noise measured reaches this (N per sample;
+    # `noise_gate`): 10 dB SNR puts 0.1-0.3 N under the simulator's 0.3-1 N pulses,
+    # thesis-like noise is 0.02 N - the stick-slip and loop kinds' weak pulses open the
+    # told-height gate at that. 0: off (no such test)
     NOISY_WHITE_N = 0.05
     DETECT_THRESHOLD_Z = rise_evidence.TOLD_Z  # ... a rise told from this z (noise units)
     LOG_SHAPE_RIDGE_STOP = 0.0
@@ -706,18 +705,6 @@ class TrackerDecoder(Decoder):
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
     STRONG_Z = 60.0  # ridge contacts: strengths spread log-uniformly up to about this
     STRENGTH_MIN, STRENGTH_MAX = math.log(0.1), math.log(3.0)
-    # while the slip is flagged the detector expects contacts from GATE_BACK_S before the
-    # samples taken to GATE_AHEAD_S after them (`ContactDetector.expect`: its gated pulse
-    # probe, `detector.pulse_gate`, reads a wider window there); 0: never told
-    GATE_BACK_S = 0.3
-    GATE_AHEAD_S = 0.3
-    # ... or (GATE_PREDICT 1) around the times the next GATE_AHEAD ridges of the flagged
-    # tracks are due, GATE_FLOOR_S plus GATE_SIGMAS of their timing either way
-    # (`contact_gate`): none past the last ridge, where a flag coasts through the rest
-    GATE_PREDICT = 1.0
-    GATE_AHEAD = 3
-    GATE_FLOOR_S = 0.03
-    GATE_SIGMAS = 3.0
     REFRESH_S = 0.5  # how often silence (and the agreement) is re-scored between contacts
     NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out
     MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts (far-off contact)
@@ -1538,41 +1525,7 @@ class TrackerDecoder(Decoder):
                 self._ramp_way = 0
         elif self.REFLAG_P > 0:
             out = self._report_reflag(g, out)
-        gate = out.slip and self.GATE_AHEAD_S > 0 and self.detector.gated is not None
-        if gate and self._noisy():
-            # the next contacts expected: the detector's gated probe reads there (`pulse_gate`)
-            self._expect_contacts()
         return out
-
-    def _expect_contacts(self) -> None:
-        """Tell the detector where contacts are expected while the slip is flagged
-        (`ContactDetector.expect`): with GATE_PREDICT, around the next ridges of the chosen
-        track and the likeliest one with a speed (`contact_gate`; none without a speed or
-        past the last ridge), else from GATE_BACK_S before the samples taken to
-        GATE_AHEAD_S after them."""
-        n, fs = self._n_in, self.fs_hz
-        back = n - round(self.GATE_BACK_S * fs)
-        if not self.GATE_PREDICT:
-            self.detector.expect(back, n + round(self.GATE_AHEAD_S * fs))
-            return
-        if self._cache is None or n <= 0:
-            return
-        _, chosen, _, _, _, magnitude = self._cache
-        tracks = [magnitude[0]] if magnitude[0] is not None else []
-        if chosen is not None and not chosen[1]:
-            tracks.append(chosen[0])
-        now_s = self.detector.samples.time(n - 1, 0.0)
-        for h in tracks:
-            if not math.isnan(h.stop):
-                continue
-            pos = self._pos[(1 - h.dirn) // 2]
-            for a, b in contact_gate.due_windows(
-                h.numbers, pos, self.count, int(self.GATE_AHEAD), self.GATE_FLOOR_S,
-                self.GATE_SIGMAS,
-            ):  # fmt: skip
-                last = n - 1 + round((b - now_s) * fs)
-                if last >= back:
-                    self.detector.expect(n - 1 + round((a - now_s) * fs), last)
 
     def _report_reflag(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged again by a pulse contact soon after the flag was last
