@@ -78,7 +78,6 @@ on how the input is chunked. Figures: docs/benchmarks/decoding.md, slip_reportin
 from __future__ import annotations
 
 import bisect
-import functools
 import math
 from collections.abc import Mapping, Sequence
 from functools import cached_property
@@ -90,7 +89,6 @@ from grasplink.decoding import (
     arrival,
     arrival_flag,
     coast_bound,
-    detect_chance,
     flag_keep,
     flat_step_speed,
     level_ramp,
@@ -469,28 +467,11 @@ class TrackerDecoder(Decoder):
     RISE_EVIDENCE_GATE = 6.0
     RISE_H_LOW = rise_evidence.H_LOW  # ... the pulse size's prior from this x the told median
     RISE_SILENCE_AHEAD = 3  # ... and the silence of this many ridges due so read (0: none)
-    # ... each such ridge scored no lower than log(1 - P(told)), P measured from the told
-    # pulses' rise against the probe's threshold (`detect_chance`): this share of the way
-    # (log) from the DETECT_P table's miss, for skipped ridges / due ridges; 0: the table's
-    DETECT_MEASURED_SKIP = 0.0
-    # The due ridges' floor, gated by the white noise too (NOISY_WHITE_N), leaves
-    # stick-slip, loop and held-noise to the digit (gated by the told pulses alone, s28,
-    # it cost their stops), but on 3 seeds it buys snr10 speeds with speeds at rest:
-    # missing 51.9 -> 50.6 %, speed at rest 13.8 -> 14.9 %, flagged at rest 31.7 -> 33.6 %
-    # (full plan, one run, with OVERDUE_NOISY_WHITE 0): off, as SPEED_AGREE_SHARE_NOISY
-    DETECT_MEASURED_SILENCE = 0.0
-    # ... or only for the due ridges whose rise is not read (no samples held yet, another
-    # contact's rise there): the z read stays the evidence (its ratio, no floor raised)
-    DETECT_MEASURED_UNREAD = 0.0
-    # ... the measured chance only while the told pulses stand under this many noise units
-    # at their median (`RiseEvidence.blind`; the rise evidence's own gate when larger)
-    DETECT_MEASURED_GATE = 6.0
-    # ... and only while the white noise measured reaches this (N per sample;
-    # `noise_gate`): 10 dB SNR puts 0.1-0.3 N under the simulator's 0.3-1 N pulses,
-    # thesis-like noise is 0.02 N - the stick-slip and loop kinds' weak pulses open the
-    # told-height gate at that. 0: off (no such test)
+    # the white noise (N per sample, `noise_gate`) from which the report's overdue rules
+    # rest (OVERDUE_NOISY_WHITE): 10 dB SNR puts 0.1-0.3 N under the simulator's 0.3-1 N
+    # pulses, thesis-like noise is 0.02 N - the stick-slip and loop kinds' weak pulses
+    # pass the told-height test (RISE_EVIDENCE_GATE) at that. 0: off (no such test)
     NOISY_WHITE_N = 0.05
-    DETECT_THRESHOLD_Z = rise_evidence.TOLD_Z  # ... a rise told from this z (noise units)
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
@@ -1207,7 +1188,6 @@ class TrackerDecoder(Decoder):
         rows, gain = rise_evidence.skip_adjustment(
             floats, ints, (ev.id, ev.t_s, ev.index, ev.emit_index), earlier, self._pos,
             self._log_miss, self.MAX_SKIP, self._rise, self.RISE_EVIDENCE_GATE,
-            self._miss_floor(self.DETECT_MEASURED_SKIP),
         )  # fmt: skip
         floats[rows, F_SCORE] += self.RISE_EVIDENCE * gain
 
@@ -1452,21 +1432,8 @@ class TrackerDecoder(Decoder):
         return self._coast_bound(B, rise_evidence.silence(
             open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
             self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
-            memo, self._miss_floor(self.DETECT_MEASURED_SILENCE),
-            self._miss_floor(self.DETECT_MEASURED_UNREAD),
+            memo,
         ))  # fmt: skip
-
-    def _miss_floor(self, weight: float) -> rise_evidence.Floor | None:
-        """A missed ridge's least score with the detection chance measured
-        (`detect_chance.floor`, `weight` of the way from the table's); None at 0."""
-        if not weight or not self._rise.blind(self.DETECT_MEASURED_GATE):
-            return None
-        if not self._noisy():
-            return None
-        return functools.partial(
-            detect_chance.floor, h_low=self.RISE_H_LOW,
-            threshold_z=self.DETECT_THRESHOLD_Z, weight=float(weight),
-        )  # fmt: skip
 
     def _noisy(self) -> bool:
         """The white noise measured at the samples taken reaches NOISY_WHITE_N (`noise_gate`;
