@@ -22,10 +22,10 @@ import math
 
 def heavy(white_n: float | None, least_n: float) -> bool:
     """Is the white noise `white_n` (N per sample; None: not measured yet) at least
-    `least_n`? `least_n` 0 or less: always (the gate is off). ValueError for a level that
-    is not a number."""
+    `least_n`? `least_n` 0 or less: never (the gate is off: no noise counts as heavy).
+    ValueError for a level that is not a number."""
     if math.isnan(least_n):
         raise ValueError("noise gate: the least white noise is not a number")
     if least_n <= 0.0:
-        return True
+        return False
     return white_n is not None and white_n >= least_n

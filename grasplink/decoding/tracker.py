@@ -1437,9 +1437,9 @@ class TrackerDecoder(Decoder):
 
     def _noisy(self) -> bool:
         """The white noise measured at the samples taken reaches NOISY_WHITE_N (`noise_gate`;
-        always with it 0)."""
+        never with it 0)."""
         if self.NOISY_WHITE_N <= 0:
-            return True
+            return False  # (the gate off: no white-noise lookup)
         white = self.detector.noise.white_at_sample(self._n_in - 1)
         return noise_gate.heavy(white, self.NOISY_WHITE_N)
 
@@ -1773,7 +1773,7 @@ class TrackerDecoder(Decoder):
             return False
         if self.OVERDUE_NOISY == 0 and self._silence_read_soft():
             return False  # heavy noise: ridges are missed far more often than DETECT_P says
-        if self.OVERDUE_NOISY_WHITE == 0 and self.NOISY_WHITE_N > 0 and self._noisy():
+        if self.OVERDUE_NOISY_WHITE == 0 and self._noisy():
             return False  # ... or the white noise reads heavy before any pulse is told
         B = self._tracks
         last = int(B._i[h.index, I_LAST])

@@ -2,7 +2,7 @@
 
 At 10 dB SNR the white noise under a ridge pulse is 0.1-0.3 N; thesis-like noise is
 0.02 N. A rule meant for heavy noise opens above a level set between them, never while
-the noise is not measured yet, always when the gate is off; a level that is not a number
+the noise is not measured yet, never when the gate is off; a level that is not a number
 is a clear error. The report's overdue rules rest where it reads heavy.
 """
 
@@ -26,9 +26,9 @@ def test_the_gate_stays_shut_before_the_noise_is_measured():
     assert not noise_gate.heavy(None, 0.05)
 
 
-def test_a_level_of_zero_turns_the_gate_off():
-    assert noise_gate.heavy(None, 0.0)
-    assert noise_gate.heavy(0.001, 0.0)
+def test_a_level_of_zero_turns_the_gate_off_so_no_noise_counts_as_heavy():
+    assert not noise_gate.heavy(None, 0.0)
+    assert not noise_gate.heavy(0.3, 0.0)
 
 
 def test_a_level_that_is_not_a_number_is_an_error():
