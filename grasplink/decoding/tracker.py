@@ -97,7 +97,6 @@ from grasplink.decoding import (
     rail_hold,
     reflag,
     rise_evidence,
-    rise_travel,
     step_hold,
     stop_jumps,
     told_rise,
@@ -121,7 +120,6 @@ from grasplink.decoding.kernels.layout import (
     F_S,
     F_SCORE,
     F_STOP,
-    F_V,
     F_WIDTH,
     I_COLS,
     I_DIRN,
@@ -129,10 +127,8 @@ from grasplink.decoding.kernels.layout import (
     I_LAST,
     I_N,
     I_RIDGE,
-    I_RUN,
     I_WIDTH,
     IDS,
-    P11,
 )
 from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.errors import ConfigError
@@ -409,10 +405,6 @@ class TrackerDecoder(Decoder):
     # the last ridge at 10 dB cleared in 0.42 s, > 0.3; a stop on a ridge placed 0.067 mm
     # past the bound; the rail before the object arrives): off (0) until those hold
     LOG_SHAPE_STOP_RIDGE = math.log(0.1)
-    # weight of a contact's scale against the track's speed (`rise_travel.log_ratio`, the
-    # measured ridge / clutter likelihood ratio) on a child taking it for its ridge: 0 off;
-    # RISE_TRAVEL_GAIN 0 keeps only its losses (a scale fitting the speed gains nothing)
-    RISE_TRAVEL = 0.0
     # a contact onto an unloaded sensor (its level under this, N: `arrival`) is the edge
     # sliding onto the skin: tracks born there at a later ridge of their way had every
     # ridge before it missed (0: off, the start prior alone). Full plan, one run
@@ -436,7 +428,6 @@ class TrackerDecoder(Decoder):
     # slip dropped 13.6 -> 12.8 % (reversal 30.0 -> 23.1, loop 39.2 -> 37.3, rates-drops
     # 8.7 -> 8.0), every other column of every kind unchanged (held 0.0 %)
     ARRIVAL_STEP_KEEP = 1.0
-    RISE_TRAVEL_GAIN = 1.0
     # a contact taken for a ridge whose onset shows no pulse's rise on the track's rise
     # time (`told_rise`: the probe's z under TOLD_RISE_Z, read only where its window is
     # held by the contact's decision) loses this (0: off) - a bend of the level (hysteresis
@@ -1160,16 +1151,6 @@ class TrackerDecoder(Decoder):
             shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
-        if self.RISE_TRAVEL and not probe and len(floats):
-            # a ridge's rise spans ~1 mm of the edge's travel whatever the speed: the
-            # track's speed (and its uncertainty) predicts the scale its ridge is found at
-            ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_RUN] >= 2) & np.isnan(floats[:, F_STOP])
-            ratio = rise_travel.log_ratio(
-                ev.scale_s, floats[ridge, F_V], floats[ridge, P11], self.fs_hz
-            )
-            if not self.RISE_TRAVEL_GAIN:
-                ratio = np.minimum(ratio, 0.0)
-            floats[ridge, F_SCORE] += self.RISE_TRAVEL * ratio
         if self.TOLD_RISE_LOG and not probe and len(floats):
             # no pulse rose at the onset on the track's rise time: a bend, not its ridge
             told_rise.ridge_loss(
