@@ -7,7 +7,7 @@ settings first) the updates with the wrong direction, the missing speeds from th
 contact, and every change of the direction told. Used to trace a case a tuning run
 flags (`tune_tracker_kinds.py`: rates-drops wrong direction).
 
-Run: `.venv/bin/python benchmarks/case_direction.py --seed 130101 --try RISE_TRAVEL=1`.
+Run: `.venv/bin/python benchmarks/case_direction.py --seed 130101 --try OVERDUE_LATCH=1`.
 """
 
 from __future__ import annotations

@@ -9,8 +9,7 @@ prints the stop's own step (the contact nearest the stop's start, within
 previous contact measured before *its* onset (past pulse, when that onset lies in the
 window), the trend the watch used, the base-to-base trend (`_long_trend`), the gap to the
 previous contact and the verdict told by the report's due time. `--headline` does the same
-for the headline loop's contacts after its onset (`scenes/loop_headline.toml`, with
-`RISE_TRAVEL=1` by default: the loop that slips on to 2.08 s).
+for the headline loop's contacts after its onset (`scenes/loop_headline.toml`).
 
 Run: `.venv/bin/python benchmarks/stop_trends.py --seeds 2` (`--cases SEED,...`: only those).
 """
@@ -90,17 +89,15 @@ def _line(contact, verdict: str) -> str:  # type: ignore[no-untyped-def]
     )
 
 
-def headline(rise_travel: float) -> None:
+def headline() -> None:
     """The headline loop's contacts after the slip's onset and their watches' trends."""
     from grasplink.controllers import build_controllers
-    from grasplink.decoding import tracker
 
-    tracker.TrackerDecoder.RISE_TRAVEL = rise_travel  # type: ignore[attr-defined]
     SEEN.clear()
     found = sr.headline_check(Path("scenes/loop_headline.toml"), build_controllers)
     keys = ("stop_s", "first_speed_s", "first_speed", "first_speed_truth", "last_speed_s",
             "speed_at_rest_updates", "speed_after_observable_updates")  # fmt: skip
-    print(f"headline (RISE_TRAVEL={rise_travel:g}):", {k: found.get(k) for k in keys})
+    print("headline:", {k: found.get(k) for k in keys})
     for _, s in sorted(SEEN.items()):
         print(
             f"  contact {s['t_s']:.3f} trend N/s own {s['own']:6.2f} past pulse "
@@ -112,10 +109,10 @@ def headline(rise_travel: float) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     plan_cases.add_plan_arguments(parser, ",".join(stop_causes.STOP_KINDS), 2, cases=True)
-    parser.add_argument("--headline", type=float, default=None, metavar="RISE_TRAVEL")
+    parser.add_argument("--headline", action="store_true")
     args = parser.parse_args(argv)
-    if args.headline is not None:
-        headline(args.headline)
+    if args.headline:
+        headline()
         return 0
     todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, args.cases)
     with ProcessPoolExecutor(2) as pool:

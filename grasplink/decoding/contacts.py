@@ -33,7 +33,7 @@ them exactly in step with its own updates.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -46,7 +46,6 @@ from grasplink.decoding.detector.hinges import (
     hinge_widths,
 )
 from grasplink.decoding.detector.noise_floor import NoiseFloor, NoiseSettings
-from grasplink.decoding.detector.pulse_gate import ExpectedWindows
 from grasplink.decoding.detector.pulse_probe import (
     PULSE_SCALES_S,
     PulseProbe,
@@ -123,8 +122,6 @@ class ContactDetector:
         self.pulses = PulseProbe(
             fs, settings.pulses, self.watcher, self.steps, *shared, self.hinges.refine_z
         )
-        # the gated pulse probe (`pulse_gate`): a wider window only where `expect` says
-        self.gated = self._gated_probe(fs, settings.pulses)
         # the probes tell a contact later than the kink bank: a step probe once every contact
         # near it is decided (`StepProbe.events`), a pulse probe once a step probe would have
         # judged it (`PulseProbe.run`); the tracker waits this long for the contacts they find
@@ -132,40 +129,6 @@ class ContactDetector:
         self.probe_lag = max(
             self.lag + max(self.steps.widths), judged + 2 * max(self.pulses.widths, default=0)
         )
-
-    def _gated_probe(self, fs: float, pulses: PulseProbeSettings) -> PulseProbe | None:
-        """The pulse probe with the gated window added, testing only the expected windows;
-        None while `gated_scale_s` is 0. The probe's own windows stay (they place a rise
-        coarse to fine); what they find the plain probe told first (its lag is shorter)."""
-        scale = float(pulses.gated_scale_s)
-        widest = max(self.hinges.channels[-1].width / fs, 0.0)
-        if scale < 0.0 or scale > widest or (scale > 0.0 and not pulses.scales_s):
-            raise ValueError(
-                f"DetectorSettings.pulses: gated_scale_s {scale!r} must lie in 0 .. {widest:g}"
-                " s (the widest hinge scale: the samples held) and needs the pulse probe on"
-                " (scales_s)"
-            )
-        if scale == 0.0:
-            return None
-        wide = replace(
-            pulses,
-            scales_s=tuple(sorted({*pulses.scales_s, scale})),
-            threshold=float(pulses.gated_threshold),
-        )
-        probe = PulseProbe(
-            fs, wide, self.watcher, self.steps, self.noise, self.samples, self.ledger,
-            self.hinges.refine_z,
-        )  # fmt: skip
-        probe.expected = ExpectedWindows()
-        return probe
-
-    def expect(self, first_index: int, last_index: int) -> None:
-        """A ridge contact's onset is expected between samples `first_index` and
-        `last_index` (the decoder's prediction, e.g. while it flags a slip): the gated pulse
-        probe tests its wider window there (`pulse_gate`). Windows over centres already
-        tested change nothing; without a gated probe this is a no-op."""
-        if self.gated is not None and self.gated.expected is not None:
-            self.gated.expected.add(int(first_index), int(last_index))
 
     @property
     def threshold(self) -> float:
@@ -231,10 +194,6 @@ class ContactDetector:
             pulses, pulse_checks = self.pulses.run()
             steps += pulses
             step_checks += pulse_checks
-        if self.gated is not None:
-            pulses, pulse_checks = self.gated.run()
-            steps += pulses
-            step_checks += pulse_checks
         self._trim()
         # block noises still needed: the last noise_blocks before the slowest channel's block
         self.noise.forget(self.hinges.channels[-1].next_n)  # (the widest lags most)
@@ -262,8 +221,7 @@ class ContactDetector:
             return
         keep = self._keep
         self.samples.trim(self._keep_x)
-        gated = self.gated.watches if self.gated is not None else []
-        self.watcher.trim(keep, [w for w, _, _ in self.steps.probes + self.pulses.watches + gated])
+        self.watcher.trim(keep, [w for w, _, _ in self.steps.probes + self.pulses.watches])
         self.steps.trim(keep)
         self.hinges.trim(keep)
         room = min(

@@ -48,8 +48,6 @@ NEAR_TOLD = 2.0  # ... and so is one this many windows (at least 20 ms) from a t
 TOLD_KEPT = 16  # told contacts whose z the median reads
 H_DEFAULT = 5.0  # the median before any contact is told (a 10 dB pulse's)
 _GRID = 32  # points of the size prior
-# (log_miss, told median z per ridge) -> a skipped ridge's least score (`detect_chance`)
-Floor = Callable[[np.ndarray, "float | np.ndarray"], np.ndarray]
 
 
 def log_ratio(z: np.ndarray, median_h: float | np.ndarray, h_low: float = H_LOW) -> np.ndarray:
@@ -90,19 +88,15 @@ def skip_score(
     median_h: float | np.ndarray,
     log_miss: np.ndarray,
     h_low: float = H_LOW,
-    unknown: np.ndarray | None = None,
 ) -> np.ndarray:
     """A skipped ridge's log score from its z: the ratio `log_ratio`, no less than the
     detector-based `log_miss` (log(1 - DETECT_P)), no more than `CLIP`; `log_miss` where
     z is unknown (NaN: the samples were not held) or `TOLD_Z` or more (the detector
-    would have told such a rise: it is another contact's) - or `unknown` there if given
-    (the miss with the detection chance measured, `detect_chance`: no z read, the miss
-    alone is the evidence)."""
+    would have told such a rise: it is another contact's)."""
     log_miss = np.asarray(log_miss, dtype=float)
     ratio = log_ratio(z, median_h, h_low)
     score = np.minimum(CLIP, np.maximum(ratio, log_miss))
-    other = log_miss if unknown is None else unknown
-    return np.where(np.isfinite(ratio) & (np.nan_to_num(z) < TOLD_Z), score, other)
+    return np.where(np.isfinite(ratio) & (np.nan_to_num(z) < TOLD_Z), score, log_miss)
 
 
 class RiseEvidence:
@@ -270,7 +264,6 @@ def skip_adjustment(
     max_skip: int,
     evidence: RiseEvidence,
     gate: float,
-    floor: Floor | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The rows of a contact's children that took it for a ridge after skipping some, and
     what each gains (log) when its skipped ridges are scored by `skip_score` in place of
@@ -338,9 +331,7 @@ def skip_adjustment(
     gain = np.zeros(len(k))
     for w in np.unique(width).tolist():
         on = width == w
-        med = evidence.median_h(w)
-        least = lm[on] if floor is None else floor(lm[on], med)
-        gain[on] = skip_score(z[on], med, least, evidence.h_low) - lm[on]
+        gain[on] = skip_score(z[on], evidence.median_h(w), lm[on], evidence.h_low) - lm[on]
     return rows, np.bincount(child, weights=gain, minlength=len(rows))
 
 
@@ -358,8 +349,6 @@ def silence(
     evidence: RiseEvidence,
     ahead: int,
     memo: dict | None = None,
-    floor: Floor | None = None,
-    unknown: Floor | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The silence schedule (due, adj, stopped, limit: `kernels.posterior.schedule`'s) with
     each due ridge of a slipping track scored by the signal's rise where the track puts it
@@ -374,9 +363,7 @@ def silence(
     miss); `held`: samples held up to this global index; `scored`: (track, ridge ahead)
     -> its score once read (the bank's: a ridge is read once, the same at every later
     update). A ridge's time due waits for the samples its rise is read from. `memo`: the
-    bank's own dict, where what does not change with g is kept between calls (`_plan`).
-    `floor`: as `skip_adjustment`'s, for the due ridges read (None: log_miss); `unknown`:
-    the same map for those whose z is not read (no samples, or another contact's rise)."""
+    bank's own dict, where what does not change with g is kept between calls (`_plan`)."""
     due0, _, stopped0, limit0 = open_sched
     plan = None if memo is None else memo.get("plan")
     if plan is None or not np.array_equal(plan[0], last):
@@ -411,10 +398,7 @@ def silence(
             z = evidence.z_each(onset[a_new, j_new], width[a_new], held)
             medians = {w: evidence.median_h(w) for w in np.unique(width[a_new]).tolist()}
             h = np.array([medians[w] for w in width[a_new].tolist()], float)
-            lm_new = lm[a_new, j_new]
-            least = lm_new if floor is None else floor(lm_new, h)
-            unread = None if unknown is None else unknown(lm_new, h)
-            fresh = skip_score(z, h, least, evidence.h_low, unread)
+            fresh = skip_score(z, h, lm[a_new, j_new], evidence.h_low)
             got[new] = fresh
             for n, j, value, zk in zip(
                 active[a_new].tolist(), j_new.tolist(), fresh.tolist(), z.tolist(), strict=True

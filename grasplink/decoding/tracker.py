@@ -78,7 +78,6 @@ on how the input is chunked. Figures: docs/benchmarks/decoding.md, slip_reportin
 from __future__ import annotations
 
 import bisect
-import functools
 import math
 from collections.abc import Mapping, Sequence
 from functools import cached_property
@@ -90,8 +89,6 @@ from grasplink.decoding import (
     arrival,
     arrival_flag,
     coast_bound,
-    contact_gate,
-    detect_chance,
     flag_keep,
     flat_step_speed,
     level_ramp,
@@ -100,7 +97,6 @@ from grasplink.decoding import (
     rail_hold,
     reflag,
     rise_evidence,
-    rise_travel,
     step_hold,
     stop_jumps,
     told_rise,
@@ -124,7 +120,6 @@ from grasplink.decoding.kernels.layout import (
     F_S,
     F_SCORE,
     F_STOP,
-    F_V,
     F_WIDTH,
     I_COLS,
     I_DIRN,
@@ -132,10 +127,8 @@ from grasplink.decoding.kernels.layout import (
     I_LAST,
     I_N,
     I_RIDGE,
-    I_RUN,
     I_WIDTH,
     IDS,
-    P11,
 )
 from grasplink.decoding.kernels.prune import prune_choice
 from grasplink.errors import ConfigError
@@ -412,10 +405,6 @@ class TrackerDecoder(Decoder):
     # the last ridge at 10 dB cleared in 0.42 s, > 0.3; a stop on a ridge placed 0.067 mm
     # past the bound; the rail before the object arrives): off (0) until those hold
     LOG_SHAPE_STOP_RIDGE = math.log(0.1)
-    # weight of a contact's scale against the track's speed (`rise_travel.log_ratio`, the
-    # measured ridge / clutter likelihood ratio) on a child taking it for its ridge: 0 off;
-    # RISE_TRAVEL_GAIN 0 keeps only its losses (a scale fitting the speed gains nothing)
-    RISE_TRAVEL = 0.0
     # a contact onto an unloaded sensor (its level under this, N: `arrival`) is the edge
     # sliding onto the skin: tracks born there at a later ridge of their way had every
     # ridge before it missed (0: off, the start prior alone). Full plan, one run
@@ -439,7 +428,6 @@ class TrackerDecoder(Decoder):
     # slip dropped 13.6 -> 12.8 % (reversal 30.0 -> 23.1, loop 39.2 -> 37.3, rates-drops
     # 8.7 -> 8.0), every other column of every kind unchanged (held 0.0 %)
     ARRIVAL_STEP_KEEP = 1.0
-    RISE_TRAVEL_GAIN = 1.0
     # a contact taken for a ridge whose onset shows no pulse's rise on the track's rise
     # time (`told_rise`: the probe's z under TOLD_RISE_Z, read only where its window is
     # held by the contact's decision) loses this (0: off) - a bend of the level (hysteresis
@@ -470,28 +458,11 @@ class TrackerDecoder(Decoder):
     RISE_EVIDENCE_GATE = 6.0
     RISE_H_LOW = rise_evidence.H_LOW  # ... the pulse size's prior from this x the told median
     RISE_SILENCE_AHEAD = 3  # ... and the silence of this many ridges due so read (0: none)
-    # ... each such ridge scored no lower than log(1 - P(told)), P measured from the told
-    # pulses' rise against the probe's threshold (`detect_chance`): this share of the way
-    # (log) from the DETECT_P table's miss, for skipped ridges / due ridges; 0: the table's
-    DETECT_MEASURED_SKIP = 0.0
-    # The due ridges' floor, gated by the white noise too (NOISY_WHITE_N), leaves
-    # stick-slip, loop and held-noise to the digit (gated by the told pulses alone, s28,
-    # it cost their stops), but on 3 seeds it buys snr10 speeds with speeds at rest:
-    # missing 51.9 -> 50.6 %, speed at rest 13.8 -> 14.9 %, flagged at rest 31.7 -> 33.6 %
-    # (full plan, one run, with OVERDUE_NOISY_WHITE 0): off, as SPEED_AGREE_SHARE_NOISY
-    DETECT_MEASURED_SILENCE = 0.0
-    # ... or only for the due ridges whose rise is not read (no samples held yet, another
-    # contact's rise there): the z read stays the evidence (its ratio, no floor raised)
-    DETECT_MEASURED_UNREAD = 0.0
-    # ... the measured chance only while the told pulses stand under this many noise units
-    # at their median (`RiseEvidence.blind`; the rise evidence's own gate when larger)
-    DETECT_MEASURED_GATE = 6.0
-    # ... and (with the gated probe's expectations, GATE_AHEAD_S) only while the white
-    # noise measured reaches this (N per sample; `noise_gate`): 10 dB SNR puts 0.1-0.3 N
-    # under the simulator's 0.3-1 N pulses, thesis-like noise is 0.02 N - the stick-slip
-    # and loop kinds' weak pulses open the told-height gate at that. 0: off (no such test)
+    # the white noise (N per sample, `noise_gate`) from which the report's overdue rules
+    # rest (OVERDUE_NOISY_WHITE): 10 dB SNR puts 0.1-0.3 N under the simulator's 0.3-1 N
+    # pulses, thesis-like noise is 0.02 N - the stick-slip and loop kinds' weak pulses
+    # pass the told-height test (RISE_EVIDENCE_GATE) at that. 0: off (no such test)
     NOISY_WHITE_N = 0.05
-    DETECT_THRESHOLD_Z = rise_evidence.TOLD_Z  # ... a rise told from this z (noise units)
     LOG_SHAPE_RIDGE_STOP = 0.0
     SHAPE_AMBIGUOUS_RIDGE = 0.0
     # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
@@ -706,18 +677,6 @@ class TrackerDecoder(Decoder):
     MAX_SKIP = 2  # missed contacts allowed between two detected ones
     STRONG_Z = 60.0  # ridge contacts: strengths spread log-uniformly up to about this
     STRENGTH_MIN, STRENGTH_MAX = math.log(0.1), math.log(3.0)
-    # while the slip is flagged the detector expects contacts from GATE_BACK_S before the
-    # samples taken to GATE_AHEAD_S after them (`ContactDetector.expect`: its gated pulse
-    # probe, `detector.pulse_gate`, reads a wider window there); 0: never told
-    GATE_BACK_S = 0.3
-    GATE_AHEAD_S = 0.3
-    # ... or (GATE_PREDICT 1) around the times the next GATE_AHEAD ridges of the flagged
-    # tracks are due, GATE_FLOOR_S plus GATE_SIGMAS of their timing either way
-    # (`contact_gate`): none past the last ridge, where a flag coasts through the rest
-    GATE_PREDICT = 1.0
-    GATE_AHEAD = 3
-    GATE_FLOOR_S = 0.03
-    GATE_SIGMAS = 3.0
     REFRESH_S = 0.5  # how often silence (and the agreement) is re-scored between contacts
     NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out
     MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts (far-off contact)
@@ -1192,16 +1151,6 @@ class TrackerDecoder(Decoder):
             shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
-        if self.RISE_TRAVEL and not probe and len(floats):
-            # a ridge's rise spans ~1 mm of the edge's travel whatever the speed: the
-            # track's speed (and its uncertainty) predicts the scale its ridge is found at
-            ridge = (ints[:, I_LAST] == ev.id) & (ints[:, I_RUN] >= 2) & np.isnan(floats[:, F_STOP])
-            ratio = rise_travel.log_ratio(
-                ev.scale_s, floats[ridge, F_V], floats[ridge, P11], self.fs_hz
-            )
-            if not self.RISE_TRAVEL_GAIN:
-                ratio = np.minimum(ratio, 0.0)
-            floats[ridge, F_SCORE] += self.RISE_TRAVEL * ratio
         if self.TOLD_RISE_LOG and not probe and len(floats):
             # no pulse rose at the onset on the track's rise time: a bend, not its ridge
             told_rise.ridge_loss(
@@ -1220,7 +1169,6 @@ class TrackerDecoder(Decoder):
         rows, gain = rise_evidence.skip_adjustment(
             floats, ints, (ev.id, ev.t_s, ev.index, ev.emit_index), earlier, self._pos,
             self._log_miss, self.MAX_SKIP, self._rise, self.RISE_EVIDENCE_GATE,
-            self._miss_floor(self.DETECT_MEASURED_SKIP),
         )  # fmt: skip
         floats[rows, F_SCORE] += self.RISE_EVIDENCE * gain
 
@@ -1465,27 +1413,14 @@ class TrackerDecoder(Decoder):
         return self._coast_bound(B, rise_evidence.silence(
             open_sched, self._silence_tables, fields, last, self._n_in, g, self._log_miss,
             self.LOG_STOP, self.RISE_EVIDENCE, scored, self._rise, int(self.RISE_SILENCE_AHEAD),
-            memo, self._miss_floor(self.DETECT_MEASURED_SILENCE),
-            self._miss_floor(self.DETECT_MEASURED_UNREAD),
+            memo,
         ))  # fmt: skip
-
-    def _miss_floor(self, weight: float) -> rise_evidence.Floor | None:
-        """A missed ridge's least score with the detection chance measured
-        (`detect_chance.floor`, `weight` of the way from the table's); None at 0."""
-        if not weight or not self._rise.blind(self.DETECT_MEASURED_GATE):
-            return None
-        if not self._noisy():
-            return None
-        return functools.partial(
-            detect_chance.floor, h_low=self.RISE_H_LOW,
-            threshold_z=self.DETECT_THRESHOLD_Z, weight=float(weight),
-        )  # fmt: skip
 
     def _noisy(self) -> bool:
         """The white noise measured at the samples taken reaches NOISY_WHITE_N (`noise_gate`;
-        always with it 0)."""
+        never with it 0)."""
         if self.NOISY_WHITE_N <= 0:
-            return True
+            return False  # (the gate off: no white-noise lookup)
         white = self.detector.noise.white_at_sample(self._n_in - 1)
         return noise_gate.heavy(white, self.NOISY_WHITE_N)
 
@@ -1538,41 +1473,7 @@ class TrackerDecoder(Decoder):
                 self._ramp_way = 0
         elif self.REFLAG_P > 0:
             out = self._report_reflag(g, out)
-        gate = out.slip and self.GATE_AHEAD_S > 0 and self.detector.gated is not None
-        if gate and self._noisy():
-            # the next contacts expected: the detector's gated probe reads there (`pulse_gate`)
-            self._expect_contacts()
         return out
-
-    def _expect_contacts(self) -> None:
-        """Tell the detector where contacts are expected while the slip is flagged
-        (`ContactDetector.expect`): with GATE_PREDICT, around the next ridges of the chosen
-        track and the likeliest one with a speed (`contact_gate`; none without a speed or
-        past the last ridge), else from GATE_BACK_S before the samples taken to
-        GATE_AHEAD_S after them."""
-        n, fs = self._n_in, self.fs_hz
-        back = n - round(self.GATE_BACK_S * fs)
-        if not self.GATE_PREDICT:
-            self.detector.expect(back, n + round(self.GATE_AHEAD_S * fs))
-            return
-        if self._cache is None or n <= 0:
-            return
-        _, chosen, _, _, _, magnitude = self._cache
-        tracks = [magnitude[0]] if magnitude[0] is not None else []
-        if chosen is not None and not chosen[1]:
-            tracks.append(chosen[0])
-        now_s = self.detector.samples.time(n - 1, 0.0)
-        for h in tracks:
-            if not math.isnan(h.stop):
-                continue
-            pos = self._pos[(1 - h.dirn) // 2]
-            for a, b in contact_gate.due_windows(
-                h.numbers, pos, self.count, int(self.GATE_AHEAD), self.GATE_FLOOR_S,
-                self.GATE_SIGMAS,
-            ):  # fmt: skip
-                last = n - 1 + round((b - now_s) * fs)
-                if last >= back:
-                    self.detector.expect(n - 1 + round((a - now_s) * fs), last)
 
     def _report_reflag(self, g: float, out: SlipEstimate) -> SlipEstimate:
         """`out`, or the slip flagged again by a pulse contact soon after the flag was last
@@ -1853,7 +1754,7 @@ class TrackerDecoder(Decoder):
             return False
         if self.OVERDUE_NOISY == 0 and self._silence_read_soft():
             return False  # heavy noise: ridges are missed far more often than DETECT_P says
-        if self.OVERDUE_NOISY_WHITE == 0 and self.NOISY_WHITE_N > 0 and self._noisy():
+        if self.OVERDUE_NOISY_WHITE == 0 and self._noisy():
             return False  # ... or the white noise reads heavy before any pulse is told
         B = self._tracks
         last = int(B._i[h.index, I_LAST])

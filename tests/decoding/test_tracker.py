@@ -417,3 +417,9 @@ def test_a_told_direction_is_not_withdrawn_between_contacts():
     assert sum(d == 1 for d in told) >= 280 and -1 not in told
     fourth = rec.contact_times_s[3]
     assert all(e.direction == 1 for e in slipping if e.t_s >= fourth)
+
+
+def test_tracker_count_constants_tune_as_counts():
+    decoder = TrackerDecoder([5.0] * 8, 400.0, tuning={"MAX_SKIP": 3.0})
+    assert decoder.MAX_SKIP == 3 and decoder._skip_prior.shape[2] == 4
+    assert TrackerDecoder._tuning_value("RISE_EVIDENCE", 0.5) == 0.5

@@ -19,7 +19,6 @@ import numpy as np
 
 from grasplink.decoding.detector.events import ContactEvent, Ledger, PulseCheck
 from grasplink.decoding.detector.noise_floor import NOISE_FLOOR_N, NoiseFloor
-from grasplink.decoding.detector.pulse_gate import ExpectedWindows
 from grasplink.decoding.detector.series import Samples
 from grasplink.decoding.detector.step_probe import StepProbe
 from grasplink.decoding.detector.watch import PulseWatcher, Watch
@@ -40,12 +39,6 @@ class PulseProbeSettings:
     snr: float = 10.0  # open while the pulses told are under this high at their median
     prior_n: float = PULSE_PRIOR_N  # their height before any is told (N)
     first_threshold: float = 5.5  # the threshold until one is told
-    # the gated probe's window (s; 0: none) and threshold (noise units): a second probe that
-    # tests only where the decoder expects a contact (`pulse_gate`, `ContactDetector.expect`).
-    # Off: full plan, 2 seeds (tune_tracker_kinds.py, docs/decoding.md s28) 50 ms at 4.0
-    # gave snr10 missing 51.7 -> 51.0 %, 60 ms at 3.5 50.9 % but constant 4.4 -> 5.7 %
-    gated_scale_s: float = 0.0
-    gated_threshold: float = 4.5
 
 
 class PulseProbe:
@@ -79,8 +72,6 @@ class PulseProbe:
         # told pulses, to be emitted: (emit, index, z, placing w, height)
         self._ready: list[tuple[int, int, float, int, float]] = []
         self._gates: dict[int, tuple[float, float] | None] = {}  # block -> `_gate`
-        # a gated probe's windows (`pulse_gate`): only centres inside them are tested
-        self.expected: ExpectedWindows | None = None
 
     def run(self) -> tuple[list[ContactEvent], list[PulseCheck]]:
         """Ridge pulses the kink bank is blind to (issue 22, 10 dB SNR): the SIZE of a rise.
@@ -104,13 +95,10 @@ class PulseProbe:
         lo = max(lo, self.samples.start + 4 * W)  # (samples held: always, as the history is kept)
         if hi - lo + 1 >= 4 * ws[0]:  # (in batches: the sums' cost is mostly per call)
             self._next = hi + 1
-            if self.expected is not None:  # a gated probe (`pulse_gate`): only where due
-                self.expected.forget(lo - W)
-            if self.expected is None or self.expected.overlaps(lo, hi):
-                blocks = range((lo - W) // self.block, (hi + W) // self.block + 1)
-                gates = {b: self._gate(b) for b in blocks}
-                if any(gates[b] is not None for b in range(lo // self.block, hi // self.block + 1)):
-                    self._candidates(lo, hi, gates)
+            blocks = range((lo - W) // self.block, (hi + W) // self.block + 1)
+            gates = {b: self._gate(b) for b in blocks}
+            if any(gates[b] is not None for b in range(lo // self.block, hi // self.block + 1)):
+                self._candidates(lo, hi, gates)
         if not (self.watches or self._ready):
             return events, checks  # nothing watched or told (most blocks): as below
         still = []
@@ -193,8 +181,6 @@ class PulseProbe:
         gated = [gates[c // B] or (math.inf, math.inf) for c in range(lo - W, hi + W + 1)]
         sigma = np.array([g[0] for g in gated])
         threshold = np.array([g[1] for g in gated])
-        if self.expected is not None:  # a gated probe: nowhere but where a contact is due
-            threshold[~self.expected.mask(lo - W, hi + W)] = math.inf
         z = np.empty((len(ws), m))
         size = np.empty((len(ws), m))
         for si, w in enumerate(ws):
