@@ -33,12 +33,12 @@ from dataclasses import replace
 
 import numpy as np
 
+from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import contact_truth as ct
 from grasplink.evaluation import detection_bound as db
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import silence_bound as sb
 from grasplink.evaluation import slip_reporting as sr
-from grasplink.decoding.registry import DEFAULT_DECODER
 
 ORACLE_LEVEL = 4.75  # detection_bound's clean level (docs/decoding.md, the information bound)
 WAITS_S = (0.0, 0.05, 0.1, 0.2, 0.5)
@@ -119,7 +119,14 @@ def job(case: sr.Case, latency_s: float) -> dict:
         out["waits"].append([count(mask), *sb.stops_cleared(t, mask, truth)])
     if case.kind == "snr10":
         told_s, decided_s = _oracle_contacts(rec, case)
-        out["oracle"] = count(sb.silent_down(t, told_s, decided_s, sb.stop_due_s(truth, told_s)))
+        told_due = sb.stop_due_s(truth, told_s)
+        oracle = sb.silent_down(t, told_s, decided_s, told_due)
+        out["oracle"] = count(oracle)
+        out["oracle_no_level"] = count(oracle & (level <= sb.LEVEL_SIGMAS * sigma))
+        out["oracle_decoder_in_silent"] = count(oracle & ~flag)
+        out["oracle_waits"] = [
+            count(sb.silent_down(t, told_s, decided_s, told_due, w)) for w in WAITS_S
+        ]
         found = np.asarray(ct.by_contact(truth, rec.t_s, rec.force_n, rec.fs_hz).found, bool)
         if len(found) == len(contacts):
             out["found"] = count(down(contacts[found], which=found))
@@ -144,7 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown kinds {sorted(unknown)}; moving: {', '.join(sr.MOVING)}")
     plan = replace(
-        sr.FULL, seeds=args.seeds, variants={k: v for k, v in sr.FULL.variants.items() if k in kinds}
+        sr.FULL,
+        seeds=args.seeds,
+        variants={k: v for k, v in sr.FULL.variants.items() if k in kinds},
     )
     todo = sr.cases(plan)
     started = time.monotonic()
@@ -209,10 +218,26 @@ def report(rows: list[dict], latency_s: float) -> None:
             f" true times) {_pct(sum(r.get('found', 0) for r in snr), scored)} %; the decoder"
             f" {_pct(total(snr, 'decoder'), scored)} %"
         )
+        oracle = total(snr, "oracle")
+        print(
+            f"  the oracle's bound less level-evidence updates"
+            f" {_pct(total(snr, 'oracle_no_level'), scored)} %; the decoder is down in"
+            f" {_pct(total(snr, 'oracle_decoder_in_silent'), oracle)} % of the oracle's"
+            " silent updates; waiting w past due ("
+            + ", ".join(f"{w:g}" for w in WAITS_S)
+            + " s): "
+            + " / ".join(_pct(g, scored) for g in np.sum([r["oracle_waits"] for r in snr], axis=0))
+            + " %"
+        )
+        every = groups["every moving kind"]
+        pooled = total(every, "bound") - total(snr, "bound") + oracle
+        print(
+            f"Every moving kind with snr10 at the oracle's contacts:"
+            f" {_pct(pooled, total(every, 'scored'))} % (the decoder"
+            f" {_pct(total(every, 'decoder'), total(every, 'scored'))} %)"
+        )
     print()
-    print(
-        "The trade: the silence decoder waits w past due before dropping (perfect detector)"
-    )
+    print("The trade: the silence decoder waits w past due before dropping (perfect detector)")
     print(
         "| wait w s | bound: every moving kind % | snr10 apart % | stops cleared"
         " <= 0.15 s: every moving kind % | snr10 apart % |"
