@@ -42,6 +42,7 @@ from grasplink.evaluation import slip_reporting as sr
 
 ORACLE_LEVEL = 4.75  # detection_bound's clean level (docs/decoding.md, the information bound)
 WAITS_S = (0.0, 0.05, 0.1, 0.2, 0.5)
+LEVEL_SIGMAS_SHOWN = (3.0, 10.0, 30.0)  # the level criterion, stricter (drift: not in it)
 OBJECT_MM = {"reversal": ns.SHORT_OBJECT_MM, "loop": ct.LOOP_OBJECT_MM}  # else the thesis'
 
 
@@ -106,6 +107,7 @@ def job(case: sr.Case, latency_s: float, found_all: bool = False) -> dict:
         "bound": count(silent),
         "latency": count(down(contacts + latency_s)),
         "no_level": count(silent & (level <= sb.LEVEL_SIGMAS * sigma)),
+        "no_level_by": [count(silent & (level <= k * sigma)) for k in LEVEL_SIGMAS_SHOWN],
         "decoder_in_silent": count(silent & ~flag),
         "decoder_outside": count(~silent & ~flag),
         "decoder_stops": [
@@ -276,6 +278,15 @@ def report(rows: list[dict], latency_s: float) -> None:
             cells.append(_pct(got[0], total(rs, "scored")))
             pooled.append(_pct(got[1], got[2]))
         print("| " + " | ".join(cells + pooled) + " |")
+    print()
+    print(
+        "Bound less the updates whose level moved by more than k white-noise sigmas (k = "
+        + ", ".join(f"{k:g}" for k in LEVEL_SIGMAS_SHOWN)
+        + "; the drift is no part of the criterion):"
+    )
+    for key, rs in groups.items():
+        got = np.sum([r["no_level_by"] for r in rs], axis=0)
+        print(f"  {key}: " + " / ".join(_pct(g, total(rs, "scored")) for g in got) + " %")
     print()
     print("By kind, bound % at each wait (" + ", ".join(f"{w:g}" for w in WAITS_S) + " s):")
     for key, rs in groups.items():
