@@ -118,9 +118,7 @@ def dropped_where(t_upd_s: np.ndarray, down: np.ndarray, truth: SkinRecording) -
     return s.dropped_from2, s.moving_from2
 
 
-def stops_cleared(
-    t_upd_s: np.ndarray, down: np.ndarray, truth: SkinRecording
-) -> tuple[int, int]:
+def stops_cleared(t_upd_s: np.ndarray, down: np.ndarray, truth: SkinRecording) -> tuple[int, int]:
     """(judged stops cleared within `CLEAR_WITHIN_S` of observable, judged stops) for a
     decoder whose flag is down exactly at `down` and which never gives a speed."""
     s = sr.score(silence_estimates(t_upd_s, ~np.asarray(down, bool)), truth)

@@ -22,8 +22,15 @@ def _truth(knots: list[tuple[float, float]], start_mm: float, length_s: float) -
     v = np.interp(t, [k[0] for k in knots], [k[1] for k in knots])
     x = start_mm + np.concatenate([[0.0], np.cumsum((v[1:] + v[:-1]) / 2) / FS_HZ])
     rec = SkinRecording(
-        t, np.zeros(len(t)), x, v, (np.abs(v) > 0).astype(float), np.full(len(t), 5.0),
-        np.zeros(0), LAYOUT_MM, FS_HZ,
+        t,
+        np.zeros(len(t)),
+        x,
+        v,
+        (np.abs(v) > 0).astype(float),
+        np.full(len(t), 5.0),
+        np.zeros(0),
+        LAYOUT_MM,
+        FS_HZ,
     )
     rec.contact_times_s = sr.ridge_crossings_s(rec)
     return rec
@@ -77,8 +84,14 @@ def test_a_stop_is_not_sliding_and_is_cleared_unless_the_decoder_waits():
     # have reached 30 mm.
     stop_s = 0.3 + 30.0 / 20.0
     truth = _truth(
-        [(0.0, 0.0), (0.3, 0.0), (0.3 + 1e-6, 20.0), (stop_s, 20.0), (stop_s + 0.03, 0.0),
-         (stop_s + 1.5, 0.0)],
+        [
+            (0.0, 0.0),
+            (0.3, 0.0),
+            (0.3 + 1e-6, 20.0),
+            (stop_s, 20.0),
+            (stop_s + 0.03, 0.0),
+            (stop_s + 1.5, 0.0),
+        ],
         -5.0,
         stop_s + 1.5,
     )
