@@ -383,8 +383,11 @@ class TrackerDecoder(Decoder):
     RESTART_CONFIRM = 3.0
     # ... and a restarted track's first speed (its restart contact and the next) while
     # neither is told a pulse, the flag down (`restart_confirm`): two kinks at rest are no
-    # restart (stop 96200); 0: held on the first contact only
-    RESTART_CONFIRM_TWO = 1.0
+    # restart (stop 96200: 2 updates with a speed after due -> 0); 0: held on the first
+    # contact only. Off: it costs the slips' own restarts after a stick (full plan, 3
+    # seeds, one run, with FLAT_STEP_SPEED 2 against neither: stick-slip missing 16.7 ->
+    # 18.2 %, slip dropped 6.9 -> 7.9, rates-drops dropped 8.1 -> 9.0; docs/decoding.md)
+    RESTART_CONFIRM_TWO = 0.0
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
     STOP_STEP_PER_S = 1.0
     # ... a stop there is told once the next ridge due after the step, had the slip gone
@@ -596,10 +599,13 @@ class TrackerDecoder(Decoder):
     # chosen next has no contact more behind it (rates-drops 130101). Off: it costs
     # decelerating slips 4.6 points of missing speed (their braking twins' next ridge
     # comes later than the report's capped schedule; full plan, 2 seeds, 17.0 -> 21.6 %)
-    OVERDUE_LATCH = 0.0
+    OVERDUE_LATCH = 1.0
     # ... for this long after that contact's speed first went overdue (inf: until a contact
-    # comes)
-    OVERDUE_LATCH_S = math.inf
+    # comes). 0.05 s (s30): the twin chosen next at 130101 showed 1.32-1.33 s, its own due
+    # time 1.338 s; a braking slip's twin whose ridge does come later keeps its speed after
+    # it (full plan, 3 seeds, one run: decelerating missing 17.3 -> 17.4 %, constant 4.9
+    # both, rates-drops after due 0.1 -> 0.0 %; docs/decoding.md)
+    OVERDUE_LATCH_S = 0.05
     # 1: no speed either from a track whose last contact was told a step the level lay
     # flat after (`flat_step_speed`: a stop's friction step). Only the speed: the flag and
     # the range stay the posterior's. Clears stick-slip 81200 (7 updates after due), but
