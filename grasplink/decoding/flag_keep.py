@@ -41,7 +41,7 @@ def unheld(hold: np.ndarray, verdicts: tuple[int, ...]) -> np.ndarray:
     never reported stopped, so a restart on a contact not yet told (or unclear) is the slip
     going on, not a contact at rest; a step or a noise pulse still holds it."""
     out = hold.copy()
-    out[list(verdicts)] = False
+    out[..., list(verdicts)] = False
     return out
 
 

@@ -24,3 +24,13 @@ def withheld(last_id: int, steps: dict[int, bool | None]) -> bool:
     step (`steps`: the step verdicts kept, id -> trend_on) after which the level lay flat
     (trend_on False; None, no trend to tell, and True, still rising, do not)?"""
     return steps.get(last_id) is False
+
+
+def lone_pulse(pulses_told: int) -> bool:
+    """At level 2 (`TrackerDecoder.FLAT_STEP_SPEED`), is a flat step's speed withheld: its
+    track's recent contacts told `pulses_told` pulses, fewer than two? A ridge train that
+    ends at a flat step has told its ridges' pulses before it (the 40 mm/s rail start over
+    ADC counts: five, the sliding object's last gap then read at 37 mm/s); an alias built
+    on a contact no ridge made has at most its first (stick-slip 81200: the 0.360 s ridge
+    told a pulse, 0.468 s not told for a second, the stop's step at 0.559 s)."""
+    return pulses_told < 2

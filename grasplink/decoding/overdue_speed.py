@@ -106,3 +106,9 @@ def overdue(due_s: float, g_s: float, blind_s: float = 0.0) -> bool:
     """Is a ridge due at `due_s` overdue at `g_s`, its track's contact having spent
     `blind_s` of that time on the sensor's rail (where no contact can show)?"""
     return g_s - blind_s > due_s
+
+
+def latched(last: int, withheld: int, withheld_s: float, g_s: float, latch_s: float) -> bool:
+    """Is a track whose last contact is `last` withheld at `g_s` by the latch: a speed from
+    that contact (`withheld`) first went overdue at `withheld_s`, at most `latch_s` ago?"""
+    return last == withheld and g_s - withheld_s <= latch_s

@@ -96,6 +96,7 @@ from grasplink.decoding import (
     overdue_speed,
     rail_hold,
     reflag,
+    restart_confirm,
     rise_evidence,
     step_hold,
     stop_jumps,
@@ -124,6 +125,7 @@ from grasplink.decoding.kernels.layout import (
     I_COLS,
     I_DIRN,
     I_FIRST,
+    I_IDS,
     I_LAST,
     I_N,
     I_RIDGE,
@@ -372,6 +374,13 @@ class TrackerDecoder(Decoder):
     # up through the stop (rates-drops 136501, loop 161000/161211): full plan, 2 seeds,
     # against 1: stops cleared 94.9 -> 96.0 %, slip dropped 17.6 -> 18.3 %
     RESTART_CONFIRM = 3.0
+    # ... and a restarted track's first speed (its restart contact and the next) while
+    # neither is told a pulse, the flag down (`restart_confirm`): two kinks at rest are no
+    # restart (stop 96200: 2 updates with a speed after due -> 0); 0: held on the first
+    # contact only. Off: it costs the slips' own restarts after a stick (full plan, 3
+    # seeds, one run, with FLAT_STEP_SPEED 2 against neither: stick-slip missing 16.7 ->
+    # 18.2 %, slip dropped 6.9 -> 7.9, rates-drops dropped 8.1 -> 9.0; docs/decoding.md)
+    RESTART_CONFIRM_TWO = 0.0
     # a step (sharp rise that stays) while slipping: the slip stopped, or the grip changed
     STOP_STEP_PER_S = 1.0
     # ... a stop there is told once the next ridge due after the step, had the slip gone
@@ -561,14 +570,23 @@ class TrackerDecoder(Decoder):
     # chosen next has no contact more behind it (rates-drops 130101). Off: it costs
     # decelerating slips 4.6 points of missing speed (their braking twins' next ridge
     # comes later than the report's capped schedule; full plan, 2 seeds, 17.0 -> 21.6 %)
-    OVERDUE_LATCH = 0.0
+    OVERDUE_LATCH = 1.0
+    # ... for this long after that contact's speed first went overdue (inf: until a contact
+    # comes). 0.05 s (s30): the twin chosen next at 130101 showed 1.32-1.33 s, its own due
+    # time 1.338 s; a braking slip's twin whose ridge does come later keeps its speed after
+    # it (full plan, 3 seeds, one run: decelerating missing 17.3 -> 17.4 %, constant 4.9
+    # both, rates-drops after due 0.1 -> 0.0 %; docs/decoding.md)
+    OVERDUE_LATCH_S = 0.05
     # 1: no speed either from a track whose last contact was told a step the level lay
     # flat after (`flat_step_speed`: a stop's friction step). Only the speed: the flag and
     # the range stay the posterior's. Clears stick-slip 81200 (7 updates after due), but
     # ridge contacts read so too: the 40 mm/s rail start over ADC counts
     # (test_quantised_input, seed 1) gives 106 speeds while slipping instead of 170, the
-    # last 0.64 s of its slip without one: off (docs/decoding.md)
-    FLAT_STEP_SPEED = 0.0
+    # last 0.64 s of its slip without one. 2 (s30): only where the track's recent contacts
+    # told fewer than two pulses (`flat_step_speed.lone_pulse`: an alias on a contact no
+    # ridge made; the rail start's ridge train told five): 81200 7 -> 0, the rail start's
+    # 170 speeds kept (docs/decoding.md); 0: off
+    FLAT_STEP_SPEED = 2.0
     # ... also under heavy noise (1; 0: not where the rise evidence reads the silence,
     # RISE_EVIDENCE_GATE): at 10 dB a silent ridge says little (snr10 missing +5 points)
     OVERDUE_NOISY = 0.0
@@ -857,6 +875,7 @@ class TrackerDecoder(Decoder):
         self._kept: tuple | None = None  # (the posterior it was read with, P(moving))
         self._due: tuple[_Bank, np.ndarray] | None = None  # (bank, `_overdue`'s times due)
         self._withheld = -1  # the last contact whose track's speed went overdue (OVERDUE_LATCH)
+        self._withheld_s = -math.inf  # ... when it first did (OVERDUE_LATCH_S)
         self._grip_rates: dict[int, float] = {}  # contact id -> `_grip_rate`
         self._unloaded: dict[int, bool] = {}  # contact id -> `_onto_empty_skin`
         # the last contact held that came onto an unloaded sensor, (id, t_s, index) or None
@@ -1743,8 +1762,15 @@ class TrackerDecoder(Decoder):
         its next ridge overdue (`_overdue`)?"""
         last = int(self._tracks._i[h.index, I_LAST])
         if self.FLAT_STEP_SPEED and flat_step_speed.withheld(last, self._steps):
-            return True
+            ids = self._tracks._i[h.index, I_IDS : I_LAST + 1]
+            if self.FLAT_STEP_SPEED < 2 or flat_step_speed.lone_pulse(self._told_pulses(ids)):
+                return True
         return self._overdue(h, g)
+
+    def _told_pulses(self, ids: np.ndarray) -> int:
+        """How many of the contacts `ids` are told a pulse (their verdicts still in the ring)."""
+        slots = np.fromiter((ring_slot(int(k), len(self._ring)) for k in ids), np.int64, len(ids))
+        return int(np.count_nonzero((self._ring_id[slots] == ids) & (self._ring[slots] == PULSE)))
 
     def _overdue(self, h: _One, g: float) -> bool:
         """Is the speed of track `h` (read from the bank now) withheld at g: its next ridge
@@ -1758,7 +1784,9 @@ class TrackerDecoder(Decoder):
             return False  # ... or the white noise reads heavy before any pulse is told
         B = self._tracks
         last = int(B._i[h.index, I_LAST])
-        if self.OVERDUE_LATCH and last == self._withheld:
+        if self.OVERDUE_LATCH and overdue_speed.latched(
+            last, self._withheld, self._withheld_s, g, self.OVERDUE_LATCH_S
+        ):
             return True  # no contact since a speed from it went overdue (`overdue_speed`)
         if self._due is None or self._due[0] is not B:
             due = overdue_speed.next_due_s(
@@ -1770,8 +1798,8 @@ class TrackerDecoder(Decoder):
             )
             self._due = (B, due)
         late = overdue_speed.overdue(float(self._due[1][h.index]), g, self._rail_s(h.t, g))
-        if late:
-            self._withheld = last
+        if late and last != self._withheld:
+            self._withheld, self._withheld_s = last, g
         return late
 
     @property
@@ -1929,10 +1957,10 @@ class TrackerDecoder(Decoder):
         n = np.arange(5)[:, None]
         # enough contacts that fit a track are a slip when none is a step or noise's pulse
         evident = (n >= 2) & ((pulses > 0) | ((n >= self.EVIDENT_CONTACTS) & (steps + noise == 0)))
-        hold = np.zeros(len(weight), np.bool_)
-        hold[STEP] = hold[NOISE] = self.RESTART_CONFIRM >= 1
-        hold[UNCLEAR] = self.RESTART_CONFIRM >= 2
-        hold[UNKNOWN] = self.RESTART_CONFIRM >= 3
+        hold = restart_confirm.hold_table(
+            len(weight), STEP, NOISE, UNCLEAR, UNKNOWN, self.RESTART_CONFIRM,
+            bool(self.RESTART_CONFIRM_TWO),
+        )  # fmt: skip
         return weight, bonus, np.concatenate([evident, np.zeros_like(evident)]), hold
 
     @cached_property

@@ -55,9 +55,11 @@ def test_level_two_and_three_take_untold_contacts_but_never_a_step_or_noise():
 def test_unhold_lifts_the_hold_of_untold_contacts_only():
     """While the flag is up a restart on a contact not yet told (or unclear) is no longer
     held; one told a step or a noise pulse still is (a stop's own friction step)."""
-    _, _, evident, hold, _, _, wide, keep_hold = tables(KEEP_FLAG_UNHOLD=1)
-    assert hold[[UNKNOWN, UNCLEAR, STEP, NOISE]].all()
-    assert not keep_hold[[UNKNOWN, UNCLEAR]].any() and keep_hold[[STEP, NOISE]].all()
+    _, _, evident, hold, _, _, wide, keep_hold = tables(KEEP_FLAG_UNHOLD=1, RESTART_CONFIRM_TWO=1)
+    for row in (0, 1):  # a restart's first contact, and its first two (`restart_confirm`)
+        assert hold[row, [UNKNOWN, UNCLEAR, STEP, NOISE]].all()
+        assert not keep_hold[row, [UNKNOWN, UNCLEAR]].any()
+        assert keep_hold[row, [STEP, NOISE]].all()
     assert np.array_equal(evident, wide)
 
 

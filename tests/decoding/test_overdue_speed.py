@@ -166,12 +166,13 @@ def test_the_reports_ridge_is_never_past_the_one_the_posterior_stops_at():
 #   in time, revived the track with the probes' 0.21 s wait (100 Hz);
 # - OVERDUE_LATCH: withheld at 1.31 s, then a braking twin of the same contacts chosen,
 #   its ridge due 37 ms later.
-# (OVERDUE_LATCH ships off: it costs decelerating slips 4.6 points of missing speed.)
+# (OVERDUE_LATCH until a contact costs decelerating slips 4.6 points of missing speed; it
+# ships for 0.05 s, OVERDUE_LATCH_S: 0.1 point.)
 WITHHELD_CASES = [
     ("stick-slip", 86_111, 4, {}, {"OVERDUE_STOP_RIDGE": 0.0}),
     ("rates-drops", 130_111, 2, {}, {"OVERDUE_STOP_RIDGE": 0.0}),
     ("rates-drops", 136_321, 14, {}, {"OVERDUE_PROBE_REGIME": 0.0}),
-    ("rates-drops", 130_101, 2, {"OVERDUE_LATCH": 1.0}, {}),
+    ("rates-drops", 130_101, 2, {}, {"OVERDUE_LATCH": 0.0}),
 ]
 
 
@@ -193,3 +194,20 @@ def test_with_its_rule_off_the_speed_after_due_stays_and_the_flag_is_the_same(
     off_estimates, stops = decoded(kind, seed, off)
     assert len(speeds_after_due(off_estimates, stops)) == updates
     assert [e.slip for e in with_rule] == [e.slip for e in off_estimates]
+
+
+def test_the_latch_lasts_its_window_from_the_first_withheld_update_and_only_that_contact():
+    """`overdue_speed.latched`: withheld first at 1.31 s, a twin of that contact is held
+    for 0.05 s after; another contact, or past the window, is not."""
+    assert overdue_speed.latched(7, 7, 1.31, 1.33, 0.05)
+    assert overdue_speed.latched(7, 7, 1.31, 1.35, 0.05)
+    assert not overdue_speed.latched(7, 7, 1.31, 1.37, 0.05)
+    assert not overdue_speed.latched(8, 7, 1.31, 1.33, 0.05)
+    assert overdue_speed.latched(7, 7, 1.31, 9.0, math.inf)
+
+
+def test_a_window_shorter_than_the_twins_wait_leaves_its_speed():
+    """The control for the window: 130101's twin showed its speed 10-20 ms after the first
+    withheld update (1.32, 1.33 s), so a 5 ms latch leaves both updates."""
+    estimates, stops = decoded("rates-drops", 130_101, {"OVERDUE_LATCH_S": 0.005})
+    assert len(speeds_after_due(estimates, stops)) == 2

@@ -434,8 +434,11 @@ def _evidence(
     its recent contacts (`TrackerDecoder._evidence_tables`): a contact's verdict counts
     where the ring of verdicts still holds that contact's id. A track whose speed is
     unknown (run 1) reads rows 5-9 (not evident) when its last contact's verdict holds it
-    (`hold_t`: a restart on a contact told a step is no slip yet)."""
-    N, R = ids.shape[0], len(ring)
+    (`hold_t[0]`: a restart on a contact told a step is no slip yet); a restarted track's
+    first speed (run 2, with contacts before the restart: n > run) too while both its
+    restart contact and the one after it are held by `hold_t[1]` (`restart_confirm`: two
+    kinks at rest are no restart until one is told a pulse or a third contact comes)."""
+    N, R, last_c = ids.shape[0], len(ring), ids.shape[1] - 1
     evident = np.empty(N, np.bool_)
     bonus = np.empty(N)
     for i in range(N):
@@ -444,10 +447,14 @@ def _evidence(
             slot = ring_slot(ids[i, c], R)
             if ring_id[slot] == ids[i, c]:
                 packed += weight_t[ring[slot]]
-        last = ids[i, ids.shape[1] - 1]
+        last = ids[i, last_c]
         slot = ring_slot(last, R)
         verdict = ring[slot] if ring_id[slot] == last else 0
-        held = run[i] == 1 and hold_t[verdict]
+        held = run[i] == 1 and hold_t[0, verdict]
+        if run[i] == 2 and n[i] > run[i] and hold_t[1, verdict]:
+            before = ids[i, last_c - 1]
+            slot = ring_slot(before, R)
+            held = hold_t[1, ring[slot] if ring_id[slot] == before else 0]
         evident[i] = evident_t[min(n[i], 4) + 5 * held, packed]
         bonus[i] = bonus_t[packed]
     return evident, bonus

@@ -1000,7 +1000,11 @@ class NumpyTracker:
         verdicts = np.where(self._ring_id.take(slot) == ids, self._ring.take(slot), 0)
         packed = np.add.reduce(weight.take(verdicts), axis=1)
         # speed unknown (restarted) and its last contact's verdict holds it: no slip yet
-        held = (B.run == 1) & hold.take(verdicts[:, -1])
+        held = (B.run == 1) & hold[0].take(verdicts[:, -1])
+        # ... and a restart's first speed while neither of its two contacts is told a pulse
+        # (`restart_confirm`, added after 0858d90)
+        second = (B.run == 2) & (B.n > B.run)
+        held |= second & hold[1].take(verdicts[:, -1]) & hold[1].take(verdicts[:, -2])
         return evident[np.minimum(B.n, 4) + 5 * held, packed], bonus.take(packed)
 
     def _log_waiting(
