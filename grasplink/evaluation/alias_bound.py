@@ -32,7 +32,10 @@ Two rules say when the speed is determined (its current speed: the last interval
   `mass` of the posterior (the tracker's 9:1).
 
 The chain is a dynamic programme over the last two told ridges (a pair state), exact for
-both rules and vectorised over the layout's ridges (<= 22: uniform4).
+both rules and vectorised over the layout's ridges (<= 22: uniform4). With `Heights` each
+told contact's measured pulse height weighs too (`height_evidence`: its density if it was
+that ridge, the unknown scale shared by the run and summed over its prior), so the
+likelihood rule reads times, detection chances and heights.
 """
 
 from __future__ import annotations
