@@ -156,6 +156,15 @@ def snr10_job(case: sr.Case, decoder: bool) -> dict:
         "height": heights[:, 0],
         "height_sigma": heights[:, 1],
         "rise_rel": rise_rel,
+        "rise": train.rise_s,
+        "rise_hat": np.array(
+            [
+                he.measure_rise(rest, a, t.offsets, alpha, rise, fs, t0, RISE_GRID_S)
+                for a, t, alpha, rise, t0 in zip(
+                    onsets, tmpls, train.alpha_n, train.rise_s, train.times_s, strict=True
+                )
+            ]
+        ),
         "times": train.times_s,
         "runs": runs,
         "found": found,
@@ -351,7 +360,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         if args.aliases:  # on the oracle's told contacts at the level "today"
             level = _level_today(held)
-            widen = _height_widen(rows) if args.heights else None
+            widen = (_height_widen(rows), _rise_widen(rows, level)) if args.heights else None
             per = list(pool.map(alias_job, rows, [level] * len(rows), [widen] * len(rows)))
             for row, bounds in zip(rows, per, strict=True):
                 row["aliases"] = bounds
@@ -383,15 +392,30 @@ def _level_today(every_held: list[dict]) -> float:
 
 
 SCALE_GRID = he.log_grid(0.25, 4.0, 49)  # the unknown scale a's range (N): log-uniform
-HEIGHT_SETTINGS = {  # name -> (the allowance of ALIAS_SETTINGS, the heights' model)
-    "smooth + heights": ("smooth", he.HeightModel(SCALE_GRID)),
-    "smooth + heights, a known": ("smooth", he.HeightModel(np.array([he.SIM_SCALE_N]))),
-    "25 %, 15-150 mm/s + heights": ("25 %, 15-150 mm/s", he.HeightModel(SCALE_GRID)),
-    "25 %, 15-150 mm/s + heights, a known": (
-        "25 %, 15-150 mm/s",
-        he.HeightModel(np.array([he.SIM_SCALE_N])),
-    ),
+RISE_GRID_S = he.log_grid(0.002, 0.25, 400)  # the rise times the oracle's fit tries
+_KNOWN = he.HeightModel(np.array([he.SIM_SCALE_N]))
+HEIGHT_SETTINGS: dict[str, tuple[str, he.HeightModel | None, bool]] = {
+    # name -> (the allowance of ALIAS_SETTINGS, the heights' model, the rise weighed)
+    "smooth + heights": ("smooth", he.HeightModel(SCALE_GRID), False),
+    "smooth + heights, a known": ("smooth", _KNOWN, False),
+    "25 %, 15-150 mm/s + heights": ("25 %, 15-150 mm/s", he.HeightModel(SCALE_GRID), False),
+    "25 %, 15-150 mm/s + heights, a known": ("25 %, 15-150 mm/s", _KNOWN, False),
+    "smooth + rise": ("smooth", None, True),
+    "smooth + heights + rise": ("smooth", he.HeightModel(SCALE_GRID), True),
+    "25 %, 15-150 mm/s + heights + rise, a known": ("25 %, 15-150 mm/s", _KNOWN, True),
 }
+
+
+def _rise_widen(rows: list[dict], level: float) -> float:
+    """The measured rise times' errors in their Cramer-Rao sigmas over the told snr10
+    contacts: their standard deviation (the factor the rise likelihood widens by)."""
+    z = np.concatenate(
+        [
+            ((r["rise_hat"] - r["rise"]) / (r["rise_rel"] * r["rise"]))[r["clean"] >= level]
+            for r in rows
+        ]
+    )
+    return float(np.std(z[np.isfinite(z)]))
 
 
 def _height_widen(rows: list[dict]) -> float:
@@ -403,10 +427,11 @@ def _height_widen(rows: list[dict]) -> float:
     return float(np.std(z))
 
 
-def alias_job(row: dict, level: float, widen: float | None = None) -> dict:
+def alias_job(row: dict, level: float, widen: tuple[float, float] | None = None) -> dict:
     """One snr10 case's alias bounds (`ab.run_bound`) per allowance of `ALIAS_SETTINGS`, on
     the oracle's clean told contacts at `level`: summed over its scored updates; with
-    `widen` (the heights' sigma factor) also per variant of `HEIGHT_SETTINGS`."""
+    `widen` (the heights' and the rise times' sigma factors) also per variant of
+    `HEIGHT_SETTINGS`."""
     told = row["clean"] >= level
     n = len(row["spacings"]) + 1
     if len(row["times"]) != n or np.any(row["runs"] != 0):
@@ -433,8 +458,15 @@ def alias_job(row: dict, level: float, widen: float | None = None) -> dict:
         }
     if widen is None:
         return out
-    for name, (allowance, model) in HEIGHT_SETTINGS.items():
-        heights = ab.Heights(row["height"], row["height_sigma"] * widen, model)
+    for name, (allowance, model, with_rise) in HEIGHT_SETTINGS.items():
+        rise_sigma = row["rise_rel"] * row["rise"] * widen[1]
+        heights = ab.Heights(
+            row["height"],
+            row["height_sigma"] * widen[0],
+            model,
+            row["rise_hat"] if with_rise else None,
+            rise_sigma if with_rise else None,
+        )
         b = ab.run_bound(
             layout,
             -1 if row["reverse"] else 1,
@@ -552,6 +584,14 @@ def height_report(rows: list[dict], args) -> None:
         " the rise alone, told, by speed set (median): "
         + ", ".join(f"{v} {np.nanmedian(np.concatenate(x)):.0%}" for v, x in variants.items())
     )
+    level = rows[0]["aliases"]["level"]
+    rz = np.concatenate([((r["rise_hat"] - r["rise"]) / r["rise"]) for r in rows])
+    print(
+        f"The oracle's least-squares rise (the onset known): error / rise over the told"
+        f" contacts median {np.nanmedian(np.abs(rz[told])):.0%} (|.|), errors"
+        f" {_rise_widen(rows, level):.2f} Cramer-Rao sigmas (std: the rise likelihood's"
+        " sigma widened by it)"
+    )
     pairs = [("smooth", "smooth + heights"), ("smooth", "smooth + heights, a known")]
     pairs += [
         ("25 %, 15-150 mm/s", "25 %, 15-150 mm/s + heights"),
@@ -568,7 +608,9 @@ def height_report(rows: list[dict], args) -> None:
         + "".join(f" {a} / {b}: held / fresh |" for a, b in pairs[::2])
         + " smooth + heights, a known |"
         + " 25 %, 15-150 + heights, a known |"
-        + " on an alias: smooth / + heights |"
+        + " smooth + rise | smooth + heights + rise |"
+        + " 25 %, 15-150 + heights + rise, a known |"
+        + " on an alias: smooth / + heights / + heights + rise |"
         + (" decoder |" if args.decoder else "")
     )
     print("Speed missing %, likelihood rule: times only beside times + heights")
@@ -592,7 +634,16 @@ def height_report(rows: list[dict], args) -> None:
         cells = [key, str(scored), f"{any2 / scored:.1%} / {last3 / scored:.1%}"]
         cells += [f"{miss(a)} -> {miss(b)}" for a, b in pairs[::2]]
         cells += [miss(pairs[1][1]), miss(pairs[3][1])]
-        cells.append(f"{share('smooth', 'wrong')} / {share('smooth + heights', 'wrong')}")
+        cells += [
+            miss("smooth + rise"),
+            miss("smooth + heights + rise"),
+            miss("25 %, 15-150 mm/s + heights + rise, a known"),
+        ]
+        cells.append(
+            " / ".join(
+                share(n, "wrong") for n in ("smooth", "smooth + heights", "smooth + heights + rise")
+            )
+        )
         if args.decoder:
             cells.append(f"{sum(r['decoder_missing'] for r in rs) / scored:.1%}")
         print("| " + " | ".join(cells) + " |")

@@ -112,21 +112,26 @@ def chain(
     entry: bool = True,
     evidence: np.ndarray | None = None,
     prior: np.ndarray | None = None,
+    rise: np.ndarray | None = None,
 ) -> Chain:
     """The hypotheses of one direction for told contacts at `times_s` (>= 2, time order),
     the ridges at `pos_mm` (travel order, from the entry end) with detection chances
     `p_det`. `entry`: the ridges before the first told one were crossed and missed (False:
     the earlier contacts are forgotten, nothing known before the first). `evidence`
     [g, j, k] (`height_evidence.evidence`): a further factor for told contact j at ridge k
-    under a shared parameter's value g, whose `prior` weights sum the weights over g."""
+    under a shared parameter's value g, whose `prior` weights sum the weights over g.
+    `rise` [2, j]: told contact j's measured rise time and its sigma (s), weighed by the
+    speed range its interval allows (`height_evidence.rise_density`)."""
     n = len(pos_mm)
     p_miss = 1.0 - p_det
     skip = _skips(p_miss)
     before = skip[n] if entry else np.ones(n)
     nominal, low, high, ok = _ranges(pos_mm, float(times_s[1] - times_s[0]), settings)
     fits = ok.copy()
-    if evidence is not None:
-        return _chain_evidence(pos_mm, times_s, p_det, settings, before, evidence, prior)
+    if evidence is not None or rise is not None:
+        if evidence is None:
+            evidence = np.ones((1, len(times_s), n))
+        return _chain_evidence(pos_mm, times_s, p_det, settings, before, evidence, prior, rise)
     weight = np.where(ok, (before * p_det)[:, None] * skip[:n] * p_det[None, :], 0.0)
     for j in range(1, len(times_s) - 1):
         nom2, low2, high2, ok2 = _ranges(pos_mm, float(times_s[j + 1] - times_s[j]), settings)
@@ -153,6 +158,23 @@ def _meet(
     return (low2[None, :, :] <= top) & (high2[None, :, :] >= bottom)
 
 
+def _rise(
+    rise: np.ndarray,
+    j: int,
+    low: np.ndarray,
+    high: np.ndarray,
+    dist: np.ndarray,
+    s: AliasSettings,
+) -> np.ndarray:
+    """[a, b]: the density of told contact j's rise if the interval it ends or starts is
+    the pair (a, b): its speed range widened by the allowance (the speed at the contact
+    may differ from the interval's mean by as much as consecutive intervals may)."""
+    with np.errstate(invalid="ignore"):
+        v_low = low / (1 + s.rel) - s.dv_dx_per_s * dist
+        v_high = high * (1 + s.rel) + s.dv_dx_per_s * dist
+    return np.asarray(he.rise_density(rise[0, j], rise[1, j], v_low, v_high))
+
+
 def _chain_evidence(
     pos_mm: np.ndarray,
     times_s: np.ndarray,
@@ -161,6 +183,7 @@ def _chain_evidence(
     before: np.ndarray,
     evidence: np.ndarray,
     prior: np.ndarray | None,
+    rise: np.ndarray | None = None,
 ) -> Chain:
     """`chain` with a per-contact factor under each value g of a shared parameter: the
     programme carries a weight per g (the paths' factors multiply within one g), summed
@@ -175,12 +198,19 @@ def _chain_evidence(
     fits = ok.copy()
     first = (before[None, :] * told[:, 0, :])[:, :, None]
     weight = np.where(ok[None], first * skip[None, :n] * told[:, 1, None, :], 0.0)
+    dist = pos_mm[None, :] - pos_mm[:, None]
+    if rise is not None:  # both contacts of the first interval read its speed
+        weight *= (
+            _rise(rise, 0, low, high, dist, settings) * _rise(rise, 1, low, high, dist, settings)
+        )[None]
     for j in range(1, len(times_s) - 1):
         nom2, low2, high2, ok2 = _ranges(pos_mm, float(times_s[j + 1] - times_s[j]), settings)
         step = _meet(low, high, low2, high2, pos_mm, settings) & fits[:, :, None] & ok2[None]
         fits = step.any(axis=0)
         weight = np.einsum("gab,abc->gbc", weight, step.astype(float))
         weight *= skip[None, :n] * told[:, j + 1, None, :]
+        if rise is not None:
+            weight *= _rise(rise, j + 1, low2, high2, dist, settings)[None]
         nominal, low, high = nom2, low2, high2
     return Chain(fits, np.tensordot(w_prior, weight, axes=1), nominal)
 
@@ -250,7 +280,9 @@ class Heights:
 
     h_n: np.ndarray
     sigma_n: np.ndarray
-    model: he.HeightModel
+    model: he.HeightModel | None  # None: the heights not weighed
+    rise_s: np.ndarray | None = None  # measured rise times and sigmas: weighed when given
+    rise_sigma_s: np.ndarray | None = None
 
 
 def hypotheses(
@@ -270,9 +302,14 @@ def hypotheses(
         if heights is None:
             c = chain(pos, times_s, p_det, settings, entry)
         else:
-            h, sigma = heights.h_n[told], heights.sigma_n[told]
-            ev = he.evidence(h, sigma, pos, heights.model)
-            c = chain(pos, times_s, p_det, settings, entry, ev, heights.model.prior)
+            ev, prior, rise = None, None, None
+            if heights.model is not None:
+                h, sigma = heights.h_n[told], heights.sigma_n[told]
+                ev = he.evidence(h, sigma, pos, heights.model)
+                prior = heights.model.prior
+            if heights.rise_s is not None and heights.rise_sigma_s is not None:
+                rise = np.stack([heights.rise_s[told], heights.rise_sigma_s[told]])
+            c = chain(pos, times_s, p_det, settings, entry, ev, prior, rise)
         out.append((pos, p_det, lag, c))
     return out
 

@@ -147,3 +147,60 @@ def rise_sigma(
     if np.linalg.matrix_rank(info) < 4:
         return float("inf")
     return float(np.sqrt(np.linalg.inv(info)[1, 1])) / rise_s
+
+
+RIDGE_SIDE_MM = 2.5  # skin.ridge_contacts: rise = ridge_side / (2 |speed|), clipped
+RISE_CLIP_S = (0.002, 0.2)
+RISE_JITTER = (0.9, 1.1)
+
+
+def measure_rise(
+    rest_n: np.ndarray,
+    at: int,
+    offsets: np.ndarray,
+    alpha_n: float,
+    rise_s: float,
+    fs_hz: float,
+    onset_s: float,
+    grid_s: np.ndarray,
+) -> float:
+    """The oracle's least-squares rise time of one pulse: over `grid_s`, the rise whose
+    shape (height and a linear background fitted) leaves the least residual on the
+    window, the signal less every pulse (`rest_n`) plus this one (`alpha_n`, `rise_s`);
+    the onset known. nan where the window leaves the signal."""
+    k = at + offsets
+    if k[0] < 0 or k[-1] >= len(rest_n):
+        return float("nan")
+    t = k / fs_hz - onset_s
+    u_true = np.maximum(t / rise_s, 0.0)
+    y = rest_n[k] + alpha_n * u_true * np.exp(1.0 - u_true)
+    span = max(-int(offsets[0]), 1)
+    line = np.vander(offsets / span, 2)
+    q, _ = np.linalg.qr(line)
+    y_perp = y - q @ (q.T @ y)
+    u = np.maximum(t[None, :] / np.asarray(grid_s, float)[:, None], 0.0)
+    g = u * np.exp(1.0 - u)
+    g_perp = g - (g @ q) @ q.T
+    norm2 = np.einsum("ij,ij->i", g_perp, g_perp)
+    fit = np.where(norm2 > 0, (g_perp @ y_perp) ** 2 / np.where(norm2 > 0, norm2, 1.0), -1.0)
+    return float(grid_s[int(np.argmax(fit))])
+
+
+def rise_density(
+    rise_s: np.ndarray, sigma_s: np.ndarray, v_low_mm_s: np.ndarray, v_high_mm_s: np.ndarray
+) -> np.ndarray:
+    """The density of a measured rise (error N(0, sigma^2)) when the speed at the contact
+    lies in [v_low, v_high] and the simulator's jitter in RISE_JITTER: the rise taken
+    uniform between the range's ends (`density`'s form with explicit ends). 1 where the
+    rise is unknown, 0 where the speed range is empty. Broadcasts."""
+    r, s = np.asarray(rise_s, float), np.asarray(sigma_s, float)
+    lo_v = np.maximum(np.asarray(v_low_mm_s, float), 1e-9)
+    hi_v = np.maximum(np.asarray(v_high_mm_s, float), lo_v)
+    lo = np.clip(RIDGE_SIDE_MM / (2 * hi_v), *RISE_CLIP_S) * RISE_JITTER[0]
+    hi = np.clip(RIDGE_SIDE_MM / (2 * lo_v), *RISE_CLIP_S) * RISE_JITTER[1]
+    known = np.isfinite(r) & np.isfinite(s)
+    ss = np.where(known, s, 1.0)
+    rr = np.where(known, r, 0.0)
+    p = (ndtr((rr - lo) / ss) - ndtr((rr - hi) / ss)) / (hi - lo)
+    p = np.where(np.isfinite(p), p, 0.0)
+    return np.where(known, p, 1.0)

@@ -120,3 +120,34 @@ def test_the_least_squares_height_ignores_a_linear_background():
     estimates = np.array([e[0] for e in noisy])
     assert np.std(estimates) == pytest.approx(sigma, rel=0.15)  # sigma is its noise
     assert he.measure(line, 10, offsets, alpha, rise, fs, 0.1, onset)[1] == np.inf
+
+
+def test_the_least_squares_rise_finds_a_clean_pulse_and_tells_the_speed():
+    fs, onset, alpha = 400.0, 1.0025, 0.8
+    rise = 2.5 / (2 * SPEED_MM_S)  # the simulator's rise at 40 mm/s: 31 ms
+    offsets = np.arange(-40, 40)
+    at = int(np.ceil(onset * fs))
+    line = 0.3 + 0.8 * np.arange(800) / fs
+    grid = he.log_grid(0.002, 0.25, 400)
+    got = he.measure_rise(line, at, offsets, alpha, rise, fs, onset, grid)
+    assert got == pytest.approx(rise, rel=0.015)  # the grid's step
+    bound = he.rise_sigma(at, offsets, alpha, rise, fs, 0.1, onset)
+    assert 0 < bound < he.rise_sigma(at, offsets, alpha, rise, fs, 0.2, onset)
+    # the measured rise weighs 40 mm/s above 80 mm/s, and a speed range holding neither
+    sigma = np.array(0.002)
+    at_40 = he.rise_density(np.array(rise), sigma, np.array(38.0), np.array(42.0))
+    at_80 = he.rise_density(np.array(rise), sigma, np.array(76.0), np.array(84.0))
+    assert at_40 > 100 * at_80
+
+
+def test_the_rise_decides_between_aliases_of_different_speeds():
+    spacings = (4.0,) * 10  # ridges 3-4 at 40 mm/s or 3-5 at 80 mm/s: the same times
+    pos = np.concatenate([[0.0], np.cumsum(spacings)])
+    times = 0.5 + pos[[3, 4]] / SPEED_MM_S
+    p_det = np.full(11, 0.7)
+    rise = np.array([[2.5 / (2 * SPEED_MM_S)] * 2, [0.002, 0.002]])  # both pulses read 40
+    plain = ab.chain(pos, times, p_det, CONSTANT)
+    weighed = ab.chain(pos, times, p_det, CONSTANT, rise=rise)
+    assert plain.weight[3, 5] > 0.1 * plain.weight[3, 4]
+    assert weighed.weight[3, 4] > 100 * weighed.weight[3, 5]
+    assert weighed.weight[3, 4] > 0
