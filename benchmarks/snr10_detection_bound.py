@@ -662,6 +662,13 @@ def height_report(rows: list[dict], args) -> None:
             f"{n} {sum(r['aliases'][n]['map_speed'] for r in rows) / assessed:.1%}" for n in names
         )
     )
+    scored_all = sum(len(r["t_upd"]) for r in rows)
+    print(
+        "  the likelihood names an alias's speed (of the scored updates): "
+        + ", ".join(
+            f"{n} {sum(r['aliases'][n]['wrong'] for r in rows) / scored_all:.1%}" for n in names
+        )
+    )
     excluded = {n: sum(not r["aliases"][n]["truth_fits"] for r in rows) for n in names}
     print(f"The true assignment excluded (cases): {excluded}")
 
