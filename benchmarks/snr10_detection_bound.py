@@ -27,8 +27,10 @@ Every snr10 case is sampled at 400 Hz (`nonstationary.make_signal`): no rate to 
 
 5. With `--heights` (and `--aliases`): the told contacts' pulse heights weigh too
    (`evaluation/height_evidence.py`: the oracle's least-squares height on the clean signal,
-   the model's f(spacing before) times a scale a marginalised or known), times only beside
-   times + heights, and how often the MAP ridge assignment is the true one.
+   the model's f(spacing before) times a scale a marginalised or known) and, apart and
+   together, the told pulses' rise times (the oracle's least-squares rise: evidence on the
+   speed itself), times only beside them, and how often the MAP ridge assignment is the
+   true one.
 
 Run: `.venv/bin/python benchmarks/snr10_detection_bound.py [--seeds N] [--decoder] [--aliases]
 [--heights] [--workers 2]`.

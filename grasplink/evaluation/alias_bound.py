@@ -35,7 +35,8 @@ The chain is a dynamic programme over the last two told ridges (a pair state), e
 both rules and vectorised over the layout's ridges (<= 22: uniform4). With `Heights` each
 told contact's measured pulse height weighs too (`height_evidence`: its density if it was
 that ridge, the unknown scale shared by the run and summed over its prior), so the
-likelihood rule reads times, detection chances and heights.
+likelihood rule reads times, detection chances and heights; with their rise times too
+(`Heights.rise_s`), each told contact's rise weighs the speed its interval allows.
 """
 
 from __future__ import annotations
