@@ -25,8 +25,15 @@ could give on slip_reporting's snr10 cases (`evaluation/detection_bound.py`).
 
 Every snr10 case is sampled at 400 Hz (`nonstationary.make_signal`): no rate to split by.
 
+5. With `--heights` (and `--aliases`): the told contacts' pulse heights weigh too
+   (`evaluation/height_evidence.py`: the oracle's least-squares height on the clean signal,
+   the model's f(spacing before) times a scale a marginalised or known) and, apart and
+   together, the told pulses' rise times (the oracle's least-squares rise: evidence on the
+   speed itself), times only beside them, and how often the MAP ridge assignment is the
+   true one.
+
 Run: `.venv/bin/python benchmarks/snr10_detection_bound.py [--seeds N] [--decoder] [--aliases]
-[--workers 2]`.
+[--heights] [--workers 2]`.
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import alias_bound as ab
 from grasplink.evaluation import contact_truth as ct
 from grasplink.evaluation import detection_bound as db
+from grasplink.evaluation import height_evidence as he
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 
@@ -96,6 +104,22 @@ def snr10_job(case: sr.Case, decoder: bool) -> dict:
         + snr
     )
     decided = (onsets + np.array([t.after for t in tmpls])) / fs
+    heights = np.array(  # the oracle's least-squares heights (N) and sigmas, clean
+        [
+            he.measure(rest, a, t.offsets, alpha, rise, fs, white, t0)
+            for a, t, alpha, rise, t0 in zip(
+                onsets, tmpls, train.alpha_n, train.rise_s, train.times_s, strict=True
+            )
+        ]
+    ).reshape(-1, 2)
+    rise_rel = np.array(  # the rise time's Cramer-Rao bound, relative (left out of the bound)
+        [
+            he.rise_sigma(a, t.offsets, alpha, rise, fs, white, t0)
+            for a, t, alpha, rise, t0 in zip(
+                onsets, tmpls, train.alpha_n, train.rise_s, train.times_s, strict=True
+            )
+        ]
+    )
     found = np.asarray(ct.by_contact(truth, rec.t_s, rec.force_n, fs).found, dtype=bool)
     # slide nulls: random onsets away from every true one, the nearest pulse's template
     rng = np.random.default_rng([SEED, case.seed, zlib.crc32(case.layout.encode())])
@@ -130,6 +154,19 @@ def snr10_job(case: sr.Case, decoder: bool) -> dict:
         "raw": raw,
         "clean": clean,
         "decided": decided,
+        "alpha": train.alpha_n,
+        "height": heights[:, 0],
+        "height_sigma": heights[:, 1],
+        "rise_rel": rise_rel,
+        "rise": train.rise_s,
+        "rise_hat": np.array(
+            [
+                he.measure_rise(rest, a, t.offsets, alpha, rise, fs, t0, RISE_GRID_S)
+                for a, t, alpha, rise, t0 in zip(
+                    onsets, tmpls, train.alpha_n, train.rise_s, train.times_s, strict=True
+                )
+            ]
+        ),
         "times": train.times_s,
         "runs": runs,
         "found": found,
@@ -288,7 +325,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="the bound without the ridge identities (evaluation/alias_bound.py) beside it",
     )
+    parser.add_argument(
+        "--heights",
+        action="store_true",
+        help="with --aliases: the told contacts' pulse heights weigh too (height_evidence.py)",
+    )
     args = parser.parse_args(argv)
+    if args.heights and not args.aliases:
+        parser.error("--heights needs --aliases")
     if not 1 <= args.seeds <= sr.FULL.seeds:
         parser.error(f"--seeds must be 1-{sr.FULL.seeds}, got {args.seeds}")
     every = sr.cases(sr.FULL)
@@ -318,12 +362,15 @@ def main(argv: list[str] | None = None) -> int:
         )
         if args.aliases:  # on the oracle's told contacts at the level "today"
             level = _level_today(held)
-            per = list(pool.map(alias_job, rows, [level] * len(rows)))
+            widen = (_height_widen(rows), _rise_widen(rows, level)) if args.heights else None
+            per = list(pool.map(alias_job, rows, [level] * len(rows), [widen] * len(rows)))
             for row, bounds in zip(rows, per, strict=True):
                 row["aliases"] = bounds
     report(rows, held, args)
     if args.aliases:
         alias_report(rows, args)
+    if args.heights:
+        height_report(rows, args)
     return 0
 
 
@@ -346,9 +393,47 @@ def _level_today(every_held: list[dict]) -> float:
     return level_for(held, sum(h["today"] for h in held) / minutes)
 
 
-def alias_job(row: dict, level: float) -> dict:
+SCALE_GRID = he.log_grid(0.25, 4.0, 49)  # the unknown scale a's range (N): log-uniform
+RISE_GRID_S = he.log_grid(0.002, 0.25, 400)  # the rise times the oracle's fit tries
+_KNOWN = he.HeightModel(np.array([he.SIM_SCALE_N]))
+HEIGHT_SETTINGS: dict[str, tuple[str, he.HeightModel | None, bool]] = {
+    # name -> (the allowance of ALIAS_SETTINGS, the heights' model, the rise weighed)
+    "smooth + heights": ("smooth", he.HeightModel(SCALE_GRID), False),
+    "smooth + heights, a known": ("smooth", _KNOWN, False),
+    "25 %, 15-150 mm/s + heights": ("25 %, 15-150 mm/s", he.HeightModel(SCALE_GRID), False),
+    "25 %, 15-150 mm/s + heights, a known": ("25 %, 15-150 mm/s", _KNOWN, False),
+    "smooth + rise": ("smooth", None, True),
+    "smooth + heights + rise": ("smooth", he.HeightModel(SCALE_GRID), True),
+    "25 %, 15-150 mm/s + heights + rise, a known": ("25 %, 15-150 mm/s", _KNOWN, True),
+}
+
+
+def _rise_widen(rows: list[dict], level: float) -> float:
+    """The measured rise times' errors in their Cramer-Rao sigmas over the told snr10
+    contacts: their standard deviation (the factor the rise likelihood widens by)."""
+    z = np.concatenate(
+        [
+            ((r["rise_hat"] - r["rise"]) / (r["rise_rel"] * r["rise"]))[r["clean"] >= level]
+            for r in rows
+        ]
+    )
+    return float(np.std(z[np.isfinite(z)]))
+
+
+def _height_widen(rows: list[dict]) -> float:
+    """The measured heights' errors in their white-noise sigmas, over every snr10 contact:
+    their standard deviation (the clean signal's drift and moving level add to the white
+    noise) - the factor the likelihood widens each sigma by."""
+    z = np.concatenate([(r["height"] - r["alpha"]) / r["height_sigma"] for r in rows])
+    z = z[np.isfinite(z)]
+    return float(np.std(z))
+
+
+def alias_job(row: dict, level: float, widen: tuple[float, float] | None = None) -> dict:
     """One snr10 case's alias bounds (`ab.run_bound`) per allowance of `ALIAS_SETTINGS`, on
-    the oracle's clean told contacts at `level`: summed over its scored updates."""
+    the oracle's clean told contacts at `level`: summed over its scored updates; with
+    `widen` (the heights' and the rise times' sigma factors) also per variant of
+    `HEIGHT_SETTINGS`."""
     told = row["clean"] >= level
     n = len(row["spacings"]) + 1
     if len(row["times"]) != n or np.any(row["runs"] != 0):
@@ -373,6 +458,30 @@ def alias_job(row: dict, level: float) -> dict:
         out[name] = {k: int(np.sum(getattr(b, k))) for k in ALIAS_COLUMNS} | {
             "truth_fits": b.truth_fits
         }
+    if widen is None:
+        return out
+    for name, (allowance, model, with_rise) in HEIGHT_SETTINGS.items():
+        rise_sigma = row["rise_rel"] * row["rise"] * widen[1]
+        heights = ab.Heights(
+            row["height"],
+            row["height_sigma"] * widen[0],
+            model,
+            row["rise_hat"] if with_rise else None,
+            rise_sigma if with_rise else None,
+        )
+        b = ab.run_bound(
+            layout,
+            -1 if row["reverse"] else 1,
+            row["times"],
+            told,
+            row["decided"],
+            row["t_upd"],
+            ALIAS_SETTINGS[allowance],
+            heights,
+        )
+        out[name] = {k: int(np.sum(getattr(b, k))) for k in ALIAS_COLUMNS} | {
+            "truth_fits": b.truth_fits
+        }
     return out
 
 
@@ -385,6 +494,9 @@ ALIAS_COLUMNS = (
     "likelihood_alone",
     "likelihood_now",
     "wrong",
+    "assessed",
+    "map_true",
+    "map_speed",
 )
 
 
@@ -442,6 +554,132 @@ def alias_report(rows: list[dict], args) -> None:
             if args.decoder:
                 cells.append(f"{sum(r['decoder_missing'] for r in rs) / scored:.1%}")
             print("| " + " | ".join(cells) + " |")
+
+
+def height_report(rows: list[dict], args) -> None:
+    """Times only beside times + heights (`HEIGHT_SETTINGS`), likelihood rule, per layout
+    and speed set: speed missing % held / fresh, the share of scored updates on an
+    alias's speed, and how often the MAP pair state is the true one."""
+    widen = _height_widen(rows)
+    ratio = np.concatenate([r["alpha"] / he.shape_factor(_before(r)) for r in rows])
+    told = np.concatenate([r["clean"] >= r["aliases"]["level"] for r in rows])
+    rel = np.concatenate([r["height_sigma"] / r["alpha"] for r in rows]) * widen
+    print(
+        f"Heights: alpha / f(spacing before) in the truth {ratio.min():.3f}-{ratio.max():.3f}"
+        f" (the per-contact draw; the scale a = 1 N shared); measured heights' errors"
+        f" {widen:.2f} white-noise sigmas (std over {np.isfinite(rel).sum()} contacts: the"
+        f" likelihood's sigma widened by it); sigma / alpha median {np.nanmedian(rel):.2f}"
+        f" (told {np.nanmedian(rel[told]):.2f}); a marginalised log-uniform over"
+        f" {SCALE_GRID[0]:g}-{SCALE_GRID[-1]:g} N ({len(SCALE_GRID)} points) or known."
+    )
+    rise = np.concatenate([r["rise_rel"] for r in rows])
+    jitter = 0.1 / 3**0.5  # rise_jitter [0.9, 1.1]: its standard deviation
+    speed_rel = np.sqrt(rise**2 + jitter**2)
+    variants: dict[str, list[np.ndarray]] = defaultdict(list)
+    for r in rows:
+        variants[r["variant"]].append(r["rise_rel"][r["clean"] >= r["aliases"]["level"]])
+    print(
+        "Left out: the rise time (1.25 mm / speed, +-10 % jitter) at its Cramer-Rao bound"
+        " (height, rise, linear background unknown; onset known) tells the speed to"
+        f" {np.nanmedian(speed_rel):.0%} (median; told {np.nanmedian(speed_rel[told]):.0%},"
+        f" within 10 % for {np.mean(speed_rel[told] <= 0.1):.0%} of the told contacts);"
+        " the rise alone, told, by speed set (median): "
+        + ", ".join(f"{v} {np.nanmedian(np.concatenate(x)):.0%}" for v, x in variants.items())
+    )
+    level = rows[0]["aliases"]["level"]
+    rz = np.concatenate([((r["rise_hat"] - r["rise"]) / r["rise"]) for r in rows])
+    print(
+        f"The oracle's least-squares rise (the onset known): error / rise over the told"
+        f" contacts median {np.nanmedian(np.abs(rz[told])):.0%} (|.|), errors"
+        f" {_rise_widen(rows, level):.2f} Cramer-Rao sigmas (std: the rise likelihood's"
+        " sigma widened by it)"
+    )
+    pairs = [("smooth", "smooth + heights"), ("smooth", "smooth + heights, a known")]
+    pairs += [
+        ("25 %, 15-150 mm/s", "25 %, 15-150 mm/s + heights"),
+        ("25 %, 15-150 mm/s", "25 %, 15-150 mm/s + heights, a known"),
+    ]
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for r in rows:
+        groups[r["layout"]].append(r)
+        groups[f"speed {r['variant']}"].append(r)
+        groups["all"].append(r)
+    order = sorted(groups, key=lambda k: (k == "all", k.startswith("speed"), k))
+    header = (
+        "| set | scored updates | ridges known: any 2 / last 3 |"
+        + "".join(f" {a} / {b}: held / fresh |" for a, b in pairs[::2])
+        + " smooth + heights, a known |"
+        + " 25 %, 15-150 + heights, a known |"
+        + " smooth + rise | smooth + heights + rise |"
+        + " 25 %, 15-150 + heights + rise, a known |"
+        + " on an alias: smooth / + heights / + heights + rise |"
+        + (" decoder |" if args.decoder else "")
+    )
+    print("Speed missing %, likelihood rule: times only beside times + heights")
+    print(header)
+    print("|---" * (header.count("|") - 1) + "|")
+    for key in order:
+        rs = groups[key]
+        scored = sum(len(r["t_upd"]) for r in rs)
+        masks = [r["clean"] >= r["aliases"]["level"] for r in rs]
+        any2 = sum(missing(r, m, None) for r, m in zip(rs, masks, strict=True))
+        last3 = sum(missing(r, m, 3) for r, m in zip(rs, masks, strict=True))
+
+        def miss(name: str, rs=rs, scored=scored) -> str:
+            held = sum(r["aliases"][name]["likelihood_held"] for r in rs)
+            fresh = sum(r["aliases"][name]["likelihood_fresh"] for r in rs)
+            return f"{(scored - held) / scored:.1%} / {(scored - fresh) / scored:.1%}"
+
+        def share(name: str, col: str, rs=rs, scored=scored) -> str:
+            return f"{sum(r['aliases'][name][col] for r in rs) / scored:.1%}"
+
+        cells = [key, str(scored), f"{any2 / scored:.1%} / {last3 / scored:.1%}"]
+        cells += [f"{miss(a)} -> {miss(b)}" for a, b in pairs[::2]]
+        cells += [miss(pairs[1][1]), miss(pairs[3][1])]
+        cells += [
+            miss("smooth + rise"),
+            miss("smooth + heights + rise"),
+            miss("25 %, 15-150 mm/s + heights + rise, a known"),
+        ]
+        cells.append(
+            " / ".join(
+                share(n, "wrong") for n in ("smooth", "smooth + heights", "smooth + heights + rise")
+            )
+        )
+        if args.decoder:
+            cells.append(f"{sum(r['decoder_missing'] for r in rs) / scored:.1%}")
+        print("| " + " | ".join(cells) + " |")
+    assessed = sum(r["aliases"]["smooth"]["assessed"] for r in rows)
+    names = ["smooth", "25 %, 15-150 mm/s", *HEIGHT_SETTINGS]
+    print(
+        f"The MAP pair state (direction, last two told ridges) is the true one, of the"
+        f" {assessed} scored updates with two told contacts decided: "
+        + ", ".join(
+            f"{n} {sum(r['aliases'][n]['map_true'] for r in rows) / assessed:.1%}" for n in names
+        )
+    )
+    print(
+        "  its speed within 10 % of the true one: "
+        + ", ".join(
+            f"{n} {sum(r['aliases'][n]['map_speed'] for r in rows) / assessed:.1%}" for n in names
+        )
+    )
+    scored_all = sum(len(r["t_upd"]) for r in rows)
+    print(
+        "  the likelihood names an alias's speed (of the scored updates): "
+        + ", ".join(
+            f"{n} {sum(r['aliases'][n]['wrong'] for r in rows) / scored_all:.1%}" for n in names
+        )
+    )
+    excluded = {n: sum(not r["aliases"][n]["truth_fits"] for r in rows) for n in names}
+    print(f"The true assignment excluded (cases): {excluded}")
+
+
+def _before(row: dict) -> np.ndarray:
+    """Per true contact (time order) the spacing crossed before its ridge (mm)."""
+    sp = np.asarray(row["spacings"], float)
+    travel = sp[::-1] if row["reverse"] else sp
+    return np.concatenate([[he.LEAD_IN_MM], travel])
 
 
 def report(rows: list[dict], every_held: list[dict], args) -> None:

@@ -32,7 +32,11 @@ Two rules say when the speed is determined (its current speed: the last interval
   `mass` of the posterior (the tracker's 9:1).
 
 The chain is a dynamic programme over the last two told ridges (a pair state), exact for
-both rules and vectorised over the layout's ridges (<= 22: uniform4).
+both rules and vectorised over the layout's ridges (<= 22: uniform4). With `Heights` each
+told contact's measured pulse height weighs too (`height_evidence`: its density if it was
+that ridge, the unknown scale shared by the run and summed over its prior), so the
+likelihood rule reads times, detection chances and heights; with their rise times too
+(`Heights.rise_s`), each told contact's rise weighs the speed its interval allows.
 """
 
 from __future__ import annotations
@@ -41,6 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import ndtr
+
+from grasplink.evaluation import height_evidence as he
 
 
 @dataclass(frozen=True)
@@ -105,17 +111,28 @@ def chain(
     p_det: np.ndarray,
     settings: AliasSettings,
     entry: bool = True,
+    evidence: np.ndarray | None = None,
+    prior: np.ndarray | None = None,
+    rise: np.ndarray | None = None,
 ) -> Chain:
     """The hypotheses of one direction for told contacts at `times_s` (>= 2, time order),
     the ridges at `pos_mm` (travel order, from the entry end) with detection chances
     `p_det`. `entry`: the ridges before the first told one were crossed and missed (False:
-    the earlier contacts are forgotten, nothing known before the first)."""
+    the earlier contacts are forgotten, nothing known before the first). `evidence`
+    [g, j, k] (`height_evidence.evidence`): a further factor for told contact j at ridge k
+    under a shared parameter's value g, whose `prior` weights sum the weights over g.
+    `rise` [2, j]: told contact j's measured rise time and its sigma (s), weighed by the
+    speed range its interval allows (`height_evidence.rise_density`)."""
     n = len(pos_mm)
     p_miss = 1.0 - p_det
     skip = _skips(p_miss)
     before = skip[n] if entry else np.ones(n)
     nominal, low, high, ok = _ranges(pos_mm, float(times_s[1] - times_s[0]), settings)
     fits = ok.copy()
+    if evidence is not None or rise is not None:
+        if evidence is None:
+            evidence = np.ones((1, len(times_s), n))
+        return _chain_evidence(pos_mm, times_s, p_det, settings, before, evidence, prior, rise)
     weight = np.where(ok, (before * p_det)[:, None] * skip[:n] * p_det[None, :], 0.0)
     for j in range(1, len(times_s) - 1):
         nom2, low2, high2, ok2 = _ranges(pos_mm, float(times_s[j + 1] - times_s[j]), settings)
@@ -130,6 +147,73 @@ def chain(
         new_weight *= skip[:n] * p_det[None, :]
         fits, weight, nominal, low, high = new_fits, new_weight, nom2, low2, high2
     return Chain(fits, weight, nominal)
+
+
+def _meet(
+    low: np.ndarray, high: np.ndarray, low2: np.ndarray, high2: np.ndarray, pos_mm, s
+) -> np.ndarray:
+    """[a, b, c]: (a, b) then (b, c) within the allowance over the distance a..c."""
+    slack = s.dv_dx_per_s * (pos_mm[None, None, :] - pos_mm[:, None, None])
+    top = (high * (1 + s.rel))[:, :, None] + slack
+    bottom = (low / (1 + s.rel))[:, :, None] - slack
+    return (low2[None, :, :] <= top) & (high2[None, :, :] >= bottom)
+
+
+def _rise(
+    rise: np.ndarray,
+    j: int,
+    low: np.ndarray,
+    high: np.ndarray,
+    dist: np.ndarray,
+    s: AliasSettings,
+) -> np.ndarray:
+    """[a, b]: the density of told contact j's rise if the interval it ends or starts is
+    the pair (a, b): its speed range widened by the allowance (the speed at the contact
+    may differ from the interval's mean by as much as consecutive intervals may)."""
+    with np.errstate(invalid="ignore"):
+        v_low = low / (1 + s.rel) - s.dv_dx_per_s * dist
+        v_high = high * (1 + s.rel) + s.dv_dx_per_s * dist
+    return np.asarray(he.rise_density(rise[0, j], rise[1, j], v_low, v_high))
+
+
+def _chain_evidence(
+    pos_mm: np.ndarray,
+    times_s: np.ndarray,
+    p_det: np.ndarray,
+    settings: AliasSettings,
+    before: np.ndarray,
+    evidence: np.ndarray,
+    prior: np.ndarray | None,
+    rise: np.ndarray | None = None,
+) -> Chain:
+    """`chain` with a per-contact factor under each value g of a shared parameter: the
+    programme carries a weight per g (the paths' factors multiply within one g), summed
+    with `prior` at the end. Kept apart so that `chain` without evidence stays as it was,
+    to the bit."""
+    n = len(pos_mm)
+    skip = _skips(1.0 - p_det)
+    g_count = evidence.shape[0]
+    w_prior = np.full(g_count, 1.0 / g_count) if prior is None else np.asarray(prior, float)
+    told = p_det[None, None, :] * evidence  # [g, j, k]
+    nominal, low, high, ok = _ranges(pos_mm, float(times_s[1] - times_s[0]), settings)
+    fits = ok.copy()
+    first = (before[None, :] * told[:, 0, :])[:, :, None]
+    weight = np.where(ok[None], first * skip[None, :n] * told[:, 1, None, :], 0.0)
+    dist = pos_mm[None, :] - pos_mm[:, None]
+    if rise is not None:  # both contacts of the first interval read its speed
+        weight *= (
+            _rise(rise, 0, low, high, dist, settings) * _rise(rise, 1, low, high, dist, settings)
+        )[None]
+    for j in range(1, len(times_s) - 1):
+        nom2, low2, high2, ok2 = _ranges(pos_mm, float(times_s[j + 1] - times_s[j]), settings)
+        step = _meet(low, high, low2, high2, pos_mm, settings) & fits[:, :, None] & ok2[None]
+        fits = step.any(axis=0)
+        weight = np.einsum("gab,abc->gbc", weight, step.astype(float))
+        weight *= skip[None, :n] * told[:, j + 1, None, :]
+        if rise is not None:
+            weight *= _rise(rise, j + 1, low2, high2, dist, settings)[None]
+        nominal, low, high = nom2, low2, high2
+    return Chain(fits, np.tensordot(w_prior, weight, axes=1), nominal)
 
 
 def after_miss(
@@ -187,6 +271,69 @@ class Layout:
         return np.concatenate([[0.0], np.cumsum(sp[::-1])]), self.p_det[::-1], self.lag_s[::-1]
 
 
+Hypotheses = list[tuple[np.ndarray, np.ndarray, np.ndarray, Chain]]  # per direction
+
+
+@dataclass(frozen=True)
+class Heights:
+    """Per true contact of a run (time order) its measured height and that's noise sigma
+    (`height_evidence.measure`), and what a hypothesis predicts for it."""
+
+    h_n: np.ndarray
+    sigma_n: np.ndarray
+    model: he.HeightModel | None  # None: the heights not weighed
+    rise_s: np.ndarray | None = None  # measured rise times and sigmas: weighed when given
+    rise_sigma_s: np.ndarray | None = None
+
+
+def hypotheses(
+    layout: Layout,
+    times_s: np.ndarray,
+    settings: AliasSettings,
+    entry: bool = True,
+    heights: Heights | None = None,
+    told: np.ndarray | None = None,
+) -> Hypotheses:
+    """Both directions' chains (direction +1 first) for told contacts at `times_s`: with
+    `heights`, each told contact's height weighs too (`told`: which of the run's contacts
+    these are)."""
+    out: Hypotheses = []
+    for direction in (1, -1):
+        pos, p_det, lag = layout.travel(direction)
+        if heights is None:
+            c = chain(pos, times_s, p_det, settings, entry)
+        else:
+            ev, prior, rise = None, None, None
+            if heights.model is not None:
+                h, sigma = heights.h_n[told], heights.sigma_n[told]
+                ev = he.evidence(h, sigma, pos, heights.model)
+                prior = heights.model.prior
+            if heights.rise_s is not None and heights.rise_sigma_s is not None:
+                rise = np.stack([heights.rise_s[told], heights.rise_sigma_s[told]])
+            c = chain(pos, times_s, p_det, settings, entry, ev, prior, rise)
+        out.append((pos, p_det, lag, c))
+    return out
+
+
+def judge(
+    hyps: Hypotheses, t_last_s: float, t_now_s: float, settings: AliasSettings
+) -> tuple[bool, bool, float, int]:
+    """At `t_now_s`, the ridges passed since the last contact (at `t_last_s`) charged:
+    `determined`'s (unanimous, likelihood, MAP speed) and the MAP pair state's index in
+    the flattened (direction, a, b) states (-1: none weighs)."""
+    speeds, fits, weights = [], [], []
+    for pos, p_det, lag, c in hyps:
+        after = after_miss(pos, p_det, lag, c.speed_mm_s, t_last_s, t_now_s)
+        speeds.append(c.speed_mm_s.ravel())
+        fits.append(c.fits.ravel())
+        weights.append((c.weight * after).ravel())
+    v, f, w = np.concatenate(speeds), np.concatenate(fits), np.concatenate(weights)
+    u, lk, v_map = determined(v, f, w, settings)
+    fitting = np.flatnonzero(f)
+    best = int(fitting[np.argmax(w[fitting])]) if len(fitting) and w[fitting].sum() > 0 else -1
+    return u, lk, v_map, best
+
+
 def assess(
     layout: Layout,
     times_s: np.ndarray,
@@ -199,17 +346,8 @@ def assess(
     Returns `determined`'s (unanimous, likelihood, MAP speed)."""
     if len(times_s) < 2:
         return False, False, float("nan")
-    speeds, fits, weights = [], [], []
-    for direction in (1, -1):
-        pos, p_det, lag = layout.travel(direction)
-        c = chain(pos, times_s, p_det, settings, entry)
-        after = after_miss(pos, p_det, lag, c.speed_mm_s, float(times_s[-1]), t_now_s)
-        speeds.append(c.speed_mm_s.ravel())
-        fits.append(c.fits.ravel())
-        weights.append((c.weight * after).ravel())
-    return determined(
-        np.concatenate(speeds), np.concatenate(fits), np.concatenate(weights), settings
-    )
+    hyps = hypotheses(layout, times_s, settings, entry)
+    return judge(hyps, float(times_s[-1]), t_now_s, settings)[:3]
 
 
 def true_fits(
@@ -236,8 +374,9 @@ class RunBound:
     from an earlier update of the run (`*_held`), determined now with the last two told
     contacts among the run's last three true ones (`*_fresh`: the memory of older contacts
     resolves the aliases), or from those fresh contacts alone (`*_alone`: nothing older
-    remembered); and where the likelihood rule names a speed the true assignment's speed
-    is more than `agree` away from (`wrong`: the posterior on an alias)."""
+    remembered); where the likelihood rule names a speed the true assignment's speed is
+    more than `agree` away from (`wrong`: the posterior on an alias); and, where two told
+    contacts are decided (`assessed`), whether the MAP pair state is the true one."""
 
     unanimous_now: np.ndarray
     likelihood_now: np.ndarray
@@ -248,6 +387,9 @@ class RunBound:
     unanimous_alone: np.ndarray
     likelihood_alone: np.ndarray
     wrong: np.ndarray
+    assessed: np.ndarray  # two told contacts decided: the hypotheses weighed
+    map_true: np.ndarray  # the MAP pair state is the true one (direction, last two ridges)
+    map_speed: np.ndarray  # the MAP pair state's speed is within `agree` of the true one
     truth_fits: bool  # the true assignment fits at every told set
 
 
@@ -259,16 +401,28 @@ def run_bound(
     decided_s: np.ndarray,
     t_upd_s: np.ndarray,
     settings: AliasSettings,
+    heights: Heights | None = None,
 ) -> RunBound:
     """One run (the edge crossing every ridge once in travel order, contact j at travel
-    ridge j): the bounds at each of its scored updates `t_upd_s` (time order)."""
+    ridge j): the bounds at each of its scored updates `t_upd_s` (time order); with
+    `heights` (per true contact) the told contacts' heights weigh too. The hypotheses of a
+    set of told contacts are built once (they change only when a contact is decided)."""
     m = len(t_upd_s)
     out = {k: np.zeros(m, bool) for k in RunBound.__dataclass_fields__ if k != "truth_fits"}
     pos, _, _ = layout.travel(direction)
+    n = len(pos)
     upto = np.searchsorted(contact_s, t_upd_s, side="right")
     held_u = held_l = False
     truth_ok = True
     checked: set[tuple[int, ...]] = set()
+    cache: dict[tuple[bool, tuple[int, ...]], Hypotheses] = {}
+
+    def judged(subset: np.ndarray, t: float, entry: bool) -> tuple[bool, bool, float, int]:
+        key = (entry, tuple(int(k) for k in subset))
+        if key not in cache:
+            cache[key] = hypotheses(layout, contact_s[subset], settings, entry, heights, subset)
+        return judge(cache[key], float(contact_s[subset[-1]]), t, settings)
+
     for i, t in enumerate(t_upd_s):
         known = np.flatnonzero(told & (decided_s <= t) & (np.arange(len(contact_s)) < upto[i]))
         if len(known) >= 2:
@@ -276,17 +430,21 @@ def run_bound(
             if key not in checked:
                 checked.add(key)
                 truth_ok &= true_fits(layout, direction, known, contact_s[known], settings)
-            u, lk, v_map = assess(layout, contact_s[known], float(t), settings)
+            u, lk, v_map, best = judged(known, float(t), True)
             out["unanimous_now"][i], out["likelihood_now"][i] = u, lk
             a, b = known[-2], known[-1]
+            out["assessed"][i] = True
+            out["map_true"][i] = best == (0 if direction > 0 else 1) * n * n + a * n + b
             v_true = (pos[b] - pos[a]) / (contact_s[b] - contact_s[a])
-            out["wrong"][i] = lk and abs(v_map / v_true - 1) > settings.agree
+            near = abs(v_map / v_true - 1) <= settings.agree
+            out["map_speed"][i] = near
+            out["wrong"][i] = lk and not near
             fresh = a >= upto[i] - 3
             out["unanimous_fresh"][i] = u and fresh
             out["likelihood_fresh"][i] = lk and fresh
             recent = known[known >= upto[i] - 3]
             if len(recent) >= 2:
-                ua, la, _ = assess(layout, contact_s[recent], float(t), settings, entry=False)
+                ua, la, _, _ = judged(recent, float(t), False)
                 out["unanimous_alone"][i], out["likelihood_alone"][i] = ua, la
             held_u |= u
             held_l |= lk
