@@ -15,11 +15,18 @@ Per case (the full plan's moving kinds, snr10 apart - it has its own bound):
   *rail* the noise-free force touches the FSR's full scale within [-10, +50] ms of the
   contact (saturation); *samples lost* a sample dropped in that window (rates-drops);
   *grip change* the grip moved by more than `GRIP_MOVE_N` over +-0.1 s; *first ridge*
-  the run's first contact (the object arriving, no pulse before it); *merged* the time
-  since the previous true contact (spacing / speed) under `MERGE_S` (the kink bank's
-  scales reach +-80 ms: the pulse starts on the previous one's rise); *weak* the pulse's
-  kink on the noise-free signal (`clean_kink_z`) under the kink bank's threshold; else
-  *other* (a clean kink over the threshold, yet missed), by the detector's why;
+  the run's first contact (the object arriving, no pulse before it); *hysteresis-held*
+  the noise-free force stays flat for more than 10 ms from the contact (the loop's FSR
+  hysteresis, a play operator 0.2 N wide, holds the level until the new pulse has risen
+  through the band: its kink comes late or never); *merged* the time
+  since the previous true contact (spacing / speed) under `MERGE_S`, the kink bank's
+  longest scale (80 ms: the two onsets share a hinge's reach, and a candidate within its
+  reach of an earlier contact is that contact again); *weak* the pulse's own
+  matched-filter SNR (`pulse_snr`) under `contact_truth.DETECTABLE_SNR` (5); *blunt
+  kink* a pulse that strong whose kink on the noise-free signal (`clean_kink_z`) stays
+  under the kink bank's threshold (a slow rise, longer than its scales, or a pulse on
+  a bend); else *other* (a clean kink over the threshold, yet missed: the detector's
+  own rules), by the detector's why;
 - its cost, by the silence bound's logic: the updates silent past due with the found
   contacts (known at their true times) that are not with all of them; each is charged to
   the latest true contact by then (a miss: telling it alone keeps the flag there). Of
@@ -50,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from grasplink.decoding.contacts import HingeSettings
+from grasplink.decoding.contacts import DEFAULT_SCALES_S, HingeSettings
 from grasplink.decoding.detector.hinges import hinge_widths
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import contact_truth as ct
@@ -63,16 +70,21 @@ from grasplink.simulators.effects import noise
 WINDOW_S = (-0.01, 0.05)  # around a contact: where its pulse rises (rail, lost samples)
 GRIP_MOVE_N = 0.1  # a grip change: the grip moved more than this over +-GRIP_SPAN_S
 GRIP_SPAN_S = 0.1
-MERGE_S = 0.04  # a pulse this soon after the previous one starts on its rise
+MERGE_S = max(DEFAULT_SCALES_S)  # a pulse this soon after the previous one: within its reach
+HELD_MIN_S = 0.01  # ... for longer than this: a kink that shows late if at all
+HELD_N = 1e-6  # the noise-free force held (hysteresis' play operator) while it moves less
+RISE_LOOK_S = 0.3  # a pulse's rise: the noise-free force's highest over this (or until the next)
 RAIL = "rail"
 LOST = "samples lost"
 GRIP = "grip change"
 FIRST = "first ridge"
+HELD = "hysteresis-held"
 MERGED = "merged"
 WEAK = "weak"
+BLUNT = "blunt kink"
 OTHER = "other"
 LATE = "told late"
-CAUSES = (RAIL, LOST, GRIP, FIRST, MERGED, WEAK, OTHER)
+CAUSES = (RAIL, LOST, GRIP, FIRST, HELD, MERGED, WEAK, BLUNT, OTHER)
 KINDS = tuple(k for k in sr.MOVING if k != "snr10")
 
 
@@ -126,7 +138,21 @@ def clean_kink_z(
     return best
 
 
-def contact_facts(case: sr.Case, rec: ns.Recorded, z: np.ndarray) -> list[dict]:
+def pulse_snr(case: sr.Case, truth: synth.SkinRecording) -> np.ndarray:
+    """Per true contact: its pulse's own matched-filter SNR against the white noise, a
+    previous tail's bend unknown (`contact_truth.ideal_snr`, background 2) - the pulse's
+    size in noise units before hysteresis and the rail; nan where the case's pulses are
+    not rebuilt (`contact_truth.pulse_train`)."""
+    try:
+        train = ct.pulse_train(truth, case.seed)
+    except ValueError:
+        return np.full(len(truth.contact_times_s), np.nan)
+    return ct.ideal_snr(train, truth.t_s, synth.NOISE_WHITE_N, background=2)
+
+
+def contact_facts(
+    case: sr.Case, rec: ns.Recorded, z: np.ndarray, clean_n: np.ndarray
+) -> list[dict]:
     """Per true contact what `cause` reads: the noise-free force on the rail in `WINDOW_S`
     (saturation), a sample lost there, the grip's move over +-`GRIP_SPAN_S`, the time
     since the previous contact of its motion run (None: the run's first), the clean z."""
@@ -143,8 +169,16 @@ def contact_facts(case: sr.Case, rec: ns.Recorded, z: np.ndarray) -> list[dict]:
         grip = np.interp([c - GRIP_SPAN_S, c + GRIP_SPAN_S], t, truth.grip_n)
         run = next(((a, b) for a, b, _ in runs if a <= c < b), None)
         previous = contacts[:i][contacts[:i] >= run[0]] if run else contacts[:i]
+        k = int(np.searchsorted(t, c))
+        end = len(t) if i + 1 == len(contacts) else int(np.searchsorted(t, contacts[i + 1]))
+        end = min(end, k + round(RISE_LOOK_S * truth.fs_hz))
+        after = clean_n[k:end] - clean_n[k] if end > k else np.zeros(1)
+        moved = np.flatnonzero(np.abs(after) > HELD_N)
         out.append(
             {
+                "held_s": float(moved[0] if len(moved) else len(after)) / truth.fs_hz,
+                "rise_n": float(after.max()),
+                "speed_mm_s": float(np.abs(np.interp(c, t, truth.speed_mm_s))),
                 "rail": bool(saturates and (truth.force_n[w] >= ns.FULL_SCALE_N - 1e-9).any()),
                 "lost": bool(not kept[w].all()),
                 "grip_n": float(abs(grip[1] - grip[0])),
@@ -165,9 +199,13 @@ def cause(facts: dict, threshold: float) -> str:
         return GRIP
     if facts["gap_s"] is None:
         return FIRST
+    if facts["held_s"] > HELD_MIN_S:
+        return HELD
     if facts["gap_s"] < MERGE_S:
         return MERGED
-    return WEAK if facts["z"] < threshold else OTHER
+    if facts["snr"] < ct.DETECTABLE_SNR:
+        return WEAK
+    return BLUNT if facts["z"] < threshold else OTHER
 
 
 def job(case: sr.Case) -> dict:
@@ -187,7 +225,9 @@ def job(case: sr.Case) -> dict:
         known_s[i] = max(contacts[i], emit_s[int(np.argmin(np.abs(told_s - contacts[i])))])
     clean = truth.force_n - added_noise_n(case, truth)
     z = clean_kink_z(clean, fs, contacts, synth.NOISE_WHITE_N)
-    facts = contact_facts(case, rec, z)
+    facts = contact_facts(case, rec, z, clean)
+    for f, snr in zip(facts, pulse_snr(case, truth), strict=True):
+        f["snr"] = float(snr)
 
     decoder = sr.build_decoder(DEFAULT_DECODER, truth.layout_mm, fs, {})
     if case.kind == "loop":
@@ -316,14 +356,15 @@ def report(rows: list[dict]) -> None:
         print("| " + " | ".join(cells) + " |")
     print()
     print(
-        "Per kind x cause: missed contacts, their clean kink z (median), the detector's why,"
+        "Per kind x cause: missed contacts, speed, pulse SNR, clean kink z, the detector why,"
         " the silent-past-due updates charged to them and of those the decoder dropped (both"
         " % of the kind's scored updates: points of its slip dropped)"
     )
     print(
-        "| kind | cause | missed | clean z median | detector why | silent % | decoder dropped % |"
+        "| kind | cause | missed | speed median mm/s | pulse SNR median | clean z median |"
+        " detector why | silent % | decoder dropped % |"
     )
-    print("|---|---|---:|---:|---|---:|---:|")
+    print("|---|---|---:|---:|---:|---:|---|---:|---:|")
     for key, rs in groups.items():
         scored = total(rs, "scored")
         facts = [f for r in rs for f in r["contacts"]]
@@ -338,6 +379,8 @@ def report(rows: list[dict]) -> None:
                 key,
                 c,
                 str(len(mine)),
+                f"{np.median([f['speed_mm_s'] for f in mine]):.0f}",
+                f"{np.nanmedian([f['snr'] for f in mine]):.1f}",
                 f"{np.median([f['z'] for f in mine]):.1f}",
                 ", ".join(f"{k} {v}" for k, v in sorted(whys.items())),
                 _pct(sum(f["cost"][0] for f in mine), scored),
@@ -345,8 +388,44 @@ def report(rows: list[dict]) -> None:
             ]
             print("| " + " | ".join(cells) + " |")
         late = np.sum([r["late"] for r in rs], axis=0)
-        print(f"| {key} | {LATE} | - | - | - | {_pct(late[0], scored)} | {_pct(late[1], scored)} |")
+        print(
+            f"| {key} | {LATE} | - | - | - | - | - | {_pct(late[0], scored)} |"
+            f" {_pct(late[1], scored)} |"
+        )
+    print()
+    print(
+        "Compact (docs/decoding.md): per kind x cause, missed contacts / silent % / decoder"
+        " dropped % (both of the kind's scored updates)"
+    )
+    print("| kind | " + " | ".join((*CAUSES, LATE)) + " |")
+    print("|---|" + "---:|" * (len(CAUSES) + 1))
+    for key, rs in groups.items():
+        scored = total(rs, "scored")
+        facts = [f for r in rs for f in r["contacts"]]
+        cells = [key]
+        for c in CAUSES:
+            mine = [f for f in facts if f["cause"] == c]
+            silent = sum(f["cost"][0] for f in mine)
+            dropped = sum(f["cost"][1] for f in mine)
+            cells.append(
+                f"{len(mine)} / {_pct(silent, scored)} / {_pct(dropped, scored)}" if mine else "-"
+            )
+        late = np.sum([r["late"] for r in rs], axis=0)
+        cells.append(f"{_pct(late[0], scored)} / {_pct(late[1], scored)}")
+        print("| " + " | ".join(cells) + " |")
     facts = [f for r in rows for f in r["contacts"]]
+    held = [f for f in facts if f["cause"] == HELD]
+    if held:
+        white = synth.NOISE_WHITE_N
+        shows = sum(1 for f in held if f["rise_n"] >= threshold * white)
+        print()
+        flat_ms = np.median([f["held_s"] for f in held]) * 1e3
+        print(
+            f"{HELD}: {len(held)} misses, held flat {flat_ms:.0f}"
+            f" ms (median); their pulse rises through the band by >= {threshold:g} white-noise"
+            f" units later in {shows} ({_pct(shows, len(held))} %), median rise"
+            f" {np.median([f['rise_n'] for f in held]) / white:.1f} units"
+        )
     zs = np.array([f["z"] for f in facts if f["found"]])
     zm = np.array([f["z"] for f in facts if not f["found"]])
     if len(zs) and len(zm):
@@ -357,13 +436,25 @@ def report(rows: list[dict]) -> None:
             f" %), missed median {np.median(zm):.1f} (under"
             f" {_pct((zm < threshold).sum(), len(zm))} %)"
         )
+    snr_found = np.array([f["snr"] for f in facts if f["found"]])
+    snr_missed = np.array([f["snr"] for f in facts if not f["found"]])
+    if len(snr_found) and len(snr_missed):
+        level = ct.DETECTABLE_SNR
+        print(
+            f"Pulse SNR (detectable from {level:g}): found median {np.nanmedian(snr_found):.1f}"
+            f" (under {_pct((snr_found < level).sum(), len(snr_found))} %), missed median"
+            f" {np.nanmedian(snr_missed):.1f} (under"
+            f" {_pct((snr_missed < level).sum(), len(snr_missed))} %)"
+        )
     cost = [(sum(f["cost"][0] for f in r["contacts"]), r) for r in rows]
     print("Costliest cases (silent updates charged to misses / of those decoder-dropped):")
     for n, r in sorted(cost, key=lambda x: -x[0])[:12]:
         print(
             f"  {r['kind']} {r['case']}: {n} / {sum(f['cost'][1] for f in r['contacts'])}; "
             + ", ".join(
-                f"{f['cause']} z {f['z']:.1f} {f['cost'][0]}" for f in r["contacts"] if f["cost"][0]
+                f"{f['cause']} snr {f['snr']:.1f} z {f['z']:.1f} {f['cost'][0]}"
+                for f in r["contacts"]
+                if f["cost"][0]
             )
         )
 
