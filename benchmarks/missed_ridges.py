@@ -11,7 +11,9 @@ Per case (the full plan's moving kinds, snr10 apart - it has its own bound):
 - every true ridge contact (`contact_truth.by_contact`: found within 20 ms or not, and
   the detector's own why - `AGAIN`, `UNDER`, `NO_KINK`) and, when found, how late it was
   told (the deciding sample of the nearest contact, `contact_truth.detect`);
-- each miss's cause, the first rule that holds, in this order:
+- each miss's cause, the first rule that holds, in this order: *told off* a told
+  contact nearer to it than to any other true contact lies 20-50 ms off (`OFF_S`: told,
+  but placed outside the match - its silence is mostly the match's, not the decoder's);
   *rail* the noise-free force touches the FSR's full scale within [-10, +50] ms of the
   contact (saturation); *samples lost* a sample dropped in that window (rates-drops);
   *grip change* the grip moved by more than `GRIP_MOVE_N` over +-0.1 s; *first ridge*
@@ -67,6 +69,7 @@ from grasplink.evaluation import slip_reporting as sr
 from grasplink.simulators import harness, synth
 from grasplink.simulators.effects import noise
 
+OFF_S = 0.05  # a miss told this near (but over MATCH_S off) was told, misplaced
 WINDOW_S = (-0.01, 0.05)  # around a contact: where its pulse rises (rail, lost samples)
 GRIP_MOVE_N = 0.1  # a grip change: the grip moved more than this over +-GRIP_SPAN_S
 GRIP_SPAN_S = 0.1
@@ -74,6 +77,7 @@ MERGE_S = max(DEFAULT_SCALES_S)  # a pulse this soon after the previous one: wit
 HELD_MIN_S = 0.01  # ... for longer than this: a kink that shows late if at all
 HELD_N = 1e-6  # the noise-free force held (hysteresis' play operator) while it moves less
 RISE_LOOK_S = 0.3  # a pulse's rise: the noise-free force's highest over this (or until the next)
+OFF = "told off"
 RAIL = "rail"
 LOST = "samples lost"
 GRIP = "grip change"
@@ -84,7 +88,7 @@ WEAK = "weak"
 BLUNT = "blunt kink"
 OTHER = "other"
 LATE = "told late"
-CAUSES = (RAIL, LOST, GRIP, FIRST, HELD, MERGED, WEAK, BLUNT, OTHER)
+CAUSES = (OFF, RAIL, LOST, GRIP, FIRST, HELD, MERGED, WEAK, BLUNT, OTHER)
 KINDS = tuple(k for k in sr.MOVING if k != "snr10")
 
 
@@ -150,6 +154,21 @@ def pulse_snr(case: sr.Case, truth: synth.SkinRecording) -> np.ndarray:
     return ct.ideal_snr(train, truth.t_s, synth.NOISE_WHITE_N, background=2)
 
 
+def own_told_offset_s(contact_s: np.ndarray, told_s: np.ndarray) -> np.ndarray:
+    """Per true contact: the signed time to the nearest told contact among those nearer to
+    it than to any other true contact (nan: none) - a miss told too far off to match."""
+    contact_s, told_s = np.asarray(contact_s, dtype=float), np.asarray(told_s, dtype=float)
+    out = np.full(len(contact_s), np.nan)
+    if not len(contact_s) or not len(told_s):
+        return out
+    owner = np.argmin(np.abs(told_s[:, None] - contact_s[None, :]), axis=1)
+    for i, c in enumerate(contact_s):
+        mine = told_s[owner == i] - c
+        if len(mine):
+            out[i] = mine[np.argmin(np.abs(mine))]
+    return out
+
+
 def contact_facts(
     case: sr.Case, rec: ns.Recorded, z: np.ndarray, clean_n: np.ndarray
 ) -> list[dict]:
@@ -191,6 +210,8 @@ def contact_facts(
 
 def cause(facts: dict, threshold: float) -> str:
     """A missed contact's cause: the first rule of the module doc that holds."""
+    if abs(facts["off_s"]) <= OFF_S:
+        return OFF
     if facts["rail"]:
         return RAIL
     if facts["lost"]:
@@ -226,8 +247,10 @@ def job(case: sr.Case) -> dict:
     clean = truth.force_n - added_noise_n(case, truth)
     z = clean_kink_z(clean, fs, contacts, synth.NOISE_WHITE_N)
     facts = contact_facts(case, rec, z, clean)
-    for f, snr in zip(facts, pulse_snr(case, truth), strict=True):
+    offsets = own_told_offset_s(contacts, told_s)
+    for f, snr, off in zip(facts, pulse_snr(case, truth), offsets, strict=True):
         f["snr"] = float(snr)
+        f["off_s"] = float(off)
 
     decoder = sr.build_decoder(DEFAULT_DECODER, truth.layout_mm, fs, {})
     if case.kind == "loop":
