@@ -42,7 +42,8 @@ def config(tuning: dict) -> dict:
     the tuning, `watch.NAME` as the detector's `WatchSettings` field NAME, `tails.NAME` as
     its kink bank's `TailKinkSettings` field NAME (`detector.tail_kinks`), `pulses.NAME` as
     its pulse probe's `PulseProbeSettings` field NAME (`detector.pulse_probe`),
-    `hinges.threshold` as its kink bank's threshold (noise units), `noise.NAME` as its
+    `hinges.threshold` as its kink bank's threshold (noise units), `hinges.NAME` as its
+    other `HingeSettings` field NAME (e.g. `merge_widths`), `noise.NAME` as its
     noise floor's `NoiseSettings` field NAME (`detector.noise_floor`), `grip_commands` 0 the
     loop cases without the grip commands their gateway would have sent."""
     watch = {k.removeprefix("watch."): v for k, v in tuning.items() if k.startswith("watch.")}
@@ -56,6 +57,13 @@ def config(tuning: dict) -> dict:
         out["grip_commands"] = bool(tuning["grip_commands"])
     if "hinges.threshold" in tuning:
         out["detector_threshold"] = tuning["hinges.threshold"]
+    kinks = {
+        k.removeprefix("hinges."): v
+        for k, v in tuning.items()
+        if k.startswith("hinges.") and k != "hinges.threshold"
+    }
+    if kinks:
+        out["hinges"] = kinks
     if pulses:
         out["pulses"] = pulses
     if noise:

@@ -849,9 +849,10 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
     tails = settings.pop("tails", None)  # TailKinkSettings fields by name (a trial's)
     pulses = settings.pop("pulses", None)  # PulseProbeSettings fields by name (a trial's)
     noise = settings.pop("noise", None)  # NoiseSettings fields by name (a trial's)
-    if threshold is not None or watch or tails or pulses or noise:
+    kinks = settings.pop("hinges", None)  # HingeSettings fields by name (a trial's)
+    if threshold is not None or watch or tails or pulses or noise or kinks:
         hinges = HingeSettings() if threshold is None else HingeSettings(threshold=threshold)
-        hinges = replace(hinges, tails=_with_fields(hinges.tails, tails))
+        hinges = replace(_with_fields(hinges, kinks), tails=_with_fields(hinges.tails, tails))
         detector = DetectorSettings(
             hinges=hinges,
             watch=_with_fields(WatchSettings(), watch),

@@ -292,3 +292,15 @@ def test_a_trial_reaches_the_detectors_watch_settings_by_name_and_refuses_unknow
     assert watch.tail_trough is True and watch.drop_fraction == 0.4
     with pytest.raises(ValueError, match="no WatchSettings field 'tail_trouf'"):
         sr.build_decoder("tracker", (6.0, 8.0), 400.0, {"watch": {"tail_trouf": 1.0}})
+
+
+def test_build_decoder_takes_a_trials_kink_bank_fields_and_names_an_unknown_one():
+    """A `hinges` trial (tune_tracker's `hinges.NAME`) reaches the kink bank's settings;
+    a field HingeSettings does not have is refused by name."""
+    layout = (10.0, 20.0)
+    decoder = sr.build_decoder("tracker", layout, 400, {"hinges": {"merge_widths": 1.0}})
+    assert decoder.detector.settings.hinges.merge_widths == 1.0
+    shipped = sr.build_decoder("tracker", layout, 400, {})
+    assert shipped.detector.settings.hinges.merge_widths != 1.0
+    with pytest.raises(ValueError, match="merge_width"):
+        sr.build_decoder("tracker", layout, 400, {"hinges": {"merge_width": 1.0}})
