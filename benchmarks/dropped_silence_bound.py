@@ -29,9 +29,9 @@ import argparse
 import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 
 import numpy as np
+import plan_cases
 
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import contact_truth as ct
@@ -152,18 +152,8 @@ def main(argv: list[str] | None = None) -> int:
         "--found", action="store_true", help="every kind's bound on today's detector's contacts"
     )
     args = parser.parse_args(argv)
-    if not 1 <= args.seeds <= sr.FULL.seeds:
-        parser.error(f"--seeds must be 1-{sr.FULL.seeds}, got {args.seeds}")
-    kinds = args.kinds.split(",") if args.kinds else list(sr.MOVING)
-    unknown = set(kinds) - set(sr.MOVING)
-    if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; moving: {', '.join(sr.MOVING)}")
-    plan = replace(
-        sr.FULL,
-        seeds=args.seeds,
-        variants={k: v for k, v in sr.FULL.variants.items() if k in kinds},
-    )
-    todo = sr.cases(plan)
+    kinds = (args.kinds or ",".join(sr.MOVING)).split(",")
+    todo = plan_cases.full_plan_cases(parser, ",".join(kinds), args.seeds, allowed=sr.MOVING)
     started = time.monotonic()
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(

@@ -54,10 +54,10 @@ import json
 import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import plan_cases
 
 from grasplink.decoding.contacts import DEFAULT_SCALES_S, HingeSettings
 from grasplink.decoding.detector.hinges import hinge_widths
@@ -310,18 +310,8 @@ def main(argv: list[str] | None = None) -> int:
         print(saved["title"])
         report(saved["rows"])
         return 0
-    if not 1 <= args.seeds <= sr.FULL.seeds:
-        parser.error(f"--seeds must be 1-{sr.FULL.seeds}, got {args.seeds}")
-    kinds = args.kinds.split(",") if args.kinds else list(KINDS)
-    unknown = set(kinds) - set(KINDS)
-    if unknown:
-        parser.error(f"unknown kinds {sorted(unknown)}; these: {', '.join(KINDS)}")
-    plan = replace(
-        sr.FULL,
-        seeds=args.seeds,
-        variants={k: v for k, v in sr.FULL.variants.items() if k in kinds},
-    )
-    todo = sr.cases(plan)
+    kinds = (args.kinds or ",".join(KINDS)).split(",")
+    todo = plan_cases.full_plan_cases(parser, ",".join(kinds), args.seeds, allowed=KINDS)
     started = time.monotonic()
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(pool.map(job, todo, chunksize=2))

@@ -25,21 +25,31 @@ def add_plan_arguments(
         parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
 
 
-def kinds_of(parser: argparse.ArgumentParser, kinds_text: str) -> list[str]:
-    """The comma-separated kinds; one the plan does not know is a usage error naming it."""
+def kinds_of(
+    parser: argparse.ArgumentParser, kinds_text: str, allowed: Sequence[str] = sr.KINDS
+) -> list[str]:
+    """The comma-separated kinds; one not `allowed` (default: every kind the plan knows)
+    is a usage error naming it."""
     kinds = kinds_text.split(",")
-    unknown = sorted(set(kinds) - set(sr.KINDS))
+    unknown = sorted(set(kinds) - set(allowed))
     if unknown:
-        parser.error(f"unknown kinds {unknown}; known: {', '.join(sr.KINDS)}")
+        parser.error(f"unknown kinds {unknown}; known: {', '.join(allowed)}")
     return kinds
 
 
 def full_plan_cases(
-    parser: argparse.ArgumentParser, kinds_text: str, seeds: int, only: str | None = None
+    parser: argparse.ArgumentParser,
+    kinds_text: str,
+    seeds: int,
+    only: str | None = None,
+    allowed: Sequence[str] = sr.KINDS,
 ) -> list[sr.Case]:
-    """The full plan's cases of these kinds with its first `seeds` seeds; `only`: the
-    comma-separated case seeds to keep (None: all)."""
-    kinds = kinds_of(parser, kinds_text)
+    """The full plan's cases of these kinds (`kinds_of`) with its first `seeds` seeds (a
+    usage error outside 1 to the plan's); `only`: the comma-separated case seeds to keep
+    (None: all)."""
+    if not 1 <= seeds <= sr.FULL.seeds:
+        parser.error(f"--seeds must be 1-{sr.FULL.seeds}, got {seeds}")
+    kinds = kinds_of(parser, kinds_text, allowed)
     todo = [c for c in sr.cases(replace(sr.FULL, seeds=seeds)) if c.kind in kinds]
     if only:
         todo = [c for c in todo if str(c.seed) in only.split(",")]
