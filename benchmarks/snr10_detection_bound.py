@@ -500,16 +500,22 @@ ALIAS_COLUMNS = (
 )
 
 
-def alias_report(rows: list[dict], args) -> None:
-    """The alias bounds per layout and speed set beside the s27 bound (any 2 / last 3,
-    ridges known) and the decoder: speed missing = scored updates not determined."""
-    level = rows[0]["aliases"]["level"]
+def _by_set(rows: list[dict]) -> tuple[dict[str, list[dict]], list[str]]:
+    """The rows by layout, by speed set ("speed ...") and all together, and the order the
+    tables print them in (layouts, then speed sets, then "all")."""
     groups: dict[str, list[dict]] = defaultdict(list)
     for r in rows:
         groups[r["layout"]].append(r)
         groups[f"speed {r['variant']}"].append(r)
         groups["all"].append(r)
-    order = sorted(groups, key=lambda k: (k == "all", k.startswith("speed"), k))
+    return groups, sorted(groups, key=lambda k: (k == "all", k.startswith("speed"), k))
+
+
+def alias_report(rows: list[dict], args) -> None:
+    """The alias bounds per layout and speed set beside the s27 bound (any 2 / last 3,
+    ridges known) and the decoder: speed missing = scored updates not determined."""
+    level = rows[0]["aliases"]["level"]
+    groups, order = _by_set(rows)
     for name in ALIAS_SETTINGS:
         s = ALIAS_SETTINGS[name]
         excluded = sum(not r["aliases"][name]["truth_fits"] for r in rows)
@@ -599,12 +605,7 @@ def height_report(rows: list[dict], args) -> None:
         ("25 %, 15-150 mm/s", "25 %, 15-150 mm/s + heights"),
         ("25 %, 15-150 mm/s", "25 %, 15-150 mm/s + heights, a known"),
     ]
-    groups: dict[str, list[dict]] = defaultdict(list)
-    for r in rows:
-        groups[r["layout"]].append(r)
-        groups[f"speed {r['variant']}"].append(r)
-        groups["all"].append(r)
-    order = sorted(groups, key=lambda k: (k == "all", k.startswith("speed"), k))
+    groups, order = _by_set(rows)
     header = (
         "| set | scored updates | ridges known: any 2 / last 3 |"
         + "".join(f" {a} / {b}: held / fresh |" for a, b in pairs[::2])
@@ -765,12 +766,7 @@ def report(rows: list[dict], every_held: list[dict], args) -> None:
     )
     print(header)
     print("|---" * (header.count("|") - 1) + "|")
-    groups: dict[str, list[dict]] = defaultdict(list)
-    for r in rows:
-        groups[r["layout"]].append(r)
-        groups[f"speed {r['variant']}"].append(r)
-        groups["all"].append(r)
-    order = sorted(groups, key=lambda k: (k == "all", k.startswith("speed"), k))
+    groups, order = _by_set(rows)
     for key in order:
         rs = groups[key]
         snr = np.concatenate([r["snr"] for r in rs])
