@@ -32,7 +32,7 @@ from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import harness
 from grasplink.simulators.effects import actuators, kinematics, noise, skin
 from grasplink.simulators.effects.skin import ridge_positions_mm
-from grasplink.simulators.synth import SkinRecording, run_recording
+from grasplink.simulators.synth import LOAD_KG, SkinRecording, run_recording
 
 MATCH_S = 0.02  # a contact within this of a true ridge crossing found it
 CHUNK = 3  # samples per skin TPDO1
@@ -99,7 +99,7 @@ def loop_recording(
         ),
         harness.make(kinematics.RidgeDips, ctx),
         harness.make(actuators.ScriptedGrip, ctx, grip_n=grip_n),
-        harness.make(actuators.ScriptedLoad, ctx, mass_kg=0.2),
+        harness.make(actuators.ScriptedLoad, ctx, mass_kg=LOAD_KG),
         harness.make(skin.FsrForce, ctx, object_length_mm=LOOP_OBJECT_MM, direction=direction),
         contacts,
         harness.make(skin.Hysteresis, ctx),

@@ -51,6 +51,7 @@ from grasplink.simulators import signals as sig
 from grasplink.simulators.core import PHYSICS
 from grasplink.simulators.engine import Simulation
 from grasplink.simulators.scene import Scene, parse_scene
+from grasplink.simulators.synth import LOAD_KG
 
 #: Builds the sans-IO participants a scene's `[controller]` names (grasplink.controllers).
 ControllerFactory = Callable[[Scene], Sequence[SansIoDevice]]
@@ -149,7 +150,7 @@ def _headline_scene(trial: Trial) -> dict:
         },
         "effects": [
             {"type": "hand.actuator", "initial_n": 5.0, "crush_limit_n": 25.0},
-            {"type": "load.scripted", "mass_kg": 0.2},
+            {"type": "load.scripted", "mass_kg": LOAD_KG},
             {
                 "type": "object.pulled",
                 "speed_mm_s": float(trial.speed_mm_s),

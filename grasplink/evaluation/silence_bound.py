@@ -36,10 +36,9 @@ from grasplink.simulators import harness
 from grasplink.simulators import signals as sig
 from grasplink.simulators.effects import skin
 from grasplink.simulators.effects.actuators import G_M_S2
-from grasplink.simulators.synth import SkinRecording
+from grasplink.simulators.synth import LOAD_KG, SkinRecording
 
 AFTER_CONTACT_S = 1e-4  # the counterfactual stop starts this soon after the contact
-LOAD_KG = 0.2  # the makers' `actuators.ScriptedLoad` (synth and the loop's physics)
 LEVEL_WINDOW_S = 0.25  # the level's move is read over this time before the update
 LEVEL_SIGMAS = 3.0  # ... and counts as evidence beyond this many white-noise sigmas
 

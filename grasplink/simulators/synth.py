@@ -25,6 +25,7 @@ NOISE_WHITE_N = 0.02  # thesis-like: high-frequency FSR noise
 NOISE_DRIFT_N = 0.05  # and slow drift
 DRIFT_CORNER_HZ = 0.3
 OBJECT_LENGTH_MM = 90.0
+LOAD_KG = 0.2  # the object's weight pulling it along the skin (`actuators.ScriptedLoad`)
 LEAD_MM = 6.0
 
 
@@ -195,7 +196,7 @@ def _record(
     effects = [harness.make(cls, ctx, **params) for cls, params in physics]
     effects += [
         harness.make(actuators.ScriptedGrip, ctx, grip_n=grip_n, interpolation=grip_interpolation),
-        harness.make(actuators.ScriptedLoad, ctx, mass_kg=0.2),
+        harness.make(actuators.ScriptedLoad, ctx, mass_kg=LOAD_KG),
         harness.make(
             skin.FsrForce,
             ctx,
