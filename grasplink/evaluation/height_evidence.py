@@ -26,9 +26,18 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import ndtr
 
-SPACING_SCALE_MM = 10.0  # skin.ridge_contacts' spacing_scale_mm
-LEAD_IN_MM = 20.0  # skin.ridge_contacts' lead_in_mm: the spacing before the first ridge met
-DRAW = (0.8, 1.2)  # skin.ridge_contacts' alpha_n interval (N): the per-contact draw
+from grasplink.simulators.effects.skin import (
+    ALPHA_DRAW_N,
+    LEAD_IN_MM,
+    MAX_RISE_S,
+    MIN_RISE_S,
+    RIDGE_SIDE_MM,
+    RISE_JITTER,
+    SPACING_SCALE_MM,
+    pulse,
+)
+
+DRAW = ALPHA_DRAW_N  # skin.ridge_contacts' per-contact height draw (N)
 SIM_SCALE_N = 1.0  # the scale a that interval implies (a x d, d in DRAW): "a known"
 
 
@@ -93,6 +102,12 @@ def evidence(
     )
 
 
+def _shape(tau_s: np.ndarray, rise_s: float | np.ndarray) -> np.ndarray:
+    """A pulse of unit height `tau_s` after its onset (0 before it): the simulator's own
+    (`skin.pulse`, u e^(1 - u), u = tau / rise), which the oracle knows."""
+    return pulse(np.maximum(tau_s, 0.0), 1.0, rise_s, 0.0)
+
+
 def measure(
     rest_n: np.ndarray,
     at: int,
@@ -112,8 +127,7 @@ def measure(
     k = at + offsets
     if k[0] < 0 or k[-1] >= len(rest_n):
         return float("nan"), float("inf")
-    u = np.maximum((k / fs_hz - onset_s) / rise_s, 0.0)
-    g = u * np.exp(1.0 - u)
+    g = _shape(k / fs_hz - onset_s, rise_s)
     span = max(-int(offsets[0]), 1)
     basis = np.vander(offsets / span, 2)
     coef, *_ = np.linalg.lstsq(basis, g, rcond=None)
@@ -139,7 +153,7 @@ def rise_sigma(
     `skin.ridge_contacts`) that the alias bound leaves out. inf where it holds none."""
     t = (at + offsets) / fs_hz
     u = np.maximum((t - onset_s) / rise_s, 0.0)
-    g = u * np.exp(1.0 - u)
+    g = _shape(t - onset_s, rise_s)
     d_rise = alpha_n * np.exp(1.0 - u) * (1.0 - u) * (-u / rise_s)  # d(alpha g) / d rise
     span = max(-int(offsets[0]), 1)
     x = np.column_stack([g, d_rise, np.vander(offsets / span, 2)])
@@ -149,9 +163,7 @@ def rise_sigma(
     return float(np.sqrt(np.linalg.inv(info)[1, 1])) / rise_s
 
 
-RIDGE_SIDE_MM = 2.5  # skin.ridge_contacts: rise = ridge_side / (2 |speed|), clipped
-RISE_CLIP_S = (0.002, 0.2)
-RISE_JITTER = (0.9, 1.1)
+RISE_CLIP_S = (MIN_RISE_S, MAX_RISE_S)  # skin.ridge_contacts: rise = side / (2 |v|), clipped
 
 
 def measure_rise(
@@ -172,14 +184,12 @@ def measure_rise(
     if k[0] < 0 or k[-1] >= len(rest_n):
         return float("nan")
     t = k / fs_hz - onset_s
-    u_true = np.maximum(t / rise_s, 0.0)
-    y = rest_n[k] + alpha_n * u_true * np.exp(1.0 - u_true)
+    y = rest_n[k] + alpha_n * _shape(t, rise_s)
     span = max(-int(offsets[0]), 1)
     line = np.vander(offsets / span, 2)
     q, _ = np.linalg.qr(line)
     y_perp = y - q @ (q.T @ y)
-    u = np.maximum(t[None, :] / np.asarray(grid_s, float)[:, None], 0.0)
-    g = u * np.exp(1.0 - u)
+    g = _shape(t[None, :], np.asarray(grid_s, float)[:, None])
     g_perp = g - (g @ q) @ q.T
     norm2 = np.einsum("ij,ij->i", g_perp, g_perp)
     fit = np.where(norm2 > 0, (g_perp @ y_perp) ** 2 / np.where(norm2 > 0, norm2, 1.0), -1.0)

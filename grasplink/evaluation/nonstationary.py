@@ -32,6 +32,7 @@ from grasplink.decoding.base import SlipEstimate
 from grasplink.evaluation.decoders import make_decoder
 from grasplink.evaluation.scoring import along_truth
 from grasplink.profiles.layouts import LAYOUTS_MM
+from grasplink.simulators.effects.skin import LEAD_IN_MM, SPACING_SCALE_MM
 from grasplink.simulators.synth import SkinRecording, scripted_recording
 
 # -- definitions (docs/decoding.md, "Non-stationary slips") ------------------------------
@@ -61,8 +62,6 @@ SNR_DB = 10.0
 FULL_SCALE_N = 5.0  # saturation: the FSR calibrated to 5 N full scale ...
 SQUEEZE_N = 12.0  # ... and squeezed from 5 N to this during the slip
 PULSE_ALPHA_N = 1.0  # mean contact height of skin.ridge_contacts (alpha_n [0.8, 1.2] N)
-SPACING_SCALE_MM = 10.0  # skin.ridge_contacts: height 1 - exp(-spacing before / 10 mm)
-LEAD_IN_MM = 20.0  # skin.ridge_contacts: the spacing assumed before the first ridge met
 PACKET = 3  # samples per skin TPDO1
 DROP_PACKETS = 0.02  # share of 3-sample packets lost
 DROP_SAMPLES = 0.005  # and of single samples

@@ -54,6 +54,14 @@ MU_THESIS = 0.7813  # friction coefficient object/silicone (ch. 4.3)
 RIDGE_ANGLE_DEG = 60.0  # equilateral ridge section (ch. 4.2)
 FULL_SCALE_N = 98.067  # FSR range 10 kg; the skin node's default calibration (98067 mN)
 CONTACT_RECORD = 1024  # how many recent contacts `RidgeContacts.contacts` keeps
+# RidgeContacts' defaults (ch. 5.3.1), named so the evaluation's models of its pulse
+# train (the snr10 bounds, the benchmark's pulse heights) read the simulator's own values
+RIDGE_SIDE_MM = 2.5  # the pulse rises over ridge_side / (2 |speed|) ...
+MIN_RISE_S, MAX_RISE_S = 0.002, 0.2  # ... clipped to these ...
+RISE_JITTER = (0.9, 1.1)  # ... times a draw from this
+ALPHA_DRAW_N = (0.8, 1.2)  # the height's draw (N), times the spacing factor:
+SPACING_SCALE_MM = 10.0  # 1 - exp(-free spacing before the ridge / this)
+LEAD_IN_MM = 20.0  # the spacing counted before the first ridge met
 # A step between two samples longer than this many times the distance the speed
 # allows is a jump of the reported edge (direction reversal), not motion.
 JUMP_SLACK = 4.0
@@ -222,13 +230,17 @@ class RidgeContacts(Effect):
     def __init__(self, params: Params, ctx: Context):
         super().__init__(params, ctx)
         layout = ctx.require_layout(params, self.kind)
-        self.ridge_side_mm = params.number("ridge_side_mm", 2.5, low=0.0, low_open=True)
-        self.min_rise_s = params.number("min_rise_s", 0.002, low=0.0, low_open=True)
-        self.max_rise_s = params.number("max_rise_s", 0.2, low=self.min_rise_s)
-        self.rise_jitter = interval_param(params, "rise_jitter", [0.9, 1.1], low=0.0, low_open=True)
-        self.alpha_n = interval_param(params, "alpha_n", [0.8, 1.2], low=0.0)
-        self.spacing_scale_mm = params.number("spacing_scale_mm", 10.0, low=0.0, low_open=True)
-        self.lead_in_mm = params.number("lead_in_mm", 20.0, low=0.0)
+        self.ridge_side_mm = params.number("ridge_side_mm", RIDGE_SIDE_MM, low=0.0, low_open=True)
+        self.min_rise_s = params.number("min_rise_s", MIN_RISE_S, low=0.0, low_open=True)
+        self.max_rise_s = params.number("max_rise_s", MAX_RISE_S, low=self.min_rise_s)
+        self.rise_jitter = interval_param(
+            params, "rise_jitter", list(RISE_JITTER), low=0.0, low_open=True
+        )
+        self.alpha_n = interval_param(params, "alpha_n", list(ALPHA_DRAW_N), low=0.0)
+        self.spacing_scale_mm = params.number(
+            "spacing_scale_mm", SPACING_SCALE_MM, low=0.0, low_open=True
+        )
+        self.lead_in_mm = params.number("lead_in_mm", LEAD_IN_MM, low=0.0)
         self.tip_probability = params.number("tip_probability", 0.0, low=0.0, high=1.0)
         self.tip_min_spacing_mm = params.number("tip_min_spacing_mm", 15.0, low=0.0)
         self.tip_height = params.number("tip_height", 0.4, low=0.0)
