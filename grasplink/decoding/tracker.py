@@ -1769,8 +1769,7 @@ class TrackerDecoder(Decoder):
 
     def _told_pulses(self, ids: np.ndarray) -> int:
         """How many of the contacts `ids` are told a pulse (their verdicts still in the ring)."""
-        slots = np.fromiter((ring_slot(int(k), len(self._ring)) for k in ids), np.int64, len(ids))
-        return int(np.count_nonzero((self._ring_id[slots] == ids) & (self._ring[slots] == PULSE)))
+        return sum(arrival_flag.verdict(int(k), self._ring, self._ring_id) == PULSE for k in ids)
 
     def _overdue(self, h: _One, g: float) -> bool:
         """Is the speed of track `h` (read from the bank now) withheld at g: its next ridge
