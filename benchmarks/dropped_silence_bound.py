@@ -32,6 +32,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import plan_cases
+from plan_cases import pct_cell
 
 from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import contact_truth as ct
@@ -138,10 +139,6 @@ def job(case: sr.Case, latency_s: float, found_all: bool = False) -> dict:
     return out
 
 
-def _pct(part: float, whole: float) -> str:
-    return f"{100.0 * part / whole:.1f}" if whole else "-"
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3, help="seeds of the full plan (1-3)")
@@ -152,17 +149,17 @@ def main(argv: list[str] | None = None) -> int:
         "--found", action="store_true", help="every kind's bound on today's detector's contacts"
     )
     args = parser.parse_args(argv)
-    kinds = (args.kinds or ",".join(sr.MOVING)).split(",")
-    todo = plan_cases.full_plan_cases(parser, ",".join(kinds), args.seeds, allowed=sr.MOVING)
+    kinds_text = args.kinds or ",".join(sr.MOVING)
+    todo = plan_cases.full_plan_cases(parser, kinds_text, args.seeds, allowed=sr.MOVING)
     started = time.monotonic()
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(
             pool.map(job, todo, [args.latency] * len(todo), [args.found] * len(todo), chunksize=2)
         )
     print(
-        f"{len(todo)} cases (full plan, {args.seeds} seed(s), kinds {', '.join(kinds)}) in"
-        f" {time.monotonic() - started:.0f} s on {args.workers} worker(s); decoder"
-        f" {DEFAULT_DECODER}"
+        plan_cases.run_title(
+            todo, args.seeds, kinds_text.split(","), args.workers, time.monotonic() - started
+        )
     )
     report(rows, args.latency)
     return 0
@@ -196,13 +193,13 @@ def report(rows: list[dict], latency_s: float) -> None:
             key,
             str(len(rs)),
             str(int(scored)),
-            _pct(total(rs, "decoder"), scored),
-            _pct(bound, scored),
-            _pct(total(rs, "latency"), scored),
-            _pct(total(rs, "no_level"), scored),
-            _pct(total(rs, "decoder_in_silent"), bound),
-            _pct(total(rs, "decoder_outside"), scored),
-            f"{_pct(dec_stops[0], dec_stops[1])} / {_pct(sil_stops[0], sil_stops[1])}"
+            pct_cell(total(rs, "decoder"), scored),
+            pct_cell(bound, scored),
+            pct_cell(total(rs, "latency"), scored),
+            pct_cell(total(rs, "no_level"), scored),
+            pct_cell(total(rs, "decoder_in_silent"), bound),
+            pct_cell(total(rs, "decoder_outside"), scored),
+            f"{pct_cell(dec_stops[0], dec_stops[1])} / {pct_cell(sil_stops[0], sil_stops[1])}"
             f" ({int(dec_stops[1])})",
         ]
         print("| " + " | ".join(cells) + " |")
@@ -218,9 +215,9 @@ def report(rows: list[dict], latency_s: float) -> None:
             got = [r for r in rs if "found" in r]
             scored = total(got, "scored")
             print(
-                f"| {key} | {_pct(total(got, 'found'), scored)} |"
-                f" {_pct(total(got, 'decoder'), scored)} |"
-                f" {_pct(total(got, 'found_decoder_in_silent'), total(got, 'found'))} |"
+                f"| {key} | {pct_cell(total(got, 'found'), scored)} |"
+                f" {pct_cell(total(got, 'decoder'), scored)} |"
+                f" {pct_cell(total(got, 'found_decoder_in_silent'), total(got, 'found'))} |"
             )
     snr = groups.get("snr10", [])
     if snr:
@@ -228,29 +225,31 @@ def report(rows: list[dict], latency_s: float) -> None:
         print()
         print(
             f"snr10, the bound on other contacts ({int(scored)} scored updates): perfect"
-            f" detector {_pct(total(snr, 'bound'), scored)} %, the oracle's told"
+            f" detector {pct_cell(total(snr, 'bound'), scored)} %, the oracle's told"
             f" (clean >= {ORACLE_LEVEL:g}, known when decided)"
-            f" {_pct(total(snr, 'oracle'), scored)} %, today's detector's found (at the"
-            f" true times) {_pct(sum(r.get('found', 0) for r in snr), scored)} %; the decoder"
-            f" {_pct(total(snr, 'decoder'), scored)} %"
+            f" {pct_cell(total(snr, 'oracle'), scored)} %, today's detector's found (at the"
+            f" true times) {pct_cell(sum(r.get('found', 0) for r in snr), scored)} %; the decoder"
+            f" {pct_cell(total(snr, 'decoder'), scored)} %"
         )
         oracle = total(snr, "oracle")
         print(
             f"  the oracle's bound less level-evidence updates"
-            f" {_pct(total(snr, 'oracle_no_level'), scored)} %; the decoder is down in"
-            f" {_pct(total(snr, 'oracle_decoder_in_silent'), oracle)} % of the oracle's"
+            f" {pct_cell(total(snr, 'oracle_no_level'), scored)} %; the decoder is down in"
+            f" {pct_cell(total(snr, 'oracle_decoder_in_silent'), oracle)} % of the oracle's"
             " silent updates; waiting w past due ("
             + ", ".join(f"{w:g}" for w in WAITS_S)
             + " s): "
-            + " / ".join(_pct(g, scored) for g in np.sum([r["oracle_waits"] for r in snr], axis=0))
+            + " / ".join(
+                pct_cell(g, scored) for g in np.sum([r["oracle_waits"] for r in snr], axis=0)
+            )
             + " %"
         )
         every = groups["every moving kind"]
         pooled = total(every, "bound") - total(snr, "bound") + oracle
         print(
             f"Every moving kind with snr10 at the oracle's contacts:"
-            f" {_pct(pooled, total(every, 'scored'))} % (the decoder"
-            f" {_pct(total(every, 'decoder'), total(every, 'scored'))} %)"
+            f" {pct_cell(pooled, total(every, 'scored'))} % (the decoder"
+            f" {pct_cell(total(every, 'decoder'), total(every, 'scored'))} %)"
         )
     print()
     print("The trade: the silence decoder waits w past due before dropping (perfect detector)")
@@ -265,8 +264,8 @@ def report(rows: list[dict], latency_s: float) -> None:
         pooled = []
         for rs in (every, apart):
             got = np.sum([r["waits"][i] for r in rs], axis=0) if rs else np.zeros(3)
-            cells.append(_pct(got[0], total(rs, "scored")))
-            pooled.append(_pct(got[1], got[2]))
+            cells.append(pct_cell(got[0], total(rs, "scored")))
+            pooled.append(pct_cell(got[1], got[2]))
         print("| " + " | ".join(cells + pooled) + " |")
     print()
     print(
@@ -276,14 +275,14 @@ def report(rows: list[dict], latency_s: float) -> None:
     )
     for key, rs in groups.items():
         got = np.sum([r["no_level_by"] for r in rs], axis=0)
-        print(f"  {key}: " + " / ".join(_pct(g, total(rs, "scored")) for g in got) + " %")
+        print(f"  {key}: " + " / ".join(pct_cell(g, total(rs, "scored")) for g in got) + " %")
     print()
     print("By kind, bound % at each wait (" + ", ".join(f"{w:g}" for w in WAITS_S) + " s):")
     for key, rs in groups.items():
         scored = total(rs, "scored")
         got = np.sum([r["waits"] for r in rs], axis=0)
-        cells = [_pct(g[0], scored) for g in got]
-        stops = [_pct(g[1], g[2]) for g in got]
+        cells = [pct_cell(g[0], scored) for g in got]
+        stops = [pct_cell(g[1], g[2]) for g in got]
         print(f"  {key}: {' / '.join(cells)}; stops cleared {' / '.join(stops)} %")
 
 

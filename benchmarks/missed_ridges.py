@@ -58,6 +58,7 @@ from pathlib import Path
 
 import numpy as np
 import plan_cases
+from plan_cases import pct_cell
 
 from grasplink.decoding.contacts import DEFAULT_SCALES_S, HingeSettings
 from grasplink.decoding.detector.hinges import hinge_widths
@@ -293,10 +294,6 @@ def job(case: sr.Case) -> dict:
     }
 
 
-def _pct(part: float, whole: float) -> str:
-    return f"{100.0 * part / whole:.1f}" if whole else "-"
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=2, help="seeds of the full plan (1-3)")
@@ -310,15 +307,13 @@ def main(argv: list[str] | None = None) -> int:
         print(saved["title"])
         report(saved["rows"])
         return 0
-    kinds = (args.kinds or ",".join(KINDS)).split(",")
-    todo = plan_cases.full_plan_cases(parser, ",".join(kinds), args.seeds, allowed=KINDS)
+    kinds_text = args.kinds or ",".join(KINDS)
+    todo = plan_cases.full_plan_cases(parser, kinds_text, args.seeds, allowed=KINDS)
     started = time.monotonic()
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(pool.map(job, todo, chunksize=2))
-    title = (
-        f"{len(todo)} cases (full plan, {args.seeds} seed(s), kinds {', '.join(kinds)}) in"
-        f" {time.monotonic() - started:.0f} s on {args.workers} worker(s); decoder"
-        f" {DEFAULT_DECODER}"
+    title = plan_cases.run_title(
+        todo, args.seeds, kinds_text.split(","), args.workers, time.monotonic() - started
     )
     if args.save:
         Path(args.save).write_text(json.dumps({"title": title, "rows": rows}))
@@ -357,13 +352,13 @@ def report(rows: list[dict]) -> None:
         cells = [
             key,
             str(scored),
-            _pct(total(rs, "decoder"), scored),
-            _pct(total(rs, "every"), scored),
-            _pct(total(rs, "found_bound"), scored),
-            _pct(told, scored),
-            _pct(total(rs, "decoder_in_bound"), told),
+            pct_cell(total(rs, "decoder"), scored),
+            pct_cell(total(rs, "every"), scored),
+            pct_cell(total(rs, "found_bound"), scored),
+            pct_cell(told, scored),
+            pct_cell(total(rs, "decoder_in_bound"), told),
             str(len(facts)),
-            _pct(missed, len(facts)),
+            pct_cell(missed, len(facts)),
             late,
         ]
         print("| " + " | ".join(cells) + " |")
@@ -396,14 +391,14 @@ def report(rows: list[dict]) -> None:
                 f"{np.nanmedian([f['snr'] for f in mine]):.1f}",
                 f"{np.median([f['z'] for f in mine]):.1f}",
                 ", ".join(f"{k} {v}" for k, v in sorted(whys.items())),
-                _pct(sum(f["cost"][0] for f in mine), scored),
-                _pct(sum(f["cost"][1] for f in mine), scored),
+                pct_cell(sum(f["cost"][0] for f in mine), scored),
+                pct_cell(sum(f["cost"][1] for f in mine), scored),
             ]
             print("| " + " | ".join(cells) + " |")
         late = np.sum([r["late"] for r in rs], axis=0)
         print(
-            f"| {key} | {LATE} | - | - | - | - | - | {_pct(late[0], scored)} |"
-            f" {_pct(late[1], scored)} |"
+            f"| {key} | {LATE} | - | - | - | - | - | {pct_cell(late[0], scored)} |"
+            f" {pct_cell(late[1], scored)} |"
         )
     print()
     print(
@@ -421,10 +416,12 @@ def report(rows: list[dict]) -> None:
             silent = sum(f["cost"][0] for f in mine)
             dropped = sum(f["cost"][1] for f in mine)
             cells.append(
-                f"{len(mine)} / {_pct(silent, scored)} / {_pct(dropped, scored)}" if mine else "-"
+                f"{len(mine)} / {pct_cell(silent, scored)} / {pct_cell(dropped, scored)}"
+                if mine
+                else "-"
             )
         late = np.sum([r["late"] for r in rs], axis=0)
-        cells.append(f"{_pct(late[0], scored)} / {_pct(late[1], scored)}")
+        cells.append(f"{pct_cell(late[0], scored)} / {pct_cell(late[1], scored)}")
         print("| " + " | ".join(cells) + " |")
     facts = [f for r in rows for f in r["contacts"]]
     held = [f for f in facts if f["cause"] == HELD]
@@ -436,7 +433,7 @@ def report(rows: list[dict]) -> None:
         print(
             f"{HELD}: {len(held)} misses, held flat {flat_ms:.0f}"
             f" ms (median); their pulse rises through the band by >= {threshold:g} white-noise"
-            f" units later in {shows} ({_pct(shows, len(held))} %), median rise"
+            f" units later in {shows} ({pct_cell(shows, len(held))} %), median rise"
             f" {np.median([f['rise_n'] for f in held]) / white:.1f} units"
         )
     zs = np.array([f["z"] for f in facts if f["found"]])
@@ -445,9 +442,9 @@ def report(rows: list[dict]) -> None:
         print()
         print(
             f"Clean kink z (threshold {threshold:g}): found contacts median"
-            f" {np.median(zs):.1f} (under the threshold {_pct((zs < threshold).sum(), len(zs))}"
+            f" {np.median(zs):.1f} (under the threshold {pct_cell((zs < threshold).sum(), len(zs))}"
             f" %), missed median {np.median(zm):.1f} (under"
-            f" {_pct((zm < threshold).sum(), len(zm))} %)"
+            f" {pct_cell((zm < threshold).sum(), len(zm))} %)"
         )
     snr_found = np.array([f["snr"] for f in facts if f["found"]])
     snr_missed = np.array([f["snr"] for f in facts if not f["found"]])
@@ -455,9 +452,9 @@ def report(rows: list[dict]) -> None:
         level = ct.DETECTABLE_SNR
         print(
             f"Pulse SNR (detectable from {level:g}): found median {np.nanmedian(snr_found):.1f}"
-            f" (under {_pct((snr_found < level).sum(), len(snr_found))} %), missed median"
+            f" (under {pct_cell((snr_found < level).sum(), len(snr_found))} %), missed median"
             f" {np.nanmedian(snr_missed):.1f} (under"
-            f" {_pct((snr_missed < level).sum(), len(snr_missed))} %)"
+            f" {pct_cell((snr_missed < level).sum(), len(snr_missed))} %)"
         )
     cost = [(sum(f["cost"][0] for f in r["contacts"]), r) for r in rows]
     print("Costliest cases (silent updates charged to misses / of those decoder-dropped):")

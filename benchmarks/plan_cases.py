@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import tune_tracker
 
+from grasplink.decoding.registry import DEFAULT_DECODER
 from grasplink.evaluation import slip_reporting as sr
 
 
@@ -54,6 +55,23 @@ def full_plan_cases(
     if only:
         todo = [c for c in todo if str(c.seed) in only.split(",")]
     return todo
+
+
+def pct_cell(part: float, whole: float) -> str:
+    """part of whole in percent with one decimal, for a table whose header carries the %;
+    "-" where there is no whole."""
+    return f"{100.0 * part / whole:.1f}" if whole else "-"
+
+
+def run_title(
+    todo: Sequence[sr.Case], seeds: int, kinds: Sequence[str], workers: int, seconds: float
+) -> str:
+    """The line a full-plan benchmark prints above its tables: what ran, how long, with
+    which decoder."""
+    return (
+        f"{len(todo)} cases (full plan, {seeds} seed(s), kinds {', '.join(kinds)}) in"
+        f" {seconds:.0f} s on {workers} worker(s); decoder {DEFAULT_DECODER}"
+    )
 
 
 def print_case_lines(results: Iterable[tuple[sr.Case, Sequence[str]]]) -> None:

@@ -445,7 +445,9 @@ def alias_job(row: dict, level: float, widen: tuple[float, float] | None = None)
         (row["decided"] - row["times"])[by_ridge],
     )
     out: dict = {"level": level}
-    for name, settings in ALIAS_SETTINGS.items():
+
+    def bound(settings: ab.AliasSettings, heights: ab.Heights | None = None) -> dict:
+        """One variant's counts on this case."""
         b = ab.run_bound(
             layout,
             -1 if row["reverse"] else 1,
@@ -454,10 +456,12 @@ def alias_job(row: dict, level: float, widen: tuple[float, float] | None = None)
             row["decided"],
             row["t_upd"],
             settings,
+            heights,
         )
-        out[name] = {k: int(np.sum(getattr(b, k))) for k in ALIAS_COLUMNS} | {
-            "truth_fits": b.truth_fits
-        }
+        return {k: int(np.sum(getattr(b, k))) for k in ALIAS_COLUMNS} | {"truth_fits": b.truth_fits}
+
+    for name, settings in ALIAS_SETTINGS.items():
+        out[name] = bound(settings)
     if widen is None:
         return out
     for name, (allowance, model, with_rise) in HEIGHT_SETTINGS.items():
@@ -469,19 +473,7 @@ def alias_job(row: dict, level: float, widen: tuple[float, float] | None = None)
             row["rise_hat"] if with_rise else None,
             rise_sigma if with_rise else None,
         )
-        b = ab.run_bound(
-            layout,
-            -1 if row["reverse"] else 1,
-            row["times"],
-            told,
-            row["decided"],
-            row["t_upd"],
-            ALIAS_SETTINGS[allowance],
-            heights,
-        )
-        out[name] = {k: int(np.sum(getattr(b, k))) for k in ALIAS_COLUMNS} | {
-            "truth_fits": b.truth_fits
-        }
+        out[name] = bound(ALIAS_SETTINGS[allowance], heights)
     return out
 
 
