@@ -14,6 +14,13 @@ one after, is held too while neither of the two is told a pulse (`second`): a sl
 that really restarted tells one of them a pulse within a verdict's wait, or makes a third
 contact. Only while the flag is down: while it is up the keep lifts the hold of untold
 contacts (`flag_keep.unheld`), so a slip's own restarts are not held up by it.
+
+But a slip going on after a stick resumes about the speed it stopped at, and two kinks at
+rest give any speed (96200: 16.4 mm/s where it slid at 79). So a restart's first speed
+within `TrackerDecoder.RESTART_AGREE_REL` of the speed the track had before it stopped
+(the bank's `before` column, kept by `kernels.branch._restart`) is not held
+(`kernels.posterior.agrees`, in the kernel that reads this table): the slip's own restarts
+report at once, the disagreeing ones wait for the pulse verdict or the third contact.
 """
 
 from __future__ import annotations

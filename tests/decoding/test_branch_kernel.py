@@ -216,7 +216,8 @@ def test_a_banks_fields_are_the_kernels_columns():
     assert bank.X[1, 1] == floats[1, kernel.F_V] and bank.P[0, 3, 3] == floats[0, kernel.P33]
     assert bank.run[1] == ints[1, kernel.I_RUN] and bank.ids[0, -1] == ints[0, kernel.I_LAST]
     assert bank.model[0] == ints[0, kernel.I_MODEL]
-    assert (_F_WIDTH, _I_WIDTH) == (reference._F_WIDTH, reference._I_WIDTH) == (25, 12)
+    assert bank.before[1] == floats[1, kernel.F_BEFORE]
+    assert (_F_WIDTH, _I_WIDTH) == (reference._F_WIDTH, reference._I_WIDTH) == (26, 12)
 
 
 def test_compiled_branch_constants_are_packed_by_name():

@@ -29,7 +29,7 @@ def one_track(v_mm_s: float, sigma_v_mm_s: float, t_s: float = 1.0) -> tuple:
             score=np.zeros(1), X=np.array([[14.0, v_mm_s, 0.0, 0.0]]), P=P, m=np.zeros(1),
             t=np.array([t_s]), stop=np.array([math.nan]), dirn=np.array([1]),
             ridge=np.array([2]), run=np.array([3]), n=np.array([3]),
-            ids=np.zeros((1, 4), np.int64),
+            ids=np.zeros((1, 4), np.int64), before=np.zeros(1),
         )
     )  # fmt: skip
 

@@ -1,6 +1,6 @@
 """A restart's first speed needs one of its two contacts told a pulse (or a third
-contact) while the flag is down (`restart_confirm`, `TrackerDecoder.RESTART_CONFIRM_TWO`,
-off by default: it costs the slips' own restarts after a stick): two kinks at rest are no
+contact) while the flag is down (`restart_confirm`, `TrackerDecoder.RESTART_CONFIRM_TWO`;
+shipped with `RESTART_AGREE_REL`, test_restart_agree, off here): two kinks at rest are no
 restart."""
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from tests.decoding.test_overdue_speed import decoded, speeds_after_due
 # the stopped track at 16.4 mm/s and the report flagged that speed at 1.87 and 1.88 s,
 # after the stop's report was due (0.985 s)
 AT_REST = ("stop", 96_200)
-ON = {"RESTART_CONFIRM_TWO": 1.0}
-OFF: dict = {}  # as shipped
+ON = {"RESTART_CONFIRM_TWO": 1.0, "RESTART_AGREE_REL": 0.0}
+OFF = {"RESTART_CONFIRM_TWO": 0.0}
 
 
 def test_two_kinks_at_rest_give_no_speed_after_the_stops_report_was_due():

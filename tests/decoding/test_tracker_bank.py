@@ -29,6 +29,7 @@ def bank(offset: float = 0.0, n: int = N) -> _Bank:
         sig=offset + rows * 0.001,
         stop=np.where(rows % 2 == 0, np.nan, offset + rows * 0.1),
         t=offset + rows * 0.25,
+        before=offset + rows * 2.5,
     )
 
 

@@ -37,6 +37,7 @@ def one_track(v_mm_s: float, a_mm_s2: float, ridge: int, t_s: float) -> _One:
         sig=np.zeros(1),
         stop=np.array([np.nan]),
         t=np.array([t_s]),
+        before=np.zeros(1),
     )
     return _One(bank, 0)
 

@@ -20,12 +20,14 @@ from grasplink.decoding.contacts import PulseCheck
 from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.decoding.tracker import TrackerDecoder
 
+NONE = np.zeros(1)  # no speed, none before a restart: `_evidence`'s restart agreement idle
+
 
 def evident(dec: TrackerDecoder, ids: list[int]) -> bool:
     row = np.array([[-1] * (6 - len(ids)) + ids], np.int64)
     n = np.array([len(ids)])
     flags, _ = posterior_kernels._evidence(
-        row, n, n, dec._ring, dec._ring_id, *dec._evidence_tables
+        row, n, n, dec._ring, dec._ring_id, *dec._evidence_tables, NONE, NONE, 0.0
     )
     return bool(flags[0])
 

@@ -16,6 +16,8 @@ from grasplink.decoding.contacts import STEP_IDS, PulseCheck
 from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.decoding.tracker import TrackerDecoder
 
+NONE = np.zeros(1)  # no speed, none before a restart: `_evidence`'s restart agreement idle
+
 
 def test_a_probe_verdict_leaves_the_kink_contact_with_the_same_number_its_own():
     dec = TrackerDecoder([10.0, 12.0, 14.0], 400.0)
@@ -23,7 +25,15 @@ def test_a_probe_verdict_leaves_the_kink_contact_with_the_same_number_its_own():
     dec._add_check(PulseCheck(STEP_IDS + 5, 0, False))  # probe 5: a step
     ids = np.array([[-1, -1, -1, -1, 5, STEP_IDS + 5]], np.int64)
     evident, bonus = posterior_kernels._evidence(
-        ids, np.array([2]), np.array([2]), dec._ring, dec._ring_id, *dec._evidence_tables
+        ids,
+        np.array([2]),
+        np.array([2]),
+        dec._ring,
+        dec._ring_id,
+        *dec._evidence_tables,
+        NONE,
+        NONE,
+        0.0,
     )
     assert bool(evident[0])  # two contacts, one a pulse: a slip
     assert math.isclose(float(bonus[0]), dec.LOG_PULSE - dec.LOG_STEP)

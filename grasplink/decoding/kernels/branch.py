@@ -32,6 +32,7 @@ from grasplink.decoding.kernels.common import pack, travel
 from grasplink.decoding.kernels.layout import (
     CHANGING,
     F_A,
+    F_BEFORE,
     F_D,
     F_M,
     F_S,
@@ -230,6 +231,8 @@ def _restart(
     out_f[j, F_SIG] = sigma_s
     out_f[j, F_STOP] = np.nan
     out_f[j, F_T] = tc
+    # the speed it had (a restarted parent's own, 0, keeps the one before that)
+    out_f[j, F_BEFORE] = f[r, F_V] if f[r, F_V] > 0 else f[r, F_BEFORE]
     _with_contact(i, r, out_i, j, ev_id, k, 1)
 
 
@@ -337,6 +340,7 @@ def _start_speed(
     out_f[j, F_SIG] = sigma_s
     out_f[j, F_STOP] = f[r, F_STOP]
     out_f[j, F_T] = tc
+    out_f[j, F_BEFORE] = f[r, F_BEFORE]
     _with_contact(i, r, out_i, j, ev_id, k, 2)
     return True
 
@@ -435,6 +439,7 @@ def _kalman(
     out_f[j, F_SIG] = sigma_s
     out_f[j, F_STOP] = f[r, F_STOP]
     out_f[j, F_T] = tc
+    out_f[j, F_BEFORE] = f[r, F_BEFORE]
     _with_contact(i, r, out_i, j, ev_id, k, i[r, I_RUN] + 1)
     return True, far, log_prior + like
 

@@ -27,10 +27,11 @@ def columns(layout: tuple[tuple[str, int], ...]) -> tuple[dict[str, int | slice]
 # ------------------------------------------------------------------ the tracker's bank
 IDS = 6  # recent contact ids a track remembers (pulse evidence, merging)
 # a track's floats: P (4 x 4 covariance, row-major), X = (s, v, a, d), dip memory m, score,
-# timing sigma, stop time (NaN: slipping), time of its last contact
+# timing sigma, stop time (NaN: slipping), time of its last contact, and the speed it had
+# before it last restarted (0: never restarted; `kernels.posterior.agrees`)
 BANK_FLOATS = (
     ("P", 16), ("s", 1), ("v", 1), ("a", 1), ("d", 1), ("m", 1), ("score", 1), ("sig", 1),
-    ("stop", 1), ("t", 1),
+    ("stop", 1), ("t", 1), ("before", 1),
 )  # fmt: skip
 # ... and ints: direction, first contact id, the last IDS contact ids, motion model,
 # contacts assigned, ridge of the last contact, contacts since it last (re)started
@@ -48,8 +49,8 @@ def one(cols: dict[str, int | slice], name: str) -> int:
     return at
 
 
-F_S, F_V, F_A, F_D, F_M, F_SCORE, F_SIG, F_STOP, F_T = (
-    one(F_COLS, name) for name in ("s", "v", "a", "d", "m", "score", "sig", "stop", "t")
+F_S, F_V, F_A, F_D, F_M, F_SCORE, F_SIG, F_STOP, F_T, F_BEFORE = (
+    one(F_COLS, name) for name in ("s", "v", "a", "d", "m", "score", "sig", "stop", "t", "before")
 )
 I_DIRN, I_FIRST, I_MODEL, I_N, I_RIDGE, I_RUN = (
     one(I_COLS, name) for name in ("dirn", "first", "model", "n", "ridge", "run")

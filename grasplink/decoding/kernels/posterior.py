@@ -54,6 +54,7 @@ NAMES = (
     "last_brake_z",
     "rest_share",
     "silence_brake",
+    "restart_agree_rel",
 )
 (
     NEGLIGIBLE,
@@ -81,6 +82,7 @@ NAMES = (
     LAST_BRAKE_Z,
     REST_SHARE,
     SILENCE_BRAKE,
+    RESTART_AGREE_REL,
 ) = range(len(NAMES))
 
 
@@ -98,6 +100,7 @@ class Tracks(NamedTuple):
     run: np.ndarray
     n: np.ndarray
     ids: np.ndarray
+    before: np.ndarray  # the speed before its last restart (0: none)
 
 
 class Silence(NamedTuple):
@@ -419,6 +422,16 @@ def log_waiting(elapsed_s: float, row: int, waiting: tuple, K: np.ndarray) -> fl
 
 
 @jit()
+def agrees(speed_mm_s: float, before_mm_s: float, agree_rel: float) -> bool:
+    """Does a restarted track's first speed agree with the one it had before it stopped:
+    within `agree_rel` of it (`restart_confirm`: a slip going on after a stick resumes
+    about its speed; two kinks at rest give any). False when none is known (0) or off."""
+    if not (agree_rel > 0 and before_mm_s > 0):
+        return False
+    return abs(speed_mm_s - before_mm_s) <= agree_rel * before_mm_s
+
+
+@jit()
 def _evidence(
     ids: np.ndarray,
     n: np.ndarray,
@@ -429,6 +442,9 @@ def _evidence(
     bonus_t: np.ndarray,
     evident_t: np.ndarray,
     hold_t: np.ndarray,
+    speed: np.ndarray,
+    before: np.ndarray,
+    agree_rel: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per track: is it evidently a slip, and its score bonus, from the pulse verdicts on
     its recent contacts (`TrackerDecoder._evidence_tables`): a contact's verdict counts
@@ -437,7 +453,9 @@ def _evidence(
     (`hold_t[0]`: a restart on a contact told a step is no slip yet); a restarted track's
     first speed (run 2, with contacts before the restart: n > run) too while both its
     restart contact and the one after it are held by `hold_t[1]` (`restart_confirm`: two
-    kinks at rest are no restart until one is told a pulse or a third contact comes)."""
+    kinks at rest are no restart until one is told a pulse or a third contact comes) - unless
+    that speed (`speed`, X's v) is within `agree_rel` of the one the track had before it
+    restarted (`before`; `agrees`)."""
     N, R, last_c = ids.shape[0], len(ring), ids.shape[1] - 1
     evident = np.empty(N, np.bool_)
     bonus = np.empty(N)
@@ -452,9 +470,10 @@ def _evidence(
         verdict = ring[slot] if ring_id[slot] == last else 0
         held = run[i] == 1 and hold_t[0, verdict]
         if run[i] == 2 and n[i] > run[i] and hold_t[1, verdict]:
-            before = ids[i, last_c - 1]
-            slot = ring_slot(before, R)
-            held = hold_t[1, ring[slot] if ring_id[slot] == before else 0]
+            first = ids[i, last_c - 1]
+            slot = ring_slot(first, R)
+            held = hold_t[1, ring[slot] if ring_id[slot] == first else 0]
+            held = held and not agrees(speed[i], before[i], agree_rel)
         evident[i] = evident_t[min(n[i], 4) + 5 * held, packed]
         bonus[i] = bonus_t[packed]
     return evident, bonus
@@ -492,7 +511,9 @@ def posterior(
     R = pos.shape[1] - 1
     J = due.shape[1]
     until = g + K[REFRESH_S]
-    evident, bonus = _evidence(ids, n, run, ring, ring_id, *evidence_t)
+    evident, bonus = _evidence(
+        ids, n, run, ring, ring_id, *evidence_t, X[:, 1], tracks.before, K[RESTART_AGREE_REL]
+    )
     best = -np.inf
     for i in range(N):
         best = max(best, score[i])

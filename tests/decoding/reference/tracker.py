@@ -33,6 +33,7 @@ from grasplink.decoding.contacts import STEP_IDS, ContactEvent
 from grasplink.decoding.kernels.layout import (
     CHANGING,
     F_A,
+    F_BEFORE,
     F_COLS,
     F_D,
     F_M,
@@ -84,7 +85,7 @@ _VAR_AT = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # covariance entries
 # the columns of a bank's two matrices: the kernels' and the runtime's (`kernels.layout`),
 # named as the numpy code of 0858d90 named them
 _P, _X, _S, _V, _A, _D = F_COLS["P"], slice(F_S, F_D + 1), F_S, F_V, F_A, F_D
-_M, _SCORE, _SIG, _STOP, _T = F_M, F_SCORE, F_SIG, F_STOP, F_T
+_M, _SCORE, _SIG, _STOP, _T, _BEFORE = F_M, F_SCORE, F_SIG, F_STOP, F_T, F_BEFORE
 _DIRN, _FIRST, _IDS = I_DIRN, I_FIRST, I_COLS["ids"]
 _MODEL, _N, _RIDGE, _RUN = I_MODEL, I_N, I_RIDGE, I_RUN
 _F_WIDTH, _I_WIDTH = F_WIDTH, I_WIDTH
@@ -463,6 +464,9 @@ class NumpyTracker:
         floats[:, _SIG] = ev.sigma_s
         floats[:, _STOP] = np.nan
         floats[:, _T] = ev.t_s
+        # the speed it had (a restarted parent's own, 0, keeps the one before: added after
+        # 0858d90, `restart_confirm`)
+        floats[:, _BEFORE] = np.where(B.X[:, 1] > 0, B.X[:, 1], B.before)
         return _Bank(floats, _with_contact(B._i, ev.id, k, 1))
 
     def _start_speed(
@@ -544,6 +548,7 @@ class NumpyTracker:
         floats[:, _SIG] = ev.sigma_s
         floats[:, _STOP] = B.stop
         floats[:, _T] = tc
+        floats[:, _BEFORE] = B.before
         ints = _with_contact(B._i, ev.id, k, 2)
         started = restarted = _Bank.empty()
         if fresh:  # each in both models: steady, then changing
@@ -636,6 +641,7 @@ class NumpyTracker:
             floats[:, _SIG] = ev.sigma_s
             floats[:, _STOP] = B.stop.take(sel)
             floats[:, _T] = tc
+            floats[:, _BEFORE] = B.before.take(sel)
             ints = B._i.take(sel, 0)
             out = _Bank(floats, _with_contact(ints, ev.id, k.take(sel), ints[:, _RUN] + 1))
         # far off: the speed changed; it starts again from the last two contacts
@@ -1004,6 +1010,10 @@ class NumpyTracker:
         # ... and a restart's first speed while neither of its two contacts is told a pulse
         # (`restart_confirm`, added after 0858d90)
         second = (B.run == 2) & (B.n > B.run)
+        # unless that speed agrees with the one before the restart (`agrees`)
+        rel = self.RESTART_AGREE_REL
+        agree = (rel > 0) & (B.before > 0) & (np.abs(B.X[:, 1] - B.before) <= rel * B.before)
+        second &= ~agree
         held |= second & hold[1].take(verdicts[:, -1]) & hold[1].take(verdicts[:, -2])
         return evident[np.minimum(B.n, 4) + 5 * held, packed], bonus.take(packed)
 
