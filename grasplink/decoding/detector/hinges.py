@@ -28,6 +28,7 @@ import numpy as np
 
 from grasplink.decoding.detector.arrival_tail import on_first_load
 from grasplink.decoding.detector.events import ContactEvent, Ledger
+from grasplink.decoding.detector.held_corners import held_corner
 from grasplink.decoding.detector.noise_floor import MEDIAN_TO_STD, NOISE_FLOOR_N, NoiseFloor
 from grasplink.decoding.detector.series import (
     BankInt,
@@ -500,16 +501,32 @@ class HingeBank:
             if tail and not self._on_tail(n, w):
                 continue
             n_at, delta, placed = self._refine(ci, n)
+            reach_w = self.merge_widths * w
             if tail:  # (timed late by the tail's bend: `tail_onsets`; not on the first
-                # load's pulse: `arrival_tail`)
+                # load's pulse: `arrival_tail`; not a held corner: `held_corners`)
+                corner = self._held_corner(n, w, float(ch.za[i]))
                 n_at, delta, placed = tail_placed(
-                    n_at, delta, placed, w, keep_time=self._on_first_load(n_at)
+                    n_at, delta, placed, w, keep_time=corner or self._on_first_load(n_at)
                 )
+                if corner:
+                    reach_w = self.tails.corner_merge_widths * w
             if self._after_drop(n_at, w):
                 continue
             # decided once z is known over +-w (late where the noise had to be waited for)
             emit = max(n + 2 * w, int(ch.zready[i - w : i + w + 1].max()))
-            candidates.append((emit, w, n_at, delta, float(ch.z[i]), float(ch.zh[i]), placed))
+            candidates.append(
+                (emit, w, n_at, delta, float(ch.z[i]), float(ch.zh[i]), placed, reach_w)
+            )
+
+    def _held_corner(self, n: int, w: int, slope_after: float) -> bool:
+        """Is the tail kink at sample n a held corner (`held_corners`)?"""
+        flat_z = self.tails.corner_flat_z
+        if not flat_z > 0.0:
+            return False
+        white = self.noise.white(n // self.block)
+        if white is None:
+            return False
+        return held_corner(slope_after, w, max(white[0], NOISE_FLOOR_N), flat_z)
 
     def _on_tail(self, n: int, w: int) -> bool:
         """A candidate the rise check drops: a ridge's kink on a pulse's tail after all
@@ -577,10 +594,11 @@ class HingeBank:
             return []
         events = []
         candidates.sort(key=lambda c: (c[0], c[1], c[2]))
-        for emit, w, n, delta, z, jump, placed in candidates:
+        for emit, w, n, delta, z, jump, placed, reach_w in candidates:
             t = self.samples.time(n, delta)
             # the same kink seen again (by a coarser scale, later): within its own reach
-            reach = self.merge_widths * w / self.fs_hz
+            # (merge_widths of its scale; a held corner's own, `held_corners`)
+            reach = reach_w / self.fs_hz
             if any(abs(t - t_old) <= reach for t_old in self._recent):
                 continue
             self._recent.append(t)

@@ -71,6 +71,10 @@ class TailKinkSettings:
     # a tail kink on the first load's pulse keeps the kink bank's time (`arrival_tail`):
     # the sensor's unloaded level (N); 0: every tail kink moved back (shipped on, s25)
     arrival_empty_n: float = arrival.EMPTY_N
+    # a tail kink with the level flat after it is a pulse hysteresis hides (`held_corners`):
+    # kept at the kink bank's time and merged within corner_merge_widths; 0: off
+    corner_flat_z: float = 0.0
+    corner_merge_widths: float = 1.0
 
 
 ON_RESIDUAL_Z = 4.0  # the shipped setting (`benchmarks/tail_kinks.py`, tune_tracker_kinds)
