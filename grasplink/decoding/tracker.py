@@ -454,7 +454,9 @@ class TrackerDecoder(Decoder):
     # median, against 1 - exp(-spacing / 10 mm)); 0: off. Full plan, 1 seed, one run
     # against 0 (tune_tracker_kinds.py, docs/decoding.md): snr10 missing 47.9 -> 47.8 %,
     # wrong direction 1.3 -> 0.6 %, flagged / speed at rest 34.3 / 12.3 -> 32.9 / 11.3 %;
-    # constant and held-noise the same to the digit: on
+    # constant and held-noise the same to the digit. 3 seeds, one run: snr10 missing 51.9
+    # -> 52.0 %, wrong direction 2.6 -> 1.0 %, speed at rest 13.8 -> 13.6 %; loop p90
+    # 52.7 -> 53.5 %; stick-slip the same; held-noise 0 false slips: on (for the direction)
     TOLD_HEIGHT = 1.0
     TOLD_HEIGHT_SIGMA = told_height.SIGMA  # ... the spread of log z about the line (nats)
     TOLD_HEIGHT_SLOPE = told_height.SLOPE  # ... log z per log f
