@@ -40,6 +40,32 @@ Z_MAX = 2.0  # under this many white-noise units no pulse rose at the onset
 LOG_LOSS = -4.0  # what a ridge child of such a contact loses (nats)
 
 
+def rise_z(
+    floats: np.ndarray,
+    ints: np.ndarray,
+    ev: ContactEvent,
+    evidence: RiseEvidence,
+    blind_s: Iterable[tuple[float, float]] = (),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows of ev's children that take it for a ridge with a speed (the run's second
+    contact or later, not stopped), the probe window of each speed's rise time and the z
+    each reads there at ev's onset. z is NaN where the window is not held before ev's
+    decision, or touches a rail interval of `blind_s` (times, s)."""
+    rows = np.flatnonzero(
+        (ints[:, I_LAST] == ev.id) & (ints[:, I_RUN] >= 2) & np.isnan(floats[:, F_STOP])
+    )
+    if not len(rows):
+        return rows, np.zeros(0, np.int64), np.zeros(0)
+    width = evidence.width_for(np.abs(floats[rows, F_V]))
+    z = evidence.z_each(np.full(len(rows), float(ev.index)), width, ev.emit_index)
+    fs = evidence.fs_hz
+    for r0, r1 in blind_s:  # a flat rail is no evidence
+        centre_s = ev.t_s + OFFSET * width / fs
+        touch = (centre_s - 3.0 * width / fs < r1) & (centre_s + 3.0 * width / fs > r0)
+        z[touch] = np.nan
+    return rows, width, z
+
+
 def ridge_loss(
     floats: np.ndarray,
     ints: np.ndarray,
@@ -48,26 +74,15 @@ def ridge_loss(
     blind_s: Iterable[tuple[float, float]] = (),
     z_max: float = Z_MAX,
     log_loss: float = LOG_LOSS,
+    read: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of ev's children that take it for a ridge with a speed (the run's second
-    contact or later, not stopped) and the z each reads at ev's onset on the window of its
-    speed's rise time; adds `log_loss` to the score of those whose z is finite and under
-    `z_max`. z is NaN where the window is not held before ev's decision, or touches a
-    rail interval of `blind_s` (times, s)."""
+    """`rise_z`'s rows and z (or `read`, when already taken); adds `log_loss` to the score
+    of those whose z is finite and under `z_max`."""
     if not (np.isfinite(z_max) and np.isfinite(log_loss) and log_loss <= 0.0):
         raise ValueError(f"told rise: z_max {z_max!r} must be finite, log_loss {log_loss!r} <= 0")
-    rows = np.flatnonzero(
-        (ints[:, I_LAST] == ev.id) & (ints[:, I_RUN] >= 2) & np.isnan(floats[:, F_STOP])
-    )
+    rows, _, z = rise_z(floats, ints, ev, evidence, blind_s) if read is None else read
     if not len(rows):
         return rows, np.zeros(0)
-    width = evidence.width_for(np.abs(floats[rows, F_V]))
-    z = evidence.z_each(np.full(len(rows), float(ev.index)), width, ev.emit_index)
-    fs = evidence.fs_hz
-    for r0, r1 in blind_s:  # a flat rail is no evidence
-        centre_s = ev.t_s + OFFSET * width / fs
-        touch = (centre_s - 3.0 * width / fs < r1) & (centre_s + 3.0 * width / fs > r0)
-        z[touch] = np.nan
     low = np.isfinite(z) & (z < z_max)
     floats[rows[low], F_SCORE] += log_loss
     return rows, z

@@ -98,8 +98,10 @@ from grasplink.decoding import (
     reflag,
     restart_confirm,
     rise_evidence,
+    rise_time,
     step_hold,
     stop_jumps,
+    told_height,
     told_rise,
 )
 from grasplink.decoding.base import DEFAULT_UPDATE_S, Decoder, SlipEstimate, StaticForce
@@ -456,6 +458,27 @@ class TrackerDecoder(Decoder):
     # missing 4.0 -> 4.4 %, stop kind 7.1 -> 9.3 % (docs/decoding.md, Gaps: the headline)
     TOLD_RISE_LOG = told_rise.LOG_LOSS
     TOLD_RISE_Z = told_rise.Z_MAX
+    # weight of a told contact's height against the spacing before the ridge a child gives
+    # it (`told_height`: the probe's z at its onset on the track's rise time, over the told
+    # median, against 1 - exp(-spacing / 10 mm)); 0: off. Full plan, 1 seed, one run
+    # against 0 (tune_tracker_kinds.py, docs/decoding.md): snr10 missing 47.9 -> 47.8 %,
+    # wrong direction 1.3 -> 0.6 %, flagged / speed at rest 34.3 / 12.3 -> 32.9 / 11.3 %;
+    # constant and held-noise the same to the digit. 3 seeds, one run: snr10 missing 51.9
+    # -> 52.0 %, wrong direction 2.6 -> 1.0 %, speed at rest 13.8 -> 13.6 %; loop p90
+    # 52.7 -> 53.5 %; stick-slip the same; held-noise 0 false slips: on (for the direction)
+    TOLD_HEIGHT = 1.0
+    TOLD_HEIGHT_SIGMA = told_height.SIGMA  # ... the spread of log z about the line (nats)
+    TOLD_HEIGHT_SLOPE = told_height.SLOPE  # ... log z per log f
+    # ... only while the told pulses stand under RISE_EVIDENCE_GATE at their median (1;
+    # 0: always)
+    TOLD_HEIGHT_NOISY = 1.0
+    # weight of a told contact's rise time against the speed of a child taking it for its
+    # ridge (`rise_time`: the probe's z on its three windows against a pulse of rise
+    # RISE_MM / speed, h fitted); 0: off. Only under heavy noise as TOLD_HEIGHT_NOISY says.
+    # Off: full plan, 1 seed, one run against 0, snr10 missing 47.9 -> 48.8 % (0.5), 49.4 %
+    # (1), speed at rest 12.3 -> 14.0 / 15.4 % (docs/decoding.md)
+    RISE_TIME = 0.0
+    RISE_TIME_RELATIVE = 0.0  # ... its gains less their mean over the contact's ridge children
     # a step after which the level lay flat (its trend ended) is not charged to a commanded
     # grip rise (1; 0: it is): the grip's bend starts the level rising with it. Alone it
     # moves no full-plan figure; with TOLD_RISE_LOG it lets the headline's stop step
@@ -873,6 +896,7 @@ class TrackerDecoder(Decoder):
             fs_hz, self._recent, noise.white, noise.block, NOISE_FLOOR_N
         )
         self._rise.h_low = self.RISE_H_LOW
+        self._rise_time = rise_time.RiseTime(self._rise, max(self.RISE_TIME, 0.0))
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
@@ -896,6 +920,9 @@ class TrackerDecoder(Decoder):
         self._reflag = reflag.Reflag()  # the pulse contact the flag is raised again for
         self._up_t = -math.inf  # the last update flagged but by `reflag`
         self._ramp_way = 0  # the way the level ramped when the ramp hold last held
+        log_f = told_height.log_factor(before)  # (`told_height`: mu per direction, ridge)
+        c = told_height.centre(log_f, pd)
+        self._height_mu = self.TOLD_HEIGHT_SLOPE * (log_f - c)
         self._entry = arrival.entry_adjustment(self._log_prior, self._log_miss[:, :R])
         # what every contact's one-contact tracks share: a bank that `_births` copies and
         # fills in (the contact's id, time, sigma and the score)
@@ -1180,11 +1207,28 @@ class TrackerDecoder(Decoder):
             shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
+        noisy = bool(len(floats)) and (
+            not self.TOLD_HEIGHT_NOISY or self._rise.blind(self.RISE_EVIDENCE_GATE)
+        )
+        heights = noisy and bool(self.TOLD_HEIGHT)
+        read = None
+        if heights or (self.TOLD_RISE_LOG and not probe and len(floats)):
+            read = told_rise.rise_z(floats, ints, ev, self._rise, self.detector.blind)
+        if noisy and self.RISE_TIME and read is not None:  # its rise against each speed
+            contact_at = (ev.t_s, ev.index, ev.emit_index)
+            self._rise_time.weigh(
+                floats, read[0], contact_at, self.detector.blind, bool(self.RISE_TIME_RELATIVE)
+            )
         if self.TOLD_RISE_LOG and not probe and len(floats):
             # no pulse rose at the onset on the track's rise time: a bend, not its ridge
             told_rise.ridge_loss(
                 floats, ints, ev, self._rise, self.detector.blind,
-                self.TOLD_RISE_Z, self.TOLD_RISE_LOG,
+                self.TOLD_RISE_Z, self.TOLD_RISE_LOG, read,
+            )  # fmt: skip
+        if heights and read is not None:  # its height against the spacing before its ridge
+            told_height.weigh(
+                floats, ints, read, self._rise, self._height_mu, self.TOLD_HEIGHT,
+                self.TOLD_HEIGHT_SIGMA,
             )  # fmt: skip
         if self.RISE_EVIDENCE and len(floats):
             self._weigh_skips(floats, ints, ev)
