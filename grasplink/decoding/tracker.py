@@ -703,10 +703,21 @@ class TrackerDecoder(Decoder):
     # a flag up past a step told RIDGE_LIKE is held (no speed) while the chosen track is
     # stopped there, until its next ridge at the speed before would be decided, times this
     # (`step_hold`: a slow step is a held ridge pulse or a turn, seldom a stop); 0: off.
-    # Full plan, 3 seeds, one run: moving slip dropped 10.7 -> 9.5 % (reversal 23.4 ->
-    # 15.6), but stops cleared 95.7 -> 95.0 %, flagged at rest 2.5 -> 2.9 %: off
-    STEP_HOLD = 0.0
+    # Alone (s29) it cost three stops (a contact after the step the stop kept, an alias's
+    # wait, the ridge after): with the two limits below, full plan, 3 seeds, one run
+    # (tune_tracker_kinds.py, docs/decoding.md "slip dropped"): moving slip dropped 10.7
+    # -> 9.9 % (reversal 23.4 -> 16.4), stops cleared 95.7 % both, flagged at rest 2.5 ->
+    # 2.7 % (snr10 31.7 -> 33.5), held 0.0 %
+    STEP_HOLD = 1.0
     STEP_HOLD_MAX_S = 3.0  # ... and no longer than this after the step (an alias's speed)
+    # ... and no longer than this after the first contact told after the step with the
+    # stop still chosen (`step_hold.unlinked`: no moving track took it up, so no ridge of
+    # the slip's: loop 161210 held its stop 2.6 s); 0: off
+    STEP_HOLD_AFTER_S = 0.3
+    # 1: the wait runs to the ridge after the next when the step lies within 3 sigma of the
+    # next (`stop_seen`: it may be that ridge's contact); 0: to the next ridge only (a stop
+    # just short of it: stop 95100 cleared 0.61 s late with 1, 0.02 s with 0)
+    STEP_HOLD_SKIP = 0.0
     RAMP_WINDOW_S = 0.05
     RAMP_STEPS = 4
     RAMP_SLOPE_N_S = 0.2
@@ -1587,11 +1598,17 @@ class TrackerDecoder(Decoder):
             return out
         tau = h.stop - h.t
         sigma = math.sqrt(max(h.p00 + 2.0 * tau * h.p01 + tau * tau * h.p11, 0.0))
+        if not self.STEP_HOLD_SKIP:
+            sigma = 0.0  # the next ridge's time, never the one after
         seen = posterior_kernels.stop_seen(
             h.s, h.v, h.stop, sigma, h.dirn, h.ridge, self._pos, self._step_hold_K
         )
         if not step_hold.holds(shape, self._up_t, h.stop, g, float(seen), self.STEP_HOLD_MAX_S):
             return out
+        if self.STEP_HOLD_AFTER_S > 0:
+            after = [c.t_s for c in self._contacts if c.t_s > h.stop]
+            if step_hold.unlinked(after, g, self.STEP_HOLD_AFTER_S):
+                return out  # a contact after the step no moving track took up: the stop
         return _flag_only(out, 0.5)  # the step tells neither a stop nor a speed
 
     @cached_property

@@ -23,10 +23,10 @@ RIDGE_SIDE = {"LOG_SHAPE_RIDGE_STOP": math.log(0.1), "SHAPE_AMBIGUOUS_RIDGE": 0.
 
 def test_a_grip_ramp_into_the_rail_while_sliding_keeps_the_slip_flag_up():
     case = sr.Case("saturation", "22 mm/s", (22,), "alpha0.3", True, 121101)
-    bare = {"LOG_SHAPE_RIDGE_STOP": 0.0, "RAIL_HOLD": 0.0}
+    bare = {"LOG_SHAPE_RIDGE_STOP": 0.0, "RAIL_HOLD": 0.0, "STEP_HOLD": 0.0}
     configs = {
         "off": {"tuning": bare},
-        "on": {"tuning": {**RIDGE_SIDE, "RAIL_HOLD": 0.0}},
+        "on": {"tuning": {**RIDGE_SIDE, "RAIL_HOLD": 0.0, "STEP_HOLD": 0.0}},
         "shipped": {"tuning": {}},  # the ridge side off, the rail hold on
     }
     scores = sr.case_job(case, "tracker", configs, baseline=False)["scores"]
