@@ -52,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         decoder = sr.build_decoder(
             "tracker", truth.layout_mm, rec.fs_hz, tune_tracker.config(tuning)
         )
+        sr.tell_grip_commands(decoder, case)
         estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
         s = sr.score(estimates, truth)
         name = ",".join(f"{k}={v}" for k, v in tuning.items()) or "shipped"

@@ -41,7 +41,7 @@ SPEED_BANDS = ((0.0, 30.0), (30.0, 60.0), (60.0, 100.0), (100.0, 1000.0))
 def job(case: sr.Case) -> list[dict]:
     """Each kink-bank contact of the case: label, first verdict, truth speed, jump time."""
     rec = case.make()
-    decoder = sc._decoder(rec, {})
+    decoder = sc._decoder(case, rec, {})
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     stops = ns.motion(rec.truth).stops

@@ -82,7 +82,8 @@ def decompose(dec: _State, g: float) -> dict:
     K = dec._K
     R = dec.count
     evident, bonus = pk._evidence(B.ids, B.n, B.run, dec._ring, dec._ring_id,
-                                  *dec._evidence_tables)  # fmt: skip
+                                  *dec._evidence_tables, B.X[:, 1], B.before,
+                                  K[pk.RESTART_AGREE_REL])  # fmt: skip
     best = float(B.score.max())
     rows = []
     for i in range(len(B)):
@@ -212,6 +213,7 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple[str, str]], li
     probe = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, config)
     dec = _Dropped(rec.truth.layout_mm, rec.fs_hz, tuning=config["tuning"],
                    detector=probe.detector if "watch" in config else None)  # fmt: skip
+    sr.tell_grip_commands(dec, case)
     dec.rows, dec.contacts, dec.checks, dec.arrived = [], [], [], []
     dec.states, dec._cache_rows = [], []
     estimates, _ = ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)

@@ -81,9 +81,7 @@ def job(case: sr.Case, latency_s: float, found_all: bool = False) -> dict:
     rec = case.make()
     truth = rec.truth
     decoder = sr.build_decoder(DEFAULT_DECODER, truth.layout_mm, rec.fs_hz, {})
-    if case.kind == "loop":
-        for t_s, force_n in sr.loop_grip_commands(case):
-            decoder.note_grip_command(t_s, force_n)
+    sr.tell_grip_commands(decoder, case)
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     t = np.array([e.t_s for e in estimates])
     flag = np.array([e.slip for e in estimates])

@@ -67,8 +67,7 @@ def cost(rounds: int) -> None:
             for case, rec in made:
                 decoder = make_decoder("tracker", rec.truth.layout_mm, rec.fs_hz)
                 if told:
-                    for t_s, force_n in sr.loop_grip_commands(case):
-                        decoder.note_grip_command(t_s, force_n)
+                    sr.tell_grip_commands(decoder, case)
                 start = time.process_time()
                 ns.feed(decoder, rec.t_s, rec.force_n, 3)
                 cpu += time.process_time() - start

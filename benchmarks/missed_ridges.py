@@ -254,9 +254,7 @@ def job(case: sr.Case) -> dict:
         f["off_s"] = float(off)
 
     decoder = sr.build_decoder(DEFAULT_DECODER, truth.layout_mm, fs, {})
-    if case.kind == "loop":
-        for t_s, force_n in sr.loop_grip_commands(case):
-            decoder.note_grip_command(t_s, force_n)
+    sr.tell_grip_commands(decoder, case)
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     t = np.array([e.t_s for e in estimates])
     flag = np.array([e.slip for e in estimates])

@@ -72,6 +72,7 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple[str, str, str]
     rec = case.make()
     truth = rec.truth
     decoder = _Whose(truth.layout_mm, rec.fs_hz, tuning=tuning)
+    sr.tell_grip_commands(decoder, case)
     decoder.shown = []
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     t = np.array([e.t_s for e in estimates])

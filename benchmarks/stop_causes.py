@@ -95,15 +95,18 @@ class _Watch(TrackerDecoder):
         super()._add_check(check)
 
 
-def _decoder(rec: ns.Recorded, tuning: dict) -> _Watch:
+def _decoder(case: sr.Case, rec: ns.Recorded, tuning: dict) -> _Watch:
     """The watching decoder with a tuning (`tune_tracker.config`: `watch.NAME` and
-    `tails.NAME` the detector's), as `slip_reporting.build_decoder` builds the default one."""
+    `tails.NAME` the detector's), as `slip_reporting.case_job` builds the default one (a
+    loop case's grip commands told)."""
     config = tune_tracker.config(tuning)
     probe = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, config)
-    return _Watch(
+    decoder = _Watch(
         rec.truth.layout_mm, rec.fs_hz, tuning=config["tuning"],
         detector=probe.detector if "watch" in config or "tails" in config else None,
     )  # fmt: skip
+    sr.tell_grip_commands(decoder, case)
+    return decoder
 
 
 def classify(
@@ -170,7 +173,7 @@ VERDICT = {True: "pulse", False: "step", None: "unclear"}
 def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[tuple]]:
     """(case, per judged stop: (delay s, cause, detail, step) with cause "" if in time)."""
     rec = case.make()
-    decoder = _decoder(rec, tuning)
+    decoder = _decoder(case, rec, tuning)
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     scored = sr.score(estimates, rec.truth)
@@ -248,7 +251,7 @@ def trace(case: sr.Case, tuning: dict) -> None:
     """One case's timeline around each stop: the truth's ridge contacts, the decoder's
     contacts and verdicts (with the update that saw them) and its chosen hypothesis."""
     rec = case.make()
-    decoder = _decoder(rec, tuning)
+    decoder = _decoder(case, rec, tuning)
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     scored = sr.score(estimates, rec.truth)
@@ -285,7 +288,7 @@ def shapes_job(case: sr.Case, tuning: dict) -> list[dict]:
     made it (`_label`) and its shape (`step_shape.measure`, the samples up to the
     verdict)."""
     rec = case.make()
-    decoder = _decoder(rec, tuning)
+    decoder = _decoder(case, rec, tuning)
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     stops = ns.motion(rec.truth).stops

@@ -50,7 +50,7 @@ def stays(levels: np.ndarray, noise: float, step_rise: int, drop: float) -> bool
 def job(case: sr.Case, tuning: dict, every: bool) -> tuple[sr.Case, list[str]]:
     stop_trends.SEEN.clear()
     rec = case.make()
-    decoder = stop_causes._decoder(rec, tuning)
+    decoder = stop_causes._decoder(case, rec, tuning)
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     estimates, _ = stop_causes.ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     scored = sr.score(estimates, rec.truth)

@@ -61,7 +61,7 @@ def job(case: sr.Case, tuning: dict) -> tuple[sr.Case, list[str]]:
     """The late stops of one case, a line each (module doc)."""
     SEEN.clear()
     rec = case.make()
-    decoder = stop_causes._decoder(rec, tuning)
+    decoder = stop_causes._decoder(case, rec, tuning)
     decoder.rows, decoder.contacts, decoder.checks, decoder.arrived = [], [], [], []
     estimates, _ = stop_causes.ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     scored = sr.score(estimates, rec.truth)

@@ -163,6 +163,7 @@ def job(case: sr.Case, tuning: dict) -> list[tuple[str, float, bool, dict, dict]
     rec = case.make()
     truth = rec.truth
     dec = _Probe(truth.layout_mm, rec.fs_hz, tuning=tuning)
+    sr.tell_grip_commands(dec, case)
     dec.seen = []
     ns.feed(dec, rec.t_s, rec.force_n, sr.CHUNK)
     contacts = np.sort(np.asarray(truth.contact_times_s, dtype=float))

@@ -866,6 +866,15 @@ def build_decoder(name: str, layout_mm: Sequence[float], fs_hz: float, settings:
 # -- running ------------------------------------------------------------------------------------
 
 
+def tell_grip_commands(decoding: Decoder, case: Case) -> None:
+    """Tell `decoding` the grip commands a `loop` case's gateway would have sent
+    (`loop_grip_commands`, its efference copy); other kinds have no gateway. Every script
+    that decodes a case calls this, so its figures are the benchmark's."""
+    if case.kind == "loop":
+        for t_s, force_n in loop_grip_commands(case):
+            decoding.note_grip_command(t_s, force_n)
+
+
 def case_job(case: Case, decoder: str, configs: dict[str, dict], baseline: bool) -> dict:
     """One case, in a worker: the decoder under each config (3-sample chunks), scored; the
     baseline too when asked (its cost beside the decoder's, in the same process)."""
@@ -877,9 +886,8 @@ def case_job(case: Case, decoder: str, configs: dict[str, dict], baseline: bool)
         # gateway would have sent (`loop_grip_commands`; a trial's grip_commands=0: without)
         told = settings.pop("grip_commands", True)
         decoding = build_decoder(decoder, rec.truth.layout_mm, rec.fs_hz, settings)
-        if told and case.kind == "loop":
-            for t_s, force_n in loop_grip_commands(case):
-                decoding.note_grip_command(t_s, force_n)
+        if told:
+            tell_grip_commands(decoding, case)
         estimates, cpu = ns.feed(decoding, rec.t_s, rec.force_n, CHUNK)
         result = score(estimates, rec.truth)
         result.kind, result.layout, result.variant = case.kind, case.layout, case.variant
