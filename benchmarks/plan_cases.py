@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 
 import tune_tracker
@@ -80,3 +81,39 @@ def print_case_lines(results: Iterable[tuple[sr.Case, Sequence[str]]]) -> None:
         for line in lines:
             way = "r" if case.reverse else "f"
             print(f"{case.kind:11s} {case.layout:9s} {case.variant:26s} {way} {case.seed:6d}", line)
+
+
+def compare_settings(
+    doc: str,
+    default_seeds: int,
+    what: str,
+    counts: Callable[[sr.CaseScore], int],
+    shown: Callable[[list[int]], bool],
+    argv: list[str] | None = None,
+) -> tuple[list[str], list[dict[str, sr.CaseScore]]]:
+    """The shipped settings and each `--try` on the chosen cases (`--kinds`, default every
+    moving kind; `--seeds`; `--cases`), in one run on 2 workers: prints which settings ran
+    and, per case whose settings' `counts` (one of its scores' counts) are `shown`, each
+    setting's count; returns the settings' names and the scores (per case, keyed "0" the
+    shipped settings, "1"... each try) for the pooled lines."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--kinds", default=",".join(sr.MOVING), help="comma-separated kinds")
+    parser.add_argument("--seeds", type=int, default=default_seeds)
+    parser.add_argument("--try", dest="tries", action="append", default=[], type=tune_tracker.parse)
+    parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
+    args = parser.parse_args(argv)
+    todo = full_plan_cases(parser, args.kinds, args.seeds, args.cases)
+    tunings = [{}, *args.tries]
+    names = [",".join(f"{a}={b}" for a, b in t.items()) or "shipped" for t in tunings]
+    configs = {str(k): tune_tracker.config(t) for k, t in enumerate(tunings)}
+    with ProcessPoolExecutor(2) as pool:
+        results = list(pool.map(tune_tracker.job, todo, [configs] * len(todo), chunksize=2))
+    print(f"{len(todo)} cases (full plan, {args.seeds} seed(s)); {what}")
+    print("settings: " + " | ".join(f"[{k}] {name}" for k, name in enumerate(names)))
+    rows = []
+    for case, scores in zip(todo, results, strict=True):
+        each = [counts(scores[str(k)]) for k in range(len(tunings))]
+        if shown(each):
+            rows.append((case, [" ".join(f"[{k}] {n:3d}" for k, n in enumerate(each))]))
+    print_case_lines(rows)
+    return names, results
