@@ -223,6 +223,15 @@ class GripCommands:
         rate = follow.rate_n_s if span <= 0 else min(follow.rate_n_s, abs(change) / span)
         return Change(self._t[start], end - self._t[start], change, self._f[start - 1], rate)
 
+    def grip_at(self, t_s: np.ndarray) -> np.ndarray:
+        """The grip (N) the commands hold the hand at, at times t_s: the command in force a
+        lag before (the actuator follows a command about a lag late; the slew is ignored:
+        a gateway's ramp is a command every 10 ms). NaN before the first command."""
+        times = np.asarray(self._t)
+        k = np.searchsorted(times, np.asarray(t_s) - self.follow.lag_s, side="right") - 1
+        grip = np.asarray(self._f)[np.maximum(k, 0)]
+        return np.where(k >= 0, grip, np.nan)
+
     def rise_at(self, t_s: float, within_s: float | None = None) -> Change | None:
         """The commanded rise whose onset holds t_s (None: none): a run of commands each
         raising the grip within a lag of the one before, started no more than

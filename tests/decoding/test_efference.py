@@ -268,6 +268,27 @@ def test_the_headline_keeps_its_speed_while_it_slides(headline):
     assert figures["last_ok"] is not False and figures["rest_ok"], figures
 
 
+def test_a_grip_rise_mid_slide_keeps_the_sliding_levels_ramp_hold(monkeypatch):
+    """The loop raises the grip while the object still slides on (loop case 163201: alpha0.7,
+    30 mm/s the far end first, the grip 5 -> 8.8 N over the last 0.6 s before the stop): the
+    level ramps on past the grip's share, so told the commands the ramp hold keeps the flag
+    as untold; the grip alone taking the ramp dropped it in 121 of 201 sliding updates
+    (untold 62)."""
+    from dataclasses import replace
+
+    from grasplink.decoding.tracker import TrackerDecoder
+    from grasplink.evaluation import slip_reporting as sr
+
+    plan = replace(sr.FULL, seeds=1)
+    (case,) = [c for c in sr.cases(plan) if c.kind == "loop" and c.seed == 163201]
+    configs = {"told": {}, "untold": {"grip_commands": False}}
+    scores = sr.case_job(case, "tracker", configs, False)["scores"]
+    monkeypatch.setattr(TrackerDecoder, "RAMP_GRIP_SHARE", 0.0)
+    grip = sr.case_job(case, "tracker", {"told": {}}, False)["scores"]["told"]
+    assert grip.dropped_from2 > scores["untold"].dropped_from2 + 20  # the contrast
+    assert scores["told"].dropped_from2 <= scores["untold"].dropped_from2
+
+
 # -- the gateway and the CAN log ------------------------------------------------------------
 def test_the_gateway_tells_its_decoder_every_grip_command_it_sends(headline):
     """The live decoder was told what the hand's RPDO carried, when it went on the bus."""
