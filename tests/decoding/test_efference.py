@@ -281,6 +281,7 @@ def test_a_grip_rise_mid_slide_keeps_the_sliding_levels_ramp_hold(monkeypatch):
 
     plan = replace(sr.FULL, seeds=1)
     (case,) = [c for c in sr.cases(plan) if c.kind == "loop" and c.seed == 163201]
+    monkeypatch.setattr(TrackerDecoder, "RAMP_GRIP_SHARE", 1.0)
     configs = {"told": {}, "untold": {"grip_commands": False}}
     scores = sr.case_job(case, "tracker", configs, False)["scores"]
     monkeypatch.setattr(TrackerDecoder, "RAMP_GRIP_SHARE", 0.0)
