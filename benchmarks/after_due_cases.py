@@ -26,15 +26,12 @@ import plan_cases
 
 
 def main(argv: list[str] | None = None) -> int:
-    names, results = plan_cases.compare_settings(
-        __doc__, 3, "after-due speed updates", lambda score: score.after_observable_speed,
-        any, argv,
+    plan_cases.compare_settings(
+        __doc__, 3, "after-due speed updates",
+        part=lambda score: score.after_observable_speed,
+        whole=lambda score: score.after_observable,
+        phrase="updates after due carry a speed", shown=any, argv=argv,
     )  # fmt: skip
-    for k, name in enumerate(names):
-        speed = sum(r[str(k)].after_observable_speed for r in results)
-        total = sum(r[str(k)].after_observable for r in results)
-        share = 100.0 * speed / total if total else float("nan")
-        print(f"[{k}] {name}: {speed} of {total} updates after due carry a speed ({share:.2f} %)")
     return 0
 
 

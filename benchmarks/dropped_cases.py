@@ -23,15 +23,11 @@ import plan_cases
 
 
 def main(argv: list[str] | None = None) -> int:
-    names, results = plan_cases.compare_settings(
-        __doc__, 1, "slip dropped updates", lambda score: score.dropped_from2,
-        lambda counts: len(set(counts)) > 1, argv,
+    plan_cases.compare_settings(
+        __doc__, 1, "slip dropped updates",
+        part=lambda score: score.dropped_from2, whole=lambda score: score.moving_from2,
+        phrase="moving updates dropped", shown=lambda counts: len(set(counts)) > 1, argv=argv,
     )  # fmt: skip
-    for k, name in enumerate(names):
-        dropped = sum(r[str(k)].dropped_from2 for r in results)
-        moving = sum(r[str(k)].moving_from2 for r in results)
-        share = 100.0 * dropped / moving if moving else float("nan")
-        print(f"[{k}] {name}: {dropped} of {moving} moving updates dropped ({share:.2f} %)")
     return 0
 
 

@@ -87,15 +87,16 @@ def compare_settings(
     doc: str,
     default_seeds: int,
     what: str,
-    counts: Callable[[sr.CaseScore], int],
+    part: Callable[[sr.CaseScore], int],
+    whole: Callable[[sr.CaseScore], int],
+    phrase: str,
     shown: Callable[[list[int]], bool],
     argv: list[str] | None = None,
-) -> tuple[list[str], list[dict[str, sr.CaseScore]]]:
+) -> None:
     """The shipped settings and each `--try` on the chosen cases (`--kinds`, default every
-    moving kind; `--seeds`; `--cases`), in one run on 2 workers: prints which settings ran
-    and, per case whose settings' `counts` (one of its scores' counts) are `shown`, each
-    setting's count; returns the settings' names and the scores (per case, keyed "0" the
-    shipped settings, "1"... each try) for the pooled lines."""
+    moving kind; `--seeds`; `--cases`), in one run on 2 workers: prints `what` ran, each
+    case whose settings' `part` counts (of its score) are `shown`, and per setting `part`
+    pooled "of" `whole` with the share, e.g. "12 of 40 `phrase` (30.00 %)"."""
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--kinds", default=",".join(sr.MOVING), help="comma-separated kinds")
     parser.add_argument("--seeds", type=int, default=default_seeds)
@@ -112,8 +113,12 @@ def compare_settings(
     print("settings: " + " | ".join(f"[{k}] {name}" for k, name in enumerate(names)))
     rows = []
     for case, scores in zip(todo, results, strict=True):
-        each = [counts(scores[str(k)]) for k in range(len(tunings))]
+        each = [part(scores[str(k)]) for k in range(len(tunings))]
         if shown(each):
             rows.append((case, [" ".join(f"[{k}] {n:3d}" for k, n in enumerate(each))]))
     print_case_lines(rows)
-    return names, results
+    for k, name in enumerate(names):
+        counted = sum(part(r[str(k)]) for r in results)
+        total = sum(whole(r[str(k)]) for r in results)
+        share = 100.0 * counted / total if total else float("nan")
+        print(f"[{k}] {name}: {counted} of {total} {phrase} ({share:.2f} %)")
