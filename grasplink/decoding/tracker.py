@@ -98,7 +98,6 @@ from grasplink.decoding import (
     reflag,
     restart_confirm,
     rise_evidence,
-    rise_time,
     step_hold,
     stop_jumps,
     told_height,
@@ -472,13 +471,6 @@ class TrackerDecoder(Decoder):
     # ... only while the told pulses stand under RISE_EVIDENCE_GATE at their median (1;
     # 0: always)
     TOLD_HEIGHT_NOISY = 1.0
-    # weight of a told contact's rise time against the speed of a child taking it for its
-    # ridge (`rise_time`: the probe's z on its three windows against a pulse of rise
-    # RISE_MM / speed, h fitted); 0: off. Only under heavy noise as TOLD_HEIGHT_NOISY says.
-    # Off: full plan, 1 seed, one run against 0, snr10 missing 47.9 -> 48.8 % (0.5), 49.4 %
-    # (1), speed at rest 12.3 -> 14.0 / 15.4 % (docs/decoding.md)
-    RISE_TIME = 0.0
-    RISE_TIME_RELATIVE = 0.0  # ... its gains less their mean over the contact's ridge children
     # a step after which the level lay flat (its trend ended) is not charged to a commanded
     # grip rise (1; 0: it is): the grip's bend starts the level rising with it. Alone it
     # moves no full-plan figure; with TOLD_RISE_LOG it lets the headline's stop step
@@ -913,7 +905,6 @@ class TrackerDecoder(Decoder):
             fs_hz, self._recent, noise.white, noise.block, NOISE_FLOOR_N
         )
         self._rise.h_low = self.RISE_H_LOW
-        self._rise_time = rise_time.RiseTime(self._rise, max(self.RISE_TIME, 0.0))
         # the last contacts' branches by their inputs, and their pruning (`_step`, `_prune`)
         self._memo: dict[tuple, tuple[_Bank, float, _Bank]] = {}
         self._pruned: dict[int, tuple[_Bank, np.ndarray, _Bank]] = {}
@@ -1224,25 +1215,22 @@ class TrackerDecoder(Decoder):
             shape == step_shape.AMBIGUOUS and self.SHAPE_AMBIGUOUS_RIDGE
         ):  # a ridge pulse held up: seldom a stop (here)
             floats[floats[:, F_STOP] == ev.t_s, F_SCORE] += self.LOG_SHAPE_RIDGE_STOP
-        noisy = bool(len(floats)) and (
-            not self.TOLD_HEIGHT_NOISY or self._rise.blind(self.RISE_EVIDENCE_GATE)
+        # both read the probe's z at the onset on each ridge child's rise time (`rise_z`)
+        rise_check = bool(self.TOLD_RISE_LOG) and not probe and bool(len(floats))
+        heights = (
+            bool(self.TOLD_HEIGHT)
+            and bool(len(floats))
+            and (not self.TOLD_HEIGHT_NOISY or self._rise.blind(self.RISE_EVIDENCE_GATE))
         )
-        heights = noisy and bool(self.TOLD_HEIGHT)
-        read = None
-        if heights or (self.TOLD_RISE_LOG and not probe and len(floats)):
+        if rise_check or heights:
             read = told_rise.rise_z(floats, ints, ev, self._rise, self.detector.blind)
-        if noisy and self.RISE_TIME and read is not None:  # its rise against each speed
-            contact_at = (ev.t_s, ev.index, ev.emit_index)
-            self._rise_time.weigh(
-                floats, read[0], contact_at, self.detector.blind, bool(self.RISE_TIME_RELATIVE)
-            )
-        if self.TOLD_RISE_LOG and not probe and len(floats):
+        if rise_check:
             # no pulse rose at the onset on the track's rise time: a bend, not its ridge
             told_rise.ridge_loss(
                 floats, ints, ev, self._rise, self.detector.blind,
                 self.TOLD_RISE_Z, self.TOLD_RISE_LOG, read,
             )  # fmt: skip
-        if heights and read is not None:  # its height against the spacing before its ridge
+        if heights:  # its height against the spacing before its ridge
             told_height.weigh(
                 floats, ints, read, self._rise, self._height_mu, self.TOLD_HEIGHT,
                 self.TOLD_HEIGHT_SIGMA,
@@ -1602,10 +1590,10 @@ class TrackerDecoder(Decoder):
                 break
         if shape != step_shape.RIDGE_LIKE:
             return out
-        tau = h.stop - h.t
-        sigma = math.sqrt(max(h.p00 + 2.0 * tau * h.p01 + tau * tau * h.p11, 0.0))
-        if not self.STEP_HOLD_SKIP:
-            sigma = 0.0  # the next ridge's time, never the one after
+        sigma = 0.0  # the next ridge's time, never the one after (STEP_HOLD_SKIP 0)
+        if self.STEP_HOLD_SKIP:
+            tau = h.stop - h.t
+            sigma = math.sqrt(max(h.p00 + 2.0 * tau * h.p01 + tau * tau * h.p11, 0.0))
         seen = posterior_kernels.stop_seen(
             h.s, h.v, h.stop, sigma, h.dirn, h.ridge, self._pos, self._step_hold_K
         )
