@@ -16,9 +16,9 @@ Run: `.venv/bin/python benchmarks/snr10_told_heights.py [--seeds N] [--kinds snr
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 import numpy as np
+import plan_cases
 
 from grasplink.decoding.detector.pulse_probe import PULSE_RAMP, PULSE_SCALES_S
 from grasplink.decoding.ridge_pulses import RISE_MM
@@ -41,6 +41,7 @@ def job(case: sr.Case) -> list[tuple[float, float, float, float, float, float]]:
     before = [LEAD_IN_MM if s is None else s for s in ct.spacings_before_mm(truth)]
     speeds = ct.speeds_at_mm_s(truth)
     times = np.array([e.t_s for e in told.contacts])
+    x = np.asarray(rec.force_n, float)
     rows = []
     for c, s, v in zip(crossings, before, speeds, strict=True):
         if not len(times):
@@ -52,7 +53,6 @@ def job(case: sr.Case) -> list[tuple[float, float, float, float, float, float]]:
         check = told.first_verdict.get(ev.id)
         h = np.nan if check is None or check.height_snr is None else check.height_snr
         delay = np.nan if check is None else 1e3 * (check.emit_index - ev.emit_index) / rec.fs_hz
-        x = np.asarray(rec.force_n, float)
         rise = RISE_MM / max(float(v), 1.0) * rec.fs_hz
         w = int(WIDTHS[np.argmin(np.abs(np.log(WIDTHS / rise)))])
         c0 = round(ev.index + OFFSET * w)
@@ -103,10 +103,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--kinds", default="snr10")
     args = parser.parse_args(argv)
-    kinds = args.kinds.split(",")
-    plan = replace(sr.FULL, seeds=args.seeds)
-    plan = replace(plan, variants={k: v for k, v in plan.variants.items() if k in kinds})
-    rows = [r for case in sr.cases(plan) for r in job(case)]
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
+    rows = [r for case in todo for r in job(case)]
+    if not rows:
+        parser.error(f"no told contact found a true crossing in {args.kinds}")
     a = np.array(rows)
     f = a[:, 0]
     print(f"{len(a)} found crossings ({args.kinds}, full plan, {args.seeds} seed(s))")
