@@ -330,7 +330,11 @@ def test_a_broker_restarted_mid_run_loses_nothing_within_the_buffer_bound(
     assert len(back) == 2 and "dropped" not in " ".join(back)
     values = [json.loads(m.payload) for m in recorder.taken() if "/values" in m.topic]
     received = {v["grip_force_n"] for v in values}
-    assert len(made) >= 40 and set(made) <= received, "a value message was lost"
+    lost = sorted(set(made) - received)
+    assert len(made) >= 40 and not lost, (
+        f"value messages lost: {lost} of {made[0]:g}..{made[-1]:g}; publisher said: {lines}; "
+        f"broker said: {(tmp_path / 'broker' / 'mosquitto.log').read_text()[-3000:]}"
+    )
     assert made[-1] - made[0] >= 40
     host = SparkplugHost("grasplink", "gw")
     for message in recorder.taken():
