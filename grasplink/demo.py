@@ -28,6 +28,8 @@ from grasplink.profiles import objects as obj
 from grasplink.profiles.kinds import BY_NODE_ID, node_kind
 
 BITRATE = 1_000_000
+# services sent on events, not in a cycle: their rate is over the whole run
+EVENT_SERVICES = frozenset({"NMT", "EMCY", "SDO tx", "SDO rx", "LSS master", "LSS slave"})
 COMMAND_PERIOD_US = 50_000
 LEVEL_DWELL_US = 500_000
 # Force belt levels (rad/s, ch. 8) then the slip belt levels (negative velocity).
@@ -62,11 +64,13 @@ class BusWatch:
     spans_us: dict[int, tuple[int, int]] = field(default_factory=dict)  # first, last per ID
 
     def rate_per_s(self, can_id: int, overall_s: float) -> float:
-        """Frames per second of one COB-ID while it flows (a TPDO starts only once its node
-        is started: the whole run's span would understate it by the boot time)."""
+        """Frames per second of one COB-ID: a cyclic one's while it flows (a TPDO starts
+        only once its node is started: the whole run's span would understate it by the
+        boot time), an event's over the whole run (the boot's NMT commands come within
+        milliseconds: their own span would read thousands per second)."""
         first, last = self.spans_us.get(can_id, (0, 0))
         count = self.frames[can_id]
-        if count < 2 or last <= first:
+        if count < 2 or last <= first or function_of(can_id)[0] in EVENT_SERVICES:
             return count / overall_s
         return (count - 1) / ((last - first) / 1e6)
 
