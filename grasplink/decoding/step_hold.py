@@ -34,6 +34,9 @@ without the limit the flag stayed up to the stop's end, 2.6 s). Not the other wa
 (hold only while contacts keep coming after the step): 93 % of what the hold buys on the
 reversals are updates with no contact after the step at all - the 25 mm object sliding
 across a long spacing - so that costs the gain (reversal dropped 15.6 -> 22.4 %).
+Only contacts not told RIDGE_LIKE count (s32, `STEP_HOLD_AFTER_UNRIDGED`): a held pulse
+after the step is the slip's own (reversal 102110: the 25 mm object's trailing edge leaving
+a ridge), while the stop's own step in 161210 is untold.
 """
 
 from __future__ import annotations

@@ -6,9 +6,11 @@ crosses the 67 mm spacing (3 s at that speed), turns at 3.65 s and comes back (c
 4.10, 4.31, 4.39 s) to rest at 4.53 s. Without the hold a step after the 1.36 s ridge,
 shaped like a ridge's, is taken for the stop and the flag drops from 1.89 s to 4.21 s
 while the object slides (176 of its 293 scored updates). With the hold the flag stays up
-to 2.52 s, where a step probe's contact after the step (1.68 s: the object's trailing edge
-leaving the first ridge) ends it: the stop still chosen 0.3 s after a contact that came
-after its step (`STEP_HOLD_AFTER_S`) - the price of the loop case below.
+to the turn. A step probe's contact after the step (1.68 s: the object's trailing edge
+leaving the first ridge, told RIDGE_LIKE) ended it at 2.52 s until s32: the stop still
+chosen 0.3 s after a contact that came after its step (`STEP_HOLD_AFTER_S`, the price of
+the loop case below); a contact told ridge-like no longer counts there
+(`STEP_HOLD_AFTER_UNRIDGED`).
 
 The hold's two limits, each on the stop it cleared late: loop 161210 (30 mm/s on 4, 3,
 48, 29 mm: a contact after its stop's step that no moving track took up held the stop
@@ -51,6 +53,16 @@ def test_held_to_the_turn_without_the_limit_on_contacts_after_the_step():
     gap = (t >= 1.9) & (t <= 3.6)  # after the step, before the turn
     assert flags[gap].all()
     assert sr.score(estimates, truth).dropped_from2 == 0
+
+
+def test_a_contact_after_the_step_told_ridge_like_does_not_end_the_hold():
+    t, flags, _, truth, estimates = _reversal({})
+    gap = (t >= 1.9) & (t <= 3.6)  # after the step, before the turn
+    assert flags[gap].all()
+    assert sr.score(estimates, truth).dropped_from2 == 0
+    # counted, the trailing edge's contact at 1.68 s ends the hold at 2.52 s
+    t, flags, _, truth, estimates = _reversal({"STEP_HOLD_AFTER_UNRIDGED": 0.0})
+    assert flags[(t >= 1.9) & (t <= 2.5)].all() and not flags[(t >= 2.6) & (t <= 3.6)].any()
 
 
 def test_without_it_the_flag_drops_there():
