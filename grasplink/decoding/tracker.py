@@ -692,6 +692,16 @@ class TrackerDecoder(Decoder):
     # posterior reports no stop, 2: over its stop too; 0: off
     RAMP_HOLD = 1.0
     RAMP_HOLD_WITHIN_S = 3.0
+    # 1: with RAMP_HOLD 1, also over the posterior's stop once the ramp's windows all lie
+    # RAMP_OVER_STOP_S after the stop was first reported (the stop's own step and the
+    # ramp before it are then out of them: a covered length ramping on is the object
+    # still sliding) and the ramp is at least RAMP_OVER_STOP_SLOPE_N_S steep (the
+    # drift of a sensor at rest wanders about 0.2 N/s); 2: the same, up only (a pulse's
+    # tail decays after a stop); 0: off. Measured, s32 (docs/decoding.md, "ramp hold
+    # over a stop"): off
+    RAMP_OVER_STOP = 0.0
+    RAMP_OVER_STOP_S = 0.0
+    RAMP_OVER_STOP_SLOPE_N_S = 0.2
     # a flag up past a step told RIDGE_LIKE is held (no speed) while the chosen track is
     # stopped there, until its next ridge at the speed before would be decided, times this
     # (`step_hold`: a slow step is a held ridge pulse or a turn, seldom a stop); 0: off.
@@ -933,6 +943,7 @@ class TrackerDecoder(Decoder):
         self._reflag = reflag.Reflag()  # the pulse contact the flag is raised again for
         self._up_t = -math.inf  # the last update flagged but by `reflag`
         self._ramp_way = 0  # the way the level ramped when the ramp hold last held
+        self._stopped_at = math.inf  # when the posterior's current stop report began
         log_f = told_height.log_factor(before)  # (`told_height`: mu per direction, ridge)
         c = told_height.centre(log_f, pd)
         self._height_mu = self.TOLD_HEIGHT_SLOPE * (log_f - c)
@@ -1544,6 +1555,10 @@ class TrackerDecoder(Decoder):
     # ------------------------------------------------------------------ reporting
     def _report(self, g: float) -> SlipEstimate:
         out = self._report_kept(g)
+        if out.slip or out.speed_mm_s is None:
+            self._stopped_at = math.inf
+        elif self._stopped_at == math.inf:
+            self._stopped_at = g
         if self.ARRIVAL_FLAG_P > 0 and self.ARRIVAL_EMPTY_N > 0:
             out = self._report_arrival(g, out)
         if not out.slip and self.STEP_HOLD > 0:
@@ -1628,20 +1643,22 @@ class TrackerDecoder(Decoder):
         RAMP_HOLD_WITHIN_S (`level_ramp`: no speed, no direction)."""
         if g - self._up_t > self.RAMP_HOLD_WITHIN_S:
             return out  # never up (a held object), or too long ago
-        if out.speed_mm_s is not None and self.RAMP_HOLD < 2:
-            return out  # the posterior's stop
         m = max(1, round(self.RAMP_WINDOW_S * self.fs_hz))
         span = (int(self.RAMP_STEPS) + 1) * m
+        over_stop = out.speed_mm_s is not None and self.RAMP_HOLD < 2
+        if over_stop:
+            since = g - span / self.fs_hz - self._stopped_at
+            if not (self.RAMP_OVER_STOP and since >= self.RAMP_OVER_STOP_S):
+                return out  # the posterior's stop (or its windows reach back to it)
         white = self.detector.noise.white_at_sample(self._n_in - 1)
         if white is None:
             return out
-        step = level_ramp.step_min_n(
-            self.RAMP_WINDOW_S, self.fs_hz, self.RAMP_SLOPE_N_S, self.RAMP_Z, white
-        )
+        slope = self.RAMP_OVER_STOP_SLOPE_N_S if over_stop else self.RAMP_SLOPE_N_S
+        step = level_ramp.step_min_n(self.RAMP_WINDOW_S, self.fs_hz, slope, self.RAMP_Z, white)
         x = self._recent.held(self._n_in - span, self._n_in)
         way = level_ramp.ramp_way(x, int(self.RAMP_STEPS), step)
-        if not way:
-            return out
+        if not way or (way < 0 and over_stop and self.RAMP_OVER_STOP >= 2):
+            return out  # (2: over a stop only up: a pulse's tail decays after a stop)
         if self.RAMP_ONE_WAY and self._ramp_way and way != self._ramp_way:
             return out  # the level turned: no coverage ramp (a pulse's tail in a stick)
         # read last: the commands' windows are looked up every hand lag
