@@ -698,8 +698,9 @@ class TrackerDecoder(Decoder):
     # still sliding) and the ramp is at least RAMP_OVER_STOP_SLOPE_N_S steep (the
     # drift of a sensor at rest wanders about 0.2 N/s); 2: the same, up only (a pulse's
     # tail decays after a stop); 0: off. Full plan, 3 seeds, every kind (s32,
-    # docs/decoding.md, "ramp hold over a stop"): 2 at 0.6 N/s, slip dropped 9.7 -> ~9.0
-    # % (loop 24.5 -> 22.5, accelerating 4.3 -> 2.6), stops and at rest unchanged
+    # docs/decoding.md, "ramp hold over a stop"): 2 at 0.6 N/s, slip dropped 9.7 -> 9.1
+    # % (the page; loop 24.5 -> 22.5, accelerating 4.3 -> 2.6), stops and at rest
+    # unchanged; the loop kind's decoder ~13 % dearer (the ramp test at stop reports)
     RAMP_OVER_STOP = 2.0
     RAMP_OVER_STOP_S = 0.0
     RAMP_OVER_STOP_SLOPE_N_S = 0.6

@@ -11,18 +11,15 @@ at 0.5 Hz wanders about 0.2 N/s; stop 92100's level rose 0.3 N/s 1.8 s after its
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from grasplink.evaluation import slip_reporting as sr
-from tests.decoding.plan_cases import decode_case
+from tests.decoding.plan_cases import decode_case, plan_case
 
 OFF = {"RAMP_OVER_STOP": 0.0}
 
 
 def _loop_score(tuning: dict) -> sr.CaseScore:
     """Loop 165100 (20 mm/s onto fibonacci, forward), decoded with its grip commands."""
-    (case,) = [c for c in sr.cases(replace(sr.FULL, seeds=1)) if c.seed == 165100]
-    assert case.kind == "loop"
+    case = plan_case("loop", 165100)
     return sr.case_job(case, "tracker", {"x": {"tuning": tuning}}, False)["scores"]["x"]
 
 

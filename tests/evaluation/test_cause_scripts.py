@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import importlib
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from grasplink.evaluation import slip_reporting as sr
+from tests.decoding.plan_cases import plan_case
 
 BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 LOOP_SEED = 164101  # alpha0.9 at 20 mm/s: the commands change its dropped count
@@ -35,14 +35,8 @@ def dropped_causes(scripts):
     return scripts("dropped_causes")
 
 
-def _case(seed: int, kind: str) -> sr.Case:
-    (case,) = [c for c in sr.cases(replace(sr.FULL, seeds=1)) if c.seed == seed]
-    assert case.kind == kind
-    return case
-
-
 def _loop_case() -> sr.Case:
-    return _case(LOOP_SEED, "loop")
+    return plan_case("loop", LOOP_SEED)
 
 
 def _score(case: sr.Case) -> sr.CaseScore:
@@ -60,7 +54,7 @@ def test_dropped_causes_counts_a_loop_case_as_the_benchmark_scores_it(dropped_ca
 
 
 def test_missing_speed_causes_names_a_cause_for_every_update_without_a_speed(scripts):
-    case = _case(110001, "snr10")  # 37 of 84 updates from the 3rd contact without a speed
+    case = plan_case("snr10", 110001)  # 37 of 84 updates from the 3rd contact without a speed
     scored = _score(case)
     _, rows = scripts("missing_speed_causes").job(case, {})
     from3 = [cause for third, cause, _ in rows if third]
@@ -69,7 +63,7 @@ def test_missing_speed_causes_names_a_cause_for_every_update_without_a_speed(scr
 
 
 def test_rest_speed_causes_names_the_track_of_every_speed_at_rest(scripts):
-    case = _case(112000, "snr10")  # 19 updates at rest carry a speed
+    case = plan_case("snr10", 112000)  # 19 updates at rest carry a speed
     scored = _score(case)
     _, rows = scripts("rest_speed_causes").job(case, {})
     assert len(rows) == scored.rest_speed > 0
@@ -77,7 +71,7 @@ def test_rest_speed_causes_names_the_track_of_every_speed_at_rest(scripts):
 
 
 def test_stop_causes_judges_the_stops_the_benchmark_judges(scripts):
-    case = _case(92000, "stop")
+    case = plan_case("stop", 92000)
     scored = _score(case)
     _, rows = scripts("stop_causes").job(case, {})
     judged = [s for s in scored.stops if s.judged and s.observable_s is not None]
@@ -86,7 +80,7 @@ def test_stop_causes_judges_the_stops_the_benchmark_judges(scripts):
 
 
 def test_two_contact_hypotheses_shares_are_a_posterior_between_the_3rd_and_4th(scripts):
-    case = _case(55001, "constant")  # 100 such updates, a speed given in 37
+    case = plan_case("constant", 55001)  # 100 such updates, a speed given in 37
     rows = scripts("two_contact_hypotheses").job(case, {})
     assert 0 < sum(given for _, _, given, _, _ in rows) < len(rows)
     for _, v_true, _, mine, ideal in rows:
