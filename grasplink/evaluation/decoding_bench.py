@@ -47,6 +47,11 @@ TARGET_LAYOUTS = ("alpha0.1", "fibonacci")
 ALL_SPEEDS = (6, 11, 23, 37, 52, 68, 83, 97, 118, 143)
 QUICK_SPEEDS = (11, 52, 118)
 COST_BUDGET_US = 50.0
+# The budget as a share of the faithful thesis MMSE's cost in the same run: 50 us is 2.5x
+# under the MMSE (window 5 s) on the host the budget was set on (~125 us/sample). The
+# recommendation judges cost by this ratio when the MMSE ran, so a loaded host (2-3x
+# slower for every decoder alike) does not change which decoder it recommends.
+BUDGET_UNDER_MMSE = 2.5
 TARGETS = {
     "speed_median_pct": 3.0,
     "speed_p90_pct": 10.0,
@@ -485,11 +490,20 @@ def _scene_figures(score: ev.RecordingScore) -> dict:
 def recommend(decoders: dict) -> str:
     """The decoder, at its default settings, with the best target-set accuracy within budget.
 
-    Accuracy = speed p90 (%) + position p90 (mm). Variants of settings are
-    benchmarked to show the trade-off, not to pick the default: a variant that
-    is cheap enough on 256-sample chunks may not be on a gateway's 3-sample ones.
+    Accuracy = speed p90 (%) + position p90 (mm). Within budget: at least
+    BUDGET_UNDER_MMSE times cheaper than the faithful MMSE measured in the same run (every
+    decoder's time moves with the host's load alike; the ratio does not), or, with no MMSE
+    in the run, COST_BUDGET_US. Variants of settings are benchmarked to show the trade-off,
+    not to pick the default: a variant that is cheap enough on 256-sample chunks may not
+    be on a gateway's 3-sample ones.
     """
     decoders = {k: v for k, v in decoders.items() if v.get("default_settings", True)}
+    baseline = _baseline_us(decoders)
+
+    def within(cost: float) -> bool:
+        if baseline is not None:
+            return cost * BUDGET_UNDER_MMSE <= baseline
+        return cost <= COST_BUDGET_US
 
     def key(item):
         _, entry = item
@@ -498,10 +512,24 @@ def recommend(decoders: dict) -> str:
         p90 = target.get("speed_p90_pct")
         pos = target.get("position_p90_mm")
         accuracy = (p90 if p90 is not None else 1e9) + (pos if pos is not None else 1e9)
-        return (cost > COST_BUDGET_US, accuracy, cost)
+        return (not within(cost), accuracy, cost)
 
     best_key, best = min(decoders.items(), key=key)
     return best.get("decoder", best_key.split(" (")[0])
+
+
+def _baseline_us(decoders: dict) -> float | None:
+    """The faithful MMSE's (default settings) µs/sample on the target set, if it ran."""
+    return next(
+        (
+            v["target"].get("cpu_us_per_sample")
+            for v in decoders.values()
+            if v.get("decoder") == "mmse"
+            and v.get("default_settings", True)
+            and v.get("target", {}).get("cpu_us_per_sample")
+        ),
+        None,
+    )
 
 
 def plot_pareto(results: dict, path: Path) -> None:
@@ -544,14 +572,7 @@ def _fmt(value, digits: int = 1) -> str:
 
 def render(results: dict, tradeoff_lines: Sequence[str] = ()) -> str:
     decoders = results["decoders"]
-    baseline = next(
-        (
-            v["target"].get("cpu_us_per_sample")
-            for v in decoders.values()
-            if v.get("decoder") == "mmse" and v.get("default_settings")
-        ),
-        None,
-    )
+    baseline = _baseline_us(decoders)
     lines = [
         "# Skin decoding benchmark: what accuracy costs in time",
         "",
@@ -570,8 +591,16 @@ def render(results: dict, tradeoff_lines: Sequence[str] = ()) -> str:
         "trade-off curves of the tracker's constants: [slip_reporting.md](slip_reporting.md).",
         "",
         f"**Recommended default: `{results['recommended_default']}`** (at default settings, "
-        f"lowest speed p90 % + position p90 mm on the target set within "
-        f"{COST_BUDGET_US:.0f} µs/sample; the other rows show what each setting trades).",
+        f"lowest speed p90 % + position p90 mm on the target set at a cost "
+        + (
+            f"at least {BUDGET_UNDER_MMSE:g}× under the faithful MMSE's in the same run "
+            f"({_fmt(baseline)} µs/sample here: the {COST_BUDGET_US:.0f} µs/sample budget "
+            "on the host it was set on, judged as a ratio so that a loaded host does not "
+            "change the pick)"
+            if baseline
+            else f"within {COST_BUDGET_US:.0f} µs/sample"
+        )
+        + "; the other rows show what each setting trades).",
         "",
         "## Target set",
         "",

@@ -9,7 +9,7 @@ import numpy as np
 
 from grasplink.decoding.registry import DEFAULT_DECODER, make_decoder
 from grasplink.evaluation import scoring as ev
-from grasplink.evaluation.decoding_bench import COST_BUDGET_US, recommend
+from grasplink.evaluation.decoding_bench import BUDGET_UNDER_MMSE, COST_BUDGET_US, recommend
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators.synth import slip_recording
 
@@ -33,6 +33,26 @@ def test_recommendation_is_the_most_accurate_decoder_within_the_cost_budget():
         "expensive": _entry(0.1, 0.1, COST_BUDGET_US * 10),
     }
     assert recommend(decoders) == "best"
+
+
+def test_recommendation_judges_cost_against_the_mmse_of_the_same_run():
+    """A loaded host slows every decoder alike: the pick must not move with it. With the
+    faithful MMSE in the run, the budget is a share of its cost, not 50 µs."""
+
+    def run(slowdown: float) -> dict:
+        mmse = _entry(200.0, 40.0, 125.0 * slowdown) | {"decoder": "mmse"}
+        return {
+            "cheap": _entry(9.0, 3.0, 5.0 * slowdown),
+            "best": _entry(1.0, 0.5, 40.0 * slowdown),
+            "expensive": _entry(0.1, 0.1, 100.0 * slowdown),
+            "mmse (window 5 s)": mmse,
+        }
+
+    for slowdown in (0.5, 1.0, 2.5):
+        assert recommend(run(slowdown)) == "best", slowdown
+    over = run(1.0)
+    over["best"]["target"]["cpu_us_per_sample"] = 125.0 / BUDGET_UNDER_MMSE * 1.01
+    assert recommend(over) == "cheap"
 
 
 def test_scoring_counts_missing_estimates_and_the_physical_limit():
