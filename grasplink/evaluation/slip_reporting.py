@@ -253,6 +253,9 @@ class Plan:
     sweep_values: int | None  # None: every value; 2: the ends (and the shipped point)
     cost_cases: int  # cases also decoded by the baseline (cost ratio)
     headline: bool
+    # the first seed index of each case (`_cases`): 0 for the tuned sets; 3 and up are
+    # seeds no rule was tuned on (`benchmarks/held_out_seeds.py`)
+    first_seed: int = 0
 
 
 def _all(kind: str) -> tuple[int, ...]:
@@ -321,11 +324,15 @@ QUICK = Plan(
 PLANS = {"full": FULL, "quick": QUICK}
 
 
+#: seed numbers a variant holds: 10 * repeat + reverse below the next variant's 100
+SEED_SLOTS = 10
+
+
 def cases(plan: Plan) -> list[Case]:
     """The benchmark set: every chosen variant on every layout, both ways, `seeds` seeds.
 
     Seeds are this module's own (50000 upwards): none of nonstationary's signals."""
-    return _cases(plan.variants, plan.layouts, plan.seeds, 50_000)
+    return _cases(plan.variants, plan.layouts, plan.seeds, 50_000, plan.first_seed)
 
 
 def sweep_cases(plan: Plan) -> list[Case]:
@@ -334,8 +341,17 @@ def sweep_cases(plan: Plan) -> list[Case]:
 
 
 def _cases(
-    variants: dict[str, tuple[int, ...]], layouts: Sequence[str], seeds: int, base: int
+    variants: dict[str, tuple[int, ...]],
+    layouts: Sequence[str],
+    seeds: int,
+    base: int,
+    first_seed: int = 0,
 ) -> list[Case]:
+    if not (first_seed >= 0 and first_seed + seeds <= SEED_SLOTS):
+        raise ValueError(
+            f"slip reporting: seeds {first_seed}..{first_seed + seeds - 1} out of the "
+            f"{SEED_SLOTS} a variant's seed numbers hold (0..{SEED_SLOTS - 1})"
+        )
     out = []
     kinds = list(KINDS)
     for kind, chosen in variants.items():
@@ -344,7 +360,7 @@ def _cases(
             label, numbers = VARIANTS[kind][v]
             for layout in layouts:
                 for reverse in ways:
-                    for repeat in range(seeds):
+                    for repeat in range(first_seed, first_seed + seeds):
                         seed = (
                             base
                             + 10_000 * kinds.index(kind)
@@ -1504,14 +1520,14 @@ def write(figures: dict, meta: dict, out: Path) -> None:
         plot_sweep(name, rows, out / f"slip_reporting_{name}.png")
     (out / PAGE).write_text("\n".join(render(figures, meta)), encoding="utf-8")
     payload = {"meta": meta, "figures": figures, "targets": target_rows(figures)}
-    (out / RAW).write_text(json.dumps(_jsonable(payload), indent=1) + "\n", encoding="utf-8")
+    (out / RAW).write_text(json.dumps(jsonable(payload), indent=1) + "\n", encoding="utf-8")
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, float | np.floating):
         return float(value) if math.isfinite(value) else None
     if isinstance(value, np.integer | np.bool_):

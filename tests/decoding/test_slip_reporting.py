@@ -304,3 +304,18 @@ def test_build_decoder_takes_a_trials_kink_bank_fields_and_names_an_unknown_one(
     assert shipped.detector.settings.hinges.merge_widths != 1.0
     with pytest.raises(ValueError, match="merge_width"):
         sr.build_decoder("tracker", layout, 400, {"hinges": {"merge_width": 1.0}})
+
+
+def test_held_out_seeds_are_other_cases_of_the_same_plan_and_out_of_range_ones_refused():
+    """`benchmarks/held_out_seeds.py` runs the full plan on seeds no rule was tuned on: the
+    same kinds, variants, layouts and directions, none of the tuned cases' seeds."""
+    from dataclasses import replace
+
+    tuned = sr.cases(sr.FULL)
+    held = sr.cases(replace(sr.FULL, first_seed=3))
+    assert len(held) == len(tuned)
+    assert not {c.seed for c in held} & {c.seed for c in tuned}
+    shape = [(c.kind, c.variant, c.layout, c.reverse) for c in tuned]
+    assert [(c.kind, c.variant, c.layout, c.reverse) for c in held] == shape
+    with pytest.raises(ValueError, match="out of the 10"):
+        sr.cases(replace(sr.FULL, first_seed=8))  # seeds 8..10: 10 is the next variant's
