@@ -253,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
     plan_cases.add_plan_arguments(parser, ",".join(MOVING_KINDS), 2)
     parser.add_argument("--detail", action="store_true", help="per kind, each cause's details")
     args = parser.parse_args(argv)
-    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, first_seed=args.first_seed)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")

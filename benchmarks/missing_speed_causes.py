@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     plan_cases.add_plan_arguments(parser, "constant", 3)
     parser.add_argument("--worst", type=int, default=15, help="cases listed")
     args = parser.parse_args(argv)
-    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, first_seed=args.first_seed)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")

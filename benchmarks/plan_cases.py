@@ -22,6 +22,12 @@ def add_plan_arguments(
     per-case diagnostic takes, read back by `full_plan_cases`."""
     parser.add_argument("--kinds", default=kinds, help="comma-separated kinds")
     parser.add_argument("--seeds", type=int, default=seeds, help="the full plan's first N")
+    parser.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="from this seed index on (0-2: tuned; 3 and up: held out, `held_out_seeds.py`)",
+    )
     parser.add_argument("--try", dest="tuning", default={}, type=tune_tracker.parse)
     if cases:
         parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
@@ -45,14 +51,20 @@ def full_plan_cases(
     seeds: int,
     only: str | None = None,
     allowed: Sequence[str] = sr.KINDS,
+    first_seed: int = 0,
 ) -> list[sr.Case]:
-    """The full plan's cases of these kinds (`kinds_of`) with its first `seeds` seeds (a
-    usage error outside 1 to the plan's); `only`: the comma-separated case seeds to keep
-    (None: all)."""
-    if not 1 <= seeds <= sr.FULL.seeds:
+    """The full plan's cases of these kinds (`kinds_of`) with `seeds` seeds from
+    `first_seed` on (the tuned ones: 0 to the plan's; a usage error outside the seeds a
+    variant holds); `only`: the comma-separated case seeds to keep (None: all)."""
+    if first_seed == 0 and not 1 <= seeds <= sr.FULL.seeds:
         parser.error(f"--seeds must be 1-{sr.FULL.seeds}, got {seeds}")
+    if not (first_seed >= 0 and seeds >= 1 and first_seed + seeds <= sr.SEED_SLOTS):
+        parser.error(
+            f"--first-seed {first_seed} --seeds {seeds}: seed indices 0-{sr.SEED_SLOTS - 1}"
+        )
     kinds = kinds_of(parser, kinds_text, allowed)
-    todo = [c for c in sr.cases(replace(sr.FULL, seeds=seeds)) if c.kind in kinds]
+    plan = replace(sr.FULL, seeds=seeds, first_seed=first_seed)
+    todo = [c for c in sr.cases(plan) if c.kind in kinds]
     if only:
         todo = [c for c in todo if str(c.seed) in only.split(",")]
     return todo
@@ -100,10 +112,11 @@ def compare_settings(
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("--kinds", default=",".join(sr.MOVING), help="comma-separated kinds")
     parser.add_argument("--seeds", type=int, default=default_seeds)
+    parser.add_argument("--first-seed", type=int, default=0, help="3 and up: held out")
     parser.add_argument("--try", dest="tries", action="append", default=[], type=tune_tracker.parse)
     parser.add_argument("--cases", default=None, help="only these case seeds (comma-separated)")
     args = parser.parse_args(argv)
-    todo = full_plan_cases(parser, args.kinds, args.seeds, args.cases)
+    todo = full_plan_cases(parser, args.kinds, args.seeds, args.cases, first_seed=args.first_seed)
     tunings = [{}, *args.tries]
     names = [",".join(f"{a}={b}" for a, b in t.items()) or "shipped" for t in tunings]
     configs = {str(k): tune_tracker.config(t) for k, t in enumerate(tunings)}

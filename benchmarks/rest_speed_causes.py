@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     plan_cases.add_plan_arguments(parser, "snr10", 2)
     parser.add_argument("--baseline", action="store_true", help="the shipped settings too")
     args = parser.parse_args(argv)
-    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, first_seed=args.first_seed)
     tunings = ([{}] if args.baseline else []) + [args.tuning]
     for tuning in tunings:
         with ProcessPoolExecutor(2) as pool:

@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.shapes and args.kinds == ",".join(STOP_KINDS):
         args.kinds = ",".join(SHAPE_KINDS)
-    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds)
+    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, first_seed=args.first_seed)
     if args.trace is not None:
         chosen = [c for c in todo if c.seed == args.trace]
         if not chosen:

@@ -110,7 +110,9 @@ def main(argv: list[str] | None = None) -> int:
     plan_cases.add_plan_arguments(parser, ",".join(stop_causes.STOP_KINDS), 2, cases=True)
     parser.add_argument("--all", action="store_true", help="every late stop, any verdict")
     args = parser.parse_args(argv)
-    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, args.cases)
+    todo = plan_cases.full_plan_cases(
+        parser, args.kinds, args.seeds, args.cases, first_seed=args.first_seed
+    )
     n = len(todo)
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * n, [args.all] * n, chunksize=2))

@@ -114,7 +114,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.headline:
         headline()
         return 0
-    todo = plan_cases.full_plan_cases(parser, args.kinds, args.seeds, args.cases)
+    todo = plan_cases.full_plan_cases(
+        parser, args.kinds, args.seeds, args.cases, first_seed=args.first_seed
+    )
     with ProcessPoolExecutor(2) as pool:
         results = list(pool.map(job, todo, [args.tuning] * len(todo), chunksize=2))
     print(f"{len(todo)} cases ({args.kinds}, full plan, {args.seeds} seed(s)), {args.tuning}")

@@ -41,8 +41,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--full", action="store_true", help="the full plan's cases")
     parser.add_argument("--kinds", default="", help="comma-separated kinds (default: all)")
     parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="0-2: tuned; 3 and up: held out (validate)"
+    )
     args = parser.parse_args(argv)
-    plan = replace(sr.FULL if args.full else sr.QUICK, seeds=args.seeds)
+    plan = replace(sr.FULL if args.full else sr.QUICK, seeds=args.seeds, first_seed=args.first_seed)
+    try:
+        sr.cases(plan)
+    except ValueError as exc:
+        parser.error(str(exc))
     if args.kinds:
         chosen = args.kinds.split(",")
         unknown = set(chosen) - set(sr.KINDS)
