@@ -54,10 +54,8 @@ def full_plan_cases(
     first_seed: int = 0,
 ) -> list[sr.Case]:
     """The full plan's cases of these kinds (`kinds_of`) with `seeds` seeds from
-    `first_seed` on (the tuned ones: 0 to the plan's; a usage error outside the seeds a
-    variant holds); `only`: the comma-separated case seeds to keep (None: all)."""
-    if first_seed == 0 and not 1 <= seeds <= sr.FULL.seeds:
-        parser.error(f"--seeds must be 1-{sr.FULL.seeds}, got {seeds}")
+    `first_seed` on (0-2 the tuned ones, 3 and up held out; a usage error outside the
+    seeds a variant holds); `only`: the comma-separated case seeds to keep (None: all)."""
     if not (first_seed >= 0 and seeds >= 1 and first_seed + seeds <= sr.SEED_SLOTS):
         parser.error(
             f"--first-seed {first_seed} --seeds {seeds}: seed indices 0-{sr.SEED_SLOTS - 1}"
