@@ -7,16 +7,21 @@ with a tuning, 3 samples at a time (`slip_reporting.CHUNK`), in one place.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
 
 
 def plan_case(kind: str, seed: int, variant: str | None = None) -> sr.Case:
-    """The full plan's case of this kind and seed (and variant)."""
+    """The full plan's case of this kind and seed (and variant): a tuned seed (index 0-2)
+    or a held-out one (3 and up, `benchmarks/held_out_seeds.py`); the seed's tens digit
+    is its index."""
+    plan = replace(sr.FULL, seeds=1, first_seed=seed // 10 % 10)
     return next(
         c
-        for c in sr.cases(sr.FULL)
+        for c in sr.cases(plan)
         if c.kind == kind and c.seed == seed and (variant is None or c.variant == variant)
     )
 

@@ -5,7 +5,6 @@ speed goes once the contact it predicts is later than the report's schedule allo
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,6 +14,7 @@ from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
+from tests.decoding.plan_cases import plan_case
 
 LAYOUT_MM = [10.0, 4.0, 12.0, 8.0]  # ridges at 0, 10, 14, 26, 34 mm
 
@@ -91,8 +91,7 @@ def test_bad_report_constants_are_named(span_rel, late_rel):
 def decoded(kind: str, seed: int, tuning: dict) -> tuple[list, list[sr.StopScore]]:
     """The tracker's estimates of a full-plan case (by kind and seed) with `tuning`, and
     its scored stops."""
-    case = next(c for c in sr.cases(replace(sr.FULL, seeds=3)) if (c.kind, c.seed) == (kind, seed))
-    rec = case.make()
+    rec = plan_case(kind, seed).make()
     decoder = sr.build_decoder("tracker", rec.truth.layout_mm, rec.fs_hz, {"tuning": tuning})
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     return estimates, sr.score(estimates, rec.truth).stops
