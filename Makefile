@@ -197,6 +197,7 @@ bench: setup
 	$(PY) benchmarks/bench_network.py
 	$(PY) benchmarks/bench_scenes.py
 	$(PY) benchmarks/bench_slip_reporting.py
+	$(PY) benchmarks/held_out_seeds.py  # the same figures on seeds no rule was tuned on
 	$(PY) benchmarks/bench_decoding.py  # shows slip_reporting's trade-off curves
 	$(PY) benchmarks/bench_gateway.py
 	$(PY) benchmarks/bench_loop.py
