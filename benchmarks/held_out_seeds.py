@@ -36,6 +36,7 @@ KIND_COLUMNS = (
     ("wrong_direction_pct", "wrong dir %", 1),
     ("stops_cleared_pct", "stops cleared %", 1),
     ("flagged_at_rest_pct", "flagged at rest %", 1),
+    ("chatter_per_min", "flag chatter / min", 1),
 )
 
 

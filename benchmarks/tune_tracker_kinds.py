@@ -31,6 +31,7 @@ COLUMNS = (
     ("flagged_at_rest_pct", "frest%"),
     ("speed_at_rest_pct", "vrest%"),
     ("dropped_from2_pct", "drop%"),
+    ("chatter_per_min", "chat/m"),
     ("cpu_us_per_sample", "us"),
 )
 

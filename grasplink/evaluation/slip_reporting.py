@@ -59,6 +59,7 @@ V_DIRECTION_MM_S = ns.V_DIRECTION_MM_S  # a direction is judged while the truth 
 STOP_MIN_S = ns.STOP_MIN_S  # a stop: below V_MOVING for at least this long after motion
 CLEAR_WITHIN_S = 0.15  # a stop's flag and speed gone this soon after it became observable
 REST_SETTLED_S = 0.15  # at-rest updates this far into a rest must carry no speed
+CHATTER_S = 0.05  # a run of the slip flag shorter than this is chatter (five updates)
 GOOD_SPEED = 0.10  # "first estimate within 10 %"
 UNIQUE_SPACING_REL = 0.10  # the first spacing either way alike within this: unique from 2
 STOP_LOOKBACK_S = 0.2  # the speed before a stop: the fastest truth in this time before it
@@ -435,6 +436,8 @@ class CaseScore:
     missing_from2: int = 0
     dropped_from2: int = 0  # ... with the slip flag down (a stop reported while it moves)
     beyond_last: int = 0  # moving updates with the edge past the last ridge (not scored)
+    short_flag_runs: int = 0  # runs of the flag (up or down) under CHATTER_S, not first or last
+    span_s: float = 0.0  # from the first update to the last
     speed_err: np.ndarray = field(default_factory=lambda: np.zeros(0))  # from3, with a speed
     first_good: list[float] = field(default_factory=list)  # per run: intervals after c3
     first_good_s: list[float] = field(default_factory=list)  # the same in seconds
@@ -507,6 +510,10 @@ def score(estimates: Sequence[SlipEstimate], truth: SkinRecording) -> CaseScore:
       end, every update has slip false and no speed (None or 0); the delay runs from
       the observable moment to that update. Judged when the stop lasts until 0.15 s
       after its observable moment; stops past the last ridge are not (no contact due).
+    - *flag chatter*: runs of the slip flag (up or down, neither the first nor the last)
+      shorter than CHATTER_S, per minute of estimates: a flag a consumer polling the
+      percept (Modbus, telemetry) sees flicker; the gateway's own slip display waits
+      `slip_off_us` (250 ms) before it drops.
     - *speed at rest*: updates 0.15 s or more into any standstill (the first rest
       too) with a speed > 0; and updates after a stop's report was due (its observable
       moment + CLEAR_WITHIN_S: the stop target's allowance) with one.
@@ -584,6 +591,10 @@ def score(estimates: Sequence[SlipEstimate], truth: SkinRecording) -> CaseScore:
                 first = during[0] if not len(dirty) else dirty[-1] + 1
                 delay = float(t_upd[first] - observable)
         out.stops.append(StopScore(start, end, observable, judged, delay))
+    changes = np.flatnonzero(flags[1:] != flags[:-1]) + 1  # each run's first update
+    runs_s = np.diff(t_upd[changes])  # the runs between two changes
+    out.short_flag_runs = int((runs_s < CHATTER_S).sum())
+    out.span_s = float(t_upd[-1] - t_upd[0])
     settled = np.zeros(len(t_upd), bool)
     for start, end in m.rests:
         settled |= (t_upd >= start + REST_SETTLED_S) & (t_upd < end)
@@ -1017,6 +1028,11 @@ def summarise(scores: Sequence[CaseScore], decoder: str = DEFAULT_DECODER) -> di
             sum(c.after_observable_speed for c in s), sum(c.after_observable for c in s)
         ),
         "flagged_at_rest_pct": _pct(sum(c.rest_flagged for c in s), sum(c.rest_updates for c in s)),
+        "chatter_per_min": (
+            60.0 * sum(c.short_flag_runs for c in s) / span
+            if (span := sum(c.span_s for c in s))
+            else None
+        ),
         "cpu_us_per_sample": cost(measured, decoder, samples),
         "cost_cases": len(base),
         "cpu_us_cost_cases": cost(base, decoder, base_samples),
@@ -1257,7 +1273,7 @@ def render(figures: dict, meta: dict) -> list[str]:
             f"`{meta['decoder']}` {_fmt(base['cpu_us_cost_cases'])} µs/sample, mmse "
             f"{_fmt(base['cpu_us_baseline'])} µs/sample: {ratio:.1f}× less.",
         ]
-    lines += ["", "## Per kind", "", KIND_HEADER, "|---|" + "---:|" * 15]
+    lines += ["", "## Per kind", "", KIND_HEADER, "|---|" + "---:|" * 16]
     for kind, title in KINDS.items():
         f = figures["kinds"][kind]
         if f["cases"]:
@@ -1278,7 +1294,7 @@ def render(figures: dict, meta: dict) -> list[str]:
         + (f" (moving kinds: {_fmt(unique['missing_from2_pct'])} % missing)." if unique else "."),
     ]
     lines += render_grid(figures)
-    lines += ["", "## Per layout (moving kinds)", "", KIND_HEADER, "|---|" + "---:|" * 15]
+    lines += ["", "## Per layout (moving kinds)", "", KIND_HEADER, "|---|" + "---:|" * 16]
     for layout, f in figures["layouts"].items():
         lines.append(_kind_row(layout, f))
     lines += render_sweeps(figures)
@@ -1290,7 +1306,7 @@ KIND_HEADER = (
     "| set | cases | missing % from 3rd / 2nd | slip dropped % | speed err med % | p90 % | "
     "first ≤ 10 %: med intervals / by 3rd % | wrong dir % | dir told % | stops judged | "
     "cleared ≤ 0.15 s % | clear p90 s | speed at rest % | speed after observable % | "
-    "flagged at rest % | µs/sample |"
+    "flagged at rest % | flag chatter per min | µs/sample |"
 )
 
 
@@ -1305,7 +1321,7 @@ def _kind_row(name: str, f: dict) -> str:
         f"{f['stops_judged']} | {_fmt(f['stops_cleared_pct'], 0)} | "
         f"{_clear_p90(f)} | {_fmt(f['speed_at_rest_pct'])} | "
         f"{_fmt(f['speed_after_observable_pct'])} | {_fmt(f['flagged_at_rest_pct'])} | "
-        f"{_fmt(f['cpu_us_per_sample'])} |"
+        f"{_fmt(f.get('chatter_per_min'))} | {_fmt(f['cpu_us_per_sample'])} |"
     )
 
 
@@ -1503,6 +1519,10 @@ DEFINITIONS = [
     '  allowance) carrying one (the Done-when\'s "never while at rest", read with target 4).',
     "- **false slip / flagged at rest %**: updates ≥ 0.15 s into a rest flagged slip; on held",
     "  objects (no slip at all) the false slip.",
+    "- **flag chatter per min**: runs of the slip flag, up or down, shorter than "
+    f"{CHATTER_S * 1e3:g} ms (neither",
+    "  the first nor the last), per minute of updates: what a consumer polling the percept",
+    "  (Modbus, telemetry) sees flicker; the gateway's belt waits 250 ms before it drops.",
     "- **µs/sample**: process CPU time per input sample in the worker, 3-sample chunks.",
     "- **headline loop**: the first speed after onset against the 3rd ridge contact (the 2nd",
     "  where unique), allowing the detector's decision delay "

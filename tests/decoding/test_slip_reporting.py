@@ -319,3 +319,15 @@ def test_held_out_seeds_are_other_cases_of_the_same_plan_and_out_of_range_ones_r
     assert [(c.kind, c.variant, c.layout, c.reverse) for c in held] == shape
     with pytest.raises(ValueError, match="out of the 10"):
         sr.cases(replace(sr.FULL, first_seed=8))  # seeds 8..10: 10 is the next variant's
+
+
+def test_flag_chatter_counts_runs_under_50_ms_but_not_the_first_or_last():
+    """One update of slip at 4.5 s inside the rest (10 ms up, then down): two changes, one
+    run under 50 ms between them; the slip itself (1 s to 4.05 s) and the rests around it
+    are runs of seconds. 5 s of updates: 12 short runs per minute."""
+    rec = truth()
+    steady = sr.score(told(), rec)
+    assert steady.short_flag_runs == 0
+    flicker = sr.score(told(flicker_s=4.5), rec)
+    assert flicker.short_flag_runs == 1
+    assert sr.summarise([flicker])["chatter_per_min"] == pytest.approx(60.0 / 4.99)
