@@ -21,6 +21,7 @@ from dataclasses import asdict, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
+import plan_cases
 from doc_tables import table
 
 from grasplink.evaluation import slip_reporting as sr
@@ -104,10 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/")
     args = parser.parse_args(argv)
-    kinds = [k for k in args.kinds.split(",") if k] or list(sr.KINDS)
-    unknown = sorted(set(kinds) - set(sr.KINDS))
-    if unknown:
-        parser.error(f"unknown kind(s) {', '.join(unknown)}; known: {', '.join(sr.KINDS)}")
+    kinds = plan_cases.kinds_of(parser, args.kinds) if args.kinds else list(sr.KINDS)
     if args.first_seed < sr.FULL.seeds:
         print(
             f"held_out_seeds: warning: seeds {args.first_seed}..{sr.FULL.seeds - 1} are "
