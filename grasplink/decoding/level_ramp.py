@@ -24,6 +24,10 @@ for the windows to pass it). A commanded grip change under way (the efference co
 level with no slip: no ramp counts then. The window's lag (about one window past a stop)
 is what it costs the stop figures.
 
+With the flag up at the previous update the test asks only half the least step (the
+tracker's `RAMP_KEEP_SHARE`, a hysteresis): near that step the medians passed and failed
+from one update to the next, and a slow slip's flag flickered every few updates.
+
 Tried, off by default (the tracker's `RAMP_ONE_WAY`): one way only. While the object
 slides one way the covered length changes one way, so a ramp is held only the way the
 last one held went (`ramp_way`; forgotten once the
