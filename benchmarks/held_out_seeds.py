@@ -122,10 +122,7 @@ def main(argv: list[str] | None = None) -> int:
         cost_cases=0,
         headline=False,
     )
-    try:
-        sr.cases(plan)  # seeds out of range: one clear error before any work
-    except ValueError as exc:
-        parser.error(str(exc))
+    plan_cases.plan_cases_or_exit(parser, plan)
     out = args.out or default_out_dir()
     measured = sr.git_state(Path(__file__).resolve().parents[1])
     started = datetime.now(UTC)

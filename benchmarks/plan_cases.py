@@ -45,6 +45,15 @@ def kinds_of(
     return kinds
 
 
+def plan_cases_or_exit(parser: argparse.ArgumentParser, plan: sr.Plan) -> list[sr.Case]:
+    """`plan`'s cases (`slip_reporting.cases`), or a usage error naming the seeds it
+    asks that a variant does not hold (`--seeds`, `--first-seed`), before any work."""
+    try:
+        return sr.cases(plan)
+    except ValueError as exc:
+        parser.error(str(exc))
+
+
 def full_plan_cases(
     parser: argparse.ArgumentParser,
     kinds_text: str,
@@ -56,13 +65,9 @@ def full_plan_cases(
     """The full plan's cases of these kinds (`kinds_of`) with `seeds` seeds from
     `first_seed` on (0-2 the tuned ones, 3 and up held out; a usage error outside the
     seeds a variant holds); `only`: the comma-separated case seeds to keep (None: all)."""
-    if not (first_seed >= 0 and seeds >= 1 and first_seed + seeds <= sr.SEED_SLOTS):
-        parser.error(
-            f"--first-seed {first_seed} --seeds {seeds}: seed indices 0-{sr.SEED_SLOTS - 1}"
-        )
     kinds = kinds_of(parser, kinds_text, allowed)
     plan = replace(sr.FULL, seeds=seeds, first_seed=first_seed)
-    todo = [c for c in sr.cases(plan) if c.kind in kinds]
+    todo = [c for c in plan_cases_or_exit(parser, plan) if c.kind in kinds]
     if only:
         todo = [c for c in todo if str(c.seed) in only.split(",")]
     return todo

@@ -16,6 +16,7 @@ from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import plan_cases
 import tune_tracker
 
 from grasplink.evaluation import slip_reporting as sr
@@ -47,17 +48,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     plan = replace(sr.FULL if args.full else sr.QUICK, seeds=args.seeds, first_seed=args.first_seed)
-    try:
-        sr.cases(plan)
-    except ValueError as exc:
-        parser.error(str(exc))
     if args.kinds:
         chosen = args.kinds.split(",")
         unknown = set(chosen) - set(sr.KINDS)
         if unknown:
             parser.error(f"unknown kinds {sorted(unknown)}; known: {', '.join(sr.KINDS)}")
         plan = replace(plan, variants={k: v for k, v in plan.variants.items() if k in chosen})
-    todo = sr.cases(plan)
+    todo = plan_cases.plan_cases_or_exit(parser, plan)
     tunings = [{}, *args.tries]
     configs = {str(k): tune_tracker.config(t) for k, t in enumerate(tunings)}
     with ProcessPoolExecutor(2) as pool:

@@ -348,10 +348,11 @@ def _cases(
     base: int,
     first_seed: int = 0,
 ) -> list[Case]:
-    if not (first_seed >= 0 and first_seed + seeds <= SEED_SLOTS):
+    if not (first_seed >= 0 and seeds >= 1 and first_seed + seeds <= SEED_SLOTS):
         raise ValueError(
-            f"slip reporting: seeds {first_seed}..{first_seed + seeds - 1} out of the "
-            f"{SEED_SLOTS} a variant's seed numbers hold (0..{SEED_SLOTS - 1})"
+            f"slip reporting: {seeds} seed(s) from index {first_seed}: not within the "
+            f"indices 0..{SEED_SLOTS - 1} (at least one) out of the {SEED_SLOTS} a variant's "
+            "seed numbers hold"
         )
     out = []
     kinds = list(KINDS)
