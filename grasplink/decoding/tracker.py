@@ -765,6 +765,7 @@ class TrackerDecoder(Decoder):
     NEGLIGIBLE = 25.0  # hypotheses this far (log) below the best are left out
     MAX_SPEED_JUMP = 2.0  # largest speed change between two contacts (far-off contact)
     START_CONTACTS = 2  # a slip may start at any of the last this many contacts
+    MAX_HYPOTHESES = 24  # tracks of two or more contacts kept by score (`_prune`)
     PER_START = 4  # tracks kept per start contact, beyond the best max_hypotheses
     DETECT_MM = 1.2  # travel after a contact before the detector has decided it
     # the detector runs on whole blocks of this length (by default): 10 ms decides a contact
@@ -824,7 +825,7 @@ class TrackerDecoder(Decoder):
         fs_hz: float,
         *,
         update_period_s: float = DEFAULT_UPDATE_S,
-        max_hypotheses: int = 24,
+        max_hypotheses: int | None = None,
         history: int = 8,
         detect_block_s: float | None = None,
         detector: ContactDetector | None = None,
@@ -893,7 +894,9 @@ class TrackerDecoder(Decoder):
         )
         self._ahead_finite = np.isfinite(self._ahead_log)
         self._erf_scale = 1.0 / (self.SPEED_PRIOR_LOG_SIGMA * math.sqrt(2.0))
-        self.max_hypotheses = int(max_hypotheses)
+        self.max_hypotheses = self.MAX_HYPOTHESES if max_hypotheses is None else int(max_hypotheses)
+        if self.max_hypotheses < 1:
+            raise ConfigError(f"tracker: max_hypotheses must be >= 1, got {self.max_hypotheses}")
         self.detector = detector or ContactDetector(fs_hz)
         block_s = self.DETECT_BLOCK_S if detect_block_s is None else float(detect_block_s)
         self._block = max(1, round(block_s * self.fs_hz))  # latency against CPU

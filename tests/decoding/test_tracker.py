@@ -423,3 +423,14 @@ def test_tracker_count_constants_tune_as_counts():
     decoder = TrackerDecoder([5.0] * 8, 400.0, tuning={"MAX_SKIP": 3.0})
     assert decoder.MAX_SKIP == 3 and decoder._skip_prior.shape[2] == 4
     assert TrackerDecoder._tuning_value("RISE_EVIDENCE", 0.5) == 0.5
+
+
+def test_hypothesis_bound_is_a_tunable_constant_and_refuses_zero():
+    from grasplink.errors import ConfigError
+
+    layout = LAYOUTS_MM["alpha0.1"]
+    assert TrackerDecoder(layout, 400.0).max_hypotheses == TrackerDecoder.MAX_HYPOTHESES
+    assert TrackerDecoder(layout, 400.0, tuning={"MAX_HYPOTHESES": 48}).max_hypotheses == 48
+    assert TrackerDecoder(layout, 400.0, max_hypotheses=8).max_hypotheses == 8
+    with pytest.raises(ConfigError, match="max_hypotheses must be >= 1, got 0"):
+        TrackerDecoder(layout, 400.0, max_hypotheses=0)
