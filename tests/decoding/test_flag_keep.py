@@ -83,9 +83,12 @@ def dropped_flags(tuning: dict) -> tuple[int, np.ndarray, np.ndarray]:
 def test_a_restart_while_the_slip_is_told_keeps_the_flag():
     """With the hold lifted while the flag is up the restart keeps it (2.45-2.51 s); the
     same case with the hold kept drops it there (so the test checks the rule)."""
-    # without the level's ramp hold (`level_ramp`), which holds this flag there too
-    held, t, flags_held = dropped_flags({"KEEP_FLAG_UNHOLD": 0.0, "RAMP_HOLD": 0.0})
-    kept, t_kept, flags_kept = dropped_flags({"KEEP_FLAG_UNHOLD": 1.0, "RAMP_HOLD": 0.0})
+    # without the level's ramp hold (`level_ramp`), which holds this flag there too, and
+    # without the ridge-shaped step's prior (`LOG_SHAPE_RIDGE_STOP`): with it the 2.32 s
+    # step is no stop, and no restart follows
+    alone = {"RAMP_HOLD": 0.0, "LOG_SHAPE_RIDGE_STOP": 0.0}
+    held, t, flags_held = dropped_flags({"KEEP_FLAG_UNHOLD": 0.0, **alone})
+    kept, t_kept, flags_kept = dropped_flags({"KEEP_FLAG_UNHOLD": 1.0, **alone})
     window = (t >= 2.455) & (t <= 2.505)
     assert window.any() and not flags_held[window].any()
     assert np.array_equal(t, t_kept) and flags_kept[window].all()

@@ -70,8 +70,9 @@ def rail_speeds(tuning: dict) -> int:
     return signs_and_errors(rec, out)[0]
 
 
-@pytest.mark.parametrize("level,speeds", [(0.0, 170), (1.0, 106), (2.0, 170)])
+@pytest.mark.parametrize("level,speeds", [(0.0, 189), (1.0, 106), (2.0, 189)])
 def test_a_ridge_trains_flat_step_keeps_its_speed_at_level_two(level, speeds):
     """The rail start's ridges told five pulses before the step at 2.415 s: at level 2 its
-    last gap (51 -> 84 mm, the object sliding) keeps its speed, as off; level 1 loses 64."""
+    last gap (51 -> 84 mm, the object sliding) keeps its speed, as off; level 1 loses 83.
+    (170 speeds before the ridge-shaped step's prior, `LOG_SHAPE_RIDGE_STOP`, s34.)"""
     assert rail_speeds({"FLAT_STEP_SPEED": level}) == speeds

@@ -35,7 +35,9 @@ def test_the_flag_is_held_over_the_rail_and_carries_no_speed():
 
 
 def test_without_it_the_flag_drops_on_the_rail():
-    t, flags, _, blind, _ = _saturated({"RAIL_HOLD": 0.0})
+    # (and without the ridge-shaped step's prior, `LOG_SHAPE_RIDGE_STOP`: with it the
+    # squeeze's slow rise is seldom the stop, and the flag stays up through most of the rail)
+    t, flags, _, blind, _ = _saturated({"RAIL_HOLD": 0.0, "LOG_SHAPE_RIDGE_STOP": 0.0})
     on = (t >= blind[0][0] + 0.14) & (t <= blind[-1][1])
     assert not flags[on].any()  # main's behaviour: the squeeze's step held as the stop
 

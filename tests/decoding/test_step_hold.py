@@ -15,7 +15,12 @@ the loop case below); a contact told ridge-like no longer counts there
 The hold's two limits, each on the stop it cleared late: loop 161210 (30 mm/s on 4, 3,
 48, 29 mm: a contact after its stop's step that no moving track took up held the stop
 2.6 s, to its end) and stop 95100 (35 mm/s: stopped just short of the next ridge, the
-wait ran to the ridge after and cleared it 0.61 s late)."""
+wait ran to the ridge after and cleared it 0.61 s late).
+
+These cases were pinned before the ridge-shaped step's prior (`LOG_SHAPE_RIDGE_STOP`,
+s34), which takes most such steps for ridges in the first place: the reversal's step is
+then no stop at all, and the hold has nothing to hold. They run without it (`BARE`), so
+that they check the hold; `test_shape_ridge_stop` checks the prior on them."""
 
 from __future__ import annotations
 
@@ -30,10 +35,12 @@ from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.evaluation import slip_reporting as sr
 from tests.decoding.plan_cases import decode_case
 
+BARE = {"LOG_SHAPE_RIDGE_STOP": 0.0}  # the step taken for a stop, as the cases were pinned
+
 
 def _reversal(tuning: dict):
     """(update times, flags, speeds, truth, estimates) of the reversal case."""
-    rec, _, estimates = decode_case("reversal", 102110, tuning, "22->-58 mm/s")
+    rec, _, estimates = decode_case("reversal", 102110, {**BARE, **tuning}, "22->-58 mm/s")
     t = np.array([e.t_s for e in estimates])
     flags = np.array([e.slip for e in estimates])
     return t, flags, [e.speed_mm_s for e in estimates], rec.truth, estimates
@@ -100,7 +107,7 @@ def test_the_wait_is_set_in_a_copy_of_the_constants():
 
 def _stop_delay_s(kind: str, seed: int, variant: str, tuning: dict) -> float:
     """The case's one judged stop: seconds from observable to cleared for good."""
-    rec, _, estimates = decode_case(kind, seed, tuning, variant)
+    rec, _, estimates = decode_case(kind, seed, {**BARE, **tuning}, variant)
     (stop,) = [s for s in sr.score(estimates, rec.truth).stops if s.judged]
     return stop.delay_s
 

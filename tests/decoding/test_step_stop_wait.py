@@ -45,8 +45,9 @@ def waited() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def test_the_case_has_a_ridge_told_a_step_and_at_once_the_flag_drops_there():
-    # (with `told_rise` off, as the case was pinned: with it the flag holds here even at 0)
-    t, slip, _ = flags(0.0, TOLD_RISE_LOG=0.0)
+    # (with `told_rise` and the ridge-shaped step's prior off, as the case was pinned:
+    # with either the flag holds here even at 0)
+    t, slip, _ = flags(0.0, TOLD_RISE_LOG=0.0, LOG_SHAPE_RIDGE_STOP=0.0)
     after = (t >= STEP_TOLD_S) & (t < STEP_TOLD_S + 0.1)
     before = (t >= STEP_TOLD_S - 0.3) & (t < STEP_TOLD_S - 0.1)
     assert slip[before].all()  # slipping before the step
