@@ -34,3 +34,9 @@ def decode_case(
     decoder = TrackerDecoder(rec.truth.layout_mm, rec.fs_hz, tuning=tuning)
     estimates, _ = ns.feed(decoder, rec.t_s, rec.force_n, sr.CHUNK)
     return rec, decoder, estimates
+
+
+def score_case(kind: str, seed: int, tuning: dict, variant: str | None = None) -> sr.CaseScore:
+    """That case decoded under `tuning` (`decode_case`), scored as the page scores it."""
+    rec, _, estimates = decode_case(kind, seed, tuning, variant)
+    return sr.score(estimates, rec.truth)

@@ -15,7 +15,7 @@ from grasplink.decoding import level_ramp
 from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import nonstationary as ns
 from grasplink.evaluation import slip_reporting as sr
-from tests.decoding.plan_cases import decode_case
+from tests.decoding.plan_cases import decode_case, score_case
 
 FS_HZ = 400.0
 
@@ -134,8 +134,7 @@ def _chatter(tuning: dict) -> int:
     """Runs of the flag under 50 ms (`slip_reporting`'s flag chatter) in the full plan's
     constant 8 mm/s slip on alpha0.9 (6, 20, 58 mm), seed 54001: after the 1st ridge the
     next is 58 mm on (7 s), the level ramping slowly as the object covers more skin."""
-    rec, _, estimates = decode_case("constant", 54001, tuning, "8 mm/s")
-    return sr.score(estimates, rec.truth).short_flag_runs
+    return score_case("constant", 54001, tuning, "8 mm/s").short_flag_runs
 
 
 def test_with_the_flag_up_a_slow_ramp_holds_at_half_its_step_without_chatter():

@@ -12,7 +12,7 @@ at 0.5 Hz wanders about 0.2 N/s; stop 92100's level rose 0.3 N/s 1.8 s after its
 from __future__ import annotations
 
 from grasplink.evaluation import slip_reporting as sr
-from tests.decoding.plan_cases import decode_case, plan_case
+from tests.decoding.plan_cases import plan_case, score_case
 
 OFF = {"RAMP_OVER_STOP": 0.0}
 
@@ -37,8 +37,7 @@ def test_the_flag_is_held_over_a_stop_report_while_the_object_slides_onto_the_sk
 
 
 def _stop_delays(tuning: dict) -> list[float]:
-    rec, _, estimates = decode_case("stop", 92100, tuning, "35 mm/s")
-    return _judged_delays(sr.score(estimates, rec.truth))
+    return _judged_delays(score_case("stop", 92100, tuning, "35 mm/s"))
 
 
 def test_a_level_drifting_up_at_rest_holds_no_flag():

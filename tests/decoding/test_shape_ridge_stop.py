@@ -16,12 +16,7 @@ from __future__ import annotations
 
 from grasplink.decoding.tracker import TrackerDecoder
 from grasplink.evaluation import slip_reporting as sr
-from tests.decoding.plan_cases import decode_case
-
-
-def _score(kind: str, seed: int, tuning: dict, variant: str) -> sr.CaseScore:
-    rec, _, estimates = decode_case(kind, seed, tuning, variant)
-    return sr.score(estimates, rec.truth)
+from tests.decoding.plan_cases import score_case
 
 
 def test_the_prior_is_on_and_gated_by_heavy_noise():
@@ -30,22 +25,22 @@ def test_the_prior_is_on_and_gated_by_heavy_noise():
 
 
 def test_a_ridge_shaped_step_does_not_stop_a_sliding_object():
-    on = _score("constant", 55100, {}, "10 mm/s")
+    on = score_case("constant", 55100, {}, "10 mm/s")
     assert on.moving_from3 > 400
     assert on.missing_from3 == 0
     assert on.dropped_from2 == 0
 
 
 def test_without_the_prior_the_speed_is_lost_at_that_step():
-    off = _score("constant", 55100, {"LOG_SHAPE_RIDGE_STOP": 0.0}, "10 mm/s")
+    off = score_case("constant", 55100, {"LOG_SHAPE_RIDGE_STOP": 0.0}, "10 mm/s")
     assert off.missing_from3 >= 50
 
 
 def test_under_heavy_noise_the_shape_does_not_keep_a_track_moving_at_rest():
-    gated = _score("snr10", 110000, {}, "57 mm/s")
+    gated = score_case("snr10", 110000, {}, "57 mm/s")
     assert gated.rest_updates > 60
     assert gated.rest_speed == 0
-    everywhere = _score("snr10", 110000, {"SHAPE_RIDGE_STOP_NOISY": 1.0}, "57 mm/s")
+    everywhere = score_case("snr10", 110000, {"SHAPE_RIDGE_STOP_NOISY": 1.0}, "57 mm/s")
     assert everywhere.rest_speed >= 20
 
 
@@ -55,11 +50,10 @@ def test_its_cost_a_stop_just_short_of_a_ridge_is_told_late_but_without_a_speed(
     prior the stop is told within 0.15 s of observable; with it the flag is held 0.2 s
     (the stop kind's stops cleared 98.4 -> 97.6 %, 3 seeds), but no speed is shown past
     the report's due time."""
-    rec, _, estimates = decode_case("stop", 95100, {}, "35 mm/s")
-    score = sr.score(estimates, rec.truth)
+    score = score_case("stop", 95100, {}, "35 mm/s")
     (stop,) = [s for s in score.stops if s.judged]
     assert sr.CLEAR_WITHIN_S < stop.delay_s <= 0.3
     assert score.after_observable_speed == 0
-    rec, _, estimates = decode_case("stop", 95100, {"LOG_SHAPE_RIDGE_STOP": 0.0}, "35 mm/s")
-    (stop,) = [s for s in sr.score(estimates, rec.truth).stops if s.judged]
+    off = score_case("stop", 95100, {"LOG_SHAPE_RIDGE_STOP": 0.0}, "35 mm/s")
+    (stop,) = [s for s in off.stops if s.judged]
     assert stop.delay_s <= sr.CLEAR_WITHIN_S

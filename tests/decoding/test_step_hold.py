@@ -33,7 +33,7 @@ from grasplink.decoding import step_hold
 from grasplink.decoding.detector import step_shape
 from grasplink.decoding.kernels import posterior as posterior_kernels
 from grasplink.evaluation import slip_reporting as sr
-from tests.decoding.plan_cases import decode_case
+from tests.decoding.plan_cases import decode_case, score_case
 
 BARE = {"LOG_SHAPE_RIDGE_STOP": 0.0}  # the step taken for a stop, as the cases were pinned
 
@@ -107,8 +107,7 @@ def test_the_wait_is_set_in_a_copy_of_the_constants():
 
 def _stop_delay_s(kind: str, seed: int, variant: str, tuning: dict) -> float:
     """The case's one judged stop: seconds from observable to cleared for good."""
-    rec, _, estimates = decode_case(kind, seed, {**BARE, **tuning}, variant)
-    (stop,) = [s for s in sr.score(estimates, rec.truth).stops if s.judged]
+    (stop,) = [s for s in score_case(kind, seed, {**BARE, **tuning}, variant).stops if s.judged]
     return stop.delay_s
 
 

@@ -21,6 +21,7 @@ import pytest
 from grasplink.decoding.base import SlipEstimate
 from grasplink.decoding.contacts import ContactDetector
 from grasplink.decoding.tracker import TrackerDecoder
+from grasplink.errors import ConfigError
 from grasplink.evaluation.scoring import observed
 from grasplink.profiles.layouts import LAYOUTS_MM
 from grasplink.simulators import synth
@@ -426,8 +427,6 @@ def test_tracker_count_constants_tune_as_counts():
 
 
 def test_hypothesis_bound_is_a_tunable_constant_and_refuses_zero():
-    from grasplink.errors import ConfigError
-
     layout = LAYOUTS_MM["alpha0.1"]
     assert TrackerDecoder(layout, 400.0).max_hypotheses == TrackerDecoder.MAX_HYPOTHESES
     assert TrackerDecoder(layout, 400.0, tuning={"MAX_HYPOTHESES": 48}).max_hypotheses == 48
