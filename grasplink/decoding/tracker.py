@@ -1124,13 +1124,13 @@ class TrackerDecoder(Decoder):
                     break
         if verdict == PULSE and self.LOG_FAST_JUMP_RIDGE and check.id not in self._fast:
             self._fast_jump(check)
-        if self.EARLY_CHECKS and self._onset(check.id) is None:
+        onset = self._onset(check.id)
+        if self.EARLY_CHECKS and onset is None:
             _put_bounded(self._early, check.id, check, self.VERDICTS_KEPT)  # (`_read_early`)
         if check.pulse is False:
             self._steps[check.id] = check.trend_on
             if check.sure:
                 self._sure.add(check.id)
-            onset = self._onset(check.id)
             self._shapes[check.id] = (
                 step_shape.UNTOLD if onset is None else self._step_shape(check, onset)
             )
@@ -1149,14 +1149,18 @@ class TrackerDecoder(Decoder):
         """A contact told a pulse that jumped like a stop's step (`stop_jumps`): noted, and
         replayed from (branched as a step, weighed by each track's speed)."""
         at = next((k for k, c in enumerate(self._contacts) if c.id == check.id), None)
-        if at is None:
-            return
-        onset, resolved = self._contacts[at].index, int(self.RESOLVED_JUMP)
+        if at is not None and self._note_jump(check, self._contacts[at].index):
+            self._replay(at, [])
+
+    def _note_jump(self, check: PulseCheck, onset: int) -> bool:
+        """Note how fast the pulse told by `check` (its onset at sample `onset`) jumped, if
+        like a stop's step (`stop_jumps.fast_jump_s`); whether it did."""
+        resolved = int(self.RESOLVED_JUMP)
         jump = stop_jumps.fast_jump_s(self._recent, onset, check.emit_index, resolved)
         if jump is None:
-            return
+            return False
         _put_bounded(self._fast, check.id, jump, self.VERDICTS_KEPT)
-        self._replay(at, [])
+        return True
 
     def _onset(self, contact_id: int) -> int | None:
         """The sample index of a held contact's onset; None when not (or no longer) held."""
@@ -1179,11 +1183,7 @@ class TrackerDecoder(Decoder):
             and self.LOG_FAST_JUMP_RIDGE
             and ev.id not in self._fast
         ):
-            jump = stop_jumps.fast_jump_s(
-                self._recent, ev.index, check.emit_index, int(self.RESOLVED_JUMP)
-            )
-            if jump is not None:
-                _put_bounded(self._fast, ev.id, jump, self.VERDICTS_KEPT)
+            self._note_jump(check, ev.index)  # (read before ev is branched: no replay)
 
     def _step_shape(self, check: PulseCheck, onset: int) -> int:
         """The shape verdict of a contact told a step (`step_shape.classify`), its onset at

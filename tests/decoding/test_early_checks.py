@@ -18,6 +18,8 @@ from __future__ import annotations
 import pytest
 
 from grasplink.decoding.detector import step_shape
+from grasplink.decoding.tracker import TrackerDecoder
+from grasplink.evaluation import slip_reporting as sr
 from tests.decoding.plan_cases import decode_case, score_case
 
 ON, OFF = {"EARLY_CHECKS": 1.0}, {"EARLY_CHECKS": 0.0}
@@ -46,8 +48,6 @@ def test_with_its_shape_the_slide_is_not_read_as_a_stop():
 
 @pytest.mark.parametrize("chunk", [1, 7, 64])
 def test_the_shape_read_does_not_depend_on_the_chunking(chunk, monkeypatch):
-    from grasplink.evaluation import slip_reporting as sr
-
     monkeypatch.setattr(sr, "CHUNK", chunk)
     _, decoder, _ = decode_case("constant", 51140, ON, "10 mm/s")
     assert _shape_at(decoder, 1.61) == step_shape.RIDGE_LIKE
@@ -61,6 +61,4 @@ def test_its_cost_a_stop_like_early_step_at_100_hz_loses_the_track():
 
 
 def test_early_verdicts_are_read_by_default():
-    from grasplink.decoding.tracker import TrackerDecoder
-
     assert TrackerDecoder.EARLY_CHECKS == 1
