@@ -521,6 +521,9 @@ class TrackerDecoder(Decoder):
     LOG_SHAPE_RIDGE_STOP = math.log(0.2)
     SHAPE_RIDGE_STOP_NOISY = 0.0  # ... also where the white noise reads heavy (1)
     SHAPE_AMBIGUOUS_RIDGE = 0.0
+    # 1: below 227 Hz a fast rise that goes on past its one-sample step is no stop's
+    # (`step_shape.THEN_SHARE`)
+    SHAPE_READ_THEN = 1
     # a contact told a pulse that jumped as fast as a stop's step (`stop_jumps`): branched
     # like a step, its ridge children whose speed makes that jump under this travel get
     # LOG_FAST_JUMP_RIDGE, its stop children whose speed makes it more LOG_FAST_JUMP_STOP
@@ -1193,7 +1196,7 @@ class TrackerDecoder(Decoder):
             return step_shape.UNTOLD
         if check.under:  # flat with the earlier pulse's course out (`detector.pulse_under`)
             return step_shape.STOP_LIKE
-        return self._recent.verdict(onset, check.emit_index)
+        return self._recent.verdict(onset, check.emit_index, bool(self.SHAPE_READ_THEN))
 
     # ------------------------------------------------------------------ hypotheses
     def _add_contact(self, ev: ContactEvent) -> None:

@@ -62,6 +62,36 @@ def test_a_ridge_pulse_held_up_on_a_rising_level_is_no_stop(fs_hz, rise_s, noise
         assert verdict(held, fs_hz) == ss.RIDGE_LIKE, (fs_hz, seed)
 
 
+@pytest.mark.parametrize(("fs_hz", "rise_s"), [(100.0, 0.025), (200.0, 0.012)])
+def test_below_227_hz_a_rise_going_on_past_its_one_sample_step_is_a_ridge(fs_hz, rise_s):
+    """The same held pulse rising within the samples called fast (2.5 at 100 and 200 Hz):
+    its level goes on rising after its largest one-sample step, a stop's does not -
+    RIDGE_LIKE, where the rise read in whole samples alone (`read_then` False) calls it
+    a stop's."""
+    told, whole = [], []
+    for seed in range(20):
+        t, x = level(fs_hz, 0.005, seed)
+        u = np.clip(t - ONSET_S, 0.0, None) / rise_s
+        held = play(x + 0.5 * t + 0.25 * u * np.exp(1.0 - u))
+        shape = ss.measure(held, round(ONSET_S * fs_hz), round(VERDICT_S * fs_hz), fs_hz)
+        told.append(ss.classify(shape, fs_hz))
+        whole.append(ss.classify(shape, fs_hz, read_then=False))
+    assert told.count(ss.RIDGE_LIKE) == 20, told
+    assert whole.count(ss.STOP_LIKE) == 20, whole
+
+
+def test_the_rise_after_the_step_is_read_from_samples_up_to_the_verdict_only():
+    """A verdict one sample past the step reads no rise after it (nothing is guessed),
+    whatever the samples after the verdict do."""
+    x = np.concatenate([np.full(30, 2.0), [2.3, 2.45, 2.6, 2.6]])
+    step_n, then_n = ss._one_sample_step(x, 30, 30)
+    assert (step_n, then_n) == (pytest.approx(0.3), 0.0)
+    step_n, then_n = ss._one_sample_step(x, 30, 31)
+    assert then_n == pytest.approx(0.15)
+    step_n, then_n = ss._one_sample_step(x, 30, 33)
+    assert then_n == pytest.approx(0.225)  # the mean of 2.45 and 2.6, less 2.3
+
+
 def test_a_fast_peak_well_over_the_level_held_is_peaked_not_a_plain_stop():
     """0.4 N in 5 ms falling back to 0.2 N (its fall held halfway): a pulse held up, or a
     stop landing on a ridge's pulse - AMBIGUOUS, neither a stop's plain step nor a slow rise;

@@ -44,6 +44,11 @@ class StepShape(NamedTuple):
     # pulse's falling tail the median before lies above it), and how soon 90 % of it came
     jump_n: float = 0.0
     jump_s: float = float("nan")
+    # the largest one-sample rise around the onset, and how far the level went on rising
+    # after it (the mean of the JUMP_THEN_SAMPLES after it less the sample it rose to):
+    # the rise's speed, read below a sample
+    step_n: float = 0.0
+    then_n: float = 0.0
 
 
 def _fit(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
@@ -95,6 +100,7 @@ def measure(x: np.ndarray, onset: int, verdict: int, fs_hz: float) -> StepShape 
     jump = peak - base0
     jumped = np.flatnonzero(smooth - base0 >= 0.9 * jump) if jump > 0 else np.zeros(0)
     jump_s = (float(jumped[0]) + (width - 1) / 2.0) / fs_hz if len(jumped) else float("nan")
+    step, then = _one_sample_step(x, onset, verdict)
     return StepShape(
         height_n=height,
         overshoot_n=peak - held,
@@ -105,7 +111,26 @@ def measure(x: np.ndarray, onset: int, verdict: int, fs_hz: float) -> StepShape 
         noise_n=noise,
         jump_n=jump,
         jump_s=jump_s,
+        step_n=step,
+        then_n=then,
     )
+
+
+JUMP_SAMPLES = 3  # the one-sample rises looked at, the first from the sample before the onset
+JUMP_THEN_SAMPLES = 2  # ... and the level's further rise read over this many after it
+
+
+def _one_sample_step(x: np.ndarray, onset: int, verdict: int) -> tuple[float, float]:
+    """(the largest rise from one sample to the next over the JUMP_SAMPLES from the one
+    before the onset, the mean of the JUMP_THEN_SAMPLES after it less the sample it rose
+    to), N; only samples up to the verdict are read."""
+    first = max(onset - 1, 0)
+    rises = np.diff(x[first : min(first + JUMP_SAMPLES, verdict) + 1])
+    if not len(rises):
+        return 0.0, 0.0
+    top = first + 1 + int(np.argmax(rises))
+    after = x[top + 1 : min(top + JUMP_THEN_SAMPLES, verdict) + 1]
+    return float(rises.max()), float(after.mean() - x[top]) if len(after) else 0.0
 
 
 # the verdicts of `classify`; AMBIGUOUS: a fast rise past the level held, or off a falling
@@ -120,6 +145,17 @@ RIDGE_LIKE, UNTOLD, STOP_LIKE, AMBIGUOUS = -1, 0, 1, 2
 # held pulses on a rising level later still (benchmarks/stop_causes.py --shapes)
 FAST_RISE_S = 0.011
 FAST_RISE_SAMPLES = 2.5
+# Below FAST_RISE_SAMPLES / FAST_RISE_S (227 Hz) the rise is read in whole samples, and a
+# ridge's push-over (12-60 ms at 20-100 mm/s) can fit within the samples called fast. A
+# stop's level change ends within the one sample interval it falls in: the level stays
+# where that sample took it. A rise that goes on past its largest one-sample step by this
+# share of it, and this many noise units (white noise alone passes 5 % of the time: the
+# mean of two samples less a third has 1.22 noise units of spread), is no stop's.
+# Rates-drops seeds 0-5 at 100 / 200 Hz (the stop-like steps of `stop_causes.py
+# --shapes`): of 21 / 22 ridge steps read STOP_LIKE 9 / 17 go on rising; of 282 / 296
+# stops 2 / 0 do.
+THEN_SHARE = 0.2
+THEN_SNR = 2.0
 # ... and a pulse rises past the level it is held at (the hysteresis holds only part of
 # its fall): a peak this share of the height above the held level, and this many noise
 # units, is a pulse's
@@ -127,11 +163,11 @@ PULSE_OVERSHOOT = 0.25
 PULSE_OVERSHOOT_SNR = 3.0
 
 
-def classify(shape: StepShape | None, fs_hz: float) -> int:
+def classify(shape: StepShape | None, fs_hz: float, read_then: bool = True) -> int:
     """STOP_LIKE (a fast, monotone level change), RIDGE_LIKE (a slow rise, or no rise at
     all: a ridge pulse held up), AMBIGUOUS (a fast rise to a peak well above the level
     held, or off a falling tail to a level under it: a ridge pulse held up, or a stop on
-    one), or UNTOLD (no shape)."""
+    one), or UNTOLD (no shape). `read_then` False: the rise in whole samples only."""
     if shape is None:
         return UNTOLD
     fast_s = max(FAST_RISE_S, FAST_RISE_SAMPLES / fs_hz)
@@ -141,7 +177,7 @@ def classify(shape: StepShape | None, fs_hz: float) -> int:
         # under the level it holds) to a peak well above the noise
         jumped = shape.jump_s <= fast_s and shape.jump_n > PULSE_OVERSHOOT_SNR * shape.noise_n
         return AMBIGUOUS if jumped and shape.pre_slope_n_s < 0 else RIDGE_LIKE
-    fast = shape.rise_s <= fast_s
+    fast = shape.rise_s <= fast_s and not (read_then and _rise_goes_on(shape, fs_hz))
     peaked = (
         shape.overshoot_n > PULSE_OVERSHOOT * shape.height_n
         and shape.overshoot_n > PULSE_OVERSHOOT_SNR * shape.noise_n
@@ -149,6 +185,14 @@ def classify(shape: StepShape | None, fs_hz: float) -> int:
     if not fast:
         return RIDGE_LIKE
     return AMBIGUOUS if peaked else STOP_LIKE
+
+
+def _rise_goes_on(shape: StepShape, fs_hz: float) -> bool:
+    """Whether, at a rate that reads the rise in whole samples, the level rose on past
+    its largest one-sample step (THEN_SHARE, THEN_SNR): a ridge's push-over, no stop."""
+    if FAST_RISE_S * fs_hz >= FAST_RISE_SAMPLES or not shape.step_n > 0:
+        return False
+    return shape.then_n > THEN_SHARE * shape.step_n and shape.then_n > THEN_SNR * shape.noise_n
 
 
 # a verdict told late (a revision, a probe's contact) is read on the rise it told of: the
@@ -198,10 +242,10 @@ class Recent:
         x = self._view(start, stop)
         return float(np.mean(x)) if x is not None and len(x) else None
 
-    def verdict(self, onset: int, told: int) -> int:
+    def verdict(self, onset: int, told: int, read_then: bool = True) -> int:
         """`classify` of the step whose onset and verdict are global sample indices."""
         held = min(told, onset + round(HELD_S * self.fs_hz))
-        return classify(self.shape(onset, held), self.fs_hz)
+        return classify(self.shape(onset, held), self.fs_hz, read_then)
 
     def held(self, start: int, end: int) -> np.ndarray | None:
         """A copy of the samples start..end-1 (global indices): None when not all held."""
