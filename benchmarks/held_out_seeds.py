@@ -49,6 +49,32 @@ def _pair(tuned: float | None, held: float | None, digits: int) -> str:
     return f"{_fmt(tuned, digits)} / {_fmt(held, digits)}"
 
 
+# What each seed window of the plan has been in view of since the rules were tuned on
+# seeds 0-2 (docs/decoding.md, per session): a held-out page is as independent as this.
+WINDOWS_SEEN = {
+    (3, 5): "held out until s34; chosen with them in view since: the ridge-shaped step's "
+    "prior's value (s34), the early verdicts' case (s35), the value of the rise read past "
+    "its one-sample step (s36)",
+    (6, 8): "gave s34 its case; the s36 rise cue's value was chosen with them in view",
+    (9, 9): "no value chosen on it; the s36 rise cue was measured on it, both ways",
+}
+
+
+def seen_note(first_seed: int, seeds: int) -> str:
+    """One sentence on what choices this page's seed window has been in view of."""
+    last = first_seed + seeds - 1
+    notes = [
+        f"seeds {lo}-{hi}: {text}" if lo != hi else f"seed {lo}: {text}"
+        for (lo, hi), text in WINDOWS_SEEN.items()
+        if lo <= last and first_seed <= hi
+    ]
+    if first_seed <= 2:
+        notes.insert(0, "seeds 0-2 are the tuned seeds themselves")
+    if not notes:
+        return "No choice has seen these seeds."
+    return "What these seeds have been in view of: " + "; ".join(notes) + "."
+
+
 def render(held: dict, tuned: dict | None, meta: dict) -> list[str]:
     tuned_targets = {row[0]: row[1] for row in (tuned or {}).get("targets", [])}
     tuned_kinds = (tuned or {}).get("figures", {}).get("kinds", {})
@@ -64,12 +90,9 @@ def render(held: dict, tuned: dict | None, meta: dict) -> list[str]:
         "The default decoder's rules and constants were chosen on the full plan's seeds "
         "0-2 of every variant. Here the same plan (kinds, layouts, speeds, both directions) "
         f"runs on seeds {plan['first_seed']}-{plan['first_seed'] + plan['seeds'] - 1}: other "
-        "noise, drift, start positions and stop points. Seeds 3-5 were held out until "
-        "s34; two rules since were chosen with them in view (the ridge-shaped step's "
-        "prior's value, s34; the early verdicts' case, s35: docs/decoding.md), so on them "
-        "this page is no longer wholly independent; seeds 6-8 gave s34 its case, and seed "
-        "9 (`--first-seed 9 --seeds 1`) is the one window no choice has seen. "
-        "Tuned: "
+        "noise, drift, start positions and stop points. "
+        + seen_note(plan["first_seed"], plan["seeds"])
+        + " Tuned: "
         f"[slip_reporting.md](slip_reporting.md) ({tuned_meta.get('date', 'not found')}, "
         f"{(tuned_meta.get('git') or {}).get('commit', '?')}).",
         "",
