@@ -180,20 +180,29 @@ class RiseEvidence:
         """`z_at` of each onset on its own (its sums anchored at its own first sample, as
         a call with that onset alone reads it: the same z to the bit whatever else is
         read with it), vectorised per window width."""
+        return self.z_and_trend_each(onset, width, before)[0]
+
+    def z_and_trend_each(
+        self, onset: np.ndarray, width: np.ndarray, before: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(`z_each`, how the level went in the window just before each onset: the mean of
+        its later half less the mean of its earlier half, in white-noise units of that
+        difference - a falling pulse tail reads well under 0, a flat level about 0)."""
         onset = np.asarray(onset, dtype=float)
         width = np.asarray(width, dtype=np.int64)
         out = np.full(onset.shape, np.nan)
+        trend = np.full(onset.shape, np.nan)
         ok = np.isfinite(onset)
         centre = np.zeros(onset.shape, np.int64)
         centre[ok] = np.rint(onset[ok] + OFFSET * width[ok]).astype(np.int64)
         lo, hi = centre - 3 * width, centre + 3 * width  # samples lo .. hi - 1 read
         ok &= (hi <= before) & (lo >= self.recent.start)
         if not ok.any():
-            return out
+            return out, trend
         start, end = int(lo[ok].min()), int(hi[ok].max())
         x = self.recent.held(start, end)
         if x is None:  # (not all held: none of these is)
-            return out
+            return out, trend
         noise = {}  # the white noise per block: one lookup each
         for b in np.unique(centre[ok] // self.block).tolist():
             white = self.white(b)
@@ -208,8 +217,17 @@ class RiseEvidence:
             adj = d1 - PULSE_RAMP * (d0 + d2)
             sigma = np.array([noise[b] for b in (centre[k] // self.block).tolist()], float)
             z = adj / (sigma * math.sqrt(2.0 / w * (1.0 + 2.0 * PULSE_RAMP**2)))
-            out[k] = np.where(np.all(np.isfinite(rows), axis=1), z, np.nan)
-        return out
+            finite = np.all(np.isfinite(rows), axis=1)
+            out[k] = np.where(finite, z, np.nan)
+            # the window [onset - w, onset): its halves' means (the onset lies 2.5 w in)
+            half = max(1, w // 2)
+            o = (np.rint(onset[k]).astype(np.int64) - lo[k])[:, None]
+            at = np.take_along_axis(sums, np.hstack([o - 2 * half, o - half, o]), axis=1)
+            later_less_earlier = (at[:, 2] - 2.0 * at[:, 1] + at[:, 0]) / half
+            trend[k] = np.where(
+                finite, later_less_earlier / (sigma * math.sqrt(2.0 / half)), np.nan
+            )
+        return out, trend
 
     def tell(self, contact_id: int, onset: float, before: int) -> None:
         """Note a told contact's z on every window, for the size prior's median."""

@@ -46,6 +46,7 @@ def rise_z(
     ev: ContactEvent,
     evidence: RiseEvidence,
     blind_s: Iterable[tuple[float, float]] = (),
+    tail_z: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rows of ev's children that take it for a ridge with a speed (the run's second
     contact or later, not stopped), the probe window of each speed's rise time and the z
@@ -57,7 +58,10 @@ def rise_z(
     if not len(rows):
         return rows, np.zeros(0, np.int64), np.zeros(0)
     width = evidence.width_for(np.abs(floats[rows, F_V]))
-    z = evidence.z_each(np.full(len(rows), float(ev.index)), width, ev.emit_index)
+    onsets = np.full(len(rows), float(ev.index))
+    z, trend = evidence.z_and_trend_each(onsets, width, ev.emit_index)
+    if tail_z is not None:  # on a falling tail: a ridge pulse held under the fall, unread
+        z[trend < -tail_z] = np.nan
     fs = evidence.fs_hz
     for r0, r1 in blind_s:  # a flat rail is no evidence
         centre_s = ev.t_s + OFFSET * width / fs
@@ -75,12 +79,13 @@ def ridge_loss(
     z_max: float = Z_MAX,
     log_loss: float = LOG_LOSS,
     read: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    tail_z: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`rise_z`'s rows and z (or `read`, when already taken); adds `log_loss` to the score
     of those whose z is finite and under `z_max`."""
     if not (np.isfinite(z_max) and np.isfinite(log_loss) and log_loss <= 0.0):
         raise ValueError(f"told rise: z_max {z_max!r} must be finite, log_loss {log_loss!r} <= 0")
-    rows, _, z = rise_z(floats, ints, ev, evidence, blind_s) if read is None else read
+    rows, _, z = rise_z(floats, ints, ev, evidence, blind_s, tail_z) if read is None else read
     if not len(rows):
         return rows, np.zeros(0)
     low = np.isfinite(z) & (z < z_max)

@@ -466,6 +466,21 @@ class TrackerDecoder(Decoder):
     # missing 4.0 -> 4.4 %, stop kind 7.1 -> 9.3 % (docs/decoding.md, Gaps: the headline)
     TOLD_RISE_LOG = told_rise.LOG_LOSS
     TOLD_RISE_Z = told_rise.Z_MAX
+    # ... but not where the level fell just before the onset by more than this (white-noise
+    # units of `RiseEvidence.z_and_trend_each`; 0: read everywhere): a ridge after a short
+    # spacing starts on the previous pulse's fall, the level falls on through its rise and
+    # the probe reads no rise (constant 50151: its true 10 mm/s track lost 4 nats at the
+    # 3 mm ridge and was pruned). The bend this rule is for comes off a flat level. Full
+    # plan, one run per window (tune_tracker_kinds.py --try TOLD_RISE_TAIL_Z=3, off ->
+    # on), seeds 0-2 / 3-5: constant missing 4.5 -> 3.3 / 5.3 -> 4.5 %, stop 7.9 -> 6.0 /
+    # 7.6 -> 5.6, accelerating 24.6 -> 24.1 / 33.9 -> 26.2, moving 20.2 -> 19.6 / 22.0 ->
+    # 21.0, slip dropped 8.5 -> 8.3 / 8.8 -> 8.6; cost: reversal 27.0 -> 27.4 / 25.5 ->
+    # 25.7, rates-drops 25.7 -> 26.3 / 25.3 -> 25.2; stops, snr10 and held unchanged.
+    # Off: it lets the scene loop_least_force show 0.17 s of speed at rest - a kink at
+    # 2.55 s where the 2.36 s ridge's fall ends, no ridge, reads like 50151's (rise z -4.7
+    # against -22 and -9, trend -6 against -10 and -4) and an alias takes it
+    # (`test_efference.py`, docs/decoding.md s36)
+    TOLD_RISE_TAIL_Z = 0.0
     # weight of a told contact's height against the spacing before the ridge a child gives
     # it (`told_height`: the probe's z at its onset on the track's rise time, over the told
     # median, against 1 - exp(-spacing / 10 mm)); 0: off. Full plan, 1 seed, one run
@@ -1314,7 +1329,8 @@ class TrackerDecoder(Decoder):
             and (not self.TOLD_HEIGHT_NOISY or self._rise.blind(self.RISE_EVIDENCE_GATE))
         )
         if rise_check or heights:
-            read = told_rise.rise_z(floats, ints, ev, self._rise, self.detector.blind)
+            tail_z = self.TOLD_RISE_TAIL_Z if self.TOLD_RISE_TAIL_Z > 0 else None
+            read = told_rise.rise_z(floats, ints, ev, self._rise, self.detector.blind, tail_z)
         if rise_check:
             # no pulse rose at the onset on the track's rise time: a bend, not its ridge
             told_rise.ridge_loss(

@@ -28,6 +28,7 @@ def _evidence(x: np.ndarray) -> rev.RiseEvidence:
 
 
 BEND_LAG = 12  # samples from the told onset to the bend (the headline: 1.496 -> ~1.525 s)
+TAIL_LEAD = 50  # samples from the earlier ridge's onset to ONSET (`_signal("tail")`)
 
 
 def _signal(kind: str, seed: int = 3, n: int = 600) -> np.ndarray:
@@ -39,6 +40,10 @@ def _signal(kind: str, seed: int = 3, n: int = 600) -> np.ndarray:
     if kind == "pulse":
         u = tau_s * SPEED_MM_S / RISE_MM
         shape = 0.7 * u * np.exp(1.0 - u)
+    elif kind == "tail":  # a ridge's pulse at 20 mm/s TAIL_LEAD before ONSET, falling there
+        u = np.clip((np.arange(n) - ONSET + TAIL_LEAD) / FS_HZ, 0.0, None) * 20.0 / RISE_MM
+        v = tau_s * SPEED_MM_S / RISE_MM
+        shape = 0.7 * u * np.exp(1.0 - u) + 0.15 * v * np.exp(1.0 - v)
     else:
         shape = 1.6 * np.clip(tau_s - BEND_LAG / FS_HZ, 0.0, None)
     return 0.6 + shape + WHITE_N * rng.standard_normal(n)
@@ -75,6 +80,35 @@ def test_a_bend_onto_a_ramp_loses_and_a_ridge_pulse_does_not(seed):
         assert floats[:, F_SCORE] == pytest.approx(expected), (kind, z)
         if kind == "pulse":
             assert np.all(z > 10.0), z  # tens of noise units, far over Z_MAX
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_with_tail_z_a_ridge_on_a_falling_tail_is_not_read_but_a_bend_still_is(seed):
+    """A ridge after a short spacing starts on the previous pulse's fall: the level goes on
+    falling through its rise, so the probe cannot read the rise there - the ridge is not
+    judged by it (no z, no loss). A bend onto the ramp comes off a flat level: still read,
+    still loses."""
+    floats, ints = _children([20.0, 40.0])
+    evidence = _evidence(_signal("tail", seed))
+    _, _, trend = rev_trend(evidence, [20.0, 40.0])
+    assert np.all(trend < -3.0), trend
+    _, z = told_rise.ridge_loss(floats, ints, _contact(64), evidence, tail_z=3.0)
+    assert np.isnan(z).all() and not floats[:, F_SCORE].any()
+    floats, ints = _children([20.0, 40.0, 65.0])
+    bend = _evidence(_signal("bend", seed))
+    _, z = told_rise.ridge_loss(floats, ints, _contact(64), bend, log_loss=-4.0, tail_z=3.0)
+    assert np.all(np.isfinite(z)) and floats[:3, F_SCORE] == pytest.approx([-4.0] * 3)
+
+
+def rev_trend(
+    evidence: rev.RiseEvidence, speeds_mm_s: list[float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The windows of children at those speeds, the probe's z and the level's trend just
+    before ONSET on each."""
+    width = evidence.width_for(np.array(speeds_mm_s))
+    onsets = np.full(len(speeds_mm_s), float(ONSET))
+    z, trend = evidence.z_and_trend_each(onsets, width, ONSET + 64)
+    return width, z, trend
 
 
 def test_a_contact_told_at_once_is_not_read_nor_one_on_the_rail():
