@@ -180,7 +180,7 @@ class RiseEvidence:
         """`z_at` of each onset on its own (its sums anchored at its own first sample, as
         a call with that onset alone reads it: the same z to the bit whatever else is
         read with it), vectorised per window width."""
-        return self.z_and_trend_each(onset, width, before)[0]
+        return self._z_each(onset, width, before, with_trend=False)[0]
 
     def z_and_trend_each(
         self, onset: np.ndarray, width: np.ndarray, before: int
@@ -188,6 +188,12 @@ class RiseEvidence:
         """(`z_each`, how the level went in the window just before each onset: the mean of
         its later half less the mean of its earlier half, in white-noise units of that
         difference - a falling pulse tail reads well under 0, a flat level about 0)."""
+        return self._z_each(onset, width, before, with_trend=True)
+
+    def _z_each(
+        self, onset: np.ndarray, width: np.ndarray, before: int, with_trend: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`z_each` and, `with_trend` (else left NaN), `z_and_trend_each`'s trend."""
         onset = np.asarray(onset, dtype=float)
         width = np.asarray(width, dtype=np.int64)
         out = np.full(onset.shape, np.nan)
@@ -219,6 +225,8 @@ class RiseEvidence:
             z = adj / (sigma * math.sqrt(2.0 / w * (1.0 + 2.0 * PULSE_RAMP**2)))
             finite = np.all(np.isfinite(rows), axis=1)
             out[k] = np.where(finite, z, np.nan)
+            if not with_trend:
+                continue
             # the window [onset - w, onset): its halves' means (the onset lies 2.5 w in)
             half = max(1, w // 2)
             o = (np.rint(onset[k]).astype(np.int64) - lo[k])[:, None]

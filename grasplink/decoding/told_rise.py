@@ -59,8 +59,10 @@ def rise_z(
         return rows, np.zeros(0, np.int64), np.zeros(0)
     width = evidence.width_for(np.abs(floats[rows, F_V]))
     onsets = np.full(len(rows), float(ev.index))
-    z, trend = evidence.z_and_trend_each(onsets, width, ev.emit_index)
-    if tail_z is not None:  # on a falling tail: a ridge pulse held under the fall, unread
+    if tail_z is None:
+        z = evidence.z_each(onsets, width, ev.emit_index)
+    else:  # on a falling tail: a ridge pulse held under the fall, unread
+        z, trend = evidence.z_and_trend_each(onsets, width, ev.emit_index)
         z[trend < -tail_z] = np.nan
     fs = evidence.fs_hz
     for r0, r1 in blind_s:  # a flat rail is no evidence
