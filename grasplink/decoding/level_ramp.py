@@ -49,6 +49,8 @@ import math
 
 import numpy as np
 
+from grasplink.decoding.kernels.common import medians_way
+
 #: the median of m samples of white noise sigma s spreads about sqrt(pi / 2) s / sqrt(m)
 _MEDIAN_SPREAD = math.sqrt(math.pi / 2)
 
@@ -79,8 +81,5 @@ def ramp_way(x: np.ndarray | None, steps: int, step_n: float) -> int:
         raise ValueError(f"level_ramp: steps must be >= 1, got {steps!r}")
     if x is None or len(x) < steps + 1 or len(x) % (steps + 1):
         return 0
-    # the median by one sort (np.median's wrapper costs 3x as much per update)
-    rows = np.sort(x.reshape(steps + 1, -1), axis=1)
-    m = rows.shape[1]
-    d = np.diff(0.5 * (rows[:, (m - 1) // 2] + rows[:, m // 2]))
-    return 1 if np.all(d >= step_n) else (-1 if np.all(d <= -step_n) else 0)
+    # compiled: numpy's sort, medians and diff cost ~13 us an update, the kernel ~3.5
+    return int(medians_way(np.asarray(x, dtype=np.float64), steps + 1, float(step_n)))

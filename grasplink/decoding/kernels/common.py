@@ -65,3 +65,24 @@ def ring_slot(contact_id: int, ring_len: int) -> int:
     kink contact's - PROBE_IDS is a multiple of 256 - and a slip lost its pulse)."""
     half = ring_len // 2
     return contact_id % half + (half if contact_id >= PROBE_IDS else 0)
+
+
+@jit()
+def medians_way(x: np.ndarray, windows: int, step: float) -> int:
+    """`level_ramp.ramp_way` on `windows` equal windows of `x` (oldest first): +1 when the
+    median of every window is at least `step` over the one before, -1 when every one is
+    at least `step` under, else 0. Each window sorted as np.sort sorts (NaN last), the
+    median of an even count the mean of the middle two: the same floats as the numpy."""
+    m = len(x) // windows
+    up = True
+    down = True
+    before = 0.0
+    for k in range(windows):
+        row = np.sort(x[k * m : (k + 1) * m])
+        median = 0.5 * (row[(m - 1) // 2] + row[m // 2])
+        if k:
+            d = median - before
+            up = up and d >= step
+            down = down and d <= -step
+        before = median
+    return 1 if up else (-1 if down else 0)
