@@ -82,4 +82,4 @@ def ramp_way(x: np.ndarray | None, steps: int, step_n: float) -> int:
     if x is None or len(x) < steps + 1 or len(x) % (steps + 1):
         return 0
     # compiled: numpy's sort, medians and diff cost ~13 us an update, the kernel ~3.5
-    return int(medians_way(np.asarray(x, dtype=np.float64), steps + 1, float(step_n)))
+    return int(medians_way(np.ascontiguousarray(x, dtype=np.float64), steps + 1, float(step_n)))

@@ -47,11 +47,14 @@ def rise_z(
     evidence: RiseEvidence,
     blind_s: Iterable[tuple[float, float]] = (),
     tail_z: float | None = None,
+    tail_fall_z: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The rows of ev's children that take it for a ridge with a speed (the run's second
     contact or later, not stopped), the probe window of each speed's rise time and the z
     each reads there at ev's onset. z is NaN where the window is not held before ev's
-    decision, or touches a rail interval of `blind_s` (times, s)."""
+    decision, or touches a rail interval of `blind_s` (times, s), or - with `tail_z` - on
+    a level falling more than `tail_z` units before the onset (and, with `tail_fall_z`,
+    falling on through the window: z under -`tail_fall_z`)."""
     rows = np.flatnonzero(
         (ints[:, I_LAST] == ev.id) & (ints[:, I_RUN] >= 2) & np.isnan(floats[:, F_STOP])
     )
@@ -63,7 +66,10 @@ def rise_z(
         z = evidence.z_each(onsets, width, ev.emit_index)
     else:  # on a falling tail: a ridge pulse held under the fall, unread
         z, trend = evidence.z_and_trend_each(onsets, width, ev.emit_index)
-        z[trend < -tail_z] = np.nan
+        tail = trend < -tail_z
+        if tail_fall_z is not None:  # ... and the level fell on through the rise's window
+            tail &= z < -tail_fall_z
+        z[tail] = np.nan
     fs = evidence.fs_hz
     for r0, r1 in blind_s:  # a flat rail is no evidence
         centre_s = ev.t_s + OFFSET * width / fs
@@ -82,12 +88,15 @@ def ridge_loss(
     log_loss: float = LOG_LOSS,
     read: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     tail_z: float | None = None,
+    tail_fall_z: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`rise_z`'s rows and z (or `read`, when already taken); adds `log_loss` to the score
     of those whose z is finite and under `z_max`."""
     if not (np.isfinite(z_max) and np.isfinite(log_loss) and log_loss <= 0.0):
         raise ValueError(f"told rise: z_max {z_max!r} must be finite, log_loss {log_loss!r} <= 0")
-    rows, _, z = rise_z(floats, ints, ev, evidence, blind_s, tail_z) if read is None else read
+    if read is None:
+        read = rise_z(floats, ints, ev, evidence, blind_s, tail_z, tail_fall_z)
+    rows, _, z = read
     if not len(rows):
         return rows, np.zeros(0)
     low = np.isfinite(z) & (z < z_max)

@@ -467,20 +467,23 @@ class TrackerDecoder(Decoder):
     TOLD_RISE_LOG = told_rise.LOG_LOSS
     TOLD_RISE_Z = told_rise.Z_MAX
     # ... but not where the level fell just before the onset by more than this (white-noise
-    # units of `RiseEvidence.z_and_trend_each`; 0: read everywhere): a ridge after a short
-    # spacing starts on the previous pulse's fall, the level falls on through its rise and
-    # the probe reads no rise (constant 50151: its true 10 mm/s track lost 4 nats at the
-    # 3 mm ridge and was pruned). The bend this rule is for comes off a flat level. Full
-    # plan, one run per window (tune_tracker_kinds.py --try TOLD_RISE_TAIL_Z=3, off ->
-    # on), seeds 0-2 / 3-5: constant missing 4.5 -> 3.3 / 5.3 -> 4.5 %, stop 7.9 -> 6.0 /
-    # 7.6 -> 5.6, accelerating 24.6 -> 24.1 / 33.9 -> 26.2, moving 20.2 -> 19.6 / 22.0 ->
-    # 21.0, slip dropped 8.5 -> 8.3 / 8.8 -> 8.6; cost: reversal 27.0 -> 27.4 / 25.5 ->
-    # 25.7, rates-drops 25.7 -> 26.3 / 25.3 -> 25.2; stops, snr10 and held unchanged.
-    # Off: it lets the scene loop_least_force show 0.17 s of speed at rest - a kink at
-    # 2.55 s where the 2.36 s ridge's fall ends, no ridge, reads like 50151's (rise z -4.7
-    # against -22 and -9, trend -6 against -10 and -4) and an alias takes it
-    # (`test_efference.py`, docs/decoding.md s36)
-    TOLD_RISE_TAIL_Z = 0.0
+    # units of `RiseEvidence.z_and_trend_each`; 0: read everywhere) and fell on through the
+    # rise's window (z under -TOLD_RISE_TAIL_FALL_Z; 0: whatever z): a ridge after a short
+    # spacing starts on the previous pulse's fall with a small pulse (its height grows with
+    # the spacing before it), the level falls on through its rise and the probe reads no
+    # rise (constant 50151: its true 10 mm/s track lost 4 nats at the 3 mm ridge, z -22
+    # and -9, and was pruned). Where a fall ends, the level flattens after the bend and z
+    # reads near 0 (loop_least_force's 2.55 s: z -4.7, trend -6.2; the tail rule alone
+    # let an alias take it and show 0.17 s of speed at rest, `test_efference.py`). Full
+    # plan, one run per window (tune_tracker_kinds.py --try TOLD_RISE_TAIL_Z=3,
+    # TOLD_RISE_TAIL_FALL_Z=6 against both 0), seeds 0-2 / 3-5: constant missing 4.5 ->
+    # 3.7 / 5.3 -> 4.6 %, stop 7.9 -> 6.5 / 7.6 both, stick-slip wrong direction 3.2 both
+    # / 4.5 -> 2.2, moving 20.2 -> 19.8 / 22.0 -> 21.7, slip dropped 8.5 -> 8.3 / 8.8 ->
+    # 8.7; no kind worse by 0.1 but rates-drops 25.7 -> 25.8 / 25.3 -> 25.4. The tail rule
+    # alone (FALL_Z 0) gained more (constant 3.3 / 4.5, accelerating 33.9 -> 26.2 on 3-5)
+    # and cost reversal, rates-drops and saturation up to 0.6 (docs/decoding.md, s36-s37)
+    TOLD_RISE_TAIL_Z = 3.0
+    TOLD_RISE_TAIL_FALL_Z = 6.0
     # weight of a told contact's height against the spacing before the ridge a child gives
     # it (`told_height`: the probe's z at its onset on the track's rise time, over the told
     # median, against 1 - exp(-spacing / 10 mm)); 0: off. Full plan, 1 seed, one run
@@ -1077,6 +1080,8 @@ class TrackerDecoder(Decoder):
         # a held level has no arrival: its flag's waiting kernel is called from here
         rows = (0, throwaway.count)
         arrival_flag.waiting_p(1.0, rows, throwaway._waiting, throwaway._K, 0.1)
+        # nor a level ramping after a flag: the ramp hold's medians kernel
+        level_ramp.ramp_way(x[: int(self.RAMP_STEPS) + 1], int(self.RAMP_STEPS), 0.0)
         _WARM = True
 
     def _detect_probability(self, spacing_before: float) -> float:
@@ -1330,7 +1335,10 @@ class TrackerDecoder(Decoder):
         )
         if rise_check or heights:
             tail_z = self.TOLD_RISE_TAIL_Z if self.TOLD_RISE_TAIL_Z > 0 else None
-            read = told_rise.rise_z(floats, ints, ev, self._rise, self.detector.blind, tail_z)
+            fall_z = self.TOLD_RISE_TAIL_FALL_Z if self.TOLD_RISE_TAIL_FALL_Z > 0 else None
+            read = told_rise.rise_z(
+                floats, ints, ev, self._rise, self.detector.blind, tail_z, fall_z
+            )
         if rise_check:
             # no pulse rose at the onset on the track's rise time: a bend, not its ridge
             told_rise.ridge_loss(

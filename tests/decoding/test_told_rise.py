@@ -31,7 +31,9 @@ BEND_LAG = 12  # samples from the told onset to the bend (the headline: 1.496 ->
 TAIL_LEAD = 50  # samples from the earlier ridge's onset to ONSET (`_signal("tail")`)
 
 
-def _signal(kind: str, seed: int = 3, n: int = 600) -> np.ndarray:
+def _signal(
+    kind: str, seed: int = 3, n: int = 600, pulse_n: float = 0.15, lead: int = TAIL_LEAD
+) -> np.ndarray:
     """0.6 N and white noise, and from ONSET a ridge pulse at SPEED_MM_S (0.7 N), or the
     coverage ramp taking over a flat level (1.6 N/s) BEND_LAG samples after ONSET: the
     headline loop's 1.496 s, told on the 80 ms scale ~30 ms before the level lets go."""
@@ -40,10 +42,10 @@ def _signal(kind: str, seed: int = 3, n: int = 600) -> np.ndarray:
     if kind == "pulse":
         u = tau_s * SPEED_MM_S / RISE_MM
         shape = 0.7 * u * np.exp(1.0 - u)
-    elif kind == "tail":  # a ridge's pulse at 20 mm/s TAIL_LEAD before ONSET, falling there
-        u = np.clip((np.arange(n) - ONSET + TAIL_LEAD) / FS_HZ, 0.0, None) * 20.0 / RISE_MM
+    elif kind == "tail":  # a ridge's pulse at 20 mm/s `lead` before ONSET, falling there
+        u = np.clip((np.arange(n) - ONSET + lead) / FS_HZ, 0.0, None) * 20.0 / RISE_MM
         v = tau_s * SPEED_MM_S / RISE_MM
-        shape = 0.7 * u * np.exp(1.0 - u) + 0.15 * v * np.exp(1.0 - v)
+        shape = 0.7 * u * np.exp(1.0 - u) + pulse_n * v * np.exp(1.0 - v)
     else:
         shape = 1.6 * np.clip(tau_s - BEND_LAG / FS_HZ, 0.0, None)
     return 0.6 + shape + WHITE_N * rng.standard_normal(n)
@@ -98,6 +100,34 @@ def test_with_tail_z_a_ridge_on_a_falling_tail_is_not_read_but_a_bend_still_is(s
     bend = _evidence(_signal("bend", seed))
     _, z = told_rise.ridge_loss(floats, ints, _contact(64), bend, log_loss=-4.0, tail_z=3.0)
     assert np.all(np.isfinite(z)) and floats[:3, F_SCORE] == pytest.approx([-4.0] * 3)
+
+
+TAIL_END_LEAD = 80  # samples from a lone pulse's onset to ONSET: its fall ends there
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+def test_with_tail_fall_z_a_small_pulse_in_a_fall_is_spared_a_falls_end_is_read(seed):
+    """A ridge after a short spacing has a small pulse on the previous one's steep fall:
+    the level falls on through the rise's window (z far under 0) and the rise is not read.
+    Where a fall ends with no ridge (loop_least_force's 2.55 s) the level flattens after
+    the bend: z near 0, read, the ridge child loses."""
+    speeds = [20.0, 40.0]
+    floats, ints = _children(speeds)
+    small = _evidence(_signal("tail", seed, pulse_n=0.05))
+    _, z, trend = rev_trend(small, speeds)
+    assert np.all(trend < -3.0) and np.all(z < -6.0), (trend, z)
+    _, z = told_rise.ridge_loss(
+        floats, ints, _contact(64), small, log_loss=-4.0, tail_z=3.0, tail_fall_z=6.0
+    )
+    assert np.isnan(z).all() and not floats[:, F_SCORE].any()
+    floats, ints = _children(speeds)
+    end = _evidence(_signal("tail", seed, pulse_n=0.0, lead=TAIL_END_LEAD))
+    _, z, trend = rev_trend(end, speeds)
+    assert np.all(trend < -3.0) and np.all(z > -6.0), (trend, z)
+    _, z = told_rise.ridge_loss(
+        floats, ints, _contact(64), end, log_loss=-4.0, tail_z=3.0, tail_fall_z=6.0
+    )
+    assert np.all(np.isfinite(z)) and floats[:2, F_SCORE] == pytest.approx([-4.0] * 2)
 
 
 def rev_trend(
