@@ -54,9 +54,11 @@ def _pair(tuned: float | None, held: float | None, digits: int) -> str:
 WINDOWS_SEEN = {
     (3, 5): "held out until s34; chosen with them in view since: the ridge-shaped step's "
     "prior's value (s34), the early verdicts' case (s35), the value of the rise read past "
-    "its one-sample step (s36)",
-    (6, 8): "gave s34 its case; the s36 rise cue's value was chosen with them in view",
-    (9, 9): "no value chosen on it; the s36 rise cue was measured on it, both ways",
+    "its one-sample step (s36), the tail rule's fall threshold (s37)",
+    (6, 8): "gave s34 its case; the s36 rise cue's value was chosen with them in view; the "
+    "s37 tail rule was measured on them, both ways, after its value was chosen",
+    (9, 9): "no value chosen on it; the s36 rise cue and the s37 tail rule were measured on "
+    "it, both ways",
 }
 
 
