@@ -18,7 +18,11 @@ import can
 from grasplink.bus.runner import NodeRunner
 from grasplink.bus.url import frame_to_message
 from grasplink.core.frames import Frame
+from grasplink.core.protocol import StreamConsumer
+from grasplink.gateway.config import load_config
+from grasplink.gateway.edge import GatewayEdge
 from grasplink.gateway.sdo_client import SdoClient, Transfer
+from grasplink.gateway.service import Gateway
 
 NODE = 0x01
 TPDO1 = 0x180 + NODE
@@ -131,3 +135,45 @@ def test_service_frames_in_a_backlog_are_never_superseded() -> None:
     finally:
         runner_bus.shutdown()
         node_bus.shutdown()
+
+
+TPDO2 = 0x280 + NODE
+
+
+class _StreamClient(_Client):
+    """A client taking TPDO1 as a counted stream (the gateway's skin packets)."""
+
+    def stream_can_ids(self) -> frozenset[int]:
+        return frozenset({TPDO1})
+
+
+def test_a_counted_streams_pdos_are_all_delivered_state_pdos_superseded() -> None:
+    # 300 packets of a stream interleaved with 300 of a state: every packet of the stream
+    # comes through in order, of the state the first batch's and then only the newest
+    channel = f"catch-up-stream-{uuid.uuid4().hex}"
+    runner_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    node_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    client = _StreamClient()
+    runner = NodeRunner(runner_bus, [client], clock_us=lambda: 0)
+    try:
+        runner.power_on()
+        for i in range(300):
+            node_bus.send(frame_to_message(Frame(TPDO1, struct.pack("<H", i))))
+            node_bus.send(frame_to_message(Frame(TPDO2, struct.pack("<H", i))))
+        runner.step()
+        assert _tpdo_numbers(client) == list(range(300))
+        state = [struct.unpack("<H", f.data)[0] for f in client.heard if f.can_id == TPDO2]
+        assert state == [*range(64), 299]
+        stats = runner.stats
+        assert stats.superseded_by_cob_id == {TPDO2: 300 - 65} and stats.catch_ups == 1
+    finally:
+        runner_bus.shutdown()
+        node_bus.shutdown()
+
+
+def test_the_gateway_takes_its_skins_sample_tpdo_as_a_stream() -> None:
+    gateway = Gateway(load_config(None))
+    assert isinstance(gateway, StreamConsumer)
+    assert gateway.stream_can_ids() == {0x190}  # the skin's TPDO1: samples; not EMG, hand
+    edge = GatewayEdge(gateway)  # what a live runner drives
+    assert isinstance(edge, StreamConsumer) and edge.stream_can_ids() == {0x190}

@@ -50,6 +50,17 @@ class FilteringDevice(SansIoDevice, Protocol):
 
 
 @runtime_checkable
+class StreamConsumer(SansIoDevice, Protocol):
+    """A device that takes counted streams of PDOs: each frame carries samples of its own
+    (the skin's packets), so a newer frame of the CAN-ID does not stand for an older one
+    as a newer state does. A runner behind its bus delivers every frame of them."""
+
+    def stream_can_ids(self) -> frozenset[int]:
+        """The CAN-IDs of the streams it takes now."""
+        ...
+
+
+@runtime_checkable
 class StreamingDevice(FilteringDevice, Protocol):
     """A device whose next ticks can be told ahead: a sensor node streaming packets.
 

@@ -103,6 +103,10 @@ class GatewayEdge:
             future.set_result(result)
         return frames + self.gateway.advance(t_us)
 
+    def stream_can_ids(self) -> frozenset[int]:
+        """The gateway's counted streams (`StreamConsumer`): the runner drops none of them."""
+        return self.gateway.stream_can_ids()
+
     def next_deadline_us(self) -> int | None:
         due = self.gateway.next_deadline_us()
         if self.mailbox:  # a command waits: now

@@ -322,6 +322,18 @@ class Gateway(NmtMaster):
                 )
         return routes
 
+    def stream_can_ids(self) -> frozenset[int]:
+        """The TPDOs that carry the skin's samples (`StreamConsumer`): a runner behind the
+        bus delivers every one of them, as each packet holds samples no later one does."""
+        if self.skin_binding is None:
+            return frozenset()
+        samples = set(self.skin_binding.objects.samples)
+        return frozenset(
+            can_id
+            for can_id, route in self._routes.items()
+            if route.kind == "skin" and samples.intersection(route.link.codec.tpdo_keys(can_id))
+        )
+
     def _skin_setup(self) -> None:
         link = self.by_kind.get("skin")
         self.skin_frames: SkinFrames | None = None
