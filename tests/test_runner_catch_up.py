@@ -117,24 +117,31 @@ def test_a_backlog_within_one_batch_loses_nothing() -> None:
         assert runner.stats.superseded == 0 and runner.stats.catch_ups == 0
 
 
-def test_service_frames_in_a_backlog_are_never_superseded() -> None:
-    # 300 heartbeats and 300 EMCYs of one node: none is process data, every one is heard
-    channel = f"catch-up-service-{uuid.uuid4().hex}"
+@contextmanager
+def _backlog(client: _Client, frames: list[Frame]) -> Iterator[NodeRunner]:
+    """`frames` queued while the runner (on a frozen clock) did not step, then one step."""
+    channel = f"catch-up-backlog-{uuid.uuid4().hex}"
     runner_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
     node_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    client = _Client()
     runner = NodeRunner(runner_bus, [client], clock_us=lambda: 0)
     try:
         runner.power_on()
-        for _ in range(300):
-            node_bus.send(frame_to_message(Frame(0x700 + NODE, bytes([0x05]))))
-            node_bus.send(frame_to_message(Frame(0x080 + NODE, bytes(8))))
+        for frame in frames:
+            node_bus.send(frame_to_message(frame))
         runner.step()
-        assert len(client.heard) == 600
-        assert runner.stats.superseded == 0 and runner.stats.catch_ups == 1
+        yield runner
     finally:
         runner_bus.shutdown()
         node_bus.shutdown()
+
+
+def test_service_frames_in_a_backlog_are_never_superseded() -> None:
+    # 300 heartbeats and 300 EMCYs of one node: none is process data, every one is heard
+    client = _Client()
+    service = [Frame(0x700 + NODE, bytes([0x05])), Frame(0x080 + NODE, bytes(8))]
+    with _backlog(client, service * 300) as runner:
+        assert len(client.heard) == 600
+        assert runner.stats.superseded == 0 and runner.stats.catch_ups == 1
 
 
 TPDO2 = 0x280 + NODE
@@ -150,25 +157,14 @@ class _StreamClient(_Client):
 def test_a_counted_streams_pdos_are_all_delivered_state_pdos_superseded() -> None:
     # 300 packets of a stream interleaved with 300 of a state: every packet of the stream
     # comes through in order, of the state the first batch's and then only the newest
-    channel = f"catch-up-stream-{uuid.uuid4().hex}"
-    runner_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    node_bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
     client = _StreamClient()
-    runner = NodeRunner(runner_bus, [client], clock_us=lambda: 0)
-    try:
-        runner.power_on()
-        for i in range(300):
-            node_bus.send(frame_to_message(Frame(TPDO1, struct.pack("<H", i))))
-            node_bus.send(frame_to_message(Frame(TPDO2, struct.pack("<H", i))))
-        runner.step()
+    packets = [Frame(c, struct.pack("<H", i)) for i in range(300) for c in (TPDO1, TPDO2)]
+    with _backlog(client, packets) as runner:
         assert _tpdo_numbers(client) == list(range(300))
         state = [struct.unpack("<H", f.data)[0] for f in client.heard if f.can_id == TPDO2]
         assert state == [*range(64), 299]
         stats = runner.stats
         assert stats.superseded_by_cob_id == {TPDO2: 300 - 65} and stats.catch_ups == 1
-    finally:
-        runner_bus.shutdown()
-        node_bus.shutdown()
 
 
 def test_the_gateway_takes_its_skins_sample_tpdo_as_a_stream() -> None:
