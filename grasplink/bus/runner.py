@@ -35,8 +35,8 @@ MAX_BATCH = 128
 # which a control loop wants the newest. Service frames (NMT, SYNC, EMCY, TIME, SDO,
 # heartbeat, LSS) are never dropped: an SDO answer queued behind a flood of PDOs is heard
 # before its client's timeout runs. Nor are a counted stream's PDOs (`StreamConsumer`: the
-# skin's packets, each its own samples): dropping three of them at a gateway's start cut
-# 22 ms out of a slip's onset, and its decoder read a 40 mm/s slip at 66 mm/s.
+# skin's packets, each its own samples): a gap in them changes what the decoder reads
+# (docs/buses.md).
 MAX_CATCH_UP = 65_536  # frames read in one catch-up (memory stays bounded)
 BEHIND_LOG_EVERY_US = 10_000_000
 # The pacer serves urgent timers only while the runner's thread makes progress: a heartbeat
